@@ -1,0 +1,15 @@
+"""goniolab: goniospectrophotometer and glossmeter control with a roughness-based model.
+
+Predicts the in-plane BRDF and the ISO 2813 gloss of a coating from its measured height map
+(Wittmann et al. 2021, Prog. Org. Coat. 156, 106247) and compares the prediction, live,
+with measurements from the instruments.
+"""
+
+from importlib.metadata import PackageNotFoundError, version
+
+try:
+    __version__ = version("goniolab")
+except PackageNotFoundError:  # pragma: no cover - running from a source tree
+    __version__ = "0.0.0+unknown"
+
+__all__ = ["__version__"]

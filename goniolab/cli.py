@@ -1,0 +1,67 @@
+"""The ``goniolab`` command.
+
+Sub-commands live in :mod:`goniolab.commands`, one module each, discovered at start-up:
+every module there exposes ``register(subparsers)`` which adds its parser and sets
+``func`` (a callable taking the parsed namespace and returning the exit code).
+
+Errors a user can act on (bad file, bad config, unreachable instrument) are printed as one
+line on stderr, ``goniolab: error: ...``, with exit code 2 for bad input and 1 for
+instrument or run failures; a traceback is shown only with ``--debug``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import pkgutil
+import sys
+from collections.abc import Sequence
+
+from goniolab import __version__
+from goniolab.errors import UserError
+
+__all__ = ["build_parser", "main"]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Build the top-level parser with every sub-command found in ``goniolab.commands``."""
+    import goniolab.commands as commands_pkg
+
+    parser = argparse.ArgumentParser(
+        prog="goniolab",
+        description="Goniospectrophotometer and glossmeter control, with BRDF and gloss "
+        "predicted from surface roughness (Wittmann et al. 2021).",
+    )
+    parser.add_argument("--version", action="version", version=f"goniolab {__version__}")
+    parser.add_argument("--debug", action="store_true", help="show tracebacks on errors")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for info in sorted(pkgutil.iter_modules(commands_pkg.__path__), key=lambda m: m.name):
+        if info.name.startswith("_"):
+            continue
+        module = importlib.import_module(f"goniolab.commands.{info.name}")
+        module.register(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``goniolab`` console script; returns the process exit code."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    try:
+        code: int = args.func(args)
+    except UserError as exc:
+        if args.debug:
+            raise
+        print(f"goniolab: error: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except KeyboardInterrupt:
+        print("goniolab: interrupted", file=sys.stderr)
+        return 130
+    return code
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

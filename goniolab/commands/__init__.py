@@ -1,0 +1,1 @@
+"""Sub-commands of the ``goniolab`` CLI: one module each, each exposing ``register(sub)``."""

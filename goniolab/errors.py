@@ -1,0 +1,26 @@
+"""Errors the ``goniolab`` application reports to a user as one clear line.
+
+Library layers raise their own errors (``goniolab.optics.HeightMapError``,
+``drivers.base.DeviceError``, ``goniolab.config.ConfigError``); the CLI and the TUI
+translate them with :func:`as_user_error`.
+"""
+
+from __future__ import annotations
+
+__all__ = ["UserError"]
+
+
+class UserError(Exception):
+    """An error caused by input the user can fix, or an instrument the user can check.
+
+    Parameters
+    ----------
+    message
+        One line naming the file/key/device and the reason.
+    exit_code
+        2 for bad input (file, config, option), 1 for instrument or run failures.
+    """
+
+    def __init__(self, message: str, *, exit_code: int = 2) -> None:
+        self.exit_code = exit_code
+        super().__init__(message)

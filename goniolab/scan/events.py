@@ -1,0 +1,162 @@
+"""Events the scan runner and the gloss logger publish.
+
+The runner never calls into a UI: it publishes these immutable events on an
+:class:`EventBus`; subscribers (the run store, the prediction worker, the CLI progress
+bar, the TUI) each get their own queue and consume at their own pace. A slow
+subscriber never stalls the runner (its queue is unbounded; the runner only ``put``s).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import enum
+import time
+from collections.abc import AsyncIterator
+from dataclasses import dataclass, field
+from typing import Any
+
+__all__ = [
+    "ArmsMoved",
+    "Event",
+    "EventBus",
+    "GlossRead",
+    "InstrumentError",
+    "PointMeasured",
+    "PointPredicted",
+    "Progress",
+    "RunFinished",
+    "RunStarted",
+    "RunState",
+    "StateChanged",
+]
+
+
+class RunState(enum.StrEnum):
+    """Explicit states of a run (DESIGN.md: idle, running, paused, done, aborted, failed)."""
+
+    IDLE = "idle"
+    RUNNING = "running"
+    PAUSED = "paused"
+    DONE = "done"
+    ABORTED = "aborted"
+    FAILED = "failed"
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Event:
+    """Base of all events; ``run_id`` is the store's run id (0 when not stored)."""
+
+    run_id: int
+    timestamp: float = field(default_factory=time.time)
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class RunStarted(Event):
+    kind: str  # "brdf" | "gloss"
+    total_points: int
+    plan: dict[str, Any]
+    sample: str
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class StateChanged(Event):
+    state: RunState
+    reason: str = ""
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ArmsMoved(Event):
+    theta_i_deg: float
+    theta_r_deg: float
+    moving: bool
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class PointMeasured(Event):
+    """One reading: point ``index`` of the plan, repeat ``repeat`` (0-based)."""
+
+    index: int
+    repeat: int
+    theta_i_deg: float
+    theta_r_deg: float
+    luminance_pct: float
+    measured_theta_i_deg: float
+    measured_theta_r_deg: float
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class PointPredicted(Event):
+    """The model's prediction for the geometry and aperture of plan point ``index``."""
+
+    index: int
+    theta_i_deg: float
+    theta_r_deg: float
+    predicted_pct: float
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Progress(Event):
+    done: int
+    total: int
+    eta_s: float
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class GlossRead(Event):
+    values_gu: dict[int, float | None]
+    predicted_gu: dict[int, float] | None
+    temperature_c: float | None = None
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class InstrumentError(Event):
+    """A recoverable or fatal instrument problem, shown to the user as it happens."""
+
+    device: str
+    message: str
+    fatal: bool
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class RunFinished(Event):
+    state: RunState
+    reason: str
+    summary: dict[str, Any]
+
+
+class EventBus:
+    """Fan-out of events to any number of subscribers, each with its own queue."""
+
+    def __init__(self) -> None:
+        self._queues: list[asyncio.Queue[Event | None]] = []
+
+    def subscribe(self) -> asyncio.Queue[Event | None]:
+        """Return a new queue that receives every event published from now on.
+
+        ``None`` is put on the queue when the bus closes.
+        """
+        q: asyncio.Queue[Event | None] = asyncio.Queue()
+        self._queues.append(q)
+        return q
+
+    def unsubscribe(self, q: asyncio.Queue[Event | None]) -> None:
+        if q in self._queues:
+            self._queues.remove(q)
+
+    def publish(self, event: Event) -> None:
+        """Deliver ``event`` to every subscriber without waiting on any of them."""
+        for q in self._queues:
+            q.put_nowait(event)
+
+    def close(self) -> None:
+        for q in self._queues:
+            q.put_nowait(None)
+
+    async def stream(self) -> AsyncIterator[Event]:
+        """Iterate over events until the bus closes."""
+        q = self.subscribe()
+        try:
+            while (ev := await q.get()) is not None:
+                yield ev
+        finally:
+            self.unsubscribe(q)
