@@ -16,15 +16,28 @@ References
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
 __all__ = [
+    "BRDF",
+    "DEFAULT_N_RECEPTOR",
+    "DEFAULT_N_SOURCE",
     "ISO2813_BLACK_GLASS_N",
     "ISO2813_RECEPTOR",
     "ISO2813_SOURCE",
     "Aperture",
     "Cone",
     "Rect",
+    "aperture_contains",
+    "direction",
+    "inplane_centre",
+    "integrate_brdf",
+    "sample_aperture",
+    "solid_angle_sr",
 ]
 
 
@@ -70,3 +83,240 @@ ISO2813_RECEPTOR: dict[int, Rect] = {
     60: Rect(4.4, 11.7),
     85: Rect(4.0, 6.0),
 }
+
+
+# --------------------------------------------------------------------------------------
+# Direction sampling and the aperture double integral (Mihalik & Durikovic eqs. 15-17)
+# --------------------------------------------------------------------------------------
+
+#: Default number of subdivisions of the source aperture (per axis for a Rect, rings for a Cone).
+DEFAULT_N_SOURCE: int = 8
+#: Default number of subdivisions of the receptor aperture (per axis / rings).
+DEFAULT_N_RECEPTOR: int = 16
+
+FloatArray = NDArray[np.float64]
+BRDF = Callable[[FloatArray, FloatArray], ArrayLike]
+
+
+def direction(theta_deg: ArrayLike, phi_deg: ArrayLike) -> FloatArray:
+    """Unit vector(s) at polar angle ``theta_deg`` from +z and azimuth ``phi_deg`` from +x.
+
+    Returns an array of shape ``(..., 3)``: ``(sin t cos p, sin t sin p, cos t)`` (PHYSICS.md,
+    "Frame and angles").
+    """
+    t = np.radians(np.asarray(theta_deg, dtype=np.float64))
+    p = np.radians(np.asarray(phi_deg, dtype=np.float64))
+    return np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], axis=-1)
+
+
+def inplane_centre(theta_r_deg: float) -> tuple[float, float]:
+    """Polar and azimuth angle (deg) of a signed in-plane receptor angle.
+
+    ``theta_r_deg > 0`` is the specular side (azimuth 180 deg, opposite the lamp at azimuth 0),
+    ``theta_r_deg < 0`` the lamp side (azimuth 0).
+    """
+    t = float(theta_r_deg)
+    return (t, 180.0) if t >= 0.0 else (-t, 0.0)
+
+
+def _frame(theta_deg: float, phi_deg: float) -> FloatArray:
+    """Rotation R = Rz(phi) Ry(theta): local +z -> centre, local +x -> e_theta, +y -> e_phi."""
+    t, p = np.radians(theta_deg), np.radians(phi_deg)
+    ct, st, cp, sp = np.cos(t), np.sin(t), np.cos(p), np.sin(p)
+    ry = np.array([[ct, 0.0, st], [0.0, 1.0, 0.0], [-st, 0.0, ct]])
+    rz = np.array([[cp, -sp, 0.0], [sp, cp, 0.0], [0.0, 0.0, 1.0]])
+    return rz @ ry
+
+
+def _local_cone(cone: Cone, n: int) -> tuple[FloatArray, FloatArray]:
+    """Central cap of polar radius du/2 plus rings [(k - 1/2) du, (k + 1/2) du] of 6k patches."""
+    h = np.radians(cone.half_angle_deg)
+    if h == 0.0:
+        return np.array([[0.0, 0.0, 1.0]]), np.array([0.0])
+    du = h / (n - 0.5) if n > 1 else 2.0 * h
+    dirs: list[FloatArray] = [np.array([[0.0, 0.0, 1.0]])]
+    weights: list[FloatArray] = [np.array([2.0 * np.pi * (1.0 - np.cos(min(0.5 * du, h)))])]
+    for k in range(1, n):
+        m = 6 * k
+        u0, u1 = (k - 0.5) * du, (k + 0.5) * du
+        u = k * du
+        v = (np.arange(m) + 0.5) * (2.0 * np.pi / m)
+        su = np.sin(u)
+        dirs.append(np.stack([su * np.cos(v), su * np.sin(v), np.full(m, np.cos(u))], axis=-1))
+        weights.append(np.full(m, 2.0 * np.pi * (np.cos(u0) - np.cos(u1)) / m))
+    return np.concatenate(dirs), np.concatenate(weights)
+
+
+def _local_rect(rect: Rect, n: int) -> tuple[FloatArray, FloatArray]:
+    """n x n midpoint grid in (alpha, beta) with exact patch solid angles da (sin b1 - sin b0)."""
+    a_half, b_half = np.radians(0.5 * rect.in_plane_deg), np.radians(0.5 * rect.perp_deg)
+    na = 1 if a_half == 0.0 else n
+    nb = 1 if b_half == 0.0 else n
+    a_edges = np.linspace(-a_half, a_half, na + 1)
+    b_edges = np.linspace(-b_half, b_half, nb + 1)
+    a = 0.5 * (a_edges[:-1] + a_edges[1:])
+    b = 0.5 * (b_edges[:-1] + b_edges[1:])
+    da = np.diff(a_edges)
+    dsinb = np.diff(np.sin(b_edges))
+    aa, bb = np.meshgrid(a, b, indexing="ij")
+    w = np.outer(da, dsinb).ravel()
+    cb = np.cos(bb).ravel()
+    d = np.stack([np.sin(aa).ravel() * cb, np.sin(bb).ravel(), np.cos(aa).ravel() * cb], axis=-1)
+    return d, w
+
+
+def sample_aperture(
+    aperture: Aperture, theta_deg: float, phi_deg: float, *, n: int = DEFAULT_N_RECEPTOR
+) -> tuple[FloatArray, FloatArray]:
+    """Deterministic quadrature of an aperture centred on the direction (theta_deg, phi_deg).
+
+    The aperture is sampled in a local frame whose +z axis is the centre direction, +x the
+    direction of increasing theta in the plane through the surface normal and the centre
+    (the plane of incidence for an in-plane instrument) and +y = z cross x, perpendicular to it.
+    World directions are ``R @ d_local`` with ``R = Rz(phi) Ry(theta)``.
+
+    - :class:`Cone` of half angle h: a central cap of polar radius du/2 (one patch, the
+      centre) and rings k = 1..n-1 covering polar angles [(k - 1/2) du, (k + 1/2) du] with
+      du = h / (n - 1/2), each of 6k patches at polar angle k du. Weights are the exact ring
+      solid angles 2 pi (cos u0 - cos u1) split evenly.
+    - :class:`Rect`: in-plane angle alpha in [-A/2, A/2] and out-of-plane angle beta in
+      [-B/2, B/2] (A = ``in_plane_deg``, B = ``perp_deg``), local direction
+      ``(sin a cos b, sin b, cos a cos b)``, an n x n midpoint grid; the patch solid angle is
+      exact, ``dOmega = cos b da db`` integrated: ``da (sin b1 - sin b0)``.
+
+    A zero-size aperture (``Cone(0)``, ``Rect(0, 0)``) is one direction of weight 0 (a point);
+    a Rect with one zero side is a line of n directions of weight 0.
+
+    Parameters
+    ----------
+    aperture
+        The :class:`Cone` or :class:`Rect`.
+    theta_deg, phi_deg
+        Centre direction: polar angle from the normal and azimuth from +x, in degrees.
+    n
+        Subdivisions: rings of a cone, cells per axis of a rectangle (>= 1).
+
+    Returns
+    -------
+    dirs, weights
+        Unit directions ``(N, 3)`` in the sample frame and their solid angles ``(N,)`` in sr.
+        Patches may lie below the horizon (``dirs[:, 2] <= 0``) for grazing centres; callers
+        decide what to do with them (:func:`integrate_brdf` gives them no flux).
+
+    References
+    ----------
+    .. [1] A. Mihalik, R. Durikovic, "Virtual gonio-spectrophotometer", sec. 2.6 and eq. 15.
+    """
+    if n < 1:
+        raise ValueError(f"aperture subdivisions must be >= 1, got {n}")
+    if isinstance(aperture, Cone):
+        local, w = _local_cone(aperture, n)
+    elif isinstance(aperture, Rect):
+        local, w = _local_rect(aperture, n)
+    else:
+        raise TypeError(f"unknown aperture type {type(aperture).__name__}")
+    dirs = local @ _frame(theta_deg, phi_deg).T
+    return dirs, w
+
+
+def solid_angle_sr(aperture: Aperture) -> float:
+    """Exact solid angle of an aperture in sr: 2 pi (1 - cos h) or 4 sin(A/2) sin(B/2)."""
+    if isinstance(aperture, Cone):
+        return float(2.0 * np.pi * (1.0 - np.cos(np.radians(aperture.half_angle_deg))))
+    a, b = np.radians(0.5 * aperture.in_plane_deg), np.radians(0.5 * aperture.perp_deg)
+    return float(2.0 * a * 2.0 * np.sin(b))
+
+
+def aperture_contains(
+    aperture: Aperture, theta_deg: float, phi_deg: float, dirs: ArrayLike
+) -> NDArray[np.bool_]:
+    """Whether unit directions ``(N, 3)`` fall inside an aperture centred on (theta, phi).
+
+    Uses the local frame of :func:`sample_aperture`: a Cone contains directions within its half
+    angle of the centre; a Rect those with ``|alpha| <= A/2`` and ``|beta| <= B/2`` where
+    ``beta = asin(y_local)`` and ``alpha = atan2(x_local, z_local)``.
+    """
+    d = np.asarray(dirs, dtype=np.float64) @ _frame(theta_deg, phi_deg)
+    if isinstance(aperture, Cone):
+        cos_h = np.cos(np.radians(aperture.half_angle_deg))
+        return np.asarray(d[..., 2] >= cos_h - 1e-15)
+    beta = np.arcsin(np.clip(d[..., 1], -1.0, 1.0))
+    alpha = np.arctan2(d[..., 0], d[..., 2])
+    eps = 1e-12
+    return np.asarray(
+        (np.abs(alpha) <= np.radians(0.5 * aperture.in_plane_deg) + eps)
+        & (np.abs(beta) <= np.radians(0.5 * aperture.perp_deg) + eps)
+    )
+
+
+def integrate_brdf(
+    brdf: BRDF,
+    theta_i_deg: float,
+    theta_r_deg: float,
+    source: Aperture,
+    receptor: Aperture,
+    *,
+    n_source: int = DEFAULT_N_SOURCE,
+    n_receptor: int = DEFAULT_N_RECEPTOR,
+    phi_i_deg: float = 0.0,
+) -> float:
+    """Fraction of the incident flux reaching the receptor (Mihalik eq. 15, source normalised).
+
+    With source patches ``s`` (directions ``wi_s``, solid angles ``dOmega_s``, uniform radiance
+    over the source aperture) and receptor patches ``d``::
+
+        Phi = sum_s dOmega_s sum_d f(wi_s, wo_d) cos(theta_d) dOmega_d / sum_s dOmega_s
+
+    i.e. Mihalik's double sum (eq. 15) divided by the source's solid angle, so a mirror of
+    reflectance R whose mirror image of the source falls inside the receptor gives ``R``.
+    A glossmeter reading is then ``100 Phi / F(1.567, theta)`` (eqs. 16-17; the black-glass
+    flux is its Fresnel reflectance, its mirror image lying inside the receptor).
+
+    Parameters
+    ----------
+    brdf
+        Vectorised ``f(wi, wo) -> sr^-1`` taking two ``(N, 3)`` arrays of unit vectors
+        (``wi`` points to the lamp, ``wo`` to the receptor).
+    theta_i_deg
+        Polar angle of the source centre (azimuth ``phi_i_deg``, default 0).
+    theta_r_deg
+        Signed in-plane receptor angle: > 0 specular side (azimuth ``phi_i_deg + 180``),
+        < 0 lamp side.
+    source, receptor
+        Apertures. A point source (``Cone(0)``) is a collimated beam. A point receptor has no
+        solid angle; the result is then the flux per steradian ``mean_s f cos(theta_o)``
+        (sr^-1) in the receptor's direction (averaged over the directions of a line aperture).
+    n_source, n_receptor
+        Subdivisions passed to :func:`sample_aperture`.
+
+    Returns
+    -------
+    float
+        Fraction of the incident flux (dimensionless; sr^-1 for a point receptor).
+        Receptor patches at or below the horizon receive nothing.
+
+    References
+    ----------
+    .. [1] A. Mihalik, R. Durikovic, "Virtual gonio-spectrophotometer", eqs. 15-17.
+    .. [2] B. Wittmann et al., Prog. Org. Coat. 156 (2021) 106247, sec. 2.3.
+    """
+    t_r, p_r = inplane_centre(theta_r_deg)
+    wi, w_s = sample_aperture(source, float(theta_i_deg), float(phi_i_deg), n=n_source)
+    wo, w_d = sample_aperture(receptor, t_r, p_r + float(phi_i_deg), n=n_receptor)
+    src_ok = wi[:, 2] > 0.0
+    rec_ok = wo[:, 2] > 0.0
+    if solid_angle_sr(source) == 0.0:
+        w_s = np.full_like(w_s, 1.0 / w_s.size)
+    if solid_angle_sr(receptor) == 0.0:
+        w_d = np.full_like(w_d, 1.0 / w_d.size)
+    wi, w_s = wi[src_ok], w_s[src_ok]
+    wo, w_d = wo[rec_ok], w_d[rec_ok]
+    total_source = float(np.sum(w_s))
+    if total_source == 0.0 or wo.shape[0] == 0:
+        return 0.0
+    ns, nd = wi.shape[0], wo.shape[0]
+    wi_pairs = np.repeat(wi, nd, axis=0)
+    wo_pairs = np.tile(wo, (ns, 1))
+    f = np.asarray(brdf(wi_pairs, wo_pairs), dtype=np.float64).reshape(ns, nd)
+    per_source = f @ (wo[:, 2] * w_d)
+    return float(per_source @ w_s / total_source)
