@@ -1,0 +1,294 @@
+"""The goniolab Textual app: measured beside predicted, live.
+
+The app consumes the backend's :class:`~goniolab.scan.events.EventBus` in an async
+worker, polls the arms in another, and never waits on a device in a message handler:
+every device call runs in a worker, every instrument error becomes a notification
+(and a banner for fatal ones), never a crash.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+from typing import ClassVar
+
+from textual import work
+from textual.app import App, ComposeResult
+from textual.binding import Binding, BindingType
+from textual.containers import Horizontal, Vertical
+from textual.notifications import SeverityLevel
+from textual.widgets import Footer, Header, Static
+
+from drivers.base import DeviceError
+from goniolab.errors import UserError
+from goniolab.scan.events import (
+    ArmsMoved,
+    Event,
+    GlossRead,
+    InstrumentError,
+    PointMeasured,
+    PointPredicted,
+    Progress,
+    RunFinished,
+    RunStarted,
+    RunState,
+    StateChanged,
+)
+from goniolab.tui.backend import Backend
+from goniolab.tui.comparison import Comparison
+from goniolab.tui.palette import ScanCommands
+from goniolab.tui.screens import RunsScreen
+from goniolab.tui.widgets import ComparisonPanel, GlossLog, ScanForm, StatusPanel
+
+__all__ = ["GonioApp"]
+
+
+class GonioApp(App[int]):
+    """Scan setup, instrument status, live comparison plots, metrics and gloss log.
+
+    Parameters
+    ----------
+    backend
+        The lab (real, simulated, or scripted in tests).
+    autostart
+        Start a scan with the form's values as soon as the goniometer is homed.
+    poll_hz
+        Arm status polling rate in Hz (0 disables polling; ArmsMoved events still update).
+    """
+
+    TITLE = "goniolab"
+    AUTO_FOCUS = None
+    COMMANDS: ClassVar = App.COMMANDS | {ScanCommands}
+    BINDINGS: ClassVar[list[BindingType]] = [
+        Binding("s", "start_scan", "Start"),
+        Binding("space", "toggle_pause", "Pause/Resume", key_display="space", priority=True),
+        Binding("x", "abort_scan", "Abort"),
+        Binding("l", "toggle_log", "Residual/log"),
+        Binding("r", "browse_runs", "Runs"),
+        Binding("q", "quit", "Quit"),
+    ]
+    CSS = """
+    #top { height: 1fr; }
+    #left { width: 52; }
+    #gloss-log { height: 9; border: round $primary; }
+    #banner { display: none; background: $error; color: $text; height: auto; padding: 0 1; }
+    #banner.shown { display: block; }
+    """
+
+    def __init__(self, backend: Backend, *, autostart: bool = False, poll_hz: float = 4.0) -> None:
+        super().__init__()
+        self.backend = backend
+        self.autostart = autostart
+        self.poll_hz = poll_hz
+        self.comparison = Comparison()
+        self.run_state = RunState.IDLE
+        self.run_id = 0
+        self.progress: tuple[int, int, float] = (0, 0, math.nan)
+        self.events_seen = 0
+        self.ready = asyncio.Event()
+        self._redraw_pending = False
+        self._queue = backend.bus.subscribe()
+
+    # ------------------------------------------------------------------ layout
+    def compose(self) -> ComposeResult:
+        yield Header()
+        yield Static("", id="banner")
+        with Horizontal(id="top"):
+            with Vertical(id="left"):
+                yield ScanForm(self.backend.sample_names(), self.backend.default_setup())
+                yield StatusPanel()
+            yield ComparisonPanel(id="live")
+        yield GlossLog(id="gloss-log")
+        yield Footer()
+
+    def on_mount(self) -> None:
+        self.sub_title = self.backend.title
+        self.query_one("#gloss-log", GlossLog).border_title = "glossmeter log"
+        self.consume_events()
+        self.startup()
+
+    # ------------------------------------------------------------------ workers
+    @work(exclusive=True, group="startup")
+    async def startup(self) -> None:
+        """Connect and home the lab, then poll the arms and (optionally) start a scan."""
+        self.query_one(StatusPanel).show_run("run: idle (homing...)")
+        try:
+            await self.backend.open()
+        except (DeviceError, UserError, OSError) as exc:
+            self.show_banner(f"lab not ready: {exc}")
+            self.notify(str(exc), title="Lab", severity="error", timeout=10)
+            self.query_one(StatusPanel).show_run("run: idle (lab not ready)")
+            return
+        self.query_one(StatusPanel).show_run("run: idle (homed)")
+        await self.poll_once()
+        if self.poll_hz > 0:
+            self.poll_arms()
+        self.ready.set()
+        if self.autostart:
+            self.action_start_scan()
+
+    async def poll_once(self) -> None:
+        """Read both arms once and show them (errors shown as link lost)."""
+        panel = self.query_one(StatusPanel)
+        try:
+            for arm in await self.backend.arm_states():
+                panel.show_arm(arm)
+        except (DeviceError, OSError) as exc:
+            from goniolab.tui.backend import ArmState
+
+            for name in ("lamp", "detector"):
+                panel.show_arm(ArmState(name, None, False, False, None, False, str(exc)))
+
+    @work(exclusive=True, group="poll")
+    async def poll_arms(self) -> None:
+        """Poll the arm status at ``poll_hz`` while the app runs."""
+        while True:
+            await asyncio.sleep(1.0 / self.poll_hz)
+            await self.poll_once()
+
+    @work(exclusive=True, group="events")
+    async def consume_events(self) -> None:
+        """Apply every bus event to the views (runs on the app's event loop)."""
+        while (ev := await self._queue.get()) is not None:
+            try:
+                self.apply_event(ev)
+            except Exception as exc:  # a bad event must not kill the consumer
+                self.notify(f"{type(ev).__name__}: {exc}", title="Display", severity="error")
+
+    @work(exclusive=True, group="start")
+    async def _start(self) -> None:
+        try:
+            setup = self.query_one(ScanForm).read()
+            self.run_id = await self.backend.start(setup)
+        except UserError as exc:
+            self.notify(str(exc), title="Scan setup", severity="error", timeout=8)
+        except (DeviceError, OSError) as exc:
+            self.show_banner(f"scan could not start: {exc}")
+            self.notify(str(exc), title="Scan", severity="error", timeout=8)
+
+    # ------------------------------------------------------------------ events
+    def apply_event(self, ev: Event) -> None:
+        """Update the model and the widgets for one event."""
+        self.events_seen += 1
+        panel = self.query_one(StatusPanel)
+        if isinstance(ev, RunStarted):
+            self.run_id = ev.run_id
+            self.comparison.clear(run_id=ev.run_id, sample=ev.sample)
+            self.progress = (0, ev.total_points, math.nan)
+            self.hide_banner()
+            self.schedule_redraw()
+        elif isinstance(ev, StateChanged):
+            self.run_state = ev.state
+        elif isinstance(ev, ArmsMoved):
+            panel.show_angles(ev.theta_i_deg, ev.theta_r_deg, ev.moving)
+        elif isinstance(ev, PointMeasured):
+            self.comparison.add_measured(ev)
+            self.schedule_redraw()
+        elif isinstance(ev, PointPredicted):
+            self.comparison.add_predicted(ev)
+            self.schedule_redraw()
+        elif isinstance(ev, Progress):
+            self.progress = (ev.done, ev.total, ev.eta_s)
+        elif isinstance(ev, GlossRead):
+            self.comparison.add_gloss(ev)
+            self.query_one("#gloss-log", GlossLog).add_reading(ev)
+            self.schedule_redraw()
+        elif isinstance(ev, InstrumentError):
+            self.notify(
+                ev.message,
+                title=f"{ev.device} error" + (" (fatal)" if ev.fatal else ""),
+                severity="error",
+                timeout=10,
+            )
+            if ev.fatal:
+                self.show_banner(f"{ev.device}: {ev.message}")
+        elif isinstance(ev, RunFinished):
+            self.run_state = ev.state
+            text = f"run {ev.run_id} {ev.state.value}" + (f": {ev.reason}" if ev.reason else "")
+            severity: SeverityLevel = "information"
+            if ev.state is RunState.ABORTED:
+                severity = "warning"
+            elif ev.state is RunState.FAILED:
+                severity = "error"
+                self.show_banner(text)
+            self.notify(text, title="Scan", severity=severity)
+        self.show_run_line()
+
+    def show_run_line(self) -> None:
+        """The one-line run status under the arm table."""
+        done, total, eta_s = self.progress
+        text = f"run {self.run_id}: {self.run_state.value}" if self.run_id else "run: idle"
+        if total:
+            text += f"  {done}/{total}"
+            if math.isfinite(eta_s) and self.run_state is RunState.RUNNING:
+                text += f"  ETA {eta_s:.0f} s"
+        self.query_one(StatusPanel).show_run(text)
+
+    def schedule_redraw(self) -> None:
+        """Coalesce bursts of events into one redraw after the current message."""
+        if not self._redraw_pending:
+            self._redraw_pending = True
+            self.call_later(self.redraw)
+
+    def redraw(self) -> None:
+        """Redraw the live comparison from the accumulated data."""
+        self._redraw_pending = False
+        self.query_one("#live", ComparisonPanel).show(self.comparison)
+
+    def show_banner(self, text: str) -> None:
+        banner = self.query_one("#banner", Static)
+        banner.update(text)
+        banner.add_class("shown")
+
+    def hide_banner(self) -> None:
+        self.query_one("#banner", Static).remove_class("shown")
+
+    # ------------------------------------------------------------------ actions
+    def action_start_scan(self) -> None:
+        """Start a scan from the form (key ``s``)."""
+        if not self.ready.is_set():
+            self.notify("the lab is not ready (not homed)", title="Scan", severity="warning")
+            return
+        if self.backend.running:
+            self.notify("a scan is already running", title="Scan", severity="warning")
+            return
+        self._start()
+
+    def action_toggle_pause(self) -> None:
+        """Pause a running scan or resume a paused one (key ``space``)."""
+        if self.run_state is RunState.RUNNING:
+            self.backend.pause()
+            self.notify("pausing after the current point", title="Scan")
+        elif self.run_state is RunState.PAUSED:
+            self.backend.resume()
+            self.notify("resuming", title="Scan")
+        else:
+            self.notify("no scan running", title="Scan", severity="warning")
+
+    def action_abort_scan(self) -> None:
+        """Abort the scan after the current point (key ``x``)."""
+        if self.backend.running:
+            self.backend.abort()
+            self.notify("aborting after the current point", title="Scan", severity="warning")
+        else:
+            self.notify("no scan running", title="Scan", severity="warning")
+
+    def action_toggle_log(self) -> None:
+        """Side plot: residuals or log10 of both curves (key ``l``)."""
+        panel = self.query_one("#live", ComparisonPanel)
+        panel.toggle_log()
+        panel.show(self.comparison)
+
+    def action_browse_runs(self) -> None:
+        """Open the stored-runs browser (key ``r``)."""
+        self.push_screen(RunsScreen(self.backend))
+
+    async def action_quit(self) -> None:
+        """Abort any scan, release the instruments and leave (key ``q``)."""
+        try:
+            if self.backend.running:
+                self.backend.abort()
+            await self.backend.close()
+        except (DeviceError, OSError) as exc:
+            self.log.error(f"closing the lab: {exc}")
+        self.exit(0)

@@ -1,0 +1,173 @@
+"""What the TUI needs from the lab, as a small Protocol (no Textual here).
+
+The app never talks to drivers, the runner or the store directly: it calls a
+:class:`Backend` and consumes the backend's :class:`~goniolab.scan.events.EventBus`.
+:class:`goniolab.tui.lab_backend.LabBackend` implements it over a real or simulated
+:class:`~goniolab.lab.Lab`; tests may implement it with a scripted publisher.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Protocol
+
+from goniolab.errors import UserError
+from goniolab.scan.events import EventBus, GlossRead, PointMeasured, PointPredicted
+
+__all__ = ["ArmState", "Backend", "RunSummary", "ScanSetup", "StoredRun"]
+
+
+@dataclass(frozen=True, slots=True)
+class ScanSetup:
+    """The scan form: an in-plane BRDF scan at one incidence angle.
+
+    Attributes
+    ----------
+    sample
+        Sample spec (``sample:NAME`` or a height-map path) used for the prediction.
+    theta_i_deg
+        Incidence angle (lamp arm) in degrees.
+    theta_r_start_deg, theta_r_stop_deg, theta_r_step_deg
+        Detector sweep in degrees, signed (> 0 specular side), stop included.
+    repeats
+        Readings per point (their scatter is drawn as min/max bars).
+    """
+
+    sample: str
+    theta_i_deg: float
+    theta_r_start_deg: float
+    theta_r_stop_deg: float
+    theta_r_step_deg: float
+    repeats: int
+
+    def validate(self) -> None:
+        """Raise :class:`UserError` naming the form field and the reason when invalid."""
+        values = {
+            "theta_i_deg": self.theta_i_deg,
+            "theta_r_start_deg": self.theta_r_start_deg,
+            "theta_r_stop_deg": self.theta_r_stop_deg,
+            "theta_r_step_deg": self.theta_r_step_deg,
+        }
+        for name, value in values.items():
+            if not math.isfinite(value):
+                raise UserError(f"scan setup: {name} must be a finite number, got {value}")
+        if not self.sample:
+            raise UserError("scan setup: sample: choose a sample")
+        if not 0.0 <= self.theta_i_deg < 90.0:
+            raise UserError(
+                f"scan setup: theta_i_deg must lie in [0, 90) deg, got {self.theta_i_deg}"
+            )
+        if self.theta_r_step_deg <= 0.0:
+            raise UserError(
+                f"scan setup: theta_r_step_deg must be > 0 deg, got {self.theta_r_step_deg}"
+            )
+        if self.theta_r_stop_deg < self.theta_r_start_deg:
+            raise UserError(
+                "scan setup: theta_r_stop_deg must be >= theta_r_start_deg, got "
+                f"{self.theta_r_stop_deg} < {self.theta_r_start_deg}"
+            )
+        if self.repeats < 1:
+            raise UserError(f"scan setup: repeats must be >= 1, got {self.repeats}")
+
+    def theta_r_values_deg(self) -> list[float]:
+        """The detector angles of the sweep, start to stop inclusive, in degrees."""
+        n = math.floor(
+            (self.theta_r_stop_deg - self.theta_r_start_deg) / self.theta_r_step_deg + 1e-9
+        )
+        return [round(self.theta_r_start_deg + k * self.theta_r_step_deg, 9) for k in range(n + 1)]
+
+
+@dataclass(frozen=True, slots=True)
+class ArmState:
+    """One arm as the status panel shows it."""
+
+    name: str
+    position_deg: float | None
+    moving: bool
+    homed: bool
+    alarm_code: int | None
+    connected: bool
+    message: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class RunSummary:
+    """One row of the runs browser."""
+
+    run_id: int
+    started: float  # unix time
+    kind: str
+    sample: str
+    status: str
+    n_points: int
+
+
+@dataclass(frozen=True, slots=True)
+class StoredRun:
+    """A stored run, as events, so the same :class:`Comparison` code can show it."""
+
+    summary: RunSummary
+    measured: list[PointMeasured] = field(default_factory=list)
+    predicted: list[PointPredicted] = field(default_factory=list)
+    gloss: list[GlossRead] = field(default_factory=list)
+
+
+class Backend(Protocol):
+    """The lab as the TUI sees it. Every device call may raise ``drivers.base.DeviceError``."""
+
+    bus: EventBus
+
+    @property
+    def title(self) -> str:
+        """A one-line description of the lab (config name, mode)."""
+        ...
+
+    async def open(self) -> None:
+        """Connect the instruments and home the goniometer."""
+        ...
+
+    async def close(self) -> None:
+        """Stop any run and release the instruments."""
+        ...
+
+    def sample_names(self) -> list[str]:
+        """Built-in samples for the picker (without the ``sample:`` prefix)."""
+        ...
+
+    def default_setup(self) -> ScanSetup:
+        """The form's initial values (from the config)."""
+        ...
+
+    @property
+    def running(self) -> bool:
+        """A run is in progress (running or paused)."""
+        ...
+
+    async def start(self, setup: ScanSetup) -> int:
+        """Start a scan in the background; return its run id. Raises UserError on bad setup."""
+        ...
+
+    def pause(self) -> None:
+        """Ask the runner to pause after the current point."""
+        ...
+
+    def resume(self) -> None:
+        """Ask a paused runner to continue."""
+        ...
+
+    def abort(self) -> None:
+        """Ask the runner to stop after the current point (run marked aborted)."""
+        ...
+
+    async def arm_states(self) -> tuple[ArmState, ArmState]:
+        """Lamp and detector arm status, read from the instrument."""
+        ...
+
+    def list_runs(self) -> list[RunSummary]:
+        """Stored runs, newest first (blocking: call from a thread worker)."""
+        ...
+
+    def load_run(self, run_id: int) -> StoredRun:
+        """One stored run's readings, predictions and gloss (blocking: thread worker)."""
+        ...

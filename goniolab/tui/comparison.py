@@ -1,0 +1,210 @@
+"""Measured-beside-predicted bookkeeping for the TUI (no Textual here, so it is testable alone).
+
+A :class:`Comparison` accumulates the scan events of one run (every repeat of every plan
+point, and the model's prediction for each point) and derives what the screens show:
+mean and min/max of the repeats, the residuals, and the seed's comparison metrics.
+
+References
+----------
+.. [1] Wittmann, A. et al. (2021), "Predicting gloss and BRDF of filled coatings from
+   surface roughness": section 4 and fig. 8 compare measured and simulated in-plane
+   luminance curves by their peak amplitude and full width at half maximum (FWHM).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from goniolab.scan.events import GlossRead, PointMeasured, PointPredicted
+
+__all__ = ["Comparison", "ComparisonMetrics", "CurveArrays", "PeakMetrics", "peak_metrics"]
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True, slots=True)
+class PeakMetrics:
+    """Peak of an in-plane luminance curve (Wittmann 2021, fig. 8 metrics).
+
+    Attributes
+    ----------
+    amplitude
+        Highest value of the curve (same unit as the values, % of a mirror).
+    position_deg
+        theta_r of the highest sample, in degrees.
+    fwhm_deg
+        Full width at half maximum in degrees; NaN when the curve does not fall below
+        half its maximum on both sides of the peak inside the sampled range.
+    """
+
+    amplitude: float
+    position_deg: float
+    fwhm_deg: float
+
+
+def peak_metrics(theta_deg: FloatArray, values: FloatArray) -> PeakMetrics:
+    """Amplitude, position and FWHM of a sampled peak.
+
+    The half-maximum crossings are found by linear interpolation between the samples
+    that bracket ``amplitude / 2`` on each side of the maximum, the definition used for
+    the measured and simulated curves of Wittmann et al. (2021), fig. 8.
+
+    Parameters
+    ----------
+    theta_deg
+        Detector angles in degrees (any order; sorted here).
+    values
+        Curve values at ``theta_deg`` (relative luminance in %).
+
+    Returns
+    -------
+    PeakMetrics
+        NaN fields when there are no samples.
+    """
+    theta = np.asarray(theta_deg, dtype=np.float64)
+    vals = np.asarray(values, dtype=np.float64)
+    ok = np.isfinite(theta) & np.isfinite(vals)
+    theta, vals = theta[ok], vals[ok]
+    if theta.size == 0:
+        return PeakMetrics(math.nan, math.nan, math.nan)
+    order = np.argsort(theta, kind="stable")
+    theta, vals = theta[order], vals[order]
+    k = int(np.argmax(vals))
+    amplitude = float(vals[k])
+    half = amplitude / 2.0
+    left = math.nan
+    for j in range(k, 0, -1):
+        if vals[j - 1] <= half < vals[j] or vals[j - 1] < half <= vals[j]:
+            t = (half - vals[j - 1]) / (vals[j] - vals[j - 1])
+            left = float(theta[j - 1] + t * (theta[j] - theta[j - 1]))
+            break
+    right = math.nan
+    for j in range(k, theta.size - 1):
+        if vals[j + 1] <= half < vals[j] or vals[j + 1] < half <= vals[j]:
+            t = (vals[j] - half) / (vals[j] - vals[j + 1])
+            right = float(theta[j] + t * (theta[j + 1] - theta[j]))
+            break
+    return PeakMetrics(amplitude, float(theta[k]), right - left)
+
+
+@dataclass(frozen=True, slots=True)
+class CurveArrays:
+    """The per-point arrays the plots draw, sorted by ``theta_r_deg``.
+
+    ``mean_pct``/``min_pct``/``max_pct`` are NaN where the point has no reading yet,
+    ``predicted_pct`` is NaN where the model's prediction has not arrived.
+    """
+
+    theta_r_deg: FloatArray
+    mean_pct: FloatArray
+    min_pct: FloatArray
+    max_pct: FloatArray
+    predicted_pct: FloatArray
+    n_readings: NDArray[np.int64]
+
+    @property
+    def residual_pct(self) -> FloatArray:
+        """Measured mean minus predicted, in % of a mirror (NaN where either is missing)."""
+        return self.mean_pct - self.predicted_pct
+
+
+@dataclass(frozen=True, slots=True)
+class ComparisonMetrics:
+    """What the metrics table shows: peaks of both curves, RMSE and the last gloss reading."""
+
+    measured: PeakMetrics
+    predicted: PeakMetrics
+    rmse_pct: float
+    n_compared: int
+    gloss_measured_gu: dict[int, float | None]
+    gloss_predicted_gu: dict[int, float]
+
+
+@dataclass
+class Comparison:
+    """Accumulates the readings and predictions of one run.
+
+    Points are keyed by the plan index; repeats of a point are kept individually so
+    their scatter can be drawn as min/max bars.
+    """
+
+    run_id: int = 0
+    sample: str = ""
+    readings: dict[int, list[float]] = field(default_factory=dict)
+    theta_r_deg: dict[int, float] = field(default_factory=dict)
+    predicted: dict[int, float] = field(default_factory=dict)
+    gloss: list[GlossRead] = field(default_factory=list)
+
+    def clear(self, *, run_id: int = 0, sample: str = "") -> None:
+        """Forget everything and start collecting for ``run_id``."""
+        self.run_id = run_id
+        self.sample = sample
+        self.readings.clear()
+        self.theta_r_deg.clear()
+        self.predicted.clear()
+        self.gloss.clear()
+
+    def add_measured(self, ev: PointMeasured) -> None:
+        """Record one reading (one repeat of plan point ``ev.index``)."""
+        self.readings.setdefault(ev.index, []).append(ev.luminance_pct)
+        self.theta_r_deg.setdefault(ev.index, ev.theta_r_deg)
+
+    def add_predicted(self, ev: PointPredicted) -> None:
+        """Record the model's prediction for plan point ``ev.index``."""
+        self.predicted[ev.index] = ev.predicted_pct
+        self.theta_r_deg.setdefault(ev.index, ev.theta_r_deg)
+
+    def add_gloss(self, ev: GlossRead) -> None:
+        """Record one glossmeter reading (with its prediction, if any)."""
+        self.gloss.append(ev)
+
+    @property
+    def n_readings(self) -> int:
+        """Number of readings (all repeats of all points) received so far."""
+        return sum(len(v) for v in self.readings.values())
+
+    def arrays(self) -> CurveArrays:
+        """Per-point arrays sorted by theta_r (NaN where data has not arrived)."""
+        idx = sorted(self.theta_r_deg, key=lambda i: (self.theta_r_deg[i], i))
+        theta = np.array([self.theta_r_deg[i] for i in idx], dtype=np.float64)
+        mean = np.full(theta.size, np.nan)
+        lo = np.full(theta.size, np.nan)
+        hi = np.full(theta.size, np.nan)
+        pred = np.full(theta.size, np.nan)
+        count = np.zeros(theta.size, dtype=np.int64)
+        for k, i in enumerate(idx):
+            reps = self.readings.get(i)
+            if reps:
+                mean[k] = float(np.mean(reps))
+                lo[k] = min(reps)
+                hi[k] = max(reps)
+                count[k] = len(reps)
+            if i in self.predicted:
+                pred[k] = self.predicted[i]
+        return CurveArrays(theta, mean, lo, hi, pred, count)
+
+    def metrics(self) -> ComparisonMetrics:
+        """Peak metrics of measured mean and predicted curve, their RMSE, last gloss.
+
+        RMSE is ``sqrt(mean((measured_mean - predicted)^2))`` over the points that have
+        both a reading and a prediction (NaN when there are none).
+        """
+        a = self.arrays()
+        measured = peak_metrics(a.theta_r_deg, a.mean_pct)
+        predicted = peak_metrics(a.theta_r_deg, a.predicted_pct)
+        res = a.residual_pct
+        res = res[np.isfinite(res)]
+        rmse = float(np.sqrt(np.mean(res**2))) if res.size else math.nan
+        last = self.gloss[-1] if self.gloss else None
+        return ComparisonMetrics(
+            measured=measured,
+            predicted=predicted,
+            rmse_pct=rmse,
+            n_compared=int(res.size),
+            gloss_measured_gu=dict(last.values_gu) if last else {},
+            gloss_predicted_gu=dict(last.predicted_gu or {}) if last else {},
+        )

@@ -1,0 +1,125 @@
+"""The runs browser: list stored runs, reopen one and show its comparison and metrics."""
+
+from __future__ import annotations
+
+from datetime import UTC, datetime
+from typing import ClassVar
+
+from textual import work
+from textual.app import ComposeResult
+from textual.binding import Binding, BindingType
+from textual.screen import Screen
+from textual.widgets import DataTable, Footer, Header, Static
+
+from goniolab.tui.backend import Backend, RunSummary, StoredRun
+from goniolab.tui.comparison import Comparison
+from goniolab.tui.widgets import ComparisonPanel
+
+__all__ = ["RunsScreen"]
+
+
+class RunsScreen(Screen[None]):
+    """Stored runs (newest first); Enter reopens one below the list."""
+
+    BINDINGS: ClassVar[list[BindingType]] = [
+        Binding("escape,r", "app.pop_screen", "Back"),
+        Binding("l", "toggle_log", "Residual/log"),
+    ]
+    DEFAULT_CSS = """
+    RunsScreen #runs { height: 10; border: round $primary; }
+    RunsScreen #run-title { height: 1; padding: 0 1; }
+    """
+    AUTO_FOCUS = "#runs"
+
+    def __init__(self, backend: Backend) -> None:
+        super().__init__()
+        self.backend = backend
+        self.comparison = Comparison()
+        self.loaded_run: int | None = None
+
+    def compose(self) -> ComposeResult:
+        yield Header()
+        yield DataTable[str](id="runs", cursor_type="row")
+        yield Static("select a run and press Enter", id="run-title")
+        yield ComparisonPanel(id="run-comparison")
+        yield Footer()
+
+    def on_mount(self) -> None:
+        self.query_one("#runs", DataTable).border_title = "stored runs"
+        table = self.query_one("#runs", DataTable)
+        for key, label in (
+            ("id", "run"),
+            ("started", "started (UTC)"),
+            ("kind", "kind"),
+            ("sample", "sample"),
+            ("status", "status"),
+            ("points", "points"),
+        ):
+            table.add_column(label, key=key)
+        self.load_runs()
+
+    @work(thread=True, exclusive=True, group="runs-list")
+    def load_runs(self) -> None:
+        """Read the run list from the store (blocking SQLite: a thread worker)."""
+        try:
+            runs = self.backend.list_runs()
+        except Exception as exc:  # store errors are shown, never crash the UI
+            self.app.call_from_thread(
+                self.notify, f"run store: {exc}", title="Runs", severity="error"
+            )
+            return
+        self.app.call_from_thread(self._show_runs, runs)
+
+    def _show_runs(self, runs: list[RunSummary]) -> None:
+        table = self.query_one("#runs", DataTable)
+        table.clear()
+        for r in runs:
+            started = datetime.fromtimestamp(r.started, tz=UTC).strftime("%Y-%m-%d %H:%M:%S")
+            table.add_row(
+                str(r.run_id),
+                started,
+                r.kind,
+                r.sample,
+                r.status,
+                str(r.n_points),
+                key=str(r.run_id),
+            )
+
+    def on_data_table_row_selected(self, event: DataTable.RowSelected) -> None:
+        if event.data_table.id != "runs" or event.row_key.value is None:
+            return
+        self.open_run(int(event.row_key.value))
+
+    @work(thread=True, exclusive=True, group="runs-open")
+    def open_run(self, run_id: int) -> None:
+        """Load one run's points and predictions (thread worker) and show them."""
+        try:
+            stored = self.backend.load_run(run_id)
+        except Exception as exc:
+            self.app.call_from_thread(
+                self.notify, f"run {run_id}: {exc}", title="Runs", severity="error"
+            )
+            return
+        self.app.call_from_thread(self._show_run, stored)
+
+    def _show_run(self, stored: StoredRun) -> None:
+        s = stored.summary
+        comparison = Comparison()
+        comparison.clear(run_id=s.run_id, sample=s.sample)
+        for m in stored.measured:
+            comparison.add_measured(m)
+        for p in stored.predicted:
+            comparison.add_predicted(p)
+        for g in stored.gloss:
+            comparison.add_gloss(g)
+        self.comparison = comparison
+        self.loaded_run = s.run_id
+        self.query_one("#run-title", Static).update(
+            f"run {s.run_id}: {s.sample}, {s.kind}, {s.status}, {comparison.n_readings} readings"
+        )
+        self.query_one(ComparisonPanel).show(comparison)
+
+    def action_toggle_log(self) -> None:
+        panel = self.query_one(ComparisonPanel)
+        panel.toggle_log()
+        panel.show(self.comparison)

@@ -1,0 +1,325 @@
+"""The widgets of the goniolab TUI: comparison plots, metrics, instrument status, gloss log."""
+
+from __future__ import annotations
+
+import math
+from datetime import UTC, datetime
+
+import numpy as np
+from textual.app import ComposeResult
+from textual.containers import Horizontal, Vertical
+from textual.widgets import DataTable, Input, Label, Select, Static
+from textual_plot import HiResMode, LegendLocation, PlotWidget
+
+from goniolab.scan.events import GlossRead
+from goniolab.tui.backend import ArmState, ScanSetup
+from goniolab.tui.comparison import Comparison, ComparisonMetrics
+
+__all__ = [
+    "ComparisonPanel",
+    "GlossLog",
+    "MetricsTable",
+    "ScanForm",
+    "StatusPanel",
+    "fmt_num",
+]
+
+GLOSS_ANGLES_DEG = (20, 60, 85)
+
+
+def fmt_num(value: float | None, digits: int = 2) -> str:
+    """Format a number for a table cell; ``-`` for missing or NaN."""
+    if value is None or not math.isfinite(value):
+        return "-"
+    return f"{value:.{digits}f}"
+
+
+class MetricsTable(DataTable[str]):
+    """Measured vs predicted: amplitude, peak position, FWHM, RMSE and gloss."""
+
+    ROWS = (
+        ("amplitude", "amplitude %"),
+        ("position", "peak θr °"),
+        ("fwhm", "FWHM °"),
+        ("rmse", "RMSE %"),
+        ("g20", "G20 GU"),
+        ("g60", "G60 GU"),
+        ("g85", "G85 GU"),
+    )
+
+    def on_mount(self) -> None:
+        self.cursor_type = "none"
+        self.zebra_stripes = True
+        self.add_column("metric", key="metric")
+        self.add_column("meas.", key="measured", width=7)
+        self.add_column("pred.", key="predicted", width=7)
+        self.add_column("Δ", key="delta", width=7)
+        for key, label in self.ROWS:
+            self.add_row(label, "-", "-", "-", key=key)
+
+    def show(self, m: ComparisonMetrics) -> None:
+        """Fill the table from ``m``."""
+        pairs: dict[str, tuple[float | None, float | None, int]] = {
+            "amplitude": (m.measured.amplitude, m.predicted.amplitude, 2),
+            "position": (m.measured.position_deg, m.predicted.position_deg, 1),
+            "fwhm": (m.measured.fwhm_deg, m.predicted.fwhm_deg, 2),
+            "rmse": (m.rmse_pct, None, 3),
+        }
+        for angle in GLOSS_ANGLES_DEG:
+            pairs[f"g{angle}"] = (
+                m.gloss_measured_gu.get(angle),
+                m.gloss_predicted_gu.get(angle),
+                1,
+            )
+        for key, (meas, pred, digits) in pairs.items():
+            delta = meas - pred if meas is not None and pred is not None else None
+            self.update_cell(key, "measured", fmt_num(meas, digits))
+            self.update_cell(key, "predicted", fmt_num(pred, digits))
+            self.update_cell(key, "delta", fmt_num(delta, digits))
+
+
+class ComparisonPanel(Horizontal):
+    """Measured points (mean with min/max bars of the repeats) over the predicted curve,
+    and beside it the residuals (or a log10 view) and the metrics table."""
+
+    DEFAULT_CSS = """
+    ComparisonPanel { height: 1fr; }
+    ComparisonPanel > .main-plot { width: 3fr; border: round $primary; }
+    ComparisonPanel > Vertical { width: 2fr; }
+    ComparisonPanel .side-plot { height: 1fr; border: round $secondary; }
+    ComparisonPanel MetricsTable { height: 9; }
+    """
+
+    def __init__(self, *, id: str | None = None) -> None:
+        super().__init__(id=id)
+        self.log_view = False
+
+    def compose(self) -> ComposeResult:
+        main = PlotWidget(classes="main-plot", allow_pan_and_zoom=True)
+        main.border_title = "luminance % vs θr °: measured ▪ predicted ─"
+        yield main
+        with Vertical():
+            side = PlotWidget(classes="side-plot", allow_pan_and_zoom=True)
+            side.border_title = "residual (meas. − pred.) %"
+            yield side
+            yield MetricsTable()
+
+    @property
+    def main_plot(self) -> PlotWidget:
+        return self.query_one(".main-plot", PlotWidget)
+
+    @property
+    def side_plot(self) -> PlotWidget:
+        return self.query_one(".side-plot", PlotWidget)
+
+    def toggle_log(self) -> None:
+        """Switch the side plot between residuals and log10 of both curves."""
+        self.log_view = not self.log_view
+
+    def show(self, comparison: Comparison) -> None:
+        """Redraw both plots and the metrics table from ``comparison``."""
+        a = comparison.arrays()
+        main = self.main_plot
+        main.clear()
+        main.set_xlabel("θr (deg)")
+        has_pred = np.isfinite(a.predicted_pct)
+        has_meas = np.isfinite(a.mean_pct)
+        if has_pred.any():
+            main.plot(
+                a.theta_r_deg[has_pred],
+                a.predicted_pct[has_pred],
+                line_style="bold cyan",
+                hires_mode=HiResMode.BRAILLE,
+                label="predicted",
+            )
+        if has_meas.any():
+            x = a.theta_r_deg[has_meas]
+            mean = a.mean_pct[has_meas]
+            # Asymmetric min/max bars drawn as symmetric bars around the midpoint.
+            mid = (a.min_pct[has_meas] + a.max_pct[has_meas]) / 2.0
+            half = (a.max_pct[has_meas] - a.min_pct[has_meas]) / 2.0
+            if np.any(half > 0):
+                main.errorbar(x, mid, yerr=half, marker_style="yellow", label="min/max")
+            main.scatter(x, mean, marker="●", marker_style="bold yellow", label="measured")
+        main.show_legend(LegendLocation.TOPRIGHT, is_visible=bool(has_pred.any() or has_meas.any()))
+
+        side = self.side_plot
+        side.clear()
+        side.set_xlabel("θr (deg)")
+        if self.log_view:
+            side.border_title = "log10 luminance %: measured ● predicted ─"
+            pos_p = has_pred & (a.predicted_pct > 0)
+            pos_m = has_meas & (a.mean_pct > 0)
+            if pos_p.any():
+                side.plot(
+                    a.theta_r_deg[pos_p],
+                    np.log10(a.predicted_pct[pos_p]),
+                    line_style="bold cyan",
+                    hires_mode=HiResMode.BRAILLE,
+                )
+            if pos_m.any():
+                side.scatter(
+                    a.theta_r_deg[pos_m],
+                    np.log10(a.mean_pct[pos_m]),
+                    marker="●",
+                    marker_style="bold yellow",
+                )
+        else:
+            side.border_title = "residual (meas. − pred.) %"
+            res = a.residual_pct
+            ok = np.isfinite(res)
+            if ok.any():
+                side.bar(
+                    a.theta_r_deg[ok],
+                    res[ok],
+                    bar_style=["green" if r >= 0 else "red" for r in res[ok]],
+                )
+        self.query_one(MetricsTable).show(comparison.metrics())
+
+
+class StatusPanel(Vertical):
+    """Arm angles, moving/idle, homed, connection and alarm state, plus the run state."""
+
+    DEFAULT_CSS = """
+    StatusPanel { height: auto; border: round $primary; }
+    StatusPanel DataTable { height: 4; }
+    StatusPanel #run-state { height: 2; }
+    """
+
+    def compose(self) -> ComposeResult:
+        yield DataTable[str](id="arms", cursor_type="none")
+        yield Static("run: idle", id="run-state")
+
+    def on_mount(self) -> None:
+        self.border_title = "instrument"
+        table = self.query_one("#arms", DataTable)
+        for key, label, width in (
+            ("angle", "angle °", 8),
+            ("motion", "motion", 6),
+            ("homed", "homed", 5),
+            ("link", "link", 4),
+            ("alarm", "alarm", 5),
+        ):
+            table.add_column(label, key=key, width=width)
+        table.add_row("-", "-", "-", "connecting", "-", key="lamp", label="lamp")
+        table.add_row("-", "-", "-", "connecting", "-", key="detector", label="detector")
+
+    def show_arm(self, arm: ArmState) -> None:
+        """Update one arm's row (``arm.name`` is ``lamp`` or ``detector``)."""
+        table = self.query_one("#arms", DataTable)
+        table.update_cell(arm.name, "angle", fmt_num(arm.position_deg, 2))
+        table.update_cell(arm.name, "motion", "moving" if arm.moving else "idle")
+        table.update_cell(arm.name, "homed", "yes" if arm.homed else "no")
+        table.update_cell(arm.name, "link", "ok" if arm.connected else "lost")
+        alarm = "-" if arm.alarm_code is None else f"{arm.alarm_code}"
+        if arm.message:
+            alarm = arm.message[:24]
+        table.update_cell(arm.name, "alarm", alarm)
+
+    def show_angles(self, theta_i_deg: float, theta_r_deg: float, moving: bool) -> None:
+        """Update both arms from an ArmsMoved event (angles in degrees)."""
+        table = self.query_one("#arms", DataTable)
+        motion = "moving" if moving else "idle"
+        table.update_cell("lamp", "angle", fmt_num(theta_i_deg, 2))
+        table.update_cell("detector", "angle", fmt_num(theta_r_deg, 2))
+        table.update_cell("lamp", "motion", motion)
+        table.update_cell("detector", "motion", motion)
+
+    def show_run(self, text: str) -> None:
+        """Replace the run-state line."""
+        self.query_one("#run-state", Static).update(text)
+
+
+class GlossLog(DataTable[str]):
+    """Glossmeter readings as they come: time, measured and predicted G20/G60/G85."""
+
+    def on_mount(self) -> None:
+        self.cursor_type = "row"
+        self.zebra_stripes = True
+        self.add_column("time (UTC)", key="time")
+        for angle in GLOSS_ANGLES_DEG:
+            self.add_column(f"G{angle}", key=f"g{angle}")
+        for angle in GLOSS_ANGLES_DEG:
+            self.add_column(f"pred G{angle}", key=f"p{angle}")
+
+    def add_reading(self, ev: GlossRead) -> None:
+        """Append one reading (newest at the bottom, scrolled into view)."""
+        when = datetime.fromtimestamp(ev.timestamp, tz=UTC).strftime("%H:%M:%S")
+        pred = ev.predicted_gu or {}
+        cells = [when]
+        cells += [fmt_num(ev.values_gu.get(a), 1) for a in GLOSS_ANGLES_DEG]
+        cells += [fmt_num(pred.get(a), 1) for a in GLOSS_ANGLES_DEG]
+        self.add_row(*cells)
+        self.move_cursor(row=self.row_count - 1)
+
+
+class ScanForm(Vertical):
+    """Sample, theta_i, theta_r range and repeats of the next scan."""
+
+    DEFAULT_CSS = """
+    ScanForm { height: auto; border: round $primary; }
+    ScanForm .field { height: 1; margin: 0 0 1 0; }
+    ScanForm .field Label { width: 11; }
+    ScanForm .field Input { width: 1fr; }
+    """
+
+    FIELDS = (
+        ("theta_i_deg", "θi °"),
+        ("theta_r_start_deg", "θr from °"),
+        ("theta_r_stop_deg", "θr to °"),
+        ("theta_r_step_deg", "θr step °"),
+        ("repeats", "repeats"),
+    )
+
+    def __init__(self, samples: list[str], setup: ScanSetup) -> None:
+        super().__init__()
+        self._samples = samples
+        self._setup = setup
+
+    def compose(self) -> ComposeResult:
+        name = self._setup.sample.removeprefix("sample:")
+        options = [(s, s) for s in self._samples]
+        if name not in self._samples:
+            options.insert(0, (name, name))
+        yield Select(options, value=name, allow_blank=False, id="sample")
+        for key, label in self.FIELDS:
+            with Horizontal(classes="field"):
+                yield Label(label)
+                value = getattr(self._setup, key)
+                yield Input(
+                    f"{value:g}" if isinstance(value, float) else str(value),
+                    id=key,
+                    type="integer" if key == "repeats" else "number",
+                    compact=True,
+                )
+
+    def on_mount(self) -> None:
+        self.border_title = "scan setup"
+
+    def read(self) -> ScanSetup:
+        """The setup as typed; raises :class:`~goniolab.errors.UserError` when invalid."""
+        from goniolab.errors import UserError
+
+        values: dict[str, float] = {}
+        for key, _label in self.FIELDS:
+            text = self.query_one(f"#{key}", Input).value.strip()
+            try:
+                values[key] = float(text)
+            except ValueError:
+                raise UserError(f"scan setup: {key}: not a number: {text!r}") from None
+        sample = self.query_one("#sample", Select).value
+        if not isinstance(sample, str):
+            raise UserError("scan setup: sample: choose a sample")
+        spec = sample if ":" in sample or "/" in sample or "." in sample else f"sample:{sample}"
+        if values["repeats"] != int(values["repeats"]):
+            raise UserError(f"scan setup: repeats: must be an integer, got {values['repeats']}")
+        setup = ScanSetup(
+            sample=spec,
+            theta_i_deg=values["theta_i_deg"],
+            theta_r_start_deg=values["theta_r_start_deg"],
+            theta_r_stop_deg=values["theta_r_stop_deg"],
+            theta_r_step_deg=values["theta_r_step_deg"],
+            repeats=int(values["repeats"]),
+        )
+        setup.validate()
+        return setup

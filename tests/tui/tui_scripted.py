@@ -1,0 +1,248 @@
+"""A scripted stand-in for the lab: publishes the runner's events from a known curve.
+
+Measured and predicted curves are analytic Gaussians, so the tests know the truth:
+peak amplitude ``AMP_PCT`` at ``PEAK_DEG``, FWHM ``2 sqrt(2 ln 2) SIGMA_DEG``, and each
+point's repeats are ``mean - SPREAD_PCT``, ``mean``, ``mean + SPREAD_PCT`` (repeats = 3).
+Points advance only when the test releases them (``release(n)``), so pause/resume and
+abort are tested without sleeps or races.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+
+from drivers.base import DeviceTimeout
+from goniolab.errors import UserError
+from goniolab.scan.events import (
+    ArmsMoved,
+    EventBus,
+    GlossRead,
+    InstrumentError,
+    PointMeasured,
+    PointPredicted,
+    Progress,
+    RunFinished,
+    RunStarted,
+    RunState,
+    StateChanged,
+)
+from goniolab.tui.backend import ArmState, RunSummary, ScanSetup, StoredRun
+
+AMP_PCT = 40.0
+PEAK_DEG = 20.0
+SIGMA_DEG = 3.0
+PRED_SCALE = 0.9  # predicted = PRED_SCALE * measured mean
+SPREAD_PCT = 0.5
+T0 = 1_767_225_600.0  # 2026-01-01 00:00:00 UTC: fixed timestamps for snapshots
+
+
+def gaussian_pct(theta_r_deg: float) -> float:
+    """The scripted measured mean: AMP_PCT exp(-(t - PEAK)^2 / (2 SIGMA^2))."""
+    return AMP_PCT * math.exp(-((theta_r_deg - PEAK_DEG) ** 2) / (2.0 * SIGMA_DEG**2))
+
+
+class ScriptedBackend:
+    """Implements :class:`goniolab.tui.backend.Backend` with a scripted event publisher."""
+
+    def __init__(self, *, gated: bool = True, fail_open: bool = False) -> None:
+        self.bus = EventBus()
+        self.gated = gated
+        self.fail_open = fail_open
+        self._allowed = 0
+        self._gate = asyncio.Condition()
+        self._paused = False
+        self._resume = asyncio.Event()
+        self._resume.set()
+        self._abort = False
+        self._task: asyncio.Task[None] | None = None
+        self.opened = False
+        self.closed = False
+        self.setups: list[ScanSetup] = []
+        self.position = (45.0, 45.0)
+        self.stored: dict[int, StoredRun] = {}
+
+    @property
+    def title(self) -> str:
+        return "scripted lab"
+
+    async def open(self) -> None:
+        if self.fail_open:
+            raise DeviceTimeout("no answer to homing within 30.0 s", device="lamp")
+        self.opened = True
+
+    async def close(self) -> None:
+        self.closed = True
+        if self._task is not None:
+            self._abort = True
+            self._resume.set()
+            async with self._gate:
+                self._allowed = 10**9
+                self._gate.notify_all()
+            await self._task
+
+    def sample_names(self) -> list[str]:
+        return ["flat", "wittmann-1", "wittmann-3"]
+
+    def default_setup(self) -> ScanSetup:
+        return ScanSetup("sample:wittmann-3", 20.0, 10.0, 30.0, 2.0, 3)
+
+    @property
+    def running(self) -> bool:
+        return self._task is not None and not self._task.done()
+
+    async def start(self, setup: ScanSetup) -> int:
+        setup.validate()
+        if self.running:
+            raise UserError("a scan is already running")
+        self.setups.append(setup)
+        run_id = len(self.setups)
+        self._abort = False
+        self._task = asyncio.get_running_loop().create_task(self._run(run_id, setup))
+        return run_id
+
+    async def release(self, n: int) -> None:
+        """Let ``n`` more points run."""
+        async with self._gate:
+            self._allowed += n
+            self._gate.notify_all()
+
+    def pause(self) -> None:
+        self._paused = True
+        self._resume.clear()
+
+    def resume(self) -> None:
+        self._paused = False
+        self._resume.set()
+
+    def abort(self) -> None:
+        self._abort = True
+        self._resume.set()
+
+    async def arm_states(self) -> tuple[ArmState, ArmState]:
+        ti, tr = self.position
+        return (
+            ArmState("lamp", ti, False, True, None, True),
+            ArmState("detector", tr, False, True, None, True),
+        )
+
+    def list_runs(self) -> list[RunSummary]:
+        return [s.summary for s in sorted(self.stored.values(), key=lambda r: -r.summary.run_id)]
+
+    def load_run(self, run_id: int) -> StoredRun:
+        if run_id not in self.stored:
+            raise KeyError(f"no run {run_id}")
+        return self.stored[run_id]
+
+    def _ts(self, k: int) -> float:
+        return T0 + k
+
+    async def _run(self, run_id: int, setup: ScanSetup) -> None:
+        pub = self.bus.publish
+        thetas = setup.theta_r_values_deg()
+        pub(
+            RunStarted(
+                run_id=run_id,
+                timestamp=self._ts(0),
+                kind="brdf",
+                total_points=len(thetas),
+                plan={"theta_i_deg": setup.theta_i_deg},
+                sample=setup.sample,
+            )
+        )
+        pub(StateChanged(run_id=run_id, timestamp=self._ts(0), state=RunState.RUNNING))
+        measured: list[PointMeasured] = []
+        predicted: list[PointPredicted] = []
+        state = RunState.DONE
+        for index, tr in enumerate(thetas):
+            if self.gated:
+                async with self._gate:
+                    await self._gate.wait_for(lambda: self._allowed > 0)
+                    self._allowed -= 1
+            if self._paused:
+                pub(StateChanged(run_id=run_id, timestamp=self._ts(index), state=RunState.PAUSED))
+                await self._resume.wait()
+                if not self._abort:
+                    pub(
+                        StateChanged(
+                            run_id=run_id, timestamp=self._ts(index), state=RunState.RUNNING
+                        )
+                    )
+            if self._abort:
+                state = RunState.ABORTED
+                break
+            self.position = (setup.theta_i_deg, tr)
+            pub(
+                ArmsMoved(
+                    run_id=run_id,
+                    timestamp=self._ts(index),
+                    theta_i_deg=setup.theta_i_deg,
+                    theta_r_deg=tr,
+                    moving=False,
+                )
+            )
+            mean = gaussian_pct(tr)
+            p = PointPredicted(
+                run_id=run_id,
+                timestamp=self._ts(index),
+                index=index,
+                theta_i_deg=setup.theta_i_deg,
+                theta_r_deg=tr,
+                predicted_pct=PRED_SCALE * mean,
+            )
+            predicted.append(p)
+            pub(p)
+            for rep in range(setup.repeats):
+                offset = (rep - (setup.repeats - 1) / 2.0) * SPREAD_PCT
+                m = PointMeasured(
+                    run_id=run_id,
+                    timestamp=self._ts(index),
+                    index=index,
+                    repeat=rep,
+                    theta_i_deg=setup.theta_i_deg,
+                    theta_r_deg=tr,
+                    luminance_pct=mean + offset,
+                    measured_theta_i_deg=setup.theta_i_deg,
+                    measured_theta_r_deg=tr,
+                )
+                measured.append(m)
+                pub(m)
+            pub(
+                Progress(
+                    run_id=run_id,
+                    timestamp=self._ts(index),
+                    done=index + 1,
+                    total=len(thetas),
+                    eta_s=float(len(thetas) - index - 1),
+                )
+            )
+            await asyncio.sleep(0)
+        pub(RunFinished(run_id=run_id, timestamp=self._ts(99), state=state, reason="", summary={}))
+        self.stored[run_id] = StoredRun(
+            RunSummary(run_id, self._ts(0), "brdf", setup.sample, state.value, len(measured)),
+            measured,
+            predicted,
+        )
+
+    def publish_gloss(self, k: int, g60: float) -> None:
+        """A glossmeter reading (G60 only measured, all three predicted)."""
+        self.bus.publish(
+            GlossRead(
+                run_id=0,
+                timestamp=self._ts(k),
+                values_gu={20: None, 60: g60, 85: None},
+                predicted_gu={20: 30.0, 60: 58.0, 85: 90.0},
+            )
+        )
+
+    def publish_timeout(self) -> None:
+        """An instrument timeout, as the runner reports it."""
+        self.bus.publish(
+            InstrumentError(
+                run_id=0,
+                timestamp=self._ts(0),
+                device="spectro",
+                message="no reply to 'MEASURE' within 2.0 s",
+                fatal=False,
+            )
+        )
