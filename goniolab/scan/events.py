@@ -82,6 +82,9 @@ class PointMeasured(Event):
     luminance_pct: float
     measured_theta_i_deg: float
     measured_theta_r_deg: float
+    #: The model's prediction for this geometry when already computed (else ``None``);
+    #: the residual is ``luminance_pct - predicted_pct``.
+    predicted_pct: float | None = None
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -1,0 +1,87 @@
+"""The model in the loop: predictions for each plan geometry, computed off the event loop.
+
+The prediction for plan point (theta_i, theta_r) is what the goniospectrophotometer of
+Wittmann et al. (2021, sec. 2.3) would read from the modelled surface: relative luminance in
+% of a mirror, ``100 x`` the flux reaching the detector cone (6 deg opening), averaged over
+the lamp's source cone (6 deg divergence) -- ``ReflectanceModel.luminance_pct`` with the
+configured cones (PHYSICS.md, "What the instruments see"; Mihalik eqs. 15-17 for the
+source-and-receptor integration).
+
+Evaluating the model is numeric work (an aperture quadrature per geometry), so it runs in a
+worker thread through :func:`asyncio.to_thread`; the runner and any UI keep their loop free.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from goniolab.optics.apertures import Cone
+from goniolab.optics.models import ReflectanceModel
+
+__all__ = ["Predictor"]
+
+
+@dataclass(frozen=True, slots=True)
+class Predictor:
+    """Evaluate ``model.luminance_pct`` for a plan's geometries in a worker thread.
+
+    Parameters
+    ----------
+    model
+        Any :class:`~goniolab.optics.models.ReflectanceModel` (the lab's facet model of
+        the sample under the instruments, or one built from ``--sample``).
+    source
+        Lamp divergence cone (config ``[goniometer] source_cone_deg``).
+    detector
+        Detector opening cone (config ``[spectro] detector_cone_deg``).
+    chunk
+        Geometries per worker call: predictions are published chunk by chunk so that a
+        live plot fills while the scan runs.
+    """
+
+    model: ReflectanceModel
+    source: Cone
+    detector: Cone
+    chunk: int = 8
+
+    def predict_sync(self, theta_i_deg: float, theta_r_deg: Sequence[float]) -> NDArray[np.float64]:
+        """Predicted luminance in % of a mirror at ``theta_r_deg`` (blocking; for threads)."""
+        tr = np.asarray(theta_r_deg, dtype=np.float64)
+        out = self.model.luminance_pct(theta_i_deg, tr, source=self.source, detector=self.detector)
+        return np.asarray(out, dtype=np.float64).reshape(tr.shape)
+
+    async def predict(
+        self, theta_i_deg: float, theta_r_deg: Sequence[float]
+    ) -> NDArray[np.float64]:
+        """Same as :meth:`predict_sync`, computed in a worker thread (never on the loop)."""
+        return await asyncio.to_thread(self.predict_sync, theta_i_deg, list(theta_r_deg))
+
+    def describe(self) -> dict[str, object]:
+        """Model parameters stored with a run (model class, apertures)."""
+        return {
+            "model": type(self.model).__name__,
+            "source_cone_deg": self.source.full_angle_deg,
+            "detector_cone_deg": self.detector.full_angle_deg,
+            **_model_params(self.model),
+        }
+
+
+def _model_params(model: ReflectanceModel) -> dict[str, object]:
+    """Public scalar attributes of a model (refractive index, weighting, alpha, source)."""
+    out: dict[str, object] = {}
+    for name in ("n", "weighting", "masking", "kind", "alpha"):
+        v = getattr(model, name, None)
+        if isinstance(v, complex):
+            out[name] = [v.real, v.imag]
+        elif isinstance(v, str | int | float | bool):
+            out[name] = v
+    surface = getattr(model, "surface", None)
+    src = getattr(surface, "source", None)
+    if isinstance(src, str):
+        out["surface_source"] = src
+    return out

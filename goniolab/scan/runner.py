@@ -1,0 +1,548 @@
+"""The scan runner: a state machine that moves the arms, reads the detector and stores each point.
+
+States (:class:`~goniolab.scan.events.RunState`)::
+
+    idle --start--> running --pause--> paused --resume--> running --> done
+                       |                  |
+                       +--abort-----------+--> aborted   (arms parked)
+                       +--DeviceError--------> failed    (arms parked, reason kept)
+
+Pause, resume and abort are commands (plain method calls, safe from any task on the loop)
+honoured *between* readings. Resume re-reads the arm positions and re-moves them when they
+drifted or were moved by hand while paused. A fault (any :class:`drivers.base.DeviceError`)
+stops the arms, parks them (best effort) and marks the run ``failed`` with the reason; every
+reading measured before the fault stays in the store.
+
+Every reading is committed to the store *before* the next one is taken (no buffering), and
+readings are keyed by (plan index, repeat) with a UNIQUE constraint, so
+:meth:`ScanRunner.run` on an interrupted run (also after the process was killed) measures
+exactly the missing readings.
+
+The runner publishes events on an :class:`~goniolab.scan.events.EventBus`
+(``publish`` never waits on a subscriber) and never imports a UI.
+
+Before any motion, :func:`dry_run` checks every geometry with
+``Goniometer.check_geometry`` (soft limits + arm-separation interlock) and estimates the run
+time from the trapezoidal motion model (:func:`sim.motion.trapezoid_duration_s`,
+Biagiotti & Melchiorri sec. 3.2) plus dwell and reading time.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+import time
+from collections.abc import Awaitable, Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from drivers.base import (
+    DeviceError,
+    Goniometer,
+    InterlockError,
+    LimitError,
+    Spectrocolorimeter,
+)
+from goniolab.scan.events import (
+    ArmsMoved,
+    EventBus,
+    InstrumentError,
+    PointMeasured,
+    PointPredicted,
+    Progress,
+    RunFinished,
+    RunStarted,
+    RunState,
+    StateChanged,
+)
+from goniolab.scan.plans import MIRROR_INDEX, BrdfPlan, PlanPoint
+from goniolab.scan.predict import Predictor
+from goniolab.scan.summary import summarize_brdf
+from goniolab.store import RunStore
+from sim.clock import Clock
+from sim.motion import trapezoid_duration_s
+
+__all__ = [
+    "ArmMotion",
+    "DryRun",
+    "PlanRefused",
+    "RunResult",
+    "ScanRunner",
+    "dry_run",
+]
+
+#: Called with "mirror" before the mirror reference readings and "sample" after them;
+#: returns once the operator (or the simulated lab) has swapped the specimen.
+SpecimenHook = Callable[[str], Awaitable[None]]
+
+
+class PlanRefused(Exception):
+    """The dry run found a geometry the goniometer must not reach (names point and reason)."""
+
+
+@dataclass(frozen=True, slots=True)
+class ArmMotion:
+    """Speed and acceleration of both arms (config ``[goniometer.lamp|detector]``)."""
+
+    lamp_speed_deg_s: float
+    lamp_accel_deg_s2: float
+    detector_speed_deg_s: float
+    detector_accel_deg_s2: float
+
+    def move_time_s(self, start: tuple[float, float], target: tuple[float, float]) -> float:
+        """Time of a two-arm move; the arms move together, so the slower arm sets it."""
+        t_lamp = trapezoid_duration_s(
+            target[0] - start[0], self.lamp_speed_deg_s, self.lamp_accel_deg_s2
+        )
+        t_det = trapezoid_duration_s(
+            target[1] - start[1], self.detector_speed_deg_s, self.detector_accel_deg_s2
+        )
+        return max(t_lamp, t_det)
+
+
+@dataclass(frozen=True, slots=True)
+class DryRun:
+    """Result of :func:`dry_run`: every reading's estimated duration and the total."""
+
+    n_readings: int
+    n_moves: int
+    point_times_s: tuple[float, ...]
+
+    @property
+    def eta_s(self) -> float:
+        """Estimated run time in seconds of lab clock."""
+        return math.fsum(self.point_times_s)
+
+
+def dry_run(
+    points: Sequence[PlanPoint],
+    goniometer: Goniometer,
+    motion: ArmMotion,
+    *,
+    start_deg: tuple[float, float],
+    dwell_s: float,
+    reading_time_s: float,
+    park_deg: tuple[float, float] | None = None,
+) -> DryRun:
+    """Check every geometry before any motion and estimate the run time.
+
+    Parameters
+    ----------
+    points
+        The readings still to take, in order.
+    goniometer
+        Its ``check_geometry`` raises :class:`~drivers.base.LimitError` or
+        :class:`~drivers.base.InterlockError` for an unsafe geometry; nothing moves.
+    motion
+        Arm speeds and accelerations for the trapezoidal move times.
+    start_deg
+        Arm positions (theta_i, theta_r) before the first move.
+    dwell_s, reading_time_s
+        Settling time after each move and time of one reading (exposure + transfer).
+    park_deg
+        The park geometry, checked too (a fault or an abort drives there).
+
+    Returns
+    -------
+    DryRun
+        Per-reading time: move (first repeat of a geometry only) + dwell + reading.
+
+    Raises
+    ------
+    PlanRefused
+        Naming the first unsafe point, its geometry and the goniometer's reason.
+    """
+    if park_deg is not None:
+        try:
+            goniometer.check_geometry(*park_deg)
+        except (LimitError, InterlockError) as exc:
+            raise PlanRefused(
+                f"park position theta_i={park_deg[0]:g} deg, theta_r={park_deg[1]:g} deg "
+                f"is unsafe: {exc}"
+            ) from exc
+    times: list[float] = []
+    pos = start_deg
+    moves = 0
+    checked: set[tuple[float, float]] = set()
+    for p in points:
+        target = (p.theta_i_deg, p.theta_r_deg)
+        if target not in checked:
+            try:
+                goniometer.check_geometry(*target)
+            except (LimitError, InterlockError) as exc:
+                what = "mirror reference" if p.index == MIRROR_INDEX else f"point {p.index}"
+                raise PlanRefused(
+                    f"{what} (theta_i={p.theta_i_deg:g} deg, theta_r={p.theta_r_deg:g} deg) "
+                    f"is unsafe: {exc}"
+                ) from exc
+            checked.add(target)
+        t = reading_time_s
+        if target != pos:
+            t += motion.move_time_s(pos, target) + dwell_s
+            moves += 1
+            pos = target
+        times.append(t)
+    return DryRun(n_readings=len(points), n_moves=moves, point_times_s=tuple(times))
+
+
+@dataclass(slots=True)
+class RunResult:
+    """What a finished :meth:`ScanRunner.run` returns (also published as RunFinished)."""
+
+    run_id: int
+    state: RunState
+    reason: str
+    summary: dict[str, Any] = field(default_factory=dict)
+
+
+class ScanRunner:
+    """Run (or continue) one stored BRDF scan.
+
+    Parameters
+    ----------
+    goniometer, spectro, clock
+        The lab's instruments and clock (``lab.goniometer``, ``lab.spectro``, ``lab.clock``).
+    plan
+        The plan; its readings already in the store for ``run_id`` are skipped.
+    store, run_id
+        The run store and the id of the run (created by the caller with the plan).
+    bus
+        Where events are published.
+    motion
+        Arm speeds/accelerations for the ETA.
+    predictor
+        Model predictions for each geometry (``None``: no comparison).
+    move_timeout_s, home_timeout_s
+        Timeouts of one move and of homing (also used for parking).
+    park_deg
+        Park geometry (theta_i, theta_r) after the run, an abort or a fault.
+    reading_time_s
+        Duration of one reading for the ETA (default: the exposure time).
+    position_tolerance_deg
+        After a resume, arms further than this from the current target are re-moved.
+    specimen_hook
+        Swaps mirror and sample for the mirror reference (``None`` when the plan has none).
+    misalignment_threshold_deg
+        Peak offset above which the summary carries a misalignment hint.
+    """
+
+    def __init__(
+        self,
+        *,
+        goniometer: Goniometer,
+        spectro: Spectrocolorimeter,
+        clock: Clock,
+        plan: BrdfPlan,
+        store: RunStore,
+        run_id: int,
+        bus: EventBus,
+        motion: ArmMotion,
+        predictor: Predictor | None = None,
+        move_timeout_s: float = 30.0,
+        home_timeout_s: float = 120.0,
+        park_deg: tuple[float, float] | None = None,
+        reading_time_s: float | None = None,
+        position_tolerance_deg: float = 0.05,
+        specimen_hook: SpecimenHook | None = None,
+        misalignment_threshold_deg: float = 0.5,
+    ) -> None:
+        self.goniometer = goniometer
+        self.spectro = spectro
+        self.clock = clock
+        self.plan = plan
+        self.store = store
+        self.run_id = run_id
+        self.bus = bus
+        self.motion = motion
+        self.predictor = predictor
+        self.move_timeout_s = move_timeout_s
+        self.home_timeout_s = home_timeout_s
+        self.park_deg = park_deg
+        self.reading_time_s = plan.exposure_us * 1e-6 if reading_time_s is None else reading_time_s
+        self.position_tolerance_deg = position_tolerance_deg
+        self.specimen_hook = specimen_hook
+        self.misalignment_threshold_deg = misalignment_threshold_deg
+        if plan.mirror_reference and specimen_hook is None:
+            raise ValueError("a plan with a mirror reference needs a specimen_hook")
+        self._state = RunState.IDLE
+        self._pause_requested = False
+        self._abort_requested = False
+        self._wake = asyncio.Event()
+        self._verify_position = False
+        self._predicted: dict[int, float] = {}
+        self._target: tuple[float, float] | None = None
+        self._measured_deg: tuple[float, float] = (math.nan, math.nan)
+
+    # ------------------------------------------------------------------ commands
+    @property
+    def state(self) -> RunState:
+        """The current state."""
+        return self._state
+
+    def pause(self) -> None:
+        """Ask the run to pause after the current reading."""
+        if self._state in (RunState.IDLE, RunState.RUNNING):
+            self._pause_requested = True
+
+    def resume(self) -> None:
+        """Continue a paused run (arm positions are re-checked before the next reading)."""
+        self._pause_requested = False
+        self._wake.set()
+
+    def abort(self) -> None:
+        """Stop after the current reading, park the arms and mark the run ``aborted``."""
+        self._abort_requested = True
+        self._wake.set()
+
+    # ------------------------------------------------------------------ helpers
+    def _set_state(self, state: RunState, reason: str = "") -> None:
+        self._state = state
+        self.store.set_status(self.run_id, state.value, reason)
+        self.bus.publish(StateChanged(run_id=self.run_id, state=state, reason=reason))
+
+    async def _checkpoint(self) -> bool:
+        """Honour pause/abort between readings; ``False`` means stop."""
+        if self._abort_requested:
+            return False
+        if self._pause_requested:
+            self._set_state(RunState.PAUSED)
+            while self._pause_requested and not self._abort_requested:
+                self._wake.clear()
+                await self._wake.wait()
+            if self._abort_requested:
+                return False
+            self._set_state(RunState.RUNNING)
+            self._verify_position = True
+        return True
+
+    async def _move(self, target: tuple[float, float]) -> None:
+        self.bus.publish(
+            ArmsMoved(run_id=self.run_id, theta_i_deg=target[0], theta_r_deg=target[1], moving=True)
+        )
+        measured = await self.goniometer.move_to(target[0], target[1], self.move_timeout_s)
+        self._measured_deg = (float(measured[0]), float(measured[1]))
+        self._target = target
+        self.bus.publish(
+            ArmsMoved(
+                run_id=self.run_id,
+                theta_i_deg=self._measured_deg[0],
+                theta_r_deg=self._measured_deg[1],
+                moving=False,
+            )
+        )
+
+    async def _ensure_position(self, target: tuple[float, float]) -> bool:
+        """Move to ``target`` if needed; return True when a move happened."""
+        if self._target != target:
+            await self._move(target)
+            return True
+        if self._verify_position:
+            self._verify_position = False
+            ti, tr = await self.goniometer.positions_deg()
+            if (
+                abs(ti - target[0]) > self.position_tolerance_deg
+                or abs(tr - target[1]) > self.position_tolerance_deg
+            ):
+                await self._move(target)
+                return True
+            self._measured_deg = (float(ti), float(tr))
+        return False
+
+    async def _ensure_homed(self) -> None:
+        lamp = await self.goniometer.lamp.status()
+        det = await self.goniometer.detector.status()
+        if not (lamp.homed and det.homed):
+            await self.goniometer.home(self.home_timeout_s)
+
+    async def _park(self) -> str:
+        """Stop and park the arms, best effort; returns "" or what went wrong."""
+        problems: list[str] = []
+        with contextlib.suppress(DeviceError):
+            await self.goniometer.stop()
+        try:
+            await self.goniometer.park(self.home_timeout_s)
+        except DeviceError as exc:
+            problems.append(f"parking failed: {exc}")
+        self._target = None
+        return "; ".join(problems)
+
+    async def _predict_all(self) -> None:
+        """Predict every geometry not yet predicted, chunk by chunk, in worker threads."""
+        if self.predictor is None:
+            return
+        self._predicted.update(self.store.predictions(self.run_id))
+        todo = [i for i in range(self.plan.n_geometries) if i not in self._predicted]
+        ti = self.plan.theta_i_deg
+        for start in range(0, len(todo), self.predictor.chunk):
+            idx = todo[start : start + self.predictor.chunk]
+            trs = [self.plan.theta_r_deg[i] for i in idx]
+            values = await self.predictor.predict(ti, trs)
+            rows = [(i, ti, tr, float(v)) for i, tr, v in zip(idx, trs, values, strict=True)]
+            self.store.add_predictions(self.run_id, rows)
+            for i, _, tr, v in rows:
+                self._predicted[i] = v
+                self.bus.publish(
+                    PointPredicted(
+                        run_id=self.run_id, index=i, theta_i_deg=ti, theta_r_deg=tr, predicted_pct=v
+                    )
+                )
+
+    def _mirror_level(self) -> float | None:
+        vals = [p.luminance_pct for p in self.store.points(self.run_id) if p.index == MIRROR_INDEX]
+        if len(vals) < self.plan.repeats:
+            return None
+        return math.fsum(vals) / len(vals)
+
+    # ------------------------------------------------------------------ run
+    async def run(self) -> RunResult:
+        """Take every reading of the plan not yet in the store; return the final state.
+
+        Raises
+        ------
+        PlanRefused
+            From the dry run, before any motion (the run stays resumable).
+        """
+        all_points = self.plan.points()
+        done = self.store.done_keys(self.run_id)
+        todo = [p for p in all_points if p.key not in done]
+        start_deg = await self.goniometer.positions_deg()
+        plan_dry = dry_run(
+            todo,
+            self.goniometer,
+            self.motion,
+            start_deg=(float(start_deg[0]), float(start_deg[1])),
+            dwell_s=self.plan.dwell_s,
+            reading_time_s=self.reading_time_s,
+            park_deg=self.park_deg,
+        )
+        remaining_s = list(plan_dry.point_times_s)
+        total = len(all_points)
+        n_done = total - len(todo)
+
+        self.bus.publish(
+            RunStarted(
+                run_id=self.run_id,
+                kind="brdf",
+                total_points=total,
+                plan=self.plan.to_dict(),
+                sample=self.plan.sample,
+            )
+        )
+        self._set_state(RunState.RUNNING)
+        self.bus.publish(
+            Progress(run_id=self.run_id, done=n_done, total=total, eta_s=plan_dry.eta_s)
+        )
+        predict_task = asyncio.create_task(self._predict_all(), name=f"predict-run-{self.run_id}")
+        state = RunState.DONE
+        reason = ""
+        try:
+            await self._ensure_homed()
+            await self.spectro.set_exposure_us(self.plan.exposure_us)
+            mirror_pct = self._mirror_level()
+            specimen = "sample"
+            for k, p in enumerate(todo):
+                if not await self._checkpoint():
+                    state, reason = RunState.ABORTED, "aborted by the operator"
+                    break
+                want = "mirror" if p.index == MIRROR_INDEX else "sample"
+                if want != specimen:
+                    assert self.specimen_hook is not None
+                    await self.specimen_hook(want)
+                    specimen = want
+                target = (p.theta_i_deg, p.theta_r_deg)
+                if await self._ensure_position(target):
+                    await self.clock.sleep(self.plan.dwell_s)
+                reading = await self.spectro.measure()
+                raw_pct = float(reading.luminance_pct)
+                if p.index == MIRROR_INDEX:
+                    value = raw_pct
+                else:
+                    if mirror_pct is None and self.plan.mirror_reference:
+                        mirror_pct = self._mirror_level()
+                    value = raw_pct if mirror_pct is None else 100.0 * raw_pct / mirror_pct
+                ts = time.time()
+                self.store.add_point(
+                    self.run_id,
+                    index=p.index,
+                    repeat=p.repeat,
+                    theta_i_deg=p.theta_i_deg,
+                    theta_r_deg=p.theta_r_deg,
+                    measured_theta_i_deg=self._measured_deg[0],
+                    measured_theta_r_deg=self._measured_deg[1],
+                    luminance_pct=value,
+                    raw={
+                        "luminance_pct": raw_pct,
+                        "exposure_us": reading.exposure_us,
+                        "wavelengths_nm": list(reading.wavelengths_nm),
+                        "values": list(reading.values),
+                        "mirror_pct": mirror_pct,
+                        "clock_s": self.clock.now(),
+                    },
+                    timestamp=ts,
+                )
+                n_done += 1
+                self.bus.publish(
+                    PointMeasured(
+                        run_id=self.run_id,
+                        timestamp=ts,
+                        index=p.index,
+                        repeat=p.repeat,
+                        theta_i_deg=p.theta_i_deg,
+                        theta_r_deg=p.theta_r_deg,
+                        luminance_pct=value,
+                        measured_theta_i_deg=self._measured_deg[0],
+                        measured_theta_r_deg=self._measured_deg[1],
+                        predicted_pct=self._predicted.get(p.index),
+                    )
+                )
+                eta = math.fsum(remaining_s[k + 1 :])
+                self.bus.publish(Progress(run_id=self.run_id, done=n_done, total=total, eta_s=eta))
+            if specimen == "mirror":
+                assert self.specimen_hook is not None
+                await self.specimen_hook("sample")
+        except DeviceError as exc:
+            state = RunState.FAILED
+            reason = str(exc)
+            self.bus.publish(
+                InstrumentError(
+                    run_id=self.run_id, device=exc.device, message=exc.message, fatal=True
+                )
+            )
+        except asyncio.CancelledError:
+            # Cancelled from outside (the process is shutting down): park, record, re-raise.
+            predict_task.cancel()
+            park_problem = await asyncio.shield(self._park())
+            why = "cancelled" + (f"; {park_problem}" if park_problem else "")
+            self._set_state(RunState.ABORTED, why)
+            raise
+        park_problem = await self._park()
+        if park_problem:
+            reason = f"{reason}; {park_problem}" if reason else park_problem
+            self.bus.publish(
+                InstrumentError(
+                    run_id=self.run_id, device="goniometer", message=park_problem, fatal=False
+                )
+            )
+        try:
+            await predict_task
+        except Exception as exc:  # a model failure must not lose the run
+            self.bus.publish(
+                InstrumentError(
+                    run_id=self.run_id,
+                    device="model",
+                    message=f"prediction failed: {exc}",
+                    fatal=False,
+                )
+            )
+        summary = summarize_brdf(
+            self.plan,
+            self.store.points(self.run_id),
+            self.store.predictions(self.run_id),
+            misalignment_threshold_deg=self.misalignment_threshold_deg,
+        )
+        self._set_state(state, reason)
+        self.bus.publish(
+            RunFinished(run_id=self.run_id, state=state, reason=reason, summary=summary)
+        )
+        return RunResult(run_id=self.run_id, state=state, reason=reason, summary=summary)

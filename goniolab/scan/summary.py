@@ -1,0 +1,162 @@
+"""Run summary: measured vs predicted curve, RMSE, peak metrics and a misalignment hint.
+
+The comparison metrics are those of Wittmann et al. (2021, fig. 8): peak amplitude and full
+width at half maximum of the in-plane luminance curve, measured (mean of the repeats at each
+geometry) against predicted, plus the RMSE of the per-geometry residuals.
+
+Misalignment hint (Wittmann et al. 2021, sec. 5.2-5.3 attribute the scatter on glossy
+samples to arm/sample misalignment). Derivation: a facet of normal ``n`` reflects
+``wi`` into ``wo = 2 (wi.n) n - wi`` (seed sec. 3.2, ``M = 2 n n^T - I``). Tilting the sample
+by ``tau`` about the axis normal to the plane of incidence rotates ``n`` by ``tau`` in that
+plane; a reflection about a line rotated by ``tau`` is the original reflection followed by a
+rotation of ``2 tau``, so the specular peak moves by ``delta = 2 tau`` (in either sense,
+depending on the tilt's sense). A zero offset ``d`` of the lamp arm moves the true incidence
+to ``theta_i + d`` and the peak by ``d``; a zero offset of the detector arm moves the
+recorded angles, and so the peak, by ``d`` too. So a measured peak offset ``delta`` from the
+predicted one points to a sample tilt of ``|delta| / 2`` or an arm zero offset of ``|delta|``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from goniolab.optics.metrics import PeakMetrics, peak_metrics
+from goniolab.scan.plans import MIRROR_INDEX, BrdfPlan
+from goniolab.store import PointRow
+
+__all__ = ["misalignment_hint", "summarize_brdf"]
+
+
+def misalignment_hint(
+    measured_peak_deg: float, predicted_peak_deg: float, threshold_deg: float
+) -> str | None:
+    """Explain a peak offset larger than ``threshold_deg`` (see the module docstring).
+
+    Returns
+    -------
+    str or None
+        ``None`` when ``|measured - predicted| <= threshold_deg``.
+    """
+    delta = measured_peak_deg - predicted_peak_deg
+    if not math.isfinite(delta) or abs(delta) <= threshold_deg:
+        return None
+    return (
+        f"measured peak at {measured_peak_deg:.2f} deg, predicted at {predicted_peak_deg:.2f} deg "
+        f"(offset {delta:+.2f} deg > {threshold_deg:g} deg): the sample may be tilted by about "
+        f"{abs(delta) / 2:.2f} deg in the plane of incidence (a tilt tau moves the specular peak "
+        f"by 2 tau), or an arm zero may be off by about {abs(delta):.2f} deg; check the sample "
+        "seating and the arm zeros (Wittmann et al. 2021, sec. 5.2-5.3)"
+    )
+
+
+def _finite(v: float) -> float | None:
+    """JSON has no NaN: a FWHM whose half-maximum crossing lies outside the scan is None."""
+    return float(v) if math.isfinite(v) else None
+
+
+def _peak_dict(pm: PeakMetrics) -> dict[str, float | None]:
+    return {
+        "amplitude_pct": _finite(pm.amplitude),
+        "position_deg": _finite(pm.position_deg),
+        "fwhm_deg": _finite(pm.fwhm_deg),
+    }
+
+
+def summarize_brdf(
+    plan: BrdfPlan,
+    points: Sequence[PointRow],
+    predictions: Mapping[int, float],
+    *,
+    misalignment_threshold_deg: float = 0.5,
+) -> dict[str, Any]:
+    """Summarise a BRDF run from what the store holds.
+
+    Parameters
+    ----------
+    plan
+        The run's plan.
+    points
+        Stored readings (``luminance_pct`` already relative to the mirror reference).
+    predictions
+        ``{index: predicted_pct}``.
+    misalignment_threshold_deg
+        Peak offset above which a hint is given.
+
+    Returns
+    -------
+    dict
+        JSON-serialisable: counts, per-geometry mean/std/prediction/residual, ``rmse_pct``,
+        ``measured_peak``/``predicted_peak`` (:func:`goniolab.optics.metrics.peak_metrics`
+        on the repeat means), ``peak_offset_deg``, ``amplitude_ratio`` and ``hint``.
+    """
+    by_index: dict[int, list[float]] = {}
+    mirror: list[float] = []
+    for p in points:
+        if p.index == MIRROR_INDEX:
+            mirror.append(p.luminance_pct)
+        else:
+            by_index.setdefault(p.index, []).append(p.luminance_pct)
+    geometries: list[dict[str, Any]] = []
+    residuals: list[float] = []
+    for i, tr in enumerate(plan.theta_r_deg):
+        vals = by_index.get(i, [])
+        mean = math.fsum(vals) / len(vals) if vals else None
+        std = float(np.std(vals, ddof=1)) if len(vals) > 1 else (0.0 if vals else None)
+        pred = predictions.get(i)
+        resid = None if mean is None or pred is None else mean - pred
+        if resid is not None:
+            residuals.append(resid)
+        geometries.append(
+            {
+                "index": i,
+                "theta_r_deg": tr,
+                "n": len(vals),
+                "mean_pct": mean,
+                "std_pct": std,
+                "predicted_pct": pred,
+                "residual_pct": resid,
+            }
+        )
+    n_readings = sum(len(v) for v in by_index.values()) + len(mirror)
+    n_planned = len(plan.points())
+    out: dict[str, Any] = {
+        "theta_i_deg": plan.theta_i_deg,
+        "sample": plan.sample,
+        "readings": n_readings,
+        "planned_readings": n_planned,
+        "complete": n_readings == n_planned,
+        "mirror_pct": (math.fsum(mirror) / len(mirror)) if mirror else None,
+        "rmse_pct": math.sqrt(math.fsum(r * r for r in residuals) / len(residuals))
+        if residuals
+        else None,
+        "measured_peak": None,
+        "predicted_peak": None,
+        "peak_offset_deg": None,
+        "amplitude_ratio": None,
+        "hint": None,
+        "geometries": geometries,
+    }
+    # peak_metrics wants increasing angles: a listed plan may scan in any order.
+    order = sorted(range(plan.n_geometries), key=lambda i: plan.theta_r_deg[i])
+    measured_idx = [i for i in order if geometries[i]["mean_pct"] is not None]
+    if len(measured_idx) >= 3:
+        theta = np.array([plan.theta_r_deg[i] for i in measured_idx])
+        means = np.array([geometries[i]["mean_pct"] for i in measured_idx])
+        mp = peak_metrics(theta, means)
+        out["measured_peak"] = _peak_dict(mp)
+        if all(i in predictions for i in order):
+            theta_all = np.array([plan.theta_r_deg[i] for i in order])
+            pp = peak_metrics(theta_all, np.array([predictions[i] for i in order]))
+            out["predicted_peak"] = _peak_dict(pp)
+            offset = float(mp.position_deg - pp.position_deg)
+            out["peak_offset_deg"] = offset
+            if pp.amplitude > 0:
+                out["amplitude_ratio"] = float(mp.amplitude / pp.amplitude)
+            out["hint"] = misalignment_hint(
+                float(mp.position_deg), float(pp.position_deg), misalignment_threshold_deg
+            )
+    return out

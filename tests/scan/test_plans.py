@@ -1,0 +1,115 @@
+"""Plans: angle ranges, reading order, mirror reference, gloss statistics."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from goniolab.scan.plans import (
+    MIRROR_INDEX,
+    BrdfPlan,
+    GlossPlan,
+    PlanError,
+    gloss_statistics,
+    parse_angles,
+)
+
+
+def test_range_is_inclusive_like_the_seed_sweep() -> None:
+    # Wittmann et al. sweep the detector 0..70 deg in 1 deg steps: 71 geometries.
+    angles = parse_angles("0:70:1")
+    assert len(angles) == 71
+    assert angles[0] == 0.0 and angles[-1] == 70.0
+
+
+def test_fractional_step_lands_on_the_grid() -> None:
+    assert parse_angles("0:1:0.1") == tuple(k / 10 for k in range(11))
+    assert parse_angles("-10:10:2.5") == (-10.0, -7.5, -5.0, -2.5, 0.0, 2.5, 5.0, 7.5, 10.0)
+
+
+def test_lists_keep_their_order() -> None:
+    assert parse_angles("30, 10,20") == (30.0, 10.0, 20.0)
+    assert parse_angles([5, 6.5]) == (5.0, 6.5)
+
+
+@pytest.mark.parametrize(
+    ("spec", "words"),
+    [
+        ("0:70", "start:stop:step"),
+        ("0:70:0", "step must be > 0"),
+        ("70:0:1", "stop < start"),
+        ("0:x:1", "non-numeric"),
+        ("1,b", "non-numeric"),
+        ("", "empty"),
+        ("0:inf:1", "finite"),
+    ],
+)
+def test_bad_angle_specs_name_the_problem(spec: str, words: str) -> None:
+    with pytest.raises(PlanError, match="theta_r") as exc:
+        parse_angles(spec)
+    assert words in str(exc.value)
+
+
+def test_points_order_repeats_and_mirror_first() -> None:
+    plan = BrdfPlan(45.0, (0.0, 10.0, 20.0), repeats=2, mirror_reference=True)
+    pts = plan.points()
+    assert len(pts) == 2 * (3 + 1)
+    assert [(p.index, p.repeat) for p in pts[:4]] == [
+        (MIRROR_INDEX, 0),
+        (MIRROR_INDEX, 1),
+        (0, 0),
+        (0, 1),
+    ]
+    # the mirror is read at the specular geometry theta_r = theta_i
+    assert all(p.theta_r_deg == 45.0 for p in pts[:2])
+    assert [p.theta_r_deg for p in pts[2:]] == [0.0, 0.0, 10.0, 10.0, 20.0, 20.0]
+    assert len({p.key for p in pts}) == len(pts)
+
+
+def test_plan_round_trips_through_its_json_form() -> None:
+    plan = BrdfPlan(45.0, parse_angles("0:70:1"), repeats=5, dwell_s=0.2, exposure_us=20000,
+                    mirror_reference=True, sample="sample:wittmann-3")  # fmt: skip
+    assert BrdfPlan.from_dict(plan.to_dict()) == plan
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "words"),
+    [
+        ({"repeats": 0}, "repeats"),
+        ({"dwell_s": -1.0}, "dwell_s"),
+        ({"exposure_us": 100}, "exposure_us"),
+        ({"theta_r_deg": (1.0, 1.0)}, "repeated"),
+        ({"theta_r_deg": ()}, "no detector angles"),
+    ],
+)
+def test_bad_plans_are_refused(kwargs: dict[str, object], words: str) -> None:
+    args: dict[str, object] = {"theta_i_deg": 45.0, "theta_r_deg": (0.0, 1.0)}
+    args.update(kwargs)
+    with pytest.raises(PlanError, match=words):
+        BrdfPlan(**args)  # type: ignore[arg-type]
+
+
+def test_gloss_statistics_mean_and_sample_std() -> None:
+    readings = [
+        {20: 80.0, 60: 90.0, 85: None},
+        {20: 82.0, 60: 92.0, 85: None},
+        {20: 84.0, 60: 94.0, 85: None},
+    ]
+    st = gloss_statistics(readings)
+    assert st.mean_gu == {20: 82.0, 60: 92.0}
+    # sample std (ddof=1) of 80, 82, 84 is exactly 2
+    assert st.std_gu[20] == pytest.approx(2.0, abs=1e-12)
+    assert st.n == {20: 3, 60: 3}
+    assert 85 not in st.mean_gu
+
+
+def test_gloss_single_reading_has_zero_spread() -> None:
+    st = gloss_statistics([{60: 42.5}], angles_deg=(60,))
+    assert st.mean_gu[60] == 42.5 and st.std_gu[60] == 0.0
+    assert math.isfinite(st.std_gu[60])
+
+
+def test_gloss_plan_rejects_non_iso_angles() -> None:
+    with pytest.raises(PlanError, match="20, 60, 85"):
+        GlossPlan(count=3, angles_deg=(45,))

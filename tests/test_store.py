@@ -1,0 +1,143 @@
+"""The run store: WAL, one row per reading, exactly-once, durable across a reopen, export."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import sqlite3
+from pathlib import Path
+
+import pytest
+
+from goniolab.store import RunStore, StoreError, default_store_path, resolve_store_path
+
+
+def _run(store: RunStore) -> int:
+    return store.create_run(
+        kind="brdf",
+        plan={"theta_i_deg": 45.0, "theta_r_deg": [0.0, 1.0]},
+        config={"lab": {"name": "x"}},
+        sample="sample:flat",
+        model={"n": 1.55},
+        version="0.1.0",
+    )
+
+
+def _point(store: RunStore, run_id: int, index: int, repeat: int, value: float) -> None:
+    store.add_point(
+        run_id, index=index, repeat=repeat, theta_i_deg=45.0, theta_r_deg=float(index),
+        measured_theta_i_deg=45.001, measured_theta_r_deg=float(index) - 0.002,
+        luminance_pct=value, raw={"luminance_pct": value}, timestamp=1700000000.0 + index,
+    )  # fmt: skip
+
+
+def test_store_is_wal_and_creates_its_directory(tmp_path: Path) -> None:
+    path = tmp_path / "deep" / "dir" / "s.sqlite"
+    with RunStore(path) as s:
+        assert s.journal_mode == "wal"
+    assert path.exists()
+
+
+def test_points_survive_a_reopen_and_are_unique(tmp_path: Path) -> None:
+    path = tmp_path / "s.sqlite"
+    s = RunStore(path)
+    rid = _run(s)
+    _point(s, rid, 0, 0, 12.5)
+    _point(s, rid, 0, 1, 12.7)
+    with pytest.raises(sqlite3.IntegrityError):
+        _point(s, rid, 0, 1, 99.0)
+    s.close()
+    # a second connection (as a resumed process would open) sees exactly the committed rows
+    with RunStore(path) as s2:
+        pts = s2.points(rid)
+        assert [(p.index, p.repeat, p.luminance_pct) for p in pts] == [(0, 0, 12.5), (0, 1, 12.7)]
+        assert s2.done_keys(rid) == {(0, 0), (0, 1)}
+        assert pts[0].measured_theta_i_deg == 45.001
+        rec = s2.get_run(rid)
+        assert rec.plan["theta_r_deg"] == [0.0, 1.0] and rec.sample == "sample:flat"
+        assert rec.status == "idle" and rec.finished_at is None
+
+
+def test_committed_rows_are_visible_to_another_reader_before_close(tmp_path: Path) -> None:
+    path = tmp_path / "s.sqlite"
+    s = RunStore(path)
+    rid = _run(s)
+    _point(s, rid, 3, 0, 1.0)
+    reader = sqlite3.connect(path)
+    assert reader.execute("SELECT COUNT(*) FROM points").fetchone()[0] == 1
+    reader.close()
+    s.close()
+
+
+def test_status_and_finish_time(store_path: Path) -> None:
+    with RunStore(store_path) as s:
+        rid = _run(s)
+        s.set_status(rid, "running")
+        assert s.get_run(rid).finished_at is None
+        s.set_status(rid, "failed", "detector: stall")
+        rec = s.get_run(rid)
+        assert (rec.status, rec.reason) == ("failed", "detector: stall")
+        assert rec.finished_at is not None
+        with pytest.raises(StoreError, match="no run 999"):
+            s.set_status(999, "done")
+        with pytest.raises(StoreError, match=str(store_path)):
+            s.get_run(999)
+
+
+def test_export_csv_one_row_per_reading_with_prediction(store_path: Path) -> None:
+    with RunStore(store_path) as s:
+        rid = _run(s)
+        for i in range(2):
+            for r in range(3):
+                _point(s, rid, i, r, 10.0 * i + r)
+        s.add_predictions(rid, [(0, 45.0, 0.0, 1.5), (1, 45.0, 1.0, 11.5)])
+        text = s.export(rid, "csv")
+        rows = list(csv.DictReader(io.StringIO(text)))
+        assert len(rows) == 6
+        assert [(r["index"], r["repeat"]) for r in rows[:3]] == [("0", "0"), ("0", "1"), ("0", "2")]
+        assert float(rows[4]["luminance_pct"]) == 11.0
+        assert float(rows[4]["theta_r_deg"]) == 1.0
+        assert float(rows[4]["predicted_pct"]) == 11.5
+        doc = json.loads(s.export(rid, "json"))
+        assert doc["run"]["id"] == rid and len(doc["readings"]) == 6
+        with pytest.raises(StoreError, match="csv"):
+            s.export(rid, "xlsx")
+
+
+def test_gloss_readings_are_sequenced(store_path: Path) -> None:
+    with RunStore(store_path) as s:
+        rid = s.create_run(kind="gloss", plan={}, config={}, sample="", model={}, version="x")
+        a = s.add_gloss_reading(rid, values_gu={20: 80.1, 60: 90.2, 85: None}, temperature_c=25.0,
+                                predicted_gu={20: 81.0, 60: 91.0, 85: 97.0}, raw="1|...", timestamp=1.0)  # fmt: skip
+        b = s.add_gloss_reading(rid, values_gu={60: 90.4}, temperature_c=None, predicted_gu=None,
+                                raw="2|...", timestamp=2.0)  # fmt: skip
+        assert (a, b) == (0, 1)
+        rows = s.gloss_readings(rid)
+        assert rows[0].values_gu == {20: 80.1, 60: 90.2, 85: None}
+        assert rows[0].predicted_gu == {20: 81.0, 60: 91.0, 85: 97.0}
+        assert rows[1].values_gu[20] is None and rows[1].predicted_gu is None
+        exported = list(csv.DictReader(io.StringIO(s.export(rid, "csv"))))
+        assert [e["g60_gu"] for e in exported] == ["90.2", "90.4"]
+
+
+def test_store_path_resolution_order(tmp_path: Path) -> None:
+    assert (
+        resolve_store_path(str(tmp_path / "a.sqlite"), str(tmp_path / "b.sqlite"))
+        == tmp_path / "a.sqlite"
+    )
+    assert resolve_store_path(None, str(tmp_path / "b.sqlite")) == tmp_path / "b.sqlite"
+    assert resolve_store_path(None, "") == default_store_path()
+    assert default_store_path().name == "goniolab.sqlite"
+
+
+def test_unopenable_store_names_the_file(tmp_path: Path) -> None:
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    with pytest.raises(StoreError, match="cannot open"):
+        RunStore(blocker / "s.sqlite")
+
+
+@pytest.fixture
+def store_path(tmp_path: Path) -> Path:
+    return tmp_path / "store.sqlite"
