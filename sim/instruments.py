@@ -1,0 +1,606 @@
+"""The simulated lab in-process: arms, spectro-colorimeter and glossmeter.
+
+Each class implements the matching :mod:`drivers.base` Protocol, so the scan runner, the
+CLI and the contract tests use them exactly like the real drivers. Readings come from
+the physics: a :class:`goniolab.optics.models.ReflectanceModel` (normally the
+``FacetModel`` of the sample's height map) evaluated at the geometry the arms *really*
+have -- including the sample tilt and the arms' zero offsets that Wittmann et al. (2021,
+sec. 5.2-5.3) name as the cause of the scatter on glossy samples -- through the
+configured source and detector cones. Model evaluation is CPU work and runs in a thread
+(:func:`asyncio.to_thread`) so the event loop never stalls.
+
+References
+----------
+.. [1] B. Wittmann et al., "BRDF and gloss computation of polyurethane coatings from
+   roughness measurements", Prog. Org. Coat. 156 (2021) 106247, sec. 2.3 (instrument),
+   sec. 5.2-5.3 (misalignment).
+.. [2] ISO 2813:2014 / ASTM D523: specular gloss at 20/60/85 deg.
+.. [3] Zehntner ZGM1120 Technical Manual rev. 3.0 (2021), pp. 16-28: 0.1 GU resolution,
+   -2 = overflow.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import functools
+import time
+from collections.abc import AsyncIterator, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from drivers.base import (
+    GLOSS_ANGLES_DEG,
+    AxisStatus,
+    DeviceFault,
+    DeviceTimeout,
+    Disconnected,
+    GlossReading,
+    LimitError,
+    SpectroReading,
+    StallError,
+)
+from goniolab.optics.apertures import Cone
+from goniolab.optics.models import ReflectanceModel
+from sim.clock import Clock
+from sim.faults import FaultInjector
+from sim.motion import MotorFault, SimMotor
+
+__all__ = [
+    "GLOSS_OVERFLOW_GU",
+    "SPECTRUM_WAVELENGTHS_NM",
+    "SimAxis",
+    "SimGlossmeter",
+    "SimSpectro",
+    "effective_angles",
+    "make_sim_goniometer",
+    "spectrum_for_luminance",
+]
+
+#: Wavelength grid of the simulated spectra: 380..780 nm in 10 nm steps.
+SPECTRUM_WAVELENGTHS_NM: tuple[float, ...] = tuple(float(w) for w in range(380, 781, 10))
+
+#: Readings above this are reported as overflow (ZGM1120 range 0..2000 GU).
+GLOSS_OVERFLOW_GU = 2000.0
+
+#: Slope of the simulated spectral shape per nm around 580 nm (a faint warm tint).
+_SPECTRUM_TILT_PER_NM = 1.5e-4
+
+
+def effective_angles(
+    lamp_deg: float,
+    detector_deg: float,
+    *,
+    sample_tilt_deg: float = 0.0,
+    lamp_zero_offset_deg: float = 0.0,
+    detector_zero_offset_deg: float = 0.0,
+) -> tuple[float, float]:
+    """Incidence and signed reflection angle the sample really sees.
+
+    The arms stand at ``lamp_deg`` (lamp at -theta_i, lamp side) and ``detector_deg``
+    (signed theta_r, > 0 specular side) in their own frames. An arm's zero offset shifts
+    its true angle: ``lamp_true = lamp_deg + lamp_zero_offset_deg``,
+    ``det_true = detector_deg + detector_zero_offset_deg``. A sample tilted by tau in the
+    plane of incidence, towards the specular side, turns its normal to +tau, so the
+    angles measured from that normal are (Wittmann et al. 2021, sec. 5.2-5.3)::
+
+        theta_i_eff = lamp_true + tau
+        theta_r_eff = det_true - tau
+
+    and the specular peak moves to ``theta_r = theta_i + 2 tau`` in arm coordinates.
+
+    Returns
+    -------
+    tuple of float
+        ``(theta_i_eff_deg, theta_r_eff_deg)``.
+    """
+    ti = lamp_deg + lamp_zero_offset_deg + sample_tilt_deg
+    tr = detector_deg + detector_zero_offset_deg - sample_tilt_deg
+    return ti, tr
+
+
+@functools.lru_cache(maxsize=1)
+def _y_weights() -> NDArray[np.float64]:
+    """Normalised luminance weights ybar(l) S_D65(l) on :data:`SPECTRUM_WAVELENGTHS_NM`.
+
+    CIE 1964 10 deg observer and illuminant D65 (colour-science tables), as PHYSICS.md
+    prescribes for the colour maths; imported lazily (colour-science is slow to import).
+    """
+    import colour  # lazy: colour-science is slow to import
+
+    wl = np.asarray(SPECTRUM_WAVELENGTHS_NM)
+    cmfs = colour.MSDS_CMFS["CIE 1964 10 Degree Standard Observer"]
+    ybar = np.interp(wl, cmfs.wavelengths, cmfs.values[:, 1])
+    d65 = colour.SDS_ILLUMINANTS["D65"]
+    s = np.interp(wl, d65.wavelengths, d65.values)
+    w = ybar * s
+    return np.asarray(w / w.sum(), dtype=np.float64)
+
+
+def spectrum_for_luminance(luminance_pct: float) -> tuple[float, ...]:
+    """A plausible near-neutral reflectance spectrum whose Y equals ``luminance_pct``.
+
+    The shape is a clear coating over a neutral substrate with a faint warm tint,
+    ``s(l) = 1 + k (l - 580 nm)`` with ``k = 1.5e-4 /nm`` (about +/-3 % over the visible),
+    scaled so that ``Y = sum(R ybar S_D65) / sum(ybar S_D65)`` (CIE 15:2004 eq. 7.1 with
+    the 10 deg observer and D65) equals ``luminance_pct`` exactly.
+
+    Parameters
+    ----------
+    luminance_pct
+        Target relative luminance Y in % of the mirror reference.
+
+    Returns
+    -------
+    tuple of float
+        Reflectance in % at :data:`SPECTRUM_WAVELENGTHS_NM`.
+    """
+    wl = np.asarray(SPECTRUM_WAVELENGTHS_NM)
+    shape = 1.0 + _SPECTRUM_TILT_PER_NM * (wl - 580.0)
+    y_shape = float(np.dot(_y_weights(), shape))
+    return tuple(float(v) for v in luminance_pct * shape / y_shape)
+
+
+class SimAxis:
+    """A simulated goniometer arm (implements :class:`drivers.base.Axis`).
+
+    Parameters
+    ----------
+    name
+        Arm name (``"lamp"``, ``"detector"``), used in every error.
+    motor
+        The motion model; its soft limits are this axis' ``limits_deg``.
+    clock
+        The lab clock (:class:`sim.clock.SimClock` or :class:`sim.clock.RealClock`).
+    stall_tolerance_deg
+        Largest allowed |command - feedback| once a move has ended; more is a stall.
+    faults
+        Fault injector for this arm (timeouts, disconnects); ``None`` = no faults.
+    """
+
+    def __init__(
+        self,
+        name: str,
+        motor: SimMotor,
+        clock: Clock,
+        *,
+        stall_tolerance_deg: float = 0.5,
+        faults: FaultInjector | None = None,
+    ) -> None:
+        self.name = name
+        self.motor = motor
+        self.clock = clock
+        self.limits_deg: tuple[float, float] = motor.soft_limits_deg
+        self.stall_tolerance_deg = stall_tolerance_deg
+        self.faults = faults or FaultInjector(name)
+        self._connected = False
+        self._tracker: asyncio.Task[None] | None = None
+
+    # -------------------------------------------------------------- connection
+    async def connect(self) -> None:
+        """Open the (simulated) link."""
+        self._connected = True
+
+    async def close(self) -> None:
+        """Close the link; a running move continues (as on a real controller)."""
+        self._connected = False
+        if self._tracker is not None and not self._tracker.done():
+            self._tracker.cancel()
+        self._tracker = None
+
+    def _op(self, operation: str) -> None:
+        if not self._connected:
+            raise Disconnected(f"not connected ({operation})", device=self.name)
+        self.faults.check(operation)
+
+    # -------------------------------------------------------------- time keeping
+    def _ensure_tracker(self) -> None:
+        """Keep virtual time flowing until the current move ends (needed at scale 0
+        when nobody waits in-process, e.g. a wire server polled over the network)."""
+        if self._tracker is None or self._tracker.done():
+            self._tracker = asyncio.get_running_loop().create_task(
+                self._track(), name=f"SimAxis-{self.name}-tracker"
+            )
+
+    async def _track(self) -> None:
+        while True:
+            now = self.clock.now()
+            nxt = self.motor.next_event_s(now)
+            if nxt is None:
+                return
+            await self.clock.sleep(max(nxt - now, 1e-9))
+
+    # -------------------------------------------------------------- Axis protocol
+    async def status(self) -> AxisStatus:
+        """Controller state at the current clock time."""
+        self._op("status")
+        return self.snapshot()
+
+    def snapshot(self) -> AxisStatus:
+        """Status without counting an operation (used by the wire servers)."""
+        now = self.clock.now()
+        m = self.motor
+        alarm = m.alarm_code(now)
+        moving = m.is_moving(now)
+        pos = m.position_deg(now)
+        cmd = m.command_deg(now)
+        return AxisStatus(
+            position_deg=pos,
+            command_deg=cmd,
+            moving=moving,
+            in_position=(not moving)
+            and alarm is None
+            and abs(cmd - pos) <= self.stall_tolerance_deg,
+            homed=m.homed,
+            alarm_code=alarm,
+            ready=alarm is None and not moving,
+        )
+
+    async def position_deg(self) -> float:
+        """Feedback position in degrees."""
+        self._op("position")
+        return self.motor.position_deg(self.clock.now())
+
+    def actual_deg(self) -> float:
+        """Where the arm truly is, in degrees from its mechanical zero (physics input)."""
+        return self.motor.physical_deg(self.clock.now()) - self.motor.home_switch_deg
+
+    async def move_to(self, target_deg: float) -> None:
+        """Start an absolute move; returns once accepted.
+
+        Raises
+        ------
+        LimitError
+            ``target_deg`` outside ``limits_deg`` (checked before anything moves).
+        DeviceFault
+            An alarm is active.
+        """
+        self._op("move_to")
+        lo, hi = self.limits_deg
+        if not lo <= target_deg <= hi:
+            raise LimitError(
+                f"target {target_deg:g} deg outside limits [{lo:g}, {hi:g}] deg", device=self.name
+            )
+        try:
+            self.motor.start_move(target_deg, self.clock.now())
+        except MotorFault as exc:
+            raise DeviceFault(str(exc), device=self.name, code=exc.code) from exc
+        self._ensure_tracker()
+
+    async def wait_in_position(self, timeout_s: float) -> float:
+        """Wait (on the lab clock) until the move ends; return the feedback position.
+
+        Raises
+        ------
+        DeviceFault
+            An alarm occurred (e.g. mid-move or at a limit switch).
+        StallError
+            The move ended with feedback and command more than ``stall_tolerance_deg``
+            apart.
+        DeviceTimeout
+            Still moving after ``timeout_s`` (clock seconds).
+        """
+        self._op("wait_in_position")
+        deadline = self.clock.now() + timeout_s
+        while True:
+            now = self.clock.now()
+            m = self.motor
+            alarm = m.alarm_code(now)
+            if alarm is not None:
+                raise DeviceFault(
+                    f"alarm 0x{alarm:02X} at {m.position_deg(now):.3f} deg",
+                    device=self.name,
+                    code=alarm,
+                )
+            nxt = m.next_event_s(now)
+            if nxt is None:
+                pos, cmd = m.position_deg(now), m.command_deg(now)
+                if abs(cmd - pos) > self.stall_tolerance_deg:
+                    raise StallError(
+                        f"stalled at {pos:.3f} deg, commanded {cmd:.3f} deg "
+                        f"(tolerance {self.stall_tolerance_deg:g} deg)",
+                        device=self.name,
+                    )
+                return pos
+            remaining = deadline - now
+            if remaining <= 0.0:
+                raise DeviceTimeout(
+                    f"not in position after {timeout_s:g} s (at {m.position_deg(now):.3f} deg, "
+                    f"target {m.target_deg():.3f} deg)",
+                    device=self.name,
+                )
+            await self.clock.sleep(max(min(nxt - now, remaining), 1e-9))
+
+    async def home(self, timeout_s: float) -> None:
+        """Return to the home switch and zero the encoder there.
+
+        Raises
+        ------
+        DeviceFault, DeviceTimeout
+            As :meth:`wait_in_position`.
+        """
+        self._op("home")
+        try:
+            self.motor.start_home(self.clock.now())
+        except MotorFault as exc:
+            raise DeviceFault(str(exc), device=self.name, code=exc.code) from exc
+        self._ensure_tracker()
+        await self.wait_in_position(timeout_s)
+
+    async def stop(self) -> None:
+        """Quick stop where the arm is."""
+        self._op("stop")
+        self.motor.stop(self.clock.now())
+
+    async def reset_alarm(self) -> None:
+        """Clear the active alarm."""
+        self._op("reset_alarm")
+        self.motor.reset_alarm(self.clock.now())
+
+
+def make_sim_goniometer(lamp: SimAxis, detector: SimAxis, min_separation_deg: float) -> object:
+    """The project's two-arm goniometer (with its interlock) on two simulated axes.
+
+    Returns ``drivers.goniometer.TwoArmGoniometer(lamp, detector, min_separation_deg)``:
+    the same interlock code runs against simulated and real arms.
+    """
+    from drivers.goniometer import TwoArmGoniometer
+
+    return TwoArmGoniometer(lamp, detector, min_separation_deg)
+
+
+class SimSpectro:
+    """A simulated STIL Ruby spectro-colorimeter (implements ``Spectrocolorimeter``).
+
+    Parameters
+    ----------
+    model
+        The sample's reflectance model.
+    lamp, detector
+        The simulated arms; their *actual* positions define the geometry.
+    clock
+        Lab clock (the exposure takes ``exposure_us`` of its time).
+    source_cone_deg, detector_cone_deg
+        Full angles of the lamp divergence and the detector opening (Wittmann 2.3: 6, 6).
+    noise_pct
+        Relative noise (1 sigma, % of the reading).
+    rng
+        Seeded generator for the noise.
+    sample_tilt_deg, lamp_zero_offset_deg, detector_zero_offset_deg
+        Misalignments, see :func:`effective_angles`.
+    faults
+        Fault injector (timeouts, garbled replies, disconnects).
+    name
+        Device name in errors.
+    """
+
+    #: Ruby exposure range in microseconds (PROTOCOLS.md).
+    EXPOSURE_RANGE_US: tuple[int, int] = (500, 250_000)
+
+    def __init__(
+        self,
+        model: ReflectanceModel,
+        lamp: SimAxis,
+        detector: SimAxis,
+        clock: Clock,
+        *,
+        source_cone_deg: float = 6.0,
+        detector_cone_deg: float = 6.0,
+        noise_pct: float = 0.0,
+        rng: np.random.Generator | None = None,
+        sample_tilt_deg: float = 0.0,
+        lamp_zero_offset_deg: float = 0.0,
+        detector_zero_offset_deg: float = 0.0,
+        exposure_us: int = 10_000,
+        faults: FaultInjector | None = None,
+        name: str = "spectro",
+    ) -> None:
+        self.name = name
+        self.model = model
+        self.lamp = lamp
+        self.detector = detector
+        self.clock = clock
+        self.source = Cone(source_cone_deg)
+        self.detector_aperture = Cone(detector_cone_deg)
+        self.noise_pct = noise_pct
+        self._rng = rng if rng is not None else np.random.default_rng(0)
+        self.sample_tilt_deg = sample_tilt_deg
+        self.lamp_zero_offset_deg = lamp_zero_offset_deg
+        self.detector_zero_offset_deg = detector_zero_offset_deg
+        self.exposure_us = exposure_us
+        self.faults = faults or FaultInjector(name)
+        self._connected = False
+
+    async def connect(self) -> None:
+        """Open the (simulated) port."""
+        self._connected = True
+
+    async def close(self) -> None:
+        """Close the port."""
+        self._connected = False
+
+    def _op(self, operation: str) -> None:
+        if not self._connected:
+            raise Disconnected(f"not connected ({operation})", device=self.name)
+        self.faults.check(operation)
+
+    async def identify(self) -> str:
+        """Identification string."""
+        self._op("identify")
+        return "STIL RUBY (goniolab simulator)"
+
+    async def set_exposure_us(self, exposure_us: int) -> None:
+        """Set the integration time.
+
+        Raises
+        ------
+        ValueError
+            Outside the Ruby's 500..250000 us.
+        """
+        self._op("set_exposure_us")
+        lo, hi = self.EXPOSURE_RANGE_US
+        if not lo <= exposure_us <= hi:
+            raise ValueError(f"{self.name}: exposure {exposure_us} us outside [{lo}, {hi}] us")
+        self.exposure_us = int(exposure_us)
+
+    def geometry_deg(self) -> tuple[float, float]:
+        """The effective (theta_i, theta_r) the sample sees now, see :func:`effective_angles`."""
+        return effective_angles(
+            self.lamp.actual_deg(),
+            self.detector.actual_deg(),
+            sample_tilt_deg=self.sample_tilt_deg,
+            lamp_zero_offset_deg=self.lamp_zero_offset_deg,
+            detector_zero_offset_deg=self.detector_zero_offset_deg,
+        )
+
+    def predict_luminance_pct(self, theta_i_deg: float, theta_r_deg: float) -> float:
+        """Noise-free reading at an effective geometry (blocking: call from a thread)."""
+        value = self.model.luminance_pct(
+            theta_i_deg,
+            np.asarray([theta_r_deg], dtype=np.float64),
+            source=self.source,
+            detector=self.detector_aperture,
+        )
+        return float(np.asarray(value).reshape(-1)[0])
+
+    async def read_luminance_pct(self) -> float:
+        """One noisy luminance value at the arms' current actual geometry."""
+        ti, tr = self.geometry_deg()
+        await self.clock.sleep(self.exposure_us * 1e-6)
+        clean = await asyncio.to_thread(self.predict_luminance_pct, ti, tr)
+        if self.noise_pct:
+            clean *= 1.0 + 0.01 * self.noise_pct * float(self._rng.standard_normal())
+        return max(clean, 0.0)
+
+    async def measure(self) -> SpectroReading:
+        """Expose and return luminance plus a spectrum consistent with it.
+
+        The geometry is sampled at the start of the exposure.
+        """
+        self._op("measure")
+        lum = await self.read_luminance_pct()
+        return SpectroReading(
+            wavelengths_nm=SPECTRUM_WAVELENGTHS_NM,
+            values=spectrum_for_luminance(lum),
+            luminance_pct=lum,
+            exposure_us=self.exposure_us,
+            timestamp=time.time(),
+        )
+
+
+class SimGlossmeter:
+    """A simulated ISO 2813 glossmeter (implements ``Glossmeter``), ZGM1120-like.
+
+    Parameters
+    ----------
+    model
+        The sample's reflectance model (``model.gloss`` gives the GU values).
+    clock
+        Lab clock (measurement time and auto-send interval).
+    noise_pct
+        Relative noise (1 sigma, % of the reading) before rounding to 0.1 GU.
+    rng
+        Seeded generator.
+    measure_time_s
+        Duration of one measurement.
+    autosend_interval_s
+        Interval of pushed readings in :meth:`readings` (an operator pressing the
+        button); 0 disables the stream.
+    temperature_c
+        Reported instrument temperature.
+    faults
+        Fault injector.
+    name
+        Device name in errors.
+    """
+
+    def __init__(
+        self,
+        model: ReflectanceModel,
+        clock: Clock,
+        *,
+        noise_pct: float = 0.0,
+        rng: np.random.Generator | None = None,
+        measure_time_s: float = 0.5,
+        autosend_interval_s: float = 5.0,
+        temperature_c: float = 23.0,
+        faults: FaultInjector | None = None,
+        name: str = "glossmeter",
+    ) -> None:
+        self.name = name
+        self.model = model
+        self.clock = clock
+        self.noise_pct = noise_pct
+        self._rng = rng if rng is not None else np.random.default_rng(0)
+        self.measure_time_s = measure_time_s
+        self.autosend_interval_s = autosend_interval_s
+        self.temperature_c = temperature_c
+        self.faults = faults or FaultInjector(name)
+        self._connected = False
+        self._gloss_cache: dict[int, float] = {}
+
+    async def connect(self) -> None:
+        """Open the (simulated) port."""
+        self._connected = True
+
+    async def close(self) -> None:
+        """Close the port."""
+        self._connected = False
+
+    def _op(self, operation: str) -> None:
+        if not self._connected:
+            raise Disconnected(f"not connected ({operation})", device=self.name)
+        self.faults.check(operation)
+
+    async def predicted_gu(self, angles_deg: Sequence[int]) -> dict[int, float]:
+        """Noise-free model gloss per geometry (cached: the sample does not change)."""
+        missing = [a for a in angles_deg if a not in self._gloss_cache]
+        if missing:
+            values = await asyncio.to_thread(self.model.gloss, tuple(missing))
+            self._gloss_cache.update({int(k): float(v) for k, v in values.items()})
+        return {a: self._gloss_cache[a] for a in angles_deg}
+
+    async def read_values_gu(
+        self, angles_deg: Sequence[int]
+    ) -> tuple[dict[int, float | None], tuple[int, ...]]:
+        """Noisy values rounded to 0.1 GU, and the geometries that overflowed."""
+        for a in angles_deg:
+            if a not in GLOSS_ANGLES_DEG:
+                raise ValueError(f"{self.name}: geometry {a} deg not one of {GLOSS_ANGLES_DEG}")
+        await self.clock.sleep(self.measure_time_s)
+        clean = await self.predicted_gu(angles_deg)
+        values: dict[int, float | None] = {a: None for a in GLOSS_ANGLES_DEG}
+        overflow: list[int] = []
+        for a in angles_deg:
+            v = clean[a]
+            if self.noise_pct:
+                v *= 1.0 + 0.01 * self.noise_pct * float(self._rng.standard_normal())
+            if v > GLOSS_OVERFLOW_GU:
+                overflow.append(a)
+                values[a] = None
+            else:
+                values[a] = round(max(v, 0.0), 1)
+        return values, tuple(overflow)
+
+    async def measure(self, angles_deg: Sequence[int] = GLOSS_ANGLES_DEG) -> GlossReading:
+        """One measurement at the requested geometries (others are ``None``)."""
+        self._op("measure")
+        values, overflow = await self.read_values_gu(angles_deg)
+        return GlossReading(
+            values_gu=values,
+            overflow_deg=overflow,
+            temperature_c=self.temperature_c,
+            timestamp=time.time(),
+            raw="",
+        )
+
+    def readings(self) -> AsyncIterator[GlossReading]:
+        """Readings pushed every ``autosend_interval_s`` clock seconds (auto-send)."""
+        return self._stream()
+
+    async def _stream(self) -> AsyncIterator[GlossReading]:
+        if self.autosend_interval_s <= 0:
+            return
+        while True:
+            await self.clock.sleep(self.autosend_interval_s)
+            yield await self.measure()
