@@ -78,6 +78,8 @@ Move sequences (what goes on the wire; the simulator must accept exactly these):
     stop / home / alarm reset: direct-data pulses ``input_bits.stop`` / ``zhome`` /
                     ``alarm_reset``; command-opcode writes ``opcodes.stop`` / ``home`` /
                     ``alarm_reset`` (then ``enable``) to ``command``.
+    connect:        command-opcode writes ``opcodes.enable`` to ``command``; direct-data
+                    writes nothing.
 
 kind = "stil-spectro"
 ---------------------

@@ -1,0 +1,141 @@
+"""A small async line transport over a serial port (pyserial-asyncio-fast).
+
+Shared by :mod:`drivers.stil` and :mod:`drivers.glossmeter`. ``port`` is anything
+:func:`serial.serial_for_url` accepts: a device (``/dev/ttyUSB0``, a pty path) or
+``socket://host:port``. (pyserial-asyncio-fast cannot open ``loop://``.)
+
+Every failure is mapped onto :mod:`drivers.base` errors naming the device and the port:
+a missing or busy port -> :class:`~drivers.base.Disconnected`, no complete line in time ->
+:class:`~drivers.base.DeviceTimeout`, undecodable bytes -> :class:`~drivers.base.ProtocolError`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+
+import serial
+import serial_asyncio_fast
+
+from drivers.base import DeviceTimeout, Disconnected, ProtocolError
+from drivers.profiles import SerialSettings
+
+__all__ = ["LineTransport", "quote"]
+
+
+def quote(raw: str | bytes, limit: int = 80) -> str:
+    """``repr`` of a raw line, truncated to ``limit`` characters (for error messages)."""
+    text = repr(raw)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+class LineTransport:
+    """Write commands and read terminated lines on one serial port.
+
+    Parameters
+    ----------
+    port
+        Device path or pyserial URL.
+    settings
+        Baud rate, byte size, parity, stop bits.
+    device
+        The instrument's configured name (used in error messages).
+    encoding
+        Text encoding of commands and replies.
+    """
+
+    def __init__(
+        self, port: str, settings: SerialSettings, *, device: str, encoding: str = "ascii"
+    ) -> None:
+        self.port = port
+        self.settings = settings
+        self.device = device
+        self.encoding = encoding
+        self._reader: asyncio.StreamReader | None = None
+        self._writer: asyncio.StreamWriter | None = None
+
+    @property
+    def is_open(self) -> bool:
+        """Whether :meth:`open` succeeded and :meth:`close` was not called since."""
+        return self._writer is not None
+
+    async def open(self) -> None:
+        """Open the port; raise :class:`Disconnected` naming the port when that fails."""
+        if not self.port:
+            raise Disconnected("no serial port configured", device=self.device)
+        try:
+            self._reader, self._writer = await serial_asyncio_fast.open_serial_connection(
+                url=self.port,
+                baudrate=self.settings.baudrate,
+                bytesize=self.settings.bytesize,
+                parity=self.settings.parity,
+                stopbits=self.settings.stopbits,
+            )
+        except (serial.SerialException, OSError, ValueError) as exc:
+            raise Disconnected(
+                f"cannot open serial port {self.port!r}: {exc}", device=self.device
+            ) from exc
+
+    async def close(self) -> None:
+        """Close the port (idempotent)."""
+        writer, self._writer, self._reader = self._writer, None, None
+        if writer is not None:
+            writer.close()
+            with contextlib.suppress(OSError, serial.SerialException):
+                await writer.wait_closed()
+
+    def _streams(self) -> tuple[asyncio.StreamReader, asyncio.StreamWriter]:
+        if self._reader is None or self._writer is None:
+            raise Disconnected(f"serial port {self.port!r} is not open", device=self.device)
+        return self._reader, self._writer
+
+    async def write(self, text: str) -> None:
+        """Encode and send ``text`` as is (the caller appends any terminator)."""
+        _, writer = self._streams()
+        try:
+            writer.write(text.encode(self.encoding))
+            await writer.drain()
+        except (serial.SerialException, OSError) as exc:
+            raise Disconnected(f"write to {self.port!r} failed: {exc}", device=self.device) from exc
+
+    def discard_input(self) -> None:
+        """Drop bytes already received but not read (stale replies)."""
+        reader, _ = self._streams()
+        buffered = getattr(reader, "_buffer", None)
+        if isinstance(buffered, bytearray):
+            buffered.clear()
+
+    async def read_line(self, terminator: str, timeout_s: float | None) -> str:
+        """Read one line ending in ``terminator``; return it without the terminator.
+
+        ``timeout_s`` ``None`` waits forever (pushed readings).
+        """
+        reader, _ = self._streams()
+        term = terminator.encode(self.encoding)
+        try:
+            raw = await asyncio.wait_for(reader.readuntil(term), timeout_s)
+        except TimeoutError:
+            raise DeviceTimeout(
+                f"no reply on {self.port!r} within {timeout_s} s", device=self.device
+            ) from None
+        except asyncio.IncompleteReadError as exc:
+            raise Disconnected(
+                f"port {self.port!r} closed (partial line {quote(exc.partial)})",
+                device=self.device,
+            ) from exc
+        except asyncio.LimitOverrunError as exc:
+            self.discard_input()
+            raise ProtocolError(
+                f"line on {self.port!r} longer than the buffer without terminator {terminator!r}",
+                device=self.device,
+            ) from exc
+        except (serial.SerialException, OSError) as exc:
+            raise Disconnected(
+                f"read from {self.port!r} failed: {exc}", device=self.device
+            ) from exc
+        try:
+            return raw[: -len(term)].decode(self.encoding)
+        except UnicodeDecodeError:
+            raise ProtocolError(
+                f"undecodable bytes {quote(raw)} on {self.port!r}", device=self.device
+            ) from None
