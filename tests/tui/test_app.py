@@ -1,0 +1,199 @@
+"""Pilot-driven tests of the TUI against the scripted backend (events from known curves)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+import pytest
+from textual.pilot import Pilot
+from textual.widgets import DataTable, Input, Static
+from textual_plot import PlotWidget
+from tui_scripted import AMP_PCT, PEAK_DEG, PRED_SCALE, SIGMA_DEG, ScriptedBackend, gaussian_pct
+
+from goniolab.scan.events import RunState
+from goniolab.tui.app import GonioApp
+from goniolab.tui.screens import RunsScreen
+from goniolab.tui.widgets import ComparisonPanel, GlossLog, MetricsTable, StatusPanel
+
+SIZE = (140, 42)
+
+
+async def wait_until(pilot: Pilot[int], cond: Callable[[], bool], *, max_turns: int = 400) -> None:
+    """Let the app process messages until ``cond()`` holds (no wall-clock waits)."""
+    for _ in range(max_turns):
+        if cond():
+            return
+        await pilot.pause()
+    raise AssertionError("condition not reached")
+
+
+def notes(app: GonioApp) -> list[str]:
+    return [f"{n.title}: {n.message}" for n in app._notifications]
+
+
+def plot_xy(app: GonioApp, label: str) -> tuple[np.ndarray, np.ndarray]:
+    plot = app.query_one("#live", ComparisonPanel).main_plot
+    ds = plot._datasets[plot._labels.index(label)]
+    return np.asarray(ds.x), np.asarray(ds.y)
+
+
+def cell(table: DataTable[str], row: str, col: str) -> str:
+    return str(table.get_cell(row, col))
+
+
+async def test_scan_points_appear_in_plot_and_metrics() -> None:
+    backend = ScriptedBackend()
+    app = GonioApp(backend, poll_hz=0)
+    async with app.run_test(size=SIZE) as pilot:
+        await wait_until(pilot, app.ready.is_set)
+        await pilot.press("s")
+        await wait_until(pilot, lambda: app.run_state is RunState.RUNNING)
+        await backend.release(3)
+        await wait_until(pilot, lambda: app.comparison.n_readings == 9)
+        await pilot.pause()
+        x, y = plot_xy(app, "measured")
+        assert x.tolist() == [10.0, 12.0, 14.0]
+        np.testing.assert_allclose(y, [gaussian_pct(t) for t in (10.0, 12.0, 14.0)])
+        xp, yp = plot_xy(app, "predicted")
+        np.testing.assert_allclose(yp, [PRED_SCALE * gaussian_pct(t) for t in xp])
+        status = app.query_one(StatusPanel)
+        arms = status.query_one("#arms", DataTable)
+        assert cell(arms, "detector", "angle") == "14.00"
+        assert "3/11" in str(status.query_one("#run-state", Static).render())
+
+        await backend.release(100)
+        await wait_until(pilot, lambda: app.run_state is RunState.DONE)
+        await pilot.pause()
+        table = app.query_one("#live", ComparisonPanel).query_one(MetricsTable)
+        # Grid 10..30 step 2 hits the peak at 20 deg exactly.
+        assert cell(table, "amplitude", "measured") == f"{AMP_PCT:.2f}"
+        assert cell(table, "amplitude", "predicted") == f"{PRED_SCALE * AMP_PCT:.2f}"
+        assert cell(table, "position", "measured") == f"{PEAK_DEG:.1f}"
+        # FWHM from linear interpolation on the 2-deg grid, within 0.1 deg of 2 sqrt(2 ln 2) s.
+        fwhm = float(cell(table, "fwhm", "measured"))
+        assert fwhm == pytest.approx(2 * math.sqrt(2 * math.log(2)) * SIGMA_DEG, abs=0.1)
+        # measured mean = g, predicted = 0.9 g -> RMSE = 0.1 * rms(g) over the grid.
+        grid = np.arange(10.0, 30.1, 2.0)
+        rmse = (1 - PRED_SCALE) * math.sqrt(np.mean([gaussian_pct(t) ** 2 for t in grid]))
+        assert float(cell(table, "rmse", "measured")) == pytest.approx(rmse, abs=1e-3)
+        assert any("run 1 done" in n for n in notes(app))
+
+
+async def test_pause_resume_and_abort() -> None:
+    backend = ScriptedBackend()
+    app = GonioApp(backend, poll_hz=0)
+    async with app.run_test(size=SIZE) as pilot:
+        await wait_until(pilot, app.ready.is_set)
+        await pilot.press("s")
+        await wait_until(pilot, lambda: app.run_state is RunState.RUNNING)
+        await backend.release(2)
+        await wait_until(pilot, lambda: app.comparison.n_readings == 6)
+        await pilot.press("space")
+        await backend.release(1)  # the runner reaches the next point and honours the pause
+        await wait_until(pilot, lambda: app.run_state is RunState.PAUSED)
+        assert app.comparison.n_readings == 6
+        await pilot.press("space")
+        await wait_until(pilot, lambda: app.comparison.n_readings == 9)
+        assert app.run_state is RunState.RUNNING
+        await pilot.press("x")
+        await backend.release(1)
+        await wait_until(pilot, lambda: app.run_state is RunState.ABORTED)
+        assert app.comparison.n_readings == 9
+        assert any("run 1 aborted" in n for n in notes(app))
+        # Nothing running any more: space and x only warn.
+        await pilot.press("space")
+        assert notes(app)[-1] == "Scan: no scan running"
+
+
+async def test_instrument_timeout_is_a_notification_not_a_crash() -> None:
+    backend = ScriptedBackend()
+    app = GonioApp(backend, poll_hz=0)
+    async with app.run_test(size=SIZE) as pilot:
+        await wait_until(pilot, app.ready.is_set)
+        backend.publish_timeout()
+        await wait_until(pilot, lambda: any("spectro error" in n for n in notes(app)))
+        assert app.is_running
+        assert "no reply to 'MEASURE' within 2.0 s" in notes(app)[-1]
+
+
+async def test_homing_timeout_shows_banner_and_blocks_start() -> None:
+    backend = ScriptedBackend(fail_open=True)
+    app = GonioApp(backend, poll_hz=0, autostart=True)
+    async with app.run_test(size=SIZE) as pilot:
+        banner = app.query_one("#banner", Static)
+        await wait_until(pilot, lambda: banner.has_class("shown"))
+        assert "lamp: no answer to homing within 30.0 s" in str(banner.render())
+        await pilot.press("s")
+        assert notes(app)[-1] == "Scan: the lab is not ready (not homed)"
+        assert backend.setups == []
+
+
+async def test_bad_form_value_names_the_field() -> None:
+    backend = ScriptedBackend()
+    app = GonioApp(backend, poll_hz=0)
+    async with app.run_test(size=SIZE) as pilot:
+        await wait_until(pilot, app.ready.is_set)
+        app.query_one("#theta_r_step_deg", Input).value = "0"
+        await pilot.press("s")
+        await wait_until(pilot, lambda: bool(notes(app)))
+        assert "theta_r_step_deg must be > 0 deg" in notes(app)[-1]
+        assert backend.setups == []
+
+
+async def test_autostart_and_form_values_reach_the_backend() -> None:
+    backend = ScriptedBackend(gated=False)
+    app = GonioApp(backend, poll_hz=0, autostart=True)
+    async with app.run_test(size=SIZE) as pilot:
+        await wait_until(pilot, lambda: app.run_state is RunState.DONE)
+        assert backend.setups[0].sample == "sample:wittmann-3"
+        assert backend.setups[0].theta_r_values_deg() == list(np.arange(10.0, 30.1, 2.0))
+        assert app.comparison.n_readings == 11 * 3
+
+
+async def test_command_palette_offers_abort() -> None:
+    backend = ScriptedBackend()
+    app = GonioApp(backend, poll_hz=0)
+    async with app.run_test(size=SIZE) as pilot:
+        await wait_until(pilot, app.ready.is_set)
+        await pilot.press("s")
+        await wait_until(pilot, lambda: app.run_state is RunState.RUNNING)
+        await pilot.press("ctrl+p")
+        await pilot.press(*"abort scan")
+        await pilot.pause()
+        await pilot.press("enter")
+        await backend.release(1)
+        await wait_until(pilot, lambda: app.run_state is RunState.ABORTED)
+        assert app.comparison.n_readings == 0
+
+
+async def test_gloss_log_and_runs_browser() -> None:
+    backend = ScriptedBackend(gated=False)
+    app = GonioApp(backend, poll_hz=0, autostart=True)
+    async with app.run_test(size=SIZE) as pilot:
+        await wait_until(pilot, lambda: app.run_state is RunState.DONE)
+        backend.publish_gloss(5, 61.25)
+        log = app.query_one("#gloss-log", GlossLog)
+        await wait_until(pilot, lambda: log.row_count == 1)
+        assert log.get_row_at(0) == ["00:00:05", "-", "61.2", "-", "30.0", "58.0", "90.0"]
+        metrics = app.query_one("#live", ComparisonPanel).query_one(MetricsTable)
+        await pilot.pause()
+        assert cell(metrics, "g60", "delta") == "3.2"
+
+        await pilot.press("r")
+        await wait_until(pilot, lambda: isinstance(app.screen, RunsScreen))
+        screen = app.screen
+        assert isinstance(screen, RunsScreen)
+        runs = screen.query_one("#runs", DataTable)
+        await wait_until(pilot, lambda: runs.row_count == 1)
+        await pilot.press("enter")
+        await wait_until(pilot, lambda: screen.loaded_run == 1)
+        plot = screen.query_one(ComparisonPanel).main_plot
+        assert isinstance(plot, PlotWidget)
+        x = plot._datasets[plot._labels.index("measured")].x
+        assert list(x) == list(np.arange(10.0, 30.1, 2.0))
+        table = screen.query_one(MetricsTable)
+        assert cell(table, "amplitude", "measured") == f"{AMP_PCT:.2f}"
+        await pilot.press("escape")
+        await wait_until(pilot, lambda: not isinstance(app.screen, RunsScreen))
