@@ -1,0 +1,287 @@
+"""The runner state machine on fake instruments and the sim clock (instant, no sleeps)."""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+from collections.abc import Callable
+
+import pytest
+
+from drivers.base import DeviceError
+from goniolab.optics.apertures import Cone
+from goniolab.scan.events import (
+    ArmsMoved,
+    Event,
+    EventBus,
+    InstrumentError,
+    PointMeasured,
+    PointPredicted,
+    RunFinished,
+    RunState,
+    StateChanged,
+)
+from goniolab.scan.plans import MIRROR_INDEX, BrdfPlan, parse_angles
+from goniolab.scan.predict import Predictor
+from goniolab.scan.runner import ArmMotion, PlanRefused, ScanRunner, dry_run
+from goniolab.store import RunStore
+
+from .conftest import LOBE_AMPLITUDE_PCT, LOBE_SIGMA_DEG, FakeLab
+
+MOTION = ArmMotion(20.0, 40.0, 20.0, 40.0)
+
+
+def make_runner(
+    lab: FakeLab, store: RunStore, plan: BrdfPlan, run_id: int | None = None, **kw: object
+) -> tuple[ScanRunner, EventBus]:
+    if run_id is None:
+        run_id = store.create_run(kind="brdf", plan=plan.to_dict(), config={}, sample=plan.sample,
+                                  model={}, version="test")  # fmt: skip
+    bus = EventBus()
+
+    async def specimen(which: str) -> None:
+        lab.spectro.specimen = which
+
+    runner = ScanRunner(
+        goniometer=lab.goniometer, spectro=lab.spectro, clock=lab.clock, plan=plan, store=store,
+        run_id=run_id, bus=bus, motion=MOTION,
+        predictor=Predictor(lab.model, Cone(6.0), Cone(6.0)),
+        park_deg=lab.goniometer.park_deg, specimen_hook=specimen, **kw,  # type: ignore[arg-type]
+    )  # fmt: skip
+    return runner, bus
+
+
+async def drive(
+    runner: ScanRunner, bus: EventBus, on_event: Callable[[Event], None]
+) -> list[Event]:
+    """Run while a subscriber reacts to each event as a UI would (commands, not awaits)."""
+    q = bus.subscribe()
+    seen: list[Event] = []
+
+    async def consume() -> None:
+        while True:
+            ev = await q.get()
+            if ev is None:
+                return
+            seen.append(ev)
+            on_event(ev)
+            if isinstance(ev, RunFinished):
+                return
+
+    task = asyncio.create_task(consume())
+    await runner.run()
+    await task
+    return seen
+
+
+def test_dry_run_eta_is_the_trapezoid_sum(fake_lab: FakeLab) -> None:
+    plan = BrdfPlan(45.0, (0.0, 10.0, 20.0), repeats=2, dwell_s=0.5, exposure_us=10000)
+    dr = dry_run(plan.points(), fake_lab.goniometer, MOTION, start_deg=(0.0, 0.0),
+                 dwell_s=0.5, reading_time_s=0.01)  # fmt: skip
+    # lamp 0->45 at v=20, a=40: 45/20 + 20/40 = 2.75 s (detector stays at 0);
+    # detector 0->10 and 10->20: v^2/a = 10 deg, so 10/20 + 20/40 = 1.0 s each;
+    # 3 dwells of 0.5 s; 6 readings of 0.01 s.
+    assert dr.eta_s == pytest.approx(2.75 + 1.0 + 1.0 + 3 * 0.5 + 6 * 0.01, abs=1e-12)
+    assert dr.n_moves == 3 and dr.n_readings == 6
+    # a short, triangular move: 2 sqrt(d/a) for d < v^2/a
+    dr2 = dry_run(BrdfPlan(45.0, (20.0, 22.5)).points(), fake_lab.goniometer, MOTION,
+                  start_deg=(45.0, 20.0), dwell_s=0.0, reading_time_s=0.0)  # fmt: skip
+    assert dr2.eta_s == pytest.approx(2 * (2.5 / 40.0) ** 0.5, abs=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("angles", "bad", "why"),
+    [
+        ("-60:0:10", "point 1 (theta_i=45 deg, theta_r=-50 deg)", "separation 5 deg"),
+        ("60,75", "point 1 (theta_i=45 deg, theta_r=75 deg)", "outside the limits"),
+    ],
+)
+def test_unsafe_plan_is_refused_before_any_motion(
+    fake_lab: FakeLab, store: RunStore, angles: str, bad: str, why: str
+) -> None:
+    plan = BrdfPlan(45.0, parse_angles(angles))
+    runner, _ = make_runner(fake_lab, store, plan)
+    with pytest.raises(PlanRefused) as exc:
+        asyncio.run(runner.run())
+    assert bad in str(exc.value) and why in str(exc.value)
+    assert fake_lab.goniometer.moves == []
+    assert fake_lab.spectro.n_reads == 0
+
+
+async def test_full_run_stores_every_reading_and_matches_the_model(
+    fake_lab: FakeLab, store: RunStore
+) -> None:
+    plan = BrdfPlan(45.0, parse_angles("35:55:1"), repeats=3, sample="sample:fake")
+    runner, bus = make_runner(fake_lab, store, plan)
+    events = await drive(runner, bus, lambda ev: None)
+    assert runner.state is RunState.DONE
+    assert store.count_points(runner.run_id) == 21 * 3
+    assert store.get_run(runner.run_id).status == "done"
+    assert fake_lab.goniometer.home_calls == 1  # not homed at start -> homed once
+    assert fake_lab.goniometer.park_calls == 1
+    assert (fake_lab.goniometer.lamp.pos_deg, fake_lab.goniometer.detector.pos_deg) == (45.0, 45.0)
+    # one move per geometry plus the park move
+    assert len(fake_lab.goniometer.moves) == 21 + 1
+    # predictions computed in a worker thread, never on the loop's thread
+    assert fake_lab.model.threads and threading.get_ident() not in fake_lab.model.threads
+    assert fake_lab.model.calls[0][2] == Cone(6.0)
+    assert len([e for e in events if isinstance(e, PointPredicted)]) == 21
+    assert len([e for e in events if isinstance(e, PointMeasured)]) == 63
+    s = runner_summary(events)
+    # the fake spectro reads exactly the model's lobe: zero residual, same peak
+    assert s["rmse_pct"] == pytest.approx(0.0, abs=1e-12)
+    assert s["measured_peak"]["position_deg"] == pytest.approx(45.0, abs=1e-9)
+    assert s["measured_peak"]["amplitude_pct"] == pytest.approx(LOBE_AMPLITUDE_PCT, rel=1e-12)
+    # FWHM of a Gaussian: 2 sqrt(2 ln 2) sigma = 7.06 deg, from 1-deg samples (linear interp.)
+    assert s["measured_peak"]["fwhm_deg"] == pytest.approx(2.3548 * LOBE_SIGMA_DEG, abs=0.1)
+    assert s["hint"] is None and s["complete"] is True
+    states = [e.state for e in events if isinstance(e, StateChanged)]
+    assert states == [RunState.RUNNING, RunState.DONE]
+
+
+def runner_summary(events: list[Event]) -> dict[str, object]:
+    fin = [e for e in events if isinstance(e, RunFinished)]
+    assert len(fin) == 1
+    return fin[0].summary  # type: ignore[return-value]
+
+
+async def test_tilted_sample_gives_the_misalignment_hint(
+    fake_lab: FakeLab, store: RunStore
+) -> None:
+    # a sample tilt tau = 1 deg rotates the mirror direction by 2 tau = 2 deg
+    fake_lab.spectro.shift_deg = 2.0
+    plan = BrdfPlan(45.0, parse_angles("30:60:1"))
+    runner, bus = make_runner(fake_lab, store, plan)
+    s = runner_summary(await drive(runner, bus, lambda ev: None))
+    assert s["peak_offset_deg"] == pytest.approx(2.0, abs=0.05)
+    assert "tilted by about 1.0" in str(s["hint"])
+    assert "2.0" in str(s["hint"])
+    assert s["rmse_pct"] > 1.0  # type: ignore[operator]
+
+
+async def test_pause_then_resume_removes_arms_moved_by_hand(
+    fake_lab: FakeLab, store: RunStore
+) -> None:
+    plan = BrdfPlan(45.0, (40.0, 45.0, 50.0), repeats=3)
+    runner, bus = make_runner(fake_lab, store, plan)
+    gonio = fake_lab.goniometer
+
+    def on_event(ev: Event) -> None:
+        if isinstance(ev, PointMeasured) and (ev.index, ev.repeat) == (1, 0):
+            runner.pause()
+        if isinstance(ev, StateChanged) and ev.state is RunState.PAUSED:
+            gonio.detector.pos_deg = 47.0  # someone nudged the detector arm while paused
+            runner.resume()
+
+    events = await drive(runner, bus, on_event)
+    assert runner.state is RunState.DONE
+    states = [e.state for e in events if isinstance(e, StateChanged)]
+    assert states == [RunState.RUNNING, RunState.PAUSED, RunState.RUNNING, RunState.DONE]
+    # 3 geometry moves + one re-move to (45, 45) after resume + park
+    assert gonio.moves == [(45.0, 40.0), (45.0, 45.0), (45.0, 45.0), (45.0, 50.0), (45.0, 45.0)]
+    # the readings after resume are at the planned geometry again: the lobe's peak value
+    pts = {(p.index, p.repeat): p for p in store.points(runner.run_id)}
+    assert pts[(1, 1)].luminance_pct == pytest.approx(LOBE_AMPLITUDE_PCT, rel=1e-12)
+    assert pts[(1, 1)].measured_theta_r_deg == 45.0
+
+
+async def test_resume_without_drift_does_not_move(fake_lab: FakeLab, store: RunStore) -> None:
+    plan = BrdfPlan(45.0, (40.0, 45.0), repeats=2)
+    runner, bus = make_runner(fake_lab, store, plan)
+
+    def on_event(ev: Event) -> None:
+        if isinstance(ev, PointMeasured) and (ev.index, ev.repeat) == (0, 0):
+            runner.pause()
+        if isinstance(ev, StateChanged) and ev.state is RunState.PAUSED:
+            runner.resume()
+
+    await drive(runner, bus, on_event)
+    assert fake_lab.goniometer.moves == [(45.0, 40.0), (45.0, 45.0), (45.0, 45.0)]
+
+
+async def test_abort_parks_and_a_second_runner_completes_exactly_once(
+    fake_lab: FakeLab, store: RunStore
+) -> None:
+    plan = BrdfPlan(45.0, parse_angles("40:50:1"), repeats=2)
+    runner, bus = make_runner(fake_lab, store, plan)
+
+    def on_event(ev: Event) -> None:
+        if isinstance(ev, PointMeasured) and (ev.index, ev.repeat) == (4, 1):
+            runner.abort()
+
+    events = await drive(runner, bus, on_event)
+    assert runner.state is RunState.ABORTED
+    assert store.get_run(runner.run_id).status == "aborted"
+    # the subscriber sees events at its own pace: the abort lands between two readings
+    # at most a few readings after (4, 1); every reading taken is stored
+    n_stored = store.count_points(runner.run_id)
+    assert n_stored == len([e for e in events if isinstance(e, PointMeasured)])
+    assert 10 <= n_stored < 22
+    assert fake_lab.goniometer.park_calls == 1
+    assert runner_summary(events)["complete"] is False
+    # continue the same run: only the missing readings are taken
+    reads_before = fake_lab.spectro.n_reads
+    runner2, bus2 = make_runner(fake_lab, store, plan, run_id=runner.run_id)
+    await drive(runner2, bus2, lambda ev: None)
+    assert runner2.state is RunState.DONE
+    assert fake_lab.spectro.n_reads - reads_before == 22 - n_stored
+    keys = [(p.index, p.repeat) for p in store.points(runner.run_id)]
+    assert keys == [(i, r) for i in range(11) for r in range(2)]
+    # predictions were already stored: not recomputed for the resumed run
+    assert len(fake_lab.model.calls) == 2  # 11 geometries in chunks of 8
+
+
+async def test_fault_mid_scan_parks_and_keeps_points(fake_lab: FakeLab, store: RunStore) -> None:
+    fake_lab.goniometer.fail_on_move = 4  # the 4th geometry's move stalls
+    plan = BrdfPlan(45.0, parse_angles("40:50:1"), repeats=2)
+    runner, bus = make_runner(fake_lab, store, plan)
+    events = await drive(runner, bus, lambda ev: None)
+    assert runner.state is RunState.FAILED
+    rec = store.get_run(runner.run_id)
+    assert rec.status == "failed" and "excessive position deviation" in rec.reason
+    assert "detector" in rec.reason
+    assert store.count_points(runner.run_id) == 6  # geometries 0..2 kept
+    assert fake_lab.goniometer.stop_calls == 1 and fake_lab.goniometer.park_calls == 1
+    errs = [e for e in events if isinstance(e, InstrumentError)]
+    assert errs and errs[0].fatal and errs[0].device == "detector"
+
+
+async def test_failed_park_is_reported_not_raised(fake_lab: FakeLab, store: RunStore) -> None:
+    gonio = fake_lab.goniometer
+
+    async def broken_park(timeout_s: float) -> None:
+        raise DeviceError("no answer", device="lamp")
+
+    gonio.park = broken_park  # type: ignore[method-assign]
+    plan = BrdfPlan(45.0, (44.0, 45.0, 46.0))
+    runner, bus = make_runner(fake_lab, store, plan)
+    await drive(runner, bus, lambda ev: None)
+    assert runner.state is RunState.DONE
+    assert "parking failed: lamp: no answer" in store.get_run(runner.run_id).reason
+
+
+async def test_mirror_reference_sets_the_100_percent_level(
+    fake_lab: FakeLab, store: RunStore
+) -> None:
+    plan = BrdfPlan(45.0, (44.0, 45.0, 46.0), repeats=2, mirror_reference=True)
+    runner, bus = make_runner(fake_lab, store, plan)
+    await drive(runner, bus, lambda ev: None)
+    pts = {(p.index, p.repeat): p for p in store.points(runner.run_id)}
+    assert pts[(MIRROR_INDEX, 0)].luminance_pct == 80.0
+    # sample reading = raw * 100 / mirror level (80 %)
+    assert pts[(1, 0)].luminance_pct == pytest.approx(LOBE_AMPLITUDE_PCT * 100.0 / 80.0, rel=1e-12)
+    assert pts[(1, 0)].raw["luminance_pct"] == pytest.approx(LOBE_AMPLITUDE_PCT, rel=1e-12)
+    assert fake_lab.spectro.specimen == "sample"
+
+
+async def test_homed_arms_are_not_rehomed(fake_lab: FakeLab, store: RunStore) -> None:
+    fake_lab.goniometer.lamp.homed = fake_lab.goniometer.detector.homed = True
+    runner, bus = make_runner(fake_lab, store, BrdfPlan(45.0, (44.0, 45.0, 46.0)))
+    events = await drive(runner, bus, lambda ev: None)
+    assert fake_lab.goniometer.home_calls == 0
+    moved = [e for e in events if isinstance(e, ArmsMoved) and not e.moving]
+    assert [(e.theta_i_deg, e.theta_r_deg) for e in moved] == [
+        (45.0, 44.0),
+        (45.0, 45.0),
+        (45.0, 46.0),
+    ]
