@@ -6,9 +6,10 @@ mean and min/max of the repeats, the residuals, and the seed's comparison metric
 
 References
 ----------
-.. [1] Wittmann, A. et al. (2021), "Predicting gloss and BRDF of filled coatings from
-   surface roughness": section 4 and fig. 8 compare measured and simulated in-plane
-   luminance curves by their peak amplitude and full width at half maximum (FWHM).
+.. [1] B. Wittmann et al., "BRDF and gloss computation of polyurethane coatings from
+   roughness measurements", Prog. Org. Coat. 156 (2021) 106247, sec. 4.2, fig. 8: measured
+   and computed in-plane curves are compared by peak amplitude and FWHM
+   (:func:`goniolab.optics.metrics.peak_metrics`).
 """
 
 from __future__ import annotations
@@ -19,76 +20,27 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from goniolab.optics.metrics import PeakMetrics, peak_metrics
 from goniolab.scan.events import GlossRead, PointMeasured, PointPredicted
 
-__all__ = ["Comparison", "ComparisonMetrics", "CurveArrays", "PeakMetrics", "peak_metrics"]
+__all__ = ["Comparison", "ComparisonMetrics", "CurveArrays"]
 
 FloatArray = NDArray[np.float64]
 
 
-@dataclass(frozen=True, slots=True)
-class PeakMetrics:
-    """Peak of an in-plane luminance curve (Wittmann 2021, fig. 8 metrics).
+def _peak_or_nan(theta_deg: FloatArray, values: FloatArray) -> PeakMetrics:
+    """:func:`goniolab.optics.metrics.peak_metrics` of the finite samples, NaN when too few.
 
-    Attributes
-    ----------
-    amplitude
-        Highest value of the curve (same unit as the values, % of a mirror).
-    position_deg
-        theta_r of the highest sample, in degrees.
-    fwhm_deg
-        Full width at half maximum in degrees; NaN when the curve does not fall below
-        half its maximum on both sides of the peak inside the sampled range.
+    A live scan has gaps (points not yet measured or predicted); the metrics of the
+    samples received so far are shown, and NaN (a ``-`` cell) until three are in.
     """
-
-    amplitude: float
-    position_deg: float
-    fwhm_deg: float
-
-
-def peak_metrics(theta_deg: FloatArray, values: FloatArray) -> PeakMetrics:
-    """Amplitude, position and FWHM of a sampled peak.
-
-    The half-maximum crossings are found by linear interpolation between the samples
-    that bracket ``amplitude / 2`` on each side of the maximum, the definition used for
-    the measured and simulated curves of Wittmann et al. (2021), fig. 8.
-
-    Parameters
-    ----------
-    theta_deg
-        Detector angles in degrees (any order; sorted here).
-    values
-        Curve values at ``theta_deg`` (relative luminance in %).
-
-    Returns
-    -------
-    PeakMetrics
-        NaN fields when there are no samples.
-    """
-    theta = np.asarray(theta_deg, dtype=np.float64)
-    vals = np.asarray(values, dtype=np.float64)
-    ok = np.isfinite(theta) & np.isfinite(vals)
-    theta, vals = theta[ok], vals[ok]
-    if theta.size == 0:
+    ok = np.isfinite(theta_deg) & np.isfinite(values)
+    theta, vals = theta_deg[ok], values[ok]
+    # Repeats of one geometry share theta: arrays() already averages them, so theta is
+    # strictly increasing unless the plan itself repeats an angle.
+    if theta.size < 3 or np.any(np.diff(theta) <= 0):
         return PeakMetrics(math.nan, math.nan, math.nan)
-    order = np.argsort(theta, kind="stable")
-    theta, vals = theta[order], vals[order]
-    k = int(np.argmax(vals))
-    amplitude = float(vals[k])
-    half = amplitude / 2.0
-    left = math.nan
-    for j in range(k, 0, -1):
-        if vals[j - 1] <= half < vals[j] or vals[j - 1] < half <= vals[j]:
-            t = (half - vals[j - 1]) / (vals[j] - vals[j - 1])
-            left = float(theta[j - 1] + t * (theta[j] - theta[j - 1]))
-            break
-    right = math.nan
-    for j in range(k, theta.size - 1):
-        if vals[j + 1] <= half < vals[j] or vals[j + 1] < half <= vals[j]:
-            t = (vals[j] - half) / (vals[j] - vals[j + 1])
-            right = float(theta[j] + t * (theta[j + 1] - theta[j]))
-            break
-    return PeakMetrics(amplitude, float(theta[k]), right - left)
+    return peak_metrics(theta, vals)
 
 
 @dataclass(frozen=True, slots=True)
@@ -149,7 +101,13 @@ class Comparison:
         self.gloss.clear()
 
     def add_measured(self, ev: PointMeasured) -> None:
-        """Record one reading (one repeat of plan point ``ev.index``)."""
+        """Record one reading (one repeat of plan point ``ev.index``).
+
+        Mirror-reference readings (negative plan index, the 100 % level) are not points
+        of the curve and are skipped.
+        """
+        if ev.index < 0:
+            return
         self.readings.setdefault(ev.index, []).append(ev.luminance_pct)
         self.theta_r_deg.setdefault(ev.index, ev.theta_r_deg)
 
@@ -194,8 +152,8 @@ class Comparison:
         both a reading and a prediction (NaN when there are none).
         """
         a = self.arrays()
-        measured = peak_metrics(a.theta_r_deg, a.mean_pct)
-        predicted = peak_metrics(a.theta_r_deg, a.predicted_pct)
+        measured = _peak_or_nan(a.theta_r_deg, a.mean_pct)
+        predicted = _peak_or_nan(a.theta_r_deg, a.predicted_pct)
         res = a.residual_pct
         res = res[np.isfinite(res)]
         rmse = float(np.sqrt(np.mean(res**2))) if res.size else math.nan

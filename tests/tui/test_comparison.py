@@ -4,39 +4,12 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 import pytest
 
 from goniolab.errors import UserError
 from goniolab.scan.events import PointMeasured, PointPredicted
 from goniolab.tui.backend import ScanSetup
-from goniolab.tui.comparison import Comparison, peak_metrics
-
-
-def test_peak_metrics_triangle_is_exact() -> None:
-    # Linear interpolation is exact on a piecewise-linear peak: half max 1 at 1 and 3.
-    m = peak_metrics(np.array([4.0, 0.0, 2.0, 1.0, 3.0]), np.array([0.0, 0.0, 2.0, 1.0, 1.0]))
-    assert m.amplitude == 2.0
-    assert m.position_deg == 2.0
-    assert m.fwhm_deg == pytest.approx(2.0, abs=1e-12)
-
-
-def test_peak_metrics_gaussian_fwhm() -> None:
-    # FWHM of a Gaussian = 2 sqrt(2 ln 2) sigma.
-    theta = np.arange(-20.0, 20.0 + 1e-9, 0.01)
-    sigma = 2.5
-    vals = 30.0 * np.exp(-((theta - 1.0) ** 2) / (2 * sigma**2))
-    m = peak_metrics(theta, vals)
-    assert m.amplitude == pytest.approx(30.0, rel=1e-9)
-    assert m.position_deg == pytest.approx(1.0, abs=1e-9)
-    assert m.fwhm_deg == pytest.approx(2 * math.sqrt(2 * math.log(2)) * sigma, abs=1e-4)
-
-
-def test_peak_metrics_open_side_gives_nan_width() -> None:
-    m = peak_metrics(np.array([0.0, 1.0, 2.0]), np.array([1.0, 2.0, 3.0]))
-    assert m.amplitude == 3.0
-    assert math.isnan(m.fwhm_deg)
-    assert math.isnan(peak_metrics(np.array([]), np.array([])).amplitude)
+from goniolab.tui.comparison import Comparison
 
 
 def _meas(index: int, repeat: int, tr: float, value: float) -> PointMeasured:
@@ -77,8 +50,30 @@ def test_comparison_repeats_residuals_and_rmse() -> None:
     m = c.metrics()
     assert m.n_compared == 2
     assert m.rmse_pct == pytest.approx(math.sqrt((1.0**2 + 2.0**2) / 2))
-    assert m.measured.amplitude == 10.0 and m.measured.position_deg == 15.0
+    # Fewer than three measured geometries: no peak metrics yet (shown as "-").
+    assert math.isnan(m.measured.amplitude) and math.isnan(m.measured.fwhm_deg)
     assert c.n_readings == 4
+
+
+def test_comparison_metrics_of_triangle_and_mirror_skipped() -> None:
+    # A piecewise-linear peak 0, 2, 4, 2, 0 at 10..30 deg: half max 2 crossed at 15 and
+    # 25 deg exactly, so FWHM = 10 deg; the parabola through 2, 4, 2 peaks at 20 deg, 4.
+    c = Comparison()
+    c.add_measured(_meas(-1, 0, 20.0, 100.0))  # mirror reference: not part of the curve
+    for i, (tr, v) in enumerate(
+        zip((10.0, 15.0, 20.0, 25.0, 30.0), (0.0, 2.0, 4.0, 2.0, 0.0), strict=True)
+    ):
+        c.add_measured(_meas(i, 0, tr, v))
+        c.add_predicted(_pred(i, tr, v / 2))
+    m = c.metrics()
+    assert c.n_readings == 5
+    assert m.measured.amplitude == pytest.approx(4.0)
+    assert m.measured.position_deg == pytest.approx(20.0)
+    assert m.measured.fwhm_deg == pytest.approx(10.0)
+    assert m.predicted.amplitude == pytest.approx(2.0)
+    assert m.predicted.fwhm_deg == pytest.approx(10.0)
+    # residuals v/2 -> RMSE = sqrt((1 + 4 + 1) / 5)
+    assert m.rmse_pct == pytest.approx(math.sqrt(6.0 / 5.0))
 
 
 def test_scan_setup_validation_names_the_field() -> None:
