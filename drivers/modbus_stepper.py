@@ -492,12 +492,13 @@ class ModbusStepperAxis:
                         return self.steps_to_deg(feedback)
             else:
                 stopped_polls = 0
-            if self._clock() >= deadline:
+            remaining_s = deadline - self._clock()
+            if remaining_s <= 0.0:
                 await self._stop_quietly()
                 raise DeviceTimeout(
                     f"{what} not finished within {timeout_s} s; STOP sent", device=self.name
                 )
-            await self._sleep(self.poll_interval_s)
+            await self._sleep(min(self.poll_interval_s, remaining_s))
 
     async def wait_in_position(self, timeout_s: float) -> float:
         """Wait for IN-POS and !MOVE; return the feedback position in degrees.

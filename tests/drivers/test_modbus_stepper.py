@@ -1,0 +1,343 @@
+"""ModbusStepperAxis against a byte-recording fake controller: exact ADUs/frames, error paths.
+
+Expected bytes are written out by hand from the Modbus spec (MBAP header, function 3/16
+PDUs, RTU CRC-16/MODBUS) and the AZ direct-data table in shared/PROTOCOLS.md.
+"""
+
+from __future__ import annotations
+
+import socket
+import struct
+from typing import Any
+
+import pytest
+
+from drivers.base import (
+    Axis,
+    DeviceFault,
+    DeviceTimeout,
+    Disconnected,
+    LimitError,
+    ProtocolError,
+    StallError,
+)
+from drivers.modbus_stepper import ModbusStepperAxis
+
+STATUS, ALARM, FEEDBACK, COMMAND_POS, INPUT, DIRECT = 0x7E, 0x80, 0x120, 0x122, 0x7C, 0x58
+READY, ALM_A, MOVE, IN_POS = 1 << 5, 1 << 7, 1 << 13, 1 << 14
+
+# move_to(12.5 deg) with steps_per_deg=1000, speed 20 deg/s, accel 40 deg/s^2 (AZ: 1 count =
+# 1 step/s, 1 step/s^2): data 0, op 1 (absolute), 12500 steps, 20000 Hz, 40000, 40000,
+# current 1000 (100 %), trigger 1, destination 0 -- 18 registers, int32 high word first.
+MOVE_PDU_12_5 = bytes.fromhex(
+    "10 0058 0012 24"
+    " 0000 0000  0000 0001  0000 30D4  0000 4E20  0000 9C40  0000 9C40"
+    " 0000 03E8  0000 0001  0000 0000".replace(" ", "")
+)
+
+
+class FakeClock:
+    """Virtual time: ``sleep`` advances it instantly."""
+
+    def __init__(self) -> None:
+        self.t = 0.0
+        self.sleeps = 0
+
+    def now(self) -> float:
+        return self.t
+
+    async def sleep(self, dt_s: float) -> None:
+        self.t += dt_s
+        self.sleeps += 1
+
+
+def make_axis(port: int, clock: FakeClock | None = None, **kw: Any) -> ModbusStepperAxis:
+    clock = clock or FakeClock()
+    options: dict[str, Any] = {
+        "host": "127.0.0.1",
+        "port": port,
+        "steps_per_deg": 1000.0,
+        "limits_deg": (0.0, 85.0),
+        "speed_deg_s": 20.0,
+        "accel_deg_s2": 40.0,
+        "stall_tolerance_deg": 0.5,
+        "timeout_s": 1.0,
+        "poll_interval_s": 0.05,
+        "sleep": clock.sleep,
+        "clock": clock.now,
+    }
+    options.update(kw)
+    return ModbusStepperAxis("lamp", **options)
+
+
+def mover(polls_to_arrive: int, *, final_steps: int | None = None, alarm_at: int | None = None):
+    """on_write/on_read hooks: a move starts on the direct-data write and finishes (or
+    alarms) after a number of status reads."""
+    state = {"reads": 0, "target": 0}
+
+    def on_write(dev: Any, address: int, values: list[int]) -> None:
+        if address == DIRECT:
+            state["target"] = dev.get32(DIRECT + 4)
+            state["reads"] = 0
+            dev.set32(STATUS, READY | MOVE)
+
+    def on_read(dev: Any, address: int, count: int) -> None:
+        if address != STATUS:
+            return
+        state["reads"] += 1
+        if alarm_at is not None and state["reads"] >= alarm_at:
+            dev.set32(STATUS, ALM_A)
+            dev.set32(ALARM, 0x30)
+        elif state["reads"] > polls_to_arrive and dev.get32(STATUS) & MOVE:
+            dev.set32(STATUS, READY | IN_POS)
+            dev.set32(FEEDBACK, state["target"] if final_steps is None else final_steps)
+
+    return on_write, on_read
+
+
+async def test_move_to_sends_exact_tcp_adu(fakes: Any, modbus_server: Any) -> None:
+    dev = fakes.Device()
+    dev.set32(STATUS, READY | IN_POS)
+    server = await modbus_server(dev)
+    axis = make_axis(server.port)
+    assert isinstance(axis, Axis)
+    await axis.connect()
+    try:
+        await axis.move_to(12.5)
+    finally:
+        await axis.close()
+    read_req, write_req = dev.requests
+    # MBAP: transaction id (any), protocol 0, length = unit + PDU, unit 1
+    assert read_req[2:] == bytes.fromhex("0000 0006 01 03 007E 0002".replace(" ", ""))
+    assert write_req[2:] == bytes.fromhex("0000 002B 01".replace(" ", "")) + MOVE_PDU_12_5
+    assert write_req[:2] != read_req[:2]  # a fresh transaction id per request
+
+
+async def test_move_to_sends_exact_rtu_frame_with_crc(fakes: Any, modbus_server: Any) -> None:
+    assert fakes.crc16(b"123456789") == 0x4B37  # CRC-16/MODBUS check value
+    dev = fakes.Device()
+    dev.set32(STATUS, READY | IN_POS)
+    server = await modbus_server(dev, rtu=True)
+    axis = make_axis(0, transport="rtu", serial_port=f"socket://127.0.0.1:{server.port}", unit_id=3)
+    await axis.connect()
+    try:
+        await axis.move_to(12.5)
+    finally:
+        await axis.close()
+    body = bytes([3]) + MOVE_PDU_12_5
+    crc = fakes.crc16(body)
+    assert dev.requests[1] == body + bytes([crc & 0xFF, crc >> 8])
+    assert dev.requests[0] == fakes.rtu_frame(bytes.fromhex("03 03 007E 0002".replace(" ", "")))
+    assert dev.unit_ids == [3, 3]
+
+
+async def test_negative_target_is_twos_complement_high_word_first(
+    fakes: Any, modbus_server: Any
+) -> None:
+    dev = fakes.Device()
+    server = await modbus_server(dev)
+    axis = make_axis(server.port, limits_deg=(-10.0, 10.0))
+    await axis.connect()
+    await axis.move_to(-5.0)
+    await axis.close()
+    address, values = dev.writes()[0]
+    assert address == DIRECT
+    assert values[4:6] == [0xFFFF, 0xEC78]  # -5000 steps
+
+
+async def test_wait_in_position_polls_until_in_pos(fakes: Any, modbus_server: Any) -> None:
+    dev = fakes.Device()
+    dev.on_write, dev.on_read = mover(3)
+    server = await modbus_server(dev)
+    clock = FakeClock()
+    axis = make_axis(server.port, clock)
+    await axis.connect()
+    await axis.move_to(12.5)
+    position = await axis.wait_in_position(timeout_s=5.0)
+    status = await axis.status()
+    await axis.close()
+    assert position == 12.5
+    # polls 1-3 after the move write report MOVE, poll 4 IN-POS -> three poll sleeps
+    assert clock.sleeps == 3
+    assert clock.t == pytest.approx(3 * 0.05)
+    assert status.in_position and not status.moving and status.alarm_code is None
+    assert status.position_deg == 12.5
+
+
+async def test_alarm_mid_move_raises_fault_and_sends_stop(fakes: Any, modbus_server: Any) -> None:
+    dev = fakes.Device()
+    dev.on_write, dev.on_read = mover(10, alarm_at=3)
+    server = await modbus_server(dev)
+    axis = make_axis(server.port)
+    await axis.connect()
+    await axis.move_to(30.0)
+    with pytest.raises(DeviceFault) as info:
+        await axis.wait_in_position(timeout_s=5.0)
+    await axis.close()
+    assert info.value.code == 0x30
+    assert "lamp" in str(info.value)
+    # after the move: STOP (bit 5) pulsed in the input command word, then cleared
+    assert dev.writes()[1:] == [(INPUT, [0x0000, 0x0020]), (INPUT, [0, 0])]
+
+
+async def test_stall_detected_when_stopped_short(fakes: Any, modbus_server: Any) -> None:
+    dev = fakes.Device()
+    dev.on_write, dev.on_read = mover(1, final_steps=10_000)
+    server = await modbus_server(dev)
+    axis = make_axis(server.port)
+    await axis.connect()
+    await axis.move_to(12.5)
+    with pytest.raises(StallError, match=r"-2\.5000 deg"):
+        await axis.wait_in_position(timeout_s=5.0)
+    await axis.close()
+
+
+async def test_timeout_sends_stop(fakes: Any, modbus_server: Any) -> None:
+    dev = fakes.Device()
+    dev.on_write, dev.on_read = mover(10**9)
+    server = await modbus_server(dev)
+    clock = FakeClock()
+    axis = make_axis(server.port, clock, poll_interval_s=0.1)
+    await axis.connect()
+    await axis.move_to(12.5)
+    with pytest.raises(DeviceTimeout, match="1.0 s"):
+        await axis.wait_in_position(timeout_s=1.0)
+    await axis.close()
+    assert clock.t == pytest.approx(1.0)
+    assert dev.writes()[-2:] == [(INPUT, [0, 0x20]), (INPUT, [0, 0])]
+
+
+@pytest.mark.parametrize("target", [85.001, -0.1, float("nan"), float("inf")])
+async def test_limits_checked_before_any_bus_traffic(
+    fakes: Any, modbus_server: Any, target: float
+) -> None:
+    dev = fakes.Device()
+    server = await modbus_server(dev)
+    axis = make_axis(server.port)
+    await axis.connect()
+    with pytest.raises(LimitError, match=r"\[0\.0, 85\.0\]"):
+        await axis.move_to(target)
+    await axis.close()
+    assert dev.requests == []
+
+
+async def test_alarm_before_move_blocks_the_move(fakes: Any, modbus_server: Any) -> None:
+    dev = fakes.Device()
+    dev.set32(STATUS, ALM_A)
+    dev.set32(ALARM, 0x41)
+    server = await modbus_server(dev)
+    axis = make_axis(server.port)
+    await axis.connect()
+    with pytest.raises(DeviceFault) as info:
+        await axis.move_to(10.0)
+    await axis.reset_alarm()
+    await axis.close()
+    assert info.value.code == 0x41
+    # no direct-data write; ALM-RST (bit 7) pulsed
+    assert dev.writes() == [(INPUT, [0, 0x80]), (INPUT, [0, 0])]
+
+
+async def test_home_pulses_zhome_and_waits(fakes: Any, modbus_server: Any) -> None:
+    dev = fakes.Device()
+    dev.set32(STATUS, READY | IN_POS)
+    dev.set32(FEEDBACK, 5000)
+
+    def on_write(d: Any, address: int, values: list[int]) -> None:
+        if address == INPUT and values == [0, 0x10]:
+            d.set32(STATUS, READY | MOVE)
+
+    def on_read(d: Any, address: int, count: int) -> None:
+        if address == STATUS and d.get32(STATUS) & MOVE and len(d.pdus) > 5:
+            d.set32(STATUS, READY | IN_POS)
+            d.set32(FEEDBACK, 0)
+
+    dev.on_write, dev.on_read = on_write, on_read
+    server = await modbus_server(dev)
+    axis = make_axis(server.port)
+    await axis.connect()
+    await axis.home(timeout_s=5.0)
+    status = await axis.status()
+    await axis.close()
+    assert dev.writes() == [(INPUT, [0, 0x10]), (INPUT, [0, 0])]
+    assert status.homed and status.position_deg == 0.0
+
+
+async def test_status_reads_command_position(fakes: Any, modbus_server: Any) -> None:
+    dev = fakes.Device()
+    dev.set32(STATUS, READY | MOVE)
+    dev.set32(FEEDBACK, -1234)
+    dev.set32(COMMAND_POS, 2000)
+    server = await modbus_server(dev)
+    axis = make_axis(server.port, steps_per_deg=200.0, limits_deg=(-90, 90))
+    await axis.connect()
+    status = await axis.status()
+    assert await axis.position_deg() == -6.17
+    await axis.close()
+    assert status.position_deg == -6.17 and status.command_deg == 10.0
+    assert status.moving and not status.in_position and status.ready
+
+
+@pytest.mark.parametrize(
+    ("function", "code", "error"),
+    [(16, 2, ProtocolError), (16, 3, ProtocolError), (16, 4, DeviceFault), (3, 6, DeviceFault)],
+)
+async def test_modbus_exception_responses(
+    fakes: Any, modbus_server: Any, function: int, code: int, error: type[Exception]
+) -> None:
+    dev = fakes.Device(exception=(function, code))
+    server = await modbus_server(dev)
+    axis = make_axis(server.port)
+    await axis.connect()
+    with pytest.raises(error, match=f"Modbus exception {code} ") as info:
+        await axis.move_to(1.0)
+    await axis.close()
+    if isinstance(info.value, DeviceFault):
+        assert info.value.code == code
+    assert dev.pdus[-1][0] == function
+
+
+async def test_unreachable_controller_is_disconnected() -> None:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    axis = make_axis(port, timeout_s=0.5)
+    with pytest.raises(Disconnected, match=f"127.0.0.1:{port}"):
+        await axis.connect()
+    with pytest.raises(Disconnected, match="not connected"):
+        await axis.position_deg()
+
+
+async def test_missing_serial_port_is_disconnected_naming_it() -> None:
+    axis = make_axis(0, transport="rtu", serial_port="/dev/goniolab-no-such-port", timeout_s=0.5)
+    with pytest.raises(Disconnected, match="/dev/goniolab-no-such-port"):
+        await axis.connect()
+
+
+async def test_applied_motion_sequence(fakes: Any, modbus_server: Any) -> None:
+    dev = fakes.Device()
+    server = await modbus_server(dev)
+    axis = make_axis(server.port, profile="applied-motion-mdx")
+    await axis.connect()
+    await axis.move_to(12.5)
+    await axis.stop()
+    await axis.close()
+    # 40125 -> 124, 40345 -> 344 ...; 20 deg/s * 1000 steps/deg = 1 rps at 20000 steps/rev
+    # = 240 counts of 1/240 rps; 40 deg/s^2 = 2 rps/s = 12 counts of 1/6 rps/s.
+    assert dev.writes() == [
+        (124, [0x9F]),  # enable on connect
+        (344, [12]),
+        (346, [12]),
+        (348, [240]),
+        (350, [0, 12500]),
+        (124, [0x67]),
+        (124, [0xE1]),  # stop opcode from the profile
+    ]
+    # the pre-move status read is of 40003-04 (address 2, two registers)
+    assert dev.pdus[1] == struct.pack(">BHH", 3, 2, 2)
+
+
+def test_bad_configuration_names_the_axis() -> None:
+    with pytest.raises(ValueError, match="lamp: limits_deg"):
+        ModbusStepperAxis("lamp", limits_deg=(10.0, 0.0))
+    with pytest.raises(ValueError, match="lamp: speed_deg_s=0.001 gives 0 register counts"):
+        ModbusStepperAxis("lamp", profile="applied-motion-mdx", speed_deg_s=0.001)
