@@ -200,7 +200,7 @@ async def test_timeout_sends_stop(fakes: Any, modbus_server: Any) -> None:
     axis = make_axis(server.port, clock, poll_interval_s=0.1)
     await axis.connect()
     await axis.move_to(12.5)
-    with pytest.raises(DeviceTimeout, match="1.0 s"):
+    with pytest.raises(DeviceTimeout, match=r"1\.0 s"):
         await axis.wait_in_position(timeout_s=1.0)
     await axis.close()
     assert clock.t == pytest.approx(1.0)
@@ -339,5 +339,5 @@ async def test_applied_motion_sequence(fakes: Any, modbus_server: Any) -> None:
 def test_bad_configuration_names_the_axis() -> None:
     with pytest.raises(ValueError, match="lamp: limits_deg"):
         ModbusStepperAxis("lamp", limits_deg=(10.0, 0.0))
-    with pytest.raises(ValueError, match="lamp: speed_deg_s=0.001 gives 0 register counts"):
+    with pytest.raises(ValueError, match=r"lamp: speed_deg_s=0\.001 gives 0 register counts"):
         ModbusStepperAxis("lamp", profile="applied-motion-mdx", speed_deg_s=0.001)
