@@ -29,13 +29,17 @@ __all__ = [
     "ISO2813_BLACK_GLASS_N",
     "ISO2813_RECEPTOR",
     "ISO2813_SOURCE",
+    "MAX_CONE_RINGS",
+    "MAX_SUBDIVISIONS",
     "Aperture",
     "Cone",
     "Rect",
+    "Subdivisions",
     "aperture_contains",
     "direction",
     "inplane_centre",
     "integrate_brdf",
+    "lobe_subdivisions",
     "sample_aperture",
     "solid_angle_sr",
 ]
@@ -96,6 +100,12 @@ DEFAULT_N_RECEPTOR: int = 16
 
 FloatArray = NDArray[np.float64]
 BRDF = Callable[[FloatArray, FloatArray], ArrayLike]
+#: Aperture subdivisions: one count for both axes, or ``(n_in_plane, n_perpendicular)``.
+Subdivisions = int | tuple[int, int]
+#: Upper bound on subdivisions per axis chosen by :func:`lobe_subdivisions`.
+MAX_SUBDIVISIONS: int = 400
+#: Upper bound on the rings of a Cone chosen by :func:`lobe_subdivisions` (~3 k^2 patches).
+MAX_CONE_RINGS: int = 64
 
 
 def direction(theta_deg: ArrayLike, phi_deg: ArrayLike) -> FloatArray:
@@ -147,11 +157,11 @@ def _local_cone(cone: Cone, n: int) -> tuple[FloatArray, FloatArray]:
     return np.concatenate(dirs), np.concatenate(weights)
 
 
-def _local_rect(rect: Rect, n: int) -> tuple[FloatArray, FloatArray]:
-    """n x n midpoint grid in (alpha, beta) with exact patch solid angles da (sin b1 - sin b0)."""
+def _local_rect(rect: Rect, n_in: int, n_perp: int) -> tuple[FloatArray, FloatArray]:
+    """Midpoint grid in (alpha, beta) with exact patch solid angles da (sin b1 - sin b0)."""
     a_half, b_half = np.radians(0.5 * rect.in_plane_deg), np.radians(0.5 * rect.perp_deg)
-    na = 1 if a_half == 0.0 else n
-    nb = 1 if b_half == 0.0 else n
+    na = 1 if a_half == 0.0 else n_in
+    nb = 1 if b_half == 0.0 else n_perp
     a_edges = np.linspace(-a_half, a_half, na + 1)
     b_edges = np.linspace(-b_half, b_half, nb + 1)
     a = 0.5 * (a_edges[:-1] + a_edges[1:])
@@ -166,7 +176,7 @@ def _local_rect(rect: Rect, n: int) -> tuple[FloatArray, FloatArray]:
 
 
 def sample_aperture(
-    aperture: Aperture, theta_deg: float, phi_deg: float, *, n: int = DEFAULT_N_RECEPTOR
+    aperture: Aperture, theta_deg: float, phi_deg: float, *, n: Subdivisions = DEFAULT_N_RECEPTOR
 ) -> tuple[FloatArray, FloatArray]:
     """Deterministic quadrature of an aperture centred on the direction (theta_deg, phi_deg).
 
@@ -181,8 +191,8 @@ def sample_aperture(
       solid angles 2 pi (cos u0 - cos u1) split evenly.
     - :class:`Rect`: in-plane angle alpha in [-A/2, A/2] and out-of-plane angle beta in
       [-B/2, B/2] (A = ``in_plane_deg``, B = ``perp_deg``), local direction
-      ``(sin a cos b, sin b, cos a cos b)``, an n x n midpoint grid; the patch solid angle is
-      exact, ``dOmega = cos b da db`` integrated: ``da (sin b1 - sin b0)``.
+      ``(sin a cos b, sin b, cos a cos b)``, an n_in x n_perp midpoint grid; the patch solid
+      angle is exact, ``dOmega = cos b da db`` integrated: ``da (sin b1 - sin b0)``.
 
     A zero-size aperture (``Cone(0)``, ``Rect(0, 0)``) is one direction of weight 0 (a point);
     a Rect with one zero side is a line of n directions of weight 0.
@@ -194,7 +204,8 @@ def sample_aperture(
     theta_deg, phi_deg
         Centre direction: polar angle from the normal and azimuth from +x, in degrees.
     n
-        Subdivisions: rings of a cone, cells per axis of a rectangle (>= 1).
+        Subdivisions (>= 1): rings of a cone; cells per axis of a rectangle, or a pair
+        ``(n_in, n_perp)`` (a cone uses the larger of the pair).
 
     Returns
     -------
@@ -207,16 +218,48 @@ def sample_aperture(
     ----------
     .. [1] A. Mihalik, R. Durikovic, "Virtual gonio-spectrophotometer", sec. 2.6 and eq. 15.
     """
-    if n < 1:
+    n_in, n_perp = (n, n) if isinstance(n, int) else (int(n[0]), int(n[1]))
+    if min(n_in, n_perp) < 1:
         raise ValueError(f"aperture subdivisions must be >= 1, got {n}")
     if isinstance(aperture, Cone):
-        local, w = _local_cone(aperture, n)
+        local, w = _local_cone(aperture, max(n_in, n_perp))
     elif isinstance(aperture, Rect):
-        local, w = _local_rect(aperture, n)
+        local, w = _local_rect(aperture, n_in, n_perp)
     else:
         raise TypeError(f"unknown aperture type {type(aperture).__name__}")
     dirs = local @ _frame(theta_deg, phi_deg).T
     return dirs, w
+
+
+def lobe_subdivisions(
+    aperture: Aperture,
+    theta_deg: float,
+    lobe_in_rad: float,
+    lobe_perp_rad: float,
+    *,
+    minimum: int = DEFAULT_N_RECEPTOR,
+    maximum: int = MAX_SUBDIVISIONS,
+) -> tuple[int, int]:
+    """Receptor subdivisions whose step is at most the lobe's angular width in each axis.
+
+    A midpoint rule over a Gaussian-like lobe of standard deviation sigma is accurate to
+    ~exp(-2 pi^2 sigma^2 / h^2) when the step h <= sigma. A specular lobe of a surface with
+    per-axis rms slope s has ``sigma_in ~ 2 s`` in the plane of incidence and
+    ``sigma_perp ~ 2 s cos(theta)`` perpendicular to it (the mirror direction turns by twice
+    the facet tilt, foreshortened by cos(theta) out of the plane); callers pass those widths.
+
+    Returns ``(n_in, n_perp)`` clipped to ``[minimum, maximum]``; for a Cone both are the ring
+    count needed for the narrower width, at most :data:`MAX_CONE_RINGS`.
+    """
+    lin = max(float(lobe_in_rad), 1e-9)
+    lperp = max(float(lobe_perp_rad), 1e-9)
+    if isinstance(aperture, Cone):
+        rings = int(np.ceil(np.radians(aperture.half_angle_deg) / min(lin, lperp) + 0.5))
+        k = int(np.clip(rings, minimum, min(maximum, MAX_CONE_RINGS)))
+        return k, k
+    n_in = int(np.ceil(np.radians(aperture.in_plane_deg) / lin))
+    n_perp = int(np.ceil(np.radians(aperture.perp_deg) / lperp))
+    return int(np.clip(n_in, minimum, maximum)), int(np.clip(n_perp, minimum, maximum))
 
 
 def solid_angle_sr(aperture: Aperture) -> float:
@@ -256,8 +299,8 @@ def integrate_brdf(
     source: Aperture,
     receptor: Aperture,
     *,
-    n_source: int = DEFAULT_N_SOURCE,
-    n_receptor: int = DEFAULT_N_RECEPTOR,
+    n_source: Subdivisions = DEFAULT_N_SOURCE,
+    n_receptor: Subdivisions = DEFAULT_N_RECEPTOR,
     phi_i_deg: float = 0.0,
 ) -> float:
     """Fraction of the incident flux reaching the receptor (Mihalik eq. 15, source normalised).
@@ -287,7 +330,9 @@ def integrate_brdf(
         solid angle; the result is then the flux per steradian ``mean_s f cos(theta_o)``
         (sr^-1) in the receptor's direction (averaged over the directions of a line aperture).
     n_source, n_receptor
-        Subdivisions passed to :func:`sample_aperture`.
+        Subdivisions passed to :func:`sample_aperture`. The receptor grid must resolve the
+        BRDF lobe: the midpoint rule is accurate when the step is below the lobe's angular
+        width in each axis (see :func:`lobe_subdivisions`).
 
     Returns
     -------
