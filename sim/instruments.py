@@ -194,7 +194,7 @@ class SimAxis:
         self.faults.check(operation)
 
     # -------------------------------------------------------------- time keeping
-    def _ensure_tracker(self) -> None:
+    def ensure_tracker(self) -> None:
         """Keep virtual time flowing until the current move ends (needed at scale 0
         when nobody waits in-process, e.g. a wire server polled over the network)."""
         if self._tracker is None or self._tracker.done():
@@ -265,7 +265,7 @@ class SimAxis:
             self.motor.start_move(target_deg, self.clock.now())
         except MotorFault as exc:
             raise DeviceFault(str(exc), device=self.name, code=exc.code) from exc
-        self._ensure_tracker()
+        self.ensure_tracker()
 
     async def wait_in_position(self, timeout_s: float) -> float:
         """Wait (on the lab clock) until the move ends; return the feedback position.
@@ -324,7 +324,7 @@ class SimAxis:
             self.motor.start_home(self.clock.now())
         except MotorFault as exc:
             raise DeviceFault(str(exc), device=self.name, code=exc.code) from exc
-        self._ensure_tracker()
+        self.ensure_tracker()
         await self.wait_in_position(timeout_s)
 
     async def stop(self) -> None:

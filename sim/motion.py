@@ -364,9 +364,17 @@ class SimMotor:
 
     # ------------------------------------------------------------------ commands
     def start_move(
-        self, target_deg: float, now_s: float, *, speed_deg_s: float | None = None
+        self,
+        target_deg: float,
+        now_s: float,
+        *,
+        speed_deg_s: float | None = None,
+        accel_deg_s2: float | None = None,
     ) -> MoveProfile:
         """Start an absolute move to encoder position ``target_deg``.
+
+        ``speed_deg_s`` / ``accel_deg_s2`` override the motor's defaults for this move
+        (a controller takes them from the move command).
 
         Raises
         ------
@@ -387,7 +395,12 @@ class SimMotor:
         start = self.physical_deg(now_s)
         self._homing = False
         return self._begin(
-            start, target_deg + self._offset_deg, speed_deg_s or self.speed_deg_s, now_s, target_deg
+            start,
+            target_deg + self._offset_deg,
+            speed_deg_s or self.speed_deg_s,
+            now_s,
+            target_deg,
+            accel_deg_s2=accel_deg_s2,
         )
 
     def start_home(self, now_s: float) -> MoveProfile:
@@ -407,11 +420,18 @@ class SimMotor:
         return profile
 
     def _begin(
-        self, start_phys: float, target_phys: float, speed: float, now_s: float, command_enc: float
+        self,
+        start_phys: float,
+        target_phys: float,
+        speed: float,
+        now_s: float,
+        command_enc: float,
+        *,
+        accel_deg_s2: float | None = None,
     ) -> MoveProfile:
         if self._move is not None:  # a new command replaces the running one from here
             self._physical_deg = start_phys
-        move = MoveProfile(start_phys, target_phys, speed, self.accel_deg_s2, now_s)
+        move = MoveProfile(start_phys, target_phys, speed, accel_deg_s2 or self.accel_deg_s2, now_s)
         self._move = move
         self._command_deg = command_enc
         self._stop = self._first_stop(move)
