@@ -1,0 +1,164 @@
+"""``goniolab runs list | show RUN | export RUN``: browse and export the run store."""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from goniolab.errors import UserError
+from goniolab.scan.plans import BrdfPlan, PlanError
+from goniolab.scan.summary import summarize_brdf
+from goniolab.store import RunRecord, RunStore, StoreError, resolve_store_path
+
+__all__ = ["open_store", "register"]
+
+
+def open_store(store_arg: str | None, config_arg: str | None = None) -> RunStore:
+    """Open the store chosen by ``--store``, else config ``[lab] store``, else the default."""
+    config_store: str | None = None
+    if config_arg:
+        from goniolab.config import load_lab_config
+
+        config_store = load_lab_config(config_arg).lab.store
+    path = resolve_store_path(store_arg, config_store)
+    try:
+        return RunStore(path)
+    except StoreError as exc:
+        raise UserError(str(exc)) from exc
+
+
+def _when(ts: float | None) -> str:
+    if ts is None:
+        return "-"
+    return dt.datetime.fromtimestamp(ts, tz=dt.UTC).strftime("%Y-%m-%d %H:%M:%S")
+
+
+def _get_run(store: RunStore, run_id: int) -> RunRecord:
+    try:
+        return store.get_run(run_id)
+    except StoreError as exc:
+        raise UserError(str(exc)) from exc
+
+
+def run_summary(store: RunStore, rec: RunRecord) -> dict[str, Any]:
+    """The summary of a stored run, recomputed from its stored readings and predictions."""
+    if rec.kind == "brdf":
+        try:
+            plan = BrdfPlan.from_dict(rec.plan)
+        except PlanError as exc:
+            raise UserError(f"store {store.path}: run {rec.id}: {exc}") from exc
+        return summarize_brdf(plan, store.points(rec.id), store.predictions(rec.id))
+    from goniolab.scan.plans import gloss_statistics
+
+    rows = store.gloss_readings(rec.id)
+    return {
+        "readings": len(rows),
+        "statistics": gloss_statistics([r.values_gu for r in rows]).as_dict(),
+    }
+
+
+def _cmd_list(args: argparse.Namespace) -> int:
+    with open_store(args.store, args.config) as store:
+        runs = store.list_runs(limit=args.limit)
+        if args.json:
+            print(json.dumps([_brief(store, r) for r in runs], indent=2))
+            return 0
+        if not runs:
+            print(f"no runs in {store.path}", file=sys.stderr)
+            return 0
+        print(
+            f"{'RUN':>5}  {'KIND':5}  {'STATUS':8}  {'READINGS':>8}  {'CREATED (UTC)':19}  SAMPLE"
+        )
+        for r in runs:
+            b = _brief(store, r)
+            print(
+                f"{r.id:>5}  {r.kind:5}  {r.status:8}  {b['readings']:>8}  "
+                f"{_when(r.created_at):19}  {r.sample}"
+            )
+    return 0
+
+
+def _brief(store: RunStore, r: RunRecord) -> dict[str, Any]:
+    n = store.count_points(r.id) if r.kind == "brdf" else len(store.gloss_readings(r.id))
+    return {
+        "id": r.id,
+        "kind": r.kind,
+        "status": r.status,
+        "reason": r.reason,
+        "sample": r.sample,
+        "readings": n,
+        "created_at": r.created_at,
+        "finished_at": r.finished_at,
+    }
+
+
+def _cmd_show(args: argparse.Namespace) -> int:
+    with open_store(args.store, args.config) as store:
+        rec = _get_run(store, args.run)
+        summary = run_summary(store, rec)
+        if args.json:
+            print(json.dumps({"run": rec.as_dict(), "summary": summary}, indent=2))
+            return 0
+        print(f"run {rec.id} ({rec.kind}) on {rec.sample or '-'}: {rec.status}")
+        if rec.reason:
+            print(f"  reason: {rec.reason}")
+        print(f"  created {_when(rec.created_at)} UTC, finished {_when(rec.finished_at)} UTC")
+        print(f"  goniolab {rec.version}; model {json.dumps(rec.model, sort_keys=True)}")
+        print(f"  plan {json.dumps(rec.plan, sort_keys=True)}")
+        if rec.kind == "brdf":
+            from goniolab.commands.scan import format_summary
+
+            print(format_summary(summary))
+        else:
+            for angle, st in summary["statistics"].items():
+                print(f"  G{angle}: {st['mean_gu']:.1f} +- {st['std_gu']:.1f} GU (n = {st['n']})")
+        if rec.status not in ("done",) and rec.kind == "brdf":
+            print(f"  continue it with: goniolab scan resume {rec.id}")
+    return 0
+
+
+def _cmd_export(args: argparse.Namespace) -> int:
+    with open_store(args.store, args.config) as store:
+        _get_run(store, args.run)
+        text = store.export(args.run, args.format)
+    if args.output:
+        out = Path(args.output)
+        try:
+            out.write_text(text, encoding="utf-8")
+        except OSError as exc:
+            raise UserError(f"cannot write {out}: {exc.strerror}") from exc
+        print(f"run {args.run} written to {out}", file=sys.stderr)
+    else:
+        sys.stdout.write(text if text.endswith("\n") or not text else text + "\n")
+    return 0
+
+
+def register(subparsers: Any) -> None:
+    """Add ``runs`` and its sub-commands."""
+    p = subparsers.add_parser("runs", help="list, show and export stored runs")
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument(
+        "--store", help="SQLite store file (default: config [lab] store or user data dir)"
+    )
+    common.add_argument("--config", help="lab config TOML whose [lab] store to use")
+    sub = p.add_subparsers(dest="runs_command", metavar="ACTION", required=True)
+
+    pl = sub.add_parser("list", parents=[common], help="list runs, newest first")
+    pl.add_argument("--limit", type=int, default=None, help="show at most N runs")
+    pl.add_argument("--json", action="store_true", help="print JSON")
+    pl.set_defaults(func=_cmd_list)
+
+    ps = sub.add_parser("show", parents=[common], help="show one run and its summary")
+    ps.add_argument("run", type=int, metavar="RUN")
+    ps.add_argument("--json", action="store_true", help="print JSON")
+    ps.set_defaults(func=_cmd_show)
+
+    pe = sub.add_parser("export", parents=[common], help="export one run, one row per reading")
+    pe.add_argument("run", type=int, metavar="RUN")
+    pe.add_argument("--format", choices=("csv", "json"), default="csv")
+    pe.add_argument("-o", "--output", help="write to FILE instead of stdout")
+    pe.set_defaults(func=_cmd_export)

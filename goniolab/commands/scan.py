@@ -1,0 +1,409 @@
+"""``goniolab scan``: run an in-plane BRDF scan; ``goniolab scan resume RUN`` continues one.
+
+Progress (a plain-text bar with the ETA) goes to stderr, the summary to stdout at the end;
+``--json`` prints only the summary JSON on stdout. Ctrl-C asks the runner to stop between
+readings: the arms are parked, the run is marked ``aborted`` and the command prints how to
+resume it. A second Ctrl-C cancels at once (the arms are still parked, best effort).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import math
+import signal
+import sys
+from pathlib import Path
+from typing import Any, TextIO
+
+from goniolab import __version__
+from goniolab.errors import UserError
+from goniolab.optics.apertures import Cone
+from goniolab.scan.events import (
+    EventBus,
+    InstrumentError,
+    PointMeasured,
+    Progress,
+    RunFinished,
+    RunState,
+)
+from goniolab.scan.plans import BrdfPlan, PlanError, parse_angles
+from goniolab.scan.predict import Predictor
+from goniolab.scan.runner import ArmMotion, PlanRefused, RunResult, ScanRunner
+from goniolab.store import RunStore, StoreError, resolve_store_path
+
+__all__ = ["format_eta", "format_summary", "register"]
+
+_EXIT = {RunState.DONE: 0, RunState.FAILED: 1, RunState.ABORTED: 130}
+
+
+def format_eta(seconds: float) -> str:
+    """``1h02m03s`` / ``2m03s`` / ``7s`` for a non-negative duration."""
+    if not math.isfinite(seconds):
+        return "?"
+    s = max(0, round(seconds))
+    h, rem = divmod(s, 3600)
+    m, sec = divmod(rem, 60)
+    if h:
+        return f"{h}h{m:02d}m{sec:02d}s"
+    if m:
+        return f"{m}m{sec:02d}s"
+    return f"{sec}s"
+
+
+def _fmt(v: Any, unit: str, spec: str = ".2f") -> str:
+    return "-" if v is None else f"{v:{spec}}{unit}"
+
+
+def format_summary(summary: dict[str, Any]) -> str:
+    """Human-readable run summary (the same numbers as the JSON)."""
+    lines = [
+        f"  readings: {summary['readings']} of {summary['planned_readings']}"
+        + ("" if summary["complete"] else " (incomplete)"),
+    ]
+    if summary.get("mirror_pct") is not None:
+        lines.append(f"  mirror reference: {summary['mirror_pct']:.3f} % (set to 100 %)")
+    lines.append(f"  RMSE measured - predicted: {_fmt(summary['rmse_pct'], ' %', '.3f')}")
+    mp, pp = summary.get("measured_peak"), summary.get("predicted_peak")
+    for label, pk in (("measured ", mp), ("predicted", pp)):
+        if pk is not None:
+            lines.append(
+                f"  {label} peak: amplitude {_fmt(pk['amplitude_pct'], ' %', '.3f')}, "
+                f"position {_fmt(pk['position_deg'], ' deg')}, FWHM {_fmt(pk['fwhm_deg'], ' deg')}"
+            )
+    if summary.get("peak_offset_deg") is not None:
+        lines.append(f"  peak offset: {summary['peak_offset_deg']:+.2f} deg")
+    if summary.get("hint"):
+        lines.append(f"  hint: {summary['hint']}")
+    return "\n".join(lines)
+
+
+class ProgressBar:
+    """A plain-text progress bar with ETA, redrawn in place on a terminal."""
+
+    def __init__(self, stream: TextIO, clock_scale: float, width: int = 30) -> None:
+        self.stream = stream
+        self.clock_scale = clock_scale
+        self.width = width
+        self.tty = stream.isatty()
+        self.last = ""
+        self._last_pct = -1
+
+    def wall_s(self, lab_s: float) -> float:
+        """Lab-clock seconds to wall seconds (a sim clock at scale 0 takes no wall time)."""
+        if self.clock_scale <= 0:
+            return 0.0
+        return lab_s / self.clock_scale
+
+    def update(self, ev: Progress, detail: str) -> None:
+        frac = ev.done / ev.total if ev.total else 1.0
+        n = round(frac * self.width)
+        line = (
+            f"[{'#' * n}{'.' * (self.width - n)}] {ev.done}/{ev.total} "
+            f"ETA {format_eta(self.wall_s(ev.eta_s))} {detail}"
+        )
+        pct = int(frac * 100)
+        if self.tty:
+            self.stream.write("\r" + line.ljust(len(self.last)))
+            self.last = line
+            self.stream.flush()
+        elif pct // 10 != self._last_pct // 10 or ev.done == ev.total:
+            self.stream.write(line + "\n")
+            self.stream.flush()
+        self._last_pct = pct
+
+    def message(self, text: str) -> None:
+        if self.tty and self.last:
+            self.stream.write("\n")
+            self.last = ""
+        self.stream.write(text + "\n")
+        self.stream.flush()
+
+    def close(self) -> None:
+        if self.tty and self.last:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+async def _report(bus_q: asyncio.Queue[Any], bar: ProgressBar) -> None:
+    detail = ""
+    while (ev := await bus_q.get()) is not None:
+        if isinstance(ev, PointMeasured):
+            pred = "" if ev.predicted_pct is None else f" (pred {ev.predicted_pct:.3f} %)"
+            detail = f"theta_r={ev.theta_r_deg:g} L={ev.luminance_pct:.3f} %{pred}"
+        elif isinstance(ev, Progress):
+            bar.update(ev, detail)
+        elif isinstance(ev, InstrumentError):
+            bar.message(
+                f"goniolab: {'fault' if ev.fatal else 'warning'}: {ev.device}: {ev.message}"
+            )
+        elif isinstance(ev, RunFinished):
+            return
+
+
+def _config_snapshot(cfg: Any) -> dict[str, Any]:
+    snap: dict[str, Any] = cfg.model_dump(mode="json")
+    snap["_source"] = str(Path(cfg.source).resolve()) if cfg.source else ""
+    return snap
+
+
+async def _specimen_prompt(which: str) -> None:
+    """Ask the operator to place the mirror (or the sample back) and press Enter."""
+    what = "the reference MIRROR" if which == "mirror" else "the SAMPLE"
+    print(f"goniolab: place {what} under the instruments, then press Enter", file=sys.stderr)
+    line = await asyncio.to_thread(sys.stdin.readline)
+    if not line:
+        raise UserError(f"no operator confirmation on stdin for placing {what}", exit_code=1)
+
+
+async def _execute(
+    *,
+    config_path: str,
+    time_scale: float | None,
+    store: RunStore,
+    plan: BrdfPlan | None,
+    run_id: int | None,
+    json_out: bool,
+) -> int:
+    from goniolab.lab import Lab
+
+    async with Lab.from_config(config_path, time_scale=time_scale) as lab:
+        cfg = lab.config
+        if plan is None:
+            assert run_id is not None
+            rec = store.get_run(run_id)
+            plan = BrdfPlan.from_dict(rec.plan)
+        predictor = Predictor(
+            _prediction_model(lab, plan.sample, cfg),
+            Cone(cfg.goniometer.source_cone_deg),
+            Cone(cfg.spectro.detector_cone_deg),
+        )
+        if run_id is None:
+            run_id = store.create_run(
+                kind="brdf",
+                plan=plan.to_dict(),
+                config=_config_snapshot(cfg),
+                sample=plan.sample,
+                model=predictor.describe(),
+                version=__version__,
+            )
+        g = cfg.goniometer
+        motion = ArmMotion(
+            g.lamp.speed_deg_s, g.lamp.accel_deg_s2, g.detector.speed_deg_s, g.detector.accel_deg_s2
+        )
+        bus = EventBus()
+        runner = ScanRunner(
+            goniometer=lab.goniometer,
+            spectro=lab.spectro,
+            clock=lab.clock,
+            plan=plan,
+            store=store,
+            run_id=run_id,
+            bus=bus,
+            motion=motion,
+            predictor=predictor,
+            move_timeout_s=g.move_timeout_s,
+            park_deg=(g.park.theta_i_deg, g.park.theta_r_deg),
+            specimen_hook=_specimen_hook(lab) if plan.mirror_reference else None,
+        )
+        bar = ProgressBar(sys.stderr, float(getattr(lab.clock, "scale", 1.0)))
+        report = asyncio.create_task(_report(bus.subscribe(), bar))
+        loop = asyncio.get_running_loop()
+        main_task = asyncio.current_task()
+        interrupts = 0
+
+        def on_sigint() -> None:
+            nonlocal interrupts
+            interrupts += 1
+            if interrupts == 1:
+                bar.message("goniolab: stopping after this reading (Ctrl-C again to stop now)")
+                runner.abort()
+            elif main_task is not None:
+                main_task.cancel()
+
+        loop.add_signal_handler(signal.SIGINT, on_sigint)
+        try:
+            result: RunResult = await runner.run()
+        except PlanRefused as exc:
+            store.set_status(run_id, RunState.FAILED.value, f"plan refused: {exc}")
+            raise UserError(f"plan refused (no arm moved): {exc}") from exc
+        except asyncio.CancelledError:
+            bar.close()
+            print(
+                f"goniolab: run {run_id} aborted; continue it with: goniolab scan resume {run_id}",
+                file=sys.stderr,
+            )
+            return 130
+        finally:
+            loop.remove_signal_handler(signal.SIGINT)
+            bus.close()
+            await report
+            bar.close()
+    payload = {
+        "run_id": run_id,
+        "state": result.state.value,
+        "reason": result.reason,
+        **result.summary,
+    }
+    if json_out:
+        print(json.dumps(payload, indent=2))
+    else:
+        print(
+            f"run {run_id}: {result.state.value}" + (f" ({result.reason})" if result.reason else "")
+        )
+        print(format_summary(result.summary))
+    if result.state is not RunState.DONE:
+        print(
+            f"goniolab: run {run_id} {result.state.value}; continue it with: "
+            f"goniolab scan resume {run_id}",
+            file=sys.stderr,
+        )
+    return _EXIT[result.state]
+
+
+def _prediction_model(lab: Any, sample: str, cfg: Any) -> Any:
+    """The lab's model when the plan's sample is the configured one, else ``model_for``."""
+    if not sample or sample == cfg.sample.map:
+        return lab.model
+    from goniolab.maps import model_for
+
+    return model_for(sample, n=cfg.sample.n)
+
+
+def _specimen_hook(lab: Any) -> Any:
+    swap = getattr(lab, "place_specimen", None)
+    if swap is not None:
+
+        async def hook(which: str) -> None:
+            await swap(which)
+
+        return hook
+    return _specimen_prompt
+
+
+def _cmd_scan(args: argparse.Namespace) -> int:
+    if not args.config:
+        raise UserError("scan: --config FILE is required (e.g. configs/lab-sim.toml)")
+    from goniolab.config import load_lab_config
+
+    cfg = load_lab_config(args.config)
+    sample = args.sample or cfg.sample.map
+    if args.sample and not (args.sample.startswith("sample:") or Path(args.sample).exists()):
+        raise UserError(
+            f"--sample {args.sample}: no such file (use sample:NAME or a height-map path)"
+        )
+    try:
+        plan = BrdfPlan(
+            theta_i_deg=args.theta_i,
+            theta_r_deg=parse_angles(args.theta_r, name="--theta-r"),
+            repeats=args.repeats,
+            dwell_s=args.dwell,
+            exposure_us=args.exposure_us
+            if args.exposure_us is not None
+            else cfg.spectro.exposure_us,
+            mirror_reference=args.mirror_reference,
+            sample=sample,
+        )
+    except PlanError as exc:
+        raise UserError(f"scan: {exc}") from exc
+    store = _open(args.store, cfg.lab.store)
+    with store:
+        return asyncio.run(
+            _execute(
+                config_path=args.config,
+                time_scale=args.time_scale,
+                store=store,
+                plan=plan,
+                run_id=None,
+                json_out=args.json,
+            )
+        )
+
+
+def _open(store_arg: str | None, config_store: str | None) -> RunStore:
+    try:
+        return RunStore(resolve_store_path(store_arg, config_store))
+    except StoreError as exc:
+        raise UserError(str(exc)) from exc
+
+
+def _cmd_resume(args: argparse.Namespace) -> int:
+    config_store = None
+    if args.config:
+        from goniolab.config import load_lab_config
+
+        config_store = load_lab_config(args.config).lab.store
+    store = _open(args.store, config_store)
+    with store:
+        try:
+            rec = store.get_run(args.run)
+        except StoreError as exc:
+            raise UserError(str(exc)) from exc
+        if rec.kind != "brdf":
+            raise UserError(f"run {rec.id} is a {rec.kind} run; only scans can be resumed")
+        if rec.status == RunState.DONE.value:
+            raise UserError(f"run {rec.id} is already done ({store.count_points(rec.id)} readings)")
+        config_path = args.config or rec.config.get("_source", "")
+        if not config_path:
+            raise UserError(f"run {rec.id}: no config file recorded; pass --config FILE")
+        if not Path(config_path).exists():
+            raise UserError(
+                f"run {rec.id}: config {config_path} no longer exists; pass --config FILE"
+            )
+        print(
+            f"goniolab: resuming run {rec.id}: {store.count_points(rec.id)} readings stored",
+            file=sys.stderr,
+        )
+        return asyncio.run(
+            _execute(
+                config_path=config_path,
+                time_scale=args.time_scale,
+                store=store,
+                plan=None,
+                run_id=rec.id,
+                json_out=args.json,
+            )
+        )
+
+
+def _add_common(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--store", help="SQLite run store (default: config [lab] store or user data dir)"
+    )
+    p.add_argument("--time-scale", type=float, default=None, help="sim clock scale (0 = instant)")
+    p.add_argument("--json", action="store_true", help="print only the summary JSON on stdout")
+
+
+def register(subparsers: Any) -> None:
+    """Add ``scan`` (and ``scan resume RUN``)."""
+    p = subparsers.add_parser(
+        "scan",
+        help="run an in-plane BRDF scan (or: scan resume RUN)",
+        description="Measure the in-plane luminance curve at fixed incidence and compare it, "
+        "point by point, with the model prediction (Wittmann et al. 2021, sec. 2.3).",
+    )
+    _add_common(p)
+    p.add_argument("--config", help="lab config TOML (e.g. configs/lab-sim.toml)")
+    p.add_argument(
+        "--sample", help="sample:NAME or a height-map file (default: config [sample] map)"
+    )
+    p.add_argument("--theta-i", type=float, default=45.0, help="incidence angle, deg (default 45)")
+    p.add_argument(
+        "--theta-r", default="0:70:1", help='detector angles: "start:stop:step" or "a,b,c"'
+    )
+    p.add_argument("--repeats", type=int, default=1, help="readings per geometry")
+    p.add_argument("--dwell", type=float, default=0.0, help="settling time after a move, s")
+    p.add_argument("--exposure-us", type=int, default=None, help="exposure, us (default: config)")
+    p.add_argument(
+        "--mirror-reference",
+        action="store_true",
+        help="read a mirror at the specular geometry first; it sets the 100 %% level",
+    )
+    p.set_defaults(func=_cmd_scan)
+    sub = p.add_subparsers(dest="scan_command", metavar="resume")
+    pr = sub.add_parser("resume", help="continue an interrupted run (also after a crash)")
+    _add_common(pr)
+    pr.add_argument("run", type=int, metavar="RUN")
+    pr.add_argument("--config", help="lab config TOML (default: the one the run was started with)")
+    pr.set_defaults(func=_cmd_resume)

@@ -1,0 +1,78 @@
+"""The gloss logger: readings stored as they come, garbled lines and disconnects survived."""
+
+from __future__ import annotations
+
+import pytest
+
+from drivers.base import Disconnected, GlossReading, ProtocolError
+from goniolab.scan.events import EventBus, GlossRead, InstrumentError, RunState
+from goniolab.scan.gloss import GlossLogger, predict_gloss
+from goniolab.scan.plans import GlossPlan
+from goniolab.store import RunStore
+from sim.clock import SimClock
+
+from .conftest import FakeGlossmeter, FakeModel
+
+
+def reading(g20: float, g60: float, g85: float, t: float) -> GlossReading:
+    return GlossReading(values_gu={20: g20, 60: g60, 85: g85}, temperature_c=25.0, timestamp=t,
+                        raw=f"1| 401120999|xy|{round(g20 * 10)}|...")  # fmt: skip
+
+
+def make(store: RunStore, script: list[GlossReading | Exception], count: int, **kw: object
+         ) -> tuple[GlossLogger, FakeGlossmeter, EventBus, SimClock]:  # fmt: skip
+    meter = FakeGlossmeter(script)
+    bus = EventBus()
+    clock = SimClock(0)
+    rid = store.create_run(kind="gloss", plan={}, config={}, sample="", model={}, version="t")
+    logger = GlossLogger(meter=meter, store=store, run_id=rid, bus=bus, clock=clock,
+                         plan=GlossPlan(count=count), predicted_gu={20: 80.0, 60: 90.0, 85: 95.0},
+                         **kw)  # type: ignore[arg-type]  # fmt: skip
+    return logger, meter, bus, clock
+
+
+async def test_garble_and_disconnect_lose_nothing(store: RunStore) -> None:
+    script: list[GlossReading | Exception] = [
+        reading(80.1, 90.0, 95.2, 1.0),
+        ProtocolError("garbled reply '1| 4011x0999|xy|9'", device="glossmeter"),
+        reading(80.3, 90.2, 95.0, 2.0),
+        Disconnected("port closed", device="glossmeter"),
+        Disconnected("port closed", device="glossmeter"),
+        reading(80.5, 90.4, 94.8, 3.0),
+    ]
+    logger, meter, bus, clock = make(store, script, 3)
+    q = bus.subscribe()
+    result = await logger.run()
+    assert result.state is RunState.DONE and result.readings == 3
+    # two reconnects with exponential backoff on the lab clock: 0.5 s then 1.0 s
+    assert result.reconnects == 2 and meter.connects == 2 and meter.closes == 2
+    assert clock.now() == pytest.approx(1.5, abs=1e-12)
+    rows = store.gloss_readings(result.run_id)
+    assert [r.values_gu[60] for r in rows] == [90.0, 90.2, 90.4]
+    assert rows[0].predicted_gu == {20: 80.0, 60: 90.0, 85: 95.0}
+    events = []
+    while not q.empty():
+        events.append(q.get_nowait())
+    errors = [e for e in events if isinstance(e, InstrumentError)]
+    assert len(errors) == 3 and not any(e.fatal for e in errors)
+    assert "garbled" in errors[0].message
+    assert len([e for e in events if isinstance(e, GlossRead)]) == 3
+    # mean and sample std of 90.0, 90.2, 90.4: 90.2 and 0.2
+    assert result.stats.mean_gu[60] == pytest.approx(90.2, abs=1e-9)
+    assert result.stats.std_gu[60] == pytest.approx(0.2, abs=1e-9)
+    assert store.get_run(result.run_id).status == "done"
+
+
+async def test_too_many_failures_fail_but_keep_readings(store: RunStore) -> None:
+    script: list[GlossReading | Exception] = [reading(80.0, 90.0, 95.0, 1.0)]
+    script += [ProtocolError("garbled", device="glossmeter")] * 3
+    logger, _, _, _ = make(store, script, 5, max_failures=3)
+    result = await logger.run()
+    assert result.state is RunState.FAILED and "3 consecutive failures" in result.reason
+    assert len(store.gloss_readings(result.run_id)) == 1
+    assert store.get_run(result.run_id).status == "failed"
+
+
+async def test_predicted_gloss_runs_in_a_thread() -> None:
+    model = FakeModel()
+    assert await predict_gloss(model, (20, 60)) == {20: 80.0, 60: 90.0}
