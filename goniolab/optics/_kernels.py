@@ -1,0 +1,448 @@
+"""Fused per-facet kernels of the facet model, each in numba and as a pure-numpy twin.
+
+Every kernel walks the facet normals ``m = (mx, my, mz)`` once for one incident direction
+``wi`` and does, per facet (Wittmann et al. 2021, eqs. 5-10, with the PHYSICS.md weight):
+
+- ``c = wi . m`` (cosine of the local incidence angle iota); facets with ``c <= 0`` face
+  away from the lamp and get no light;
+- ``wo = 2 c m - wi`` (the seed's ``M = 2 m m^T - I``, eqs. 5-8);
+- facets whose ``wo_z <= 0`` would send the light into the surface: they are dropped
+  (no multiple scattering is modelled, so that flux is lost, not redistributed);
+- the weight ``w = c / (m_z cos ti) F(c)`` ("radiometric": flux reflected by the facet,
+  whose projected area on x-y is one pixel, over the flux falling on that pixel) or
+  ``w = F(c)`` ("seed": Wittmann weighs the slope histogram by Fresnel alone).
+
+The fraction of the incident flux sent towards ``wo_k`` is ``w_k / N``. The kernels then
+bin, deposit or integrate ``w`` in different ways. The numba versions are compiled with
+``nogil=True`` so the facet model can split the facets over threads; the numpy twins are
+the test reference and the benchmark baseline. All arithmetic is float64.
+"""
+
+from __future__ import annotations
+
+import cmath
+import math
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+
+from goniolab.optics.fresnel import fresnel
+
+__all__ = [
+    "cone_response_numba",
+    "cone_response_numpy",
+    "deposit_numba",
+    "deposit_numpy",
+    "hemisphere_numba",
+    "hemisphere_numpy",
+    "rect_response_numba",
+    "rect_response_numpy",
+    "reflect_numpy",
+]
+
+FloatArray = NDArray[np.float64]
+
+
+# ----------------------------------------------------------------------------- scalar helpers
+@njit(cache=True, nogil=True, fastmath=False)
+def _fresnel_scalar(c: float, n_re: float, n_im: float) -> float:  # pragma: no cover - numba
+    """Unpolarised Fresnel reflectance (cosine form of Wittmann eq. 9; pbrt FrComplex)."""
+    if c < 0.0:
+        c = 0.0
+    elif c > 1.0:
+        c = 1.0
+    if n_im == 0.0:
+        s2 = (1.0 - c * c) / (n_re * n_re)
+        if s2 >= 1.0:
+            return 1.0
+        ct = math.sqrt(1.0 - s2)
+        rs = (c - n_re * ct) / (c + n_re * ct)
+        rp = (n_re * c - ct) / (n_re * c + ct)
+        return 0.5 * (rs * rs + rp * rp)
+    eta = complex(n_re, n_im)
+    cc = complex(c, 0.0)
+    ctc = cmath.sqrt(1.0 - (1.0 - cc * cc) / (eta * eta))
+    r_perp = (cc - eta * ctc) / (cc + eta * ctc)
+    r_parl = (eta * cc - ctc) / (eta * cc + ctc)
+    return 0.5 * (
+        r_perp.real * r_perp.real
+        + r_perp.imag * r_perp.imag
+        + r_parl.real * r_parl.real
+        + r_parl.imag * r_parl.imag
+    )
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def _reflect(
+    mx: float,
+    my: float,
+    mz: float,
+    wx: float,
+    wy: float,
+    wz: float,
+    n_re: float,
+    n_im: float,
+    seed: bool,
+) -> tuple[float, float, float, float]:  # pragma: no cover - numba
+    """Mirror direction and weight of one facet; weight 0 for dropped facets."""
+    c = wx * mx + wy * my + wz * mz
+    if c <= 0.0:
+        return 0.0, 0.0, 0.0, 0.0
+    ox = 2.0 * c * mx - wx
+    oy = 2.0 * c * my - wy
+    oz = 2.0 * c * mz - wz
+    if oz <= 0.0:
+        return 0.0, 0.0, 0.0, 0.0
+    f = _fresnel_scalar(c, n_re, n_im)
+    w = f if seed else c / (mz * wz) * f
+    return ox, oy, oz, w
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def _interval_overlap(x: float, s: float, r: float) -> float:  # pragma: no cover - numba
+    """Fraction of [x - s/2, x + s/2] inside [-r/2, r/2] (indicator when s == 0)."""
+    if s <= 0.0:
+        ax = abs(x)
+        h = 0.5 * r
+        if ax < h:
+            return 1.0
+        if ax == h:
+            return 0.5
+        return 0.0
+    lo = max(x - 0.5 * s, -0.5 * r)
+    hi = min(x + 0.5 * s, 0.5 * r)
+    if hi <= lo:
+        return 0.0
+    return (hi - lo) / s
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def _table(
+    g: float, table: FloatArray, g0: float, g1: float, o_in: float
+) -> float:  # pragma: no cover
+    """Cap-overlap fraction O(gamma) from its table on [g0, g1] (linear interpolation)."""
+    if g <= g0:
+        return o_in
+    if g >= g1:
+        return 0.0
+    t = (g - g0) / (g1 - g0) * (table.size - 1)
+    i = int(t)
+    if i >= table.size - 1:
+        return table[table.size - 1]
+    f = t - i
+    return table[i] * (1.0 - f) + table[i + 1] * f
+
+
+# ----------------------------------------------------------------------------- numba kernels
+@njit(cache=True, nogil=True, fastmath=False)
+def hemisphere_numba(
+    mx: FloatArray,
+    my: FloatArray,
+    mz: FloatArray,
+    wi: FloatArray,
+    n_re: float,
+    n_im: float,
+    seed: bool,
+    n_theta: int,
+    n_phi: int,
+    bin_rad: float,
+) -> tuple[FloatArray, float]:  # pragma: no cover - numba
+    """Sum of weights per (theta_o, phi_o) bin of width ``bin_rad``; also the total weight."""
+    hist = np.zeros((n_theta, n_phi))
+    wx, wy, wz = wi[0], wi[1], wi[2]
+    total = 0.0
+    two_pi = 2.0 * math.pi
+    for k in range(mx.size):
+        ox, oy, oz, w = _reflect(mx[k], my[k], mz[k], wx, wy, wz, n_re, n_im, seed)
+        if w == 0.0:
+            continue
+        total += w
+        th = math.acos(min(oz, 1.0))
+        it = int(th / bin_rad)
+        if it >= n_theta:
+            it = n_theta - 1
+        ph = math.atan2(oy, ox)
+        if ph < 0.0:
+            ph += two_pi
+        ip = int(ph / bin_rad)
+        if ip >= n_phi:
+            ip = n_phi - 1
+        hist[it, ip] += w
+    return hist, total
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def deposit_numba(
+    mx: FloatArray,
+    my: FloatArray,
+    mz: FloatArray,
+    wi: FloatArray,
+    n_re: float,
+    n_im: float,
+    seed: bool,
+    a0: float,
+    ha: float,
+    na: int,
+    b0: float,
+    hb: float,
+    nb: int,
+) -> tuple[FloatArray, float]:  # pragma: no cover - numba
+    """Cloud-in-cell deposit of the weights on nodes ``(a0 + i ha, b0 + j hb)``.
+
+    Coordinates: in-plane angle ``alpha = atan2(-wo_x, wo_z)`` and out-of-plane angle
+    ``beta = asin(wo_y)`` (radians). Facets outside the node grid are not deposited.
+    """
+    grid = np.zeros((na, nb))
+    wx, wy, wz = wi[0], wi[1], wi[2]
+    total = 0.0
+    b_lo = b0 - hb
+    b_hi = b0 + nb * hb
+    for k in range(mx.size):
+        ox, oy, oz, w = _reflect(mx[k], my[k], mz[k], wx, wy, wz, n_re, n_im, seed)
+        if w == 0.0:
+            continue
+        total += w
+        be = math.asin(max(-1.0, min(1.0, oy)))
+        if be <= b_lo or be >= b_hi:
+            continue
+        al = math.atan2(-ox, oz)
+        x = (al - a0) / ha
+        if x <= -1.0 or x >= na:
+            continue
+        y = (be - b0) / hb
+        i = math.floor(x)
+        j = math.floor(y)
+        fx = x - i
+        fy = y - j
+        for di in range(2):
+            ii = i + di
+            if ii < 0 or ii >= na:
+                continue
+            wa = fx if di == 1 else 1.0 - fx
+            for dj in range(2):
+                jj = j + dj
+                if jj < 0 or jj >= nb:
+                    continue
+                wb = fy if dj == 1 else 1.0 - fy
+                grid[ii, jj] += w * wa * wb
+    return grid, total
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def cone_response_numba(
+    mx: FloatArray,
+    my: FloatArray,
+    mz: FloatArray,
+    wi: FloatArray,
+    n_re: float,
+    n_im: float,
+    seed: bool,
+    d: FloatArray,
+    table: FloatArray,
+    g0: float,
+    g1: float,
+    o_in: float,
+) -> float:  # pragma: no cover - numba
+    """``sum_k w_k O(gamma_k)``, gamma_k the angle between wo_k and the detector axis d."""
+    wx, wy, wz = wi[0], wi[1], wi[2]
+    dx, dy, dz = d[0], d[1], d[2]
+    acc = 0.0
+    for k in range(mx.size):
+        ox, oy, oz, w = _reflect(mx[k], my[k], mz[k], wx, wy, wz, n_re, n_im, seed)
+        if w == 0.0:
+            continue
+        ex = ox - dx
+        ey = oy - dy
+        ez = oz - dz
+        half_chord = 0.5 * math.sqrt(ex * ex + ey * ey + ez * ez)
+        if half_chord >= 1.0:
+            continue
+        g = 2.0 * math.asin(half_chord)
+        acc += w * _table(g, table, g0, g1, o_in)
+    return acc
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def rect_response_numba(
+    mx: FloatArray,
+    my: FloatArray,
+    mz: FloatArray,
+    wi: FloatArray,
+    n_re: float,
+    n_im: float,
+    seed: bool,
+    alpha_r: float,
+    s_in: float,
+    r_in: float,
+    s_perp: float,
+    r_perp: float,
+) -> float:  # pragma: no cover - numba
+    """``sum_k w_k ov_in(alpha_k - alpha_r) ov_perp(beta_k)`` for rectangular apertures."""
+    wx, wy, wz = wi[0], wi[1], wi[2]
+    reach_b = 0.5 * (s_perp + r_perp)
+    acc = 0.0
+    for k in range(mx.size):
+        ox, oy, oz, w = _reflect(mx[k], my[k], mz[k], wx, wy, wz, n_re, n_im, seed)
+        if w == 0.0:
+            continue
+        be = math.asin(max(-1.0, min(1.0, oy)))
+        if abs(be) > reach_b:
+            continue
+        ob = _interval_overlap(be, s_perp, r_perp)
+        if ob == 0.0:
+            continue
+        al = math.atan2(-ox, oz)
+        acc += w * ob * _interval_overlap(al - alpha_r, s_in, r_in)
+    return acc
+
+
+# ----------------------------------------------------------------------------- numpy twins
+def reflect_numpy(
+    mx: FloatArray,
+    my: FloatArray,
+    mz: FloatArray,
+    wi: FloatArray,
+    n_re: float,
+    n_im: float,
+    seed: bool,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Vectorised twin of the per-facet step: ``(wo_x, wo_y, wo_z, w)``, w = 0 when dropped."""
+    c = wi[0] * mx + wi[1] * my + wi[2] * mz
+    ox = 2.0 * c * mx - wi[0]
+    oy = 2.0 * c * my - wi[1]
+    oz = 2.0 * c * mz - wi[2]
+    keep = (c > 0.0) & (oz > 0.0)
+    f = fresnel(np.clip(c, 0.0, 1.0), complex(n_re, n_im))
+    w = f if seed else c / (mz * wi[2]) * f
+    return ox, oy, oz, np.where(keep, w, 0.0)
+
+
+def hemisphere_numpy(
+    mx: FloatArray,
+    my: FloatArray,
+    mz: FloatArray,
+    wi: FloatArray,
+    n_re: float,
+    n_im: float,
+    seed: bool,
+    n_theta: int,
+    n_phi: int,
+    bin_rad: float,
+) -> tuple[FloatArray, float]:
+    """Numpy twin of :func:`hemisphere_numba`."""
+    ox, oy, oz, w = reflect_numpy(mx, my, mz, wi, n_re, n_im, seed)
+    keep = w != 0.0
+    ox, oy, oz, w = ox[keep], oy[keep], oz[keep], w[keep]
+    it = np.minimum((np.arccos(np.minimum(oz, 1.0)) / bin_rad).astype(np.int64), n_theta - 1)
+    ph = np.arctan2(oy, ox)
+    ph = np.where(ph < 0.0, ph + 2.0 * np.pi, ph)
+    ip = np.minimum((ph / bin_rad).astype(np.int64), n_phi - 1)
+    hist = np.bincount(it * n_phi + ip, weights=w, minlength=n_theta * n_phi).astype(np.float64)
+    return hist.reshape(n_theta, n_phi), float(w.sum())
+
+
+def deposit_numpy(
+    mx: FloatArray,
+    my: FloatArray,
+    mz: FloatArray,
+    wi: FloatArray,
+    n_re: float,
+    n_im: float,
+    seed: bool,
+    a0: float,
+    ha: float,
+    na: int,
+    b0: float,
+    hb: float,
+    nb: int,
+) -> tuple[FloatArray, float]:
+    """Numpy twin of :func:`deposit_numba`."""
+    ox, oy, oz, w = reflect_numpy(mx, my, mz, wi, n_re, n_im, seed)
+    keep = w != 0.0
+    ox, oy, oz, w = ox[keep], oy[keep], oz[keep], w[keep]
+    total = float(w.sum())
+    be = np.arcsin(np.clip(oy, -1.0, 1.0))
+    al = np.arctan2(-ox, oz)
+    x = (al - a0) / ha
+    y = (be - b0) / hb
+    sel = (be > b0 - hb) & (be < b0 + nb * hb) & (x > -1.0) & (x < na)
+    x, y, w = x[sel], y[sel], w[sel]
+    i = np.floor(x).astype(np.int64)
+    j = np.floor(y).astype(np.int64)
+    fx = x - i
+    fy = y - j
+    grid = np.zeros(na * nb)
+    for di, wa in ((0, 1.0 - fx), (1, fx)):
+        for dj, wb in ((0, 1.0 - fy), (1, fy)):
+            ii = i + di
+            jj = j + dj
+            ok = (ii >= 0) & (ii < na) & (jj >= 0) & (jj < nb)
+            grid += np.bincount(ii[ok] * nb + jj[ok], weights=(w * wa * wb)[ok], minlength=na * nb)
+    return grid.reshape(na, nb), total
+
+
+def table_numpy(g: FloatArray, table: FloatArray, g0: float, g1: float, o_in: float) -> FloatArray:
+    """Numpy twin of the O(gamma) table lookup."""
+    if g1 > g0:
+        t = (np.clip(g, g0, g1) - g0) / (g1 - g0) * (table.size - 1)
+        inner = np.interp(t, np.arange(table.size, dtype=np.float64), table)
+    else:
+        inner = np.zeros_like(g)
+    return np.where(g <= g0, o_in, np.where(g >= g1, 0.0, inner))
+
+
+def cone_response_numpy(
+    mx: FloatArray,
+    my: FloatArray,
+    mz: FloatArray,
+    wi: FloatArray,
+    n_re: float,
+    n_im: float,
+    seed: bool,
+    d: FloatArray,
+    table: FloatArray,
+    g0: float,
+    g1: float,
+    o_in: float,
+) -> float:
+    """Numpy twin of :func:`cone_response_numba`."""
+    ox, oy, oz, w = reflect_numpy(mx, my, mz, wi, n_re, n_im, seed)
+    half_chord = 0.5 * np.sqrt((ox - d[0]) ** 2 + (oy - d[1]) ** 2 + (oz - d[2]) ** 2)
+    g = 2.0 * np.arcsin(np.minimum(half_chord, 1.0))
+    return float(np.sum(w * table_numpy(g, table, g0, g1, o_in)))
+
+
+def interval_overlap_numpy(x: FloatArray, s: float, r: float) -> FloatArray:
+    """Numpy twin of the 1-D interval overlap fraction."""
+    if s <= 0.0:
+        ax = np.abs(x)
+        return np.where(ax < 0.5 * r, 1.0, np.where(ax == 0.5 * r, 0.5, 0.0))
+    lo = np.maximum(x - 0.5 * s, -0.5 * r)
+    hi = np.minimum(x + 0.5 * s, 0.5 * r)
+    out: FloatArray = np.maximum(hi - lo, 0.0) / s
+    return out
+
+
+def rect_response_numpy(
+    mx: FloatArray,
+    my: FloatArray,
+    mz: FloatArray,
+    wi: FloatArray,
+    n_re: float,
+    n_im: float,
+    seed: bool,
+    alpha_r: float,
+    s_in: float,
+    r_in: float,
+    s_perp: float,
+    r_perp: float,
+) -> float:
+    """Numpy twin of :func:`rect_response_numba`."""
+    ox, oy, oz, w = reflect_numpy(mx, my, mz, wi, n_re, n_im, seed)
+    be = np.arcsin(np.clip(oy, -1.0, 1.0))
+    al = np.arctan2(-ox, oz)
+    ov = interval_overlap_numpy(be, s_perp, r_perp) * interval_overlap_numpy(
+        al - alpha_r, s_in, r_in
+    )
+    return float(np.sum(w * ov))
