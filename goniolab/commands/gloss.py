@@ -1,0 +1,222 @@
+"""``goniolab gloss log``: log glossmeter readings into the run store.
+
+Either from a lab config (``--config FILE``: the configured glossmeter, real or simulated)
+or straight from a port (``--port PORT --protocol zgm1120|line``, no config). Each reading
+is committed to the store with its timestamp, printed beside the model's ISO 2813 gloss
+when the sample has a height map, or printed as one JSON object per line with ``--json``.
+Garbled lines and disconnects are reported on stderr; the logger reconnects with backoff
+and loses nothing already read. Ctrl-C ends the session after the current reading.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import datetime as dt
+import json
+import signal
+import sys
+from contextlib import AsyncExitStack
+from typing import Any
+
+from goniolab import __version__
+from goniolab.errors import UserError
+from goniolab.scan.events import EventBus, GlossRead, InstrumentError, RunState
+from goniolab.scan.gloss import GlossLogger, GlossResult, predict_gloss
+from goniolab.scan.plans import GlossPlan, PlanError
+from goniolab.store import RunStore, StoreError, resolve_store_path
+
+__all__ = ["format_reading", "register"]
+
+
+def _iso(ts: float) -> str:
+    return dt.datetime.fromtimestamp(ts, tz=dt.UTC).isoformat(timespec="milliseconds")
+
+
+def format_reading(ev: GlossRead, seq: int) -> str:
+    """One text line: time, measured GU per geometry, predicted GU beside them."""
+    parts = [f"{seq:>4}  {_iso(ev.timestamp)}"]
+    for angle, v in sorted(ev.values_gu.items()):
+        txt = "  -  " if v is None else f"{v:6.1f}"
+        if ev.predicted_gu is not None and angle in ev.predicted_gu:
+            txt += f" (pred {ev.predicted_gu[angle]:6.1f})"
+        parts.append(f"G{angle} {txt}")
+    if ev.temperature_c is not None:
+        parts.append(f"{ev.temperature_c:.1f} C")
+    return "  ".join(parts) + " GU"
+
+
+def reading_json(ev: GlossRead, seq: int) -> str:
+    """One JSON object (one line) per reading."""
+    return json.dumps(
+        {
+            "run_id": ev.run_id,
+            "seq": seq,
+            "timestamp": ev.timestamp,
+            "time_utc": _iso(ev.timestamp),
+            "values_gu": {str(k): v for k, v in sorted(ev.values_gu.items())},
+            "predicted_gu": None
+            if ev.predicted_gu is None
+            else {str(k): v for k, v in sorted(ev.predicted_gu.items())},
+            "temperature_c": ev.temperature_c,
+        }
+    )
+
+
+async def _print_events(q: asyncio.Queue[Any], json_out: bool) -> None:
+    seq = 0
+    while (ev := await q.get()) is not None:
+        if isinstance(ev, GlossRead):
+            print(reading_json(ev, seq) if json_out else format_reading(ev, seq), flush=True)
+            seq += 1
+        elif isinstance(ev, InstrumentError):
+            kind = "fault" if ev.fatal else "warning"
+            print(f"goniolab: {kind}: {ev.device}: {ev.message}", file=sys.stderr, flush=True)
+
+
+def _open_meter_from_port(args: argparse.Namespace) -> Any:
+    """A glossmeter driver on ``--port`` speaking ``--protocol`` (no lab config)."""
+    from drivers.glossmeter import open_glossmeter
+
+    return open_glossmeter(
+        args.port,
+        protocol=args.protocol,
+        profile=args.profile,
+        serial_number=args.serial_number,
+        baudrate=args.baudrate,
+        timeout_s=args.timeout,
+    )
+
+
+async def _session(args: argparse.Namespace, store: RunStore, plan: GlossPlan) -> GlossResult:
+    from sim.clock import RealClock
+
+    async with AsyncExitStack() as stack:
+        config: dict[str, Any] = {}
+        model: Any = None
+        if args.config:
+            from goniolab.lab import Lab
+
+            lab = await stack.enter_async_context(
+                Lab.from_config(args.config, time_scale=args.time_scale)
+            )
+            meter = lab.glossmeter
+            clock: Any = lab.clock
+            config = lab.config.model_dump(mode="json")
+            if plan.sample == lab.config.sample.map:
+                model = lab.model
+            elif plan.sample:
+                from goniolab.maps import model_for
+
+                model = model_for(plan.sample, n=lab.config.sample.n)
+        else:
+            meter = _open_meter_from_port(args)
+            clock = RealClock()
+            config = {"port": args.port, "protocol": args.protocol, "baudrate": args.baudrate}
+            await meter.connect()
+            stack.push_async_callback(meter.close)
+            if plan.sample:
+                from goniolab.maps import model_for
+
+                model = model_for(plan.sample, n=args.n)
+        predicted = None if model is None else await predict_gloss(model, plan.angles_deg)
+        run_id = store.create_run(
+            kind="gloss",
+            plan=plan.to_dict(),
+            config=config,
+            sample=plan.sample,
+            model={}
+            if model is None
+            else {"model": type(model).__name__, "predicted_gu": predicted},
+            version=__version__,
+        )
+        bus = EventBus()
+        mode = args.mode or ("push" if args.protocol == "line" and not args.config else "measure")
+        logger = GlossLogger(
+            meter=meter,
+            store=store,
+            run_id=run_id,
+            bus=bus,
+            clock=clock,
+            plan=plan,
+            predicted_gu=predicted,
+            mode=mode,
+            interval_s=args.interval,
+        )
+        printer = asyncio.create_task(_print_events(bus.subscribe(), args.json))
+        loop = asyncio.get_running_loop()
+        loop.add_signal_handler(signal.SIGINT, logger.stop)
+        try:
+            result = await logger.run()
+        finally:
+            loop.remove_signal_handler(signal.SIGINT)
+            bus.close()
+            await printer
+        return result
+
+
+def _cmd_log(args: argparse.Namespace) -> int:
+    if not args.config and not args.port:
+        raise UserError("gloss log: give --config FILE, or --port PORT --protocol zgm1120|line")
+    if args.config and args.port:
+        raise UserError("gloss log: --config and --port exclude each other")
+    config_store = None
+    sample = args.sample or ""
+    if args.config:
+        from goniolab.config import load_lab_config
+
+        cfg = load_lab_config(args.config)
+        config_store = cfg.lab.store
+        sample = args.sample or cfg.sample.map
+    try:
+        plan = GlossPlan(count=args.count, angles_deg=tuple(args.angles), sample=sample)
+    except PlanError as exc:
+        raise UserError(f"gloss log: {exc}") from exc
+    try:
+        store = RunStore(resolve_store_path(args.store, config_store))
+    except StoreError as exc:
+        raise UserError(str(exc)) from exc
+    with store:
+        result = asyncio.run(_session(args, store, plan))
+        if not args.json:
+            for angle in plan.angles_deg:
+                if angle in result.stats.n:
+                    print(
+                        f"G{angle}: mean {result.stats.mean_gu[angle]:.2f} GU, "
+                        f"std {result.stats.std_gu[angle]:.2f} GU (n = {result.stats.n[angle]})"
+                    )
+        print(
+            f"goniolab: gloss run {result.run_id}: {result.readings} readings, "
+            f"{result.state.value}" + (f" ({result.reason})" if result.reason else ""),
+            file=sys.stderr,
+        )
+    return 0 if result.state in (RunState.DONE, RunState.ABORTED) else 1
+
+
+def register(subparsers: Any) -> None:
+    """Add ``gloss log``."""
+    p = subparsers.add_parser("gloss", help="glossmeter sessions (gloss log)")
+    sub = p.add_subparsers(dest="gloss_command", metavar="ACTION", required=True)
+    pl = sub.add_parser("log", help="log glossmeter readings into the store")
+    pl.add_argument("--config", help="lab config TOML (uses its [glossmeter])")
+    pl.add_argument("--port", help="serial port of the meter (without --config)")
+    pl.add_argument("--protocol", choices=("zgm1120", "line"), default="zgm1120")
+    pl.add_argument("--profile", default=None, help="protocol profile (default: the protocol's)")
+    pl.add_argument("--serial-number", default="401120999", help="ZGM1120 serial number")
+    pl.add_argument("--baudrate", type=int, default=9600)
+    pl.add_argument("--timeout", type=float, default=2.0, help="reply timeout, s")
+    pl.add_argument("--sample", help="sample:NAME or height map: print the predicted gloss beside")
+    pl.add_argument(
+        "--n", type=float, default=1.55, help="refractive index for --sample (no config)"
+    )
+    pl.add_argument("--count", type=int, default=0, help="readings to take (0 = until Ctrl-C)")
+    pl.add_argument(
+        "--angles", type=int, nargs="+", default=[20, 60, 85], help="geometries (20 60 85)"
+    )
+    pl.add_argument("--mode", choices=("measure", "push"), default=None,
+                    help="ask for each reading, or take readings the meter pushes")  # fmt: skip
+    pl.add_argument("--interval", type=float, default=0.0, help="pause between readings, s")
+    pl.add_argument("--time-scale", type=float, default=None, help="sim clock scale (0 = instant)")
+    pl.add_argument("--store", help="SQLite run store")
+    pl.add_argument("--json", action="store_true", help="one JSON object per reading on stdout")
+    pl.set_defaults(func=_cmd_log)

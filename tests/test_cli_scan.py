@@ -1,0 +1,105 @@
+"""CLI: ``goniolab runs`` on a prepared store, and ``goniolab scan`` input errors."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+from pathlib import Path
+
+import pytest
+
+from goniolab.cli import main
+from goniolab.scan.plans import BrdfPlan
+from goniolab.store import RunStore
+
+SIGMA_DEG = 3.0
+
+
+def lobe(tr: float) -> float:
+    return 40.0 * math.exp(-0.5 * ((tr - 45.0) / SIGMA_DEG) ** 2)
+
+
+@pytest.fixture
+def store_file(tmp_path: Path) -> Path:
+    """A store with one finished 2-repeat scan 35..55 deg matching a Gaussian lobe exactly."""
+    path = tmp_path / "s.sqlite"
+    plan = BrdfPlan(45.0, tuple(float(t) for t in range(35, 56)), repeats=2, sample="sample:x")
+    with RunStore(path) as s:
+        rid = s.create_run(kind="brdf", plan=plan.to_dict(), config={}, sample="sample:x",
+                           model={"n": 1.55}, version="t")  # fmt: skip
+        for i, tr in enumerate(plan.theta_r_deg):
+            for r in range(2):
+                s.add_point(rid, index=i, repeat=r, theta_i_deg=45.0, theta_r_deg=tr,
+                            measured_theta_i_deg=45.0, measured_theta_r_deg=tr,
+                            luminance_pct=lobe(tr), raw={}, timestamp=1.0)  # fmt: skip
+        s.add_predictions(rid, [(i, 45.0, tr, lobe(tr)) for i, tr in enumerate(plan.theta_r_deg)])
+        s.set_status(rid, "done")
+        half = s.create_run(kind="brdf", plan=plan.to_dict(), config={}, sample="sample:x",
+                            model={}, version="t")  # fmt: skip
+        s.add_point(half, index=0, repeat=0, theta_i_deg=45.0, theta_r_deg=35.0,
+                    measured_theta_i_deg=45.0, measured_theta_r_deg=35.0, luminance_pct=1.0,
+                    raw={}, timestamp=2.0)  # fmt: skip
+        s.set_status(half, "aborted", "aborted by the operator")
+    return path
+
+
+def test_runs_list_json(store_file: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["runs", "list", "--store", str(store_file), "--json"]) == 0
+    runs = json.loads(capsys.readouterr().out)
+    assert [(r["id"], r["status"], r["readings"]) for r in runs] == [
+        (2, "aborted", 1),
+        (1, "done", 42),
+    ]
+
+
+def test_runs_show_recomputes_the_summary(
+    store_file: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["runs", "show", "1", "--store", str(store_file), "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    s = doc["summary"]
+    assert s["rmse_pct"] == 0.0 and s["complete"] is True
+    assert s["measured_peak"]["position_deg"] == pytest.approx(45.0, abs=1e-9)
+    # Gaussian FWHM = 2 sqrt(2 ln 2) sigma
+    assert s["measured_peak"]["fwhm_deg"] == pytest.approx(
+        2 * math.sqrt(2 * math.log(2)) * SIGMA_DEG, abs=0.1
+    )
+    assert main(["runs", "show", "2", "--store", str(store_file)]) == 0
+    out = capsys.readouterr().out
+    assert "aborted" in out and "goniolab scan resume 2" in out
+
+
+def test_runs_export_csv_to_file(store_file: Path, tmp_path: Path) -> None:
+    out = tmp_path / "run1.csv"
+    assert (
+        main(["runs", "export", "1", "--format", "csv", "-o", str(out), "--store", str(store_file)])
+        == 0
+    )
+    rows = list(csv.DictReader(io.StringIO(out.read_text())))
+    assert len(rows) == 42
+    assert {"theta_r_deg", "repeat", "luminance_pct", "predicted_pct"} <= set(rows[0])
+    assert [(r["theta_r_deg"], r["repeat"]) for r in rows[:3]] == [
+        ("35.0", "0"),
+        ("35.0", "1"),
+        ("36.0", "0"),
+    ]
+
+
+def test_missing_run_is_a_clear_error(store_file: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["runs", "show", "7", "--store", str(store_file)]) == 2
+    err = capsys.readouterr().err
+    assert "no run 7" in err and str(store_file) in err
+
+
+def test_scan_without_config_is_refused(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["scan", "--theta-r", "0:70:1"]) == 2
+    assert "--config" in capsys.readouterr().err
+
+
+def test_resume_of_a_finished_run_is_refused(
+    store_file: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["scan", "resume", "1", "--store", str(store_file)]) == 2
+    assert "already done" in capsys.readouterr().err
