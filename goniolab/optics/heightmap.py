@@ -12,6 +12,48 @@ File formats (:func:`load_heightmap`, :func:`save_heightmap`):
     A 2-D numpy array of heights in micrometres, read with ``allow_pickle=False``. The steps
     live in a JSON sidecar ``<file>.npy.json`` (``{"dx_um": .., "dy_um": .., "meta": {..}}``)
     that :func:`save_heightmap` always writes; without a sidecar, ``step_um`` is required.
+``.csv`` ``.txt`` ``.asc`` ``.dat``
+    A text matrix, one row of the map per line. The delimiter is sniffed from the first data
+    line (tab, then ``;`` -- which also allows a decimal comma --, then ``,``, else runs of
+    whitespace). Comment lines (``#``, ``%``) before the data carry ``key = value``
+    or ``Key: value`` settings: ``dx_um``, ``dy_um``, ``step_um`` (dy defaults to dx),
+    ``z_unit`` (m, mm, um, nm, pm, A; default um), ``missing_value``, and Gwyddion's
+    "ASCII data matrix" export header (``# Width: 5.000 µm``, ``# Height: ...`` are the
+    x and y extents, ``# Value units: m``; Gwyddion modules/file/asciiexport.c). Missing
+    points: empty cell, ``nan``, ``-``, ``BAD`` or the missing value. Ragged rows are an
+    error.
+``.sdf``
+    ISO 25178-71 / Surfstand SDF, ASCII (``aISO-1.0``, ``aBCR-1.0``) or binary (``bISO-1.0``,
+    ``bBCR-1.0``): header keys ManufacID, CreateDate, ModDate, NumPoints, NumProfiles,
+    Xscale, Yscale, Zscale (metres per unit), Zresolution, Compression, DataType, CheckType.
+    Binary header: 81 bytes, little-endian ``8s 10s 12s 12s uint16 uint16 4*float64
+    3*uint8``, then NumProfiles rows of NumPoints values. DataType 0 uint8, 1 uint16,
+    2 uint32, 3 float32, 4 int8, 5 int16, 6 int32, 7 float64 (Gwyddion
+    modules/file/sdfile.c). ASCII: ``Key = value`` lines, ``*``, the values, ``*``, an
+    optional trailer, ``*``. Invalid points: ``BAD`` in ASCII, NaN in floats, the type
+    minimum in int16/int32 (the convention of SurfaceTopography's SDF reader).
+    Compression and checksums are rejected with a clear error.
+``.sur``
+    Digital Surf (MountainsMap, STIL exports): a 512-byte little-endian header starting
+    ``DIGITAL SURF`` (or ``DSCOMPRESSED``), the comment zone, the private zone, then
+    int16/int32 points, row by row. Field offsets are those of Gwyddion
+    modules/file/surffile.c (``surffile_load`` and its ``SurfWriter``), confirmed against
+    RosettaSciIO rsciio/digitalsurf/_api.py, which also gives the DSCOMPRESSED layout
+    (stream directory + zlib streams) and the non-measured value ``zmin - 2`` when the
+    "special points" flag (offset 86) is 1. Heights are ``point * dz + z_offset`` in the
+    z step unit, as Gwyddion computes them (RosettaSciIO subtracts ``zmin`` first; goniolab
+    writes ``zmin = 0`` so its files read the same either way). Only the first object of
+    a multi-object file is read.
+``.gwy``
+    Gwyddion native files: the first GwyDataField ``/N/data`` of the container, ``xreal``
+    and ``yreal`` with ``si_unit_xy``, values with ``si_unit_z`` (metres by default); a
+    mask ``/N/mask`` marks points that become NaN. Written with the ``gwyfile`` package;
+    read with a bounded parser of the documented serialisation (``gwyfile``'s parser can
+    loop forever on a malformed component).
+
+Heights are returned in micrometres whatever the unit in the file; ``meta['format']`` names
+the format read and integer formats report their z quantisation step as
+``meta['z_step_um']``.
 
 References
 ----------
@@ -273,9 +315,10 @@ def _resolve_steps(
 def _make(
     name: str, z_um: ArrayLike, dx_um: float, dy_um: float, meta: dict[str, str]
 ) -> HeightMap:
-    return HeightMap(
-        z_um=np.asarray(z_um, dtype=np.float64), dx_um=dx_um, dy_um=dy_um, source=name, meta=meta
-    )
+    z = np.asarray(z_um, dtype=np.float64)
+    if np.isinf(z).any():
+        raise _fail(name, "heights overflow to infinity after scaling: implausible z scale")
+    return HeightMap(z_um=z, dx_um=dx_um, dy_um=dy_um, source=name, meta=meta)
 
 
 # Length units accepted in headers, as micrometres per unit. The micro sign appears as
@@ -400,7 +443,7 @@ def _read_npy(path: Path, opts: _ReadOptions) -> HeightMap:
             if not isinstance(extra, dict):
                 raise TypeError("meta is not an object")
             meta.update({str(k): str(v) for k, v in extra.items()})
-        except (OSError, ValueError, KeyError, TypeError) as exc:
+        except (OSError, ValueError, KeyError, TypeError, RecursionError) as exc:
             raise _fail(side.name, f"bad step sidecar for {name}: {exc!r}") from None
     dx, dy = _resolve_steps(name, file_steps, opts.step_um, what=side.name)
     return _make(name, z, dx, dy, meta)
@@ -429,7 +472,7 @@ def _decode_text(raw: bytes) -> str:
 
 def _parse_header_line(line: str) -> tuple[str, str] | None:
     """``# key = value`` or Gwyddion's ``# Key: value``; returns (lower-case key, value)."""
-    body = line.lstrip("#;% \t")
+    body = line.lstrip("#% \t")
     for sep in ("=", ":"):
         if sep in body:
             key, value = body.split(sep, 1)
@@ -480,7 +523,7 @@ def _read_text(path: Path, opts: _ReadOptions) -> HeightMap:
         stripped = line.strip()
         if not stripped:
             continue
-        if stripped[0] in "#;%":
+        if stripped[0] in "#%":
             if rows:
                 continue  # trailing comments
             parsed = _parse_header_line(stripped)
@@ -513,7 +556,7 @@ def _read_text(path: Path, opts: _ReadOptions) -> HeightMap:
         if key.startswith("meta."):
             try:
                 meta[key[5:]] = str(json.loads(value))
-            except ValueError:
+            except (ValueError, RecursionError):
                 meta[key[5:]] = value
         elif key == "channel":
             meta["channel"] = value
@@ -1019,7 +1062,7 @@ def _sur_parse_comment(comment: str, meta: dict[str, str]) -> tuple[float, float
                     steps[key] = float(value)
                 elif key.startswith("meta."):
                     meta[key[5:]] = str(json.loads(value))
-            except ValueError:
+            except (ValueError, RecursionError):
                 other.append(line)
         elif line.strip():
             other.append(line)
@@ -1257,7 +1300,9 @@ def _read_gwy(path: Path, opts: _ReadOptions) -> HeightMap:
         meta["title"] = title
     gmeta = top.get(f"/{channel}/meta")
     if isinstance(gmeta, dict):
-        meta.update({k: v for k, v in gmeta.items() if k != "__type__" and isinstance(v, str)})
+        for key, value in gmeta.items():
+            if key != "__type__" and isinstance(value, (str, bytes)):
+                meta[key] = value if isinstance(value, str) else value.decode("latin-1")
     dx = _snap(xreal * xy_um / xres)
     dy = _snap(yreal * xy_um / yres)
     dx, dy = _resolve_steps(name, (dx, dy), opts.step_um)
@@ -1290,7 +1335,7 @@ def _write_gwy(hm: HeightMap, path: Path) -> None:
         )
     meta = {k: v for k, v in hm.meta.items() if k not in ("format", "channel", "title")}
     if meta:
-        container["/0/meta"] = GwyContainer(meta)
+        container["/0/meta"] = GwyContainer(meta, typecodes=dict.fromkeys(meta, "s"))
     container.tofile(str(path))
 
 
