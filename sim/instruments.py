@@ -40,6 +40,7 @@ from drivers.base import (
     SpectroReading,
     StallError,
 )
+from drivers.goniometer import TwoArmGoniometer
 from goniolab.optics.apertures import Cone
 from goniolab.optics.models import ReflectanceModel
 from sim.clock import Clock
@@ -106,7 +107,11 @@ def _y_weights() -> NDArray[np.float64]:
     CIE 1964 10 deg observer and illuminant D65 (colour-science tables), as PHYSICS.md
     prescribes for the colour maths; imported lazily (colour-science is slow to import).
     """
-    import colour  # lazy: colour-science is slow to import
+    import warnings
+
+    with warnings.catch_warnings():  # "Matplotlib not available" on import
+        warnings.simplefilter("ignore")
+        import colour  # lazy: colour-science is slow to import
 
     wl = np.asarray(SPECTRUM_WAVELENGTHS_NM)
     cmfs = colour.MSDS_CMFS["CIE 1964 10 Degree Standard Observer"]
@@ -338,15 +343,22 @@ class SimAxis:
         self.motor.reset_alarm(self.clock.now())
 
 
-def make_sim_goniometer(lamp: SimAxis, detector: SimAxis, min_separation_deg: float) -> object:
+def make_sim_goniometer(
+    lamp: SimAxis,
+    detector: SimAxis,
+    *,
+    min_separation_deg: float,
+    park_deg: tuple[float, float] = (45.0, 45.0),
+) -> TwoArmGoniometer:
     """The project's two-arm goniometer (with its interlock) on two simulated axes.
 
-    Returns ``drivers.goniometer.TwoArmGoniometer(lamp, detector, min_separation_deg)``:
-    the same interlock code runs against simulated and real arms.
+    The same :class:`drivers.goniometer.TwoArmGoniometer` -- limit and separation
+    interlock, safe move ordering -- runs against simulated and real arms; there is no
+    second interlock implementation in the simulator.
     """
-    from drivers.goniometer import TwoArmGoniometer
-
-    return TwoArmGoniometer(lamp, detector, min_separation_deg)
+    return TwoArmGoniometer(
+        lamp, detector, min_separation_deg=min_separation_deg, park_deg=park_deg
+    )
 
 
 class SimSpectro:

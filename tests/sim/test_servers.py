@@ -1,0 +1,300 @@
+"""The simulated lab on the wire, checked with raw clients (not the project's drivers):
+a plain pymodbus master against the AZ register map, raw bytes on the ptys."""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import AsyncIterator, Sequence
+from pathlib import Path
+
+import numpy as np
+import pytest
+import serial_asyncio_fast
+from numpy.typing import ArrayLike, NDArray
+from pymodbus.client import AsyncModbusTcpClient
+
+from drivers.profiles import load_stepper_profile, load_stil_profile, load_zgm_profile
+from goniolab.optics.apertures import Aperture, Cone
+from sim.clock import SimClock
+from sim.faults import FaultInjector, FaultSpec
+from sim.instruments import SimAxis, SimGlossmeter, SimSpectro
+from sim.motion import ALARM_OVERLOAD, SimMotor, trapezoid_duration_s
+from sim.servers import ModbusAxisServer, SimLabServer, StilPtyDevice, WireAxis, ZgmPtyDevice
+
+pytestmark = pytest.mark.wire
+
+FEEDBACK, STATUS, ALARM, INPUT, DIRECT = 0x0120, 0x007E, 0x0080, 0x007C, 0x0058
+IN_POS, MOVE, ALM_A, HOME_END = 1 << 14, 1 << 13, 1 << 7, 1 << 4
+
+
+class Lobe:
+    """L = 100 exp(-((tr - ti)/4)^2); gloss fixed. Closed-form truth for the wire tests."""
+
+    def brdf_point(self, theta_i_deg: float, theta_r_deg: float, phi_r_deg: float = 180.0) -> float:
+        return float(self.luminance_pct(theta_i_deg, [theta_r_deg])[0])
+
+    def brdf_inplane(self, theta_i_deg: float, theta_r_deg: ArrayLike) -> NDArray[np.float64]:
+        return self.luminance_pct(theta_i_deg, theta_r_deg)
+
+    def luminance_pct(
+        self,
+        theta_i_deg: float,
+        theta_r_deg: ArrayLike,
+        *,
+        source: Aperture = Cone(6),
+        detector: Aperture = Cone(6),
+    ) -> NDArray[np.float64]:
+        tr = np.asarray(theta_r_deg, dtype=np.float64)
+        return 100.0 * np.exp(-(((tr - theta_i_deg) / 4.0) ** 2))
+
+    def reflected_fraction(
+        self, theta_i_deg: float, theta_r_deg: float, source: Aperture, receptor: Aperture
+    ) -> float:
+        return self.brdf_point(theta_i_deg, theta_r_deg) / 100.0
+
+    def gloss(self, angles_deg: Sequence[int] = (20, 60, 85)) -> dict[int, float]:
+        return {a: {20: 81.26, 60: 93.04, 85: 2500.0}[a] for a in angles_deg}
+
+
+def axis(clock: SimClock, name: str, start_deg: float, faults: FaultSpec | None = None) -> SimAxis:
+    m = SimMotor(
+        name,
+        speed_deg_s=20,
+        accel_deg_s2=40,
+        soft_limits_deg=(-80, 85),
+        start_deg=start_deg,
+        homed=True,
+    )
+    return SimAxis(name, m, clock, faults=FaultInjector(name, faults))
+
+
+def regs32(value: int) -> list[int]:
+    v = value & 0xFFFFFFFF
+    return [v >> 16, v & 0xFFFF]
+
+
+@pytest.fixture
+async def modbus(
+    request: pytest.FixtureRequest,
+) -> AsyncIterator[tuple[ModbusAxisServer, AsyncModbusTcpClient, SimClock]]:
+    scale = getattr(request, "param", 0.0)
+    clock = SimClock(scale)
+    prof = load_stepper_profile("oriental-az")
+    lamp = axis(clock, "lamp", 45.0)
+    det = axis(clock, "detector", 45.0, FaultSpec(disconnect_after=0))
+    server = ModbusAxisServer(
+        [WireAxis(lamp, prof, 1000.0, 1), WireAxis(det, prof, 1000.0, 2)], host="127.0.0.1", port=0
+    )
+    await server.start()
+    client = AsyncModbusTcpClient("127.0.0.1", port=server.port, timeout=2, retries=0)
+    await client.connect()
+    try:
+        yield server, client, clock
+    finally:
+        client.close()
+        await server.stop()
+
+
+async def read(client: AsyncModbusTcpClient, address: int, unit: int, count: int = 2) -> list[int]:
+    rr = await client.read_holding_registers(address, count=count, device_id=unit)
+    assert not rr.isError(), rr
+    return list(rr.registers)
+
+
+async def wait_stopped(client: AsyncModbusTcpClient, unit: int) -> int:
+    for _ in range(2000):  # request round trips, no sleeps: the scale-0 clock runs the move
+        hi, lo = await read(client, STATUS, unit)
+        word = hi << 16 | lo
+        if not word & MOVE:
+            return word
+    raise AssertionError("move never ended")
+
+
+async def test_master_reads_feedback_int32_high_word_first(modbus) -> None:  # type: ignore[no-untyped-def]
+    _, client, _ = modbus
+    assert await read(client, FEEDBACK, 1) == [0x0000, 0xAFC8]  # 45 deg * 1000 steps/deg = 45000
+    word = await wait_stopped(client, 1)
+    assert word & IN_POS and not word & ALM_A
+
+
+async def test_direct_data_write_with_trigger_starts_the_move(modbus) -> None:  # type: ignore[no-untyped-def]
+    server, client, clock = modbus
+    block = [
+        0,
+        0,
+        0,
+        1,
+        *regs32(-12500),
+        *regs32(20000),
+        *regs32(40000),
+        *regs32(40000),
+        0,
+        1000,
+        0,
+        1,
+        0,
+        0,
+    ]
+    assert len(block) == 18
+    rr = await client.write_registers(DIRECT, block, device_id=2)
+    assert not rr.isError()
+    hi, lo = await read(client, STATUS, 2)
+    assert (hi << 16 | lo) & MOVE
+    word = await wait_stopped(client, 2)
+    assert word & IN_POS
+    assert await read(client, FEEDBACK, 2) == [0xFFFF, 0xCF2C]  # -12500 two's complement
+    assert clock.now() == pytest.approx(trapezoid_duration_s(57.5, 20.0, 40.0))
+    assert await read(client, FEEDBACK, 1) == [0x0000, 0xAFC8]  # the other unit did not move
+    # trigger = 0 only stores the data
+    block[15] = 0
+    block[4:6] = regs32(0)
+    await client.write_registers(DIRECT, block, device_id=2)
+    assert await read(client, FEEDBACK, 2) == [0xFFFF, 0xCF2C]
+
+
+async def test_zhome_alarm_and_alarm_reset_bits(modbus) -> None:  # type: ignore[no-untyped-def]
+    server, client, _ = modbus
+    await client.write_registers(INPUT, regs32(1 << 4), device_id=1)  # ZHOME rising edge
+    await client.write_registers(INPUT, [0, 0], device_id=1)
+    word = await wait_stopped(client, 1)
+    assert await read(client, FEEDBACK, 1) == [0, 0]
+    assert word & HOME_END and word & IN_POS
+    server.axes[1].axis.motor.inject_alarm(10.0)
+    block = [
+        0,
+        0,
+        0,
+        1,
+        *regs32(30000),
+        *regs32(20000),
+        *regs32(40000),
+        *regs32(40000),
+        0,
+        1000,
+        0,
+        1,
+        0,
+        0,
+    ]
+    await client.write_registers(DIRECT, block, device_id=1)
+    word = await wait_stopped(client, 1)
+    assert word & ALM_A and not word & IN_POS
+    assert await read(client, ALARM, 1) == [0, ALARM_OVERLOAD]
+    assert await read(client, FEEDBACK, 1) == [0, 10000]
+    await client.write_registers(INPUT, regs32(1 << 7), device_id=1)  # ALM-RST
+    await client.write_registers(INPUT, [0, 0], device_id=1)
+    assert await read(client, ALARM, 1) == [0, 0]
+
+
+@pytest.mark.parametrize("modbus", [1e-9], indirect=True)
+async def test_stop_bit_halts_a_move(modbus) -> None:  # type: ignore[no-untyped-def]
+    server, client, _ = modbus  # a clock this slow keeps the arm mid-move
+    block = [
+        0,
+        0,
+        0,
+        1,
+        *regs32(80000),
+        *regs32(20000),
+        *regs32(40000),
+        *regs32(40000),
+        0,
+        1000,
+        0,
+        1,
+        0,
+        0,
+    ]
+    await client.write_registers(DIRECT, block, device_id=1)
+    hi, lo = await read(client, STATUS, 1)
+    assert (hi << 16 | lo) & MOVE
+    await client.write_registers(INPUT, regs32(1 << 5), device_id=1)  # STOP
+    hi, lo = await read(client, STATUS, 1)
+    assert not (hi << 16 | lo) & MOVE
+    assert server.axes[1].axis.motor.command_deg(server.axes[1].axis.clock.now()) == pytest.approx(
+        45.0, abs=1e-3
+    )
+
+
+async def test_disconnected_unit_answers_gateway_no_response() -> None:
+    clock = SimClock(0)
+    prof = load_stepper_profile("oriental-az")
+    lamp = axis(clock, "lamp", 45.0, FaultSpec(disconnect_after=1))
+    server = ModbusAxisServer([WireAxis(lamp, prof, 1000.0, 1)], port=0)
+    async with SimLabServer([server]):
+        client = AsyncModbusTcpClient("127.0.0.1", port=server.port, timeout=2, retries=0)
+        await client.connect()
+        assert await read(client, FEEDBACK, 1) == [0x0000, 0xAFC8]
+        rr = await client.read_holding_registers(FEEDBACK, count=2, device_id=1)
+        assert rr.isError() and rr.exception_code == 0x0B
+        client.close()
+
+
+@pytest.fixture
+async def ptys(tmp_path: Path) -> AsyncIterator[tuple[SimLabServer, Path]]:
+    clock = SimClock(0)
+    lamp, det = axis(clock, "lamp", 45.0), axis(clock, "detector", 47.0)
+    spectro = SimSpectro(Lobe(), lamp, det, clock, noise_pct=0.0)
+    gloss = SimGlossmeter(Lobe(), clock, noise_pct=0.0, autosend_interval_s=2.0)
+    lab = SimLabServer(
+        [],
+        StilPtyDevice(spectro, load_stil_profile("stil-ruby"), tmp_path / "sim" / "spectro"),
+        ZgmPtyDevice(
+            gloss,
+            load_zgm_profile("zgm1120"),
+            tmp_path / "sim" / "gloss",
+            serial_number="401120999",
+        ),
+    )
+    async with lab:
+        yield lab, tmp_path / "sim"
+    assert not (tmp_path / "sim" / "spectro").exists()  # symlinks removed on stop
+
+
+async def test_stil_pty_speaks_the_profile(ptys) -> None:  # type: ignore[no-untyped-def]
+    lab, d = ptys
+    assert (d / "spectro").is_symlink() and lab.endpoints()["spectro"]["port"] == str(d / "spectro")
+    reader, writer = await serial_asyncio_fast.open_serial_connection(
+        url=str(d / "spectro"), baudrate=115200
+    )
+    try:
+        writer.write(b"IDN?\r")
+        assert (await asyncio.wait_for(reader.readuntil(b"\r\n"), 5)).startswith(b"STIL RUBY")
+        writer.write(b"EXP 100\r")
+        assert (
+            await asyncio.wait_for(reader.readuntil(b"\r\n"), 5)
+            == b"ERR 2 exposure out of range 500..250000 us\r\n"
+        )
+        writer.write(b"EXP 20000\r")
+        assert await asyncio.wait_for(reader.readuntil(b"\r\n"), 5) == b"EXP=20000\r\n"
+        writer.write(b"MEAS\r")
+        y_line = await asyncio.wait_for(reader.readuntil(b"\r\n"), 5)
+        spec = (await asyncio.wait_for(reader.readuntil(b"\r\n"), 5)).decode().split()
+        expected = 100.0 * np.exp(-((2.0 / 4.0) ** 2))  # lamp 45, detector 47
+        assert y_line == f"Y={expected:.4f}\r\n".encode()
+        assert spec[:4] == ["SPEC", "380", "10", "41"] and len(spec[4].split(",")) == 41
+    finally:
+        writer.close()
+
+
+async def test_zgm1120_pty_measure_reply_bytes(ptys) -> None:  # type: ignore[no-untyped-def]
+    _, d = ptys
+    reader, writer = await serial_asyncio_fast.open_serial_connection(
+        url=str(d / "gloss"), baudrate=9600
+    )
+    try:
+        writer.write(b"1| 401120999|ab|7|1|0:")
+        reply = await asyncio.wait_for(reader.readuntil(b"\r\n"), 5)
+        # 81.26 -> 81.3 GU = 813 (0.1 GU); 93.04 -> 930; 85 deg 2500 GU overflows (-2)
+        assert reply == b"1| 401120999|ab|813|813|930|930|-2|-2|1|23\r\n"
+        writer.write(b"1| 401120999|cd|2|1|0:")  # 60 deg only
+        assert (
+            await asyncio.wait_for(reader.readuntil(b"\r\n"), 5)
+            == b"1| 401120999|cd|-1|-1|930|930|-1|-1|1|23\r\n"
+        )
+        writer.write(b"6| 401120999|ef|1:")  # auto-send on
+        assert await asyncio.wait_for(reader.readuntil(b"\r\n"), 5) == b"6| 401120999|ef|1\r\n"
+        pushed = await asyncio.wait_for(reader.readuntil(b"\r\n"), 5)
+        assert pushed == b"1| 401120999|00|813|813|930|930|-2|-2|1|23\r\n"
+    finally:
+        writer.close()
