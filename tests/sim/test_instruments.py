@@ -32,6 +32,8 @@ from sim.instruments import (
 )
 from sim.motion import ALARM_OVERLOAD, SimMotor, trapezoid_duration_s
 
+CONE6 = Cone(6.0)
+
 
 class LobeModel:
     """A Gaussian specular lobe: L = 100 exp(-((tr - ti) / w)^2) cos-free, known in closed form."""
@@ -52,8 +54,8 @@ class LobeModel:
         theta_i_deg: float,
         theta_r_deg: ArrayLike,
         *,
-        source: Aperture = Cone(6.0),
-        detector: Aperture = Cone(6.0),
+        source: Aperture = CONE6,
+        detector: Aperture = CONE6,
     ) -> NDArray[np.float64]:
         tr = np.asarray(theta_r_deg, dtype=np.float64)
         self.calls.append((theta_i_deg, float(tr.reshape(-1)[0]), source, detector))
@@ -121,7 +123,7 @@ async def test_axis_limits_alarm_stall_timeout() -> None:
     # stall
     axis.motor.inject_stall(30.0)
     await axis.move_to(40.0)
-    with pytest.raises(StallError, match="stalled at 30.000 deg, commanded 40.000 deg"):
+    with pytest.raises(StallError, match=r"stalled at 30\.000 deg, commanded 40\.000 deg"):
         await axis.wait_in_position(10.0)
 
 

@@ -26,6 +26,8 @@ pytestmark = pytest.mark.wire
 FEEDBACK, STATUS, ALARM, INPUT, DIRECT = 0x0120, 0x007E, 0x0080, 0x007C, 0x0058
 IN_POS, MOVE, ALM_A, HOME_END = 1 << 14, 1 << 13, 1 << 7, 1 << 4
 
+CONE6 = Cone(6.0)
+
 
 class Lobe:
     """L = 100 exp(-((tr - ti)/4)^2); gloss fixed. Closed-form truth for the wire tests."""
@@ -41,8 +43,8 @@ class Lobe:
         theta_i_deg: float,
         theta_r_deg: ArrayLike,
         *,
-        source: Aperture = Cone(6),
-        detector: Aperture = Cone(6),
+        source: Aperture = CONE6,
+        detector: Aperture = CONE6,
     ) -> NDArray[np.float64]:
         tr = np.asarray(theta_r_deg, dtype=np.float64)
         return 100.0 * np.exp(-(((tr - theta_i_deg) / 4.0) ** 2))
@@ -118,7 +120,7 @@ async def test_master_reads_feedback_int32_high_word_first(modbus) -> None:  # t
 
 
 async def test_direct_data_write_with_trigger_starts_the_move(modbus) -> None:  # type: ignore[no-untyped-def]
-    server, client, clock = modbus
+    _, client, clock = modbus
     block = [
         0,
         0,
