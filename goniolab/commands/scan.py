@@ -30,7 +30,7 @@ from goniolab.scan.events import (
 )
 from goniolab.scan.plans import BrdfPlan, PlanError, parse_angles
 from goniolab.scan.predict import Predictor
-from goniolab.scan.runner import ArmMotion, PlanRefused, RunResult, ScanRunner
+from goniolab.scan.runner import ArmMotion, PlanRefused, RunResult, ScanRunner, dry_run
 from goniolab.store import RunStore, StoreError, resolve_store_path
 
 __all__ = ["format_eta", "format_summary", "register"]
@@ -179,7 +179,33 @@ async def _execute(
             Cone(cfg.goniometer.source_cone_deg),
             Cone(cfg.spectro.detector_cone_deg),
         )
+        g = cfg.goniometer
+        motion = ArmMotion(
+            g.lamp.speed_deg_s, g.lamp.accel_deg_s2, g.detector.speed_deg_s, g.detector.accel_deg_s2
+        )
+        park_deg = (g.park.theta_i_deg, g.park.theta_r_deg)
+        clock_scale = float(getattr(lab.clock, "scale", 1.0))
         if run_id is None:
+            # refuse an unsafe plan before a run is even recorded (the runner checks again)
+            start = await lab.goniometer.positions_deg()
+            try:
+                check = dry_run(
+                    plan.points(),
+                    lab.goniometer,
+                    motion,
+                    start_deg=(float(start[0]), float(start[1])),
+                    dwell_s=plan.dwell_s,
+                    reading_time_s=plan.exposure_us * 1e-6,
+                    park_deg=park_deg,
+                )
+            except PlanRefused as exc:
+                raise UserError(f"plan refused (no arm moved): {exc}") from exc
+            wall = check.eta_s / clock_scale if clock_scale > 0 else 0.0
+            print(
+                f"goniolab: {check.n_readings} readings, {check.n_moves} moves, "
+                f"ETA {format_eta(wall)}",
+                file=sys.stderr,
+            )
             run_id = store.create_run(
                 kind="brdf",
                 plan=plan.to_dict(),
@@ -188,10 +214,6 @@ async def _execute(
                 model=predictor.describe(),
                 version=__version__,
             )
-        g = cfg.goniometer
-        motion = ArmMotion(
-            g.lamp.speed_deg_s, g.lamp.accel_deg_s2, g.detector.speed_deg_s, g.detector.accel_deg_s2
-        )
         bus = EventBus()
         runner = ScanRunner(
             goniometer=lab.goniometer,
@@ -204,10 +226,10 @@ async def _execute(
             motion=motion,
             predictor=predictor,
             move_timeout_s=g.move_timeout_s,
-            park_deg=(g.park.theta_i_deg, g.park.theta_r_deg),
+            park_deg=park_deg,
             specimen_hook=_specimen_hook(lab) if plan.mirror_reference else None,
         )
-        bar = ProgressBar(sys.stderr, float(getattr(lab.clock, "scale", 1.0)))
+        bar = ProgressBar(sys.stderr, clock_scale)
         report = asyncio.create_task(_report(bus.subscribe(), bar))
         loop = asyncio.get_running_loop()
         main_task = asyncio.current_task()
