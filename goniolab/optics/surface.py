@@ -95,9 +95,12 @@ def slopes(hm: HeightMap, method: SlopeMethod = "forward") -> tuple[FloatArray, 
             left = z[:-2, :-2] + z[1:-1, :-2] + z[2:, :-2]
             lower = z[2:, :-2] + z[2:, 1:-1] + z[2:, 2:]
             upper = z[:-2, :-2] + z[:-2, 1:-1] + z[:-2, 2:]
-            centre_ok = np.isfinite(z[1:-1, 1:-1])
-            p[1:-1, 1:-1] = np.where(centre_ok, (right - left) / (6.0 * dx), np.nan)
-            q[1:-1, 1:-1] = np.where(centre_ok, (lower - upper) / (6.0 * dy), np.nan)
+            # The plane is fitted to all nine points: any missing one undefines the facet.
+            bad = np.isnan(z).astype(np.int64)
+            bad9 = sum(bad[a : ny - 2 + a, b : nx - 2 + b] for a in range(3) for b in range(3))
+            ok9 = bad9 == 0
+            p[1:-1, 1:-1] = np.where(ok9, (right - left) / (6.0 * dx), np.nan)
+            q[1:-1, 1:-1] = np.where(ok9, (lower - upper) / (6.0 * dy), np.nan)
     return p, q
 
 
