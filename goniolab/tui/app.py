@@ -63,6 +63,7 @@ class GonioApp(App[int]):
         Binding("s", "start_scan", "Start"),
         Binding("space", "toggle_pause", "Pause/Resume", key_display="space", priority=True),
         Binding("x", "abort_scan", "Abort"),
+        Binding("g", "read_gloss", "Gloss"),
         Binding("l", "toggle_log", "Residual/log"),
         Binding("r", "browse_runs", "Runs"),
         Binding("q", "quit", "Quit"),
@@ -125,6 +126,7 @@ class GonioApp(App[int]):
             self.poll_arms()
         self.ready.set()
         if self.autostart:
+            self.action_read_gloss()
             self.action_start_scan()
 
     async def poll_once(self) -> None:
@@ -166,17 +168,31 @@ class GonioApp(App[int]):
             self.show_banner(f"scan could not start: {exc}")
             self.notify(str(exc), title="Scan", severity="error", timeout=8)
 
+    @work(group="gloss")
+    async def _read_gloss(self) -> None:
+        try:
+            sample = self.query_one(ScanForm).read_sample()
+            await self.backend.read_gloss(sample)
+        except UserError as exc:
+            self.notify(str(exc), title="Glossmeter", severity="warning")
+        except (DeviceError, OSError) as exc:
+            self.notify(str(exc), title="Glossmeter", severity="error", timeout=8)
+
     # ------------------------------------------------------------------ events
     def apply_event(self, ev: Event) -> None:
         """Update the model and the widgets for one event."""
         self.events_seen += 1
         panel = self.query_one(StatusPanel)
         if isinstance(ev, RunStarted):
+            if ev.kind != "brdf":
+                return
             self.run_id = ev.run_id
             self.comparison.clear(run_id=ev.run_id, sample=ev.sample)
             self.progress = (0, ev.total_points, math.nan)
             self.hide_banner()
             self.schedule_redraw()
+        elif isinstance(ev, StateChanged | Progress | RunFinished) and ev.run_id != self.run_id:
+            return  # another session on the bus (the gloss logger's run)
         elif isinstance(ev, StateChanged):
             self.run_state = ev.state
         elif isinstance(ev, ArmsMoved):
@@ -272,6 +288,13 @@ class GonioApp(App[int]):
             self.notify("aborting after the current point", title="Scan", severity="warning")
         else:
             self.notify("no scan running", title="Scan", severity="warning")
+
+    def action_read_gloss(self) -> None:
+        """Take one glossmeter reading, shown in the log beside its prediction (key ``g``)."""
+        if not self.ready.is_set():
+            self.notify("the lab is not ready", title="Glossmeter", severity="warning")
+            return
+        self._read_gloss()
 
     def action_toggle_log(self) -> None:
         """Side plot: residuals or log10 of both curves (key ``l``)."""

@@ -164,6 +164,11 @@ class Backend(Protocol):
         """Lamp and detector arm status, read from the instrument."""
         ...
 
+    async def read_gloss(self, sample: str) -> None:
+        """Start one glossmeter reading (published as GlossRead with the prediction of
+        ``sample``). Raises UserError when one is already in progress."""
+        ...
+
     def list_runs(self) -> list[RunSummary]:
         """Stored runs, newest first (blocking: call from a thread worker)."""
         ...

@@ -13,6 +13,7 @@ SCAN_COMMANDS: tuple[tuple[str, str, str], ...] = (
     ("Start scan", "start_scan", "Start a scan with the setup form's values (key s)"),
     ("Pause / resume scan", "toggle_pause", "Pause after the current point, or resume (space)"),
     ("Abort scan", "abort_scan", "Stop after the current point; run marked aborted (x)"),
+    ("Read glossmeter", "read_gloss", "One 20/60/85 reading beside the prediction (g)"),
     ("Toggle residual / log view", "toggle_log", "Side plot: residuals or log10 curves (l)"),
     ("Browse stored runs", "browse_runs", "Reopen a stored run's comparison (r)"),
     ("Quit", "quit", "Leave goniolab (q)"),

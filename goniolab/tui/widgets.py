@@ -31,6 +31,8 @@ def fmt_num(value: float | None, digits: int = 2) -> str:
     """Format a number for a table cell; ``-`` for missing or NaN."""
     if value is None or not math.isfinite(value):
         return "-"
+    if abs(value) < 0.5 * 10.0**-digits:
+        value = 0.0  # no "-0.00"
     return f"{value:.{digits}f}"
 
 
@@ -142,6 +144,14 @@ class ComparisonPanel(Horizontal):
                 main.errorbar(x, mid, yerr=half, marker_style="yellow", label="min/max")
             main.scatter(x, mean, marker="●", marker_style="bold yellow", label="measured")
         main.show_legend(LegendLocation.TOPRIGHT, is_visible=bool(has_pred.any() or has_meas.any()))
+        # Head-room above the peak so the top point is not drawn on the frame.
+        ys = np.concatenate([a.predicted_pct[has_pred], a.max_pct[has_meas]])
+        if ys.size:
+            top = float(ys.max())
+            bottom = min(0.0, float(np.concatenate([a.min_pct[has_meas], ys]).min()))
+            main.set_ylimits(bottom, top + 0.08 * (top - bottom) if top > bottom else top + 1.0)
+        else:
+            main.set_ylimits(None, None)
 
         side = self.side_plot
         side.clear()
@@ -296,6 +306,15 @@ class ScanForm(Vertical):
     def on_mount(self) -> None:
         self.border_title = "scan setup"
 
+    def read_sample(self) -> str:
+        """The selected sample as a spec (``sample:NAME`` or a path)."""
+        from goniolab.errors import UserError
+
+        sample = self.query_one("#sample", Select).value
+        if not isinstance(sample, str):
+            raise UserError("scan setup: sample: choose a sample")
+        return sample if ":" in sample or "/" in sample or "." in sample else f"sample:{sample}"
+
     def read(self) -> ScanSetup:
         """The setup as typed; raises :class:`~goniolab.errors.UserError` when invalid."""
         from goniolab.errors import UserError
@@ -307,10 +326,7 @@ class ScanForm(Vertical):
                 values[key] = float(text)
             except ValueError:
                 raise UserError(f"scan setup: {key}: not a number: {text!r}") from None
-        sample = self.query_one("#sample", Select).value
-        if not isinstance(sample, str):
-            raise UserError("scan setup: sample: choose a sample")
-        spec = sample if ":" in sample or "/" in sample or "." in sample else f"sample:{sample}"
+        spec = self.read_sample()
         if values["repeats"] != int(values["repeats"]):
             raise UserError(f"scan setup: repeats: must be an integer, got {values['repeats']}")
         setup = ScanSetup(

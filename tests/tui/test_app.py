@@ -173,10 +173,13 @@ async def test_gloss_log_and_runs_browser() -> None:
     app = GonioApp(backend, poll_hz=0, autostart=True)
     async with app.run_test(size=SIZE) as pilot:
         await wait_until(pilot, lambda: app.run_state is RunState.DONE)
+        # autostart took one gloss reading (scripted: G60 = 61.0 at T0 + 1 s)
+        assert backend.gloss_samples == ["sample:wittmann-3"]
         backend.publish_gloss(5, 61.25)
         log = app.query_one("#gloss-log", GlossLog)
-        await wait_until(pilot, lambda: log.row_count == 1)
-        assert log.get_row_at(0) == ["00:00:05", "-", "61.2", "-", "30.0", "58.0", "90.0"]
+        await wait_until(pilot, lambda: log.row_count == 2)
+        assert log.get_row_at(0)[:3] == ["00:00:01", "-", "61.0"]
+        assert log.get_row_at(1) == ["00:00:05", "-", "61.2", "-", "30.0", "58.0", "90.0"]
         metrics = app.query_one("#live", ComparisonPanel).query_one(MetricsTable)
         await pilot.pause()
         assert cell(metrics, "g60", "delta") == "3.2"

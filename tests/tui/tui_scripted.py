@@ -61,6 +61,7 @@ class ScriptedBackend:
         self.setups: list[ScanSetup] = []
         self.position = (45.0, 45.0)
         self.stored: dict[int, StoredRun] = {}
+        self.gloss_samples: list[str] = []
 
     @property
     def title(self) -> str:
@@ -125,6 +126,10 @@ class ScriptedBackend:
             ArmState("lamp", ti, False, True, None, True),
             ArmState("detector", tr, False, True, None, True),
         )
+
+    async def read_gloss(self, sample: str) -> None:
+        self.gloss_samples.append(sample)
+        self.publish_gloss(len(self.gloss_samples), 60.0 + len(self.gloss_samples))
 
     def list_runs(self) -> list[RunSummary]:
         return [s.summary for s in sorted(self.stored.values(), key=lambda r: -r.summary.run_id)]

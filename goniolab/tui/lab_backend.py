@@ -1,0 +1,409 @@
+"""The TUI's :class:`~goniolab.tui.backend.Backend` over a real or simulated :class:`Lab`.
+
+It wires the same parts as ``goniolab scan`` and ``goniolab gloss``: a
+:class:`~goniolab.scan.runner.ScanRunner` with a :class:`~goniolab.scan.predict.Predictor`
+for BRDF scans, a :class:`~goniolab.scan.gloss.GlossLogger` for glossmeter readings, and the
+:class:`~goniolab.store.RunStore` where every reading is committed as it is taken. All
+publish on one :class:`~goniolab.scan.events.EventBus` that the app consumes.
+No Textual here.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from contextlib import AsyncExitStack
+from pathlib import Path
+from typing import Any
+
+from drivers.base import GLOSS_ANGLES_DEG, DeviceError
+from goniolab import __version__
+from goniolab.config import LabConfig, load_lab_config
+from goniolab.errors import UserError
+from goniolab.optics.apertures import Cone
+from goniolab.optics.models import ReflectanceModel
+from goniolab.scan.events import (
+    EventBus,
+    GlossRead,
+    InstrumentError,
+    PointMeasured,
+    PointPredicted,
+    RunFinished,
+    RunState,
+)
+from goniolab.scan.gloss import GlossLogger, predict_gloss
+from goniolab.scan.plans import BrdfPlan, GlossPlan, PlanError
+from goniolab.scan.predict import Predictor
+from goniolab.scan.runner import ArmMotion, PlanRefused, ScanRunner
+from goniolab.store import RunStore, StoreError, resolve_store_path
+from goniolab.tui.backend import ArmState, RunSummary, ScanSetup, StoredRun
+
+__all__ = ["LabBackend"]
+
+#: The default scan of the form: an in-plane sweep through the specular peak at 20 deg
+#: incidence (Wittmann et al. 2021, sec. 2.3 measure in-plane curves around specular).
+DEFAULT_THETA_I_DEG = 20.0
+DEFAULT_THETA_R_DEG = (0.0, 40.0, 1.0)
+DEFAULT_REPEATS = 3
+
+
+class LabBackend:
+    """The lab behind the TUI.
+
+    Parameters
+    ----------
+    config_path
+        A lab config TOML (``configs/lab-sim.toml``); read and validated here, so a bad
+        file is reported (file, key, reason) before the UI starts.
+    time_scale
+        Sim clock scale overriding ``[lab] time_scale`` (0 = instant, tests).
+    sample
+        Initial sample of the form (``sample:NAME`` or ``NAME`` or a height-map path);
+        default: the config's ``[sample] map``.
+    store_path
+        Run store file overriding ``[lab] store``.
+    """
+
+    def __init__(
+        self,
+        config_path: str | Path,
+        *,
+        time_scale: float | None = None,
+        sample: str | None = None,
+        store_path: str | None = None,
+    ) -> None:
+        self.config_path = Path(config_path)
+        self.config: LabConfig = load_lab_config(self.config_path)
+        self.time_scale = time_scale
+        self.sample = _sample_spec(sample) if sample else self.config.sample.map
+        if self.sample.startswith("sample:"):
+            name = self.sample.removeprefix("sample:")
+            if name not in self.sample_names():
+                raise UserError(
+                    f"--sample {sample}: no built-in sample {name!r} "
+                    f"(known: {', '.join(self.sample_names())})"
+                )
+        elif not Path(self.sample).exists():
+            raise UserError(f"--sample {sample}: no such height-map file")
+        self.store_path = resolve_store_path(store_path, self.config.lab.store)
+        self.bus = EventBus()
+        self.lab: Any = None
+        self.store: RunStore | None = None
+        self._stack = AsyncExitStack()
+        self._runner: ScanRunner | None = None
+        self._task: asyncio.Task[None] | None = None
+        self._gloss_task: asyncio.Task[None] | None = None
+        self._gloss_run_id: int | None = None
+        self._models: dict[str, ReflectanceModel] = {}
+
+    # ------------------------------------------------------------------ lifecycle
+    @property
+    def title(self) -> str:
+        lab = self.config.lab
+        scale = lab.time_scale if self.time_scale is None else self.time_scale
+        clock = f", sim clock x{scale:g}" if lab.mode == "sim" else ""
+        return f"{lab.name} ({lab.mode}{clock})"
+
+    async def open(self) -> None:
+        """Build the lab (connect every instrument), open the store, home the goniometer."""
+        from goniolab.lab import Lab
+
+        try:
+            self.lab = await self._stack.enter_async_context(
+                Lab.from_config(self.config_path, time_scale=self.time_scale)
+            )
+            self.store = RunStore(self.store_path)
+            self._stack.callback(self.store.close)
+        except StoreError as exc:
+            await self._stack.aclose()
+            raise UserError(str(exc), exit_code=1) from exc
+        except BaseException:
+            await self._stack.aclose()
+            raise
+        home_timeout_s = 4.0 * self.config.goniometer.move_timeout_s
+        await self.lab.goniometer.home(home_timeout_s)
+
+    async def close(self) -> None:
+        """Abort a running scan (the runner parks the arms), then release everything."""
+        if self._runner is not None and self.running:
+            self._runner.abort()
+        for task in (self._task, self._gloss_task):
+            if task is not None and not task.done():
+                if task is self._gloss_task:
+                    task.cancel()
+                with contextlib.suppress(asyncio.CancelledError, Exception):
+                    await task
+        await self._stack.aclose()
+        self.bus.close()
+
+    # ------------------------------------------------------------------ form
+    def sample_names(self) -> list[str]:
+        from goniolab.maps import sample_names
+
+        return list(sample_names())
+
+    def default_setup(self) -> ScanSetup:
+        start, stop, step = DEFAULT_THETA_R_DEG
+        return ScanSetup(
+            sample=self.sample,
+            theta_i_deg=DEFAULT_THETA_I_DEG,
+            theta_r_start_deg=start,
+            theta_r_stop_deg=stop,
+            theta_r_step_deg=step,
+            repeats=DEFAULT_REPEATS,
+        )
+
+    # ------------------------------------------------------------------ scans
+    @property
+    def running(self) -> bool:
+        return self._task is not None and not self._task.done()
+
+    def _require_open(self) -> tuple[Any, RunStore]:
+        if self.lab is None or self.store is None:
+            raise UserError("the lab is not connected", exit_code=1)
+        return self.lab, self.store
+
+    async def model(self, sample: str) -> ReflectanceModel:
+        """The prediction model of ``sample``: the lab's own for the configured sample,
+        else :func:`goniolab.maps.model_for` (built in a worker thread, cached)."""
+        lab, _ = self._require_open()
+        if sample == self.config.sample.map:
+            own: ReflectanceModel = lab.model
+            return own
+        if sample not in self._models:
+            from goniolab.maps import model_for
+
+            self._models[sample] = await asyncio.to_thread(
+                model_for, sample, n=self.config.sample.n
+            )
+        return self._models[sample]
+
+    async def start(self, setup: ScanSetup) -> int:
+        """Create the run in the store and start the runner in a task; return the run id."""
+        lab, store = self._require_open()
+        setup.validate()
+        if self.running:
+            raise UserError("a scan is already running")
+        try:
+            plan = BrdfPlan(
+                theta_i_deg=setup.theta_i_deg,
+                theta_r_deg=tuple(setup.theta_r_values_deg()),
+                repeats=setup.repeats,
+                exposure_us=self.config.spectro.exposure_us,
+                sample=setup.sample,
+            )
+        except PlanError as exc:
+            raise UserError(f"scan setup: {exc}") from exc
+        cfg = self.config
+        predictor = Predictor(
+            await self.model(setup.sample),
+            Cone(cfg.goniometer.source_cone_deg),
+            Cone(cfg.spectro.detector_cone_deg),
+        )
+        run_id = store.create_run(
+            kind="brdf",
+            plan=plan.to_dict(),
+            config=cfg.model_dump(mode="json"),
+            sample=plan.sample,
+            model=predictor.describe(),
+            version=__version__,
+        )
+        g = cfg.goniometer
+        self._runner = ScanRunner(
+            goniometer=lab.goniometer,
+            spectro=lab.spectro,
+            clock=lab.clock,
+            plan=plan,
+            store=store,
+            run_id=run_id,
+            bus=self.bus,
+            motion=ArmMotion(
+                g.lamp.speed_deg_s,
+                g.lamp.accel_deg_s2,
+                g.detector.speed_deg_s,
+                g.detector.accel_deg_s2,
+            ),
+            predictor=predictor,
+            move_timeout_s=g.move_timeout_s,
+            park_deg=(g.park.theta_i_deg, g.park.theta_r_deg),
+        )
+        self._task = asyncio.get_running_loop().create_task(
+            self._run(self._runner, store, run_id), name=f"tui-run-{run_id}"
+        )
+        return run_id
+
+    async def _run(self, runner: ScanRunner, store: RunStore, run_id: int) -> None:
+        """Run to the end; a refused plan or an unexpected error becomes events, not a crash."""
+        try:
+            await runner.run()
+        except PlanRefused as exc:
+            reason = f"plan refused (no arm moved): {exc}"
+            store.set_status(run_id, RunState.FAILED.value, reason)
+            self.bus.publish(
+                InstrumentError(run_id=run_id, device="goniometer", message=reason, fatal=True)
+            )
+            self.bus.publish(
+                RunFinished(run_id=run_id, state=RunState.FAILED, reason=reason, summary={})
+            )
+        except (DeviceError, StoreError, OSError) as exc:
+            reason = str(exc)
+            self.bus.publish(
+                InstrumentError(run_id=run_id, device="lab", message=reason, fatal=True)
+            )
+            self.bus.publish(
+                RunFinished(run_id=run_id, state=RunState.FAILED, reason=reason, summary={})
+            )
+
+    def pause(self) -> None:
+        if self._runner is not None:
+            self._runner.pause()
+
+    def resume(self) -> None:
+        if self._runner is not None:
+            self._runner.resume()
+
+    def abort(self) -> None:
+        if self._runner is not None:
+            self._runner.abort()
+
+    # ------------------------------------------------------------------ gloss
+    @property
+    def gloss_busy(self) -> bool:
+        """A glossmeter reading is in progress."""
+        return self._gloss_task is not None and not self._gloss_task.done()
+
+    async def read_gloss(self, sample: str) -> None:
+        """Take one glossmeter reading (20/60/85) in the background, logged in the store.
+
+        All readings of one TUI session go into one ``gloss`` run; the prediction of
+        ``sample`` (ISO 2813, :func:`goniolab.scan.gloss.predict_gloss`) is shown beside.
+        """
+        lab, store = self._require_open()
+        if self.gloss_busy:
+            raise UserError("a glossmeter reading is already in progress")
+        model = await self.model(sample)
+        predicted = await predict_gloss(model, GLOSS_ANGLES_DEG)
+        plan = GlossPlan(count=1, angles_deg=GLOSS_ANGLES_DEG, sample=sample)
+        if self._gloss_run_id is None:
+            self._gloss_run_id = store.create_run(
+                kind="gloss",
+                plan=plan.to_dict(),
+                config=self.config.model_dump(mode="json"),
+                sample=sample,
+                model={"model": type(model).__name__, "predicted_gu": predicted},
+                version=__version__,
+            )
+        logger = GlossLogger(
+            meter=lab.glossmeter,
+            store=store,
+            run_id=self._gloss_run_id,
+            bus=self.bus,
+            clock=lab.clock,
+            plan=plan,
+            predicted_gu=predicted,
+            mode="measure",
+        )
+
+        async def _one() -> None:
+            await logger.run()
+
+        self._gloss_task = asyncio.get_running_loop().create_task(_one(), name="tui-gloss")
+
+    # ------------------------------------------------------------------ status
+    async def arm_states(self) -> tuple[ArmState, ArmState]:
+        lab, _ = self._require_open()
+        return (
+            await _arm_state("lamp", lab.goniometer.lamp),
+            await _arm_state("detector", lab.goniometer.detector),
+        )
+
+    # ------------------------------------------------------------------ store
+    def list_runs(self) -> list[RunSummary]:
+        """Stored runs, newest first (own SQLite connection: safe from a worker thread)."""
+        with RunStore(self.store_path) as store:
+            out = []
+            for rec in store.list_runs(limit=200):
+                n = (
+                    len(store.gloss_readings(rec.id))
+                    if rec.kind == "gloss"
+                    else store.count_points(rec.id)
+                )
+                out.append(RunSummary(rec.id, rec.created_at, rec.kind, rec.sample, rec.status, n))
+            return out
+
+    def load_run(self, run_id: int) -> StoredRun:
+        """One stored run as events (own SQLite connection: safe from a worker thread)."""
+        with RunStore(self.store_path) as store:
+            rec = store.get_run(run_id)
+            measured: list[PointMeasured] = []
+            predicted: list[PointPredicted] = []
+            gloss: list[GlossRead] = []
+            if rec.kind == "brdf":
+                plan = BrdfPlan.from_dict(rec.plan)
+                for p in store.points(run_id):
+                    measured.append(
+                        PointMeasured(
+                            run_id=run_id,
+                            timestamp=p.timestamp,
+                            index=p.index,
+                            repeat=p.repeat,
+                            theta_i_deg=p.theta_i_deg,
+                            theta_r_deg=p.theta_r_deg,
+                            luminance_pct=p.luminance_pct,
+                            measured_theta_i_deg=p.measured_theta_i_deg,
+                            measured_theta_r_deg=p.measured_theta_r_deg,
+                        )
+                    )
+                for index, value in sorted(store.predictions(run_id).items()):
+                    predicted.append(
+                        PointPredicted(
+                            run_id=run_id,
+                            index=index,
+                            theta_i_deg=plan.theta_i_deg,
+                            theta_r_deg=plan.theta_r_deg[index],
+                            predicted_pct=value,
+                        )
+                    )
+            for g in store.gloss_readings(run_id):
+                gloss.append(
+                    GlossRead(
+                        run_id=run_id,
+                        timestamp=g.timestamp,
+                        values_gu=g.values_gu,
+                        predicted_gu=g.predicted_gu,
+                        temperature_c=g.temperature_c,
+                    )
+                )
+            summary = RunSummary(
+                rec.id,
+                rec.created_at,
+                rec.kind,
+                rec.sample,
+                rec.status,
+                len(measured) if rec.kind == "brdf" else len(gloss),
+            )
+            return StoredRun(summary, measured, predicted, gloss)
+
+
+async def _arm_state(name: str, axis: Any) -> ArmState:
+    """One arm's status; a device error shows as a lost link with its message."""
+    try:
+        st = await axis.status()
+    except DeviceError as exc:
+        return ArmState(name, None, False, False, None, False, exc.message)
+    return ArmState(
+        name,
+        float(st.position_deg),
+        bool(st.moving),
+        bool(st.homed),
+        st.alarm_code,
+        True,
+        "" if st.alarm_code is None else f"alarm {st.alarm_code:#x}",
+    )
+
+
+def _sample_spec(sample: str) -> str:
+    """``NAME`` -> ``sample:NAME`` unless it looks like a path or already has the prefix."""
+    if sample.startswith("sample:") or "/" in sample or "." in sample:
+        return sample
+    return f"sample:{sample}"
