@@ -23,11 +23,13 @@ from __future__ import annotations
 
 import asyncio
 import functools
+import math
 import time
 from collections.abc import AsyncIterator, Sequence
+from typing import Protocol
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from drivers.base import (
     GLOSS_ANGLES_DEG,
@@ -41,7 +43,8 @@ from drivers.base import (
     StallError,
 )
 from drivers.goniometer import TwoArmGoniometer
-from goniolab.optics.apertures import Cone
+from goniolab.optics.apertures import Aperture, Cone
+from goniolab.optics.facet import cap_overlap_fraction
 from goniolab.optics.models import ReflectanceModel
 from sim.clock import Clock
 from sim.faults import FaultInjector
@@ -49,6 +52,8 @@ from sim.motion import MotorFault, SimMotor
 
 __all__ = [
     "GLOSS_OVERFLOW_GU",
+    "LuminanceModel",
+    "MirrorModel",
     "SPECTRUM_WAVELENGTHS_NM",
     "SimAxis",
     "SimGlossmeter",
@@ -66,6 +71,55 @@ GLOSS_OVERFLOW_GU = 2000.0
 
 #: Slope of the simulated spectral shape per nm around 580 nm (a faint warm tint).
 _SPECTRUM_TILT_PER_NM = 1.5e-4
+
+
+class LuminanceModel(Protocol):
+    """What the simulated spectro needs of a model: the goniometer reading."""
+
+    def luminance_pct(
+        self,
+        theta_i_deg: float,
+        theta_r_deg: ArrayLike,
+        *,
+        source: Aperture = ...,
+        detector: Aperture = ...,
+    ) -> NDArray[np.float64]:
+        """100 x fraction of the source flux reaching the detector aperture."""
+        ...
+
+
+class MirrorModel:
+    """The goniometer's reference mirror: 100 % at the specular geometry.
+
+    An ideal mirror images the source cone (half angle a_s) into an equal cone around
+    the specular direction; the reading is 100 x the fraction of that image the detector
+    cone (half angle a_d) collects -- the overlap of two spherical caps whose centres are
+    ``|theta_r - theta_i|`` apart (:func:`goniolab.optics.facet.cap_overlap_fraction`).
+    Readings are relative to this mirror (Wittmann et al. 2021, sec. 2.3).
+    """
+
+    def luminance_pct(
+        self,
+        theta_i_deg: float,
+        theta_r_deg: ArrayLike,
+        *,
+        source: Aperture = Cone(6.0),  # noqa: B008 -- frozen dataclass, safe default
+        detector: Aperture = Cone(6.0),  # noqa: B008
+    ) -> NDArray[np.float64]:
+        """Mirror reading in % for circular source and detector cones.
+
+        Raises
+        ------
+        TypeError
+            For rectangular apertures (the glossmeter has its own black-glass standard).
+        """
+        if not (isinstance(source, Cone) and isinstance(detector, Cone)):
+            raise TypeError("the goniometer mirror reference is defined for Cone apertures")
+        gamma = np.radians(np.abs(np.asarray(theta_r_deg, dtype=np.float64) - theta_i_deg))
+        frac = cap_overlap_fraction(
+            gamma, math.radians(source.half_angle_deg), math.radians(detector.half_angle_deg)
+        )
+        return np.asarray(100.0 * frac, dtype=np.float64)
 
 
 def effective_angles(
@@ -367,7 +421,8 @@ class SimSpectro:
     Parameters
     ----------
     model
-        The sample's reflectance model.
+        The sample's reflectance model (anything with ``luminance_pct``; swap it for a
+        :class:`MirrorModel` to simulate the reference mirror).
     lamp, detector
         The simulated arms; their *actual* positions define the geometry.
     clock
@@ -391,7 +446,7 @@ class SimSpectro:
 
     def __init__(
         self,
-        model: ReflectanceModel,
+        model: LuminanceModel,
         lamp: SimAxis,
         detector: SimAxis,
         clock: Clock,

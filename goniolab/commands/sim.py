@@ -1,0 +1,99 @@
+"""``goniolab sim serve``: serve the simulated lab on the wire until interrupted.
+
+Starts the Modbus TCP controllers and the pty serial devices of a lab config
+(``configs/lab-sim-wire.toml``), prints where they are (one JSON object with ``--json``),
+and runs until SIGINT or SIGTERM, then stops cleanly with exit code 0.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import signal
+import sys
+from typing import Any
+
+from goniolab.errors import UserError
+
+__all__ = ["register"]
+
+
+def register(subparsers: Any) -> None:
+    """Add ``sim`` (with ``serve``) to the top-level parser."""
+    p = subparsers.add_parser("sim", help="the simulated lab", description=__doc__)
+    sub = p.add_subparsers(dest="sim_command", metavar="SUBCOMMAND")
+    serve = sub.add_parser(
+        "serve",
+        help="serve the simulated lab over Modbus TCP and ptys until Ctrl-C",
+        description="Serve the simulated lab (Modbus TCP stepper controllers, pty serial "
+        "spectro-colorimeter and glossmeter) on the endpoints of a lab config.",
+    )
+    serve.add_argument(
+        "--config", required=True, help="lab config (e.g. configs/lab-sim-wire.toml)"
+    )
+    serve.add_argument("--json", action="store_true", help="print the endpoints as one JSON line")
+    serve.add_argument(
+        "--time-scale",
+        type=float,
+        default=None,
+        help="sim clock speed (0 = instant moves, 1 = real time); default from the config",
+    )
+    serve.set_defaults(func=_cmd_serve)
+    p.set_defaults(func=lambda args: _usage(p))
+
+
+def _usage(parser: argparse.ArgumentParser) -> int:
+    parser.print_help()
+    return 2
+
+
+def _cmd_serve(args: argparse.Namespace) -> int:
+    if args.time_scale is not None and not args.time_scale >= 0:
+        raise UserError(f"--time-scale must be >= 0, got {args.time_scale}")
+    return asyncio.run(_serve(args.config, args.time_scale, args.json))
+
+
+async def _serve(config_path: str, time_scale: float | None, as_json: bool) -> int:
+    from goniolab.config import load_lab_config
+    from goniolab.lab import build_sim_instruments, build_sim_server, sample_model
+    from sim.clock import SimClock
+
+    cfg = load_lab_config(config_path)
+    scale = cfg.lab.time_scale if time_scale is None else time_scale
+    model = await asyncio.to_thread(sample_model, cfg)
+    sims = build_sim_instruments(cfg, model, SimClock(scale))
+    server = build_sim_server(cfg, sims)
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    try:
+        try:
+            await server.start()
+        except OSError as exc:
+            raise UserError(f"cannot start the simulated lab: {exc}", exit_code=1) from None
+        endpoints = server.endpoints()
+        if as_json:
+            print(
+                json.dumps({"config": config_path, "time_scale": scale, "endpoints": endpoints}),
+                flush=True,
+            )
+        else:
+            print(f"goniolab: simulated lab from {config_path} (clock x{scale:g}):")
+            for name, ep in endpoints.items():
+                where = (
+                    f"modbus tcp {ep['host']}:{ep['port']} unit {ep['unit_id']}"
+                    if "unit_id" in ep
+                    else f"serial {ep['port']} -> {ep['pty']}"
+                )
+                print(f"  {name:<10} {where}  (profile {ep['profile']})")
+            print("Ctrl-C to stop.", flush=True)
+        await stop.wait()
+    finally:
+        await server.stop()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.remove_signal_handler(sig)
+    if not as_json:
+        print("goniolab: simulated lab stopped", file=sys.stderr)
+    return 0

@@ -1,0 +1,446 @@
+"""Build a lab -- simulated or real instruments -- from a lab config.
+
+``async with Lab.from_config("configs/lab-sim.toml") as lab:`` gives
+
+* ``lab.goniometer`` (:class:`drivers.goniometer.TwoArmGoniometer`), ``lab.spectro``,
+  ``lab.glossmeter``: objects implementing the :mod:`drivers.base` Protocols;
+* ``lab.model``: the reflectance model of ``[sample]`` (``goniolab.maps.model_for``,
+  built in a worker thread), ``lab.source`` / ``lab.detector`` (the lamp and detector
+  cones), ``lab.clock`` (the sim clock, or a real one), ``lab.config``.
+
+Modes (``[lab] mode``):
+
+* ``"sim"``: in-process simulated instruments (:mod:`sim.instruments`) reading the model.
+* ``"drivers"``: the real drivers of :mod:`drivers` to the configured endpoints; with
+  ``start_sim_servers = true`` the simulated lab is first served on those endpoints
+  (:class:`sim.servers.SimLabServer`: Modbus TCP + ptys), so the drivers run end to end
+  against it.
+
+Closing the lab closes the instruments, then stops the simulated servers. The
+direction of imports is lab -> sim / drivers, never the other way round.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+import numpy as np
+
+from drivers.base import DeviceError, Glossmeter, ProfileError, Spectrocolorimeter
+from drivers.goniometer import TwoArmGoniometer
+from drivers.profiles import load_stepper_profile, load_stil_profile, load_zgm_profile
+from goniolab.config import AxisConfig, ConfigError, LabConfig, load_lab_config
+from goniolab.errors import UserError
+from goniolab.optics.apertures import Cone
+from goniolab.optics.models import ReflectanceModel
+from sim.clock import Clock, RealClock, SimClock
+from sim.faults import FaultInjector, FaultSpec
+from sim.instruments import MirrorModel, SimAxis, SimGlossmeter, SimSpectro
+from sim.motion import SimMotor
+from sim.servers import ModbusAxisServer, SimLabServer, StilPtyDevice, WireAxis, ZgmPtyDevice
+
+__all__ = ["Lab", "SimInstruments", "build_sim_instruments", "build_sim_server", "sample_model"]
+
+
+@dataclass
+class SimInstruments:
+    """The simulated instruments of one lab (shared by the in-process and wire modes)."""
+
+    lamp: SimAxis
+    detector: SimAxis
+    spectro: SimSpectro
+    glossmeter: SimGlossmeter
+    clock: SimClock
+
+
+def _map_spec(cfg: LabConfig) -> str:
+    """``[sample] map``, with a relative file path taken relative to the config file."""
+    spec = cfg.sample.map
+    if spec.startswith("sample:") or not cfg.source:
+        return spec
+    p = Path(spec).expanduser()
+    if not p.is_absolute():
+        candidate = Path(cfg.source).resolve().parent / p
+        if candidate.exists():
+            return str(candidate)
+    return spec
+
+
+def sample_model(cfg: LabConfig) -> ReflectanceModel:
+    """The reflectance model of ``[sample]`` (blocking; call it in a thread).
+
+    Raises
+    ------
+    ConfigError
+        The map cannot be resolved or loaded (names the config key ``sample.map``).
+    """
+    from goniolab.maps import model_for
+
+    try:
+        model: ReflectanceModel = model_for(_map_spec(cfg), n=cfg.sample.n)
+    except UserError:
+        raise
+    except (ValueError, OSError) as exc:
+        raise ConfigError(cfg.source or "<config>", "sample.map", str(exc)) from None
+    return model
+
+
+def _fault_spec(cfg: LabConfig, device: str) -> FaultSpec:
+    f = cfg.sim.faults
+    if device not in f.devices:
+        return FaultSpec()
+    return FaultSpec(
+        timeout_rate=f.timeout_rate, garble_rate=f.garble_rate, disconnect_after=f.disconnect_after
+    )
+
+
+def _sim_axis(
+    name: str, ax: AxisConfig, start_deg: float, clock: SimClock, faults: FaultInjector
+) -> SimAxis:
+    motor = SimMotor(
+        name,
+        speed_deg_s=ax.speed_deg_s,
+        accel_deg_s2=ax.accel_deg_s2,
+        soft_limits_deg=ax.limits_deg,
+        start_deg=start_deg,
+        homed=True,  # a powered lab: the arms stand at park, coordinates set
+    )
+    return SimAxis(name, motor, clock, stall_tolerance_deg=ax.stall_tolerance_deg, faults=faults)
+
+
+def build_sim_instruments(
+    cfg: LabConfig, model: ReflectanceModel, clock: SimClock
+) -> SimInstruments:
+    """Simulated arms, spectro and glossmeter as configured (``[sim]``, seeded).
+
+    The arms power up at the park geometry; ``[sim.faults]`` sets the injected faults.
+    """
+    seeds = np.random.SeedSequence(cfg.sim.seed).spawn(6)
+    rngs = [np.random.default_rng(s) for s in seeds]
+    g = cfg.goniometer
+    lamp = _sim_axis(
+        "lamp",
+        g.lamp,
+        g.park.theta_i_deg,
+        clock,
+        FaultInjector("lamp", _fault_spec(cfg, "lamp"), rngs[0]),
+    )
+    detector = _sim_axis(
+        "detector",
+        g.detector,
+        g.park.theta_r_deg,
+        clock,
+        FaultInjector("detector", _fault_spec(cfg, "detector"), rngs[1]),
+    )
+    f = cfg.sim.faults
+    for axis, stall, alarm in (
+        (lamp, f.lamp_stall_at_deg, f.lamp_alarm_at_deg),
+        (detector, f.detector_stall_at_deg, f.detector_alarm_at_deg),
+    ):
+        axis.motor.inject_stall(stall)
+        if alarm is not None:
+            axis.motor.inject_alarm(alarm, f.alarm_code)
+    spectro = SimSpectro(
+        model,
+        lamp,
+        detector,
+        clock,
+        source_cone_deg=g.source_cone_deg,
+        detector_cone_deg=cfg.spectro.detector_cone_deg,
+        noise_pct=cfg.sim.noise_pct,
+        rng=rngs[2],
+        sample_tilt_deg=cfg.sim.sample_tilt_deg,
+        lamp_zero_offset_deg=cfg.sim.lamp_zero_offset_deg,
+        detector_zero_offset_deg=cfg.sim.detector_zero_offset_deg,
+        exposure_us=cfg.spectro.exposure_us,
+        faults=FaultInjector("spectro", _fault_spec(cfg, "spectro"), rngs[3]),
+    )
+    glossmeter = SimGlossmeter(
+        model,
+        clock,
+        noise_pct=cfg.sim.noise_pct,
+        rng=rngs[4],
+        autosend_interval_s=cfg.sim.gloss_autosend_s,
+        faults=FaultInjector("glossmeter", _fault_spec(cfg, "glossmeter"), rngs[5]),
+    )
+    return SimInstruments(lamp, detector, spectro, glossmeter, clock)
+
+
+def build_sim_server(cfg: LabConfig, sims: SimInstruments) -> SimLabServer:
+    """The simulated lab on the endpoints the config's drivers will use.
+
+    Raises
+    ------
+    ConfigError
+        An arm uses ``transport = "rtu"`` (the wire simulator serves Modbus TCP only) or
+        the profiles cannot be loaded.
+    """
+    src = cfg.source or "<config>"
+    servers: dict[tuple[str, int], list[WireAxis]] = {}
+    for name, ax, sim_axis in (
+        ("lamp", cfg.goniometer.lamp, sims.lamp),
+        ("detector", cfg.goniometer.detector, sims.detector),
+    ):
+        if ax.transport != "tcp":
+            raise ConfigError(
+                src,
+                f"goniometer.{name}.transport",
+                'the simulated lab serves Modbus TCP only: use transport = "tcp" with '
+                "start_sim_servers = true",
+            )
+        try:
+            wire = WireAxis(
+                sim_axis, load_stepper_profile(ax.profile), ax.steps_per_deg, ax.unit_id
+            )
+        except (ProfileError, ValueError) as exc:
+            raise ConfigError(src, f"goniometer.{name}.profile", str(exc)) from None
+        servers.setdefault((ax.host, ax.port), []).append(wire)
+    modbus = [ModbusAxisServer(w, host=h, port=p) for (h, p), w in servers.items()]
+    if cfg.glossmeter.protocol != "zgm1120":
+        raise ConfigError(
+            src, "glossmeter.protocol", 'the simulated lab serves the "zgm1120" protocol only'
+        )
+    spectro = StilPtyDevice(sims.spectro, load_stil_profile(cfg.spectro.profile), cfg.spectro.port)
+    gloss = ZgmPtyDevice(
+        sims.glossmeter,
+        load_zgm_profile(cfg.glossmeter.profile),
+        cfg.glossmeter.port,
+        serial_number=cfg.glossmeter.serial_number,
+    )
+    return SimLabServer(modbus, spectro, gloss)
+
+
+class Lab:
+    """Instruments, model and clock of one lab; use ``async with Lab.from_config(...)``.
+
+    Parameters
+    ----------
+    config
+        A validated :class:`~goniolab.config.LabConfig`.
+    time_scale
+        Overrides ``[lab] time_scale`` of the sim clock (0 = instant).
+    model
+        Use this reflectance model instead of building the one of ``[sample]``
+        (tests, or a caller that already has it).
+    """
+
+    def __init__(
+        self,
+        config: LabConfig,
+        *,
+        time_scale: float | None = None,
+        model: ReflectanceModel | None = None,
+    ) -> None:
+        if time_scale is not None and not time_scale >= 0:
+            raise UserError(f"--time-scale must be >= 0, got {time_scale}")
+        self.config = config
+        self.time_scale = config.lab.time_scale if time_scale is None else float(time_scale)
+        self.source = Cone(config.goniometer.source_cone_deg)
+        self.detector = Cone(config.spectro.detector_cone_deg)
+        self._model = model
+        self.clock: Clock = RealClock()
+        self.sims: SimInstruments | None = None
+        self.server: SimLabServer | None = None
+        self._goniometer: TwoArmGoniometer | None = None
+        self._spectro: Spectrocolorimeter | None = None
+        self._glossmeter: Glossmeter | None = None
+        self._closers: list[Callable[[], Any]] = []
+        self.place_specimen: Callable[[str], Any] | None = None
+
+    @classmethod
+    def from_config(
+        cls,
+        path_or_config: str | Path | LabConfig,
+        *,
+        time_scale: float | None = None,
+        model: ReflectanceModel | None = None,
+    ) -> Lab:
+        """A lab from a config file (loaded and validated) or an already loaded config."""
+        cfg = (
+            path_or_config
+            if isinstance(path_or_config, LabConfig)
+            else load_lab_config(path_or_config)
+        )
+        return cls(cfg, time_scale=time_scale, model=model)
+
+    # ------------------------------------------------------------------ accessors
+    def _need(self, what: str, value: Any) -> Any:
+        if value is None:
+            raise RuntimeError(f"lab not open: use 'async with Lab.from_config(...)' ({what})")
+        return value
+
+    @property
+    def goniometer(self) -> TwoArmGoniometer:
+        """The two-arm goniometer."""
+        g: TwoArmGoniometer = self._need("goniometer", self._goniometer)
+        return g
+
+    @property
+    def spectro(self) -> Spectrocolorimeter:
+        """The spectro-colorimeter."""
+        s: Spectrocolorimeter = self._need("spectro", self._spectro)
+        return s
+
+    @property
+    def glossmeter(self) -> Glossmeter:
+        """The glossmeter."""
+        m: Glossmeter = self._need("glossmeter", self._glossmeter)
+        return m
+
+    @property
+    def model(self) -> ReflectanceModel:
+        """The reflectance model of ``[sample]``."""
+        m: ReflectanceModel = self._need("model", self._model)
+        return m
+
+    @property
+    def mode(self) -> str:
+        """``"sim"`` or ``"drivers"``."""
+        return self.config.lab.mode
+
+    # ------------------------------------------------------------------ lifecycle
+    async def open(self) -> None:
+        """Build the model (in a thread), the instruments and connect them.
+
+        Raises
+        ------
+        ConfigError, UserError
+            Bad sample map, profile or endpoint in the config.
+        drivers.base.DeviceError
+            An instrument cannot be reached (names the device and endpoint).
+        """
+        try:
+            await self._open()
+        except BaseException:
+            await self.close()
+            raise
+
+    async def _open(self) -> None:
+        cfg = self.config
+        if self._model is None:
+            self._model = await asyncio.to_thread(sample_model, cfg)
+        g = cfg.goniometer
+        park = (g.park.theta_i_deg, g.park.theta_r_deg)
+        if cfg.lab.mode == "sim" or cfg.lab.start_sim_servers:
+            sim_clock = SimClock(self.time_scale)
+            self.clock = sim_clock
+            self.sims = build_sim_instruments(cfg, self._model, sim_clock)
+            self.place_specimen = self._place_specimen
+        if cfg.lab.mode == "sim":
+            assert self.sims is not None
+            self._goniometer = TwoArmGoniometer(
+                self.sims.lamp,
+                self.sims.detector,
+                min_separation_deg=g.min_separation_deg,
+                park_deg=park,
+            )
+            self._spectro = self.sims.spectro
+            self._glossmeter = self.sims.glossmeter
+        else:
+            if cfg.lab.start_sim_servers:
+                assert self.sims is not None
+                server = build_sim_server(cfg, self.sims)
+                try:
+                    await server.start()
+                except OSError as exc:
+                    raise UserError(f"cannot start the simulated lab: {exc}", exit_code=1) from None
+                self.server = server
+            self._build_drivers(park)
+        await self._connect()
+
+    def _build_drivers(self, park: tuple[float, float]) -> None:
+        from drivers.glossmeter import open_glossmeter
+        from drivers.modbus_stepper import ModbusStepperAxis
+        from drivers.stil import StilSpectro
+
+        cfg = self.config
+        g = cfg.goniometer
+
+        def axis(name: str, ax: AxisConfig) -> ModbusStepperAxis:
+            return ModbusStepperAxis(
+                name,
+                profile=ax.profile,
+                transport=ax.transport,
+                host=ax.host,
+                port=ax.port,
+                serial_port=ax.serial_port,
+                baudrate=ax.baudrate,
+                parity=ax.parity,
+                unit_id=ax.unit_id,
+                steps_per_deg=ax.steps_per_deg,
+                limits_deg=ax.limits_deg,
+                speed_deg_s=ax.speed_deg_s,
+                accel_deg_s2=ax.accel_deg_s2,
+                stall_tolerance_deg=ax.stall_tolerance_deg,
+                timeout_s=ax.timeout_s,
+            )
+
+        self._goniometer = TwoArmGoniometer(
+            axis("lamp", g.lamp),
+            axis("detector", g.detector),
+            min_separation_deg=g.min_separation_deg,
+            park_deg=park,
+        )
+        self._spectro = StilSpectro(
+            "spectro",
+            port=cfg.spectro.port,
+            profile=cfg.spectro.profile,
+            baudrate=cfg.spectro.baudrate,
+            exposure_us=cfg.spectro.exposure_us,
+            timeout_s=cfg.spectro.timeout_s,
+        )
+        self._glossmeter = open_glossmeter(
+            cfg.glossmeter.port,
+            protocol=cfg.glossmeter.protocol,
+            profile=cfg.glossmeter.profile,
+            serial_number=cfg.glossmeter.serial_number,
+            baudrate=cfg.glossmeter.baudrate,
+            timeout_s=cfg.glossmeter.timeout_s,
+        )
+
+    async def _connect(self) -> None:
+        for part in (self._goniometer, self._spectro, self._glossmeter):
+            assert part is not None
+            await part.connect()
+            self._closers.append(part.close)
+
+    async def _place_specimen(self, which: str) -> None:
+        """Simulated lab: put the reference mirror (``"mirror"``) or the sample under the
+        instruments (the spectro then reads :class:`sim.instruments.MirrorModel` or the
+        sample model). Set as ``lab.place_specimen`` only when the lab is simulated."""
+        if self.sims is None:
+            raise RuntimeError("place_specimen needs the simulated lab")
+        if which == "mirror":
+            self.sims.spectro.model = MirrorModel()
+        elif which == "sample":
+            self.sims.spectro.model = self.model
+        else:
+            raise ValueError(f"specimen must be 'mirror' or 'sample', got {which!r}")
+
+    async def close(self) -> None:
+        """Close the instruments (each even if another fails), then stop the sim servers."""
+        while self._closers:
+            closer = self._closers.pop()
+            with contextlib.suppress(DeviceError, OSError):
+                await closer()
+        if self.server is not None:
+            await self.server.stop()
+            self.server = None
+
+    async def __aenter__(self) -> Lab:
+        await self.open()
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        await self.close()
