@@ -69,6 +69,7 @@ import math
 import re
 import struct
 import time
+import tokenize
 import zlib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -428,7 +429,14 @@ def _read_npy(path: Path, opts: _ReadOptions) -> HeightMap:
             arr = np.load(f, allow_pickle=False)
     except HeightMapError:
         raise
-    except (ValueError, EOFError, SyntaxError, TypeError, OverflowError) as exc:
+    except (
+        ValueError,
+        EOFError,
+        SyntaxError,
+        TypeError,
+        OverflowError,
+        tokenize.TokenError,  # numpy tokenises the header dict to repair old files
+    ) as exc:
         raise _fail(name, f"not a readable .npy file: {exc}") from None
     z = np.asarray(arr).astype(np.float64)
     z[np.isinf(z)] = np.nan
@@ -702,8 +710,8 @@ def _read_sdf_binary(name: str, raw: bytes, opts: _ReadOptions) -> HeightMap:
     z = data.astype(np.float64).reshape(ny, nx)
     if code in _SDF_INVALID:
         z[data.reshape(ny, nx) == _SDF_INVALID[code]] = np.nan
+    z[np.isinf(z)] = np.nan  # invalid float points; overflow of the scale is caught later
     z = z * zscale_um
-    z[np.isinf(z)] = np.nan
     meta = {
         "format": "sdf-binary",
         "manufacturer": _cstr(info["ManufacID"]),
@@ -766,8 +774,9 @@ def _read_sdf_ascii(name: str, raw: bytes, opts: _ReadOptions) -> HeightMap:
             values[k] = float(token)
         except ValueError:
             raise _fail(name, f"SDF data value #{k + 1} is not a number: {token[:40]!r}") from None
-    z = values.reshape(ny, nx) * zscale_um
+    z = values.reshape(ny, nx)
     z[np.isinf(z)] = np.nan
+    z = z * zscale_um
     meta = {
         "format": "sdf-ascii",
         "manufacturer": info.get("ManufacID", ""),
@@ -1283,8 +1292,8 @@ def _read_gwy(path: Path, opts: _ReadOptions) -> HeightMap:
     z = np.array(field_obj["data"], dtype=np.float64).reshape(yres, xres)
     z_unit = _gwy_unit(field_obj, "si_unit_z") or "m"
     xy_unit = _gwy_unit(field_obj, "si_unit_xy") or "m"
-    z = z * _um_per(name, z_unit, "z")
     z[np.isinf(z)] = np.nan
+    z = z * _um_per(name, z_unit, "z")
     xy_um = _um_per(name, xy_unit, "lateral")
     xreal, yreal = field_obj.get("xreal", 1.0), field_obj.get("yreal", 1.0)
     if not all(isinstance(v, float) and math.isfinite(v) and v > 0 for v in (xreal, yreal)):
@@ -1453,7 +1462,9 @@ def load_heightmap(
     if p.is_dir():
         raise _fail(p.name, f"is a directory, not a height-map file ({p})")
     try:
-        return _READERS[kind](p, _ReadOptions(step_um, missing_value))
+        # an absurd scale in a header overflows to inf, which _make reports: no warnings
+        with np.errstate(over="ignore", invalid="ignore"):
+            return _READERS[kind](p, _ReadOptions(step_um, missing_value))
     except HeightMapError:
         raise
     except OSError as exc:

@@ -441,6 +441,7 @@ def test_sdf_every_truncation_fails_naming_file(tmp_path: Path) -> None:
         ("Compression = 0", "Compression = 1", "compressed SDF not supported"),
         ("-30 40 50", "-30 4x0 50", "not a number"),
         ("NumProfiles = 2\n", "", "lacks NumProfiles"),
+        ("Zscale      = 1.0E-09", "Zscale      = 1.0E+305", "overflow to infinity"),
     ],
 )
 def test_sdf_ascii_bad_headers(tmp_path: Path, old: str, new: str, msg: str) -> None:
