@@ -92,13 +92,15 @@ class Comparison:
     gloss: list[GlossRead] = field(default_factory=list)
 
     def clear(self, *, run_id: int = 0, sample: str = "") -> None:
-        """Forget everything and start collecting for ``run_id``."""
+        """Forget the curve and start collecting for ``run_id``.
+
+        Glossmeter readings are a log of the session, not of one scan: they are kept.
+        """
         self.run_id = run_id
         self.sample = sample
         self.readings.clear()
         self.theta_r_deg.clear()
         self.predicted.clear()
-        self.gloss.clear()
 
     def add_measured(self, ev: PointMeasured) -> None:
         """Record one reading (one repeat of plan point ``ev.index``).
