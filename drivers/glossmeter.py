@@ -1,0 +1,427 @@
+"""Glossmeters: the Zehntner ZGM1120 protocol and line-printing meters.
+
+ZGM1120 (Technical Manual rev 3.0, 2021, pp. 16-28; shared/PROTOCOLS.md)
+-------------------------------------------------------------------------
+ASCII fields separated by ``|``; commands end with ``:``, replies do not (they end with
+the profile's ``reply_terminator``, UNCONFIRMED ``\\r\\n``). Every command is
+``<opcode>| <serial>|<tid>[|<arg>...]:`` -- the serial number with one leading blank and a
+2-character transaction id that the reply must echo. Measure (opcode 1)::
+
+    > 1| 401120999|xy|5|1|0:          angle mask (bit0 20, bit1 60, bit2 85), count, temp flag
+    < 1| 401120999|xy|958|94|-1|-1|993|78|1|25
+
+The reply carries, per angle 20/60/85, the value in 0.1 GU and the raw ADC offset
+(``-1`` not measured, ``-2`` overflow), then the count and the temperature [deg C].
+
+Other opcodes: 28 GetIsOnStandard, 36 MeasureTemp, 48/52 LED on/off, 64 Reset,
+72 Calibrate (deviation in ppm), 6 AutoSend. The manual's payload layout of these replies is
+not in PROTOCOLS.md; this driver assumes (UNCONFIRMED) the same header echo
+``<opcode>| <serial>|<tid>`` followed by the payload fields: 28 -> ``1``/``0``, 36 -> the
+temperature, 72 -> one deviation in ppm per calibrated angle, 48/52/64 -> anything.
+AutoSend: ``6| <serial>|<tid>|7|1|0:`` (same arguments as measure) switches it on without
+an immediate reply; every button press then pushes a line in the measure-reply format,
+opcode ``6`` (or ``1``), with the AutoSend transaction id.
+
+Transaction ids run ``aa, ab, ..., az, ba, ..., zz`` and wrap (configurable first id).
+
+Line-printing meters (BYK micro-tri-gloss, Rhopoint, Elcometer)
+----------------------------------------------------------------
+One line per reading, parsed with the ``pattern`` regex of a ``kind = "line-gloss"``
+profile (named groups ``g20``/``g60``/``g85``/``temperature``).
+
+Any line that does not parse raises :class:`~drivers.base.ProtocolError` quoting the raw
+line (truncated to 80 characters).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+import string
+import time
+from collections.abc import AsyncIterator, Sequence
+
+from drivers.base import GLOSS_ANGLES_DEG, DeviceFault, GlossReading, ProtocolError
+from drivers.profiles import (
+    LineGlossProfile,
+    SerialSettings,
+    ZgmProfile,
+    load_line_gloss_profile,
+    load_zgm_profile,
+)
+from drivers.serial_io import LineTransport, quote
+
+__all__ = [
+    "LineGlossmeter",
+    "Zgm1120",
+    "angle_mask",
+    "parse_gloss_line",
+    "parse_zgm_measure",
+]
+
+OP_MEASURE = 1
+OP_AUTOSEND = 6
+OP_IS_ON_STANDARD = 28
+OP_MEASURE_TEMP = 36
+OP_LED_ON = 48
+OP_LED_OFF = 52
+OP_RESET = 64
+OP_CALIBRATE = 72
+
+_ANGLE_BITS = {20: 0, 60: 1, 85: 2}
+_TID_CHARS = string.ascii_lowercase
+_INT = re.compile(r"-?[0-9]{1,9}")
+
+
+def angle_mask(angles_deg: Sequence[int]) -> int:
+    """ZGM1120 angle bitmask: bit0 20 deg, bit1 60 deg, bit2 85 deg."""
+    if not angles_deg:
+        raise ValueError("at least one gloss angle is needed")
+    mask = 0
+    for angle in angles_deg:
+        if angle not in _ANGLE_BITS:
+            raise ValueError(f"gloss angle {angle} deg is not one of 20, 60, 85")
+        mask |= 1 << _ANGLE_BITS[angle]
+    return mask
+
+
+def _int_field(text: str, what: str, line: str, device: str) -> int:
+    stripped = text.strip()
+    if _INT.fullmatch(stripped) is None:
+        raise ProtocolError(f"bad {what} {text!r} in reply {quote(line)}", device=device)
+    return int(stripped)
+
+
+def _header(line: str, opcodes: Sequence[int], serial: str, tid: str, device: str) -> list[str]:
+    """Split a reply and check the echoed opcode, serial number and transaction id."""
+    fields = line.split("|")
+    if len(fields) < 3:
+        raise ProtocolError(f"reply {quote(line)} has fewer than 3 '|' fields", device=device)
+    opcode = _int_field(fields[0], "opcode", line, device)
+    if opcode not in opcodes:
+        raise ProtocolError(
+            f"reply {quote(line)} is for opcode {opcode}, expected {' or '.join(map(str, opcodes))}",
+            device=device,
+        )
+    if fields[1].strip() != serial:
+        raise ProtocolError(
+            f"reply {quote(line)} is from serial number {fields[1].strip()!r}, expected {serial!r}",
+            device=device,
+        )
+    if fields[2] != tid:
+        raise ProtocolError(
+            f"transaction id mismatch: sent {tid!r}, reply {quote(line)} carries {fields[2]!r}",
+            device=device,
+        )
+    return fields[3:]
+
+
+def parse_zgm_measure(
+    line: str,
+    *,
+    serial: str,
+    tid: str,
+    opcodes: Sequence[int] = (OP_MEASURE,),
+    device: str = "glossmeter",
+) -> GlossReading:
+    """Parse a ZGM1120 measure reply (or AutoSend push) into a :class:`GlossReading`.
+
+    Raises
+    ------
+    ProtocolError
+        Wrong field count, non-numeric field, wrong opcode / serial / transaction id.
+    """
+    payload = _header(line, opcodes, serial, tid, device)
+    if len(payload) != 8:
+        raise ProtocolError(
+            f"measure reply {quote(line)} has {len(payload)} payload fields, expected 8 "
+            "(value and ADC for 20/60/85, count, temperature)",
+            device=device,
+        )
+    values: dict[int, float | None] = {}
+    overflow: list[int] = []
+    for k, angle in enumerate(GLOSS_ANGLES_DEG):
+        raw = _int_field(payload[2 * k], f"{angle} deg value", line, device)
+        _int_field(payload[2 * k + 1], f"{angle} deg ADC offset", line, device)
+        if raw == -1:
+            values[angle] = None
+        elif raw == -2:
+            values[angle] = None
+            overflow.append(angle)
+        elif raw < 0:
+            raise ProtocolError(f"{angle} deg value {raw} in reply {quote(line)}", device=device)
+        else:
+            values[angle] = raw / 10.0
+    _int_field(payload[6], "count", line, device)
+    temperature = _float_field(payload[7], "temperature", line, device)
+    return GlossReading(
+        values_gu=values,
+        overflow_deg=tuple(overflow),
+        temperature_c=temperature,
+        timestamp=time.time(),
+        raw=line,
+    )
+
+
+def _float_field(text: str, what: str, line: str, device: str) -> float:
+    try:
+        value = float(text.strip())
+    except ValueError:
+        raise ProtocolError(f"bad {what} {text!r} in reply {quote(line)}", device=device) from None
+    if not math.isfinite(value):
+        raise ProtocolError(f"non-finite {what} in reply {quote(line)}", device=device)
+    return value
+
+
+def _settings(settings: SerialSettings, baudrate: int | None) -> SerialSettings:
+    return settings if baudrate is None else dataclasses.replace(settings, baudrate=baudrate)
+
+
+class Zgm1120:
+    """Zehntner ZGM1120 glossmeter (implements ``drivers.base.Glossmeter``).
+
+    Parameters
+    ----------
+    name
+        Configured instrument name (used in errors).
+    port
+        Serial device or pyserial URL.
+    serial_number
+        The meter's serial number (digits), sent in every command.
+    profile
+        A :class:`~drivers.profiles.ZgmProfile` or profile name / path.
+    baudrate, timeout_s
+        Override the profile's values.
+    first_transaction_id
+        First 2-letter transaction id (``"aa"``).
+    """
+
+    def __init__(
+        self,
+        name: str = "glossmeter",
+        *,
+        port: str,
+        serial_number: str = "401120999",
+        profile: ZgmProfile | str = "zgm1120",
+        baudrate: int | None = None,
+        timeout_s: float | None = None,
+        first_transaction_id: str = "aa",
+    ) -> None:
+        if not serial_number.isdigit():
+            raise ValueError(f"{name}: serial_number must be digits, got {serial_number!r}")
+        if len(first_transaction_id) != 2 or any(c not in _TID_CHARS for c in first_transaction_id):
+            raise ValueError(
+                f"{name}: transaction id must be 2 lowercase letters, got {first_transaction_id!r}"
+            )
+        self.name = name
+        self.serial_number = serial_number
+        self.profile = profile if isinstance(profile, ZgmProfile) else load_zgm_profile(profile)
+        self.timeout_s = self.profile.timeout_s if timeout_s is None else float(timeout_s)
+        self._tid_index = _TID_CHARS.index(first_transaction_id[0]) * 26 + _TID_CHARS.index(
+            first_transaction_id[1]
+        )
+        self._io = LineTransport(port, _settings(self.profile.serial, baudrate), device=name)
+
+    def next_transaction_id(self) -> str:
+        """Return the next transaction id and advance (``aa`` ... ``zz``, then ``aa``)."""
+        i = self._tid_index % (26 * 26)
+        self._tid_index = i + 1
+        return _TID_CHARS[i // 26] + _TID_CHARS[i % 26]
+
+    def command(self, opcode: int, tid: str, *args: int) -> str:
+        """The command line ``<opcode>| <serial>|<tid>[|arg...]:``."""
+        fields = [str(opcode), " " + self.serial_number, tid, *(str(a) for a in args)]
+        return "|".join(fields) + ":"
+
+    async def connect(self) -> None:
+        """Open the serial port."""
+        await self._io.open()
+
+    async def close(self) -> None:
+        """Close the serial port."""
+        await self._io.close()
+
+    async def _transact(
+        self, opcode: int, *args: int, timeout_s: float | None = None
+    ) -> tuple[str, list[str]]:
+        tid = self.next_transaction_id()
+        self._io.discard_input()
+        await self._io.write(self.command(opcode, tid, *args))
+        line = await self._io.read_line(
+            self.profile.reply_terminator, self.timeout_s if timeout_s is None else timeout_s
+        )
+        return line, _header(line, (opcode,), self.serial_number, tid, self.name)
+
+    async def measure(self, angles_deg: Sequence[int] = GLOSS_ANGLES_DEG) -> GlossReading:
+        """Measure at the given geometries (opcode 1, count 1, no temperature measurement)."""
+        mask = angle_mask(angles_deg)
+        tid = self.next_transaction_id()
+        self._io.discard_input()
+        await self._io.write(self.command(OP_MEASURE, tid, mask, 1, 0))
+        line = await self._io.read_line(self.profile.reply_terminator, self.timeout_s)
+        return parse_zgm_measure(line, serial=self.serial_number, tid=tid, device=self.name)
+
+    async def is_on_standard(self) -> bool:
+        """Opcode 28 GetIsOnStandard: whether the meter sits on its calibration tile."""
+        line, payload = await self._transact(OP_IS_ON_STANDARD)
+        if len(payload) != 1 or payload[0].strip() not in ("0", "1"):
+            raise ProtocolError(f"expected 0 or 1 in reply {quote(line)}", device=self.name)
+        return payload[0].strip() == "1"
+
+    async def measure_temperature(self) -> float:
+        """Opcode 36 MeasureTemp: instrument temperature in deg C."""
+        line, payload = await self._transact(OP_MEASURE_TEMP)
+        if len(payload) != 1:
+            raise ProtocolError(
+                f"expected one temperature in reply {quote(line)}", device=self.name
+            )
+        return _float_field(payload[0], "temperature", line, self.name)
+
+    async def set_led(self, on: bool) -> None:
+        """Opcode 48 (LED on) / 52 (LED off)."""
+        await self._transact(OP_LED_ON if on else OP_LED_OFF)
+
+    async def reset(self) -> None:
+        """Opcode 64 Reset."""
+        await self._transact(OP_RESET)
+
+    async def calibrate(self, timeout_s: float = 10.0) -> tuple[int, ...]:
+        """Opcode 72 Calibrate on the standard tile; deviations in ppm as reported.
+
+        Raises
+        ------
+        DeviceFault
+            The meter reports no deviation values (calibration refused).
+        """
+        line, payload = await self._transact(OP_CALIBRATE, timeout_s=timeout_s)
+        if not payload or payload == [""]:
+            raise DeviceFault(
+                f"calibration returned no deviation ({quote(line)})", device=self.name
+            )
+        return tuple(_int_field(p, "ppm deviation", line, self.name) for p in payload)
+
+    async def readings(self) -> AsyncIterator[GlossReading]:
+        """Switch AutoSend on (opcode 6, all angles) and yield each pushed reading."""
+        tid = self.next_transaction_id()
+        self._io.discard_input()
+        await self._io.write(self.command(OP_AUTOSEND, tid, angle_mask(GLOSS_ANGLES_DEG), 1, 0))
+        while True:
+            line = await self._io.read_line(self.profile.reply_terminator, None)
+            yield parse_zgm_measure(
+                line,
+                serial=self.serial_number,
+                tid=tid,
+                opcodes=(OP_AUTOSEND, OP_MEASURE),
+                device=self.name,
+            )
+
+
+def _gloss_value(
+    text: str, tokens: Sequence[str], what: str, line: str, device: str
+) -> float | None:
+    if text.strip() in tokens:
+        return None
+    return _float_field(text, what, line, device)
+
+
+def parse_gloss_line(
+    profile: LineGlossProfile, line: str, *, device: str = "glossmeter"
+) -> GlossReading:
+    """Parse one line of a line-printing meter with the profile's regex.
+
+    Groups that did not take part in the match are "not measured"; a value equal to one of
+    ``overflow_tokens`` is an overflow.
+
+    Raises
+    ------
+    ProtocolError
+        The line does not match the pattern or a value is not a number.
+    """
+    found = profile.pattern.match(line)
+    if found is None:
+        raise ProtocolError(
+            f"line {quote(line)} does not match the {profile.name!r} pattern", device=device
+        )
+    groups = found.groupdict()
+    values: dict[int, float | None] = {}
+    overflow: list[int] = []
+    for angle in GLOSS_ANGLES_DEG:
+        text = groups.get(f"g{angle}")
+        if text is None:
+            values[angle] = None
+            continue
+        value = _gloss_value(text, profile.overflow_tokens, f"{angle} deg gloss", line, device)
+        if value is None:
+            overflow.append(angle)
+        values[angle] = value
+    temp_text = groups.get("temperature")
+    temperature = (
+        None if temp_text is None else _float_field(temp_text, "temperature", line, device)
+    )
+    return GlossReading(
+        values_gu=values,
+        overflow_deg=tuple(overflow),
+        temperature_c=temperature,
+        timestamp=time.time(),
+        raw=line,
+    )
+
+
+class LineGlossmeter:
+    """A glossmeter that prints one line per reading (implements ``drivers.base.Glossmeter``).
+
+    ``measure`` sends the profile's ``trigger`` (if any) and parses the next line; the meter
+    decides which geometries it reports, so ``angles_deg`` only selects which values are
+    kept (the others are set to ``None``).
+    """
+
+    def __init__(
+        self,
+        name: str = "glossmeter",
+        *,
+        port: str,
+        profile: LineGlossProfile | str = "line-gloss-example",
+        baudrate: int | None = None,
+        timeout_s: float | None = None,
+    ) -> None:
+        self.name = name
+        self.profile = (
+            profile if isinstance(profile, LineGlossProfile) else load_line_gloss_profile(profile)
+        )
+        self.timeout_s = self.profile.timeout_s if timeout_s is None else float(timeout_s)
+        self._io = LineTransport(
+            port,
+            _settings(self.profile.serial, baudrate),
+            device=name,
+            encoding=self.profile.encoding,
+        )
+
+    async def connect(self) -> None:
+        """Open the serial port."""
+        await self._io.open()
+
+    async def close(self) -> None:
+        """Close the serial port."""
+        await self._io.close()
+
+    async def measure(self, angles_deg: Sequence[int] = GLOSS_ANGLES_DEG) -> GlossReading:
+        """Trigger (if the profile has a trigger) and parse the next line."""
+        angle_mask(angles_deg)  # validates the angles
+        self._io.discard_input()
+        if self.profile.trigger:
+            await self._io.write(self.profile.trigger + self.profile.line_terminator)
+        line = await self._io.read_line(self.profile.line_terminator, self.timeout_s)
+        reading = parse_gloss_line(self.profile, line, device=self.name)
+        kept = {a: (v if a in angles_deg else None) for a, v in reading.values_gu.items()}
+        return dataclasses.replace(
+            reading,
+            values_gu=kept,
+            overflow_deg=tuple(a for a in reading.overflow_deg if a in angles_deg),
+        )
+
+    async def readings(self) -> AsyncIterator[GlossReading]:
+        """Yield every line the meter prints, parsed."""
+        while True:
+            line = await self._io.read_line(self.profile.line_terminator, None)
+            yield parse_gloss_line(self.profile, line, device=self.name)
