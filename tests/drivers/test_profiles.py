@@ -1,0 +1,160 @@
+"""Profile loader: the built-in profiles' facts (shared/PROTOCOLS.md) and error messages."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from drivers.base import ProfileError
+from drivers.profiles import (
+    PROFILES_DIR,
+    LineGlossProfile,
+    StepperProfile,
+    StilProfile,
+    ZgmProfile,
+    load_profile,
+    load_stepper_profile,
+    load_stil_profile,
+    template_regex,
+)
+
+
+def test_builtin_profiles_load_with_their_kinds() -> None:
+    kinds = {p.stem: type(load_profile(p.stem)) for p in PROFILES_DIR.glob("*.toml")}
+    assert kinds == {
+        "oriental-az": StepperProfile,
+        "applied-motion-mdx": StepperProfile,
+        "stil-ruby": StilProfile,
+        "zgm1120": ZgmProfile,
+        "line-gloss-example": LineGlossProfile,
+    }
+
+
+def test_oriental_az_register_map_matches_protocols_md() -> None:
+    p = load_stepper_profile("oriental-az")
+    r, s, i = p.registers, p.status_bits, p.input_bits
+    assert (r.direct_data, r.input_command, r.output_status, r.alarm_code) == (
+        0x58,
+        0x7C,
+        0x7E,
+        0x80,
+    )
+    assert (r.feedback_position, r.command_position) == (0x120, 0x122)
+    assert i is not None
+    assert (i.start, i.zhome, i.stop, i.free, i.alarm_reset, i.fw_pos, i.rv_pos) == (
+        3,
+        4,
+        5,
+        6,
+        7,
+        14,
+        15,
+    )
+    assert (s.ready, s.alarm, s.busy, s.moving, s.in_position, s.home_end) == (5, 7, 8, 13, 14, 4)
+    assert (p.serial.parity, p.serial.bytesize, p.serial.stopbits) == ("E", 8, 1)
+    assert {"registers.command_position", "status_bits.home_end"} <= set(p.unconfirmed)
+
+
+def test_applied_motion_numbers_become_protocol_addresses() -> None:
+    p = load_stepper_profile("applied-motion-mdx")
+    r = p.registers
+    # protocol address = N - 40001
+    assert (r.output_status, r.feedback_position, r.command) == (2, 6, 124)
+    assert (r.accel, r.decel, r.velocity, r.target_position) == (344, 346, 348, 350)
+    assert p.opcodes is not None
+    assert (p.opcodes.relative_move, p.opcodes.absolute_move) == (0x66, 0x67)
+    assert (p.opcodes.enable, p.opcodes.disable) == (0x9F, 0x9E)
+    # 1 count = 1/240 rps; at 20000 steps/rev: 240 counts per 20000 steps/s
+    assert p.speed_counts_per_step_s == pytest.approx(240 / 20000)
+    assert p.accel_counts_per_step_s2 == pytest.approx(6 / 20000)
+    assert {"opcodes.stop", "opcodes.home"} <= set(p.unconfirmed)
+
+
+def test_stil_profile_is_all_unconfirmed_and_templates_parse() -> None:
+    p = load_stil_profile("stil-ruby")
+    assert (p.exposure_min_us, p.exposure_max_us) == (500, 250000)
+    assert all(f"commands.{k}" in p.unconfirmed for k in ("identify", "set_exposure", "measure"))
+    line = p.reply_measure[1].format(start_nm=380, step_nm=5, count=2, values="1.5,2")
+    found = template_regex(p.reply_measure[1]).match(line)
+    assert found is not None and found.group("values") == "1.5,2"
+    assert template_regex(p.reply_error).match("ERR 2 exposure out of range") is not None
+
+
+AZ_TEXT = (PROFILES_DIR / "oriental-az.toml").read_text()
+
+
+def write(tmp_path: Path, text: str, name: str = "bad.toml") -> Path:
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "key", "reason"),
+    [
+        ("output_status = 0x007E", "", "registers.output_status", "missing"),
+        (
+            "output_status = 0x007E",
+            'output_status = "0x7E"',
+            "registers.output_status",
+            "expected an integer",
+        ),
+        ("moving = 13", "moving = 40", "status_bits.moving", "above the maximum 31"),
+        ('parity = "E"', 'parity = "X"', "serial.parity", "expected 'N', 'E' or 'O'"),
+        ("trigger = 1 ", "trigerr = 1 ", "direct_data.trigerr", "unknown key"),
+        (
+            'move_style = "direct-data"',
+            'move_style = "jog"',
+            "move_style",
+            "expected 'direct-data'",
+        ),
+        ('"status_bits.home_end",', '"status_bits.nope",', "unconfirmed", "'status_bits.nope'"),
+        ('kind = "modbus-stepper"', 'kind = "laser"', "kind", "expected one of"),
+        (
+            "speed_counts_per_step_s = 1.0",
+            "speed_counts_per_step_s = 0.0",
+            "units.speed_counts_per_step_s",
+            "must be > 0",
+        ),
+    ],
+)
+def test_errors_name_file_key_and_reason(
+    tmp_path: Path, old: str, new: str, key: str, reason: str
+) -> None:
+    assert old in AZ_TEXT
+    path = write(tmp_path, AZ_TEXT.replace(old, new, 1))
+    with pytest.raises(ProfileError) as info:
+        load_profile(path)
+    message = str(info.value)
+    assert message.startswith(f"{path}: key '{key}': ")
+    assert reason in message
+
+
+def test_missing_file_lists_builtin_profiles() -> None:
+    with pytest.raises(ProfileError, match=r"no-such\.toml: profile file not found .*oriental-az"):
+        load_profile("no-such")
+
+
+def test_toml_syntax_error_names_file(tmp_path: Path) -> None:
+    path = write(tmp_path, "kind = \n")
+    with pytest.raises(ProfileError, match=f"{path}: TOML syntax error"):
+        load_profile(path)
+
+
+def test_wrong_kind_for_typed_loader() -> None:
+    with pytest.raises(ProfileError, match="key 'kind': expected 'modbus-stepper', got 'zgm1120'"):
+        load_stepper_profile("zgm1120")
+
+
+def test_bad_line_pattern_and_template(tmp_path: Path) -> None:
+    text = (PROFILES_DIR / "line-gloss-example.toml").read_text()
+    path = write(tmp_path, text.replace("(?P<g20>", "(?P<g20", 1))
+    with pytest.raises(ProfileError, match="key 'pattern': invalid regex"):
+        load_profile(path)
+    stil = (PROFILES_DIR / "stil-ruby.toml").read_text()
+    path = write(tmp_path, stil.replace("{luminance_pct:.4f}", "{lum}", 1), "stil.toml")
+    with pytest.raises(
+        ProfileError, match=r"key 'replies.measure': bad reply template .*unknown field \{lum\}"
+    ):
+        load_profile(path)
