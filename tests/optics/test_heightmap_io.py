@@ -62,29 +62,27 @@ def test_heightmap_rejects_bad_heights(z: np.ndarray, msg: str) -> None:
 def test_level_plane_recovers_bumps_and_keeps_nan() -> None:
     ny, nx = 40, 50
     dx, dy = 0.5, 0.25
-    yy, xx = np.meshgrid(np.arange(ny) * dy, np.arange(nx) * dx, indexing="ij")
-    bumps = np.zeros((ny, nx))
-    bumps[10, 10] = 2.0
-    bumps[30, 35] = -1.5
-    bumps[20, 5] = 0.7
-    # Make the bumps zero-mean and uncorrelated with x and y so the best plane of the
-    # bumps alone is exactly zero: subtract their own least-squares plane analytically.
-    a = np.column_stack([np.ones(bumps.size), xx.ravel(), yy.ravel()])
-    coef, *_ = np.linalg.lstsq(a, bumps.ravel(), rcond=None)
-    bumps = bumps - (a @ coef).reshape(ny, nx)
-    tilted = bumps + 3.0 + 0.02 * xx - 0.05 * yy
-    tilted[5, 7] = np.nan
-    hm = HeightMap(z_um=tilted, dx_um=dx, dy_um=dy, source="t")
-    # NaN at (5, 7): the plane of the bumps over the remaining points is no longer exactly
-    # zero; compare with the plane fitted independently over those points.
-    valid = ~np.isnan(tilted)
-    coef2, *_ = np.linalg.lstsq(a[valid.ravel()], bumps[valid], rcond=None)
-    expected = bumps - (a @ coef2).reshape(ny, nx)
-    out = level_plane(hm)
-    assert np.isnan(out.z_um[5, 7])
-    assert np.count_nonzero(np.isnan(out.z_um)) == 1
-    np.testing.assert_allclose(out.z_um[valid], expected[valid], atol=1e-12)
-    assert abs(coef2).max() < 1e-3  # one missing point barely moves the plane
+    ii, jj = np.meshgrid(np.arange(ny), np.arange(nx), indexing="ij")
+
+    def bump(i0: int, j0: int, amp: float) -> np.ndarray:
+        return amp * np.exp(-((ii - i0) ** 2 + (jj - j0) ** 2) / 8.0)
+
+    def mirror(i: int, j: int) -> tuple[int, int]:  # point reflection through the centre
+        return ny - 1 - i, nx - 1 - j
+
+    # Bumps and missing points in point-symmetric pairs: over the valid points the bumps
+    # then have zero first moments in x and y, so their best plane is their mean alone and
+    # levelling must return exactly bumps - mean(bumps).
+    bumps = bump(10, 10, 2.0) + bump(*mirror(10, 10), 2.0)
+    bumps += bump(20, 5, -1.5) + bump(*mirror(20, 5), -1.5)
+    valid = np.ones((ny, nx), dtype=bool)
+    valid[5, 7] = valid[mirror(5, 7)] = False
+    tilted = bumps + 3.0 + 0.02 * jj * dx - 0.05 * ii * dy
+    tilted[~valid] = np.nan
+    out = level_plane(HeightMap(z_um=tilted, dx_um=dx, dy_um=dy, source="t"))
+    assert np.array_equal(np.isnan(out.z_um), ~valid)
+    expected = bumps - bumps[valid].mean()
+    np.testing.assert_allclose(out.z_um[valid], expected[valid], rtol=0, atol=1e-12)
 
 
 def test_level_plane_exact_plane_goes_to_zero() -> None:
@@ -100,16 +98,20 @@ def test_level_plane_no_valid_points() -> None:
 
 
 def test_fill_missing_nearest_and_mean() -> None:
-    z = np.array([[1.0, np.nan, 3.0, 4.0], [5.0, 6.0, 7.0, np.nan]])
+    z = np.array([[1.0, np.nan, np.nan, 4.0], [5.0, 6.0, 7.0, 8.0], [9.0, 9.0, 9.0, np.nan]])
     hm = HeightMap(z_um=z, dx_um=1.0, dy_um=1.0, source="f")
     near = fill_missing(hm, "nearest").z_um
-    # (0,1) is at distance 1 from 1.0, 3.0 and 6.0: any of them is a nearest neighbour.
-    assert near[0, 1] in (1.0, 3.0, 6.0)
-    assert near[1, 3] in (4.0, 7.0)
+    # ties (two valid points at distance 1) may go either way
+    assert near[0, 1] in (1.0, 6.0)
+    assert near[0, 2] in (4.0, 7.0)
+    assert near[2, 3] in (8.0, 9.0)
+    assert not np.isnan(near).any()
     mean = fill_missing(hm, "mean").z_um
-    assert mean[0, 1] == pytest.approx(26.0 / 6.0)
-    assert not np.isnan(mean).any()
-    np.testing.assert_array_equal(mean[~np.isnan(z)], z[~np.isnan(z)])
+    valid = ~np.isnan(z)
+    assert mean[0, 1] == mean[0, 2] == mean[2, 3] == pytest.approx(z[valid].sum() / 9.0)
+    np.testing.assert_array_equal(mean[valid], z[valid])
+    gap = HeightMap(z_um=np.array([[1.0, np.nan, np.nan, 4.0]]), dx_um=1.0, dy_um=1.0)
+    np.testing.assert_array_equal(fill_missing(gap).z_um, [[1.0, 1.0, 4.0, 4.0]])
 
 
 # ---------------------------------------------------------------- .npy
@@ -484,6 +486,23 @@ def test_gwy_malformed_component_does_not_hang(tmp_path: Path) -> None:
     p.write_bytes(b"GWYP" + b"GwyContainer\x00" + struct.pack("<I", len(body)) + body)
     with pytest.raises(HeightMapError, match=r"^hang\.gwy: corrupt or truncated"):
         load_heightmap(p)
+
+
+def test_gwy_and_sdf_binary_non_finite_steps(tmp_path: Path) -> None:
+    from gwyfile.objects import GwyContainer, GwyDataField
+
+    c = GwyContainer()
+    c["/0/data"] = GwyDataField(np.zeros((2, 2)), xreal=float("nan"), yreal=1e-6)
+    p = tmp_path / "nan.gwy"
+    c.tofile(str(p))
+    with pytest.raises(HeightMapError, match=r"^nan\.gwy: xreal/yreal must be finite"):
+        load_heightmap(p)
+    raw = bytearray(_sdf_binary_bytes())
+    struct.pack_into("<d", raw, 8 + 10 + 12 + 12 + 2 + 2, float("inf"))  # Xscale
+    q = tmp_path / "inf.sdf"
+    q.write_bytes(bytes(raw))
+    with pytest.raises(HeightMapError, match=r"^inf\.sdf: Xscale must be finite"):
+        load_heightmap(q)
 
 
 def test_gwy_wrong_magic_and_no_field(tmp_path: Path) -> None:
