@@ -272,14 +272,16 @@ class GonioApp(App[int]):
 
     def action_toggle_pause(self) -> None:
         """Pause a running scan or resume a paused one (key ``space``)."""
-        if self.run_state is RunState.RUNNING:
-            self.backend.pause()
-            self.notify("pausing after the current point", title="Scan")
+        if not self.backend.running:
+            self.notify("no scan running", title="Scan", severity="warning")
         elif self.run_state is RunState.PAUSED:
             self.backend.resume()
             self.notify("resuming", title="Scan")
         else:
-            self.notify("no scan running", title="Scan", severity="warning")
+            # Also when the runner has not reported RUNNING yet: it honours the
+            # request before its first reading.
+            self.backend.pause()
+            self.notify("pausing after the current point", title="Scan")
 
     def action_abort_scan(self) -> None:
         """Abort the scan after the current point (key ``x``)."""

@@ -20,6 +20,7 @@ from drivers.base import GLOSS_ANGLES_DEG, DeviceError
 from goniolab import __version__
 from goniolab.config import LabConfig, load_lab_config
 from goniolab.errors import UserError
+from goniolab.lab import Lab
 from goniolab.optics.apertures import Cone
 from goniolab.optics.models import ReflectanceModel
 from goniolab.scan.events import (
@@ -87,7 +88,7 @@ class LabBackend:
             raise UserError(f"--sample {sample}: no such height-map file")
         self.store_path = resolve_store_path(store_path, self.config.lab.store)
         self.bus = EventBus()
-        self.lab: Any = None
+        self.lab: Lab | None = None
         self.store: RunStore | None = None
         self._stack = AsyncExitStack()
         self._runner: ScanRunner | None = None
@@ -106,11 +107,9 @@ class LabBackend:
 
     async def open(self) -> None:
         """Build the lab (connect every instrument), open the store, home the goniometer."""
-        from goniolab.lab import Lab
-
         try:
             self.lab = await self._stack.enter_async_context(
-                Lab.from_config(self.config_path, time_scale=self.time_scale)
+                Lab.from_config(self.config, time_scale=self.time_scale)
             )
             self.store = RunStore(self.store_path)
             self._stack.callback(self.store.close)
@@ -138,7 +137,7 @@ class LabBackend:
 
     # ------------------------------------------------------------------ form
     def sample_names(self) -> list[str]:
-        from goniolab.maps import sample_names
+        from sim.samples import sample_names
 
         return list(sample_names())
 
@@ -158,7 +157,7 @@ class LabBackend:
     def running(self) -> bool:
         return self._task is not None and not self._task.done()
 
-    def _require_open(self) -> tuple[Any, RunStore]:
+    def _require_open(self) -> tuple[Lab, RunStore]:
         if self.lab is None or self.store is None:
             raise UserError("the lab is not connected", exit_code=1)
         return self.lab, self.store
@@ -168,8 +167,7 @@ class LabBackend:
         else :func:`goniolab.maps.model_for` (built in a worker thread, cached)."""
         lab, _ = self._require_open()
         if sample == self.config.sample.map:
-            own: ReflectanceModel = lab.model
-            return own
+            return lab.model
         if sample not in self._models:
             from goniolab.maps import model_for
 

@@ -1,0 +1,61 @@
+"""``goniolab tui``: the Textual app (measured beside predicted, live).
+
+Textual is imported only when the command runs (inside :mod:`goniolab.tui`), so the rest
+of the CLI never loads it.
+"""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from goniolab.errors import UserError
+
+__all__ = ["register"]
+
+
+def register(sub: Any) -> None:
+    """Add the ``tui`` sub-command to the ``goniolab`` parser."""
+    p: argparse.ArgumentParser = sub.add_parser(
+        "tui",
+        help="interactive lab UI: scan setup, live measured-vs-predicted plots, gloss log",
+        description="Open the lab (simulated or real), home the goniometer and show scans "
+        "live beside the model's prediction. Keys: s start, space pause/resume, x abort, "
+        "g gloss reading, l residual/log view, r stored runs, q quit, ctrl+p commands.",
+    )
+    p.add_argument("--config", required=True, metavar="FILE", help="lab config TOML")
+    p.add_argument(
+        "--time-scale",
+        type=float,
+        default=None,
+        metavar="S",
+        help="sim clock scale (0 = instant, 1 = real time); default: [lab] time_scale",
+    )
+    p.add_argument(
+        "--sample",
+        default=None,
+        metavar="NAME",
+        help="sample preselected for the prediction (built-in NAME, sample:NAME or a "
+        "height-map file); default: [sample] map",
+    )
+    p.add_argument("--store", default=None, metavar="FILE", help="run store (SQLite) file")
+    p.add_argument(
+        "--autostart",
+        action="store_true",
+        help="once homed, take a gloss reading and start the form's scan",
+    )
+    p.set_defaults(func=_cmd_tui)
+
+
+def _cmd_tui(args: argparse.Namespace) -> int:
+    if args.time_scale is not None and not args.time_scale >= 0:
+        raise UserError(f"--time-scale must be >= 0, got {args.time_scale}")
+    from goniolab.tui.app import GonioApp
+    from goniolab.tui.lab_backend import LabBackend
+
+    backend = LabBackend(
+        args.config, time_scale=args.time_scale, sample=args.sample, store_path=args.store
+    )
+    app = GonioApp(backend, autostart=args.autostart)
+    code = app.run()
+    return 0 if code is None else int(code)
