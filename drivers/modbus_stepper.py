@@ -240,7 +240,11 @@ class ModbusStepperAxis:
         client: AsyncModbusTcpClient | AsyncModbusSerialClient
         if self.transport == "tcp":
             client = AsyncModbusTcpClient(
-                self.host, port=self.port, timeout=self.timeout_s, retries=self.retries
+                self.host,
+                port=self.port,
+                timeout=self.timeout_s,
+                retries=self.retries,
+                reconnect_delay=0,  # a lost link is reported (Disconnected), not hidden
             )
         else:
             s = self.profile.serial
@@ -253,6 +257,7 @@ class ModbusStepperAxis:
                 stopbits=s.stopbits,
                 timeout=self.timeout_s,
                 retries=self.retries,
+                reconnect_delay=0,
             )
         try:
             ok = await client.connect()
@@ -299,6 +304,8 @@ class ModbusStepperAxis:
     ) -> Any:
         if self._client is None:
             raise Disconnected(f"not connected to {self.endpoint}", device=self.name)
+        if not self._client.connected:
+            raise Disconnected(f"connection to {self.endpoint} is closed", device=self.name)
         async with self._lock:
             try:
                 rr = await fn(*args, device_id=self.unit_id, **kw)
@@ -307,6 +314,10 @@ class ModbusStepperAxis:
                     f"connection to {self.endpoint} lost during {what}: {exc}", device=self.name
                 ) from exc
             except ModbusIOException as exc:
+                if not self._client.connected:
+                    raise Disconnected(
+                        f"connection to {self.endpoint} lost during {what}", device=self.name
+                    ) from exc
                 raise DeviceTimeout(
                     f"no valid answer from {self.endpoint} to {what}: {exc}", device=self.name
                 ) from exc

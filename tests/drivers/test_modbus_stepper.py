@@ -6,6 +6,7 @@ PDUs, RTU CRC-16/MODBUS) and the AZ direct-data table in shared/PROTOCOLS.md.
 
 from __future__ import annotations
 
+import asyncio
 import socket
 import struct
 from typing import Any
@@ -305,6 +306,24 @@ async def test_unreachable_controller_is_disconnected() -> None:
         await axis.connect()
     with pytest.raises(Disconnected, match="not connected"):
         await axis.position_deg()
+
+
+async def test_dropped_connection_is_disconnected() -> None:
+    async def drop(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        await reader.read(7)  # the MBAP header of the first request, then hang up
+        writer.close()
+
+    server = await asyncio.start_server(drop, "127.0.0.1", 0)
+    port = server.sockets[0].getsockname()[1]
+    axis = make_axis(port, timeout_s=0.2, retries=0)
+    await axis.connect()
+    with pytest.raises(Disconnected, match=f"connection to 127.0.0.1:{port} (lost|is closed)"):
+        await axis.position_deg()
+    with pytest.raises(Disconnected, match="is closed"):
+        await axis.position_deg()
+    await axis.close()
+    server.close()
+    await server.wait_closed()
 
 
 async def test_missing_serial_port_is_disconnected_naming_it() -> None:
