@@ -125,6 +125,8 @@ class HeightMap:
 
     def __post_init__(self) -> None:
         src = self.source
+        if np.iscomplexobj(self.z_um):
+            raise _fail(src, "heights must be real, got a complex array")
         try:
             z = np.array(self.z_um, dtype=np.float64, copy=True)
         except (TypeError, ValueError) as exc:
@@ -1086,6 +1088,9 @@ def _write_sur(hm: HeightMap, path: Path, bits: int) -> None:
     ny, nx = hm.shape
     n_max = 2 ** (bits - 1) - 16
     ints, step_um, off_um = _quantise(np.asarray(hm.z_um), n_max, offset=True)
+    for what, value in (("dx_um", hm.dx_um), ("dy_um", hm.dy_um), ("z", step_um), ("z", off_um)):
+        if not np.isfinite(np.float32(value)) or (value != 0.0 and np.float32(value) == 0.0):
+            raise _fail(path.name, f"{what} = {value!r} does not fit the float32 .sur header")
     missing = np.isnan(hm.z_um)
     ints[missing] = -2  # non-measured value: zmin - 2 with zmin = 0
     comment_lines = [f"$goniolab.dx_um = {hm.dx_um!r}", f"$goniolab.dy_um = {hm.dy_um!r}"]
@@ -1498,6 +1503,7 @@ def save_heightmap(hm: HeightMap, path: str | Path, *, fmt: str | None = None) -
     p = Path(path)
     kind = _format_for(p, fmt, _WRITERS)
     try:
-        _WRITERS[kind](hm, p)
+        with np.errstate(over="ignore", invalid="ignore"):  # float32 overflow is checked
+            _WRITERS[kind](hm, p)
     except OSError as exc:
         raise _fail(p.name, f"cannot write: {exc.strerror or exc}") from None

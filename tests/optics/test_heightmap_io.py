@@ -49,7 +49,12 @@ def test_heightmap_rejects_bad_steps(bad: object) -> None:
 
 @pytest.mark.parametrize(
     ("z", "msg"),
-    [(np.zeros(4), "2-D"), (np.zeros((0, 3)), "zero points"), (np.full((2, 2), np.inf), "inf")],
+    [
+        (np.zeros(4), "2-D"),
+        (np.zeros((0, 3)), "zero points"),
+        (np.full((2, 2), np.inf), "inf"),
+        (np.ones((2, 2), dtype=complex), "must be real"),
+    ],
 )
 def test_heightmap_rejects_bad_heights(z: np.ndarray, msg: str) -> None:
     with pytest.raises(HeightMapError, match=rf"mysrc: .*{msg}"):
@@ -600,5 +605,8 @@ def test_writer_errors(tmp_path: Path) -> None:
         save_heightmap(hm, tmp_path / "out.png")
     with pytest.raises(HeightMapError, match=r"out\.sdf: unknown height-map format 'tiff'"):
         save_heightmap(hm, tmp_path / "out.sdf", fmt="tiff")
+    tiny = HeightMap(z_um=np.zeros((2, 2)), dx_um=1e-50, dy_um=1.0)
+    with pytest.raises(HeightMapError, match=r"out\.sur: dx_um = 1e-50 does not fit"):
+        save_heightmap(tiny, tmp_path / "out.sur")
     with pytest.raises(HeightMapError, match=r"out\.csv: cannot write"):
         save_heightmap(hm, tmp_path / "nodir" / "out.csv")
