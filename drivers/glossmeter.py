@@ -56,6 +56,7 @@ __all__ = [
     "LineGlossmeter",
     "Zgm1120",
     "angle_mask",
+    "open_glossmeter",
     "parse_gloss_line",
     "parse_zgm_measure",
 ]
@@ -425,3 +426,43 @@ class LineGlossmeter:
         while True:
             line = await self._io.read_line(self.profile.line_terminator, None)
             yield parse_gloss_line(self.profile, line, device=self.name)
+
+
+def open_glossmeter(
+    port: str,
+    *,
+    protocol: str = "zgm1120",
+    profile: str | None = None,
+    serial_number: str = "401120999",
+    baudrate: int | None = None,
+    timeout_s: float | None = None,
+    name: str = "glossmeter",
+) -> Zgm1120 | LineGlossmeter:
+    """Build (not connect) a glossmeter driver for ``protocol`` ``"zgm1120"`` or ``"line"``.
+
+    ``profile`` ``None`` selects the protocol's built-in profile (``zgm1120`` /
+    ``line-gloss-example``).
+
+    Raises
+    ------
+    ValueError
+        Unknown protocol.
+    """
+    if protocol == "zgm1120":
+        return Zgm1120(
+            name,
+            port=port,
+            serial_number=serial_number,
+            profile=profile or "zgm1120",
+            baudrate=baudrate,
+            timeout_s=timeout_s,
+        )
+    if protocol == "line":
+        return LineGlossmeter(
+            name,
+            port=port,
+            profile=profile or "line-gloss-example",
+            baudrate=baudrate,
+            timeout_s=timeout_s,
+        )
+    raise ValueError(f"{name}: unknown glossmeter protocol {protocol!r} (use 'zgm1120' or 'line')")

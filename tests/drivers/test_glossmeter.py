@@ -16,6 +16,7 @@ from drivers.glossmeter import (
     LineGlossmeter,
     Zgm1120,
     angle_mask,
+    open_glossmeter,
     parse_gloss_line,
     parse_zgm_measure,
 )
@@ -208,3 +209,13 @@ def test_near_miss_zgm_replies_raise_only_protocol_error(fields: list[str]) -> N
     except ProtocolError:
         return
     assert_sane(reading)
+
+
+def test_open_glossmeter_picks_driver_and_profile() -> None:
+    zgm = open_glossmeter("/dev/x", serial_number="123", baudrate=19200)
+    assert isinstance(zgm, Zgm1120) and zgm.command(1, "ab", 7, 1, 0) == "1| 123|ab|7|1|0:"
+    line = open_glossmeter("/dev/x", protocol="line", timeout_s=0.5)
+    assert isinstance(line, LineGlossmeter) and line.profile.name == "line-gloss-example"
+    assert line.timeout_s == 0.5
+    with pytest.raises(ValueError, match="unknown glossmeter protocol 'byk'"):
+        open_glossmeter("/dev/x", protocol="byk")
