@@ -118,11 +118,18 @@ class FaultInjector:
         if fault is Fault.GARBLE:
             raise ProtocolError(f"simulated garbled reply to {operation}", device=self.device)
 
-    def garble(self, frame: bytes) -> bytes:
-        """Corrupt a reply frame reproducibly (flip bits in one byte, drop the last byte)."""
-        if not frame:
-            return b"\xff"
-        i = int(self._rng.integers(0, len(frame)))
+    def garble(self, frame: bytes, *, keep: bytes = b"\r\n") -> bytes:
+        """Corrupt a reply frame reproducibly: flip bits (XOR 0x5A) in one byte.
+
+        Bytes in ``keep`` (line terminators) are never chosen, so the frame still ends
+        where the original did and a reader sees one bad line, not a hang. XOR 0x5A maps
+        every digit, sign, separator and letter of the ASCII protocols to a character
+        their grammars reject.
+        """
+        candidates = [i for i, b in enumerate(frame) if b not in keep]
+        if not candidates:
+            return frame
+        i = candidates[int(self._rng.integers(0, len(candidates)))]
         out = bytearray(frame)
         out[i] ^= 0x5A
-        return bytes(out[:-1]) if len(out) > 2 else bytes(out)
+        return bytes(out)

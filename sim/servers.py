@@ -438,10 +438,7 @@ class StilPtyDevice(_PtyDevice):
         p = self.profile
         data = "".join(line + p.reply_terminator for line in lines).encode(p.encoding)
         if fault is Fault.GARBLE:
-            data = (
-                self.spectro.faults.garble(data.rstrip(p.reply_terminator.encode()))
-                + p.reply_terminator.encode()
-            )
+            data = self.spectro.faults.garble(data, keep=p.reply_terminator.encode(p.encoding))
         self.write(data)
 
     def _error(self, code: int, message: str) -> list[str]:
@@ -501,8 +498,10 @@ class ZgmPtyDevice(_PtyDevice):
     Measure request ``1| SN|xy|mask|count|tempflag:`` (mask bit0 20 deg, bit1 60 deg,
     bit2 85 deg); reply ``1| SN|xy|v20|a20|v60|a60|v85|a85|count|temp`` with values in
     0.1 GU, -1 = not measured, -2 = overflow; the ``a`` fields are raw ADC readings.
-    Opcode 6 switches auto-send on (``6| SN|xy|1:``) or off (``...|0:``): the meter then
-    pushes a measure reply (transaction id ``00``) every ``autosend_interval_s``.
+    Opcode 6 AutoSend (``6| SN|xy|mask|count|tempflag:``, not acknowledged): the meter
+    then pushes a reply ``6| SN|xy|...`` (measure-reply fields, the request's transaction
+    id) for every reading -- simulated as a button press every ``autosend_interval_s``;
+    mask 0 switches it off.
     Requests for another serial number are ignored (RS-232 multi-drop behaviour).
     """
 
@@ -538,12 +537,12 @@ class ZgmPtyDevice(_PtyDevice):
                 out += [str(round(v * 10)), str(round(v * self.ADC_PER_GU))]
         return out
 
-    async def _measure_reply(self, tid: str, mask: int, count: int) -> str:
+    async def _measure_reply(self, tid: str, mask: int, count: int, *, opcode: str = "1") -> str:
         angles = [a for bit, a in enumerate((20, 60, 85)) if mask >> bit & 1]
         fields = await self._reading_fields(angles)
         return "|".join(
             [
-                "1",
+                opcode,
                 f" {self.serial_number}",
                 tid,
                 *fields,
@@ -573,9 +572,12 @@ class ZgmPtyDevice(_PtyDevice):
                 return
             reply = await self._measure_reply(tid, mask & 7, count)
         elif opcode == "6":
-            on = bool(args and args[0].strip() == "1")
-            self._set_autosend(on)
-            reply = "|".join(["6", f" {self.serial_number}", tid, "1" if on else "0"])
+            try:
+                mask = int(args[0]) if args else 7
+            except ValueError:
+                return
+            self._set_autosend(tid, mask & 7)
+            return  # AutoSend is not acknowledged: readings follow as they are taken
         elif opcode == "36":
             reply = "|".join(
                 ["36", f" {self.serial_number}", tid, str(round(self.gloss.temperature_c))]
@@ -589,22 +591,22 @@ class ZgmPtyDevice(_PtyDevice):
             data = self.gloss.faults.garble(data)
         self.write(data + self.profile.reply_terminator.encode("ascii"))
 
-    def _set_autosend(self, on: bool) -> None:
+    def _set_autosend(self, tid: str, mask: int) -> None:
         if self._autosend is not None:
             self._autosend.cancel()
             self._autosend = None
-        if on and self.gloss.autosend_interval_s > 0:
-            self._autosend = asyncio.get_running_loop().create_task(self._push())
+        if mask and self.gloss.autosend_interval_s > 0:
+            self._autosend = asyncio.get_running_loop().create_task(self._push(tid, mask))
 
-    async def _push(self) -> None:
+    async def _push(self, tid: str, mask: int) -> None:
         while self.open:
             await self.gloss.clock.sleep(self.gloss.autosend_interval_s)
-            reply = await self._measure_reply("00", 7, 1)
+            reply = await self._measure_reply(tid, mask, 1, opcode="6")
             self.write(reply.encode("ascii") + self.profile.reply_terminator.encode("ascii"))
 
     async def stop(self) -> None:
         """Stop auto-send and the pty."""
-        self._set_autosend(False)
+        self._set_autosend("", 0)
         await super().stop()
 
 

@@ -294,9 +294,8 @@ async def test_zgm1120_pty_measure_reply_bytes(ptys) -> None:  # type: ignore[no
             await asyncio.wait_for(reader.readuntil(b"\r\n"), 5)
             == b"1| 401120999|cd|-1|-1|930|930|-1|-1|1|23\r\n"
         )
-        writer.write(b"6| 401120999|ef|1:")  # auto-send on
-        assert await asyncio.wait_for(reader.readuntil(b"\r\n"), 5) == b"6| 401120999|ef|1\r\n"
+        writer.write(b"6| 401120999|ef|7|1|0:")  # AutoSend: no ack, readings pushed
         pushed = await asyncio.wait_for(reader.readuntil(b"\r\n"), 5)
-        assert pushed == b"1| 401120999|00|813|813|930|930|-2|-2|1|23\r\n"
+        assert pushed == b"6| 401120999|ef|813|813|930|930|-2|-2|1|23\r\n"
     finally:
         writer.close()

@@ -1,0 +1,153 @@
+"""One contract, two backends: the simulated lab in-process and the real drivers against
+the wire simulators must behave the same (see conftest.py for the backends)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import MODEL, lab_toml  # type: ignore[import-not-found]
+
+from drivers.base import (
+    DeviceError,
+    DeviceFault,
+    Disconnected,
+    InterlockError,
+    LimitError,
+    ProtocolError,
+    StallError,
+)
+from goniolab.config import load_lab_config
+from goniolab.lab import Lab, build_sim_instruments, build_sim_server
+from goniolab.optics.apertures import Cone
+from sim.clock import SimClock
+from sim.motion import ALARM_OVERLOAD
+from sim.servers import SimLabServer
+
+STEP_DEG = 1e-3  # 1000 steps/deg on the wire
+
+
+async def test_move_and_positions(lab: Lab) -> None:
+    g = lab.goniometer
+    assert await g.positions_deg() == pytest.approx((45.0, 45.0))  # power-up at park
+    reached = await g.move_to(30.0, 12.5, timeout_s=30.0)
+    assert reached == pytest.approx((30.0, 12.5), abs=STEP_DEG)
+    st = await g.lamp.status()
+    assert st.in_position and not st.moving and st.alarm_code is None
+
+
+async def test_limits_and_interlock_refuse_before_moving(lab: Lab) -> None:
+    g = lab.goniometer
+    with pytest.raises(LimitError, match="lamp"):
+        await g.move_to(90.0, 45.0, timeout_s=30.0)
+    with pytest.raises(InterlockError, match="below the minimum 10"):
+        await g.move_to(20.0, -15.0, timeout_s=30.0)  # arms 5 deg apart
+    assert await g.positions_deg() == pytest.approx((45.0, 45.0))
+
+
+async def test_home_then_park(lab: Lab) -> None:
+    g = lab.goniometer
+    await g.home(timeout_s=30.0)
+    assert await g.positions_deg() == pytest.approx((0.0, 0.0))
+    await g.park(timeout_s=30.0)
+    assert await g.positions_deg() == pytest.approx((45.0, 45.0), abs=STEP_DEG)
+
+
+async def test_stop_leaves_the_arms_in_position(lab: Lab) -> None:
+    g = lab.goniometer
+    await g.move_to(40.0, 20.0, timeout_s=30.0)
+    await g.stop()
+    st = await g.detector.status()
+    assert not st.moving and st.position_deg == pytest.approx(20.0, abs=STEP_DEG)
+
+
+async def test_alarm_mid_move_then_reset(lab: Lab) -> None:
+    assert lab.sims is not None
+    lab.sims.lamp.motor.inject_alarm(35.0)
+    g = lab.goniometer
+    with pytest.raises(DeviceFault) as err:
+        await g.move_to(20.0, 45.0, timeout_s=30.0)
+    assert err.value.code == ALARM_OVERLOAD and err.value.device == "lamp"
+    assert await g.lamp.position_deg() == pytest.approx(35.0, abs=STEP_DEG)
+    await g.lamp.reset_alarm()
+    assert await g.move_to(20.0, 45.0, timeout_s=30.0) == pytest.approx((20.0, 45.0), abs=STEP_DEG)
+
+
+async def test_stall_is_detected(lab: Lab) -> None:
+    assert lab.sims is not None
+    lab.sims.detector.motor.inject_stall(30.0)
+    with pytest.raises(StallError) as err:
+        await lab.goniometer.move_to(45.0, 20.0, timeout_s=30.0)
+    assert err.value.device == "detector"
+
+
+@pytest.mark.parametrize("theta_r_deg", [45.0, 47.5, 30.0, -20.0])
+async def test_spectro_reads_the_model_at_the_geometry(lab: Lab, theta_r_deg: float) -> None:
+    await lab.goniometer.move_to(45.0, theta_r_deg, timeout_s=30.0)
+    reading = await lab.spectro.measure()
+    expected = float(
+        MODEL.luminance_pct(45.0, [theta_r_deg], source=Cone(6.0), detector=Cone(6.0))[0]
+    )
+    assert reading.luminance_pct == pytest.approx(expected, abs=1e-4)  # 4 decimals on the wire
+    assert len(reading.values) == len(reading.wavelengths_nm) == 41
+    assert reading.wavelengths_nm[0] == 380.0 and reading.wavelengths_nm[-1] == 780.0
+
+
+async def test_glossmeter_reads_the_model_gloss(lab: Lab) -> None:
+    expected = {a: round(v, 1) for a, v in MODEL.gloss((20, 60, 85)).items()}
+    reading = await lab.glossmeter.measure()
+    assert reading.values_gu == expected
+    assert reading.overflow_deg == ()
+    only60 = await lab.glossmeter.measure([60])
+    assert only60.values_gu == {20: None, 60: expected[60], 85: None}
+
+
+async def test_garbled_spectro_reply_is_a_protocol_error(make_lab: Callable[..., Lab]) -> None:
+    # on the wire the driver's first command (set exposure on connect) already fails
+    with pytest.raises(ProtocolError) as err:
+        async with make_lab(faults='devices = ["spectro"]\ngarble_rate = 1.0') as lab:
+            await lab.spectro.measure()
+    assert err.value.device == "spectro"
+
+
+async def test_disconnected_glossmeter(make_lab: Callable[..., Lab]) -> None:
+    async with make_lab(faults='devices = ["glossmeter"]\ndisconnect_after = 1') as lab:
+        await lab.glossmeter.measure()
+        with pytest.raises(DeviceError) as err:
+            await lab.glossmeter.measure()
+        assert err.value.device == "glossmeter"
+
+
+async def test_out_of_limits_geometry_from_config_is_refused(lab: Lab) -> None:
+    with pytest.raises(LimitError, match=r"theta_r=85.0 deg outside the detector arm limits"):
+        lab.goniometer.check_geometry(45.0, 85.0)
+    assert np.isfinite(lab.source.full_angle_deg)
+
+
+# ------------------------------------------------------------------ wire only: bad endpoints
+NO_SERVERS = {"start_sim_servers = true": "start_sim_servers = false"}
+
+
+async def test_unreachable_controller(tmp_path: Path) -> None:
+    path = lab_toml(tmp_path, "wire", extra=NO_SERVERS)
+    port = load_lab_config(path).goniometer.lamp.port  # nothing listens there
+    with pytest.raises(DeviceError) as err:
+        async with Lab.from_config(path, model=MODEL):
+            pass
+    assert err.value.device == "lamp" and f"127.0.0.1:{port}" in str(err.value)
+
+
+async def test_missing_serial_port(tmp_path: Path) -> None:
+    spectro_line = 'port = "' + str(tmp_path / "sim" / "spectro")
+    path = lab_toml(
+        tmp_path, "wire", extra={**NO_SERVERS, spectro_line: 'port = "/nonexistent/ttyX'}
+    )
+    cfg = load_lab_config(path)
+    arms_only = build_sim_server(cfg, build_sim_instruments(cfg, MODEL, SimClock(0))).modbus
+    async with SimLabServer(arms_only):
+        with pytest.raises(Disconnected) as err:
+            async with Lab.from_config(cfg, model=MODEL):
+                pass
+    assert err.value.device == "spectro" and "/nonexistent/ttyX" in str(err.value)
