@@ -180,12 +180,17 @@ def cap_overlap_fraction(gamma_rad: ArrayLike, a_s_rad: float, a_d_rad: float) -
                 * area_s
             )
         else:
-            ca, cb, sa, sb = math.cos(a), math.cos(b), math.sin(a), math.sin(b)
-            cg, sg = np.cos(gl), np.sin(gl)
-            x = np.clip((cg - ca * cb) / (sa * sb), -1.0, 1.0)
-            y = np.clip((cb - cg * ca) / (sg * sa), -1.0, 1.0)
-            z = np.clip((ca - cg * cb) / (sg * sb), -1.0, 1.0)
-            area = 2.0 * (math.pi - np.arccos(x) - ca * np.arccos(y) - cb * np.arccos(z))
+            # Numerators as 1 - cos = 2 sin^2(./2) sums, free of cancellation for small caps:
+            # cos u - cos v cos w = 2 (hv + hw - hu - 2 hv hw), h. = sin^2(./2).
+            ha, hb = math.sin(0.5 * a) ** 2, math.sin(0.5 * b) ** 2
+            hg = np.sin(0.5 * gl) ** 2
+            sa, sb, sg = math.sin(a), math.sin(b), np.sin(gl)
+            x = np.clip(2.0 * (ha + hb - hg - 2.0 * ha * hb) / (sa * sb), -1.0, 1.0)
+            y = np.clip(2.0 * (hg + ha - hb - 2.0 * hg * ha) / (sg * sa), -1.0, 1.0)
+            z = np.clip(2.0 * (hg + hb - ha - 2.0 * hg * hb) / (sg * sb), -1.0, 1.0)
+            acy, acz = np.arccos(y), np.arccos(z)
+            # 2 [pi - acos x - cos a acos y - cos b acos z], the spherical excess split off
+            area = 2.0 * ((math.pi - np.arccos(x) - acy - acz) + 2.0 * ha * acy + 2.0 * hb * acz)
         out[lens] = np.clip(area / area_s, 0.0, full)
     result: FloatArray = out
     return result
@@ -201,6 +206,50 @@ def _cone_table(a_s: float, a_d: float) -> tuple[FloatArray, float, float, float
     o_in = float(cap_overlap_fraction(np.array([0.0]), a_s, a_d)[0])
     table = cap_overlap_fraction(np.linspace(g0, g1, _CONE_TABLE_SIZE), a_s, a_d)
     return table, g0, g1, o_in
+
+
+def _zero_solid_angle(ap: Aperture) -> bool:
+    if isinstance(ap, Cone):
+        return ap.full_angle_deg == 0.0
+    return ap.in_plane_deg == 0.0 or ap.perp_deg == 0.0
+
+
+def _dir(alpha: FloatArray, beta: FloatArray) -> FloatArray:
+    """Unit vector of in-plane angle alpha = atan2(-x, z) and out-of-plane beta = asin(y)."""
+    out: FloatArray = np.stack(
+        [-np.sin(alpha) * np.cos(beta), np.sin(beta), np.cos(alpha) * np.cos(beta)], axis=-1
+    )
+    return out
+
+
+def _sample_aperture(ap: Aperture, alpha_c: float) -> tuple[FloatArray, FloatArray]:
+    """Directions (k, 3) and weights (sum 1) uniform in solid angle over an aperture.
+
+    The aperture is centred on the in-plane direction of angle ``alpha_c`` (radians). Cones:
+    512 Fibonacci-spiral points over the cap; rectangles: a 32 x 32 midpoint grid in
+    (alpha, beta) weighted by cos(beta); zero extents collapse to the centre line/point.
+    """
+    if isinstance(ap, Cone):
+        a = math.radians(ap.half_angle_deg)
+        if a == 0.0:
+            return _dir(np.array([alpha_c]), np.array([0.0])), np.ones(1)
+        k = 512
+        i = np.arange(k) + 0.5
+        ct = 1.0 - i / k * (1.0 - math.cos(a))
+        st = np.sqrt(1.0 - ct * ct)
+        ph = i * math.pi * (3.0 - math.sqrt(5.0))
+        local = np.stack([st * np.cos(ph), st * np.sin(ph), ct], axis=-1)
+        # rotate the local frame (axis +z) about y onto the aperture centre
+        ca, sa = math.cos(alpha_c), math.sin(alpha_c)
+        rot = np.array([[ca, 0.0, -sa], [0.0, 1.0, 0.0], [sa, 0.0, ca]])
+        return local @ rot.T, np.full(k, 1.0 / k)
+    na = 32 if ap.in_plane_deg > 0 else 1
+    nb = 32 if ap.perp_deg > 0 else 1
+    da = math.radians(ap.in_plane_deg) * ((np.arange(na) + 0.5) / na - 0.5)
+    db = math.radians(ap.perp_deg) * ((np.arange(nb) + 0.5) / nb - 0.5)
+    aa, bb = np.meshgrid(alpha_c + da, db, indexing="ij")
+    w = np.cos(bb).ravel()
+    return _dir(aa.ravel(), bb.ravel()), w / w.sum()
 
 
 def _check_angle(name: str, value: float, lo: float, hi: float) -> float:
@@ -236,7 +285,8 @@ class FacetModel:
         Fused numba kernels (threads over the facets) or their numpy twins.
     slope_bin : float
         Bin of the slope histogram P22 used by :meth:`brdf_point` (Wittmann: 1e-3). Its
-        relative noise is about ``1/sqrt(N P22 slope_bin^2)`` per bin, so small maps or
+        relative noise is about ``1/sqrt(N P22 slope_bin^2)`` per bin (more when neighbouring
+        slopes are correlated), so small maps or
         rough surfaces need a coarser bin (e.g. 1e-2 for N = 1e6, rms slope 0.05 gives
         about 2 %, while 1e-3 gives about 20 %).
     grid_step_deg : float
@@ -327,25 +377,42 @@ class FacetModel:
         keys, counts = np.unique((ip - p0) * n_q + (iq - q0), return_counts=True)
         return keys, counts, p0, q0, n_p, n_q
 
-    def slope_density(self, p: ArrayLike, q: ArrayLike) -> FloatArray:
-        """Slope density P22 (per unit p per unit q) from the histogram of bin ``slope_bin``."""
+    def _bin_counts(self, ip: NDArray[np.int64], iq: NDArray[np.int64]) -> FloatArray:
+        """Facet counts of the histogram bins centred on (ip, iq) x slope_bin (0 outside)."""
         keys, counts, p0, q0, n_p, n_q = self._p22_index
-        b = self.slope_bin
-        pa = np.asarray(p, dtype=np.float64)
-        qa = np.asarray(q, dtype=np.float64)
-        with np.errstate(invalid="ignore"):
-            ip = np.floor(pa / b + 0.5)
-            iq = np.floor(qa / b + 0.5)
-        ok = np.isfinite(ip) & np.isfinite(iq)
-        ip = np.where(ok, ip, p0).astype(np.int64) - p0
-        iq = np.where(ok, iq, q0).astype(np.int64) - q0
-        ok &= (ip >= 0) & (ip < n_p) & (iq >= 0) & (iq < n_q)
-        key = ip * n_q + iq
+        a, b = ip - p0, iq - q0
+        ok = (a >= 0) & (a < n_p) & (b >= 0) & (b < n_q)
+        key = np.where(ok, a * n_q + b, 0)
         pos = np.clip(np.searchsorted(keys, key), 0, keys.size - 1)
         hit = ok & (keys[pos] == key)
-        out: FloatArray = np.where(hit, counts[pos], 0).astype(np.float64) / (
-            self.surface.n_facets * b * b
+        out: FloatArray = np.where(hit, counts[pos], 0).astype(np.float64)
+        return out
+
+    def slope_density(self, p: ArrayLike, q: ArrayLike) -> FloatArray:
+        """Slope density P22 (per unit p per unit q) from the histogram of bin ``slope_bin``.
+
+        The histogram (bins centred on multiples of ``slope_bin``, Wittmann sec. 3.1) is
+        interpolated bilinearly between bin centres, so P22 is continuous: its error is then
+        second order in the bin (curvature x bin^2 / 8) instead of the first-order step of
+        a piecewise-constant histogram. Non-finite slopes give 0.
+        """
+        b = self.slope_bin
+        pa, qa = np.broadcast_arrays(
+            np.asarray(p, dtype=np.float64), np.asarray(q, dtype=np.float64)
         )
+        finite = np.isfinite(pa) & np.isfinite(qa)
+        x = np.where(finite, pa, 0.0) / b
+        y = np.where(finite, qa, 0.0) / b
+        i0, j0 = np.floor(x), np.floor(y)
+        fx, fy = x - i0, y - j0
+        i0i, j0i = i0.astype(np.int64), j0.astype(np.int64)
+        acc = (
+            self._bin_counts(i0i, j0i) * (1 - fx) * (1 - fy)
+            + self._bin_counts(i0i + 1, j0i) * fx * (1 - fy)
+            + self._bin_counts(i0i, j0i + 1) * (1 - fx) * fy
+            + self._bin_counts(i0i + 1, j0i + 1) * fx * fy
+        )
+        out: FloatArray = np.where(finite, acc, 0.0) / (self.surface.n_facets * b * b)
         return out
 
     # ------------------------------------------------------------------ Smith masking
@@ -519,6 +586,24 @@ class FacetModel:
     def _g2_at(self, wi: FloatArray, wo: FloatArray) -> FloatArray:
         return self.masking_g2(wi, wo) if self.masking else np.ones(wo.shape[:-1])
 
+    def _point_receptor(
+        self, theta_i_deg: float, theta_r_deg: FloatArray, source: Aperture, receptor: Aperture
+    ) -> FloatArray:
+        """Flux per steradian (sr^-1) towards a zero-solid-angle receptor, per theta_r.
+
+        ``mean_s mean_d f(wi_s, wo_d) cos(theta_d)`` over the source directions and the
+        receptor's centre (or line), with :meth:`brdf`: the limit that :func:`integrate_brdf`
+        also returns for a point receptor.
+        """
+        wi, ws = _sample_aperture(source, -math.radians(theta_i_deg))
+        out = np.empty(theta_r_deg.size)
+        for k, t in enumerate(theta_r_deg.ravel()):
+            wo, wd = _sample_aperture(receptor, math.radians(float(t)))
+            f = self.brdf(wi[:, None, :], wo[None, :, :]) * np.maximum(wo[None, :, 2], 0.0)
+            out[k] = float(ws @ f @ wd)
+        result: FloatArray = out.reshape(theta_r_deg.shape)
+        return result
+
     def reflected_fraction(
         self, theta_i_deg: float, theta_r_deg: float, source: Aperture, receptor: Aperture
     ) -> float:
@@ -531,11 +616,14 @@ class FacetModel:
         in the in-plane angle ``alpha = atan2(-wo_x, wo_z)`` and the out-of-plane angle
         ``beta = asin(wo_y)``, the mirror image taken as the source rectangle translated to
         wo_k (Mihalik eqs. 15-17 evaluated facet by facet). With masking, G2 is taken at the
-        receptor centre.
+        receptor centre. A receptor of zero solid angle gives the flux per steradian
+        (sr^-1), as in :meth:`luminance_pct`.
         """
         ti = _check_angle("theta_i_deg", theta_i_deg, 0.0, 90.0)
         tr_deg = _check_angle("theta_r_deg", theta_r_deg, -90.0, 90.0)
         kind = self._aperture_pair(source, receptor)
+        if _zero_solid_angle(receptor):
+            return float(self._point_receptor(ti, np.array([tr_deg]), source, receptor)[0])
         wi = _unit_wi(ti)
         tr = math.radians(tr_deg)
         d = np.array([-math.sin(tr), 0.0, math.cos(tr)])
@@ -597,8 +685,9 @@ class FacetModel:
         weighted by the aperture overlap ``O`` at every node (see
         :meth:`reflected_fraction` for the exact per-facet form this approximates to
         second order in the grid step). A point source (``Cone(0)``) reads the flux whose
-        mirror direction falls inside the detector; a point detector (``Cone(0)``) has
-        zero solid angle and reads 0 for any finite BRDF (use :meth:`brdf_inplane`).
+        mirror direction falls inside the detector. A point detector (``Cone(0)``) has no
+        solid angle: it then reads ``100 x`` the flux per steradian, ``f cos(theta_r)``
+        averaged over the source (sr^-1, from :meth:`brdf`), as :func:`integrate_brdf` does.
 
         Parameters
         ----------
@@ -621,6 +710,8 @@ class FacetModel:
         kind = self._aperture_pair(source, detector)
         if tr_deg.size == 0:
             return np.zeros(tr_deg.shape)
+        if _zero_solid_angle(detector):
+            return 100.0 * self._point_receptor(ti, tr_deg, source, detector)
         if kind == "cone":
             assert isinstance(source, Cone) and isinstance(detector, Cone)
             reach_a = reach_b = source.half_angle_deg + detector.half_angle_deg
