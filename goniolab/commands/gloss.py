@@ -95,20 +95,16 @@ async def _session(args: argparse.Namespace, store: RunStore, plan: GlossPlan) -
         config: dict[str, Any] = {}
         model: Any = None
         if args.config:
+            from goniolab.commands.scan import with_sample
+            from goniolab.config import load_lab_config
             from goniolab.lab import Lab
 
-            lab = await stack.enter_async_context(
-                Lab.from_config(args.config, time_scale=args.time_scale)
-            )
+            cfg = with_sample(load_lab_config(args.config), plan.sample)
+            lab = await stack.enter_async_context(Lab.from_config(cfg, time_scale=args.time_scale))
             meter = lab.glossmeter
             clock: Any = lab.clock
             config = lab.config.model_dump(mode="json")
-            if plan.sample == lab.config.sample.map:
-                model = lab.model
-            elif plan.sample:
-                from goniolab.maps import model_for
-
-                model = model_for(plan.sample, n=lab.config.sample.n)
+            model = lab.model
         else:
             meter = _open_meter_from_port(args)
             clock = RealClock()
@@ -118,7 +114,7 @@ async def _session(args: argparse.Namespace, store: RunStore, plan: GlossPlan) -
             if plan.sample:
                 from goniolab.maps import model_for
 
-                model = model_for(plan.sample, n=args.n)
+                model = await asyncio.to_thread(model_for, plan.sample, n=args.n)
         predicted = None if model is None else await predict_gloss(model, plan.angles_deg)
         run_id = store.create_run(
             kind="gloss",
@@ -203,7 +199,7 @@ def register(subparsers: Any) -> None:
     pl.add_argument("--protocol", choices=("zgm1120", "line"), default="zgm1120")
     pl.add_argument("--profile", default=None, help="protocol profile (default: the protocol's)")
     pl.add_argument("--serial-number", default="401120999", help="ZGM1120 serial number")
-    pl.add_argument("--baudrate", type=int, default=9600)
+    pl.add_argument("--baudrate", type=int, default=None, help="default: the profile's")
     pl.add_argument("--timeout", type=float, default=2.0, help="reply timeout, s")
     pl.add_argument("--sample", help="sample:NAME or height map: print the predicted gloss beside")
     pl.add_argument(

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from goniolab import __version__
+from goniolab.config import LabConfig, load_lab_config
 from goniolab.errors import UserError
 from goniolab.optics.apertures import Cone
 from goniolab.scan.events import (
@@ -33,7 +34,7 @@ from goniolab.scan.predict import Predictor
 from goniolab.scan.runner import ArmMotion, PlanRefused, RunResult, ScanRunner, dry_run
 from goniolab.store import RunStore, StoreError, resolve_store_path
 
-__all__ = ["format_eta", "format_summary", "register"]
+__all__ = ["format_eta", "format_summary", "register", "with_sample"]
 
 _EXIT = {RunState.DONE: 0, RunState.FAILED: 1, RunState.ABORTED: 130}
 
@@ -160,6 +161,7 @@ async def _specimen_prompt(which: str) -> None:
 async def _execute(
     *,
     config_path: str,
+    sample: str | None = None,
     time_scale: float | None,
     store: RunStore,
     plan: BrdfPlan | None,
@@ -168,14 +170,14 @@ async def _execute(
 ) -> int:
     from goniolab.lab import Lab
 
-    async with Lab.from_config(config_path, time_scale=time_scale) as lab:
+    if plan is None:
+        assert run_id is not None
+        plan = BrdfPlan.from_dict(store.get_run(run_id).plan)
+    lab_config = with_sample(load_lab_config(config_path), plan.sample)
+    async with Lab.from_config(lab_config, time_scale=time_scale) as lab:
         cfg = lab.config
-        if plan is None:
-            assert run_id is not None
-            rec = store.get_run(run_id)
-            plan = BrdfPlan.from_dict(rec.plan)
         predictor = Predictor(
-            _prediction_model(lab, plan.sample, cfg),
+            lab.model,
             Cone(cfg.goniometer.source_cone_deg),
             Cone(cfg.spectro.detector_cone_deg),
         )
@@ -284,13 +286,12 @@ async def _execute(
     return _EXIT[result.state]
 
 
-def _prediction_model(lab: Any, sample: str, cfg: Any) -> Any:
-    """The lab's model when the plan's sample is the configured one, else ``model_for``."""
+def with_sample(cfg: LabConfig, sample: str) -> LabConfig:
+    """``cfg`` with ``[sample] map`` set to ``sample``: in a simulated lab that is the sample
+    under the instruments, in a real lab the one the prediction is made for."""
     if not sample or sample == cfg.sample.map:
-        return lab.model
-    from goniolab.maps import model_for
-
-    return model_for(sample, n=cfg.sample.n)
+        return cfg
+    return cfg.model_copy(update={"sample": cfg.sample.model_copy(update={"map": sample})})
 
 
 def _specimen_hook(lab: Any) -> Any:
@@ -307,8 +308,6 @@ def _specimen_hook(lab: Any) -> Any:
 def _cmd_scan(args: argparse.Namespace) -> int:
     if not args.config:
         raise UserError("scan: --config FILE is required (e.g. configs/lab-sim.toml)")
-    from goniolab.config import load_lab_config
-
     cfg = load_lab_config(args.config)
     sample = args.sample or cfg.sample.map
     if args.sample and not (args.sample.startswith("sample:") or Path(args.sample).exists()):
@@ -353,8 +352,6 @@ def _open(store_arg: str | None, config_store: str | None) -> RunStore:
 def _cmd_resume(args: argparse.Namespace) -> int:
     config_store = None
     if args.config:
-        from goniolab.config import load_lab_config
-
         config_store = load_lab_config(args.config).lab.store
     store = _open(args.store, config_store)
     with store:
