@@ -276,7 +276,10 @@ class FacetModel:
     weighting : {"radiometric", "seed"}
         Facet weight: ``c/(m_z cos ti) F`` (radiometric, PHYSICS.md) or ``F`` (Wittmann).
     masking : bool
-        Multiply by the height-correlated Smith term ``G2 = 1/(1 + Lambda(wi) + Lambda(wo))``
+        Without masking the model is the seed's: unshadowed facets. It is reciprocal, but at
+        grazing incidence on rough surfaces (slopes above cot ti) the lit facets intercept
+        more than the flux falling on the surface and the albedo can exceed 1. With masking,
+        multiply by the height-correlated Smith term ``G2 = 1/(1 + Lambda(wi) + Lambda(wo))``
         with Lambda computed from the measured slopes (Heitz 2014, eq. 72 applied to the
         empirical slope distribution). For the aperture responses G2 is applied per
         direction (hemisphere bin, luminance grid node, or the receptor centre for
