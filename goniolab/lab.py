@@ -355,7 +355,7 @@ class Lab:
         await self._connect()
 
     def _build_drivers(self, park: tuple[float, float]) -> None:
-        from drivers.glossmeter import LineGlossmeter, Zgm1120
+        from drivers.glossmeter import open_glossmeter
         from drivers.modbus_stepper import ModbusStepperAxis
         from drivers.stil import StilSpectro
 
@@ -396,23 +396,14 @@ class Lab:
             timeout_s=cfg.spectro.timeout_s,
         )
         gm = cfg.glossmeter
-        if gm.protocol == "zgm1120":
-            self._glossmeter = Zgm1120(
-                "glossmeter",
-                port=gm.port,
-                serial_number=gm.serial_number,
-                profile=gm.profile,
-                baudrate=gm.baudrate,
-                timeout_s=gm.timeout_s,
-            )
-        else:
-            self._glossmeter = LineGlossmeter(
-                "glossmeter",
-                port=gm.port,
-                profile=gm.profile,
-                baudrate=gm.baudrate,
-                timeout_s=gm.timeout_s,
-            )
+        self._glossmeter = open_glossmeter(
+            gm.port,
+            protocol=gm.protocol,
+            profile=gm.profile,
+            serial_number=gm.serial_number,
+            baudrate=gm.baudrate,
+            timeout_s=gm.timeout_s,
+        )
 
     async def _connect(self) -> None:
         for part in (self._goniometer, self._spectro, self._glossmeter):
