@@ -115,6 +115,11 @@ class HeightMap:
         Where the map came from (a file name or ``sample:NAME``); used in error messages.
     meta
         Free-form string metadata (instrument, date, comment, original units ...).
+
+    Notes
+    -----
+    Maps compare by identity (``eq=False``): element-wise array equality has no single
+    truth value. Use :meth:`replace` to derive a changed copy.
     """
 
     z_um: FloatArray
