@@ -261,7 +261,9 @@ class ModbusStepperAxis:
             )
         try:
             ok = await client.connect()
-        except (ModbusException, OSError) as exc:
+        except (
+            Exception
+        ) as exc:  # pyserial/termios/pymodbus: any failure to open is "port unusable"
             client.close()
             raise Disconnected(
                 f"cannot connect to Modbus {self.transport.upper()} {self.endpoint}: {exc}",

@@ -174,6 +174,19 @@ class PtyPair:
             loop.remove_reader(self.fd)
         return buf
 
+    async def read_exactly(self, n: int, timeout_s: float = 5.0) -> bytes:
+        """Read exactly ``n`` bytes from the instrument end."""
+        loop = asyncio.get_running_loop()
+        buf = b""
+        queue: asyncio.Queue[bytes] = asyncio.Queue()
+        loop.add_reader(self.fd, lambda: queue.put_nowait(os.read(self.fd, n - len(buf))))
+        try:
+            while len(buf) < n:
+                buf += await asyncio.wait_for(queue.get(), timeout_s)
+        finally:
+            loop.remove_reader(self.fd)
+        return buf
+
     def send(self, data: bytes) -> None:
         os.write(self.fd, data)
 

@@ -132,6 +132,25 @@ async def test_move_to_sends_exact_rtu_frame_with_crc(fakes: Any, modbus_server:
     assert dev.unit_ids == [3, 3]
 
 
+async def test_rtu_over_a_real_serial_line(fakes: Any, pty_pair: Any) -> None:
+    """Through a pty: status read, then the exact move frame, each answered by the fake.
+
+    (8N1: the pty of the test sandbox rejects PARENB with EINVAL; parity does not change
+    the bytes of an RTU frame.)
+    """
+    axis = make_axis(0, transport="rtu", serial_port=pty_pair.path, baudrate=9600, parity="N")
+    await axis.connect()
+    move = asyncio.create_task(axis.move_to(12.5))
+    read_req = await pty_pair.read_exactly(8)
+    assert read_req == fakes.rtu_frame(bytes.fromhex("01 03 007E 0002".replace(" ", "")))
+    pty_pair.send(fakes.rtu_frame(bytes.fromhex("01 03 04 0000 4020".replace(" ", ""))))
+    write_req = await pty_pair.read_exactly(9 + 36)
+    assert write_req == fakes.rtu_frame(bytes([1]) + MOVE_PDU_12_5)
+    pty_pair.send(fakes.rtu_frame(bytes.fromhex("01 10 0058 0012".replace(" ", ""))))
+    await move
+    await axis.close()
+
+
 async def test_negative_target_is_twos_complement_high_word_first(
     fakes: Any, modbus_server: Any
 ) -> None:
