@@ -49,6 +49,7 @@ from goniolab.optics.apertures import (
     ISO2813_SOURCE,
     Aperture,
     Cone,
+    Rect,
     direction,
     integrate_brdf,
     lobe_subdivisions,
@@ -56,6 +57,7 @@ from goniolab.optics.apertures import (
 from goniolab.optics.fresnel import fresnel, fresnel_dielectric
 
 __all__ = [
+    "DEFAULT_CONE_RINGS",
     "GONIO_CONE",
     "KINDS",
     "AnalyticKind",
@@ -76,6 +78,9 @@ AnalyticKind = Literal["beckmann", "ggx", "cook-torrance", "ward"]
 KINDS: tuple[str, ...] = get_args(AnalyticKind)
 
 _SQRT_PI = math.sqrt(math.pi)
+
+#: Minimum rings of a cone receptor (1 + 3 k (k - 1) patches); more for narrow lobes.
+DEFAULT_CONE_RINGS: int = 8
 
 #: Lamp divergence and detector opening of the Wittmann goniospectrophotometer (sec. 2.3).
 GONIO_CONE: Cone = Cone(6.0)
@@ -188,9 +193,10 @@ class AnalyticModel:
         Roughness, > 0: Beckmann/GGX ``alpha`` (Beckmann: total rms slope), Ward ``sigma``.
     n
         Refractive index; complex ``n + ik`` for conductors (Mihalik eq. 10).
-    n_source, n_receptor
-        Aperture subdivisions used by :func:`goniolab.optics.apertures.integrate_brdf`;
-        ``n_receptor`` is a minimum, raised per axis so that the grid step stays below the
+    n_source, n_receptor, n_cone_rings
+        Aperture subdivisions used by :func:`goniolab.optics.apertures.integrate_brdf`:
+        source, rectangular receptor (per axis) and cone receptor (rings). The receptor
+        counts are minima, raised per axis so that the grid step stays below the
         lobe width (:func:`goniolab.optics.apertures.lobe_subdivisions`, at most 400 per axis:
         very small ``alpha`` at 85 deg is then under-resolved).
     """
@@ -203,6 +209,7 @@ class AnalyticModel:
         n: complex = 1.55,
         n_source: int = DEFAULT_N_SOURCE,
         n_receptor: int = DEFAULT_N_RECEPTOR,
+        n_cone_rings: int = DEFAULT_CONE_RINGS,
     ) -> None:
         if kind not in KINDS:
             raise ValueError(f"unknown analytic model kind {kind!r}; known: {', '.join(KINDS)}")
@@ -217,6 +224,7 @@ class AnalyticModel:
         self.n: complex = nc
         self.n_source = int(n_source)
         self.n_receptor = int(n_receptor)
+        self.n_cone_rings = int(n_cone_rings)
 
     def __repr__(self) -> str:
         return f"AnalyticModel({self.kind!r}, alpha={self.alpha:g}, n={self.n!r})"
@@ -283,8 +291,9 @@ class AnalyticModel:
         # tilt, foreshortened by cos(theta_r) out of the plane of incidence.
         s_axis = self.alpha / math.sqrt(2.0)
         cos_r = max(math.cos(math.radians(abs(theta_r_deg))), 1e-3)
+        minimum = self.n_receptor if isinstance(receptor, Rect) else self.n_cone_rings
         n_rec = lobe_subdivisions(
-            receptor, abs(theta_r_deg), 2.0 * s_axis, 2.0 * s_axis * cos_r, minimum=self.n_receptor
+            receptor, abs(theta_r_deg), 2.0 * s_axis, 2.0 * s_axis * cos_r, minimum=minimum
         )
         return integrate_brdf(
             self.brdf,
