@@ -198,11 +198,15 @@ def deposit_numba(
     total = 0.0
     b_lo = b0 - hb
     b_hi = b0 + nb * hb
+    sin_lo = math.sin(max(b_lo, -0.5 * math.pi))
+    sin_hi = math.sin(min(b_hi, 0.5 * math.pi))
     for k in range(mx.size):
         ox, oy, oz, w = _reflect(mx[k], my[k], mz[k], wx, wy, wz, n_re, n_im, seed)
         if w == 0.0:
             continue
         total += w
+        if oy <= sin_lo or oy >= sin_hi:
+            continue
         be = math.asin(max(-1.0, min(1.0, oy)))
         if be <= b_lo or be >= b_hi:
             continue
@@ -281,19 +285,27 @@ def rect_response_numba(
     """``sum_k w_k ov_in(alpha_k - alpha_r) ov_perp(beta_k)`` for rectangular apertures."""
     wx, wy, wz = wi[0], wi[1], wi[2]
     reach_b = 0.5 * (s_perp + r_perp)
+    reach_a = 0.5 * (s_in + r_in)
+    # Cheap rejection before any inverse trigonometric call: |wo_y| = sin|beta| and, in the
+    # frame turned by alpha_r, tan|alpha - alpha_r| = |sd| / cd.
+    sin_b = math.sin(min(reach_b, 0.5 * math.pi))
+    tan_a = math.tan(min(reach_a, 0.49 * math.pi))
+    ca = math.cos(alpha_r)
+    sa = math.sin(alpha_r)
     acc = 0.0
     for k in range(mx.size):
         ox, oy, oz, w = _reflect(mx[k], my[k], mz[k], wx, wy, wz, n_re, n_im, seed)
-        if w == 0.0:
+        if w == 0.0 or abs(oy) > sin_b:
+            continue
+        sd = -ox * ca - oz * sa
+        cd = oz * ca - ox * sa
+        if cd <= 0.0 or abs(sd) > tan_a * cd:
             continue
         be = math.asin(max(-1.0, min(1.0, oy)))
-        if abs(be) > reach_b:
-            continue
         ob = _interval_overlap(be, s_perp, r_perp)
         if ob == 0.0:
             continue
-        al = math.atan2(-ox, oz)
-        acc += w * ob * _interval_overlap(al - alpha_r, s_in, r_in)
+        acc += w * ob * _interval_overlap(math.atan2(sd, cd), s_in, r_in)
     return acc
 
 
