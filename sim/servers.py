@@ -55,6 +55,9 @@ __all__ = [
 #: Size of the simulated register space (covers every address of the AZ map).
 _REGISTER_SPACE = 0x0200
 
+#: Unread output a pty device keeps before it drops further replies (bytes).
+_PTY_OUTPUT_LIMIT = 64 * 1024
+
 #: How long a "timed-out" Modbus request is held before the (late) answer.
 _MODBUS_TIMEOUT_HOLD_S = 5.0
 
@@ -331,6 +334,8 @@ class _PtyDevice:
         self._master = -1
         self._slave = -1
         self._buf = b""
+        self._out = b""
+        self._writer_armed = False
         self._tasks: set[asyncio.Task[None]] = set()
         self.slave_name = ""
 
@@ -382,24 +387,49 @@ class _PtyDevice:
         raise NotImplementedError
 
     def write(self, data: bytes) -> None:
-        """Send bytes to the driver (no-op once closed)."""
+        """Queue bytes for the driver; flushed as the pty accepts them (no-op once closed).
+
+        Output beyond :data:`_PTY_OUTPUT_LIMIT` unread bytes is dropped, as a device's
+        transmit buffer overflows when nobody reads the line.
+        """
         if self._master < 0:
             return
-        view = memoryview(data)
-        while view:
-            try:
-                n = os.write(self._master, view)
-            except BlockingIOError:
-                continue
-            except OSError:
-                return
-            view = view[n:]
+        if len(self._out) + len(data) > _PTY_OUTPUT_LIMIT:
+            return
+        was_empty = not self._out
+        self._out += data
+        if was_empty:
+            self._flush()
+
+    def _flush(self) -> None:
+        if self._master < 0:
+            self._out = b""
+            return
+        loop = asyncio.get_running_loop()
+        try:
+            n = os.write(self._master, self._out)
+        except BlockingIOError:
+            n = 0
+        except OSError:
+            self._out = b""
+            n = 0
+        self._out = self._out[n:]
+        if self._out and not self._writer_armed:
+            loop.add_writer(self._master, self._flush)
+            self._writer_armed = True
+        elif not self._out and self._writer_armed:
+            loop.remove_writer(self._master)
+            self._writer_armed = False
 
     def disconnect(self) -> None:
         """Drop off the line: stop reading and close the pty (the driver sees EOF/EIO)."""
         if self._master >= 0:
             with contextlib.suppress(Exception):
-                asyncio.get_running_loop().remove_reader(self._master)
+                loop = asyncio.get_running_loop()
+                loop.remove_reader(self._master)
+                loop.remove_writer(self._master)
+        self._writer_armed = False
+        self._out = b""
         self._close_fds()
 
     def _close_fds(self) -> None:
@@ -601,6 +631,8 @@ class ZgmPtyDevice(_PtyDevice):
     async def _push(self, tid: str, mask: int) -> None:
         while self.open:
             await self.gloss.clock.sleep(self.gloss.autosend_interval_s)
+            while self._out and self.open:  # back-pressure: the line has not taken the last one
+                await asyncio.sleep(0.01)
             reply = await self._measure_reply(tid, mask, 1, opcode="6")
             self.write(reply.encode("ascii") + self.profile.reply_terminator.encode("ascii"))
 

@@ -299,3 +299,68 @@ async def test_zgm1120_pty_measure_reply_bytes(ptys) -> None:  # type: ignore[no
         assert pushed == b"6| 401120999|ef|813|813|930|930|-2|-2|1|23\r\n"
     finally:
         writer.close()
+
+
+async def test_goniolab_sim_serve_subprocess(tmp_path: Path) -> None:
+    """`goniolab sim serve --json`: endpoints as one JSON line, a raw master reads a
+    register, SIGINT stops it with exit code 0 and the pty links are gone."""
+    import json
+    import signal
+    import socket
+    import sys
+
+    from goniolab.config import configs_dir
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    text = (
+        (configs_dir() / "lab-sim-wire.toml")
+        .read_text()
+        .replace("port = 5020", f"port = {port}")
+        .replace("/tmp/goniolab-sim", str(tmp_path / "sim"))
+        .replace('map = "sample:wittmann-3"', 'map = "sample:gaussian-s0.05"')
+    )
+    cfg = tmp_path / "wire.toml"
+    cfg.write_text(text)
+    proc = await asyncio.create_subprocess_exec(
+        sys.executable,
+        "-m",
+        "goniolab.cli",
+        "sim",
+        "serve",
+        "--config",
+        str(cfg),
+        "--json",
+        "--time-scale",
+        "0",
+        stdout=asyncio.subprocess.PIPE,
+        stderr=asyncio.subprocess.PIPE,
+    )
+    try:
+        assert proc.stdout is not None
+        line = await asyncio.wait_for(proc.stdout.readline(), 60)
+        info = json.loads(line)
+        assert info["time_scale"] == 0.0
+        eps = info["endpoints"]
+        assert eps["lamp"] == {
+            "transport": "tcp",
+            "host": "127.0.0.1",
+            "port": port,
+            "unit_id": 1,
+            "profile": "oriental-az",
+        }
+        assert eps["spectro"]["port"] == str(tmp_path / "sim" / "spectro")
+        assert (tmp_path / "sim" / "gloss").is_symlink()
+        client = AsyncModbusTcpClient("127.0.0.1", port=port, timeout=5, retries=0)
+        await client.connect()
+        assert await read(client, FEEDBACK, 2) == [0x0000, 0xAFC8]  # detector parked at 45 deg
+        client.close()
+        proc.send_signal(signal.SIGINT)
+        rc = await asyncio.wait_for(proc.wait(), 30)
+        assert rc == 0, (await proc.stderr.read()).decode() if proc.stderr else ""
+        assert not (tmp_path / "sim" / "spectro").exists()
+    finally:
+        if proc.returncode is None:
+            proc.kill()
+            await proc.wait()
