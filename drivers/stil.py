@@ -36,7 +36,13 @@ from drivers.base import (
 from drivers.profiles import StilProfile, load_stil_profile, template_regex
 from drivers.serial_io import LineTransport, quote
 
-__all__ = ["StilSpectro", "parse_measure_reply", "spectrum_to_lab", "spectrum_to_xyz"]
+__all__ = [
+    "StilSpectro",
+    "match_reply",
+    "parse_measure_reply",
+    "spectrum_to_lab",
+    "spectrum_to_xyz",
+]
 
 #: Observer used for every colour computation (PROTOCOLS.md: the Ruby DLL offers 1931 2 deg
 #: and 1964 10 deg; gloss/appearance work uses 10 deg).
@@ -72,7 +78,7 @@ def parse_measure_reply(
         )
     fields: dict[str, str] = {}
     for template, line in zip(profile.reply_measure, lines, strict=True):
-        fields.update(_match(profile, template, line, device))
+        fields.update(match_reply(profile, template, line, device))
     lum_line = lines[0]
     luminance = _float(fields["luminance_pct"], "luminance", lum_line, device)
     values_text = fields["values"]
@@ -90,7 +96,14 @@ def parse_measure_reply(
     return luminance, wavelengths, values
 
 
-def _match(profile: StilProfile, template: str, line: str, device: str) -> dict[str, str]:
+def match_reply(
+    profile: StilProfile, template: str, line: str, device: str = "spectro"
+) -> dict[str, str]:
+    """Match one reply line: the profile's error line first, then ``template``.
+
+    Returns the template's fields. Raises :class:`DeviceFault` (with the device's error
+    code) for an error line and :class:`ProtocolError` quoting the line otherwise.
+    """
     error = template_regex(profile.reply_error).match(line)
     if error is not None:
         code = int(error.group("code")) if "code" in error.groupdict() else None
@@ -180,7 +193,7 @@ class StilSpectro:
         replies: list[tuple[str, dict[str, str]]] = []
         for template in templates:
             line = await self._io.read_line(self.profile.reply_terminator, timeout_s)
-            replies.append((line, _match(self.profile, template, line, self.name)))
+            replies.append((line, match_reply(self.profile, template, line, self.name)))
         return replies
 
     async def identify(self) -> str:

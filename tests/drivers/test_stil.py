@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import os
+import string
 from typing import Any
 
 import numpy as np
@@ -20,7 +21,13 @@ from drivers.base import (
     Spectrocolorimeter,
 )
 from drivers.profiles import load_stil_profile
-from drivers.stil import StilSpectro, parse_measure_reply, spectrum_to_lab, spectrum_to_xyz
+from drivers.stil import (
+    StilSpectro,
+    match_reply,
+    parse_measure_reply,
+    spectrum_to_lab,
+    spectrum_to_xyz,
+)
 
 PROFILE = load_stil_profile("stil-ruby")
 SPECTRUM = [round(10.0 + 0.25 * i, 2) for i in range(81)]  # 380..780 nm, 5 nm
@@ -133,6 +140,22 @@ def test_garbage_into_measure_parser_raises_only_protocol_errors(lines: list[str
         assert any(line.startswith("ERR ") for line in lines)  # a genuine error reply
     except ProtocolError:
         pass
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.text(max_size=120))
+def test_garbage_into_every_reply_template(line: str) -> None:
+    for template in (PROFILE.reply_identify, PROFILE.reply_set_exposure, *PROFILE.reply_measure):
+        try:
+            fields = match_reply(PROFILE, template, line)
+        except DeviceFault as exc:
+            assert line.startswith("ERR ") and isinstance(exc.code, int)
+            continue
+        except ProtocolError as exc:
+            assert "does not match" in str(exc)
+            continue
+        names = {f for _, f, _, _ in string.Formatter().parse(template) if f}
+        assert set(fields) == names  # every field of the template was captured
 
 
 @settings(max_examples=100, deadline=None)
