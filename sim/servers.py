@@ -336,6 +336,8 @@ class _PtyDevice:
         self._buf = b""
         self._out = b""
         self._writer_armed = False
+        self._drained = asyncio.Event()
+        self._drained.set()
         self._tasks: set[asyncio.Task[None]] = set()
         self.slave_name = ""
 
@@ -414,6 +416,10 @@ class _PtyDevice:
             self._out = b""
             n = 0
         self._out = self._out[n:]
+        if self._out:
+            self._drained.clear()
+        else:
+            self._drained.set()
         if self._out and not self._writer_armed:
             loop.add_writer(self._master, self._flush)
             self._writer_armed = True
@@ -430,6 +436,7 @@ class _PtyDevice:
                 loop.remove_writer(self._master)
         self._writer_armed = False
         self._out = b""
+        self._drained.set()
         self._close_fds()
 
     def _close_fds(self) -> None:
@@ -631,8 +638,7 @@ class ZgmPtyDevice(_PtyDevice):
     async def _push(self, tid: str, mask: int) -> None:
         while self.open:
             await self.gloss.clock.sleep(self.gloss.autosend_interval_s)
-            while self._out and self.open:  # back-pressure: the line has not taken the last one
-                await asyncio.sleep(0.01)
+            await self._drained.wait()  # back-pressure: the line took the last reading
             reply = await self._measure_reply(tid, mask, 1, opcode="6")
             self.write(reply.encode("ascii") + self.profile.reply_terminator.encode("ascii"))
 
