@@ -22,15 +22,16 @@ import statistics
 import sys
 import time
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from goniolab.optics.facet import FacetModel  # noqa: E402
-from goniolab.optics.heightmap import HeightMap  # noqa: E402
-from goniolab.optics.surface import Surface  # noqa: E402
+from goniolab.optics.facet import FacetModel
+from goniolab.optics.heightmap import HeightMap
+from goniolab.optics.surface import Surface
 
 TARGETS_MS = {"hemisphere_0.5deg": 20.0, "luminance_71pt": 50.0, "gloss_triplet": 50.0}
 
@@ -89,11 +90,11 @@ def main(argv: list[str] | None = None) -> int:
     }
     backends: dict[str, object] = {}
     for backend in ("numba", "numpy"):
-        model = FacetModel(surface, n=1.55, backend=backend)  # type: ignore[arg-type]
+        model = FacetModel(surface, n=1.55, backend=backend)
         work: dict[str, Callable[[], object]] = {
-            "hemisphere_0.5deg": lambda m=model: m.brdf_hemisphere(45.0, bin_deg=0.5),
-            "luminance_71pt": lambda m=model: m.luminance_pct(45.0, theta_r),
-            "gloss_triplet": lambda m=model: m.gloss((20, 60, 85)),
+            "hemisphere_0.5deg": partial(model.brdf_hemisphere, 45.0, bin_deg=0.5),
+            "luminance_71pt": partial(model.luminance_pct, 45.0, theta_r),
+            "gloss_triplet": partial(model.gloss, (20, 60, 85)),
         }
         rows = {}
         for name, fn in work.items():
