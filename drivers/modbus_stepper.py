@@ -41,7 +41,7 @@ import asyncio
 import contextlib
 import time
 from collections.abc import Awaitable, Callable, Sequence
-from typing import Any, Literal
+from typing import Any, Literal, NoReturn
 
 from pymodbus.client import AsyncModbusSerialClient, AsyncModbusTcpClient
 from pymodbus.client.mixin import ModbusClientMixin
@@ -390,7 +390,7 @@ class ModbusStepperAxis:
     async def _alarm_code(self) -> int:
         return await self._read_int32(self.profile.registers.alarm_code, "alarm code", signed=False)
 
-    async def _raise_alarm(self, context: str) -> None:
+    async def _raise_alarm(self, context: str) -> NoReturn:
         code = await self._alarm_code()
         raise DeviceFault(
             f"controller alarm {code} (0x{code:X}) {context} at {self.endpoint}",
@@ -459,11 +459,19 @@ class ModbusStepperAxis:
             assert regs.direct_data is not None
             await self._write(regs.direct_data, self.move_registers(target_steps), "direct data")
         else:
-            assert None not in (regs.accel, regs.decel, regs.velocity, regs.target_position)
-            await self._write(regs.accel or 0, [self.accel_counts], "accel")
-            await self._write(regs.decel or 0, [self.accel_counts], "decel")
-            await self._write(regs.velocity or 0, [self.speed_counts], "velocity")
-            await self._write(regs.target_position or 0, int32_registers(target_steps), "target")
+            accel, decel, velocity, target = (
+                regs.accel,
+                regs.decel,
+                regs.velocity,
+                regs.target_position,
+            )
+            # the loader requires all four for move_style "command-opcode"
+            assert accel is not None and decel is not None
+            assert velocity is not None and target is not None
+            await self._write(accel, [self.accel_counts], "accel")
+            await self._write(decel, [self.accel_counts], "decel")
+            await self._write(velocity, [self.speed_counts], "velocity")
+            await self._write(target, int32_registers(target_steps), "target")
             await self._write_opcode("absolute_move")
         self._target_steps = target_steps
 
