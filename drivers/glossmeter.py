@@ -40,7 +40,7 @@ import math
 import re
 import string
 import time
-from collections.abc import AsyncIterator, Sequence
+from collections.abc import AsyncGenerator, Sequence
 
 from drivers.base import GLOSS_ANGLES_DEG, DeviceFault, GlossReading, ProtocolError
 from drivers.profiles import (
@@ -302,7 +302,7 @@ class Zgm1120:
             )
         return tuple(_int_field(p, "ppm deviation", line, self.name) for p in payload)
 
-    async def readings(self) -> AsyncIterator[GlossReading]:
+    async def readings(self) -> AsyncGenerator[GlossReading, None]:
         """Switch AutoSend on (opcode 6, all angles) and yield each pushed reading."""
         tid = self.next_transaction_id()
         self._io.discard_input()
@@ -421,7 +421,7 @@ class LineGlossmeter:
             overflow_deg=tuple(a for a in reading.overflow_deg if a in angles_deg),
         )
 
-    async def readings(self) -> AsyncIterator[GlossReading]:
+    async def readings(self) -> AsyncGenerator[GlossReading, None]:
         """Yield every line the meter prints, parsed."""
         while True:
             line = await self._io.read_line(self.profile.line_terminator, None)

@@ -107,7 +107,11 @@ async def test_autosend_yields_pushed_readings(pty_pair: Any) -> None:
     meter = Zgm1120(port=pty_pair.path, first_transaction_id="qq")
     await meter.connect()
     stream = meter.readings()
-    first = asyncio.create_task(stream.__anext__())
+
+    async def next_reading() -> GlossReading:
+        return await anext(stream)
+
+    first = asyncio.create_task(next_reading())
     command = await pty_pair.read_until(b":")
     assert command == b"6| 401120999|qq|7|1|0:"
     pty_pair.send(b"6| 401120999|qq|120|5|450|40|801|77|1|22\r\n")

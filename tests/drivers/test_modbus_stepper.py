@@ -9,6 +9,7 @@ from __future__ import annotations
 import asyncio
 import socket
 import struct
+from collections.abc import Callable
 from typing import Any
 
 import pytest
@@ -71,7 +72,12 @@ def make_axis(port: int, clock: FakeClock | None = None, **kw: Any) -> ModbusSte
     return ModbusStepperAxis("lamp", **options)
 
 
-def mover(polls_to_arrive: int, *, final_steps: int | None = None, alarm_at: int | None = None):
+Hook = Callable[[Any, int, Any], None]
+
+
+def mover(
+    polls_to_arrive: int, *, final_steps: int | None = None, alarm_at: int | None = None
+) -> tuple[Hook, Hook]:
     """on_write/on_read hooks: a move starts on the direct-data write and finishes (or
     alarms) after a number of status reads."""
     state = {"reads": 0, "target": 0}

@@ -64,10 +64,10 @@ async def spectro(pty_pair: Any) -> Any:
 
 async def test_connect_identifies_and_sets_exposure(spectro: Any) -> None:
     dev, log = spectro
-    assert isinstance(dev, Spectrocolorimeter)
     assert log == [b"IDN?\r", b"EXP 10000\r"]
     assert dev.ident == "STIL RUBY SN 12345 FW 2.1"
     assert dev.exposure_us == 10000
+    assert isinstance(dev, Spectrocolorimeter)
 
 
 async def test_measure_parses_luminance_and_spectrum(spectro: Any) -> None:
