@@ -84,9 +84,7 @@ def sample_model(cfg: LabConfig) -> ReflectanceModel:
 
     try:
         model: ReflectanceModel = model_for(_map_spec(cfg), n=cfg.sample.n)
-    except UserError:
-        raise
-    except (ValueError, OSError) as exc:
+    except (UserError, ValueError, OSError) as exc:
         raise ConfigError(cfg.source or "<config>", "sample.map", str(exc)) from None
     return model
 

@@ -52,9 +52,9 @@ from sim.motion import MotorFault, SimMotor
 
 __all__ = [
     "GLOSS_OVERFLOW_GU",
+    "SPECTRUM_WAVELENGTHS_NM",
     "LuminanceModel",
     "MirrorModel",
-    "SPECTRUM_WAVELENGTHS_NM",
     "SimAxis",
     "SimGlossmeter",
     "SimSpectro",
