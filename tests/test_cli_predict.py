@@ -1,0 +1,128 @@
+"""``goniolab predict`` and ``goniolab samples`` through goniolab.cli.main."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from goniolab.cli import main
+from goniolab.optics.analytic import AnalyticModel
+from goniolab.optics.fresnel import fresnel_conductor, fresnel_dielectric
+
+
+def _run_json(capsys: pytest.CaptureFixture[str], *argv: str) -> Any:
+    code = main([*argv, "--json"])
+    out = capsys.readouterr().out
+    assert code == 0, out
+    return json.loads(out)
+
+
+def test_flat_black_glass_reads_100(capsys: pytest.CaptureFixture[str]) -> None:
+    rep = _run_json(capsys, "predict", "gloss", "sample:flat", "--n", "1.567")
+    assert round(rep["G60"], 1) == 100.0
+    assert round(rep["G20"], 1) == 100.0 and round(rep["G85"], 1) == 100.0
+    assert rep["haze_index"] == pytest.approx(0.0, abs=1e-6)
+    assert rep["e430"]["doi"] == 100.0
+    assert rep["d523_angle"] == 20
+
+
+def test_flat_pu_reads_the_fresnel_ratio(capsys: pytest.CaptureFixture[str]) -> None:
+    # PHYSICS.md: n = 1.55 gives 95.4 / 97.3 / 99.8 at 20 / 60 / 85.
+    rep = _run_json(capsys, "predict", "gloss", "sample:flat")
+    assert [round(rep[k], 1) for k in ("G20", "G60", "G85")] == [95.4, 97.3, 99.8]
+
+
+def test_stats_of_a_gaussian_sample(capsys: pytest.CaptureFixture[str]) -> None:
+    st = _run_json(capsys, "predict", "stats", "sample:gaussian-s0.05")
+    # Per-axis rms slope 0.05 -> total rms gradient Sdq = 0.05 sqrt(2).
+    assert st["Sdq"] == pytest.approx(0.05 * math.sqrt(2), rel=0.03)
+    assert set(st) >= {"Ra_nm", "Sq_nm", "Sdq", "h_r"}
+    # Gaussian heights: Ra = sqrt(2/pi) Sq.
+    assert st["Ra_nm"] == pytest.approx(math.sqrt(2 / math.pi) * st["Sq_nm"], rel=0.03)
+
+
+def test_brdf_of_a_gaussian_sample_matches_beckmann(capsys: pytest.CaptureFixture[str]) -> None:
+    # PHYSICS.md truth: a Gaussian surface of per-axis rms slope s has the facet BRDF
+    # F P22 / (4 ci co cos^4 th), i.e. Beckmann with alpha = s sqrt(2) (masking ~1 here).
+    out = _run_json(
+        capsys,
+        "predict",
+        "brdf",
+        "sample:gaussian-s0.05",
+        "--theta-i",
+        "45",
+        "--theta-r",
+        "39:51:3",
+    )
+    tr = np.array(out["theta_r_deg"])
+    np.testing.assert_allclose(tr, [39.0, 42.0, 45.0, 48.0, 51.0])
+    expected = AnalyticModel("beckmann", alpha=0.05 * math.sqrt(2)).luminance_pct(45.0, tr)
+    np.testing.assert_allclose(out["luminance_pct"], expected, rtol=0.05)
+    # brdf_sr is the aperture average: luminance / 100 / (pi sin^2(3 deg) cos(theta_r)).
+    omega = math.pi * math.sin(math.radians(3.0)) ** 2 * np.cos(np.radians(tr))
+    np.testing.assert_allclose(
+        out["brdf_sr"], np.array(out["luminance_pct"]) / 100 / omega, rtol=1e-3
+    )
+
+
+def test_point_brdf_scales_with_the_complex_fresnel(capsys: pytest.CaptureFixture[str]) -> None:
+    # At the in-plane specular direction the facets are level: the local incidence is 45 deg
+    # for every contributing facet, so the metal/dielectric ratio is the Fresnel ratio.
+    args = ("predict", "brdf", "sample:gaussian-s0.05", "--point", "--theta-r", "45")
+    diel = _run_json(capsys, *args)
+    metal = _run_json(capsys, *args, "--n", "0.27+3.41j")
+    assert "luminance_pct" not in diel
+    c = math.cos(math.radians(45.0))
+    ratio = float(fresnel_conductor(c, complex(0.27, 3.41))) / float(fresnel_dielectric(c, 1.55))
+    assert metal["brdf_sr"][0] / diel["brdf_sr"][0] == pytest.approx(ratio, rel=0.02)
+
+
+def test_theta_list_forms(capsys: pytest.CaptureFixture[str]) -> None:
+    out = _run_json(capsys, "predict", "brdf", "sample:flat", "--point", "--theta-r", "0:10:2.5")
+    assert out["theta_r_deg"] == [0.0, 2.5, 5.0, 7.5, 10.0]
+    out = _run_json(capsys, "predict", "brdf", "sample:flat", "--point", "--theta-r=-20,5")
+    assert out["theta_r_deg"] == [-20.0, 5.0]
+
+
+def test_bad_file_exits_2_with_one_line_naming_it(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    bad = tmp_path / "broken.csv"
+    bad.write_text("1,2,3\n4,oops,6\n")
+    assert main(["predict", "gloss", str(bad), "--step-um", "1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "broken.csv" in err and err.startswith("goniolab: error:")
+    assert main(["predict", "stats", str(tmp_path / "missing.npy")]) == 2
+    assert "missing.npy" in capsys.readouterr().err
+
+
+def test_unknown_sample_exits_2(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["predict", "gloss", "sample:wittmann-42"]) == 2
+    err = capsys.readouterr().err
+    assert "wittmann-42" in err and "wittmann-8" in err
+
+
+def test_bad_options_exit_2(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["predict", "brdf", "sample:flat", "--theta-r", "10:0:1"]) == 2
+    assert "--theta-r" in capsys.readouterr().err
+    assert main(["predict", "brdf", "sample:flat", "--theta-i", "95"]) == 2
+    assert "--theta-i" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:
+        main(["predict", "gloss", "sample:flat", "--n", "glass"])
+    assert exc.value.code == 2
+    assert "--n 'glass'" in capsys.readouterr().err
+
+
+def test_samples_command_lists_the_library(capsys: pytest.CaptureFixture[str]) -> None:
+    rows = _run_json(capsys, "samples")
+    by_name = {r["name"]: r for r in rows}
+    assert len(rows) == 12
+    assert by_name["wittmann-4"]["seed_g60"] == 26.0 and by_name["wittmann-4"]["seed_ra_nm"] == 250
+    assert by_name["flat"]["n"] == 1.55
+    assert main(["samples"]) == 0
+    assert "wittmann-8" in capsys.readouterr().out
