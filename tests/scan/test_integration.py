@@ -1,0 +1,202 @@
+"""Integration: the runner and the CLI on the simulated lab (sim clock at scale 0, no sleeps).
+
+In-process sims and the wire sims (real drivers over Modbus TCP and ptys), a fault injected
+through ``[sim.faults]``, and a SIGKILLed subprocess resumed to exactly one row per reading.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from goniolab.cli import main
+from goniolab.config import configs_dir
+from goniolab.store import RunStore
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def lab_config(
+    tmp_path: Path,
+    *,
+    base: str = "lab-sim.toml",
+    sim: dict[str, str] | None = None,
+    faults: dict[str, str] | None = None,
+    name: str = "lab.toml",
+) -> Path:
+    """Copy a shipped lab config with [sim] keys and [sim.faults] entries replaced."""
+    text = (configs_dir() / base).read_text()
+    for key, value in (sim or {}).items():
+        text, n = re.subn(rf"(?m)^{key}\s*=.*$", f"{key} = {value}", text, count=1)
+        assert n == 1, key
+    head, sep, tail = text.partition("[sim.faults]")
+    assert sep, "config has no [sim.faults] table"
+    extra = "".join(f"{k} = {v}\n" for k, v in (faults or {}).items())
+    text = head + sep + "\n" + extra + tail.split("\n", 1)[1]
+    # bare profile names resolve under the shipped configs directory, wherever the copy is
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def run_cli(args: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
+    code = main(args)
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+NOISELESS = {"noise_pct": "0.0"}
+
+
+def test_scan_on_the_in_process_sim_matches_the_model(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    cfg = lab_config(tmp_path, sim=NOISELESS)
+    store = tmp_path / "s.sqlite"
+    code, out, err = run_cli(
+        ["scan", "--config", str(cfg), "--theta-i", "45", "--theta-r", "38:52:1",
+         "--repeats", "2", "--time-scale", "0", "--json", "--store", str(store)],
+        capsys,
+    )  # fmt: skip
+    assert code == 0, err
+    summary = json.loads(out)  # stdout holds the summary JSON and nothing else
+    assert summary["state"] == "done" and summary["readings"] == 30
+    # the sim reads the same facet model through the same cones: residuals vanish
+    peak = summary["predicted_peak"]["amplitude_pct"]
+    assert summary["rmse_pct"] < 1e-3 * peak
+    assert summary["peak_offset_deg"] == pytest.approx(0.0, abs=0.05)
+    assert summary["hint"] is None
+    assert "ETA" in err and "30/30" in err
+    with RunStore(store) as s:
+        run = s.get_run(summary["run_id"])
+        assert run.status == "done" and run.sample == "sample:wittmann-3"
+        assert s.count_points(run.id) == 30
+        assert len(s.predictions(run.id)) == 15
+        assert run.config["goniometer"]["source_cone_deg"] == 6.0
+
+
+def test_sample_tilt_shifts_the_peak_by_twice_the_tilt(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # Wittmann et al. 2021, sec. 5.2-5.3: a tilt tau moves the specular peak by 2 tau.
+    cfg = lab_config(tmp_path, sim={**NOISELESS, "sample_tilt_deg": "1.0"})
+    code, out, err = run_cli(
+        ["scan", "--config", str(cfg), "--theta-r", "38:56:1", "--time-scale", "0", "--json",
+         "--store", str(tmp_path / "s.sqlite")],
+        capsys,
+    )  # fmt: skip
+    assert code == 0, err
+    s = json.loads(out)
+    assert s["peak_offset_deg"] == pytest.approx(2.0, abs=0.25)
+    assert "tilted by about 1.0" in s["hint"]
+
+
+def test_fault_mid_scan_fails_keeps_points_and_parks(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    cfg = lab_config(tmp_path, faults={"detector_stall_at_deg": "47.2"})
+    store = tmp_path / "s.sqlite"
+    code, out, err = run_cli(
+        ["scan", "--config", str(cfg), "--theta-r", "40:55:1", "--repeats", "2",
+         "--time-scale", "0", "--json", "--store", str(store)],
+        capsys,
+    )  # fmt: skip
+    assert code == 1
+    s = json.loads(out)
+    assert s["state"] == "failed"
+    assert "detector" in s["reason"]
+    # the move 47 -> 48 deg stops at 47.2 (0.8 deg > the 0.5 deg stall tolerance):
+    # geometries 40..47 (8 x 2 readings) are kept
+    assert s["readings"] == 16
+    with RunStore(store) as st:
+        run = st.get_run(s["run_id"])
+        assert run.status == "failed" and st.count_points(run.id) == 16
+    assert f"goniolab scan resume {s['run_id']}" in err
+
+
+def _kill_mid_scan(cfg: Path, store: Path, total: int) -> int:
+    """Start a scan in a subprocess, SIGKILL it once progress shows, return stored rows."""
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "goniolab.cli", "scan", "--config", str(cfg), "--theta-r", "0:70:1",
+         "--repeats", "3", "--time-scale", "0", "--store", str(store)],
+        cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env,
+    )  # fmt: skip
+    assert proc.stderr is not None
+    killed = False
+    for line in proc.stderr:  # blocking reads of the progress lines: no sleeps, no timing
+        m = re.search(r"\] (\d+)/(\d+) ETA", line)
+        if m and 0 < int(m.group(1)) < total:
+            os.kill(proc.pid, signal.SIGKILL)
+            killed = True
+            break
+    proc.wait()
+    assert killed, "the scan finished before it could be killed"
+    assert proc.returncode == -signal.SIGKILL
+    with RunStore(store) as s:
+        return s.count_points(1)
+
+
+@pytest.mark.slow
+def test_kill_9_then_resume_stores_every_reading_exactly_once(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    cfg = lab_config(tmp_path)
+    store = tmp_path / "s.sqlite"
+    total = 71 * 3
+    n_before = _kill_mid_scan(cfg, store, total)
+    assert 0 < n_before < total
+    with RunStore(store) as s:
+        assert s.get_run(1).status == "running"  # killed: nobody could record anything else
+    code, out, err = run_cli(
+        ["scan", "resume", "1", "--store", str(store), "--time-scale", "0", "--json"], capsys
+    )
+    assert code == 0, err
+    summary = json.loads(out)
+    assert summary["state"] == "done" and summary["readings"] == total
+    with RunStore(store) as s:
+        keys = [(p.index, p.repeat) for p in s.points(1)]
+        assert keys == [(i, r) for i in range(71) for r in range(3)]
+        assert s.get_run(1).status == "done"
+
+
+@pytest.mark.wire
+def test_scan_through_the_wire_sims(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    cfg = lab_config(tmp_path, base="lab-sim-wire.toml", sim=NOISELESS)
+    code, out, err = run_cli(
+        ["scan", "--config", str(cfg), "--theta-r", "40:50:2", "--time-scale", "0", "--json",
+         "--store", str(tmp_path / "s.sqlite")],
+        capsys,
+    )  # fmt: skip
+    assert code == 0, err
+    s = json.loads(out)
+    assert s["state"] == "done" and s["readings"] == 6
+    # steps_per_deg = 1000 on the wire: the STIL reply carries the luminance with its own
+    # resolution, so compare with a tolerance well below the peak
+    assert s["rmse_pct"] < 1e-2 * s["predicted_peak"]["amplitude_pct"]
+
+
+def test_gloss_log_from_the_sim_config(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    cfg = lab_config(tmp_path, sim=NOISELESS)
+    store = tmp_path / "s.sqlite"
+    code, out, err = run_cli(
+        ["gloss", "log", "--config", str(cfg), "--count", "3", "--json", "--time-scale", "0",
+         "--store", str(store)],
+        capsys,
+    )  # fmt: skip
+    assert code == 0, err
+    lines = [json.loads(x) for x in out.splitlines()]
+    assert [x["seq"] for x in lines] == [0, 1, 2]
+    for x in lines:
+        # noiseless sim: the meter reads the model's gloss to its 0.1 GU resolution
+        for angle in ("20", "60", "85"):
+            assert x["values_gu"][angle] == pytest.approx(x["predicted_gu"][angle], abs=0.051)
+    with RunStore(store) as s:
+        assert len(s.gloss_readings(lines[0]["run_id"])) == 3
