@@ -34,6 +34,7 @@ __all__ = [
     "cone_response_numpy",
     "deposit_numba",
     "deposit_numpy",
+    "hemisphere_bin_tables",
     "hemisphere_numba",
     "hemisphere_numpy",
     "rect_response_numba",
@@ -136,6 +137,16 @@ def _table(
 
 # ----------------------------------------------------------------------------- numba kernels
 @njit(cache=True, nogil=True, fastmath=False)
+def _diamond(x: float, y: float) -> float:  # pragma: no cover - numba
+    """Pseudo-angle in [0, 4), strictly increasing with atan2(y, x) mod 2 pi; 0 at (0, 0)."""
+    if x == 0.0 and y == 0.0:
+        return 0.0
+    if y >= 0.0:
+        return y / (x + y) if x >= 0.0 else 1.0 - x / (y - x)
+    return 2.0 - y / (-x - y) if x < 0.0 else 3.0 + x / (x - y)
+
+
+@njit(cache=True, nogil=True, fastmath=False)
 def hemisphere_numba(
     mx: FloatArray,
     my: FloatArray,
@@ -144,30 +155,48 @@ def hemisphere_numba(
     n_re: float,
     n_im: float,
     seed: bool,
-    n_theta: int,
-    n_phi: int,
-    bin_rad: float,
+    cos_edges: FloatArray,
+    theta_guess: NDArray[np.int64],
+    diamond_edges: FloatArray,
+    phi_guess: NDArray[np.int64],
 ) -> tuple[FloatArray, float]:  # pragma: no cover - numba
-    """Sum of weights per (theta_o, phi_o) bin of width ``bin_rad``; also the total weight."""
+    """Sum of weights per (theta_o, phi_o) bin; also the total weight.
+
+    Bins are found without inverse trigonometry: theta bin k holds
+    ``cos_edges[k+1] < wo_z <= cos_edges[k]`` and phi bin k holds
+    ``diamond_edges[k] <= D(wo_x, wo_y) < diamond_edges[k+1]`` (D the pseudo-angle), from a
+    first guess tabulated on a uniform grid (``theta_guess`` over wo_z in [0, 1],
+    ``phi_guess`` over D in [0, 4)) refined by comparisons.
+    """
+    n_theta = cos_edges.size - 1
+    n_phi = diamond_edges.size - 1
+    mt = theta_guess.size
+    mp = phi_guess.size
     hist = np.zeros((n_theta, n_phi))
     wx, wy, wz = wi[0], wi[1], wi[2]
     total = 0.0
-    two_pi = 2.0 * math.pi
     for k in range(mx.size):
         ox, oy, oz, w = _reflect(mx[k], my[k], mz[k], wx, wy, wz, n_re, n_im, seed)
         if w == 0.0:
             continue
         total += w
-        th = math.acos(min(oz, 1.0))
-        it = int(th / bin_rad)
-        if it >= n_theta:
-            it = n_theta - 1
-        ph = math.atan2(oy, ox)
-        if ph < 0.0:
-            ph += two_pi
-        ip = int(ph / bin_rad)
-        if ip >= n_phi:
-            ip = n_phi - 1
+        j = int(oz * mt)
+        if j >= mt:
+            j = mt - 1
+        it = theta_guess[j]
+        while it > 0 and oz > cos_edges[it]:
+            it -= 1
+        while it < n_theta - 1 and oz <= cos_edges[it + 1]:
+            it += 1
+        d = _diamond(ox, oy)
+        j = int(d * 0.25 * mp)
+        if j >= mp:
+            j = mp - 1
+        ip = phi_guess[j]
+        while ip < n_phi - 1 and d >= diamond_edges[ip + 1]:
+            ip += 1
+        while ip > 0 and d < diamond_edges[ip]:
+            ip -= 1
         hist[it, ip] += w
     return hist, total
 
@@ -330,6 +359,47 @@ def reflect_numpy(
     return ox, oy, oz, np.where(keep, w, 0.0)
 
 
+def diamond_numpy(x: FloatArray, y: FloatArray) -> FloatArray:
+    """Numpy twin of the pseudo-angle ``D(x, y)`` in [0, 4)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d = np.where(
+            y >= 0.0,
+            np.where(x >= 0.0, y / (x + y), 1.0 - x / (y - x)),
+            np.where(x < 0.0, 2.0 - y / (-x - y), 3.0 + x / (x - y)),
+        )
+    out: FloatArray = np.where((x == 0.0) & (y == 0.0), 0.0, d)
+    return out
+
+
+def hemisphere_bin_tables(
+    bin_rad: float, n_theta: int, n_phi: int, n_guess: int = 4096
+) -> tuple[FloatArray, NDArray[np.int64], FloatArray, NDArray[np.int64]]:
+    """Edge tables and first-guess tables for :func:`hemisphere_numba` / its twin."""
+    cos_edges = np.cos(bin_rad * np.arange(n_theta + 1))
+    phi_e = bin_rad * np.arange(n_phi + 1)
+    diamond_edges = diamond_numpy(np.cos(phi_e), np.sin(phi_e))
+    diamond_edges[0], diamond_edges[-1] = 0.0, 4.0
+    theta_guess = _theta_bins(np.arange(n_guess) / n_guess, cos_edges)
+    phi_guess = _phi_bins(4.0 * np.arange(n_guess) / n_guess, diamond_edges)
+    return cos_edges, theta_guess, diamond_edges, phi_guess
+
+
+def _theta_bins(oz: FloatArray, cos_edges: FloatArray) -> NDArray[np.int64]:
+    """k with cos_edges[k+1] < oz <= cos_edges[k] (clipped to the valid bins)."""
+    n_theta = cos_edges.size - 1
+    asc = cos_edges[::-1]
+    k = (asc.size - np.searchsorted(asc, oz, side="left")) - 1
+    out: NDArray[np.int64] = np.clip(k, 0, n_theta - 1).astype(np.int64)
+    return out
+
+
+def _phi_bins(d: FloatArray, diamond_edges: FloatArray) -> NDArray[np.int64]:
+    """k with diamond_edges[k] <= d < diamond_edges[k+1] (clipped to the valid bins)."""
+    k = np.searchsorted(diamond_edges, d, side="right") - 1
+    out: NDArray[np.int64] = np.clip(k, 0, diamond_edges.size - 2).astype(np.int64)
+    return out
+
+
 def hemisphere_numpy(
     mx: FloatArray,
     my: FloatArray,
@@ -338,18 +408,18 @@ def hemisphere_numpy(
     n_re: float,
     n_im: float,
     seed: bool,
-    n_theta: int,
-    n_phi: int,
-    bin_rad: float,
+    cos_edges: FloatArray,
+    theta_guess: NDArray[np.int64],
+    diamond_edges: FloatArray,
+    phi_guess: NDArray[np.int64],
 ) -> tuple[FloatArray, float]:
-    """Numpy twin of :func:`hemisphere_numba`."""
+    """Numpy twin of :func:`hemisphere_numba` (same bin rule; the guess tables are unused)."""
     ox, oy, oz, w = reflect_numpy(mx, my, mz, wi, n_re, n_im, seed)
     keep = w != 0.0
     ox, oy, oz, w = ox[keep], oy[keep], oz[keep], w[keep]
-    it = np.minimum((np.arccos(np.minimum(oz, 1.0)) / bin_rad).astype(np.int64), n_theta - 1)
-    ph = np.arctan2(oy, ox)
-    ph = np.where(ph < 0.0, ph + 2.0 * np.pi, ph)
-    ip = np.minimum((ph / bin_rad).astype(np.int64), n_phi - 1)
+    n_theta, n_phi = cos_edges.size - 1, diamond_edges.size - 1
+    it = _theta_bins(oz, cos_edges)
+    ip = _phi_bins(diamond_numpy(ox, oy), diamond_edges)
     hist = np.bincount(it * n_phi + ip, weights=w, minlength=n_theta * n_phi).astype(np.float64)
     return hist.reshape(n_theta, n_phi), float(w.sum())
 

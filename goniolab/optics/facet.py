@@ -545,9 +545,8 @@ class FacetModel:
             raise ValueError(f"bin_deg must divide 90, got {bin_deg}")
         n_phi = 4 * n_theta
         wi = _unit_wi(ti)
-        parts = self._run(
-            K.hemisphere_numba, K.hemisphere_numpy, wi, n_theta, n_phi, math.radians(bin_deg)
-        )
+        tables = K.hemisphere_bin_tables(math.radians(bin_deg), n_theta, n_phi)
+        parts = self._run(K.hemisphere_numba, K.hemisphere_numpy, wi, *tables)
         hist = np.sum([h for h, _ in parts], axis=0)
         total = float(sum(t for _, t in parts))
         th_e = np.linspace(0.0, 90.0, n_theta + 1)

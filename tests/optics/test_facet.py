@@ -148,8 +148,9 @@ def test_numba_kernels_equal_numpy_twins(gauss_surface_256: Surface) -> None:
     wi = _wi(50.0)
     for n_re, n_im, seed in ((1.55, 0.0, False), (0.27, 3.41, False), (1.55, 0.0, True)):
         args = (mx, my, mz, wi, n_re, n_im, seed)
-        h1, t1 = K.hemisphere_numba(*args, 90, 360, math.radians(1.0))
-        h2, t2 = K.hemisphere_numpy(*args, 90, 360, math.radians(1.0))
+        tables = K.hemisphere_bin_tables(math.radians(1.0), 90, 360)
+        h1, t1 = K.hemisphere_numba(*args, *tables)
+        h2, t2 = K.hemisphere_numpy(*args, *tables)
         np.testing.assert_allclose(h1, h2, rtol=1e-10, atol=1e-12)
         assert t1 == pytest.approx(t2, rel=1e-12)
         grid = (-0.3, math.radians(0.05), 1500, -0.1, math.radians(0.05), 121)
@@ -165,6 +166,24 @@ def test_numba_kernels_equal_numpy_twins(gauss_surface_256: Surface) -> None:
         r1 = K.rect_response_numba(*args, 0.9, 0.013, 0.077, 0.044, 0.2)
         r2 = K.rect_response_numpy(*args, 0.9, 0.013, 0.077, 0.044, 0.2)
         assert r1 == pytest.approx(r2, rel=1e-10) and r1 > 0
+
+
+def test_hemisphere_bins_equal_acos_atan2_bins() -> None:
+    """The trig-free bin search puts random directions in the bins of theta = acos(z) and
+    phi = atan2(y, x) mod 360 (exact arithmetic; directions within 1e-9 rad of an edge skipped)."""
+    rng = np.random.default_rng(8)
+    v = rng.normal(size=(200_000, 3))
+    v[:, 2] = np.abs(v[:, 2])
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    h = math.radians(0.5)
+    cos_e, _, dia_e, _ = K.hemisphere_bin_tables(h, 180, 720)
+    th = np.arccos(v[:, 2]) / h
+    ph = (np.arctan2(v[:, 1], v[:, 0]) % (2 * np.pi)) / h
+    ok = (np.abs(th - np.round(th)) > 1e-7) & (np.abs(ph - np.round(ph)) > 1e-7)
+    it = K._theta_bins(v[ok, 2], cos_e)
+    ip = K._phi_bins(K.diamond_numpy(v[ok, 0], v[ok, 1]), dia_e)
+    np.testing.assert_array_equal(it, np.floor(th[ok]).astype(int))
+    np.testing.assert_array_equal(ip, np.floor(ph[ok]).astype(int))
 
 
 @pytest.mark.parametrize("kw", [{}, {"n": 0.27 + 3.41j}, {"weighting": "seed"}, {"masking": True}])
