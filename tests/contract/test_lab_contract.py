@@ -8,7 +8,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import MODEL, lab_toml  # type: ignore[import-not-found]
 
 from drivers.base import (
     DeviceError,
@@ -25,6 +24,7 @@ from goniolab.optics.apertures import Cone
 from sim.clock import SimClock
 from sim.motion import ALARM_OVERLOAD
 from sim.servers import SimLabServer
+from tests.contract.contract_support import MODEL, lab_toml
 
 STEP_DEG = 1e-3  # 1000 steps/deg on the wire
 
