@@ -280,10 +280,12 @@ def cone_response_numba(
     """``sum_k w_k O(gamma_k)``, gamma_k the angle between wo_k and the detector axis d."""
     wx, wy, wz = wi[0], wi[1], wi[2]
     dx, dy, dz = d[0], d[1], d[2]
+    # beyond g1 the caps do not meet: reject on the cosine, before any asin
+    cos_g1 = math.cos(min(g1, math.pi))
     acc = 0.0
     for k in range(mx.size):
         ox, oy, oz, w = _reflect(mx[k], my[k], mz[k], wx, wy, wz, n_re, n_im, seed)
-        if w == 0.0:
+        if w == 0.0 or ox * dx + oy * dy + oz * dz < cos_g1:
             continue
         ex = ox - dx
         ey = oy - dy
