@@ -429,7 +429,10 @@ class SimMotor:
         *,
         accel_deg_s2: float | None = None,
     ) -> MoveProfile:
-        if self._move is not None:  # a new command replaces the running one from here
+        # A command during a move replaces it from the current position; the new profile
+        # starts from rest (the model does not blend velocities: a simplification that
+        # only matters for moves re-targeted while running).
+        if self._move is not None:
             self._physical_deg = start_phys
         move = MoveProfile(start_phys, target_phys, speed, accel_deg_s2 or self.accel_deg_s2, now_s)
         self._move = move

@@ -18,12 +18,15 @@ are, so the real drivers in :mod:`drivers` can be tested end to end:
   to the ptys at configured paths (``/tmp/goniolab-sim/spectro`` ...).
 
 Injected faults (:mod:`sim.faults`) act on the wire: a timed-out request gets no answer
-in time, a garbled one gets corrupted bytes, a disconnected device stops answering
-(Modbus: gateway exception 0x0B; pty: the port is closed).
+in time, a garbled one gets corrupted bytes (pty: one byte of the reply flipped; Modbus
+TCP: a corrupted MBAP header, which a master's framer rejects, so it sees no valid
+answer), a disconnected device stops answering (Modbus: gateway exception 0x0B, "target
+device failed to respond"; pty: the port is closed).
 """
 
 from __future__ import annotations
 
+import abc
 import asyncio
 import contextlib
 import errno
@@ -319,7 +322,7 @@ def _free_tcp_port(host: str) -> int:
 
 
 # =========================================================================== ptys
-class _PtyDevice:
+class _PtyDevice(abc.ABC):
     """A line-oriented device on the master side of a pseudo-terminal.
 
     The slave side (what a driver opens) is put in raw mode and published through a
@@ -385,8 +388,9 @@ class _PtyDevice:
             self._tasks.add(task)
             task.add_done_callback(self._tasks.discard)
 
+    @abc.abstractmethod
     async def _handle_line(self, line: bytes) -> None:
-        raise NotImplementedError
+        """Answer one command line (without its terminator)."""
 
     def write(self, data: bytes) -> None:
         """Queue bytes for the driver; flushed as the pty accepts them (no-op once closed).
