@@ -125,8 +125,8 @@ def _kill_mid_scan(cfg: Path, store: Path, total: int) -> int:
     """Start a scan in a subprocess, SIGKILL it once progress shows, return stored rows."""
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     proc = subprocess.Popen(
-        [sys.executable, "-m", "goniolab.cli", "scan", "--config", str(cfg), "--theta-r", "0:70:1",
-         "--repeats", "3", "--time-scale", "0", "--store", str(store)],
+        [sys.executable, "-m", "goniolab.cli", "scan", "--config", str(cfg), "--theta-r", "0:70:2",
+         "--repeats", "2", "--time-scale", "0", "--store", str(store)],
         cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env,
     )  # fmt: skip
     assert proc.stderr is not None
@@ -150,7 +150,7 @@ def test_kill_9_then_resume_stores_every_reading_exactly_once(
 ) -> None:
     cfg = lab_config(tmp_path)
     store = tmp_path / "s.sqlite"
-    total = 71 * 3
+    total = 36 * 2
     n_before = _kill_mid_scan(cfg, store, total)
     assert 0 < n_before < total
     with RunStore(store) as s:
@@ -163,7 +163,7 @@ def test_kill_9_then_resume_stores_every_reading_exactly_once(
     assert summary["state"] == "done" and summary["readings"] == total
     with RunStore(store) as s:
         keys = [(p.index, p.repeat) for p in s.points(1)]
-        assert keys == [(i, r) for i in range(71) for r in range(3)]
+        assert keys == [(i, r) for i in range(36) for r in range(2)]
         assert s.get_run(1).status == "done"
 
 
@@ -200,3 +200,93 @@ def test_gloss_log_from_the_sim_config(tmp_path: Path, capsys: pytest.CaptureFix
             assert x["values_gu"][angle] == pytest.approx(x["predicted_gu"][angle], abs=0.051)
     with RunStore(store) as s:
         assert len(s.gloss_readings(lines[0]["run_id"])) == 3
+
+
+async def test_fault_parks_the_arms_on_the_sim_lab(tmp_path: Path) -> None:
+    from goniolab.config import load_lab_config
+    from goniolab.lab import Lab
+    from goniolab.optics.apertures import Cone
+    from goniolab.scan.events import EventBus, RunState
+    from goniolab.scan.plans import BrdfPlan, parse_angles
+    from goniolab.scan.predict import Predictor
+    from goniolab.scan.runner import ArmMotion, ScanRunner
+
+    cfg = load_lab_config(lab_config(tmp_path, faults={"detector_stall_at_deg": "47.2"}))
+    plan = BrdfPlan(45.0, parse_angles("40:55:1"), sample=cfg.sample.map)
+    with RunStore(tmp_path / "s.sqlite") as store:
+        async with Lab.from_config(cfg, time_scale=0) as lab:
+            rid = store.create_run(kind="brdf", plan=plan.to_dict(), config={}, sample=plan.sample,
+                                   model={}, version="t")  # fmt: skip
+            runner = ScanRunner(
+                goniometer=lab.goniometer, spectro=lab.spectro, clock=lab.clock, plan=plan,
+                store=store, run_id=rid, bus=EventBus(), motion=ArmMotion(20.0, 40.0, 20.0, 40.0),
+                predictor=Predictor(lab.model, Cone(6.0), Cone(6.0)), park_deg=(45.0, 45.0),
+            )  # fmt: skip
+            result = await runner.run()
+            assert result.state is RunState.FAILED
+            assert store.count_points(rid) == 8
+            # parked: 47.2 -> 45 does not cross the obstacle; within the stall tolerance
+            ti, tr = await lab.goniometer.positions_deg()
+            assert (ti, tr) == pytest.approx((45.0, 45.0), abs=0.01)
+
+
+def test_ctrl_c_aborts_parks_and_says_how_to_resume(tmp_path: Path) -> None:
+    cfg = lab_config(tmp_path)
+    store = tmp_path / "s.sqlite"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "goniolab.cli", "scan", "--config", str(cfg), "--theta-r", "0:70:2",
+         "--repeats", "2", "--time-scale", "0", "--store", str(store)],
+        cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )  # fmt: skip
+    assert proc.stderr is not None and proc.stdout is not None
+    for line in proc.stderr:
+        if re.search(r"\] [1-9]\d*/72 ETA", line):
+            proc.send_signal(signal.SIGINT)
+            break
+    err = proc.stderr.read()
+    out = proc.stdout.read()
+    assert proc.wait() == 130
+    assert "goniolab scan resume 1" in err
+    assert "run 1: aborted" in out
+    with RunStore(store) as s:
+        run = s.get_run(1)
+        assert run.status == "aborted"
+        assert 0 < s.count_points(1) < 72
+
+
+def test_gloss_log_survives_garbled_replies(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    cfg = lab_config(
+        tmp_path, sim=NOISELESS, faults={"devices": '["glossmeter"]', "garble_rate": "0.4"}
+    )
+    store = tmp_path / "s.sqlite"
+    code, out, err = run_cli(
+        ["gloss", "log", "--config", str(cfg), "--count", "6", "--time-scale", "0", "--store",
+         str(store)],
+        capsys,
+    )  # fmt: skip
+    assert code == 0, err
+    assert "warning: glossmeter" in err  # each garbled reply is reported ...
+    with RunStore(store) as s:  # ... and the six readings are all stored
+        rows = s.gloss_readings(1)
+        assert len(rows) == 6
+        assert all(r.values_gu[60] is not None for r in rows)
+    assert "G60: mean" in out
+
+
+def test_mirror_reference_on_the_sim(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    cfg = lab_config(tmp_path, sim=NOISELESS)
+    code, out, err = run_cli(
+        ["scan", "--config", str(cfg), "--theta-r", "42:48:2", "--repeats", "2", "--mirror-reference",
+         "--time-scale", "0", "--json", "--store", str(tmp_path / "s.sqlite")],
+        capsys,
+    )  # fmt: skip
+    assert code == 0, err
+    s = json.loads(out)
+    # the simulated reference mirror reads 100 % at the specular geometry (ideal mirror,
+    # equal 6 deg source and detector cones)
+    assert s["mirror_pct"] == pytest.approx(100.0, abs=1e-9)
+    assert s["readings"] == (4 + 1) * 2
+    assert s["rmse_pct"] < 1e-3 * s["predicted_peak"]["amplitude_pct"]
