@@ -10,6 +10,7 @@ import json
 import os
 import re
 import signal
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -41,9 +42,23 @@ def lab_config(
     extra = "".join(f"{k} = {v}\n" for k, v in (faults or {}).items())
     text = head + sep + "\n" + extra + tail.split("\n", 1)[1]
     # bare profile names resolve under the shipped configs directory, wherever the copy is
+    if base == "lab-sim-wire.toml":
+        # private endpoints: tests running in parallel must not share a port or a pty link
+        text = text.replace("port = 5020", f"port = {free_tcp_port()}")
+        text = text.replace("/tmp/goniolab-sim/", f"{tmp_path}/sim/")
+        # the first reading builds the facet model's tables in the server (seconds on a
+        # loaded CI machine): a generous reply timeout keeps that from reading as a fault
+        head, sep, tail = text.partition("[spectro]")
+        text = head + sep + re.sub(r"(?m)^timeout_s\s*=.*$", "timeout_s = 60.0", tail, count=1)
     path = tmp_path / name
     path.write_text(text)
     return path
+
+
+def free_tcp_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
 
 
 def run_cli(args: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
@@ -290,3 +305,33 @@ def test_mirror_reference_on_the_sim(tmp_path: Path, capsys: pytest.CaptureFixtu
     assert s["mirror_pct"] == pytest.approx(100.0, abs=1e-9)
     assert s["readings"] == (4 + 1) * 2
     assert s["rmse_pct"] < 1e-3 * s["predicted_peak"]["amplitude_pct"]
+
+
+@pytest.mark.wire
+def test_gloss_log_from_a_port_without_config(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    cfg = lab_config(tmp_path, base="lab-sim-wire.toml", sim=NOISELESS)
+    server = subprocess.Popen(
+        [sys.executable, "-m", "goniolab.cli", "sim", "serve", "--config", str(cfg), "--json",
+         "--time-scale", "0"],
+        cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        assert server.stdout is not None
+        endpoints = json.loads(server.stdout.readline())["endpoints"]
+        port = endpoints["glossmeter"]["port"]
+        code, out, err = run_cli(
+            ["gloss", "log", "--port", port, "--protocol", "zgm1120", "--count", "2", "--json", "--timeout", "60",
+             "--sample", "sample:wittmann-3", "--store", str(tmp_path / "s.sqlite")],
+            capsys,
+        )  # fmt: skip
+    finally:
+        server.send_signal(signal.SIGINT)
+        server.wait()
+    assert code == 0, err
+    lines = [json.loads(x) for x in out.splitlines()]
+    assert len(lines) == 2
+    for x in lines:
+        # the ZGM1120 reports 0.1 GU: the noiseless sim reads the prediction to that resolution
+        assert x["values_gu"]["60"] == pytest.approx(x["predicted_gu"]["60"], abs=0.051)
