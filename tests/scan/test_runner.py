@@ -17,6 +17,7 @@ from goniolab.scan.events import (
     InstrumentError,
     PointMeasured,
     PointPredicted,
+    Progress,
     RunFinished,
     RunState,
     StateChanged,
@@ -285,3 +286,39 @@ async def test_homed_arms_are_not_rehomed(fake_lab: FakeLab, store: RunStore) ->
         (45.0, 45.0),
         (45.0, 46.0),
     ]
+
+
+async def test_eta_equals_the_time_the_run_takes_on_the_lab_clock(
+    fake_lab: FakeLab, store: RunStore
+) -> None:
+    # homed arms at (0, 0): the run is moves + dwells + exposures, exactly what the dry run sums
+    fake_lab.goniometer.lamp.homed = fake_lab.goniometer.detector.homed = True
+    plan = BrdfPlan(45.0, parse_angles("10:40:5"), repeats=3, dwell_s=0.25, exposure_us=20000)
+    runner, bus = make_runner(fake_lab, store, plan)
+    events = await drive(runner, bus, lambda ev: None)
+    progress = [e for e in events if isinstance(e, Progress)]
+    last = store.points(runner.run_id)[-1]
+    assert progress[0].eta_s == pytest.approx(last.raw["clock_s"], abs=1e-9)
+    assert progress[-1].eta_s == 0.0 and progress[-1].done == progress[-1].total == 21
+    etas = [p.eta_s for p in progress]
+    assert etas == sorted(etas, reverse=True)
+
+
+async def test_cancelled_run_parks_and_is_marked_aborted(
+    fake_lab: FakeLab, store: RunStore
+) -> None:
+    plan = BrdfPlan(45.0, parse_angles("30:60:1"), repeats=2)
+    runner, bus = make_runner(fake_lab, store, plan)
+    q = bus.subscribe()
+    task = asyncio.create_task(runner.run())
+    while True:  # wait, event by event, for the third reading
+        ev = await q.get()
+        if isinstance(ev, PointMeasured) and (ev.index, ev.repeat) == (1, 0):
+            break
+    task.cancel()
+    with pytest.raises(asyncio.CancelledError):
+        await task
+    rec = store.get_run(runner.run_id)
+    assert rec.status == "aborted" and rec.reason == "cancelled"
+    assert fake_lab.goniometer.park_calls == 1
+    assert 3 <= store.count_points(runner.run_id) < 62
