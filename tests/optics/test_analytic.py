@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -35,7 +36,9 @@ MIRROR_N = complex(1.0, 1e4)
 
 @pytest.mark.parametrize("d_fn", [beckmann_d, ggx_d])
 @pytest.mark.parametrize("alpha", [0.05, 0.3, 1.0])
-def test_distribution_projected_area_is_one(d_fn, alpha: float) -> None:  # type: ignore[no-untyped-def]
+def test_distribution_projected_area_is_one(
+    d_fn: Callable[[float, float], F64], alpha: float
+) -> None:
     # int D(h) cos th dOmega = 2 pi int_0^{pi/2} D(th) cos th sin th dth = 1 (Walter eq. 4).
     def g(t: float) -> float:
         return float(d_fn(math.cos(t), alpha)) * math.cos(t) * math.sin(t)
@@ -44,7 +47,7 @@ def test_distribution_projected_area_is_one(d_fn, alpha: float) -> None:  # type
     assert 2 * math.pi * val == pytest.approx(1.0, rel=1e-6)
 
 
-def _lambda_from_slopes(pdf, theta_deg: float) -> float:  # type: ignore[no-untyped-def]
+def _lambda_from_slopes(pdf: Callable[[float], float], theta_deg: float) -> float:
     """Smith Lambda from the marginal slope density (PHYSICS.md; Heitz 2014 eq. 65).
 
     Lambda(w) = E[max(0, cos t - sin t p)] / cos t - 1 = E[max(0, 1 - tan t p)] - 1.
@@ -108,7 +111,9 @@ def test_reciprocity(kind: str, n: complex) -> None:
     assert np.all(m.brdf(wi, wo) >= 0)
 
 
-def _albedo(f, theta_i_deg: float, n_t: int = 400, n_p: int = 400) -> float:  # type: ignore[no-untyped-def]
+def _albedo(
+    f: Callable[[F64, F64], F64], theta_i_deg: float, n_t: int = 400, n_p: int = 400
+) -> float:
     """int f(wi, wo) cos(to) dOmega_o over the hemisphere, midpoint rule in (t, p)."""
     t = (np.arange(n_t) + 0.5) * (math.pi / 2 / n_t)
     p = (np.arange(n_p) + 0.5) * (2 * math.pi / n_p)

@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from goniolab.optics.facet import FacetModel
 from goniolab.optics.surface import Surface, roughness_stats
 from sim.samples import SampleError, make_sample, sample_info, sample_names
 
@@ -85,8 +86,6 @@ def test_coating_roughness_lands_near_the_seed_ra() -> None:
 
 def test_predicted_g60_follows_the_seed_order() -> None:
     # Wittmann's central finding (sec. 4, table 1): Ra does not order gloss, slopes do.
-    from goniolab.optics.facet import FacetModel
-
     g60 = {
         name: FacetModel(Surface.from_heightmap(make_sample(name)), n=1.55).gloss((60,))[60]
         for name in WITTMANN
