@@ -83,6 +83,7 @@ def main(argv: list[str] | None = None) -> int:
         "facets": surface.n_facets,
         "map": f"{args.size}x{args.size}",
         "cpus": os.cpu_count(),
+        "load_average_1min": os.getloadavg()[0],
         "repeats": args.repeats,
         "surface_construction_ms": statistics.median(surf_runs),
         "targets_ms": TARGETS_MS,
@@ -108,7 +109,8 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     print(
         f"facet model benchmark: {results['map']} map, {surface.n_facets} facets, "
-        f"{os.cpu_count()} CPUs, median of {args.repeats}"
+        f"{os.cpu_count()} CPUs, median of {args.repeats}, "
+        f"load average {os.getloadavg()[0]:.1f} (timings scale with other load)"
     )
     print(
         f"Surface.from_heightmap (level + slopes + normals): {results['surface_construction_ms']:.1f} ms"

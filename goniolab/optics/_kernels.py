@@ -220,45 +220,37 @@ def deposit_numba(
     """Cloud-in-cell deposit of the weights on nodes ``(a0 + i ha, b0 + j hb)``.
 
     Coordinates: in-plane angle ``alpha = atan2(-wo_x, wo_z)`` and out-of-plane angle
-    ``beta = asin(wo_y)`` (radians). Facets outside the node grid are not deposited.
+    ``beta = asin(wo_y)`` (radians). A facet is deposited on the four nodes of its cell
+    only when the whole cell lies in the grid (callers keep a margin of empty nodes).
     """
     grid = np.zeros((na, nb))
     wx, wy, wz = wi[0], wi[1], wi[2]
     total = 0.0
-    b_lo = b0 - hb
-    b_hi = b0 + nb * hb
-    sin_lo = math.sin(max(b_lo, -0.5 * math.pi))
-    sin_hi = math.sin(min(b_hi, 0.5 * math.pi))
+    sin_lo = math.sin(max(b0, -0.5 * math.pi))
+    sin_hi = math.sin(min(b0 + (nb - 1) * hb, 0.5 * math.pi))
+    x_hi = na - 1.0
+    y_hi = nb - 1.0
     for k in range(mx.size):
         ox, oy, oz, w = _reflect(mx[k], my[k], mz[k], wx, wy, wz, n_re, n_im, seed)
         if w == 0.0:
             continue
         total += w
-        if oy <= sin_lo or oy >= sin_hi:
+        if oy < sin_lo or oy >= sin_hi:
             continue
-        be = math.asin(max(-1.0, min(1.0, oy)))
-        if be <= b_lo or be >= b_hi:
+        y = (math.asin(oy) - b0) / hb
+        x = (math.atan2(-ox, oz) - a0) / ha
+        if x < 0.0 or x >= x_hi or y < 0.0 or y >= y_hi:
             continue
-        al = math.atan2(-ox, oz)
-        x = (al - a0) / ha
-        if x <= -1.0 or x >= na:
-            continue
-        y = (be - b0) / hb
-        i = math.floor(x)
-        j = math.floor(y)
+        i = int(x)
+        j = int(y)
         fx = x - i
         fy = y - j
-        for di in range(2):
-            ii = i + di
-            if ii < 0 or ii >= na:
-                continue
-            wa = fx if di == 1 else 1.0 - fx
-            for dj in range(2):
-                jj = j + dj
-                if jj < 0 or jj >= nb:
-                    continue
-                wb = fy if dj == 1 else 1.0 - fy
-                grid[ii, jj] += w * wa * wb
+        w0 = w * (1.0 - fx)
+        w1 = w * fx
+        grid[i, j] += w0 * (1.0 - fy)
+        grid[i, j + 1] += w0 * fy
+        grid[i + 1, j] += w1 * (1.0 - fy)
+        grid[i + 1, j + 1] += w1 * fy
     return grid, total
 
 
@@ -446,23 +438,18 @@ def deposit_numpy(
     keep = w != 0.0
     ox, oy, oz, w = ox[keep], oy[keep], oz[keep], w[keep]
     total = float(w.sum())
-    be = np.arcsin(np.clip(oy, -1.0, 1.0))
-    al = np.arctan2(-ox, oz)
-    x = (al - a0) / ha
-    y = (be - b0) / hb
-    sel = (be > b0 - hb) & (be < b0 + nb * hb) & (x > -1.0) & (x < na)
+    x = (np.arctan2(-ox, oz) - a0) / ha
+    y = (np.arcsin(np.clip(oy, -1.0, 1.0)) - b0) / hb
+    sel = (x >= 0.0) & (x < na - 1.0) & (y >= 0.0) & (y < nb - 1.0)
     x, y, w = x[sel], y[sel], w[sel]
-    i = np.floor(x).astype(np.int64)
-    j = np.floor(y).astype(np.int64)
+    i = x.astype(np.int64)
+    j = y.astype(np.int64)
     fx = x - i
     fy = y - j
     grid = np.zeros(na * nb)
     for di, wa in ((0, 1.0 - fx), (1, fx)):
         for dj, wb in ((0, 1.0 - fy), (1, fy)):
-            ii = i + di
-            jj = j + dj
-            ok = (ii >= 0) & (ii < na) & (jj >= 0) & (jj < nb)
-            grid += np.bincount(ii[ok] * nb + jj[ok], weights=(w * wa * wb)[ok], minlength=na * nb)
+            grid += np.bincount((i + di) * nb + (j + dj), weights=w * wa * wb, minlength=na * nb)
     return grid.reshape(na, nb), total
 
 
