@@ -203,9 +203,10 @@ async def _execute(
             except PlanRefused as exc:
                 raise UserError(f"plan refused (no arm moved): {exc}") from exc
             wall = check.eta_s / clock_scale if clock_scale > 0 else 0.0
+            lab_time = "" if clock_scale == 1.0 else f" ({check.eta_s:.2f} s of lab clock)"
             print(
                 f"goniolab: {check.n_readings} readings, {check.n_moves} moves, "
-                f"ETA {format_eta(wall)}",
+                f"ETA {format_eta(wall)}{lab_time}",
                 file=sys.stderr,
             )
             run_id = store.create_run(
