@@ -144,3 +144,16 @@ def test_profile_paths_resolve_next_to_the_config_then_in_configs(tmp_path: Path
     )
     cfg = load_lab_config(write(tmp_path, '[goniometer.lamp]\nprofile = "my/az.toml"\n'))
     assert Path(cfg.goniometer.lamp.profile) == own
+
+
+def test_documented_fault_keys_load_when_uncommented(tmp_path: Path) -> None:
+    text = (configs_dir() / "lab-sim.toml").read_text()
+    start = text.index("[sim.faults]")
+    lines = [
+        ln[2:] if ln.startswith("# ") and "=" in ln.split("#")[1] else ln
+        for ln in text[start:].splitlines()
+    ]
+    cfg = load_lab_config(write(tmp_path, text[:start] + "\n".join(lines) + "\n"))
+    f = cfg.sim.faults
+    assert f.devices == ("spectro",) and f.timeout_rate == 0.05 and f.disconnect_after == 100
+    assert (f.lamp_stall_at_deg, f.detector_alarm_at_deg, f.alarm_code) == (30.0, 10.0, 0x30)

@@ -232,7 +232,7 @@ async def test_spectro_noise_is_relative_and_seeded() -> None:
     assert v.std() == pytest.approx(1.0, rel=0.15)
 
 
-@pytest.mark.filterwarnings("ignore::UserWarning")
+@pytest.mark.filterwarnings("ignore")  # colour-science shape-alignment notices
 def test_spectrum_luminance_matches_colour_science_y() -> None:
     import colour
 
