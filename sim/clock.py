@@ -20,6 +20,7 @@ import asyncio
 import heapq
 import itertools
 import time
+from collections.abc import Callable
 from typing import Protocol, runtime_checkable
 
 __all__ = ["Clock", "RealClock", "SimClock"]
@@ -69,7 +70,14 @@ class SimClock:
         sleeps; more make the ordering robust to longer chains.
     """
 
-    def __init__(self, scale: float = 1.0, *, start_s: float = 0.0, settle_iterations: int = 8):
+    def __init__(
+        self,
+        scale: float = 1.0,
+        *,
+        start_s: float = 0.0,
+        settle_iterations: int = 8,
+        wall_clock: Callable[[], float] = time.monotonic,
+    ):
         if not scale >= 0.0:
             raise ValueError(f"clock time scale must be >= 0, got {scale}")
         if settle_iterations < 1:
@@ -77,7 +85,8 @@ class SimClock:
         self.scale = float(scale)
         self._settle = settle_iterations
         self._virtual_s = float(start_s)
-        self._real_ref_s = time.monotonic()
+        self._wall = wall_clock
+        self._real_ref_s = wall_clock()
         self._sleepers: list[tuple[float, int, asyncio.Future[None]]] = []
         self._seq = itertools.count()
         self._driver: asyncio.Task[None] | None = None
@@ -86,7 +95,7 @@ class SimClock:
         """Current virtual time in seconds."""
         if self.scale == 0.0:
             return self._virtual_s
-        return self._virtual_s + (time.monotonic() - self._real_ref_s) * self.scale
+        return self._virtual_s + (self._wall() - self._real_ref_s) * self.scale
 
     async def sleep(self, dt_s: float) -> None:
         """Let ``dt_s`` virtual seconds pass.

@@ -55,8 +55,7 @@ async def test_scale0_cancelled_sleeper_does_not_advance_time() -> None:
 
 async def test_scaled_clock_uses_scaled_wall_time(monkeypatch: pytest.MonkeyPatch) -> None:
     wall = [50.0]
-    monkeypatch.setattr("sim.clock.time.monotonic", lambda: wall[0])
-    clock = SimClock(10.0, start_s=5.0)
+    clock = SimClock(10.0, start_s=5.0, wall_clock=lambda: wall[0])
     wall[0] += 2.0  # two wall seconds = twenty virtual seconds
     assert clock.now() == pytest.approx(25.0)
     slept: list[float] = []
