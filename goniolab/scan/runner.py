@@ -441,6 +441,8 @@ class ScanRunner:
             await self.spectro.set_exposure_us(self.plan.exposure_us)
             mirror_pct = self._mirror_level()
             specimen = "sample"
+            t_start_s = self.clock.now()
+            estimated_done_s = 0.0
             for k, p in enumerate(todo):
                 if not await self._checkpoint():
                     state, reason = RunState.ABORTED, "aborted by the operator"
@@ -496,7 +498,12 @@ class ScanRunner:
                         predicted_pct=self._predicted.get(p.index),
                     )
                 )
-                eta = math.fsum(remaining_s[k + 1 :])
+                # the dry-run estimate of what is left, stretched by how much slower than
+                # estimated the run has been so far (bus latency, polling, commits)
+                estimated_done_s += remaining_s[k]
+                elapsed_s = self.clock.now() - t_start_s
+                slowdown = elapsed_s / estimated_done_s if estimated_done_s > 0 else 1.0
+                eta = math.fsum(remaining_s[k + 1 :]) * max(1.0, slowdown)
                 self.bus.publish(Progress(run_id=self.run_id, done=n_done, total=total, eta_s=eta))
             if specimen == "mirror":
                 assert self.specimen_hook is not None

@@ -165,6 +165,7 @@ class FakeSpectro:
         self.mirror_pct = 80.0
         self.exposure_us = 0
         self.n_reads = 0
+        self.overhead_s = 0.0  # transfer time beyond the exposure
 
     async def connect(self) -> None:
         pass
@@ -179,7 +180,7 @@ class FakeSpectro:
         self.exposure_us = exposure_us
 
     async def measure(self) -> SpectroReading:
-        await self.clock.sleep(self.exposure_us * 1e-6)
+        await self.clock.sleep(self.exposure_us * 1e-6 + self.overhead_s)
         self.n_reads += 1
         ti, tr = self.gonio.lamp.pos_deg, self.gonio.detector.pos_deg
         if self.specimen == "mirror":

@@ -322,3 +322,17 @@ async def test_cancelled_run_parks_and_is_marked_aborted(
     assert rec.status == "aborted" and rec.reason == "cancelled"
     assert fake_lab.goniometer.park_calls == 1
     assert 3 <= store.count_points(runner.run_id) < 62
+
+
+async def test_eta_stretches_by_the_observed_slowdown(fake_lab: FakeLab, store: RunStore) -> None:
+    g = fake_lab.goniometer
+    g.lamp.homed = g.detector.homed = True
+    g.lamp.pos_deg, g.detector.pos_deg = 45.0, 45.0  # already at the only geometry: no move
+    fake_lab.spectro.overhead_s = 0.03  # each reading really takes 0.01 + 0.03 s
+    plan = BrdfPlan(45.0, (45.0,), repeats=4, exposure_us=10000)
+    runner, bus = make_runner(fake_lab, store, plan, reading_time_s=0.01)
+    events = await drive(runner, bus, lambda ev: None)
+    etas = [e.eta_s for e in events if isinstance(e, Progress)]
+    # before any reading: the plain estimate 4 x 0.01 s; then the remaining readings at
+    # the observed 0.04 s each: 3 x 0.04, 2 x 0.04, 1 x 0.04, 0
+    assert etas == pytest.approx([0.04, 0.12, 0.08, 0.04, 0.0], abs=1e-9)
