@@ -87,17 +87,33 @@ def _reflect(
     seed: bool,
 ) -> tuple[float, float, float, float]:  # pragma: no cover - numba
     """Mirror direction and weight of one facet; weight 0 for dropped facets."""
+    ox, oy, oz, c = _mirror(mx, my, mz, wx, wy, wz)
+    if c == 0.0:
+        return 0.0, 0.0, 0.0, 0.0
+    return ox, oy, oz, _weight(c, mz, wz, n_re, n_im, seed)
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def _mirror(
+    mx: float, my: float, mz: float, wx: float, wy: float, wz: float
+) -> tuple[float, float, float, float]:  # pragma: no cover - numba
+    """Mirror direction and ``c = wi . m`` of one facet; c = 0 for facets that get no weight."""
     c = wx * mx + wy * my + wz * mz
     if c <= 0.0:
         return 0.0, 0.0, 0.0, 0.0
-    ox = 2.0 * c * mx - wx
-    oy = 2.0 * c * my - wy
     oz = 2.0 * c * mz - wz
     if oz <= 0.0:
         return 0.0, 0.0, 0.0, 0.0
+    return 2.0 * c * mx - wx, 2.0 * c * my - wy, oz, c
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def _weight(
+    c: float, mz: float, wz: float, n_re: float, n_im: float, seed: bool
+) -> float:  # pragma: no cover - numba
+    """Facet weight for ``c = wi . m > 0`` (same as :func:`_reflect`)."""
     f = _fresnel_scalar(c, n_re, n_im)
-    w = f if seed else c / (mz * wz) * f
-    return ox, oy, oz, w
+    return f if seed else c / (mz * wz) * f
 
 
 @njit(cache=True, nogil=True, fastmath=False)
@@ -276,9 +292,10 @@ def cone_response_numba(
     cos_g1 = math.cos(min(g1, math.pi))
     acc = 0.0
     for k in range(mx.size):
-        ox, oy, oz, w = _reflect(mx[k], my[k], mz[k], wx, wy, wz, n_re, n_im, seed)
-        if w == 0.0 or ox * dx + oy * dy + oz * dz < cos_g1:
+        ox, oy, oz, c = _mirror(mx[k], my[k], mz[k], wx, wy, wz)
+        if c == 0.0 or ox * dx + oy * dy + oz * dz < cos_g1:
             continue
+        w = _weight(c, mz[k], wz, n_re, n_im, seed)
         ex = ox - dx
         ey = oy - dy
         ez = oz - dz
@@ -317,8 +334,8 @@ def rect_response_numba(
     sa = math.sin(alpha_r)
     acc = 0.0
     for k in range(mx.size):
-        ox, oy, oz, w = _reflect(mx[k], my[k], mz[k], wx, wy, wz, n_re, n_im, seed)
-        if w == 0.0 or abs(oy) > sin_b:
+        ox, oy, oz, c = _mirror(mx[k], my[k], mz[k], wx, wy, wz)
+        if c == 0.0 or abs(oy) > sin_b:
             continue
         sd = -ox * ca - oz * sa
         cd = oz * ca - ox * sa
@@ -328,6 +345,7 @@ def rect_response_numba(
         ob = _interval_overlap(be, s_perp, r_perp)
         if ob == 0.0:
             continue
+        w = _weight(c, mz[k], wz, n_re, n_im, seed)
         acc += w * ob * _interval_overlap(math.atan2(sd, cd), s_in, r_in)
     return acc
 
