@@ -235,15 +235,14 @@ def deposit_numba(
 ) -> tuple[FloatArray, float]:  # pragma: no cover - numba
     """Cloud-in-cell deposit of the weights on nodes ``(a0 + i ha, b0 + j hb)``.
 
-    Coordinates: in-plane angle ``alpha = atan2(-wo_x, wo_z)`` and out-of-plane angle
-    ``beta = asin(wo_y)`` (radians). A facet is deposited on the four nodes of its cell
-    only when the whole cell lies in the grid (callers keep a margin of empty nodes).
+    Coordinates: in-plane angle ``alpha = atan2(-wo_x, wo_z)`` (radians) and
+    ``sin(beta) = wo_y`` (beta the out-of-plane angle). A facet is deposited on the four
+    nodes of its cell only when the whole cell lies in the grid (callers keep a margin of
+    empty nodes).
     """
     grid = np.zeros((na, nb))
     wx, wy, wz = wi[0], wi[1], wi[2]
     total = 0.0
-    sin_lo = math.sin(max(b0, -0.5 * math.pi))
-    sin_hi = math.sin(min(b0 + (nb - 1) * hb, 0.5 * math.pi))
     x_hi = na - 1.0
     y_hi = nb - 1.0
     for k in range(mx.size):
@@ -251,11 +250,11 @@ def deposit_numba(
         if w == 0.0:
             continue
         total += w
-        if oy < sin_lo or oy >= sin_hi:
+        y = (oy - b0) / hb
+        if y < 0.0 or y >= y_hi:
             continue
-        y = (math.asin(oy) - b0) / hb
         x = (math.atan2(-ox, oz) - a0) / ha
-        if x < 0.0 or x >= x_hi or y < 0.0 or y >= y_hi:
+        if x < 0.0 or x >= x_hi:
             continue
         i = int(x)
         j = int(y)
@@ -457,7 +456,7 @@ def deposit_numpy(
     ox, oy, oz, w = ox[keep], oy[keep], oz[keep], w[keep]
     total = float(w.sum())
     x = (np.arctan2(-ox, oz) - a0) / ha
-    y = (np.arcsin(np.clip(oy, -1.0, 1.0)) - b0) / hb
+    y = (oy - b0) / hb
     sel = (x >= 0.0) & (x < na - 1.0) & (y >= 0.0) & (y < nb - 1.0)
     x, y, w = x[sel], y[sel], w[sel]
     i = x.astype(np.int64)

@@ -722,13 +722,14 @@ class FacetModel:
             reach_a = 0.5 * (source.in_plane_deg + detector.in_plane_deg)
             reach_b = 0.5 * (source.perp_deg + detector.perp_deg)
         h = self.grid_step_deg
+        hv = math.radians(h)  # node step in sin(beta), the grid's out-of-plane coordinate
         u = math.ceil(reach_a / h) + 1  # window half-width in nodes
-        v = math.ceil(reach_b / h) + 1
+        v = math.ceil(math.sin(math.radians(min(reach_b, 90.0))) / hv) + 1
         flat = tr_deg.ravel()
         i_lo = math.floor(flat.min() / h) - u - 1
         i_hi = math.ceil(flat.max() / h) + u + 1
         na, nb = i_hi - i_lo + 1, 2 * v + 1
-        a0, b0 = i_lo * h, -v * h
+        a0 = i_lo * h
         wi = _unit_wi(ti)
         parts = self._run(
             K.deposit_numba,
@@ -737,12 +738,12 @@ class FacetModel:
             math.radians(a0),
             math.radians(h),
             na,
-            math.radians(b0),
-            math.radians(h),
+            -v * hv,
+            hv,
             nb,
         )
         grid = np.sum([g for g, _ in parts], axis=0)
-        beta_nodes = np.radians(b0 + h * np.arange(nb))
+        beta_nodes = np.arcsin(np.clip(hv * np.arange(-v, v + 1), -1.0, 1.0))
         if self.masking:
             al = np.radians(a0 + h * np.arange(na))[:, None]
             be = beta_nodes[None, :]
