@@ -2,8 +2,9 @@
 
 The library (``configs/samples.toml``) holds a flat surface, isotropic Gaussian surfaces of
 known rms slope, and analogues of the eight polyurethane coatings of Wittmann et al. (2021,
-table 1): a smooth film (long-wavelength Gaussian waviness, Ra ~ 30 nm) plus spherical-cap
-filler bumps of the listed sizes and loadings, and a rough special-cure surface (#8).
+table 1): a smooth film (long-wavelength Gaussian waviness with sparse micro-defects,
+Ra ~ 30 nm) plus spherical-cap filler bumps of the listed sizes and loadings, and a rough
+special-cure surface (#8).
 
 Every map is generated from a seed with numpy's PCG64 generator, vectorised (an FFT filter
 for the random fields, one ``bincount`` per filler population for the caps; periodic
@@ -107,8 +108,10 @@ def _check_params(info: SampleInfo, where: str) -> None:
         fillers = p.get("fillers", [])
         if not isinstance(fillers, list):
             raise SampleError(f"{SAMPLES_TOML}: {where}.fillers must be an array of tables")
-        for i, f in enumerate(fillers):
-            fw = f"{where}.fillers[{i}]"
+        entries = [(f"{where}.fillers[{i}]", f) for i, f in enumerate(fillers)]
+        if "film_defects" in p:
+            entries.append((f"{where}.film_defects", p["film_defects"]))
+        for fw, f in entries:
             if not isinstance(f, Mapping):
                 raise SampleError(f"{SAMPLES_TOML}: {fw} must be a table")
             d = f.get("diameter_um")
@@ -277,7 +280,10 @@ def _generate(info: SampleInfo, shape: tuple[int, int], step_um: float, seed: in
     film = _gaussian_field(rng, shape, step_um, float(p["film_corr_um"]))
     film_ra = _ra(film)
     z = film * (float(p["film_ra_nm"]) * 1e-3 / film_ra) if film_ra > 0 else film
-    for f in p.get("fillers", []):
+    populations = list(p.get("fillers", []))
+    if "film_defects" in p:
+        populations.insert(0, p["film_defects"])
+    for f in populations:
         d = f["diameter_um"]
         z = z + _caps(
             rng,
