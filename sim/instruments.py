@@ -1,7 +1,10 @@
 """The simulated lab in-process: arms, spectro-colorimeter and glossmeter.
 
 Each class implements the matching :mod:`drivers.base` Protocol, so the scan runner, the
-CLI and the contract tests use them exactly like the real drivers. Readings come from
+CLI and the contract tests use them exactly like the real drivers. The simulated
+goniometer is the project's own ``drivers.goniometer.TwoArmGoniometer(SimAxis, SimAxis)``
+(built by :mod:`goniolab.lab`, since :mod:`sim` imports only ``drivers.base``,
+``drivers.profiles`` and ``goniolab.optics``): one interlock for real and simulated arms. Readings come from
 the physics: a :class:`goniolab.optics.models.ReflectanceModel` (normally the
 ``FacetModel`` of the sample's height map) evaluated at the geometry the arms *really*
 have -- including the sample tilt and the arms' zero offsets that Wittmann et al. (2021,
@@ -42,7 +45,6 @@ from drivers.base import (
     SpectroReading,
     StallError,
 )
-from drivers.goniometer import TwoArmGoniometer
 from goniolab.optics.apertures import Aperture, Cone
 from goniolab.optics.facet import cap_overlap_fraction
 from goniolab.optics.models import ReflectanceModel
@@ -59,7 +61,6 @@ __all__ = [
     "SimGlossmeter",
     "SimSpectro",
     "effective_angles",
-    "make_sim_goniometer",
     "spectrum_for_luminance",
 ]
 
@@ -395,24 +396,6 @@ class SimAxis:
         """Clear the active alarm."""
         self._op("reset_alarm")
         self.motor.reset_alarm(self.clock.now())
-
-
-def make_sim_goniometer(
-    lamp: SimAxis,
-    detector: SimAxis,
-    *,
-    min_separation_deg: float,
-    park_deg: tuple[float, float] = (45.0, 45.0),
-) -> TwoArmGoniometer:
-    """The project's two-arm goniometer (with its interlock) on two simulated axes.
-
-    The same :class:`drivers.goniometer.TwoArmGoniometer` -- limit and separation
-    interlock, safe move ordering -- runs against simulated and real arms; there is no
-    second interlock implementation in the simulator.
-    """
-    return TwoArmGoniometer(
-        lamp, detector, min_separation_deg=min_separation_deg, park_deg=park_deg
-    )
 
 
 class SimSpectro:

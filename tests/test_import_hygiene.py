@@ -74,6 +74,8 @@ def test_sim_imports_only_optics_from_goniolab() -> None:
     assert "sim.servers" in imported and "sim.instruments" in imported
     bad = offenders(modules, ("goniolab", "textual"), ("goniolab.optics",))
     assert [m for m in bad if m != "goniolab"] == [], bad
+    drivers_used = offenders(modules, ("drivers",), ("drivers.base", "drivers.profiles"))
+    assert drivers_used in ([], ["drivers"]), drivers_used
 
 
 def test_textual_only_under_tui() -> None:
