@@ -104,6 +104,8 @@ BRDF = Callable[[FloatArray, FloatArray], ArrayLike]
 Subdivisions = int | tuple[int, int]
 #: Upper bound on subdivisions per axis chosen by :func:`lobe_subdivisions`.
 MAX_SUBDIVISIONS: int = 400
+#: Most (source, receptor) direction pairs passed to one brdf call by integrate_brdf.
+_MAX_PAIRS: int = 262_144
 #: Upper bound on the rings of a Cone chosen by :func:`lobe_subdivisions` (~3 k^2 patches).
 MAX_CONE_RINGS: int = 64
 
@@ -360,8 +362,14 @@ def integrate_brdf(
     if total_source == 0.0 or wo.shape[0] == 0:
         return 0.0
     ns, nd = wi.shape[0], wo.shape[0]
-    wi_pairs = np.repeat(wi, nd, axis=0)
-    wo_pairs = np.tile(wo, (ns, 1))
-    f = np.asarray(brdf(wi_pairs, wo_pairs), dtype=np.float64).reshape(ns, nd)
-    per_source = f @ (wo[:, 2] * w_d)
+    proj = wo[:, 2] * w_d
+    per_source = np.empty(ns)
+    step = max(1, _MAX_PAIRS // nd)  # bound the memory of one brdf call
+    for k in range(0, ns, step):
+        chunk = wi[k : k + step]
+        m = chunk.shape[0]
+        f = np.asarray(
+            brdf(np.repeat(chunk, nd, axis=0), np.tile(wo, (m, 1))), dtype=np.float64
+        ).reshape(m, nd)
+        per_source[k : k + m] = f @ proj
     return float(per_source @ w_s / total_source)
