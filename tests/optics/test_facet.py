@@ -341,6 +341,31 @@ def test_cone_overlap_equals_explicit_source_quadrature(gaussian_factory) -> Non
     np.testing.assert_allclose(lum, exact, rtol=2e-3)
 
 
+def test_rect_luminance_grid_matches_exact_per_facet_rect(gauss_surface_256: Surface) -> None:
+    """ISO 2813 rectangles through the luminance grid vs the exact per-facet overlap."""
+    m = FacetModel(gauss_surface_256)
+    for t in (20, 60, 85):
+        tr = np.array([t - 1.0, float(t), t + 1.5])
+        grid = m.luminance_pct(t, tr, source=ISO2813_SOURCE, detector=ISO2813_RECEPTOR[t])
+        exact = np.array(
+            [100 * m.reflected_fraction(t, x, ISO2813_SOURCE, ISO2813_RECEPTOR[t]) for x in tr]
+        )
+        np.testing.assert_allclose(grid, exact, rtol=5e-3, atol=1e-4 * exact.max())
+
+
+def test_slope_density_equals_the_dense_histogram_at_bin_centres(
+    gauss_surface_256: Surface,
+) -> None:
+    from goniolab.optics.surface import slope_histogram
+
+    h = slope_histogram(gauss_surface_256.p, gauss_surface_256.q, bin_size=0.01)
+    m = FacetModel(gauss_surface_256, slope_bin=0.01)
+    pc = 0.5 * (h.p_edges[1:] + h.p_edges[:-1])
+    qc = 0.5 * (h.q_edges[1:] + h.q_edges[:-1])
+    pp, qq = np.meshgrid(pc, qc, indexing="ij")
+    np.testing.assert_allclose(m.slope_density(pp, qq), h.density, rtol=1e-9, atol=1e-9)
+
+
 def test_point_source_counts_facets_inside_the_detector(gauss_surface_256: Surface) -> None:
     mx, my, mz = gauss_surface_256.normals
     ox, oy, oz, w = K.reflect_numpy(mx, my, mz, _wi(30.0), 1.55, 0.0, False)
