@@ -107,6 +107,33 @@ CREATE INDEX IF NOT EXISTS points_run ON points(run_id, idx, repeat);
 """
 
 
+#: CSV columns of a scan export (one row per reading) and of a gloss export.
+_POINT_FIELDS = (
+    "run_id",
+    "index",
+    "repeat",
+    "theta_i_deg",
+    "theta_r_deg",
+    "measured_theta_i_deg",
+    "measured_theta_r_deg",
+    "luminance_pct",
+    "predicted_pct",
+    "timestamp",
+)
+_GLOSS_FIELDS = (
+    "run_id",
+    "seq",
+    "timestamp",
+    "g20_gu",
+    "g60_gu",
+    "g85_gu",
+    "temperature_c",
+    "predicted_g20_gu",
+    "predicted_g60_gu",
+    "predicted_g85_gu",
+)
+
+
 class StoreError(Exception):
     """The store file cannot be opened, or a run id does not exist (message names both)."""
 
@@ -503,10 +530,11 @@ class RunStore:
         if fmt == "json":
             return json.dumps({"run": self.get_run(run_id).as_dict(), "readings": rows}, indent=2)
         if fmt == "csv":
+            kind = self.get_run(run_id).kind
             buf = io.StringIO()
-            if rows:
-                writer = csv.DictWriter(buf, fieldnames=list(rows[0]), lineterminator="\n")
-                writer.writeheader()
-                writer.writerows(rows)
+            fields = _GLOSS_FIELDS if kind == "gloss" else _POINT_FIELDS
+            writer = csv.DictWriter(buf, fieldnames=list(fields), lineterminator="\n")
+            writer.writeheader()  # also for a run without readings yet
+            writer.writerows(rows)
             return buf.getvalue()
         raise StoreError(f"export format must be 'csv' or 'json', got {fmt!r}")

@@ -141,3 +141,13 @@ def test_unopenable_store_names_the_file(tmp_path: Path) -> None:
 @pytest.fixture
 def store_path(tmp_path: Path) -> Path:
     return tmp_path / "store.sqlite"
+
+
+def test_export_of_a_run_without_readings_has_the_header(store_path: Path) -> None:
+    with RunStore(store_path) as s:
+        rid = _run(s)
+        header = s.export(rid, "csv").splitlines()
+        assert header == [
+            "run_id,index,repeat,theta_i_deg,theta_r_deg,measured_theta_i_deg,"
+            "measured_theta_r_deg,luminance_pct,predicted_pct,timestamp"
+        ]

@@ -116,7 +116,7 @@ def _cmd_show(args: argparse.Namespace) -> int:
         else:
             for angle, st in summary["statistics"].items():
                 print(f"  G{angle}: {st['mean_gu']:.1f} +- {st['std_gu']:.1f} GU (n = {st['n']})")
-        if rec.status not in ("done",) and rec.kind == "brdf":
+        if rec.status != "done" and rec.kind == "brdf":
             print(f"  continue it with: goniolab scan resume {rec.id}")
     return 0
 
