@@ -15,7 +15,7 @@ from goniolab.optics.fresnel import fresnel, fresnel_dielectric
 from goniolab.optics.heightmap import HeightMap
 from goniolab.optics.metrics import peak_metrics
 from goniolab.optics.models import ReflectanceModel
-from goniolab.optics.surface import Surface
+from goniolab.optics.surface import Surface, slope_histogram
 
 FloatArray = np.ndarray
 
@@ -356,8 +356,6 @@ def test_rect_luminance_grid_matches_exact_per_facet_rect(gauss_surface_256: Sur
 def test_slope_density_equals_the_dense_histogram_at_bin_centres(
     gauss_surface_256: Surface,
 ) -> None:
-    from goniolab.optics.surface import slope_histogram
-
     h = slope_histogram(gauss_surface_256.p, gauss_surface_256.q, bin_size=0.01)
     m = FacetModel(gauss_surface_256, slope_bin=0.01)
     pc = 0.5 * (h.p_edges[1:] + h.p_edges[:-1])
