@@ -307,7 +307,9 @@ def test_luminance_matches_integrate_brdf_of_the_analytic_gaussian(
     np.testing.assert_allclose(lum, quad, rtol=0.03)
 
 
-def test_cone_overlap_equals_explicit_source_quadrature(gaussian_factory) -> None:  # type: ignore[no-untyped-def]
+def test_cone_overlap_equals_explicit_source_quadrature(
+    gaussian_factory: Callable[..., HeightMap],
+) -> None:
     """The isometry trick vs brute force: sample the source cone, reflect every facet of
     every source direction with its own weight, count what enters the detector cone.
 
@@ -407,7 +409,7 @@ def test_reciprocity(gauss_surface_256: Surface, masking: bool) -> None:
 
 
 @pytest.mark.parametrize("slope_rms", [0.05, 0.5])
-def test_albedo_at_most_one(gaussian_factory, slope_rms: float) -> None:  # type: ignore[no-untyped-def]
+def test_albedo_at_most_one(gaussian_factory: Callable[..., HeightMap], slope_rms: float) -> None:
     """Masked: albedo <= 1 at every incidence, because (1/N) sum_k c_k+/(m_z cos ti) is
     exactly 1 + Lambda(wi) (Smith normalisation) and G2 <= 1/(1 + Lambda(wi)). Unmasked:
     <= 1 while no facet faces away from the lamp; at grazing incidence on rough surfaces
@@ -447,7 +449,9 @@ def test_smith_lambda_of_gaussian_slopes_is_beckmann(gauss_surface_1024: Surface
 
 
 # --------------------------------------------------------------------------- rougher surfaces
-def test_rougher_means_lower_peak_wider_fwhm_lower_gloss(gaussian_factory) -> None:  # type: ignore[no-untyped-def]
+def test_rougher_means_lower_peak_wider_fwhm_lower_gloss(
+    gaussian_factory: Callable[..., HeightMap],
+) -> None:
     tr = np.arange(0.0, 71.0, 0.5)
     results = []
     for s in (0.01, 0.03, 0.08):

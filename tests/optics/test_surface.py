@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -141,7 +142,9 @@ def test_roughness_stats_of_a_cosine() -> None:
     assert st.n_facets == 7 * 255
 
 
-def test_roughness_stats_gaussian_h_r_orders_roughness(gaussian_factory) -> None:  # type: ignore[no-untyped-def]
+def test_roughness_stats_gaussian_h_r_orders_roughness(
+    gaussian_factory: Callable[..., HeightMap],
+) -> None:
     smooth = roughness_stats(gaussian_factory(128, 0.01, seed=2), slope_method="central")
     rough = roughness_stats(gaussian_factory(128, 0.05, seed=2), slope_method="central")
     assert smooth.slope_rms_x == pytest.approx(0.01, rel=0.02)
