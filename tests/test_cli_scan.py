@@ -103,3 +103,16 @@ def test_resume_of_a_finished_run_is_refused(
 ) -> None:
     assert main(["scan", "resume", "1", "--store", str(store_file)]) == 2
     assert "already done" in capsys.readouterr().err
+
+
+def test_runs_show_gloss_statistics(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "g.sqlite"
+    with RunStore(path) as s:
+        rid = s.create_run(kind="gloss", plan={}, config={}, sample="", model={}, version="t")
+        for k, g60 in enumerate((57.0, 58.0, 59.0)):
+            s.add_gloss_reading(rid, values_gu={20: None, 60: g60, 85: None}, temperature_c=None,
+                                predicted_gu=None, raw="", timestamp=float(k))  # fmt: skip
+        s.set_status(rid, "done")
+    assert main(["runs", "show", str(rid), "--store", str(path)]) == 0
+    # mean 58.0, sample std 1.0 of 57, 58, 59
+    assert "G60: 58.0 +- 1.0 GU (n = 3)" in capsys.readouterr().out

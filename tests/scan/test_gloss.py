@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import asyncio
+
 import pytest
 
 from drivers.base import Disconnected, GlossReading, ProtocolError
@@ -76,3 +78,40 @@ async def test_too_many_failures_fail_but_keep_readings(store: RunStore) -> None
 async def test_predicted_gloss_runs_in_a_thread() -> None:
     model = FakeModel()
     assert await predict_gloss(model, (20, 60)) == {20: 80.0, 60: 90.0}
+
+
+async def test_push_mode_reopens_the_stream_after_a_disconnect(store: RunStore) -> None:
+    script: list[GlossReading | Exception] = [
+        reading(70.0, 80.0, 90.0, 1.0),
+        Disconnected("USB cable pulled", device="glossmeter"),
+        reading(71.0, 81.0, 91.0, 2.0),
+    ]
+    logger, _, _, clock = make(store, script, 2, mode="push")
+    result = await logger.run()
+    assert result.state is RunState.DONE and result.readings == 2
+    assert result.reconnects == 1 and clock.now() == pytest.approx(0.5, abs=1e-12)
+    assert [r.values_gu[85] for r in store.gloss_readings(result.run_id)] == [90.0, 91.0]
+
+
+async def test_stop_ends_an_open_ended_session(store: RunStore) -> None:
+    script: list[GlossReading | Exception] = [reading(70.0 + k, 80.0, 90.0, k) for k in range(10)]
+    logger, _, bus, _ = make(store, script, 0)  # count 0: until stopped
+    q = bus.subscribe()
+
+    async def stop_after_three() -> None:
+        n = 0
+        while (ev := await q.get()) is not None:
+            if isinstance(ev, GlossRead):
+                n += 1
+                if n == 3:
+                    logger.stop()
+                    return
+
+    watcher = asyncio.create_task(stop_after_three())
+    result = await logger.run()
+    await watcher
+    # the subscriber reads at its own pace: the stop lands after the 3rd or 4th reading
+    n = result.readings
+    assert n in (3, 4) and result.state is RunState.DONE
+    assert len(store.gloss_readings(result.run_id)) == n
+    assert result.stats.mean_gu[20] == pytest.approx(70.0 + (n - 1) / 2, abs=1e-12)
