@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 
 from goniolab.cli import main
+from goniolab.config import configs_dir
 from goniolab.scan.plans import BrdfPlan
 from goniolab.store import RunStore
 
@@ -116,3 +117,36 @@ def test_runs_show_gloss_statistics(tmp_path: Path, capsys: pytest.CaptureFixtur
     assert main(["runs", "show", str(rid), "--store", str(path)]) == 0
     # mean 58.0, sample std 1.0 of 57, 58, 59
     assert "G60: 58.0 +- 1.0 GU (n = 3)" in capsys.readouterr().out
+
+
+def test_unknown_sample_names_the_option(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    cfg = str(configs_dir() / "lab-sim.toml")
+    args = ["scan", "--config", cfg, "--sample", "sample:nope", "--store", str(tmp_path / "s")]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert "--sample sample:nope: unknown sample" in err and "wittmann-3" in err
+
+
+def test_unsafe_plan_is_refused_and_not_recorded(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    store = tmp_path / "s.sqlite"
+    cfg = str(configs_dir() / "lab-sim.toml")
+    # theta_r = -40 deg at theta_i = 45 deg: arms 5 deg apart, below the 10 deg minimum
+    args = [
+        "scan",
+        "--config",
+        cfg,
+        "--theta-r=-40,-30",
+        "--time-scale",
+        "0",
+        "--store",
+        str(store),
+    ]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert "point 0 (theta_i=45 deg, theta_r=-40 deg) is unsafe" in err and "no arm moved" in err
+    with RunStore(store) as s:
+        assert s.list_runs() == []

@@ -158,6 +158,10 @@ def _cmd_log(args: argparse.Namespace) -> int:
         raise UserError("gloss log: --config and --port exclude each other")
     config_store = None
     sample = args.sample or ""
+    if args.sample:
+        from goniolab.commands.scan import check_sample_arg
+
+        check_sample_arg(args.sample)
     if args.config:
         from goniolab.config import load_lab_config
 

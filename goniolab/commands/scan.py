@@ -34,7 +34,7 @@ from goniolab.scan.predict import Predictor
 from goniolab.scan.runner import ArmMotion, PlanRefused, RunResult, ScanRunner, dry_run
 from goniolab.store import RunStore, StoreError, resolve_store_path
 
-__all__ = ["format_eta", "format_summary", "register", "with_sample"]
+__all__ = ["check_sample_arg", "format_eta", "format_summary", "register", "with_sample"]
 
 _EXIT = {RunState.DONE: 0, RunState.FAILED: 1, RunState.ABORTED: 130}
 
@@ -306,15 +306,25 @@ def _specimen_hook(lab: Any) -> Any:
     return _specimen_prompt
 
 
+def check_sample_arg(spec: str) -> None:
+    """Name ``--sample`` (not the config) when the sample does not exist."""
+    if spec.startswith("sample:"):
+        from sim.samples import sample_names
+
+        names = sample_names()
+        if spec.removeprefix("sample:") not in names:
+            raise UserError(f"--sample {spec}: unknown sample; known: {', '.join(names)}")
+    elif not Path(spec).is_file():
+        raise UserError(f"--sample {spec}: no such file (use sample:NAME or a height-map path)")
+
+
 def _cmd_scan(args: argparse.Namespace) -> int:
     if not args.config:
         raise UserError("scan: --config FILE is required (e.g. configs/lab-sim.toml)")
     cfg = load_lab_config(args.config)
     sample = args.sample or cfg.sample.map
-    if args.sample and not (args.sample.startswith("sample:") or Path(args.sample).exists()):
-        raise UserError(
-            f"--sample {args.sample}: no such file (use sample:NAME or a height-map path)"
-        )
+    if args.sample:
+        check_sample_arg(args.sample)
     try:
         plan = BrdfPlan(
             theta_i_deg=args.theta_i,
