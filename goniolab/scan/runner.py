@@ -523,6 +523,14 @@ class ScanRunner:
             why = "cancelled" + (f"; {park_problem}" if park_problem else "")
             self._set_state(RunState.ABORTED, why)
             raise
+        except Exception as exc:
+            # Not an instrument fault (a bug, a full disk): still leave the arms parked and
+            # the run resumable, then let the error surface.
+            predict_task.cancel()
+            park_problem = await self._park()
+            why = f"internal error: {exc!r}" + (f"; {park_problem}" if park_problem else "")
+            self._set_state(RunState.FAILED, why)
+            raise
         park_problem = await self._park()
         if park_problem:
             reason = f"{reason}; {park_problem}" if reason else park_problem

@@ -336,3 +336,18 @@ async def test_eta_stretches_by_the_observed_slowdown(fake_lab: FakeLab, store: 
     # before any reading: the plain estimate 4 x 0.01 s; then the remaining readings at
     # the observed 0.04 s each: 3 x 0.04, 2 x 0.04, 1 x 0.04, 0
     assert etas == pytest.approx([0.04, 0.12, 0.08, 0.04, 0.0], abs=1e-9)
+
+
+async def test_unexpected_error_parks_marks_failed_and_surfaces(
+    fake_lab: FakeLab, store: RunStore
+) -> None:
+    async def bad_exposure(exposure_us: int) -> None:
+        raise ValueError("spectro: exposure 10000 us outside [500, 5000] us")
+
+    fake_lab.spectro.set_exposure_us = bad_exposure  # type: ignore[method-assign]
+    runner, _ = make_runner(fake_lab, store, BrdfPlan(45.0, (44.0, 45.0, 46.0)))
+    with pytest.raises(ValueError, match="outside"):
+        await runner.run()
+    rec = store.get_run(runner.run_id)
+    assert rec.status == "failed" and "internal error" in rec.reason
+    assert fake_lab.goniometer.park_calls == 1
