@@ -91,6 +91,8 @@ _MIN_CHUNK = 1 << 16
 _LAMBDA_MAX_FACETS = 1 << 17
 _LAMBDA_THETA_STEP_DEG = 0.5
 _LAMBDA_PHI_STEP_DEG = 5.0
+#: luminance_pct evaluates up to this many detector angles exactly, facet by facet.
+_EXACT_MAX_POINTS = 2
 #: Nodes of the tabulated cap-overlap fraction O(gamma).
 _CONE_TABLE_SIZE = 4097
 
@@ -684,7 +686,8 @@ class FacetModel:
         """Goniometer reading: 100 x the fraction of the incident flux reaching the detector.
 
         Source directions are uniform in solid angle over the source aperture around wi;
-        the detector is centred on the signed in-plane angle theta_r. The weights are
+        the detector is centred on the signed in-plane angle theta_r. One or two angles are
+        evaluated exactly with :meth:`reflected_fraction`. For more, the weights are
         deposited once (cloud-in-cell) on a grid of in-plane angle x out-of-plane angle
         nodes ``grid_step_deg`` apart around the in-plane arc; each reading is the grid
         weighted by the aperture overlap ``O`` at every node (see
@@ -717,6 +720,10 @@ class FacetModel:
             return np.zeros(tr_deg.shape)
         if _zero_solid_angle(detector):
             return 100.0 * self._point_receptor(ti, tr_deg, source, detector)
+        if tr_deg.size <= _EXACT_MAX_POINTS:
+            # one pass per point beats the grid's deposit + tables; and it is exact
+            exact = [self.reflected_fraction(ti, float(t), source, detector) for t in tr_deg.flat]
+            return 100.0 * np.asarray(exact, dtype=np.float64).reshape(tr_deg.shape)
         if kind == "cone":
             assert isinstance(source, Cone) and isinstance(detector, Cone)
             reach_a = reach_b = source.half_angle_deg + detector.half_angle_deg
