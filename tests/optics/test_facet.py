@@ -436,6 +436,23 @@ def test_albedo_at_most_one(gaussian_factory: Callable[..., HeightMap], slope_rm
     )
 
 
+def test_masking_is_neutral_on_a_mirror_and_only_removes_light(
+    flat_surface: Surface, gauss_surface_256: Surface
+) -> None:
+    """Lambda = 0 for a flat surface (G2 = 1); on a rough one G2 <= 1 everywhere, and most
+    so at grazing angles."""
+    flat = FacetModel(flat_surface, n=1.567, masking=True)
+    assert flat.gloss() == pytest.approx({20: 100.0, 60: 100.0, 85: 100.0}, rel=1e-12)
+    plain = FacetModel(gauss_surface_256)
+    masked = FacetModel(gauss_surface_256, masking=True)
+    tr = np.arange(60.0, 86.0, 1.0)
+    lp, lm = plain.luminance_pct(75.0, tr), masked.luminance_pct(75.0, tr)
+    assert np.all(lm <= lp) and lm.max() > 0
+    g_plain, g_masked = plain.gloss(), masked.gloss()
+    loss = {t: 1 - g_masked[t] / g_plain[t] for t in (20, 60, 85)}
+    assert 0 <= loss[20] < loss[60] < loss[85]
+
+
 def test_smith_lambda_of_gaussian_slopes_is_beckmann(gauss_surface_1024: Surface) -> None:
     """Lambda from the measured slopes vs the exact Beckmann Smith Lambda (a = sqrt2 sigma)."""
     sx, _ = _sigma(gauss_surface_1024)
