@@ -44,11 +44,11 @@ from scipy.special import erf
 from goniolab.optics.apertures import (
     DEFAULT_N_RECEPTOR,
     DEFAULT_N_SOURCE,
+    GONIO_CONE,
     ISO2813_BLACK_GLASS_N,
     ISO2813_RECEPTOR,
     ISO2813_SOURCE,
     Aperture,
-    Cone,
     Rect,
     direction,
     integrate_brdf,
@@ -58,7 +58,6 @@ from goniolab.optics.fresnel import fresnel, fresnel_dielectric
 
 __all__ = [
     "DEFAULT_CONE_RINGS",
-    "GONIO_CONE",
     "KINDS",
     "AnalyticKind",
     "AnalyticModel",
@@ -81,9 +80,6 @@ _SQRT_PI = math.sqrt(math.pi)
 
 #: Minimum rings of a cone receptor (1 + 3 k (k - 1) patches); more for narrow lobes.
 DEFAULT_CONE_RINGS: int = 8
-
-#: Lamp divergence and detector opening of the Wittmann goniospectrophotometer (sec. 2.3).
-GONIO_CONE: Cone = Cone(6.0)
 
 
 def _tan2(cos_t: FloatArray) -> FloatArray:

@@ -26,6 +26,7 @@ __all__ = [
     "BRDF",
     "DEFAULT_N_RECEPTOR",
     "DEFAULT_N_SOURCE",
+    "GONIO_CONE",
     "ISO2813_BLACK_GLASS_N",
     "ISO2813_RECEPTOR",
     "ISO2813_SOURCE",
@@ -74,6 +75,9 @@ class Rect:
 
 
 Aperture = Cone | Rect
+
+#: The Wittmann goniometer's lamp divergence and detector opening (6 deg full angle, sec. 2.3).
+GONIO_CONE: Cone = Cone(6.0)
 
 #: Refractive index of the ISO 2813 primary standard (polished black glass) at 587.6 nm.
 ISO2813_BLACK_GLASS_N: float = 1.567

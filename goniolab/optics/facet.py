@@ -64,6 +64,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from goniolab.optics import _kernels as K
 from goniolab.optics.apertures import (
+    GONIO_CONE,
     ISO2813_BLACK_GLASS_N,
     ISO2813_RECEPTOR,
     ISO2813_SOURCE,
@@ -75,7 +76,6 @@ from goniolab.optics.fresnel import fresnel, fresnel_dielectric
 from goniolab.optics.surface import Surface
 
 __all__ = [
-    "GONIO_CONE",
     "FacetModel",
     "HemisphereBRDF",
     "cap_overlap_fraction",
@@ -95,9 +95,6 @@ _LAMBDA_PHI_STEP_DEG = 5.0
 _EXACT_MAX_POINTS = 2
 #: Nodes of the tabulated cap-overlap fraction O(gamma).
 _CONE_TABLE_SIZE = 4097
-
-#: The Wittmann goniometer's lamp and detector apertures (6 deg full angle, sec. 2.3).
-GONIO_CONE = Cone(6.0)
 
 _executor: ThreadPoolExecutor | None = None
 

@@ -42,8 +42,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares
 
-from goniolab.optics.analytic import GONIO_CONE, KINDS, AnalyticModel
-from goniolab.optics.apertures import ISO2813_RECEPTOR, Aperture
+from goniolab.optics.analytic import KINDS, AnalyticModel
+from goniolab.optics.apertures import GONIO_CONE, ISO2813_RECEPTOR, Aperture
 
 __all__ = ["ALPHA_BOUNDS", "N_BOUNDS", "FitResult", "fit_to_curve", "fit_to_gloss"]
 
