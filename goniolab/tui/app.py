@@ -10,12 +10,14 @@ from __future__ import annotations
 
 import asyncio
 import math
+import time
 from typing import ClassVar
 
 from textual import work
 from textual.app import App, ComposeResult
 from textual.binding import Binding, BindingType
 from textual.containers import Horizontal, Vertical
+from textual.css.query import NoMatches
 from textual.notifications import SeverityLevel
 from textual.widgets import Footer, Header, Static
 
@@ -57,6 +59,8 @@ class GonioApp(App[int]):
     """
 
     TITLE = "goniolab"
+    #: Minimum time between two redraws of the live plots (wall seconds).
+    REDRAW_INTERVAL_S = 0.25
     AUTO_FOCUS = None
     COMMANDS: ClassVar = App.COMMANDS | {ScanCommands}
     BINDINGS: ClassVar[list[BindingType]] = [
@@ -88,6 +92,10 @@ class GonioApp(App[int]):
         self.events_seen = 0
         self.ready = asyncio.Event()
         self._redraw_pending = False
+        self._last_redraw_s = -math.inf
+        self._closed = False
+        self._starting = False
+        self._pause_on_start = False
         self._queue = backend.bus.subscribe()
 
     # ------------------------------------------------------------------ layout
@@ -154,6 +162,8 @@ class GonioApp(App[int]):
         while (ev := await self._queue.get()) is not None:
             try:
                 self.apply_event(ev)
+            except NoMatches:  # the screen is being torn down: nothing left to show
+                return
             except Exception as exc:  # a bad event must not kill the consumer
                 self.notify(f"{type(ev).__name__}: {exc}", title="Display", severity="error")
 
@@ -162,11 +172,18 @@ class GonioApp(App[int]):
         try:
             setup = self.query_one(ScanForm).read()
             self.run_id = await self.backend.start(setup)
+            if self._pause_on_start:
+                # space pressed while the run was being set up (model, store): the
+                # runner honours it before its first reading.
+                self.backend.pause()
         except UserError as exc:
             self.notify(str(exc), title="Scan setup", severity="error", timeout=8)
         except (DeviceError, OSError) as exc:
             self.show_banner(f"scan could not start: {exc}")
             self.notify(str(exc), title="Scan", severity="error", timeout=8)
+        finally:
+            self._starting = False
+            self._pause_on_start = False
 
     @work(group="gloss")
     async def _read_gloss(self) -> None:
@@ -240,16 +257,35 @@ class GonioApp(App[int]):
                 text += f"  ETA {eta_s:.0f} s"
         self.query_one(StatusPanel).show_run(text)
 
+    @property
+    def redraw_pending(self) -> bool:
+        """A redraw of the live plots is scheduled but has not run yet."""
+        return self._redraw_pending
+
     def schedule_redraw(self) -> None:
-        """Coalesce bursts of events into one redraw after the current message."""
-        if not self._redraw_pending:
-            self._redraw_pending = True
+        """Coalesce events into at most one plot redraw per ``REDRAW_INTERVAL_S``.
+
+        Rendering both plots takes ~0.1 s; on a fast (or instant) sim clock readings
+        arrive much faster than that, so redraws are rate-limited, never queued up.
+        """
+        if self._redraw_pending:
+            return
+        self._redraw_pending = True
+        wait_s = self._last_redraw_s + self.REDRAW_INTERVAL_S - time.monotonic()
+        if wait_s > 0:
+            self.set_timer(wait_s, self.redraw)
+        else:
             self.call_later(self.redraw)
 
     def redraw(self) -> None:
         """Redraw the live comparison from the accumulated data."""
         self._redraw_pending = False
-        self.query_one("#live", ComparisonPanel).show(self.comparison)
+        self._last_redraw_s = time.monotonic()
+        try:
+            panel = self.query_one("#live", ComparisonPanel)
+        except NoMatches:  # a timer firing while the app shuts down
+            return
+        panel.show(self.comparison)
 
     def show_banner(self, text: str) -> None:
         banner = self.query_one("#banner", Static)
@@ -265,14 +301,19 @@ class GonioApp(App[int]):
         if not self.ready.is_set():
             self.notify("the lab is not ready (not homed)", title="Scan", severity="warning")
             return
-        if self.backend.running:
+        if self.backend.running or self._starting:
             self.notify("a scan is already running", title="Scan", severity="warning")
             return
+        self._starting = True
         self._start()
 
     def action_toggle_pause(self) -> None:
         """Pause a running scan or resume a paused one (key ``space``)."""
-        if not self.backend.running:
+        if self._starting:
+            self._pause_on_start = not self._pause_on_start
+            what = "will pause before the first reading" if self._pause_on_start else "will run"
+            self.notify(f"the scan {what}", title="Scan")
+        elif not self.backend.running:
             self.notify("no scan running", title="Scan", severity="warning")
         elif self.run_state is RunState.PAUSED:
             self.backend.resume()
@@ -308,12 +349,23 @@ class GonioApp(App[int]):
         """Open the stored-runs browser (key ``r``)."""
         self.push_screen(RunsScreen(self.backend))
 
-    async def action_quit(self) -> None:
-        """Abort any scan, release the instruments and leave (key ``q``)."""
+    async def close_backend(self) -> None:
+        """Abort any scan (the runner parks the arms) and release the instruments, once."""
+        if self._closed:
+            return
+        self._closed = True
         try:
             if self.backend.running:
                 self.backend.abort()
             await self.backend.close()
         except (DeviceError, OSError) as exc:
             self.log.error(f"closing the lab: {exc}")
+
+    async def action_quit(self) -> None:
+        """Abort any scan, release the instruments and leave (key ``q``)."""
+        await self.close_backend()
         self.exit(0)
+
+    async def on_unmount(self) -> None:
+        """Also release the lab when the app ends another way (ctrl+c, a test's end)."""
+        await self.close_backend()

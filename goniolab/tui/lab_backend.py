@@ -63,6 +63,9 @@ class LabBackend:
         default: the config's ``[sample] map``.
     store_path
         Run store file overriding ``[lab] store``.
+    model
+        Reflectance model of the configured sample, instead of building it from
+        ``[sample] map`` (passed to :class:`~goniolab.lab.Lab`; tests use a cheap one).
     """
 
     def __init__(
@@ -72,7 +75,9 @@ class LabBackend:
         time_scale: float | None = None,
         sample: str | None = None,
         store_path: str | None = None,
+        model: ReflectanceModel | None = None,
     ) -> None:
+        self._lab_model = model
         self.config_path = Path(config_path)
         self.config: LabConfig = load_lab_config(self.config_path)
         self.time_scale = time_scale
@@ -109,7 +114,7 @@ class LabBackend:
         """Build the lab (connect every instrument), open the store, home the goniometer."""
         try:
             self.lab = await self._stack.enter_async_context(
-                Lab.from_config(self.config, time_scale=self.time_scale)
+                Lab.from_config(self.config, time_scale=self.time_scale, model=self._lab_model)
             )
             self.store = RunStore(self.store_path)
             self._stack.callback(self.store.close)

@@ -3,30 +3,28 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 
 import numpy as np
 import pytest
-from textual.pilot import Pilot
 from textual.widgets import DataTable, Input, Static
 from textual_plot import PlotWidget
-from tui_scripted import AMP_PCT, PEAK_DEG, PRED_SCALE, SIGMA_DEG, ScriptedBackend, gaussian_pct
 
 from goniolab.scan.events import RunState
 from goniolab.tui.app import GonioApp
 from goniolab.tui.screens import RunsScreen
 from goniolab.tui.widgets import ComparisonPanel, GlossLog, MetricsTable, StatusPanel
+from tests.tui.tui_scripted import (
+    AMP_PCT,
+    PEAK_DEG,
+    PRED_SCALE,
+    SIGMA_DEG,
+    ScriptedBackend,
+    gaussian_pct,
+    settle,
+    wait_until,
+)
 
 SIZE = (140, 42)
-
-
-async def wait_until(pilot: Pilot[int], cond: Callable[[], bool], *, max_turns: int = 400) -> None:
-    """Let the app process messages until ``cond()`` holds (no wall-clock waits)."""
-    for _ in range(max_turns):
-        if cond():
-            return
-        await pilot.pause()
-    raise AssertionError("condition not reached")
 
 
 def notes(app: GonioApp) -> list[str]:
@@ -52,7 +50,7 @@ async def test_scan_points_appear_in_plot_and_metrics() -> None:
         await wait_until(pilot, lambda: app.run_state is RunState.RUNNING)
         await backend.release(3)
         await wait_until(pilot, lambda: app.comparison.n_readings == 9)
-        await pilot.pause()
+        await settle(pilot, app)
         x, y = plot_xy(app, "measured")
         assert x.tolist() == [10.0, 12.0, 14.0]
         np.testing.assert_allclose(y, [gaussian_pct(t) for t in (10.0, 12.0, 14.0)])
@@ -65,7 +63,7 @@ async def test_scan_points_appear_in_plot_and_metrics() -> None:
 
         await backend.release(100)
         await wait_until(pilot, lambda: app.run_state is RunState.DONE)
-        await pilot.pause()
+        await settle(pilot, app)
         table = app.query_one("#live", ComparisonPanel).query_one(MetricsTable)
         # Grid 10..30 step 2 hits the peak at 20 deg exactly.
         assert cell(table, "amplitude", "measured") == f"{AMP_PCT:.2f}"
@@ -161,7 +159,7 @@ async def test_command_palette_offers_abort() -> None:
         await wait_until(pilot, lambda: app.run_state is RunState.RUNNING)
         await pilot.press("ctrl+p")
         await pilot.press(*"abort scan")
-        await pilot.pause()
+        await settle(pilot, app)
         await pilot.press("enter")
         await backend.release(1)
         await wait_until(pilot, lambda: app.run_state is RunState.ABORTED)
@@ -181,7 +179,7 @@ async def test_gloss_log_and_runs_browser() -> None:
         assert log.get_row_at(0)[:3] == ["00:00:01", "-", "61.0"]
         assert log.get_row_at(1) == ["00:00:05", "-", "61.2", "-", "30.0", "58.0", "90.0"]
         metrics = app.query_one("#live", ComparisonPanel).query_one(MetricsTable)
-        await pilot.pause()
+        await settle(pilot, app)
         assert cell(metrics, "g60", "delta") == "3.2"
 
         await pilot.press("r")

@@ -10,21 +10,13 @@ from collections.abc import Callable
 
 from textual.pilot import Pilot
 from textual.widgets import DataTable
-from tui_scripted import ScriptedBackend
 
 from goniolab.scan.events import RunState
 from goniolab.tui.app import GonioApp
 from goniolab.tui.screens import RunsScreen
+from tests.tui.tui_scripted import ScriptedBackend, settle, wait_until
 
 SIZE = (140, 42)
-
-
-async def _wait(pilot: Pilot[int], cond: Callable[[], bool]) -> None:
-    for _ in range(400):
-        if cond():
-            return
-        await pilot.pause()
-    raise AssertionError("condition not reached")
 
 
 def _finished_app() -> tuple[GonioApp, ScriptedBackend]:
@@ -36,13 +28,13 @@ def test_main_screen_after_scan(snap_compare: Callable[..., bool]) -> None:
     app, backend = _finished_app()
 
     async def run_before(pilot: Pilot[int]) -> None:
-        await _wait(pilot, lambda: app.run_state is RunState.DONE)
+        await wait_until(pilot, lambda: app.run_state is RunState.DONE)
         backend.publish_gloss(5, 61.25)
         backend.publish_gloss(9, 57.5)
-        await _wait(pilot, lambda: len(app.comparison.gloss) == 3)
-        await pilot.pause()
+        await wait_until(pilot, lambda: len(app.comparison.gloss) == 3)
+        await settle(pilot, app)
         app.clear_notifications()
-        await pilot.pause()
+        await settle(pilot, app)
 
     assert snap_compare(app, terminal_size=SIZE, run_before=run_before)
 
@@ -51,12 +43,12 @@ def test_main_screen_log_view_and_timeout(snap_compare: Callable[..., bool]) -> 
     app, backend = _finished_app()
 
     async def run_before(pilot: Pilot[int]) -> None:
-        await _wait(pilot, lambda: app.run_state is RunState.DONE)
+        await wait_until(pilot, lambda: app.run_state is RunState.DONE)
         app.clear_notifications()
         await pilot.press("l")
         backend.publish_timeout()
-        await _wait(pilot, lambda: len(app._notifications) == 1)
-        await pilot.pause()
+        await wait_until(pilot, lambda: len(app._notifications) == 1)
+        await settle(pilot, app)
 
     assert snap_compare(app, terminal_size=SIZE, run_before=run_before)
 
@@ -65,15 +57,15 @@ def test_runs_browser(snap_compare: Callable[..., bool]) -> None:
     app, _backend = _finished_app()
 
     async def run_before(pilot: Pilot[int]) -> None:
-        await _wait(pilot, lambda: app.run_state is RunState.DONE)
+        await wait_until(pilot, lambda: app.run_state is RunState.DONE)
         app.clear_notifications()
         await pilot.press("r")
-        await _wait(pilot, lambda: isinstance(app.screen, RunsScreen))
+        await wait_until(pilot, lambda: isinstance(app.screen, RunsScreen))
         screen = app.screen
         assert isinstance(screen, RunsScreen)
-        await _wait(pilot, lambda: screen.query_one("#runs", DataTable).row_count == 1)
+        await wait_until(pilot, lambda: screen.query_one("#runs", DataTable).row_count == 1)
         await pilot.press("enter")
-        await _wait(pilot, lambda: screen.loaded_run == 1)
-        await pilot.pause()
+        await wait_until(pilot, lambda: screen.loaded_run == 1)
+        await settle(pilot, app)
 
     assert snap_compare(app, terminal_size=SIZE, run_before=run_before)

@@ -11,6 +11,9 @@ from __future__ import annotations
 
 import asyncio
 import math
+from collections.abc import Callable
+
+from textual.pilot import Pilot
 
 from drivers.base import DeviceTimeout
 from goniolab.errors import UserError
@@ -27,6 +30,7 @@ from goniolab.scan.events import (
     RunState,
     StateChanged,
 )
+from goniolab.tui.app import GonioApp
 from goniolab.tui.backend import ArmState, RunSummary, ScanSetup, StoredRun
 
 AMP_PCT = 40.0
@@ -251,3 +255,19 @@ class ScriptedBackend:
                 fatal=False,
             )
         )
+
+
+async def wait_until(pilot: Pilot[int], cond: Callable[[], bool], *, max_turns: int = 3000) -> None:
+    """Let the app process messages until ``cond()`` holds (no wall-clock waits)."""
+    for _ in range(max_turns):
+        if cond():
+            return
+        await pilot.pause()
+    raise AssertionError("condition not reached")
+
+
+async def settle(pilot: Pilot[int], app: GonioApp) -> None:
+    """Wait for the rate-limited plot redraw to run and the screen to repaint."""
+    await wait_until(pilot, lambda: not app.redraw_pending)
+    for _ in range(3):
+        await pilot.pause()

@@ -1,0 +1,193 @@
+"""The TUI over the real stack: Lab (in-process sim, instant clock), ScanRunner, RunStore.
+
+The simulated lab reads a noise-free, perfectly aligned Beckmann surface; the prediction
+comes from the same model through the same apertures, so the truth is that measured and
+predicted agree to rounding, point by point.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from textual.pilot import Pilot
+from textual.widgets import DataTable, Input
+
+from goniolab.optics.analytic import AnalyticModel
+from goniolab.optics.apertures import Cone
+from goniolab.scan.events import RunState
+from goniolab.store import RunStore
+from goniolab.tui.app import GonioApp
+from goniolab.tui.lab_backend import LabBackend
+from goniolab.tui.screens import RunsScreen
+from goniolab.tui.widgets import ComparisonPanel, GlossLog, MetricsTable, StatusPanel
+from tests.tui.tui_scripted import settle, wait_until
+
+REPO = Path(__file__).resolve().parents[2]
+SIZE = (140, 42)
+ALPHA = 0.1  # Beckmann total rms slope of the simulated sample
+
+
+def sim_config(tmp_path: Path, *, faults: str = "") -> Path:
+    """configs/lab-sim.toml with an instant clock, no noise and a temporary store."""
+    text = (REPO / "configs" / "lab-sim.toml").read_text()
+    text = re.sub(r"(?m)^time_scale = .*$", "time_scale = 0.0", text)
+    text = re.sub(r"(?m)^store = .*$", f'store = "{tmp_path / "runs.sqlite"}"', text)
+    text = re.sub(r"(?m)^noise_pct = .*$", "noise_pct = 0.0", text)
+    text = text.replace("[sim.faults]", "[sim.faults]\n" + faults)
+    path = tmp_path / "lab.toml"
+    path.write_text(text)
+    return path
+
+
+def make_app(tmp_path: Path, *, faults: str = "", autostart: bool = False) -> GonioApp:
+    backend = LabBackend(
+        sim_config(tmp_path, faults=faults), model=AnalyticModel("beckmann", alpha=ALPHA)
+    )
+    return GonioApp(backend, autostart=autostart, poll_hz=0)
+
+
+async def set_form(pilot: Pilot[int], app: GonioApp, **values: str) -> None:
+    for key, value in values.items():
+        app.query_one(f"#{key}", Input).value = value
+    await pilot.pause()
+
+
+async def test_scan_on_the_sim_lab_measured_equals_predicted(tmp_path: Path) -> None:
+    app = make_app(tmp_path)
+    async with app.run_test(size=SIZE) as pilot:
+        await wait_until(pilot, app.ready.is_set)
+        arms = app.query_one(StatusPanel).query_one("#arms", DataTable)
+        assert str(arms.get_cell("lamp", "homed")) == "yes"
+        assert str(arms.get_cell("detector", "link")) == "ok"
+        await set_form(
+            pilot,
+            app,
+            theta_i_deg="20",
+            theta_r_start_deg="10",
+            theta_r_stop_deg="30",
+            theta_r_step_deg="2",
+            repeats="2",
+        )
+        await pilot.press("s")
+        await wait_until(pilot, lambda: app.run_state is RunState.DONE)
+        await wait_until(pilot, lambda: len(app.comparison.predicted) == 11)
+        await settle(pilot, app)
+        a = app.comparison.arrays()
+        assert a.theta_r_deg.tolist() == list(np.arange(10.0, 30.1, 2.0))
+        assert a.n_readings.tolist() == [2] * 11
+        # Independent truth: the model's own in-plane luminance through the 6-deg cones.
+        truth = AnalyticModel("beckmann", alpha=ALPHA).luminance_pct(
+            20.0, a.theta_r_deg, source=Cone(6.0), detector=Cone(6.0)
+        )
+        np.testing.assert_allclose(a.mean_pct, truth, rtol=1e-9)
+        np.testing.assert_allclose(a.predicted_pct, truth, rtol=1e-9)
+        plot = app.query_one("#live", ComparisonPanel).main_plot
+        ds = plot._datasets[plot._labels.index("measured")]
+        np.testing.assert_allclose(ds.y, truth, rtol=1e-9)
+        metrics = app.query_one("#live", ComparisonPanel).query_one(MetricsTable)
+        assert str(metrics.get_cell("rmse", "measured")) == "0.000"
+        assert str(metrics.get_cell("position", "measured")) == "20.0"  # specular
+        # Every reading is in the store.
+        with RunStore(tmp_path / "runs.sqlite") as store:
+            assert store.count_points(app.run_id) == 22
+            assert store.get_run(app.run_id).status == "done"
+
+
+async def test_pause_resume_abort_on_the_sim_lab(tmp_path: Path) -> None:
+    app = make_app(tmp_path)
+    total = 11 * 2
+    async with app.run_test(size=SIZE) as pilot:
+        await wait_until(pilot, app.ready.is_set)
+        await set_form(
+            pilot,
+            app,
+            theta_r_start_deg="0",
+            theta_r_stop_deg="40",
+            theta_r_step_deg="4",
+            repeats="2",
+        )
+
+        # Run 1: pause, nothing measured while paused, resume to the end.
+        # The actions of keys s and space, back to back: a Pilot key press waits for the
+        # app to go idle, and on the instant clock the whole scan may be over by then.
+        app.action_start_scan()
+        app.action_toggle_pause()  # honoured before the first reading
+        await wait_until(pilot, lambda: app.run_state is RunState.PAUSED)
+        paused_at = app.comparison.n_readings
+        assert paused_at == 0
+        for _ in range(20):
+            await pilot.pause()
+        assert app.comparison.n_readings == paused_at
+        await pilot.press("space")
+        await wait_until(pilot, lambda: app.run_state is RunState.DONE)
+        assert app.comparison.n_readings == total
+        first = app.run_id
+
+        # Run 2: pause, then abort while paused: the run stops where it was, arms parked.
+        app.action_start_scan()
+        app.action_toggle_pause()
+        await wait_until(pilot, lambda: app.run_state is RunState.PAUSED)
+        stopped_at = app.comparison.n_readings
+        await pilot.press("x")
+        await wait_until(pilot, lambda: app.run_state is RunState.ABORTED)
+        assert app.comparison.n_readings == stopped_at < total
+        with RunStore(tmp_path / "runs.sqlite") as store:
+            assert store.get_run(first).status == "done"
+            assert store.count_points(first) == total
+            assert store.get_run(app.run_id).status == "aborted"
+            assert store.count_points(app.run_id) == stopped_at
+        await app.poll_once()
+        arms = app.query_one(StatusPanel).query_one("#arms", DataTable)
+        assert str(arms.get_cell("lamp", "angle")) == "45.00"  # config park 45/45
+        assert str(arms.get_cell("detector", "angle")) == "45.00"
+
+
+async def test_gloss_reading_and_runs_browser_on_the_sim_lab(tmp_path: Path) -> None:
+    app = make_app(tmp_path)
+    async with app.run_test(size=SIZE) as pilot:
+        await wait_until(pilot, app.ready.is_set)
+        await set_form(
+            pilot, app, theta_r_start_deg="10", theta_r_stop_deg="30", theta_r_step_deg="5"
+        )
+        await pilot.press("g", "s")
+        await wait_until(pilot, lambda: app.run_state is RunState.DONE)
+        log = app.query_one("#gloss-log", GlossLog)
+        await wait_until(pilot, lambda: log.row_count == 1)
+        gloss = AnalyticModel("beckmann", alpha=ALPHA).gloss((20, 60, 85))
+        row = log.get_row_at(0)
+        # Noise-free sim meter: reads the model's gloss (0.1 GU resolution); predicted beside.
+        for k, angle in enumerate((20, 60, 85)):
+            assert float(row[1 + k]) == pytest.approx(gloss[angle], abs=0.051)
+            assert float(row[4 + k]) == pytest.approx(gloss[angle], abs=0.051)
+        await pilot.press("r")
+        await wait_until(pilot, lambda: isinstance(app.screen, RunsScreen))
+        screen = app.screen
+        assert isinstance(screen, RunsScreen)
+        runs = screen.query_one("#runs", DataTable)
+        await wait_until(pilot, lambda: runs.row_count == 2)  # the brdf run and the gloss run
+        kinds = {str(runs.get_row_at(i)[2]) for i in range(2)}
+        assert kinds == {"brdf", "gloss"}
+        brdf_row = next(i for i in range(2) if str(runs.get_row_at(i)[2]) == "brdf")
+        runs.move_cursor(row=brdf_row)
+        await pilot.press("enter")
+        await wait_until(pilot, lambda: screen.loaded_run == app.run_id)
+        reopened = screen.comparison.arrays()
+        live = app.comparison.arrays()
+        np.testing.assert_allclose(reopened.mean_pct, live.mean_pct)
+        np.testing.assert_allclose(reopened.predicted_pct, live.predicted_pct)
+
+
+async def test_instrument_timeout_during_scan_is_reported(tmp_path: Path) -> None:
+    # The spectro never answers: the run fails with the device named, the app keeps running.
+    app = make_app(tmp_path, faults='devices = ["spectro"]\ntimeout_rate = 1.0\n')
+    async with app.run_test(size=SIZE) as pilot:
+        await wait_until(pilot, app.ready.is_set)
+        await pilot.press("s")
+        await wait_until(pilot, lambda: app.run_state is RunState.FAILED)
+        titles = [n.title for n in app._notifications]
+        assert "spectro error (fatal)" in titles
+        assert app.query_one("#banner").has_class("shown")
+        assert app.is_running
