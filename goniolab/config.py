@@ -111,7 +111,8 @@ class AxisConfig(_Strict):
     profile: str = "oriental-az"
     transport: Literal["tcp", "rtu"] = "tcp"
     host: str = "127.0.0.1"
-    port: Annotated[int, Field(ge=1, le=65535)] = 5020
+    # 0 = any free port, picked when the lab serves its own simulated controllers
+    port: Annotated[int, Field(ge=0, le=65535)] = 5020
     unit_id: Annotated[int, Field(ge=1, le=247)] = 1
     serial_port: str = ""
     baudrate: Annotated[int, Field(ge=300, le=4_000_000)] = 115200
@@ -343,6 +344,19 @@ def _cross_checks(cfg: LabConfig, path: Path) -> None:
             "goniometer.park",
             f"arm separation {sep:g} deg is below min_separation_deg {g.min_separation_deg:g}",
         )
+    for name, arm in (("lamp", g.lamp), ("detector", g.detector)):
+        if (
+            cfg.lab.mode == "drivers"
+            and not cfg.lab.start_sim_servers
+            and arm.transport == "tcp"
+            and arm.port == 0
+        ):
+            raise ConfigError(
+                path,
+                f"goniometer.{name}.port",
+                "port 0 (any free port) only works when the lab serves its own simulated "
+                "controllers (start_sim_servers = true); give the controller's TCP port",
+            )
     if (
         cfg.lab.mode == "drivers"
         and g.lamp.transport == "tcp"

@@ -352,6 +352,16 @@ class Lab:
             self._build_drivers(park)
         await self._connect()
 
+    def _modbus_port(self, ax: AxisConfig) -> int:
+        """The TCP port to reach an arm on: the configured one, or, when this lab serves
+        the simulated controllers and the config says ``port = 0``, the port the server
+        was given by the kernel."""
+        if self.server is not None:
+            for srv in self.server.modbus:
+                if (srv.host, srv.requested_port) == (ax.host, ax.port):
+                    return srv.port
+        return ax.port
+
     def _build_drivers(self, park: tuple[float, float]) -> None:
         from drivers.glossmeter import open_glossmeter
         from drivers.modbus_stepper import ModbusStepperAxis
@@ -366,7 +376,7 @@ class Lab:
                 profile=ax.profile,
                 transport=ax.transport,
                 host=ax.host,
-                port=ax.port,
+                port=self._modbus_port(ax),
                 serial_port=ax.serial_port,
                 baudrate=ax.baudrate,
                 parity=ax.parity,

@@ -513,6 +513,19 @@ class SimSpectro:
         )
         return float(np.asarray(value).reshape(-1)[0])
 
+    async def warm_up(self) -> None:
+        """Evaluate the model once (in a thread) so the first reading answers promptly.
+
+        The first evaluation of a facet model loads its compiled kernels and builds its
+        aperture tables, and the first spectrum imports colour-science; together they can
+        take longer than a driver's reply timeout (2 s in the
+        shipped configs). The wire servers call this before they accept connections. The
+        geometry is the specular one at 45 deg, valid for every model; the noise
+        generator is not touched, so seeded readings stay the same.
+        """
+        await asyncio.to_thread(self.predict_luminance_pct, 45.0, 45.0)
+        await asyncio.to_thread(_y_weights)  # imports colour-science (slow) for the spectra
+
     async def read_luminance_pct(self) -> float:
         """One noisy luminance value at the arms' current actual geometry."""
         ti, tr = self.geometry_deg()
@@ -609,6 +622,10 @@ class SimGlossmeter:
             values = await asyncio.to_thread(self.model.gloss, tuple(missing))
             self._gloss_cache.update({int(k): float(v) for k, v in values.items()})
         return {a: self._gloss_cache[a] for a in angles_deg}
+
+    async def warm_up(self) -> None:
+        """Compute (and cache) the model gloss at 20/60/85 deg before the first request."""
+        await self.predicted_gu(GLOSS_ANGLES_DEG)
 
     async def read_values_gu(
         self, angles_deg: Sequence[int]

@@ -232,7 +232,8 @@ class ModbusAxisServer:
     axes
         The arms, each with its unit id and profile.
     host, port
-        Listening address (port 0 = pick a free port; see :attr:`port` after start).
+        Listening address (port 0 = the kernel picks a free port when binding; see
+        :attr:`port` after start, :attr:`requested_port` keeps the configured one).
     """
 
     def __init__(self, axes: list[WireAxis], *, host: str = "127.0.0.1", port: int = 5020) -> None:
@@ -241,6 +242,7 @@ class ModbusAxisServer:
             raise ValueError(f"duplicate Modbus unit ids {ids} on {host}:{port}")
         self.axes = {a.unit_id: a for a in axes}
         self.host = host
+        self.requested_port = port
         self.port = port
         self._server: ModbusTcpServer | None = None
         self._garble_next = 0
@@ -293,32 +295,26 @@ class ModbusAxisServer:
             The address is in use or cannot be bound (message names host:port).
         """
         devices = [self._device(w) for w in self.axes.values()]
-        if self.port == 0:
-            self.port = _free_tcp_port(self.host)
         server = ModbusTcpServer(
-            devices, address=(self.host, self.port), trace_packet=self._trace_packet
+            devices, address=(self.host, self.requested_port), trace_packet=self._trace_packet
         )
         try:
             await server.serve_forever(background=True)
         except RuntimeError as exc:
             raise OSError(
-                errno.EADDRINUSE, f"cannot listen on {self.host}:{self.port} (in use?): {exc}"
+                errno.EADDRINUSE,
+                f"cannot listen on {self.host}:{self.requested_port} (in use?): {exc}",
             ) from None
         self._server = server
+        sockets = getattr(server.transport, "sockets", None) or ()
+        if sockets:  # port 0: the port the kernel picked, bound race-free
+            self.port = int(sockets[0].getsockname()[1])
 
     async def stop(self) -> None:
         """Stop serving and close every connection."""
         if self._server is not None:
             await self._server.shutdown()
             self._server = None
-
-
-def _free_tcp_port(host: str) -> int:
-    import socket
-
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind((host, 0))
-        return int(s.getsockname()[1])
 
 
 # =========================================================================== ptys
@@ -676,7 +672,18 @@ class SimLabServer:
         self._started: list[ModbusAxisServer | _PtyDevice] = []
 
     async def start(self) -> None:
-        """Start every server; on failure, stop those already started and re-raise."""
+        """Warm the models up, then start every server.
+
+        The spectro's and glossmeter's models are evaluated once *before* any endpoint
+        accepts a connection (:meth:`SimSpectro.warm_up`, :meth:`SimGlossmeter.warm_up`),
+        so a driver's first reading is not held up by kernel loading and table building
+        and fits its ordinary reply timeout. On failure, the servers already started are
+        stopped and the error re-raised.
+        """
+        if self.spectro is not None:
+            await self.spectro.spectro.warm_up()
+        if self.glossmeter is not None:
+            await self.glossmeter.gloss.warm_up()
         parts: list[ModbusAxisServer | _PtyDevice] = [*self.modbus]
         parts += [d for d in (self.spectro, self.glossmeter) if d is not None]
         try:

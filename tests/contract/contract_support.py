@@ -2,14 +2,14 @@
 
 Backends: ``inproc`` (``mode = "sim"``, the simulated instruments themselves) and ``wire``
 (``mode = "drivers"`` with ``start_sim_servers = true``: the real drivers over Modbus TCP
-and ptys to the simulated lab). Both come from ``configs/lab-sim-wire.toml`` with a free
-TCP port, ptys under tmp_path, a scale-0 clock and no noise, and read a fast analytic
-model (GGX, alpha 0.08).
+and ptys to the simulated lab). Both come from ``configs/lab-sim-wire.toml`` with
+``port = 0`` (the server binds a free port and the lab hands it to the drivers: no race
+between parallel test workers), ptys under tmp_path, a scale-0 clock and no noise, and
+read a fast analytic model (GGX, alpha 0.08).
 """
 
 from __future__ import annotations
 
-import socket
 from pathlib import Path
 
 from goniolab.config import configs_dir
@@ -18,19 +18,13 @@ from goniolab.optics.analytic import AnalyticModel
 MODEL = AnalyticModel("ggx", alpha=0.08, n=1.55)
 
 
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 def lab_toml(
     tmp_path: Path, backend: str, *, faults: str = "", extra: dict[str, str] | None = None
 ) -> Path:
     """The wire config adapted for a test; ``faults`` lines go under ``[sim.faults]``."""
     text = (configs_dir() / "lab-sim-wire.toml").read_text()
     text = (
-        text.replace("port = 5020", f"port = {free_port()}")
+        text.replace("port = 5020", "port = 0")
         .replace("/tmp/goniolab-sim", str(tmp_path / "sim"))
         .replace("time_scale = 1.0", "time_scale = 0.0")
         .replace("noise_pct = 0.5", "noise_pct = 0.0")

@@ -3,6 +3,7 @@ the wire simulators must behave the same (see conftest.py for the backends)."""
 
 from __future__ import annotations
 
+import socket
 from collections.abc import Callable
 from pathlib import Path
 
@@ -18,7 +19,7 @@ from drivers.base import (
     ProtocolError,
     StallError,
 )
-from goniolab.config import load_lab_config
+from goniolab.config import ConfigError, load_lab_config
 from goniolab.lab import Lab, build_sim_instruments, build_sim_server
 from goniolab.optics.apertures import Cone
 from sim.clock import SimClock
@@ -134,23 +135,36 @@ NO_SERVERS = {"start_sim_servers = true": "start_sim_servers = false"}
 
 
 async def test_unreachable_controller(tmp_path: Path) -> None:
-    path = lab_toml(tmp_path, "wire", extra=NO_SERVERS)
-    port = load_lab_config(path).goniometer.lamp.port  # nothing listens there
-    with pytest.raises(DeviceError) as err:
-        async with Lab.from_config(path, model=MODEL):
-            pass
+    with socket.socket() as held:  # bound, never listening: connections are refused
+        held.bind(("127.0.0.1", 0))
+        port = held.getsockname()[1]
+        path = lab_toml(tmp_path, "wire", extra={**NO_SERVERS, "port = 0": f"port = {port}"})
+        with pytest.raises(Disconnected) as err:
+            async with Lab.from_config(path, model=MODEL):
+                pass
     assert err.value.device == "lamp" and f"127.0.0.1:{port}" in str(err.value)
 
 
+async def test_port_zero_needs_the_lab_to_serve_the_sim(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match=r"goniometer\.lamp\.port: port 0 \(any free port\)"):
+        load_lab_config(lab_toml(tmp_path, "wire", extra=NO_SERVERS))
+
+
 async def test_missing_serial_port(tmp_path: Path) -> None:
-    spectro_line = 'port = "' + str(tmp_path / "sim" / "spectro")
-    path = lab_toml(
-        tmp_path, "wire", extra={**NO_SERVERS, spectro_line: 'port = "/nonexistent/ttyX'}
-    )
-    cfg = load_lab_config(path)
+    cfg = load_lab_config(lab_toml(tmp_path, "wire"))
     arms_only = build_sim_server(cfg, build_sim_instruments(cfg, MODEL, SimClock(0))).modbus
     async with SimLabServer(arms_only):
+        spectro_line = 'port = "' + str(tmp_path / "sim" / "spectro")
+        path = lab_toml(
+            tmp_path,
+            "wire",
+            extra={
+                **NO_SERVERS,
+                "port = 0": f"port = {arms_only[0].port}",
+                spectro_line: 'port = "/nonexistent/ttyX',
+            },
+        )
         with pytest.raises(Disconnected) as err:
-            async with Lab.from_config(cfg, model=MODEL):
+            async with Lab.from_config(path, model=MODEL):
                 pass
     assert err.value.device == "spectro" and "/nonexistent/ttyX" in str(err.value)

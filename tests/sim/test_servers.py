@@ -4,7 +4,7 @@ a plain pymodbus master against the AZ register map, raw bytes on the ptys."""
 from __future__ import annotations
 
 import asyncio
-from collections.abc import AsyncIterator, Sequence
+from collections.abc import AsyncIterator, Awaitable, Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -306,18 +306,14 @@ async def test_goniolab_sim_serve_subprocess(tmp_path: Path) -> None:
     register, SIGINT stops it with exit code 0 and the pty links are gone."""
     import json
     import signal
-    import socket
     import sys
 
     from goniolab.config import configs_dir
 
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
     text = (
         (configs_dir() / "lab-sim-wire.toml")
         .read_text()
-        .replace("port = 5020", f"port = {port}")
+        .replace("port = 5020", "port = 0")  # the server binds a free port, printed below
         .replace("/tmp/goniolab-sim", str(tmp_path / "sim"))
         .replace('map = "sample:wittmann-3"', 'map = "sample:gaussian-s0.05"')
     )
@@ -343,6 +339,8 @@ async def test_goniolab_sim_serve_subprocess(tmp_path: Path) -> None:
         info = json.loads(line)
         assert info["time_scale"] == 0.0
         eps = info["endpoints"]
+        port = eps["lamp"]["port"]
+        assert port > 0 and eps["detector"]["port"] == port  # one server, two unit ids
         assert eps["lamp"] == {
             "transport": "tcp",
             "host": "127.0.0.1",
@@ -364,3 +362,65 @@ async def test_goniolab_sim_serve_subprocess(tmp_path: Path) -> None:
         if proc.returncode is None:
             proc.kill()
             await proc.wait()
+
+
+class CountingLobe(Lobe):
+    """:class:`Lobe` that counts its evaluations."""
+
+    def __init__(self) -> None:
+        self.luminance_calls = 0
+        self.gloss_calls = 0
+
+    def luminance_pct(
+        self,
+        theta_i_deg: float,
+        theta_r_deg: ArrayLike,
+        *,
+        source: Aperture = CONE6,
+        detector: Aperture = CONE6,
+    ) -> NDArray[np.float64]:
+        self.luminance_calls += 1
+        return super().luminance_pct(theta_i_deg, theta_r_deg, source=source, detector=detector)
+
+    def gloss(self, angles_deg: Sequence[int] = (20, 60, 85)) -> dict[int, float]:
+        self.gloss_calls += 1
+        return super().gloss(angles_deg)
+
+
+async def test_models_are_evaluated_before_the_ptys_accept_commands(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The first evaluation of a real facet model (kernel loading, tables) must not eat a
+    driver's reply timeout: SimLabServer evaluates spectro and gloss models first."""
+    clock = SimClock(0)
+    model = CountingLobe()
+    lamp, det = axis(clock, "lamp", 45.0), axis(clock, "detector", 45.0)
+    spectro = StilPtyDevice(
+        SimSpectro(model, lamp, det, clock), load_stil_profile("stil-ruby"), tmp_path / "s"
+    )
+    gloss = ZgmPtyDevice(
+        SimGlossmeter(model, clock),
+        load_zgm_profile("zgm1120"),
+        tmp_path / "g",
+        serial_number="401120999",
+    )
+    seen_at_start: list[tuple[int, int]] = []
+    for dev in (spectro, gloss):
+        original = dev.start
+
+        async def start(original: Callable[[], Awaitable[None]] = original) -> None:
+            seen_at_start.append((model.luminance_calls, model.gloss_calls))
+            await original()
+
+        monkeypatch.setattr(dev, "start", start)
+    async with SimLabServer([], spectro, gloss):
+        assert seen_at_start == [(1, 1), (1, 1)]
+        reader, writer = await serial_asyncio_fast.open_serial_connection(
+            url=str(tmp_path / "g"), baudrate=9600
+        )
+        try:
+            writer.write(b"1| 401120999|ab|7|1|0:")
+            await asyncio.wait_for(reader.readuntil(b"\r\n"), 5)
+        finally:
+            writer.close()
+        assert model.gloss_calls == 1  # the warm-up filled the cache for all three angles
