@@ -29,6 +29,8 @@ deadline -> STOP is sent and :class:`~drivers.base.DeviceTimeout` raised.
 
 Errors: connection refused / port missing -> :class:`~drivers.base.Disconnected` naming
 ``host:port`` or the serial port; no answer -> :class:`~drivers.base.DeviceTimeout`;
+bytes received but no valid frame (bad CRC, corrupted MBAP header) after the retries ->
+:class:`~drivers.base.ProtocolError` quoting the bytes;
 Modbus exception responses 1-3 (illegal function / address / value: the profile does not
 fit the device) -> :class:`~drivers.base.ProtocolError`, 4 and above (device failure,
 busy...) -> :class:`~drivers.base.DeviceFault`, both carrying the exception code; any
@@ -43,6 +45,7 @@ import time
 from collections.abc import Awaitable, Callable, Sequence
 from typing import Any, Literal, NoReturn
 
+import serial
 from pymodbus.client import AsyncModbusSerialClient, AsyncModbusTcpClient
 from pymodbus.client.mixin import ModbusClientMixin
 from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
@@ -58,11 +61,14 @@ from drivers.base import (
     StallError,
 )
 from drivers.profiles import StepperProfile, load_stepper_profile
+from drivers.serial_io import busy_hint
 
 __all__ = ["ModbusStepperAxis"]
 
 _INT32 = ModbusClientMixin.DATATYPE.INT32
 _UINT32 = ModbusClientMixin.DATATYPE.UINT32
+#: Received bytes quoted in a "garbled reply" error (the tail of the receive buffer).
+_GARBLE_QUOTE_BYTES = 32
 _EXCEPTION_NAMES = {
     1: "illegal function",
     2: "illegal data address",
@@ -199,6 +205,7 @@ class ModbusStepperAxis:
         self._lock = asyncio.Lock()
         self._target_steps: int | None = None
         self._homed = False
+        self._received = b""  # bytes received during the current request (trace hook)
 
     # ------------------------------------------------------------------ helpers
     def _counts(self, label: str, value_per_s: float, counts_per_step: float) -> int:
@@ -245,6 +252,7 @@ class ModbusStepperAxis:
                 timeout=self.timeout_s,
                 retries=self.retries,
                 reconnect_delay=0,  # a lost link is reported (Disconnected), not hidden
+                trace_packet=self._trace_packet,
             )
         else:
             s = self.profile.serial
@@ -258,6 +266,7 @@ class ModbusStepperAxis:
                 timeout=self.timeout_s,
                 retries=self.retries,
                 reconnect_delay=0,
+                trace_packet=self._trace_packet,
             )
         try:
             ok = await client.connect()
@@ -266,24 +275,55 @@ class ModbusStepperAxis:
         ) as exc:  # pyserial/termios/pymodbus: any failure to open is "port unusable"
             client.close()
             raise Disconnected(
-                f"cannot connect to Modbus {self.transport.upper()} {self.endpoint}: {exc}",
+                f"cannot connect to Modbus {self.transport.upper()} {self.endpoint}: "
+                f"{busy_hint(exc)}",
                 device=self.name,
             ) from exc
         if not ok:
             client.close()
             raise Disconnected(
-                f"cannot connect to Modbus {self.transport.upper()} {self.endpoint}",
+                f"cannot connect to Modbus {self.transport.upper()} {self.endpoint}"
+                f"{self._why_not_open()}",
                 device=self.name,
             )
         self._client = client
         if self.profile.move_style == "command-opcode":
             await self._write_opcode("enable")
 
+    def _why_not_open(self) -> str:
+        """pymodbus logs why a serial port did not open and returns False: open it once
+        ourselves (exclusively, as pymodbus does) to name the reason (missing, busy...)."""
+        if self.transport != "rtu":
+            return ""
+        try:
+            serial.serial_for_url(self.serial_port, exclusive=True).close()
+        except (serial.SerialException, OSError, ValueError) as exc:
+            return f": {busy_hint(exc)}"
+        return ""
+
     async def close(self) -> None:
         """Close the connection (idempotent)."""
         client, self._client = self._client, None
         if client is not None:
             client.close()
+
+    def _trace_packet(self, sending: bool, data: bytes) -> bytes:
+        """pymodbus hook on every packet: remember what arrived during the current request."""
+        if not sending and data:
+            self._received = bytes(data[-_GARBLE_QUOTE_BYTES:])
+        return data
+
+    def _no_valid_answer(self, what: str, exc: Exception) -> DeviceTimeout | ProtocolError:
+        """Bytes came back but no frame was accepted: garbled (bad CRC, bad MBAP header,
+        wrong length); nothing came back: a timeout."""
+        if self._received:
+            raw = " ".join(f"{b:02X}" for b in self._received)
+            return ProtocolError(
+                f"garbled reply from {self.endpoint} to {what}: received [{raw}], "
+                f"not a valid Modbus {self.transport.upper()} frame",
+                device=self.name,
+            )
+        return DeviceTimeout(f"no answer from {self.endpoint} to {what}: {exc}", device=self.name)
 
     def _check(self, rr: Any, what: str) -> Any:
         if rr.isError():
@@ -309,6 +349,7 @@ class ModbusStepperAxis:
         if not self._client.connected:
             raise Disconnected(f"connection to {self.endpoint} is closed", device=self.name)
         async with self._lock:
+            self._received = b""
             try:
                 rr = await fn(*args, device_id=self.unit_id, **kw)
             except ConnectionException as exc:
@@ -320,17 +361,13 @@ class ModbusStepperAxis:
                     raise Disconnected(
                         f"connection to {self.endpoint} lost during {what}", device=self.name
                     ) from exc
-                raise DeviceTimeout(
-                    f"no valid answer from {self.endpoint} to {what}: {exc}", device=self.name
-                ) from exc
+                raise self._no_valid_answer(what, exc) from exc
             except ModbusException as exc:
                 raise ProtocolError(
                     f"{what} at {self.endpoint} failed: {exc}", device=self.name
                 ) from exc
             except TimeoutError as exc:
-                raise DeviceTimeout(
-                    f"{what} at {self.endpoint} timed out", device=self.name
-                ) from exc
+                raise self._no_valid_answer(what, exc) from exc
         return self._check(rr, what)
 
     async def _read(self, address: int, count: int, what: str) -> list[int]:

@@ -5,7 +5,8 @@ Shared by :mod:`drivers.stil` and :mod:`drivers.glossmeter`. ``port`` is anythin
 ``socket://host:port``. (pyserial-asyncio-fast cannot open ``loop://``.)
 
 Every failure is mapped onto :mod:`drivers.base` errors naming the device and the port:
-a missing or busy port -> :class:`~drivers.base.Disconnected`, no complete line in time ->
+a missing or busy port -> :class:`~drivers.base.Disconnected` (ports are opened with an
+exclusive lock, as pymodbus does: a port another program holds is refused, not shared), no complete line in time ->
 :class:`~drivers.base.DeviceTimeout`, undecodable bytes -> :class:`~drivers.base.ProtocolError`.
 """
 
@@ -20,7 +21,15 @@ import serial_asyncio_fast
 from drivers.base import DeviceTimeout, Disconnected, ProtocolError
 from drivers.profiles import SerialSettings
 
-__all__ = ["LineTransport", "quote"]
+__all__ = ["LineTransport", "busy_hint", "quote"]
+
+
+def busy_hint(exc: BaseException) -> str:
+    """The open error, with the likely cause spelled out when the port is locked."""
+    text = str(exc)
+    if "exclusively lock" in text:
+        return f"port busy: another program holds it open ({text})"
+    return text
 
 
 def quote(raw: str | bytes, limit: int = 80) -> str:
@@ -70,10 +79,11 @@ class LineTransport:
                 bytesize=self.settings.bytesize,
                 parity=self.settings.parity,
                 stopbits=self.settings.stopbits,
+                exclusive=True,  # flock: a port another program holds is refused, not shared
             )
         except (serial.SerialException, OSError, ValueError) as exc:
             raise Disconnected(
-                f"cannot open serial port {self.port!r}: {exc}", device=self.device
+                f"cannot open serial port {self.port!r}: {busy_hint(exc)}", device=self.device
             ) from exc
 
     async def close(self) -> None:

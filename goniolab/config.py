@@ -348,12 +348,14 @@ def _cross_checks(cfg: LabConfig, path: Path) -> None:
         if (
             cfg.lab.mode == "drivers"
             and not cfg.lab.start_sim_servers
-            and arm.transport == "tcp"
-            and arm.port == 0
+            and (
+                (arm.transport == "tcp" and arm.port == 0)
+                or (arm.transport == "rtu" and arm.serial_port.endswith(":0"))
+            )
         ):
             raise ConfigError(
                 path,
-                f"goniometer.{name}.port",
+                f"goniometer.{name}.{'port' if arm.transport == 'tcp' else 'serial_port'}",
                 "port 0 (any free port) only works when the lab serves its own simulated "
                 "controllers (start_sim_servers = true); give the controller's TCP port",
             )

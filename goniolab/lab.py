@@ -13,8 +13,9 @@ Modes (``[lab] mode``):
 * ``"sim"``: in-process simulated instruments (:mod:`sim.instruments`) reading the model.
 * ``"drivers"``: the real drivers of :mod:`drivers` to the configured endpoints; with
   ``start_sim_servers = true`` the simulated lab is first served on those endpoints
-  (:class:`sim.servers.SimLabServer`: Modbus TCP + ptys), so the drivers run end to end
-  against it.
+  (:class:`sim.servers.SimLabServer`: Modbus TCP, or RTU over ``socket://``, + ptys), so
+  the drivers run end to end against it. Port 0 there (``port = 0``, ``serial_port =
+  "socket://127.0.0.1:0"``) binds a free port and hands it to the drivers.
 
 Closing the lab closes the instruments, then stops the simulated servers. The
 direction of imports is lab -> sim / drivers, never the other way round.
@@ -170,36 +171,59 @@ def build_sim_instruments(
     return SimInstruments(lamp, detector, spectro, glossmeter, clock)
 
 
+def _socket_url(url: str) -> tuple[str, int] | None:
+    """``(host, port)`` of a pyserial ``socket://host:port`` URL, else ``None``."""
+    if not url.startswith("socket://"):
+        return None
+    host, sep, port = url[len("socket://") :].rpartition(":")
+    if not sep or not host or not port.isdigit() or int(port) > 65535:
+        return None
+    return host, int(port)
+
+
 def build_sim_server(cfg: LabConfig, sims: SimInstruments) -> SimLabServer:
     """The simulated lab on the endpoints the config's drivers will use.
+
+    Arms on ``transport = "tcp"`` are served by a Modbus TCP server on ``host:port``; arms
+    on ``transport = "rtu"`` by a Modbus RTU server framed over TCP, which needs
+    ``serial_port = "socket://host:port"``. Arms sharing an endpoint share one server
+    (one unit id each). Port 0 lets the kernel pick a free port (see :class:`Lab`).
 
     Raises
     ------
     ConfigError
-        An arm uses ``transport = "rtu"`` (the wire simulator serves Modbus TCP only) or
-        the profiles cannot be loaded.
+        An RTU arm whose ``serial_port`` is not ``socket://host:port``, or a profile
+        that cannot be loaded or served.
     """
     src = cfg.source or "<config>"
-    servers: dict[tuple[str, int], list[WireAxis]] = {}
+    servers: dict[tuple[str, str, int], list[WireAxis]] = {}
     for name, ax, sim_axis in (
         ("lamp", cfg.goniometer.lamp, sims.lamp),
         ("detector", cfg.goniometer.detector, sims.detector),
     ):
-        if ax.transport != "tcp":
-            raise ConfigError(
-                src,
-                f"goniometer.{name}.transport",
-                'the simulated lab serves Modbus TCP only: use transport = "tcp" with '
-                "start_sim_servers = true",
-            )
+        if ax.transport == "tcp":
+            key = ("tcp", ax.host, ax.port)
+        else:
+            where = _socket_url(ax.serial_port)
+            if where is None:
+                raise ConfigError(
+                    src,
+                    f"goniometer.{name}.serial_port",
+                    f"the simulated lab serves Modbus RTU over a TCP socket only: use "
+                    f'serial_port = "socket://127.0.0.1:PORT" (got {ax.serial_port!r})',
+                )
+            key = ("rtu", *where)
         try:
             wire = WireAxis(
                 sim_axis, load_stepper_profile(ax.profile), ax.steps_per_deg, ax.unit_id
             )
         except (ProfileError, ValueError) as exc:
             raise ConfigError(src, f"goniometer.{name}.profile", str(exc)) from None
-        servers.setdefault((ax.host, ax.port), []).append(wire)
-    modbus = [ModbusAxisServer(w, host=h, port=p) for (h, p), w in servers.items()]
+        servers.setdefault(key, []).append(wire)
+    modbus = [
+        ModbusAxisServer(w, host=h, port=p, transport="tcp" if t == "tcp" else "rtu")
+        for (t, h, p), w in servers.items()
+    ]
     if cfg.glossmeter.protocol != "zgm1120":
         raise ConfigError(
             src, "glossmeter.protocol", 'the simulated lab serves the "zgm1120" protocol only'
@@ -352,15 +376,21 @@ class Lab:
             self._build_drivers(park)
         await self._connect()
 
-    def _modbus_port(self, ax: AxisConfig) -> int:
-        """The TCP port to reach an arm on: the configured one, or, when this lab serves
-        the simulated controllers and the config says ``port = 0``, the port the server
-        was given by the kernel."""
+    def _served_at(self, ax: AxisConfig) -> tuple[int, str]:
+        """``(port, serial_port)`` to reach an arm: the configured ones or, when this lab
+        serves the simulated controllers and the config says port 0 (``port = 0`` or
+        ``serial_port = "socket://host:0"``), the port the kernel gave the server."""
         if self.server is not None:
             for srv in self.server.modbus:
-                if (srv.host, srv.requested_port) == (ax.host, ax.port):
-                    return srv.port
-        return ax.port
+                served = (srv.transport, srv.host, srv.requested_port)
+                if ax.transport == "tcp" and served == ("tcp", ax.host, ax.port):
+                    return srv.port, ax.serial_port
+                if ax.transport == "rtu" and served == (
+                    "rtu",
+                    *(_socket_url(ax.serial_port) or ()),
+                ):
+                    return ax.port, srv.url
+        return ax.port, ax.serial_port
 
     def _build_drivers(self, park: tuple[float, float]) -> None:
         from drivers.glossmeter import open_glossmeter
@@ -371,13 +401,14 @@ class Lab:
         g = cfg.goniometer
 
         def axis(name: str, ax: AxisConfig) -> ModbusStepperAxis:
+            port, serial_port = self._served_at(ax)
             return ModbusStepperAxis(
                 name,
                 profile=ax.profile,
                 transport=ax.transport,
                 host=ax.host,
-                port=self._modbus_port(ax),
-                serial_port=ax.serial_port,
+                port=port,
+                serial_port=serial_port,
                 baudrate=ax.baudrate,
                 parity=ax.parity,
                 unit_id=ax.unit_id,

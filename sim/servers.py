@@ -4,8 +4,9 @@ The same simulated instruments as :mod:`sim.instruments`, reachable the way real
 are, so the real drivers in :mod:`drivers` can be tested end to end:
 
 * :class:`ModbusAxisServer`: one Modbus TCP server (pymodbus 3.16
-  ``ModbusTcpServer`` with :class:`pymodbus.simulator.SimDevice` devices) with one unit id
-  per arm, implementing a ``direct-data`` stepper profile (Oriental Motor AZ register map,
+  ``ModbusTcpServer`` with :class:`pymodbus.simulator.SimDevice` devices), or a Modbus
+  RTU one framed over a TCP socket (``ModbusSerialServer`` on ``socket://host:port``),
+  with one unit id per arm, implementing a ``direct-data`` stepper profile (Oriental Motor AZ register map,
   manual HM-60262E, see ``configs/profiles/oriental-az.toml``). Writing the 18-register
   direct-data block with trigger = 1 starts a move of the simulated arm; the status,
   alarm, feedback and command registers are refreshed from the arm on every request;
@@ -18,9 +19,9 @@ are, so the real drivers in :mod:`drivers` can be tested end to end:
   to the ptys at configured paths (``/tmp/goniolab-sim/spectro`` ...).
 
 Injected faults (:mod:`sim.faults`) act on the wire: a timed-out request gets no answer
-in time, a garbled one gets corrupted bytes (pty: one byte of the reply flipped; Modbus
-TCP: a corrupted MBAP header, which a master's framer rejects, so it sees no valid
-answer), a disconnected device stops answering (Modbus: gateway exception 0x0B, "target
+(Modbus: not executed, no reply sent), a garbled one gets corrupted bytes (pty: one byte
+of the reply flipped; Modbus TCP: a corrupted MBAP header, RTU: a wrong CRC, which a
+master's framer rejects), a disconnected device stops answering (Modbus: gateway exception 0x0B, "target
 device failed to respond"; pty: the port is closed).
 """
 
@@ -36,10 +37,11 @@ import tty
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import Any, Literal
 
 from pymodbus.constants import ExcCodes
-from pymodbus.server import ModbusTcpServer
+from pymodbus.framer import FramerType
+from pymodbus.server import ModbusSerialServer, ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
 
 from drivers.profiles import StepperProfile, StilProfile, ZgmProfile, template_regex
@@ -60,9 +62,6 @@ _REGISTER_SPACE = 0x0200
 
 #: Unread output a pty device keeps before it drops further replies (bytes).
 _PTY_OUTPUT_LIMIT = 64 * 1024
-
-#: How long a "timed-out" Modbus request is held before the (late) answer.
-_MODBUS_TIMEOUT_HOLD_S = 5.0
 
 
 def _split32(value: int) -> tuple[int, int]:
@@ -225,7 +224,7 @@ class WireAxis:
 
 
 class ModbusAxisServer:
-    """A Modbus TCP server with one simulated stepper controller per unit id.
+    """A Modbus server with one simulated stepper controller per unit id.
 
     Parameters
     ----------
@@ -234,18 +233,47 @@ class ModbusAxisServer:
     host, port
         Listening address (port 0 = the kernel picks a free port when binding; see
         :attr:`port` after start, :attr:`requested_port` keeps the configured one).
+    transport
+        ``"tcp"``: Modbus TCP (MBAP framing, pymodbus ``ModbusTcpServer``). ``"rtu"``:
+        Modbus RTU framing (unit id, PDU, CRC-16) over a TCP socket (pymodbus
+        ``ModbusSerialServer`` on ``socket://host:port``), which a master reaches as the
+        serial URL ``socket://host:port`` -- an RTU line without a serial cable.
+
+    Notes
+    -----
+    Injected faults act per request of a unit: a timed-out request is not executed and
+    its reply is never sent (the master sees silence); a garbled reply is sent with its
+    framing corrupted -- TCP: the MBAP length field, RTU: the CRC -- so a master's framer
+    rejects it; a disconnected unit answers exception 0x0B (gateway target failed to
+    respond).
     """
 
-    def __init__(self, axes: list[WireAxis], *, host: str = "127.0.0.1", port: int = 5020) -> None:
+    def __init__(
+        self,
+        axes: list[WireAxis],
+        *,
+        host: str = "127.0.0.1",
+        port: int = 5020,
+        transport: Literal["tcp", "rtu"] = "tcp",
+    ) -> None:
         ids = [a.unit_id for a in axes]
         if len(set(ids)) != len(ids):
             raise ValueError(f"duplicate Modbus unit ids {ids} on {host}:{port}")
+        if transport not in ("tcp", "rtu"):
+            raise ValueError(f"transport must be 'tcp' or 'rtu', got {transport!r}")
         self.axes = {a.unit_id: a for a in axes}
         self.host = host
         self.requested_port = port
         self.port = port
-        self._server: ModbusTcpServer | None = None
-        self._garble_next = 0
+        self.transport = transport
+        self._server: ModbusTcpServer | ModbusSerialServer | None = None
+        self._pending: dict[int, list[Fault]] = {unit: [] for unit in self.axes}
+
+    @property
+    def url(self) -> str:
+        """Where a master connects: ``host:port`` (TCP) or ``socket://host:port`` (RTU)."""
+        where = f"{self.host}:{self.port}"
+        return where if self.transport == "tcp" else f"socket://{where}"
 
     def _device(self, wire: WireAxis) -> SimDevice:
         async def action(
@@ -259,11 +287,9 @@ class ModbusAxisServer:
             fault = wire.axis.faults.decide()
             if fault is Fault.DISCONNECT:
                 return ExcCodes.GATEWAY_NO_RESPONSE
-            if fault is Fault.TIMEOUT:
-                await asyncio.sleep(_MODBUS_TIMEOUT_HOLD_S)
-            if fault is Fault.GARBLE:
-                self._garble_next += 1
-            if set_values is not None:
+            if fault is not Fault.NONE:
+                self._pending[wire.unit_id].append(fault)
+            if set_values is not None and fault is not Fault.TIMEOUT:
                 wire.apply_write(registers, start_address, address, [int(v) for v in set_values])
             wire.refresh(registers, start_address)
             return None
@@ -277,14 +303,19 @@ class ModbusAxisServer:
         )
 
     def _trace_packet(self, sending: bool, data: bytes) -> bytes:
-        if sending and self._garble_next > 0:
-            self._garble_next -= 1
-            # corrupt the MBAP length so the client's framer rejects the frame
-            out = bytearray(data)
-            if len(out) > 5:
-                out[5] ^= 0x3C
-            return bytes(out)
-        return data
+        """Act out a pending fault on the reply frame of its unit."""
+        unit_at = 6 if self.transport == "tcp" else 0  # MBAP unit id / RTU address
+        if not sending or len(data) <= unit_at:
+            return data
+        pending = self._pending.get(data[unit_at])
+        if not pending:
+            return data
+        fault = pending.pop(0)
+        if fault is Fault.TIMEOUT:
+            return b""  # no answer at all
+        out = bytearray(data)
+        out[5 if self.transport == "tcp" else -1] ^= 0x3C  # MBAP length / CRC high byte
+        return bytes(out)
 
     async def start(self) -> None:
         """Bind and serve in the background.
@@ -295,12 +326,21 @@ class ModbusAxisServer:
             The address is in use or cannot be bound (message names host:port).
         """
         devices = [self._device(w) for w in self.axes.values()]
-        server = ModbusTcpServer(
-            devices, address=(self.host, self.requested_port), trace_packet=self._trace_packet
-        )
+        server: ModbusTcpServer | ModbusSerialServer
+        if self.transport == "tcp":
+            server = ModbusTcpServer(
+                devices, address=(self.host, self.requested_port), trace_packet=self._trace_packet
+            )
+        else:
+            server = ModbusSerialServer(
+                devices,
+                framer=FramerType.RTU,
+                port=f"socket://{self.host}:{self.requested_port}",
+                trace_packet=self._trace_packet,
+            )
         try:
             await server.serve_forever(background=True)
-        except RuntimeError as exc:
+        except (RuntimeError, OSError) as exc:
             raise OSError(
                 errno.EADDRINUSE,
                 f"cannot listen on {self.host}:{self.requested_port} (in use?): {exc}",
@@ -718,13 +758,9 @@ class SimLabServer:
         out: dict[str, Any] = {}
         for srv in self.modbus:
             for unit, wire in srv.axes.items():
-                out[wire.axis.name] = {
-                    "transport": "tcp",
-                    "host": srv.host,
-                    "port": srv.port,
-                    "unit_id": unit,
-                    "profile": wire.profile.name,
-                }
+                ep: dict[str, Any] = {"transport": srv.transport, "host": srv.host}
+                ep |= {"port": srv.port} if srv.transport == "tcp" else {"serial_port": srv.url}
+                out[wire.axis.name] = ep | {"unit_id": unit, "profile": wire.profile.name}
         for dev in (self.spectro, self.glossmeter):
             if dev is not None:
                 out[dev.name] = {

@@ -82,11 +82,12 @@ async def _serve(config_path: str, time_scale: float | None, as_json: bool) -> i
         else:
             print(f"goniolab: simulated lab from {config_path} (clock x{scale:g}):")
             for name, ep in endpoints.items():
-                where = (
-                    f"modbus tcp {ep['host']}:{ep['port']} unit {ep['unit_id']}"
-                    if "unit_id" in ep
-                    else f"serial {ep['port']} -> {ep['pty']}"
-                )
+                if "unit_id" not in ep:
+                    where = f"serial {ep['port']} -> {ep['pty']}"
+                elif ep["transport"] == "tcp":
+                    where = f"modbus tcp {ep['host']}:{ep['port']} unit {ep['unit_id']}"
+                else:
+                    where = f"modbus rtu {ep['serial_port']} unit {ep['unit_id']}"
                 print(f"  {name:<10} {where}  (profile {ep['profile']})")
             print("Ctrl-C to stop.", flush=True)
         await stop.wait()

@@ -49,6 +49,7 @@ class FakeModbusDevice:
     on_read: Callable[[FakeModbusDevice, int, int], None] | None = None
     exception: tuple[int, int] | None = None
     unit_ids: list[int] = field(default_factory=list)
+    mangle: Callable[[bytes], bytes] | None = None  # applied to each whole reply frame
 
     def set32(self, address: int, value: int) -> None:
         raw = struct.pack(">i" if value < 0 else ">I", value)
@@ -107,6 +108,9 @@ class FakeModbusServer:
             self.server.close()
             await self.server.wait_closed()
 
+    def _mangle(self, frame: bytes) -> bytes:
+        return frame if self.device.mangle is None else self.device.mangle(frame)
+
     async def _handle(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         try:
             while True:
@@ -122,7 +126,7 @@ class FakeModbusServer:
                     assert crc16_modbus(frame[:-2]) == struct.unpack("<H", frame[-2:])[0]
                     self.device.unit_ids.append(frame[0])
                     reply = self.device.answer(frame[1:-2])
-                    writer.write(rtu_frame(bytes([frame[0]]) + reply))
+                    writer.write(self._mangle(rtu_frame(bytes([frame[0]]) + reply)))
                 else:
                     header = await reader.readexactly(7)
                     tid, pid, length, unit = struct.unpack(">HHHB", header)
@@ -130,7 +134,8 @@ class FakeModbusServer:
                     self.device.requests.append(header + pdu)
                     self.device.unit_ids.append(unit)
                     reply = self.device.answer(pdu)
-                    writer.write(struct.pack(">HHHB", tid, pid, len(reply) + 1, unit) + reply)
+                    adu = struct.pack(">HHHB", tid, pid, len(reply) + 1, unit) + reply
+                    writer.write(self._mangle(adu))
                 await writer.drain()
         except (asyncio.IncompleteReadError, ConnectionResetError):
             pass

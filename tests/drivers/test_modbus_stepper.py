@@ -13,6 +13,7 @@ from collections.abc import Callable
 from typing import Any
 
 import pytest
+import serial
 
 from drivers.base import (
     Axis,
@@ -323,14 +324,78 @@ async def test_modbus_exception_responses(
 
 
 async def test_unreachable_controller_is_disconnected() -> None:
-    with socket.socket() as s:
+    with socket.socket() as s:  # bound but not listening (held, so no other test takes it)
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    axis = make_axis(port, timeout_s=0.5)
-    with pytest.raises(Disconnected, match=f"127.0.0.1:{port}"):
-        await axis.connect()
+        axis = make_axis(port, timeout_s=0.5)
+        with pytest.raises(Disconnected, match=f"127.0.0.1:{port}"):
+            await axis.connect()
     with pytest.raises(Disconnected, match="not connected"):
         await axis.position_deg()
+
+
+def flip(index: int) -> Callable[[bytes], bytes]:
+    """Corrupt one byte of a reply frame (XOR 0x3C), as line noise would."""
+
+    def mangle(frame: bytes) -> bytes:
+        out = bytearray(frame)
+        out[index] ^= 0x3C
+        return bytes(out)
+
+    return mangle
+
+
+async def test_garbled_tcp_reply_is_protocol_error_quoting_the_bytes(
+    fakes: Any, modbus_server: Any
+) -> None:
+    dev = fakes.Device(mangle=flip(5))  # MBAP length 7 -> 0x3B: the frame never completes
+    dev.set32(FEEDBACK, 45000)
+    server = await modbus_server(dev)
+    axis = make_axis(server.port, timeout_s=0.2, retries=0)
+    await axis.connect()
+    with pytest.raises(ProtocolError) as err:
+        await axis.position_deg()
+    tid = dev.requests[0][:2].hex(" ").upper()
+    assert f"received [{tid} 00 00 00 3B 01 03 04 00 00 AF C8]" in str(err.value)
+    assert err.value.device == "lamp" and f"127.0.0.1:{server.port}" in str(err.value)
+    await axis.close()
+
+
+async def test_rtu_reply_with_bad_crc_is_protocol_error(fakes: Any, modbus_server: Any) -> None:
+    dev = fakes.Device(mangle=flip(-1))
+    dev.set32(FEEDBACK, 45000)
+    server = await modbus_server(dev, rtu=True)
+    url = f"socket://127.0.0.1:{server.port}"
+    axis = make_axis(0, transport="rtu", serial_port=url, timeout_s=0.2, retries=0)
+    await axis.connect()
+    with pytest.raises(ProtocolError) as err:
+        await axis.position_deg()
+    good = fakes.rtu_frame(bytes.fromhex("01 03 04 0000 AFC8"))
+    bad = good[:-1] + bytes([good[-1] ^ 0x3C])
+    assert f"received [{bad.hex(' ').upper()}], not a valid Modbus RTU frame" in str(err.value)
+    await axis.close()
+
+
+async def test_silent_controller_is_timeout_then_recovers(fakes: Any, modbus_server: Any) -> None:
+    replies = {"silent": True}
+    dev = fakes.Device(mangle=lambda frame: b"" if replies["silent"] else frame)
+    dev.set32(FEEDBACK, 45000)
+    server = await modbus_server(dev)
+    axis = make_axis(server.port, timeout_s=0.2, retries=0)
+    await axis.connect()
+    with pytest.raises(DeviceTimeout, match=f"no answer from 127.0.0.1:{server.port}"):
+        await axis.position_deg()
+    replies["silent"] = False
+    assert await axis.position_deg() == 45.0
+    await axis.close()
+
+
+async def test_busy_serial_port_is_disconnected(pty_pair: Any) -> None:
+    # another program holds the port: an exclusive (flock) open, as pyserial/pymodbus do
+    with serial.Serial(pty_pair.path, exclusive=True):
+        axis = make_axis(0, transport="rtu", serial_port=pty_pair.path, timeout_s=0.2)
+        with pytest.raises(Disconnected, match=f"{pty_pair.path}: port busy"):
+            await axis.connect()
 
 
 async def test_dropped_connection_is_disconnected() -> None:

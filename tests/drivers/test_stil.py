@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+import serial
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -124,6 +125,16 @@ async def test_missing_port_is_disconnected_naming_it() -> None:
     dev = StilSpectro(port="/dev/goniolab-no-spectro")
     with pytest.raises(Disconnected, match="/dev/goniolab-no-spectro"):
         await dev.connect()
+
+
+async def test_busy_port_is_disconnected_and_names_it(pty_pair: Any) -> None:
+    with serial.Serial(pty_pair.path, exclusive=True):  # another program holds the port
+        dev = StilSpectro(port=pty_pair.path, timeout_s=0.2)
+        with pytest.raises(Disconnected, match=f"{pty_pair.path}.*port busy: another program"):
+            await dev.connect()
+    os.set_blocking(pty_pair.fd, False)
+    with pytest.raises(BlockingIOError):  # nothing reached the instrument the other holds
+        os.read(pty_pair.fd, 100)
 
 
 def test_count_mismatch_is_protocol_error() -> None:
