@@ -12,7 +12,7 @@ from goniolab.lab import Lab
 from tests.contract.contract_support import MODEL, lab_toml
 
 
-@pytest.fixture(params=["inproc", "wire"])
+@pytest.fixture(params=["inproc", "wire", "wire-rtu"])
 def backend(request: pytest.FixtureRequest) -> str:
     return str(request.param)
 

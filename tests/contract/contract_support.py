@@ -1,8 +1,9 @@
 """Shared pieces of the lab contract suite (imported by conftest.py and the tests).
 
-Backends: ``inproc`` (``mode = "sim"``, the simulated instruments themselves) and ``wire``
+Backends: ``inproc`` (``mode = "sim"``, the simulated instruments themselves), ``wire``
 (``mode = "drivers"`` with ``start_sim_servers = true``: the real drivers over Modbus TCP
-and ptys to the simulated lab). Both come from ``configs/lab-sim-wire.toml`` with
+and ptys to the simulated lab) and ``wire-rtu`` (the same with the arms on Modbus RTU,
+framed over ``socket://``). Both come from ``configs/lab-sim-wire.toml`` with
 ``port = 0`` (the server binds a free port and the lab hands it to the drivers: no race
 between parallel test workers), ptys under tmp_path, a scale-0 clock and no noise, and
 read a fast analytic model (GGX, alpha 0.08).
@@ -30,6 +31,10 @@ def lab_toml(
         .replace("noise_pct = 0.5", "noise_pct = 0.0")
         .replace("[sim.faults]", "[sim.faults]\n" + faults)
     )
+    if backend == "wire-rtu":
+        text = text.replace(
+            'transport = "tcp"', 'transport = "rtu"\nserial_port = "socket://127.0.0.1:0"'
+        )
     if backend == "inproc":
         text = text.replace('mode = "drivers"', 'mode = "sim"').replace(
             "start_sim_servers = true", "start_sim_servers = false"

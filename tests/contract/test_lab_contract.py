@@ -13,6 +13,7 @@ import pytest
 from drivers.base import (
     DeviceError,
     DeviceFault,
+    DeviceTimeout,
     Disconnected,
     InterlockError,
     LimitError,
@@ -114,6 +115,28 @@ async def test_garbled_spectro_reply_is_a_protocol_error(make_lab: Callable[...,
         async with make_lab(faults='devices = ["spectro"]\ngarble_rate = 1.0') as lab:
             await lab.spectro.measure()
     assert err.value.device == "spectro"
+
+
+FAST_REPLIES = {"timeout_s = 1.0": "timeout_s = 0.2"}  # the arms' per-request timeout
+
+
+@pytest.mark.parametrize(
+    ("fault", "error", "message"),
+    [
+        ("garble_rate = 1.0", ProtocolError, "garbled"),
+        ("timeout_rate = 1.0", DeviceTimeout, "no answer"),
+    ],
+)
+async def test_arm_fault_is_reported_and_nothing_moves(
+    make_lab: Callable[..., Lab], fault: str, error: type[DeviceError], message: str
+) -> None:
+    faults = f'devices = ["lamp"]\n{fault}'
+    async with make_lab(faults=faults, extra=FAST_REPLIES) as lab:
+        with pytest.raises(error, match=message) as err:
+            await lab.goniometer.move_to(30.0, 30.0, timeout_s=30.0)
+        assert err.value.device == "lamp"
+        assert lab.sims is not None
+        assert (lab.sims.lamp.actual_deg(), lab.sims.detector.actual_deg()) == (45.0, 45.0)
 
 
 async def test_disconnected_glossmeter(make_lab: Callable[..., Lab]) -> None:

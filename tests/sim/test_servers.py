@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import serial_asyncio_fast
 from numpy.typing import ArrayLike, NDArray
-from pymodbus.client import AsyncModbusTcpClient
+from pymodbus.client import AsyncModbusSerialClient, AsyncModbusTcpClient
 
 from drivers.profiles import load_stepper_profile, load_stil_profile, load_zgm_profile
 from goniolab.optics.apertures import Aperture, Cone
@@ -424,3 +424,21 @@ async def test_models_are_evaluated_before_the_ptys_accept_commands(
         finally:
             writer.close()
         assert model.gloss_calls == 1  # the warm-up filled the cache for all three angles
+
+
+async def test_rtu_server_answers_a_plain_rtu_master_over_socket() -> None:
+    """RTU framing (unit, PDU, CRC-16) over TCP: pymodbus' serial master on socket://."""
+    clock = SimClock(0)
+    prof = load_stepper_profile("oriental-az")
+    server = ModbusAxisServer(
+        [WireAxis(axis(clock, "lamp", 45.0), prof, 1000.0, 1)], port=0, transport="rtu"
+    )
+    async with SimLabServer([server]):
+        assert server.url == f"socket://127.0.0.1:{server.port}" and server.port > 0
+        client = AsyncModbusSerialClient(server.url, timeout=2, retries=0)
+        await client.connect()
+        try:
+            rr = await client.read_holding_registers(FEEDBACK, count=2, device_id=1)
+            assert not rr.isError() and list(rr.registers) == [0x0000, 0xAFC8]  # 45000 steps
+        finally:
+            client.close()
