@@ -191,3 +191,24 @@ async def test_instrument_timeout_during_scan_is_reported(tmp_path: Path) -> Non
         assert "spectro error (fatal)" in titles
         assert app.query_one("#banner").has_class("shown")
         assert app.is_running
+
+
+async def test_arm_alarm_fails_the_run_and_shows_in_the_status_panel(tmp_path: Path) -> None:
+    # The detector controller raises alarm 0x30 when it passes 52 deg (beyond the park
+    # position, so homing does not cross it): the run fails with the reason kept, the
+    # status panel shows the alarm, the app keeps running.
+    app = make_app(tmp_path, faults="detector_alarm_at_deg = 52.0\nalarm_code = 48\n")
+    async with app.run_test(size=SIZE) as pilot:
+        await wait_until(pilot, app.ready.is_set)
+        await set_form(
+            pilot, app, theta_r_start_deg="40", theta_r_stop_deg="60", theta_r_step_deg="5"
+        )
+        await pilot.press("s")
+        await wait_until(pilot, lambda: app.run_state is RunState.FAILED)
+        assert app.comparison.n_readings == 3 * 3  # 40, 45, 50 deg measured before the alarm
+        await app.poll_once()
+        arms = app.query_one(StatusPanel).query_one("#arms", DataTable)
+        assert str(arms.get_cell("detector", "alarm")) == "alarm 0x30"
+        assert str(arms.get_cell("lamp", "alarm")) == "-"
+        assert app.query_one("#banner").has_class("shown")
+        assert app.is_running

@@ -257,7 +257,7 @@ class ScriptedBackend:
         )
 
 
-async def wait_until(pilot: Pilot[int], cond: Callable[[], bool], *, max_turns: int = 3000) -> None:
+async def wait_until(pilot: Pilot[int], cond: Callable[[], bool], *, max_turns: int = 1000) -> None:
     """Let the app process messages until ``cond()`` holds (no wall-clock waits)."""
     for _ in range(max_turns):
         if cond():
