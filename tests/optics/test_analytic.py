@@ -198,3 +198,30 @@ def test_bad_parameters_are_named() -> None:
         AnalyticModel("ggx", alpha=0.0)
     with pytest.raises(ValueError, match="85"):
         AnalyticModel("ggx", alpha=0.1).gloss((45,))
+
+
+def test_cook_torrance_vcavity_by_hand() -> None:
+    """Cook-Torrance at a geometry where the V-cavity term binds (PHYSICS.md, Mihalik eq. 12).
+
+    ti = 80, wo in plane at 40 deg on the lamp side: h is 60 deg from the normal and both
+    directions make 20 deg with h, so G = min(1, 2 cos 60 cos 40 / cos 20, 2 cos 60 cos 80
+    / cos 20) = cos 80 / cos 20 = 0.185; f = D_Beckmann(60 deg) G F(cos 20) / (4 cos 80 cos 40).
+    """
+    alpha, n = 0.5, 1.5
+    m = AnalyticModel("cook-torrance", alpha=alpha, n=n)
+    c60 = math.cos(math.radians(60.0))
+    tan2 = math.tan(math.radians(60.0)) ** 2
+    d = math.exp(-tan2 / alpha**2) / (math.pi * alpha**2 * c60**4)
+    c20 = math.cos(math.radians(20.0))
+    g = math.cos(math.radians(80.0)) / c20
+    f_expected = (
+        d
+        * g
+        * float(fresnel_dielectric(c20, n))
+        / (4.0 * math.cos(math.radians(80.0)) * math.cos(math.radians(40.0)))
+    )
+    assert m.brdf_inplane(80.0, [-40.0])[0] == pytest.approx(f_expected, rel=1e-12)
+    # Beckmann with its Smith masking differs there: the two shadowing terms are not the same.
+    assert AnalyticModel("beckmann", alpha=alpha, n=n).brdf_inplane(80.0, [-40.0])[0] != (
+        pytest.approx(f_expected, rel=1e-3)
+    )
