@@ -27,6 +27,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import os
 import sqlite3
 import time
 from collections.abc import Iterator, Mapping, Sequence
@@ -214,6 +215,14 @@ def resolve_store_path(cli_store: str | None, config_store: str | None = None) -
     return default_store_path()
 
 
+def _why(exc: BaseException) -> str:
+    """SQLite's reason, with the one a user meets most often made explicit."""
+    text = str(exc)
+    if "file is not a database" in text:
+        return "not a goniolab run store (the file is not an SQLite database)"
+    return text
+
+
 def _dumps(obj: Any) -> str:
     return json.dumps(obj, sort_keys=True, default=str)
 
@@ -225,6 +234,18 @@ class RunStore:
     ----------
     path
         The database file; its directory is created if missing.
+    readonly
+        Open for reading only (``runs list/show/export``): the file must exist, nothing
+        is created or written, and a store on read-only media can still be read.
+    create
+        Create the file when missing (``False``: a missing store is an error, e.g. for
+        ``scan resume``).
+
+    Raises
+    ------
+    StoreError
+        The file cannot be opened or created; the message names the file and the reason
+        (a directory, a read-only location, not an SQLite store, ...).
 
     Notes
     -----
@@ -232,10 +253,38 @@ class RunStore:
     worker threads, store writes never do.
     """
 
-    def __init__(self, path: str | Path) -> None:
+    def __init__(self, path: str | Path, *, readonly: bool = False, create: bool = True) -> None:
         self.path = Path(path)
+        self.readonly = readonly
+        where = f"store {self.path}"
+        if self.path.is_dir():
+            raise StoreError(f"{where}: is a directory, not a store file")
+        exists = self.path.exists()
+        if not exists and (readonly or not create):
+            raise StoreError(f"{where}: no such file (no run has been recorded there)")
+        if readonly:
+            self._db = self._open_readonly(where)
+            return
+        blocker = next((d for d in self.path.parents if d.exists()), None)
+        if blocker is not None and not blocker.is_dir():
+            raise StoreError(f"{where}: {blocker} is a file, not a directory")
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise StoreError(
+                f"{where}: cannot create the directory {self.path.parent}: {exc.strerror}"
+            ) from exc
+        # SQLite's own message for these is "unable to open database file": say why.
+        # WAL writes <store>-wal and <store>-shm beside the file, so the directory must
+        # be writable too (os.access also reports a read-only file system, even for root).
+        if not os.access(self.path.parent, os.W_OK):
+            raise StoreError(
+                f"{where}: the directory {self.path.parent} is not writable "
+                "(read-only file system or permissions); choose another --store"
+            )
+        if exists and not os.access(self.path, os.W_OK):
+            raise StoreError(f"{where}: the file is read-only; choose another --store")
+        try:
             self._db = sqlite3.connect(self.path, isolation_level=None, timeout=10.0)
             self._db.execute("PRAGMA journal_mode=WAL")
             self._db.execute("PRAGMA synchronous=FULL")
@@ -246,7 +295,24 @@ class RunStore:
                 (str(_SCHEMA_VERSION),),
             )
         except (OSError, sqlite3.Error) as exc:
-            raise StoreError(f"store {self.path}: cannot open: {exc}") from exc
+            raise StoreError(f"{where}: cannot open: {_why(exc)}") from exc
+
+    def _open_readonly(self, where: str) -> sqlite3.Connection:
+        """Open for reading only: ``mode=ro``; on a read-only directory (no ``-shm`` can be
+        created beside the file) ``immutable=1``, which reads the main file as it is."""
+        uri = self.path.resolve().as_uri()
+        query = "mode=ro" if os.access(self.path.parent, os.W_OK) else "immutable=1"
+        try:
+            db = sqlite3.connect(f"{uri}?{query}", uri=True, isolation_level=None, timeout=10.0)
+            row = db.execute(
+                "SELECT COUNT(*) FROM sqlite_master WHERE type = 'table' AND name = 'runs'"
+            ).fetchone()
+        except sqlite3.Error as exc:
+            raise StoreError(f"{where}: cannot open: {_why(exc)}") from exc
+        if not row[0]:
+            db.close()
+            raise StoreError(f"{where}: not a goniolab run store (no runs table)")
+        return db
 
     # ------------------------------------------------------------------ lifecycle
     def close(self) -> None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import os
 import sqlite3
 from pathlib import Path
 
@@ -131,11 +132,67 @@ def test_store_path_resolution_order(tmp_path: Path) -> None:
     assert default_store_path().name == "goniolab.sqlite"
 
 
-def test_unopenable_store_names_the_file(tmp_path: Path) -> None:
+def test_store_below_a_file_names_the_blocking_file(tmp_path: Path) -> None:
     blocker = tmp_path / "file"
     blocker.write_text("x")
-    with pytest.raises(StoreError, match="cannot open"):
-        RunStore(blocker / "s.sqlite")
+    with pytest.raises(StoreError, match=f"{blocker} is a file, not a directory"):
+        RunStore(blocker / "sub" / "s.sqlite")
+
+
+def test_directory_or_foreign_file_as_store_is_refused_by_name(tmp_path: Path) -> None:
+    with pytest.raises(StoreError, match=f"store {tmp_path}: is a directory"):
+        RunStore(tmp_path)
+    toml = tmp_path / "lab.toml"
+    toml.write_text("[lab]\n" * 200)
+    for readonly in (False, True):
+        with pytest.raises(StoreError, match=r"lab\.toml: cannot open: not a goniolab run store"):
+            RunStore(toml, readonly=readonly)
+    assert toml.read_text() == "[lab]\n" * 200
+
+
+def test_missing_store_is_not_created_when_reading_or_resuming(tmp_path: Path) -> None:
+    path = tmp_path / "typo" / "s.sqlite"
+    for kwargs in ({"readonly": True}, {"create": False}):
+        with pytest.raises(StoreError, match=f"store {path}: no such file"):
+            RunStore(path, **kwargs)
+    assert not (tmp_path / "typo").exists()
+
+
+def test_readonly_store_reads_and_never_writes(tmp_path: Path) -> None:
+    path = tmp_path / "s.sqlite"
+    with RunStore(path) as s:
+        rid = _run(s)
+        _point(s, rid, 0, 0, 1.5)
+    before = path.read_bytes()
+    with RunStore(path, readonly=True) as ro:
+        assert [r.id for r in ro.list_runs()] == [rid]
+        assert [p.luminance_pct for p in ro.points(rid)] == [1.5]
+        with pytest.raises(sqlite3.OperationalError, match="readonly"):
+            _point(ro, rid, 1, 0, 2.5)
+    assert path.read_bytes() == before
+
+
+def test_store_on_an_unwritable_directory(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # a read-only mount: access(2) answers EROFS for W_OK (even for root), which a test
+    # cannot mount; the store asks os.access, so deny writes to that directory there
+    path = tmp_path / "ro" / "s.sqlite"
+    with RunStore(path) as s:
+        rid = _run(s)
+        _point(s, rid, 0, 0, 1.5)
+    real_access = os.access
+
+    def access(p: str | os.PathLike[str], mode: int) -> bool:
+        if mode & os.W_OK and Path(p).resolve().is_relative_to(tmp_path / "ro"):
+            return False
+        return real_access(p, mode)
+
+    monkeypatch.setattr("goniolab.store.os.access", access)
+    for target in (path, tmp_path / "ro" / "new.sqlite"):
+        with pytest.raises(StoreError, match=f"directory {tmp_path / 'ro'} is not writable"):
+            RunStore(target)
+    assert not (tmp_path / "ro" / "new.sqlite").exists()
+    with RunStore(path, readonly=True) as ro:  # immutable read: still lists the run
+        assert [p.luminance_pct for p in ro.points(rid)] == [1.5]
 
 
 @pytest.fixture

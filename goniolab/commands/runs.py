@@ -14,19 +14,23 @@ from goniolab.scan.plans import BrdfPlan, PlanError
 from goniolab.scan.summary import summarize_brdf
 from goniolab.store import RunRecord, RunStore, StoreError, resolve_store_path
 
-__all__ = ["open_store", "register"]
+__all__ = ["open_store", "register", "run_summary", "store_path"]
 
 
-def open_store(store_arg: str | None, config_arg: str | None = None) -> RunStore:
-    """Open the store chosen by ``--store``, else config ``[lab] store``, else the default."""
+def store_path(store_arg: str | None, config_arg: str | None = None) -> Path:
+    """The store chosen by ``--store``, else config ``[lab] store``, else the default."""
     config_store: str | None = None
     if config_arg:
         from goniolab.config import load_lab_config
 
         config_store = load_lab_config(config_arg).lab.store
-    path = resolve_store_path(store_arg, config_store)
+    return resolve_store_path(store_arg, config_store)
+
+
+def open_store(store_arg: str | None, config_arg: str | None = None) -> RunStore:
+    """Open the chosen store for reading (nothing is created or written; it must exist)."""
     try:
-        return RunStore(path)
+        return RunStore(store_path(store_arg, config_arg), readonly=True)
     except StoreError as exc:
         raise UserError(str(exc)) from exc
 
@@ -62,6 +66,13 @@ def run_summary(store: RunStore, rec: RunRecord) -> dict[str, Any]:
 
 
 def _cmd_list(args: argparse.Namespace) -> int:
+    path = store_path(args.store, args.config)
+    if not path.exists():
+        # a fresh installation (or a mistyped --store): nothing to list, nothing created
+        if args.json:
+            print("[]")
+        print(f"no runs: store {path} does not exist yet", file=sys.stderr)
+        return 0
     with open_store(args.store, args.config) as store:
         runs = store.list_runs(limit=args.limit)
         if args.json:

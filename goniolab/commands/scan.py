@@ -1,9 +1,10 @@
 """``goniolab scan``: run an in-plane BRDF scan; ``goniolab scan resume RUN`` continues one.
 
 Progress (a plain-text bar with the ETA) goes to stderr, the summary to stdout at the end;
-``--json`` prints only the summary JSON on stdout. Ctrl-C asks the runner to stop between
-readings: the arms are parked, the run is marked ``aborted`` and the command prints how to
-resume it. A second Ctrl-C cancels at once (the arms are still parked, best effort).
+``--json`` prints only the summary JSON on stdout. Ctrl-C asks the runner to stop: a move
+in progress is interrupted (a reading in progress is finished and stored), the arms are
+parked, the run is marked ``aborted`` and the command prints how to resume it. A second
+Ctrl-C cancels at once (the arms are still parked, best effort).
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ import argparse
 import asyncio
 import json
 import math
+import re
 import signal
 import sys
 from pathlib import Path
@@ -35,6 +37,9 @@ from goniolab.scan.runner import ArmMotion, PlanRefused, RunResult, ScanRunner, 
 from goniolab.store import RunStore, StoreError, resolve_store_path
 
 __all__ = ["check_sample_arg", "format_eta", "format_summary", "register", "with_sample"]
+
+#: A negative number, or an angle range/list starting with one ("-40:-30:5", "-10,0,10").
+_NEGATIVE_ARG = re.compile(r"^-\d+$|^-\d*\.\d+$|^-[\d.]+[:,][\d.:,\-]*$")
 
 _EXIT = {RunState.DONE: 0, RunState.FAILED: 1, RunState.ABORTED: 130}
 
@@ -77,6 +82,8 @@ def format_summary(summary: dict[str, Any]) -> str:
         lines.append(f"  peak offset: {summary['peak_offset_deg']:+.2f} deg")
     if summary.get("hint"):
         lines.append(f"  hint: {summary['hint']}")
+    if summary.get("peak_note"):
+        lines.append(f"  note: {summary['peak_note']}")
     return "\n".join(lines)
 
 
@@ -187,28 +194,31 @@ async def _execute(
         )
         park_deg = (g.park.theta_i_deg, g.park.theta_r_deg)
         clock_scale = float(getattr(lab.clock, "scale", 1.0))
-        if run_id is None:
-            # refuse an unsafe plan before a run is even recorded (the runner checks again)
-            start = await lab.goniometer.positions_deg()
-            try:
-                check = dry_run(
-                    plan.points(),
-                    lab.goniometer,
-                    motion,
-                    start_deg=(float(start[0]), float(start[1])),
-                    dwell_s=plan.dwell_s,
-                    reading_time_s=plan.exposure_us * 1e-6,
-                    park_deg=park_deg,
-                )
-            except PlanRefused as exc:
-                raise UserError(f"plan refused (no arm moved): {exc}") from exc
-            wall = check.eta_s / clock_scale if clock_scale > 0 else 0.0
-            lab_time = "" if clock_scale == 1.0 else f" ({check.eta_s:.2f} s of lab clock)"
-            print(
-                f"goniolab: {check.n_readings} readings, {check.n_moves} moves, "
-                f"ETA {format_eta(wall)}{lab_time}",
-                file=sys.stderr,
+        # refuse an unsafe plan before any motion, and before a new run is even recorded
+        # (the runner checks again); a resumed run checks only the readings still to take
+        done = set() if run_id is None else store.done_keys(run_id)
+        todo = [pt for pt in plan.points() if pt.key not in done]
+        start = await lab.goniometer.positions_deg()
+        try:
+            check = dry_run(
+                todo,
+                lab.goniometer,
+                motion,
+                start_deg=(float(start[0]), float(start[1])),
+                dwell_s=plan.dwell_s,
+                reading_time_s=plan.exposure_us * 1e-6,
+                park_deg=park_deg,
             )
+        except PlanRefused as exc:
+            raise UserError(f"plan refused (no arm moved): {exc}") from exc
+        wall = check.eta_s / clock_scale if clock_scale > 0 else 0.0
+        lab_time = "" if clock_scale == 1.0 else f" ({check.eta_s:.2f} s of lab clock)"
+        print(
+            f"goniolab: {check.n_readings} readings, {check.n_moves} moves, "
+            f"ETA {format_eta(wall)}{lab_time}",
+            file=sys.stderr,
+        )
+        if run_id is None:
             run_id = store.create_run(
                 kind="brdf",
                 plan=plan.to_dict(),
@@ -242,7 +252,9 @@ async def _execute(
             nonlocal interrupts
             interrupts += 1
             if interrupts == 1:
-                bar.message("goniolab: stopping after this reading (Ctrl-C again to stop now)")
+                bar.message(
+                    "goniolab: stopping: the arms stop, then park (Ctrl-C again to quit at once)"
+                )
                 runner.abort()
             elif main_task is not None:
                 main_task.cancel()
@@ -353,9 +365,9 @@ def _cmd_scan(args: argparse.Namespace) -> int:
         )
 
 
-def _open(store_arg: str | None, config_store: str | None) -> RunStore:
+def _open(store_arg: str | None, config_store: str | None, *, create: bool = True) -> RunStore:
     try:
-        return RunStore(resolve_store_path(store_arg, config_store))
+        return RunStore(resolve_store_path(store_arg, config_store), create=create)
     except StoreError as exc:
         raise UserError(str(exc)) from exc
 
@@ -364,7 +376,7 @@ def _cmd_resume(args: argparse.Namespace) -> int:
     config_store = None
     if args.config:
         config_store = load_lab_config(args.config).lab.store
-    store = _open(args.store, config_store)
+    store = _open(args.store, config_store, create=False)
     with store:
         try:
             rec = store.get_run(args.run)
@@ -430,6 +442,10 @@ def register(subparsers: Any) -> None:
         action="store_true",
         help="read a mirror at the specular geometry first; it sets the 100 %% level",
     )
+    # "--theta-r -40:-30:5" is an angle list, not an option: widen argparse's test for
+    # "negative number" arguments (a private attribute, stable since Python 3.2) so that
+    # lamp-side ranges and lists need no "--theta-r=" spelling.
+    p._negative_number_matcher = _NEGATIVE_ARG
     p.set_defaults(func=_cmd_scan)
     sub = p.add_subparsers(dest="scan_command", metavar="resume")
     pr = sub.add_parser("resume", help="continue an interrupted run (also after a crash)")

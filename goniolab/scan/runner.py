@@ -81,6 +81,10 @@ class PlanRefused(Exception):
     """The dry run found a geometry the goniometer must not reach (names point and reason)."""
 
 
+class _MoveAborted(Exception):
+    """An abort arrived while the arms were moving (the move was interrupted)."""
+
+
 @dataclass(frozen=True, slots=True)
 class ArmMotion:
     """Speed and acceleration of both arms (config ``[goniometer.lamp|detector]``)."""
@@ -269,6 +273,7 @@ class ScanRunner:
         self._pause_requested = False
         self._abort_requested = False
         self._wake = asyncio.Event()
+        self._abort_event = asyncio.Event()
         self._verify_position = False
         self._predicted: dict[int, float] = {}
         self._target: tuple[float, float] | None = None
@@ -291,8 +296,11 @@ class ScanRunner:
         self._wake.set()
 
     def abort(self) -> None:
-        """Stop after the current reading, park the arms and mark the run ``aborted``."""
+        """Stop the run: a move in progress is interrupted (the arms are stopped where they
+        are), a reading in progress is completed and stored; then the arms are parked and
+        the run is marked ``aborted``."""
         self._abort_requested = True
+        self._abort_event.set()
         self._wake.set()
 
     # ------------------------------------------------------------------ helpers
@@ -320,7 +328,24 @@ class ScanRunner:
         self.bus.publish(
             ArmsMoved(run_id=self.run_id, theta_i_deg=target[0], theta_r_deg=target[1], moving=True)
         )
-        measured = await self.goniometer.move_to(target[0], target[1], self.move_timeout_s)
+        move = asyncio.ensure_future(
+            self.goniometer.move_to(target[0], target[1], self.move_timeout_s)
+        )
+        aborted = asyncio.ensure_future(self._abort_event.wait())
+        try:
+            await asyncio.wait({move, aborted}, return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            aborted.cancel()
+            if not move.done():
+                # an abort (or an outside cancellation): leave the move; _park stops the
+                # arms where they are before driving them to park
+                move.cancel()
+                with contextlib.suppress(asyncio.CancelledError, DeviceError):
+                    await move
+        if move.cancelled():
+            self._target = None
+            raise _MoveAborted
+        measured = move.result()
         self._measured_deg = (float(measured[0]), float(measured[1]))
         self._target = target
         self.bus.publish(
@@ -453,7 +478,12 @@ class ScanRunner:
                     await self.specimen_hook(want)
                     specimen = want
                 target = (p.theta_i_deg, p.theta_r_deg)
-                if await self._ensure_position(target):
+                try:
+                    moved = await self._ensure_position(target)
+                except _MoveAborted:
+                    state, reason = RunState.ABORTED, "aborted by the operator during a move"
+                    break
+                if moved:
                     await self.clock.sleep(self.plan.dwell_s)
                 reading = await self.spectro.measure()
                 raw_pct = float(reading.luminance_pct)

@@ -91,7 +91,9 @@ def summarize_brdf(
     dict
         JSON-serialisable: counts, per-geometry mean/std/prediction/residual, ``rmse_pct``,
         ``measured_peak``/``predicted_peak`` (:func:`goniolab.optics.metrics.peak_metrics`
-        on the repeat means), ``peak_offset_deg``, ``amplitude_ratio`` and ``hint``.
+        on the repeat means and on the predictions, both over the measured geometries),
+        ``peak_offset_deg``, ``amplitude_ratio`` and ``hint`` (``None`` unless both maxima
+        lie inside the measured range; ``peak_note`` then says why).
     """
     by_index: dict[int, list[float]] = {}
     mirror: list[float] = []
@@ -138,25 +140,47 @@ def summarize_brdf(
         "peak_offset_deg": None,
         "amplitude_ratio": None,
         "hint": None,
+        "peak_note": None,
         "geometries": geometries,
     }
     # peak_metrics wants increasing angles: a listed plan may scan in any order.
     order = sorted(range(plan.n_geometries), key=lambda i: plan.theta_r_deg[i])
     measured_idx = [i for i in order if geometries[i]["mean_pct"] is not None]
-    if len(measured_idx) >= 3:
-        theta = np.array([plan.theta_r_deg[i] for i in measured_idx])
-        means = np.array([geometries[i]["mean_pct"] for i in measured_idx])
-        mp = peak_metrics(theta, means)
-        out["measured_peak"] = _peak_dict(mp)
-        if all(i in predictions for i in order):
-            theta_all = np.array([plan.theta_r_deg[i] for i in order])
-            pp = peak_metrics(theta_all, np.array([predictions[i] for i in order]))
-            out["predicted_peak"] = _peak_dict(pp)
-            offset = float(mp.position_deg - pp.position_deg)
-            out["peak_offset_deg"] = offset
-            if pp.amplitude > 0:
-                out["amplitude_ratio"] = float(mp.amplitude / pp.amplitude)
-            out["hint"] = misalignment_hint(
-                float(mp.position_deg), float(pp.position_deg), misalignment_threshold_deg
-            )
+    if len(measured_idx) < 3:
+        if n_readings:
+            out["peak_note"] = "fewer than 3 geometries measured: no peak metrics"
+        return out
+    theta = np.array([plan.theta_r_deg[i] for i in measured_idx])
+    means = np.array([geometries[i]["mean_pct"] for i in measured_idx])
+    mp = peak_metrics(theta, means)
+    out["measured_peak"] = _peak_dict(mp)
+    if not all(i in predictions for i in measured_idx):
+        return out
+    # Measured and predicted curves are compared on the same geometries (an interrupted
+    # run compares what it measured), and only when the measured range brackets the
+    # predicted specular peak of the whole plan and the measured maximum lies inside it:
+    # otherwise the "peak" of a partial curve is its end or a bump of the off-specular
+    # floor, and an "offset" would be the distance to it, not a misalignment.
+    pred_curve = np.array([predictions[i] for i in measured_idx])
+    pp = peak_metrics(theta, pred_curve)
+    out["predicted_peak"] = _peak_dict(pp)
+    if all(i in predictions for i in order) and len(measured_idx) < len(order):
+        theta_all = np.array([plan.theta_r_deg[i] for i in order])
+        pp_plan = peak_metrics(theta_all, np.array([predictions[i] for i in order]))
+    else:
+        pp_plan = pp
+    k_meas = int(np.argmax(means))
+    if not (theta[0] < pp_plan.position_deg < theta[-1] and 0 < k_meas < len(measured_idx) - 1):
+        out["peak_note"] = (
+            f"the measured range {theta[0]:g}..{theta[-1]:g} deg does not bracket the "
+            f"specular peak (predicted at {pp_plan.position_deg:.2f} deg; measured maximum "
+            f"at {mp.position_deg:.2f} deg): no peak comparison"
+        )
+        return out
+    out["peak_offset_deg"] = float(mp.position_deg - pp.position_deg)
+    if pp.amplitude > 0:
+        out["amplitude_ratio"] = float(mp.amplitude / pp.amplitude)
+    out["hint"] = misalignment_hint(
+        float(mp.position_deg), float(pp.position_deg), misalignment_threshold_deg
+    )
     return out
