@@ -71,6 +71,7 @@ class GonioApp(App[int]):
         Binding("l", "toggle_log", "Residual/log"),
         Binding("r", "browse_runs", "Runs"),
         Binding("q", "quit", "Quit"),
+        Binding("escape", "blur", "Leave field", show=False),
     ]
     CSS = """
     #top { height: 1fr; }
@@ -123,7 +124,8 @@ class GonioApp(App[int]):
         self.query_one(StatusPanel).show_run("run: idle (homing...)")
         try:
             await self.backend.open()
-        except (DeviceError, UserError, OSError) as exc:
+        except (DeviceError, UserError, OSError, ValueError, RuntimeError) as exc:
+            # Unreachable instrument, bad map/profile, port busy: shown, the UI stays up.
             self.show_banner(f"lab not ready: {exc}")
             self.notify(str(exc), title="Lab", severity="error", timeout=10)
             self.query_one(StatusPanel).show_run("run: idle (lab not ready)")
@@ -331,6 +333,10 @@ class GonioApp(App[int]):
             self.notify("aborting after the current point", title="Scan", severity="warning")
         else:
             self.notify("no scan running", title="Scan", severity="warning")
+
+    def action_blur(self) -> None:
+        """Leave a form field so that the single-key commands work again (``escape``)."""
+        self.screen.set_focus(None)
 
     def action_read_gloss(self) -> None:
         """Take one glossmeter reading, shown in the log beside its prediction (key ``g``)."""

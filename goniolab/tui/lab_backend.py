@@ -81,16 +81,19 @@ class LabBackend:
         self.config_path = Path(config_path)
         self.config: LabConfig = load_lab_config(self.config_path)
         self.time_scale = time_scale
-        self.sample = _sample_spec(sample) if sample else self.config.sample.map
-        if self.sample.startswith("sample:"):
-            name = self.sample.removeprefix("sample:")
-            if name not in self.sample_names():
-                raise UserError(
-                    f"--sample {sample}: no built-in sample {name!r} "
-                    f"(known: {', '.join(self.sample_names())})"
-                )
-        elif not Path(self.sample).exists():
-            raise UserError(f"--sample {sample}: no such height-map file")
+        # The config's own map is resolved (relative to the config file) by the Lab.
+        self.sample = self.config.sample.map
+        if sample:
+            self.sample = _sample_spec(sample)
+            if self.sample.startswith("sample:"):
+                name = self.sample.removeprefix("sample:")
+                if name not in self.sample_names():
+                    raise UserError(
+                        f"--sample {sample}: no built-in sample {name!r} "
+                        f"(known: {', '.join(self.sample_names())})"
+                    )
+            elif not Path(self.sample).exists():
+                raise UserError(f"--sample {sample}: no such height-map file")
         self.store_path = resolve_store_path(store_path, self.config.lab.store)
         self.bus = EventBus()
         self.lab: Lab | None = None

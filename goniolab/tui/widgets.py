@@ -214,26 +214,30 @@ class StatusPanel(Vertical):
         table.add_row("-", "-", "-", "connecting", "-", key="lamp", label="lamp")
         table.add_row("-", "-", "-", "connecting", "-", key="detector", label="detector")
 
+    def _set(self, row: str, col: str, text: str) -> None:
+        """Update one cell, skipping unchanged values (polling must not repaint idly)."""
+        table = self.query_one("#arms", DataTable)
+        if str(table.get_cell(row, col)) != text:
+            table.update_cell(row, col, text)
+
     def show_arm(self, arm: ArmState) -> None:
         """Update one arm's row (``arm.name`` is ``lamp`` or ``detector``)."""
-        table = self.query_one("#arms", DataTable)
-        table.update_cell(arm.name, "angle", fmt_num(arm.position_deg, 2))
-        table.update_cell(arm.name, "motion", "moving" if arm.moving else "idle")
-        table.update_cell(arm.name, "homed", "yes" if arm.homed else "no")
-        table.update_cell(arm.name, "link", "ok" if arm.connected else "lost")
+        self._set(arm.name, "angle", fmt_num(arm.position_deg, 2))
+        self._set(arm.name, "motion", "moving" if arm.moving else "idle")
+        self._set(arm.name, "homed", "yes" if arm.homed else "no")
+        self._set(arm.name, "link", "ok" if arm.connected else "lost")
         alarm = "-" if arm.alarm_code is None else f"{arm.alarm_code}"
         if arm.message:
             alarm = arm.message[:24]
-        table.update_cell(arm.name, "alarm", alarm)
+        self._set(arm.name, "alarm", alarm)
 
     def show_angles(self, theta_i_deg: float, theta_r_deg: float, moving: bool) -> None:
         """Update both arms from an ArmsMoved event (angles in degrees)."""
-        table = self.query_one("#arms", DataTable)
         motion = "moving" if moving else "idle"
-        table.update_cell("lamp", "angle", fmt_num(theta_i_deg, 2))
-        table.update_cell("detector", "angle", fmt_num(theta_r_deg, 2))
-        table.update_cell("lamp", "motion", motion)
-        table.update_cell("detector", "motion", motion)
+        self._set("lamp", "angle", fmt_num(theta_i_deg, 2))
+        self._set("detector", "angle", fmt_num(theta_r_deg, 2))
+        self._set("lamp", "motion", motion)
+        self._set("detector", "motion", motion)
 
     def show_run(self, text: str) -> None:
         """Replace the run-state line."""
