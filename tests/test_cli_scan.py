@@ -10,9 +10,9 @@ from pathlib import Path
 
 import pytest
 
-from goniolab.cli import main
+from goniolab.cli import build_parser, main
 from goniolab.config import configs_dir
-from goniolab.scan.plans import BrdfPlan
+from goniolab.scan.plans import BrdfPlan, parse_angles
 from goniolab.store import RunStore
 
 SIGMA_DEG = 3.0
@@ -139,7 +139,8 @@ def test_unsafe_plan_is_refused_and_not_recorded(
         "scan",
         "--config",
         cfg,
-        "--theta-r=-40,-30",
+        "--theta-r",
+        "-40,-30",  # a lamp-side list, not an option
         "--time-scale",
         "0",
         "--store",
@@ -150,3 +151,49 @@ def test_unsafe_plan_is_refused_and_not_recorded(
     assert "point 0 (theta_i=45 deg, theta_r=-40 deg) is unsafe" in err and "no arm moved" in err
     with RunStore(store) as s:
         assert s.list_runs() == []
+
+
+@pytest.mark.parametrize(
+    ("spec", "angles"),
+    [("-40:-30:5", (-40.0, -35.0, -30.0)), ("-10,0,10", (-10.0, 0.0, 10.0)), ("-7.5", (-7.5,))],
+)
+def test_theta_r_may_start_on_the_lamp_side(spec: str, angles: tuple[float, ...]) -> None:
+    args = build_parser().parse_args(["scan", "--config", "x.toml", "--theta-r", spec])
+    assert parse_angles(args.theta_r) == angles
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["scan", "--config", "{tmp}/none.toml"], "none.toml: config file not found"),
+        (["scan", "--config", "{cfg}", "--theta-r", "garbage"],
+         "scan: --theta-r: list 'garbage' has a non-numeric entry"),
+        (["scan", "--config", "{cfg}", "--repeats", "0"], "scan: repeats must be >= 1, got 0"),
+        (["scan", "--config", "{cfg}", "--sample", "{tmp}/no.npy"],
+         "--sample {tmp}/no.npy: no such file"),
+        (["scan", "--config", "{cfg}", "--store", "{tmp}"], "store {tmp}: is a directory"),
+        (["scan", "resume", "3", "--store", "{tmp}/none.sqlite"],
+         "store {tmp}/none.sqlite: no such file"),
+        (["runs", "export", "3", "--store", "{tmp}/none.sqlite"],
+         "store {tmp}/none.sqlite: no such file"),
+    ],
+)  # fmt: skip
+def test_bad_input_is_one_clear_line_with_exit_2(
+    args: list[str], message: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    fill = {"tmp": str(tmp_path), "cfg": str(configs_dir() / "lab-sim.toml")}
+    assert main([a.format(**fill) for a in args]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("goniolab: error: ") and err.count("\n") == 1  # one line
+    assert message.format(**fill) in err
+    assert list(tmp_path.iterdir()) == []  # nothing created on the way
+
+
+def test_runs_list_of_a_missing_store_creates_nothing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / "typo" / "s.sqlite"
+    assert main(["runs", "list", "--store", str(path), "--json"]) == 0
+    out, err = capsys.readouterr()
+    assert json.loads(out) == [] and f"store {path} does not exist yet" in err
+    assert not (tmp_path / "typo").exists()

@@ -351,3 +351,25 @@ async def test_unexpected_error_parks_marks_failed_and_surfaces(
     rec = store.get_run(runner.run_id)
     assert rec.status == "failed" and "internal error" in rec.reason
     assert fake_lab.goniometer.park_calls == 1
+
+
+async def test_abort_during_a_move_stops_the_arms_and_takes_no_reading(
+    fake_lab: FakeLab, store: RunStore
+) -> None:
+    g = fake_lab.goniometer
+    g.lamp.homed = g.detector.homed = True  # arms homed at (0, 0)
+    runner, bus = make_runner(fake_lab, store, BrdfPlan(45.0, parse_angles("30:60:1")))
+
+    def abort_on_first_move(ev: Event) -> None:
+        if isinstance(ev, ArmsMoved) and ev.moving:
+            runner.abort()
+
+    events = await drive(runner, bus, abort_on_first_move)
+    fin = next(e for e in events if isinstance(e, RunFinished))
+    assert fin.state is RunState.ABORTED and "during a move" in fin.reason
+    assert store.count_points(runner.run_id) == 0 and fake_lab.spectro.n_reads == 0
+    assert g.stop_calls >= 1 and g.park_calls == 1
+    # the move to (45, 30) never ran: the lab clock shows only the park move from (0, 0),
+    # the trapezoid 45 deg at 20 deg/s, 40 deg/s^2: 45/20 + 20/40 = 2.75 s
+    assert fake_lab.clock.now() == pytest.approx(2.75, abs=1e-12)
+    assert store.get_run(runner.run_id).status == "aborted"
