@@ -325,8 +325,8 @@ class LabBackend:
 
     # ------------------------------------------------------------------ store
     def list_runs(self) -> list[RunSummary]:
-        """Stored runs, newest first (own SQLite connection: safe from a worker thread)."""
-        with RunStore(self.store_path) as store:
+        """Stored runs, newest first (own read-only connection: safe from a worker thread)."""
+        with RunStore(self.store_path, readonly=True) as store:
             out = []
             for rec in store.list_runs(limit=200):
                 n = (
@@ -338,8 +338,8 @@ class LabBackend:
             return out
 
     def load_run(self, run_id: int) -> StoredRun:
-        """One stored run as events (own SQLite connection: safe from a worker thread)."""
-        with RunStore(self.store_path) as store:
+        """One stored run as events (own read-only connection: safe from a worker thread)."""
+        with RunStore(self.store_path, readonly=True) as store:
             rec = store.get_run(run_id)
             measured: list[PointMeasured] = []
             predicted: list[PointPredicted] = []
