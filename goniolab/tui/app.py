@@ -36,7 +36,7 @@ from goniolab.scan.events import (
     RunState,
     StateChanged,
 )
-from goniolab.tui.backend import Backend
+from goniolab.tui.backend import ArmState, Backend
 from goniolab.tui.comparison import Comparison
 from goniolab.tui.palette import ScanCommands
 from goniolab.tui.screens import RunsScreen
@@ -146,8 +146,6 @@ class GonioApp(App[int]):
             for arm in await self.backend.arm_states():
                 panel.show_arm(arm)
         except (DeviceError, OSError) as exc:
-            from goniolab.tui.backend import ArmState
-
             for name in ("lamp", "detector"):
                 panel.show_arm(ArmState(name, None, False, False, None, False, str(exc)))
 
