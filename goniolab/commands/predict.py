@@ -9,7 +9,10 @@ model (Wittmann et al. 2021, PHYSICS.md) gives
 - ``brdf``: the in-plane curve at ``--theta-i`` over ``--theta-r``: the goniometer reading
   (``luminance_pct``, % of a mirror, source and detector cones) and the aperture-averaged
   BRDF ``luminance / 100 / (projected solid angle of the detector)``, or with ``--point`` the
-  BRDF in the exact direction (no aperture, no luminance).
+  BRDF in the exact direction (no aperture, no luminance). With three or more increasing
+  angles it also reports the seed's two comparison numbers (Wittmann sec. 4.2, fig. 8):
+  peak amplitude and FWHM of the luminance curve (of the BRDF with ``--point``),
+  :func:`goniolab.optics.metrics.peak_metrics`.
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ from goniolab.errors import UserError
 from goniolab.maps import model_for, resolve_map
 from goniolab.optics.apertures import Cone, inplane_centre, sample_aperture
 from goniolab.optics.instruments import gloss_report
+from goniolab.optics.metrics import PeakMetrics, peak_metrics
 from goniolab.optics.surface import roughness_stats
 
 __all__ = ["parse_index", "parse_theta_list", "register"]
@@ -162,6 +166,13 @@ def _projected_solid_angle_sr(detector: Cone, theta_r_deg: float) -> float:
     return float(np.sum(np.clip(dirs[:, 2], 0.0, None) * w))
 
 
+def _peak(tr: NDArray[np.float64], values: NDArray[np.float64]) -> PeakMetrics | None:
+    """Peak metrics of the curve when the angles are >= 3 and strictly increasing."""
+    if tr.size < 3 or np.any(np.diff(tr) <= 0):
+        return None
+    return peak_metrics(tr, values)
+
+
 def _cmd_brdf(args: argparse.Namespace) -> int:
     ti = float(args.theta_i)
     if not (math.isfinite(ti) and 0.0 <= ti < 90.0):
@@ -193,6 +204,14 @@ def _cmd_brdf(args: argparse.Namespace) -> int:
         out["detector_deg"] = det.full_angle_deg
         out["brdf_sr"] = brdf.tolist()
         out["luminance_pct"] = lum.tolist()
+    peak = _peak(tr, brdf if lum is None else lum)
+    if peak is not None:
+        out["peak"] = {
+            "of": "brdf_sr" if lum is None else "luminance_pct",
+            "amplitude": peak.amplitude,
+            "position_deg": peak.position_deg,
+            "fwhm_deg": None if math.isnan(peak.fwhm_deg) else peak.fwhm_deg,
+        }
     if args.json:
         print(json.dumps(out, indent=2))
         return 0
@@ -203,6 +222,12 @@ def _cmd_brdf(args: argparse.Namespace) -> int:
         if lum is not None:
             line += f"  {lum[k]:12.5g}"
         print(line)
+    if peak is not None:
+        unit = "1/sr" if lum is None else "%"
+        fwhm = (
+            "outside the scanned range" if math.isnan(peak.fwhm_deg) else f"{peak.fwhm_deg:.3g} deg"
+        )
+        print(f"peak {peak.amplitude:.5g} {unit} at {peak.position_deg:.2f} deg, FWHM {fwhm}")
     return 0
 
 
