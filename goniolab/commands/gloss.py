@@ -3,7 +3,9 @@
 Either from a lab config (``--config FILE``: the configured glossmeter, real or simulated)
 or straight from a port (``--port PORT --protocol zgm1120|line``, no config). Each reading
 is committed to the store with its timestamp, printed beside the model's ISO 2813 gloss
-when the sample has a height map, or printed as one JSON object per line with ``--json``.
+when the sample has a height map, or printed as one JSON object per line with ``--json``
+(readings carry ``seq``; the last line holds the session's ``statistics``: n, mean and
+sample standard deviation per geometry).
 Garbled lines and disconnects are reported on stderr; the logger reconnects with backoff
 and loses nothing already read. Ctrl-C ends the session after the current reading.
 """
@@ -14,12 +16,14 @@ import argparse
 import asyncio
 import datetime as dt
 import json
+import os
 import signal
 import sys
 from contextlib import AsyncExitStack
 from typing import Any
 
 from goniolab import __version__
+from goniolab.commands.scan import run_lab
 from goniolab.errors import UserError
 from goniolab.scan.events import EventBus, GlossRead, InstrumentError, RunState
 from goniolab.scan.gloss import GlossLogger, GlossResult, predict_gloss
@@ -34,16 +38,17 @@ def _iso(ts: float) -> str:
 
 
 def format_reading(ev: GlossRead, seq: int) -> str:
-    """One text line: time, measured GU per geometry, predicted GU beside them."""
+    """One text line: sequence number, UTC time, measured GU per geometry with the
+    predicted GU beside it, instrument temperature."""
     parts = [f"{seq:>4}  {_iso(ev.timestamp)}"]
     for angle, v in sorted(ev.values_gu.items()):
-        txt = "  -  " if v is None else f"{v:6.1f}"
+        txt = f"G{angle}     - GU" if v is None else f"G{angle} {v:6.1f} GU"
         if ev.predicted_gu is not None and angle in ev.predicted_gu:
             txt += f" (pred {ev.predicted_gu[angle]:6.1f})"
-        parts.append(f"G{angle} {txt}")
+        parts.append(txt)
     if ev.temperature_c is not None:
-        parts.append(f"{ev.temperature_c:.1f} C")
-    return "  ".join(parts) + " GU"
+        parts.append(f"{ev.temperature_c:.1f} degC")
+    return "  ".join(parts)
 
 
 def reading_json(ev: GlossRead, seq: int) -> str:
@@ -156,6 +161,12 @@ def _cmd_log(args: argparse.Namespace) -> int:
         raise UserError("gloss log: give --config FILE, or --port PORT --protocol zgm1120|line")
     if args.config and args.port:
         raise UserError("gloss log: --config and --port exclude each other")
+    if args.port and "://" not in args.port and not os.path.exists(args.port):
+        raise UserError(f"gloss log: --port {args.port}: no such device")
+    if not args.interval >= 0:
+        raise UserError(f"gloss log: --interval must be >= 0 s, got {args.interval}")
+    if not args.timeout > 0:
+        raise UserError(f"gloss log: --timeout must be > 0 s, got {args.timeout}")
     config_store = None
     sample = args.sample or ""
     if args.sample:
@@ -177,8 +188,22 @@ def _cmd_log(args: argparse.Namespace) -> int:
     except StoreError as exc:
         raise UserError(str(exc)) from exc
     with store:
-        result = asyncio.run(_session(args, store, plan))
-        if not args.json:
+        result = run_lab(_session(args, store, plan))
+        if args.json:
+            # the last JSON line: the session's statistics (reading lines carry "seq")
+            print(
+                json.dumps(
+                    {
+                        "run_id": result.run_id,
+                        "state": result.state.value,
+                        "reason": result.reason,
+                        "readings": result.readings,
+                        "reconnects": result.reconnects,
+                        "statistics": result.stats.as_dict(),
+                    }
+                )
+            )
+        else:
             for angle in plan.angles_deg:
                 if angle in result.stats.n:
                     print(

@@ -16,9 +16,11 @@ import math
 import re
 import signal
 import sys
+from collections.abc import Coroutine
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any, TextIO, TypeVar
 
+from drivers.base import DeviceError
 from goniolab import __version__
 from goniolab.config import LabConfig, load_lab_config
 from goniolab.errors import UserError
@@ -36,7 +38,16 @@ from goniolab.scan.predict import Predictor
 from goniolab.scan.runner import ArmMotion, PlanRefused, RunResult, ScanRunner, dry_run
 from goniolab.store import RunStore, StoreError, resolve_store_path
 
-__all__ = ["check_sample_arg", "format_eta", "format_summary", "register", "with_sample"]
+__all__ = [
+    "check_sample_arg",
+    "format_eta",
+    "format_summary",
+    "register",
+    "run_lab",
+    "with_sample",
+]
+
+_T = TypeVar("_T")
 
 #: A negative number, or an angle range/list starting with one ("-40:-30:5", "-10,0,10").
 _NEGATIVE_ARG = re.compile(r"^-\d+$|^-\d*\.\d+$|^-[\d.]+[:,][\d.:,\-]*$")
@@ -299,6 +310,15 @@ async def _execute(
     return _EXIT[result.state]
 
 
+def run_lab(coro: Coroutine[Any, Any, _T]) -> _T:
+    """``asyncio.run(coro)``; an instrument that cannot be reached (or fails outside a
+    run, which records its own faults) becomes one line naming the device, exit code 1."""
+    try:
+        return asyncio.run(coro)
+    except DeviceError as exc:
+        raise UserError(f"instrument error: {exc}", exit_code=1) from exc
+
+
 def with_sample(cfg: LabConfig, sample: str) -> LabConfig:
     """``cfg`` with ``[sample] map`` set to ``sample``: in a simulated lab that is the sample
     under the instruments, in a real lab the one the prediction is made for."""
@@ -353,7 +373,7 @@ def _cmd_scan(args: argparse.Namespace) -> int:
         raise UserError(f"scan: {exc}") from exc
     store = _open(args.store, cfg.lab.store)
     with store:
-        return asyncio.run(
+        return run_lab(
             _execute(
                 config_path=args.config,
                 time_scale=args.time_scale,
@@ -397,7 +417,7 @@ def _cmd_resume(args: argparse.Namespace) -> int:
             f"goniolab: resuming run {rec.id}: {store.count_points(rec.id)} readings stored",
             file=sys.stderr,
         )
-        return asyncio.run(
+        return run_lab(
             _execute(
                 config_path=config_path,
                 time_scale=args.time_scale,

@@ -207,8 +207,19 @@ def test_gloss_log_from_the_sim_config(tmp_path: Path, capsys: pytest.CaptureFix
         capsys,
     )  # fmt: skip
     assert code == 0, err
-    lines = [json.loads(x) for x in out.splitlines()]
+    *lines, stats = [json.loads(x) for x in out.splitlines()]
     assert [x["seq"] for x in lines] == [0, 1, 2]
+    # the last line: n, mean and sample std (ddof = 1) of the three readings per geometry
+    for angle in ("20", "60", "85"):
+        vals = [x["values_gu"][angle] for x in lines]
+        mean = sum(vals) / 3
+        std = (sum((v - mean) ** 2 for v in vals) / 2) ** 0.5
+        assert stats["statistics"][angle] == {
+            "n": 3,
+            "mean_gu": pytest.approx(mean, abs=1e-12),
+            "std_gu": pytest.approx(std, abs=1e-12),
+        }
+    assert stats["state"] == "done" and stats["readings"] == 3
     for x in lines:
         # noiseless sim: the meter reads the model's gloss to its 0.1 GU resolution
         for angle in ("20", "60", "85"):
@@ -330,8 +341,8 @@ def test_gloss_log_from_a_port_without_config(
         server.send_signal(signal.SIGINT)
         server.wait()
     assert code == 0, err
-    lines = [json.loads(x) for x in out.splitlines()]
-    assert len(lines) == 2
+    *lines, stats = [json.loads(x) for x in out.splitlines()]
+    assert len(lines) == 2 and stats["readings"] == 2
     for x in lines:
         # the ZGM1120 reports 0.1 GU: the noiseless sim reads the prediction to that resolution
         assert x["values_gu"]["60"] == pytest.approx(x["predicted_gu"]["60"], abs=0.051)
