@@ -14,7 +14,10 @@ style. What goes on the wire is fixed by the profile's documented move sequences
   opcode into the command register, each a function-16 request; ``connect`` writes the
   enable opcode; stop / home / alarm reset write their opcodes.
 
-Units: ``steps = round(deg * steps_per_deg)`` (``steps_per_deg`` includes the gearing);
+Units: ``steps = round(deg * steps_per_deg * gear_ratio)``, with ``steps_per_deg`` the
+motor's steps per degree of its own shaft and ``gear_ratio`` the motor turns per arm turn
+(1 for a direct drive); :attr:`ModbusStepperAxis.steps_per_deg` is their product, the
+steps per degree of the arm;
 speed and acceleration registers hold ``round(speed_deg_s * steps_per_deg *
 speed_counts_per_step_s)`` and the same for acceleration.
 
@@ -111,7 +114,10 @@ class ModbusStepperAxis:
     unit_id
         Modbus device id.
     steps_per_deg
-        Motor steps per degree of arm rotation, gearing included.
+        Motor steps per degree of the motor shaft (e.g. 10000 steps/rev -> 27.78).
+    gear_ratio
+        Motor turns per arm turn (gearbox reduction; 1 = direct drive). The arm moves
+        ``steps_per_deg * gear_ratio`` steps per degree.
     limits_deg
         Soft limits ``(low, high)`` in degrees, checked before any bus traffic.
     speed_deg_s, accel_deg_s2
@@ -142,6 +148,7 @@ class ModbusStepperAxis:
         parity: str | None = None,
         unit_id: int = 1,
         steps_per_deg: float = 1000.0,
+        gear_ratio: float = 1.0,
         limits_deg: tuple[float, float] = (0.0, 85.0),
         speed_deg_s: float = 20.0,
         accel_deg_s2: float = 40.0,
@@ -162,6 +169,8 @@ class ModbusStepperAxis:
             raise ValueError(f"{name}: transport 'rtu' needs serial_port")
         if not steps_per_deg > 0:
             raise ValueError(f"{name}: steps_per_deg must be > 0, got {steps_per_deg}")
+        if not gear_ratio > 0:
+            raise ValueError(f"{name}: gear_ratio must be > 0, got {gear_ratio}")
         lo, hi = (float(v) for v in limits_deg)
         if not lo < hi:
             raise ValueError(
@@ -185,7 +194,8 @@ class ModbusStepperAxis:
         self.baudrate = baudrate if baudrate is not None else self.profile.serial.baudrate
         self.parity = parity if parity is not None else self.profile.serial.parity
         self.unit_id = unit_id
-        self.steps_per_deg = float(steps_per_deg)
+        self.gear_ratio = float(gear_ratio)
+        self.steps_per_deg = float(steps_per_deg) * self.gear_ratio  # per degree of the arm
         self.limits_deg: tuple[float, float] = (lo, hi)
         self.speed_deg_s = float(speed_deg_s)
         self.accel_deg_s2 = float(accel_deg_s2)

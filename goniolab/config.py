@@ -117,7 +117,8 @@ class AxisConfig(_Strict):
     serial_port: str = ""
     baudrate: Annotated[int, Field(ge=300, le=4_000_000)] = 115200
     parity: Literal["N", "E", "O"] = "E"
-    steps_per_deg: PositiveFloat = 1000.0
+    steps_per_deg: PositiveFloat = 1000.0  # motor steps per degree of the motor shaft
+    gear_ratio: PositiveFloat = 1.0  # motor turns per arm turn (1 = direct drive)
     limits_deg: tuple[FiniteFloat, FiniteFloat] = (0.0, 85.0)
     speed_deg_s: PositiveFloat = 20.0
     accel_deg_s2: PositiveFloat = 40.0

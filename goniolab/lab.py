@@ -215,7 +215,10 @@ def build_sim_server(cfg: LabConfig, sims: SimInstruments) -> SimLabServer:
             key = ("rtu", *where)
         try:
             wire = WireAxis(
-                sim_axis, load_stepper_profile(ax.profile), ax.steps_per_deg, ax.unit_id
+                sim_axis,
+                load_stepper_profile(ax.profile),
+                ax.steps_per_deg * ax.gear_ratio,  # steps per degree of the arm
+                ax.unit_id,
             )
         except (ProfileError, ValueError) as exc:
             raise ConfigError(src, f"goniometer.{name}.profile", str(exc)) from None
@@ -413,6 +416,7 @@ class Lab:
                 parity=ax.parity,
                 unit_id=ax.unit_id,
                 steps_per_deg=ax.steps_per_deg,
+                gear_ratio=ax.gear_ratio,
                 limits_deg=ax.limits_deg,
                 speed_deg_s=ax.speed_deg_s,
                 accel_deg_s2=ax.accel_deg_s2,

@@ -48,6 +48,9 @@ def test_shipped_values() -> None:
         real.goniometer.lamp.transport == "rtu"
         and real.goniometer.lamp.serial_port == "/dev/ttyUSB0"
     )
+    lamp = real.goniometer.lamp  # 3600 steps/rev motor behind a 100:1 gearbox
+    assert (lamp.steps_per_deg, lamp.gear_ratio) == (10.0, 100.0)
+    assert wire.goniometer.lamp.gear_ratio == 1.0  # direct drive unless configured
 
 
 def write(tmp_path: Path, text: str) -> Path:
@@ -75,6 +78,15 @@ def write(tmp_path: Path, text: str) -> Path:
             "x.toml: goniometer.detector.port: Input should be less than or equal to 65535",
         ),
         ('[lab]\nmode = "real"\n', "x.toml: lab.mode: Input should be 'sim' or 'drivers'"),
+        (
+            "[goniometer.lamp]\ngear_ratio = 0\n",
+            "x.toml: goniometer.lamp.gear_ratio: Input should be greater than 0",
+        ),
+        (
+            '[lab]\nmode = "drivers"\n[goniometer.detector]\nunit_id = 2\n'
+            '[goniometer.lamp]\ntransport = "rtu"\nserial_port = "socket://127.0.0.1:0"\n',
+            "x.toml: goniometer.lamp.serial_port: port 0 (any free port) only works",
+        ),
         (
             '[goniometer.lamp]\ntransport = "rtu"\n',
             'x.toml: goniometer.lamp: transport = "rtu" needs serial_port',

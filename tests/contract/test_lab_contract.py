@@ -191,3 +191,11 @@ async def test_missing_serial_port(tmp_path: Path) -> None:
             async with Lab.from_config(path, model=MODEL):
                 pass
     assert err.value.device == "spectro" and "/nonexistent/ttyX" in str(err.value)
+
+
+async def test_geared_arms_reach_the_commanded_angles(make_lab: Callable[..., Lab]) -> None:
+    geared = {"steps_per_deg = 1000.0": "steps_per_deg = 10.0\ngear_ratio = 100.0"}
+    async with make_lab(extra=geared) as lab:
+        assert await lab.goniometer.move_to(30.0, 40.0, timeout_s=30.0) == (30.0, 40.0)
+        assert lab.sims is not None
+        assert (lab.sims.lamp.actual_deg(), lab.sims.detector.actual_deg()) == (30.0, 40.0)

@@ -121,6 +121,24 @@ async def test_move_to_sends_exact_tcp_adu(fakes: Any, modbus_server: Any) -> No
     assert write_req[:2] != read_req[:2]  # a fresh transaction id per request
 
 
+async def test_gearing_multiplies_motor_steps(fakes: Any, modbus_server: Any) -> None:
+    """10 motor steps per shaft degree behind a 100:1 gearbox = 1000 steps per arm degree:
+    the same bytes as the 1000 steps/deg move above (12500 steps, 20000 Hz, 40000)."""
+    dev = fakes.Device()
+    dev.set32(STATUS, READY | IN_POS)
+    server = await modbus_server(dev)
+    axis = make_axis(server.port, steps_per_deg=10.0, gear_ratio=100.0)
+    await axis.connect()
+    try:
+        await axis.move_to(12.5)
+    finally:
+        await axis.close()
+    assert dev.pdus[-1] == MOVE_PDU_12_5
+    assert axis.steps_to_deg(12500) == 12.5
+    with pytest.raises(ValueError, match="lamp: gear_ratio must be > 0"):
+        make_axis(server.port, gear_ratio=0.0)
+
+
 async def test_move_to_sends_exact_rtu_frame_with_crc(fakes: Any, modbus_server: Any) -> None:
     assert fakes.crc16(b"123456789") == 0x4B37  # CRC-16/MODBUS check value
     dev = fakes.Device()
