@@ -25,6 +25,7 @@ power loss; nothing is buffered in memory.
 from __future__ import annotations
 
 import csv
+import fcntl
 import io
 import json
 import os
@@ -34,13 +35,14 @@ from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import platformdirs
 
 __all__ = [
     "GlossRow",
     "PointRow",
+    "RunBusy",
     "RunRecord",
     "RunStore",
     "StoreError",
@@ -137,6 +139,49 @@ _GLOSS_FIELDS = (
 
 class StoreError(Exception):
     """The store file cannot be opened, or a run id does not exist (message names both)."""
+
+
+class RunBusy(StoreError):
+    """Another runner (this process or another one) is measuring the run right now."""
+
+
+class _ClaimFile:
+    """One open lock file per store, shared by every claim of this process.
+
+    POSIX record locks (``lockf``) belong to the process and closing *any* descriptor of
+    the file drops all of them, so the file is opened once and closed only when the last
+    claim is released. The kernel drops the locks when the process dies (also on
+    ``kill -9``): a crashed run is never left claimed.
+    """
+
+    _open: ClassVar[dict[Path, tuple[int, set[int]]]] = {}
+
+    @classmethod
+    def acquire(cls, lock_path: Path, run_id: int) -> None:
+        fd, held = cls._open.get(lock_path, (-1, set()))
+        if run_id in held:
+            raise RunBusy(f"run {run_id} is already being measured by this process")
+        if fd < 0:
+            fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.lockf(fd, fcntl.LOCK_EX | fcntl.LOCK_NB, 1, run_id)
+        except OSError as exc:
+            if not held:
+                os.close(fd)
+            raise RunBusy(
+                f"run {run_id} is being measured by another goniolab process; stop that one first"
+            ) from exc
+        held.add(run_id)
+        cls._open[lock_path] = (fd, held)
+
+    @classmethod
+    def release(cls, lock_path: Path, run_id: int) -> None:
+        fd, held = cls._open[lock_path]
+        fcntl.lockf(fd, fcntl.LOCK_UN, 1, run_id)
+        held.discard(run_id)
+        if not held:
+            os.close(fd)
+            del cls._open[lock_path]
 
 
 @dataclass(frozen=True, slots=True)
@@ -339,6 +384,27 @@ class RunStore:
     def journal_mode(self) -> str:
         """The SQLite journal mode in use (``"wal"``)."""
         return str(self._db.execute("PRAGMA journal_mode").fetchone()[0])
+
+    # ------------------------------------------------------------------ claims
+    @contextmanager
+    def claim_run(self, run_id: int) -> Iterator[None]:
+        """Hold the run for measuring: a second runner of the same run (another process,
+        e.g. ``scan resume`` while the scan still runs, or this one) gets :class:`RunBusy`.
+
+        The claim is a POSIX record lock on byte ``run_id`` of ``<store>-lock`` beside the
+        store file, released on exit and by the kernel when the process dies.
+        """
+        lock_path = self.path.resolve().with_name(self.path.name + "-lock")
+        try:
+            _ClaimFile.acquire(lock_path, run_id)
+        except RunBusy as exc:
+            raise RunBusy(f"store {self.path}: {exc}") from None
+        except OSError as exc:
+            raise StoreError(f"store {self.path}: cannot claim run {run_id}: {exc}") from exc
+        try:
+            yield
+        finally:
+            _ClaimFile.release(lock_path, run_id)
 
     # ------------------------------------------------------------------ runs
     def create_run(

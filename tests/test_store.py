@@ -7,11 +7,19 @@ import io
 import json
 import os
 import sqlite3
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 
-from goniolab.store import RunStore, StoreError, default_store_path, resolve_store_path
+from goniolab.store import (
+    RunBusy,
+    RunStore,
+    StoreError,
+    default_store_path,
+    resolve_store_path,
+)
 
 
 def _run(store: RunStore) -> int:
@@ -208,3 +216,37 @@ def test_export_of_a_run_without_readings_has_the_header(store_path: Path) -> No
             "run_id,index,repeat,theta_i_deg,theta_r_deg,measured_theta_i_deg,"
             "measured_theta_r_deg,luminance_pct,predicted_pct,timestamp"
         ]
+
+
+def test_a_run_is_claimed_by_one_runner_and_freed_when_its_process_dies(tmp_path: Path) -> None:
+    path = tmp_path / "s.sqlite"
+    with RunStore(path) as s:
+        rid = _run(s)
+        other = _run(s)
+        with s.claim_run(rid):
+            with (
+                pytest.raises(RunBusy, match=f"run {rid} is already being measured"),
+                s.claim_run(rid),
+            ):
+                pass
+            with s.claim_run(other):  # another run of the same store is free
+                pass
+        # another process claims the run and is killed -9 while holding it
+        code = (
+            "import sys, os; from goniolab.store import RunStore\n"
+            f"s = RunStore({str(path)!r})\n"
+            f"c = s.claim_run({rid}); c.__enter__()\n"
+            "print('held', flush=True); sys.stdin.readline()\n"
+        )
+        proc = subprocess.Popen(
+            [sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
+        )
+        try:
+            assert proc.stdout is not None and proc.stdout.readline() == "held\n"
+            with pytest.raises(RunBusy, match="another goniolab process"), s.claim_run(rid):
+                pass
+        finally:
+            proc.kill()
+            proc.wait()
+        with s.claim_run(rid):  # the kernel dropped the dead process's lock
+            pass

@@ -36,7 +36,7 @@ from goniolab.scan.events import (
 from goniolab.scan.plans import BrdfPlan, PlanError, parse_angles
 from goniolab.scan.predict import Predictor
 from goniolab.scan.runner import ArmMotion, PlanRefused, RunResult, ScanRunner, dry_run
-from goniolab.store import RunStore, StoreError, resolve_store_path
+from goniolab.store import RunBusy, RunStore, StoreError, resolve_store_path
 
 __all__ = [
     "check_sample_arg",
@@ -276,6 +276,8 @@ async def _execute(
         except PlanRefused as exc:
             store.set_status(run_id, RunState.FAILED.value, f"plan refused: {exc}")
             raise UserError(f"plan refused (no arm moved): {exc}") from exc
+        except RunBusy as exc:
+            raise UserError(f"{exc} (no arm moved)") from exc
         except asyncio.CancelledError:
             bar.close()
             print(

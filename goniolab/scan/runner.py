@@ -427,7 +427,13 @@ class ScanRunner:
         ------
         PlanRefused
             From the dry run, before any motion (the run stays resumable).
+        goniolab.store.RunBusy
+            Another runner holds the run (:meth:`RunStore.claim_run`); nothing moved.
         """
+        with self.store.claim_run(self.run_id):
+            return await self._run()
+
+    async def _run(self) -> RunResult:
         all_points = self.plan.points()
         done = self.store.done_keys(self.run_id)
         todo = [p for p in all_points if p.key not in done]
