@@ -7,13 +7,17 @@ PDUs, RTU CRC-16/MODBUS) and the AZ direct-data table in shared/PROTOCOLS.md.
 from __future__ import annotations
 
 import asyncio
+import os
 import socket
 import struct
+import tty
 from collections.abc import Callable
 from typing import Any
 
 import pytest
 import serial
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from drivers.base import (
     Axis,
@@ -468,3 +472,54 @@ def test_bad_configuration_names_the_axis() -> None:
         ModbusStepperAxis("lamp", limits_deg=(10.0, 0.0))
     with pytest.raises(ValueError, match=r"lamp: speed_deg_s=0\.001 gives 0 register counts"):
         ModbusStepperAxis("lamp", profile="applied-motion-mdx", speed_deg_s=0.001)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    position=st.integers(min_value=0, max_value=6),  # burst start in the 9-byte reply frame
+    mask=st.integers(min_value=1, max_value=0xFFFF),  # any non-zero burst of <= 16 bits
+    cut=st.integers(min_value=0, max_value=8),  # or: the frame cut short after `cut` bytes
+    truncate=st.booleans(),
+)
+def test_line_noise_on_rtu_replies_is_only_protocol_error(
+    position: int, mask: int, cut: int, truncate: bool
+) -> None:
+    """CRC-16 detects every burst error of up to 16 bits, and a cut frame never completes:
+    whatever the noise, the driver reports ProtocolError (never a wrong position)."""
+    from tests.drivers.conftest import PtyPair, rtu_frame
+
+    def noise(frame: bytes) -> bytes:
+        if truncate:
+            return frame[:cut]  # (cut 0: silence, which must be a timeout instead)
+        out = bytearray(frame)
+        out[position] ^= mask >> 8
+        out[position + 1] ^= mask & 0xFF
+        return bytes(out)
+
+    reply = rtu_frame(bytes.fromhex("01 03 04 0000 AFC8"))  # feedback 45000 steps
+
+    async def run(master: int, path: str) -> None:
+        axis = make_axis(
+            0, transport="rtu", serial_port=path, parity="N", timeout_s=0.05, retries=0
+        )
+        await axis.connect()
+        try:
+            reading = asyncio.create_task(axis.position_deg())
+            instrument = PtyPair(master, path)
+            await instrument.read_exactly(8)  # the read request frame, then the noisy answer
+            instrument.send(noise(reply))
+            expected = DeviceTimeout if truncate and cut == 0 else ProtocolError
+            with pytest.raises(expected) as err:
+                await reading
+            assert type(err.value) is expected and err.value.device == "lamp"
+        finally:
+            await axis.close()
+
+    master, slave = os.openpty()
+    try:
+        tty.setraw(master)
+        tty.setraw(slave)
+        asyncio.run(run(master, os.ttyname(slave)))
+    finally:
+        os.close(master)
+        os.close(slave)
