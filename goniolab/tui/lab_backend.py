@@ -21,6 +21,7 @@ from goniolab import __version__
 from goniolab.config import LabConfig, load_lab_config
 from goniolab.errors import UserError
 from goniolab.lab import Lab
+from goniolab.maps import model_for
 from goniolab.optics.apertures import Cone
 from goniolab.optics.models import ReflectanceModel
 from goniolab.scan.events import (
@@ -38,6 +39,7 @@ from goniolab.scan.predict import Predictor
 from goniolab.scan.runner import ArmMotion, PlanRefused, ScanRunner
 from goniolab.store import RunStore, StoreError, resolve_store_path
 from goniolab.tui.backend import ArmState, RunSummary, ScanSetup, StoredRun
+from sim.samples import sample_names
 
 __all__ = ["LabBackend"]
 
@@ -145,8 +147,6 @@ class LabBackend:
 
     # ------------------------------------------------------------------ form
     def sample_names(self) -> list[str]:
-        from sim.samples import sample_names
-
         return list(sample_names())
 
     def default_setup(self) -> ScanSetup:
@@ -177,8 +177,6 @@ class LabBackend:
         if sample == self.config.sample.map:
             return lab.model
         if sample not in self._models:
-            from goniolab.maps import model_for
-
             self._models[sample] = await asyncio.to_thread(
                 model_for, sample, n=self.config.sample.n
             )

@@ -11,6 +11,7 @@ from textual.containers import Horizontal, Vertical
 from textual.widgets import DataTable, Input, Label, Select, Static
 from textual_plot import HiResMode, LegendLocation, PlotWidget
 
+from goniolab.errors import UserError
 from goniolab.scan.events import GlossRead
 from goniolab.tui.backend import ArmState, ScanSetup
 from goniolab.tui.comparison import Comparison, ComparisonMetrics
@@ -312,8 +313,6 @@ class ScanForm(Vertical):
 
     def read_sample(self) -> str:
         """The selected sample as a spec (``sample:NAME`` or a path)."""
-        from goniolab.errors import UserError
-
         sample = self.query_one("#sample", Select).value
         if not isinstance(sample, str):
             raise UserError("scan setup: sample: choose a sample")
@@ -321,8 +320,6 @@ class ScanForm(Vertical):
 
     def read(self) -> ScanSetup:
         """The setup as typed; raises :class:`~goniolab.errors.UserError` when invalid."""
-        from goniolab.errors import UserError
-
         values: dict[str, float] = {}
         for key, _label in self.FIELDS:
             text = self.query_one(f"#{key}", Input).value.strip()
