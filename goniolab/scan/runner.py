@@ -471,7 +471,10 @@ class ScanRunner:
             await self._ensure_homed()
             await self.spectro.set_exposure_us(self.plan.exposure_us)
             mirror_pct = self._mirror_level()
-            specimen = "sample"
+            # What lies under the instruments: the sample at the start of a new run; unknown
+            # when a mirror-referenced run resumes (a crash may have left the mirror in
+            # place), so the hook confirms the specimen before the first reading.
+            specimen: str | None = "sample" if not (self.plan.mirror_reference and done) else None
             t_start_s = self.clock.now()
             estimated_done_s = 0.0
             for k, p in enumerate(todo):

@@ -373,3 +373,23 @@ async def test_abort_during_a_move_stops_the_arms_and_takes_no_reading(
     # the trapezoid 45 deg at 20 deg/s, 40 deg/s^2: 45/20 + 20/40 = 2.75 s
     assert fake_lab.clock.now() == pytest.approx(2.75, abs=1e-12)
     assert store.get_run(runner.run_id).status == "aborted"
+
+
+async def test_resume_after_a_crash_in_the_mirror_phase_puts_the_sample_back(
+    fake_lab: FakeLab, store: RunStore
+) -> None:
+    plan = BrdfPlan(45.0, (44.0, 45.0, 46.0), repeats=2, mirror_reference=True)
+    rid = store.create_run(kind="brdf", plan=plan.to_dict(), config={}, sample="", model={},
+                           version="test")  # fmt: skip
+    for r in range(2):  # a process stored both mirror readings, then died: mirror still in place
+        store.add_point(rid, index=MIRROR_INDEX, repeat=r, theta_i_deg=45.0, theta_r_deg=45.0,
+                        measured_theta_i_deg=45.0, measured_theta_r_deg=45.0, luminance_pct=80.0,
+                        raw={"luminance_pct": 80.0}, timestamp=0.0)  # fmt: skip
+    fake_lab.spectro.specimen = "mirror"
+    runner, bus = make_runner(fake_lab, store, plan, run_id=rid)
+    await drive(runner, bus, lambda ev: None)
+    pts = {(p.index, p.repeat): p for p in store.points(rid)}
+    assert len(pts) == 8
+    # the sample's lobe at 45 deg, relative to the stored mirror level 80 %
+    assert pts[(1, 1)].luminance_pct == pytest.approx(LOBE_AMPLITUDE_PCT * 100.0 / 80.0, rel=1e-12)
+    assert fake_lab.spectro.specimen == "sample"
