@@ -112,11 +112,13 @@ class DryRun:
     n_readings: int
     n_moves: int
     point_times_s: tuple[float, ...]
+    #: The move from the last geometry to the park position that ends the run.
+    park_s: float = 0.0
 
     @property
     def eta_s(self) -> float:
-        """Estimated run time in seconds of lab clock."""
-        return math.fsum(self.point_times_s)
+        """Estimated run time in seconds of lab clock, the final park move included."""
+        return math.fsum(self.point_times_s) + self.park_s
 
 
 def dry_run(
@@ -150,7 +152,8 @@ def dry_run(
     Returns
     -------
     DryRun
-        Per-reading time: move (first repeat of a geometry only) + dwell + reading.
+        Per-reading time: move (first repeat of a geometry only) + dwell + reading; and
+        the final move to ``park_deg`` (0 without one).
 
     Raises
     ------
@@ -187,7 +190,8 @@ def dry_run(
             moves += 1
             pos = target
         times.append(t)
-    return DryRun(n_readings=len(points), n_moves=moves, point_times_s=tuple(times))
+    park_s = 0.0 if park_deg is None else motion.move_time_s(pos, park_deg)
+    return DryRun(n_readings=len(points), n_moves=moves, point_times_s=tuple(times), park_s=park_s)
 
 
 @dataclass(slots=True)
@@ -542,7 +546,7 @@ class ScanRunner:
                 estimated_done_s += remaining_s[k]
                 elapsed_s = self.clock.now() - t_start_s
                 slowdown = elapsed_s / estimated_done_s if estimated_done_s > 0 else 1.0
-                eta = math.fsum(remaining_s[k + 1 :]) * max(1.0, slowdown)
+                eta = (math.fsum(remaining_s[k + 1 :]) + plan_dry.park_s) * max(1.0, slowdown)
                 self.bus.publish(Progress(run_id=self.run_id, done=n_done, total=total, eta_s=eta))
             if specimen == "mirror":
                 assert self.specimen_hook is not None

@@ -297,9 +297,12 @@ async def test_eta_equals_the_time_the_run_takes_on_the_lab_clock(
     runner, bus = make_runner(fake_lab, store, plan)
     events = await drive(runner, bus, lambda ev: None)
     progress = [e for e in events if isinstance(e, Progress)]
-    last = store.points(runner.run_id)[-1]
-    assert progress[0].eta_s == pytest.approx(last.raw["clock_s"], abs=1e-9)
-    assert progress[-1].eta_s == 0.0 and progress[-1].done == progress[-1].total == 21
+    # the whole run, up to the arms at park, is what the first estimate said
+    assert progress[0].eta_s == pytest.approx(fake_lab.clock.now(), abs=1e-9)
+    # after the last reading only the park move (45, 40) -> (45, 45) is left: 5 deg,
+    # triangular at 40 deg/s^2, 2 sqrt(5 / 40) s
+    assert progress[-1].eta_s == pytest.approx(2 * (5 / 40) ** 0.5, abs=1e-9)
+    assert progress[-1].done == progress[-1].total == 21
     etas = [p.eta_s for p in progress]
     assert etas == sorted(etas, reverse=True)
 
