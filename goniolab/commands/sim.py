@@ -21,13 +21,20 @@ __all__ = ["register"]
 
 def register(subparsers: Any) -> None:
     """Add ``sim`` (with ``serve``) to the top-level parser."""
-    p = subparsers.add_parser("sim", help="the simulated lab", description=__doc__)
+    p = subparsers.add_parser(
+        "sim",
+        help="the simulated lab",
+        description="The simulated lab. 'goniolab sim serve --config configs/lab-sim-wire.toml' "
+        "serves it on the wire (Modbus TCP or RTU-over-socket controllers, pty serial "
+        "spectro-colorimeter and glossmeter) until Ctrl-C; see docs/WIRE_SIM.md.",
+    )
     sub = p.add_subparsers(dest="sim_command", metavar="SUBCOMMAND")
     serve = sub.add_parser(
         "serve",
-        help="serve the simulated lab over Modbus TCP and ptys until Ctrl-C",
-        description="Serve the simulated lab (Modbus TCP stepper controllers, pty serial "
-        "spectro-colorimeter and glossmeter) on the endpoints of a lab config.",
+        help="serve the simulated lab over Modbus and ptys until Ctrl-C",
+        description="Serve the simulated lab (Modbus TCP or RTU-over-socket stepper "
+        "controllers, pty serial spectro-colorimeter and glossmeter) on the endpoints of a "
+        "lab config; port 0 picks a free port (printed).",
     )
     serve.add_argument(
         "--config", required=True, help="lab config (e.g. configs/lab-sim-wire.toml)"
