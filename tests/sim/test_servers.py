@@ -4,6 +4,7 @@ a plain pymodbus master against the AZ register map, raw bytes on the ptys."""
 from __future__ import annotations
 
 import asyncio
+import shutil
 from collections.abc import AsyncIterator, Awaitable, Callable, Sequence
 from pathlib import Path
 
@@ -442,3 +443,31 @@ async def test_rtu_server_answers_a_plain_rtu_master_over_socket() -> None:
             assert not rr.isError() and list(rr.registers) == [0x0000, 0xAFC8]  # 45000 steps
         finally:
             client.close()
+
+
+@pytest.mark.skipif(shutil.which("mbpoll") is None, reason="mbpoll not installed (apt mbpoll)")
+async def test_mbpoll_reads_feedback_and_starts_a_move(modbus) -> None:  # type: ignore[no-untyped-def]
+    """The docs/WIRE_SIM.md recipe with a standard Modbus master (Debian's mbpoll):
+    int32 big-endian word order, 0-based protocol addresses."""
+    server, _, _ = modbus
+
+    async def mbpoll(*args: str) -> str:
+        proc = await asyncio.create_subprocess_exec(
+            "mbpoll", "-m", "tcp", "-p", str(server.port), "-a", "1", "-0", "-t", "4:int", "-B",
+            *args, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.STDOUT,
+        )  # fmt: skip
+        out, _ = await asyncio.wait_for(proc.communicate(), 30)
+        assert proc.returncode == 0, out.decode()
+        return out.decode()
+
+    read = ("-r", "288", "-c", "1", "-1", "127.0.0.1")
+    assert "[288]: \t45000" in await mbpoll(*read)
+    written = await mbpoll(
+        "-r", "88", "127.0.0.1", "0", "1", "30000", "20000", "40000", "40000", "1000", "1", "0"
+    )  # fmt: skip
+    assert "Written 9 references" in written
+    for _ in range(50):  # each read is a round trip; the scale-0 clock runs the move
+        if "[288]: \t30000" in await mbpoll(*read):
+            break
+    else:
+        raise AssertionError("the lamp arm never reached 30000 steps")
