@@ -76,6 +76,9 @@ async def test_alarm_mid_move_then_reset(lab: Lab) -> None:
         await g.move_to(20.0, 45.0, timeout_s=30.0)
     assert err.value.code == ALARM_OVERLOAD and err.value.device == "lamp"
     assert await g.lamp.position_deg() == pytest.approx(35.0, abs=STEP_DEG)
+    lamp, detector = await g.lamp.status(), await g.detector.status()
+    assert lamp.alarm_code == ALARM_OVERLOAD and not lamp.moving  # left standing, alarm latched
+    assert not detector.moving and detector.position_deg == pytest.approx(45.0, abs=STEP_DEG)
     await g.lamp.reset_alarm()
     assert await g.move_to(20.0, 45.0, timeout_s=30.0) == pytest.approx((20.0, 45.0), abs=STEP_DEG)
 
