@@ -197,3 +197,36 @@ def test_runs_list_of_a_missing_store_creates_nothing(
     out, err = capsys.readouterr()
     assert json.loads(out) == [] and f"store {path} does not exist yet" in err
     assert not (tmp_path / "typo").exists()
+
+
+def test_runs_show_prints_the_plan_as_the_range_that_made_it(
+    store_file: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["runs", "show", "1", "--store", str(store_file)]) == 0
+    out = capsys.readouterr().out
+    assert (
+        "  plan: theta_i 45 deg, theta_r 35:55:1 deg (21 angles), repeats 2, dwell 0 s, "
+        "exposure 10000 us\n"
+    ) in out
+    assert (
+        parse_angles("35:55:1")
+        == BrdfPlan.from_dict(RunStore(store_file, readonly=True).get_run(1).plan).theta_r_deg
+    )
+
+
+def test_runs_show_gloss_prints_the_prediction_beside_the_mean(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / "g.sqlite"
+    with RunStore(path) as s:
+        rid = s.create_run(kind="gloss", plan={"kind": "gloss", "count": 2, "angles_deg": [60]},
+                           config={}, sample="sample:x", model={"predicted_gu": {"60": 58.96}},
+                           version="t")  # fmt: skip
+        for k, g60 in enumerate((58.5, 59.5)):
+            s.add_gloss_reading(rid, values_gu={60: g60}, temperature_c=None, predicted_gu=None,
+                                raw="", timestamp=float(k))  # fmt: skip
+    assert main(["runs", "show", str(rid), "--store", str(path)]) == 0
+    out = capsys.readouterr().out
+    # mean 59.0, sample std sqrt(0.5) = 0.707 of 58.5 and 59.5
+    assert "  plan: gloss 60 deg, 2 readings\n" in out
+    assert "  G60: 59.0 +- 0.7 GU (n = 2), predicted 59.0 GU\n" in out

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import argparse
 import datetime as dt
+import itertools
 import json
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -14,7 +16,7 @@ from goniolab.scan.plans import BrdfPlan, PlanError
 from goniolab.scan.summary import summarize_brdf
 from goniolab.store import RunRecord, RunStore, StoreError, resolve_store_path
 
-__all__ = ["open_store", "register", "run_summary", "store_path"]
+__all__ = ["angles_text", "open_store", "plan_text", "register", "run_summary", "store_path"]
 
 
 def store_path(store_arg: str | None, config_arg: str | None = None) -> Path:
@@ -107,6 +109,34 @@ def _brief(store: RunStore, r: RunRecord) -> dict[str, Any]:
     }
 
 
+def angles_text(angles_deg: Sequence[float]) -> str:
+    """``"0:70:1 deg (71 angles)"`` for an evenly spaced increasing list (the ``--theta-r``
+    range that gives it), else ``"a, b, c deg"``."""
+    a = [float(v) for v in angles_deg]
+    if len(a) >= 3:
+        step = a[1] - a[0]
+        if step > 0 and all(abs((y - x) - step) < 1e-9 for x, y in itertools.pairwise(a)):
+            return f"{a[0]:g}:{a[-1]:g}:{step:g} deg ({len(a)} angles)"
+    return ", ".join(f"{v:g}" for v in a) + " deg"
+
+
+def plan_text(plan: dict[str, Any]) -> str:
+    """One readable line for a stored plan (``--json`` gives the plan as stored)."""
+    if plan.get("kind") == "gloss":
+        count = plan.get("count", 0)
+        angles = "/".join(str(a) for a in plan.get("angles_deg", []))
+        return f"gloss {angles} deg, " + (f"{count} readings" if count else "until stopped")
+    try:
+        return (
+            f"theta_i {float(plan['theta_i_deg']):g} deg, "
+            f"theta_r {angles_text(plan['theta_r_deg'])}, repeats {plan['repeats']}, "
+            f"dwell {float(plan['dwell_s']):g} s, exposure {plan['exposure_us']} us"
+            + (", mirror reference" if plan.get("mirror_reference") else "")
+        )
+    except (KeyError, TypeError, ValueError):
+        return json.dumps(plan, sort_keys=True)
+
+
 def _cmd_show(args: argparse.Namespace) -> int:
     with open_store(args.store, args.config) as store:
         rec = _get_run(store, args.run)
@@ -119,14 +149,19 @@ def _cmd_show(args: argparse.Namespace) -> int:
             print(f"  reason: {rec.reason}")
         print(f"  created {_when(rec.created_at)} UTC, finished {_when(rec.finished_at)} UTC")
         print(f"  goniolab {rec.version}; model {json.dumps(rec.model, sort_keys=True)}")
-        print(f"  plan {json.dumps(rec.plan, sort_keys=True)}")
+        print(f"  plan: {plan_text(rec.plan)}")
         if rec.kind == "brdf":
             from goniolab.commands.scan import format_summary
 
             print(format_summary(summary))
         else:
+            predicted = rec.model.get("predicted_gu") or {}
             for angle, st in summary["statistics"].items():
-                print(f"  G{angle}: {st['mean_gu']:.1f} +- {st['std_gu']:.1f} GU (n = {st['n']})")
+                pred = predicted.get(angle)
+                print(
+                    f"  G{angle}: {st['mean_gu']:.1f} +- {st['std_gu']:.1f} GU (n = {st['n']})"
+                    + ("" if pred is None else f", predicted {float(pred):.1f} GU")
+                )
         if rec.status != "done" and rec.kind == "brdf":
             print(f"  continue it with: goniolab scan resume {rec.id}")
     return 0

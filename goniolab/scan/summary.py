@@ -173,8 +173,8 @@ def summarize_brdf(
     if not (theta[0] < pp_plan.position_deg < theta[-1] and 0 < k_meas < len(measured_idx) - 1):
         out["peak_note"] = (
             f"the measured range {theta[0]:g}..{theta[-1]:g} deg does not bracket the "
-            f"specular peak (predicted at {pp_plan.position_deg:.2f} deg; measured maximum "
-            f"at {mp.position_deg:.2f} deg): no peak comparison"
+            f"specular peak (predicted maximum at {pp_plan.position_deg:.2f} deg, measured "
+            f"maximum at {mp.position_deg:.2f} deg): no peak comparison"
         )
         return out
     out["peak_offset_deg"] = float(mp.position_deg - pp.position_deg)

@@ -60,7 +60,7 @@ def test_interrupted_run_before_the_peak_gives_no_offset_and_no_hint() -> None:
     s = summarize_brdf(PLAN, _rows(PLAN, 9, 0.0), _predictions(PLAN))
     assert s["readings"] == 9 and s["complete"] is False
     assert s["peak_offset_deg"] is None and s["amplitude_ratio"] is None and s["hint"] is None
-    assert "does not bracket the specular peak (predicted at 45.00 deg" in s["peak_note"]
+    assert "does not bracket the specular peak (predicted maximum at 45.00 deg" in s["peak_note"]
 
 
 def test_interrupted_run_past_the_peak_compares_on_the_measured_geometries() -> None:
