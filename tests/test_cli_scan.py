@@ -208,10 +208,8 @@ def test_runs_show_prints_the_plan_as_the_range_that_made_it(
         "  plan: theta_i 45 deg, theta_r 35:55:1 deg (21 angles), repeats 2, dwell 0 s, "
         "exposure 10000 us\n"
     ) in out
-    assert (
-        parse_angles("35:55:1")
-        == BrdfPlan.from_dict(RunStore(store_file, readonly=True).get_run(1).plan).theta_r_deg
-    )
+    with RunStore(store_file, readonly=True) as s:
+        assert BrdfPlan.from_dict(s.get_run(1).plan).theta_r_deg == parse_angles("35:55:1")
 
 
 def test_runs_show_gloss_prints_the_prediction_beside_the_mean(
