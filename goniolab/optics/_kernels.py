@@ -13,7 +13,10 @@ Every kernel walks the facet normals ``m = (mx, my, mz)`` once for one incident 
   ``w = F(c)`` ("seed": Wittmann weighs the slope histogram by Fresnel alone).
 
 The fraction of the incident flux sent towards ``wo_k`` is ``w_k / N``. The kernels then
-bin, deposit or integrate ``w`` in different ways. The numba versions are compiled with
+bin, deposit or integrate ``w`` in different ways; the cone kernels also use the
+gradient of ``w`` across the mirror image of the source (:func:`_weight_grad`, with the
+Fresnel derivative of :func:`_fresnel_d_scalar`) for the first-order aperture term
+described in :mod:`goniolab.optics.facet`. The numba versions are compiled with
 ``nogil=True`` so the facet model can split the facets over threads; the numpy twins are
 the test reference and the benchmark baseline. All arithmetic is float64.
 """
@@ -34,12 +37,14 @@ __all__ = [
     "cone_response_numpy",
     "deposit_numba",
     "deposit_numpy",
+    "fresnel_d_numpy",
     "hemisphere_bin_tables",
     "hemisphere_numba",
     "hemisphere_numpy",
     "rect_response_numba",
     "rect_response_numpy",
     "reflect_numpy",
+    "weight_grad_numpy",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -72,6 +77,79 @@ def _fresnel_scalar(c: float, n_re: float, n_im: float) -> float:  # pragma: no 
         + r_parl.real * r_parl.real
         + r_parl.imag * r_parl.imag
     )
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def _fresnel_d_scalar(
+    c: float, n_re: float, n_im: float
+) -> tuple[float, float]:  # pragma: no cover - numba
+    """Unpolarised Fresnel reflectance F(c) and its derivative dF/dc (c = cos iota).
+
+    With ``cos t = sqrt(1 - (1 - c^2)/eta^2)``, ``d cos t/dc = c/(eta^2 cos t)`` and both
+    amplitude coefficients have ``dr/dc = 2 eta (cos t - c d cos t/dc) / D^2`` (D their
+    denominator); ``dF/dc = Re(conj(r_s) dr_s + conj(r_p) dr_p)``. Zero slope under total
+    internal reflection.
+    """
+    if c < 0.0:
+        c = 0.0
+    elif c > 1.0:
+        c = 1.0
+    if n_im == 0.0:
+        s2 = (1.0 - c * c) / (n_re * n_re)
+        if s2 >= 1.0:
+            return 1.0, 0.0
+        ct = math.sqrt(1.0 - s2)
+        dct = c / (n_re * n_re * ct)
+        den_s = c + n_re * ct
+        den_p = n_re * c + ct
+        rs = (c - n_re * ct) / den_s
+        rp = (n_re * c - ct) / den_p
+        num = 2.0 * n_re * (ct - c * dct)
+        return 0.5 * (rs * rs + rp * rp), rs * num / (den_s * den_s) + rp * num / (den_p * den_p)
+    eta = complex(n_re, n_im)
+    cc = complex(c, 0.0)
+    ctc = cmath.sqrt(1.0 - (1.0 - cc * cc) / (eta * eta))
+    dct_c = cc / (eta * eta * ctc)
+    den_sc = cc + eta * ctc
+    den_pc = eta * cc + ctc
+    r_perp = (cc - eta * ctc) / den_sc
+    r_parl = (eta * cc - ctc) / den_pc
+    num_c = 2.0 * eta * (ctc - cc * dct_c)
+    d_perp = num_c / (den_sc * den_sc)
+    d_parl = num_c / (den_pc * den_pc)
+    f = 0.5 * (
+        r_perp.real * r_perp.real
+        + r_perp.imag * r_perp.imag
+        + r_parl.real * r_parl.real
+        + r_parl.imag * r_parl.imag
+    )
+    df = (
+        r_perp.real * d_perp.real
+        + r_perp.imag * d_perp.imag
+        + r_parl.real * d_parl.real
+        + r_parl.imag * d_parl.imag
+    )
+    return f, df
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def _weight_grad(
+    c: float, mz: float, wz: float, n_re: float, n_im: float, seed: bool
+) -> tuple[float, float, float]:  # pragma: no cover - numba
+    """Facet weight w and its gradient over the mirror image of the source, ``dw = P (t.m) + Q t_z``.
+
+    In the image space ``o = M s`` of the source directions s the weight is
+    ``w = phi(c)/(m_z s_z)`` with ``c = o.m``, ``s_z = 2 c m_z - o_z`` and ``phi = c F`` (seed:
+    ``w = F``); along a tangent t at the image centre (where s = wi)
+    ``dc = t.m`` and ``ds_z = 2 (t.m) m_z - t_z``, so
+    ``P = phi'(c)/(m_z wi_z) - 2 phi(c)/wi_z^2`` and ``Q = phi(c)/(m_z wi_z^2)`` (seed:
+    ``P = F'(c)``, ``Q = 0``).
+    """
+    f, df = _fresnel_d_scalar(c, n_re, n_im)
+    if seed:
+        return f, df, 0.0
+    phi = c * f
+    return phi / (mz * wz), (f + c * df) / (mz * wz) - 2.0 * phi / (wz * wz), phi / (mz * wz * wz)
 
 
 @njit(cache=True, nogil=True, fastmath=False)
@@ -232,23 +310,28 @@ def deposit_numba(
     b0: float,
     hb: float,
     nb: int,
+    grad: bool,
 ) -> tuple[FloatArray, float]:  # pragma: no cover - numba
     """Cloud-in-cell deposit of the weights on nodes ``(a0 + i ha, b0 + j hb)``.
 
     Coordinates: in-plane angle ``alpha = atan2(-wo_x, wo_z)`` (radians) and
     ``sin(beta) = wo_y`` (beta the out-of-plane angle). A facet is deposited on the four
     nodes of its cell only when the whole cell lies in the grid (callers keep a margin of
-    empty nodes).
+    empty nodes). ``grid[0]`` holds the weights; with ``grad``, ``grid[1]`` and ``grid[2]``
+    hold their gradients over the source image (:func:`_weight_grad`) along the unit
+    tangents ``t_alpha = (-wo_z, 0, wo_x)/rho`` and ``t_beta = (-wo_x wo_y, rho^2,
+    -wo_z wo_y)/rho`` (``rho = cos beta``), else zeros.
     """
-    grid = np.zeros((na, nb))
+    grid = np.zeros((3, na, nb))
     wx, wy, wz = wi[0], wi[1], wi[2]
     total = 0.0
     x_hi = na - 1.0
     y_hi = nb - 1.0
     for k in range(mx.size):
-        ox, oy, oz, w = _reflect(mx[k], my[k], mz[k], wx, wy, wz, n_re, n_im, seed)
-        if w == 0.0:
+        ox, oy, oz, c = _mirror(mx[k], my[k], mz[k], wx, wy, wz)
+        if c == 0.0:
             continue
+        w, pp, qq = _weight_grad(c, mz[k], wz, n_re, n_im, seed)
         total += w
         y = (oy - b0) / hb
         if y < 0.0 or y >= y_hi:
@@ -260,12 +343,26 @@ def deposit_numba(
         j = int(y)
         fx = x - i
         fy = y - j
-        w0 = w * (1.0 - fx)
-        w1 = w * fx
-        grid[i, j] += w0 * (1.0 - fy)
-        grid[i, j + 1] += w0 * fy
-        grid[i + 1, j] += w1 * (1.0 - fy)
-        grid[i + 1, j + 1] += w1 * fy
+        c00 = (1.0 - fx) * (1.0 - fy)
+        c01 = (1.0 - fx) * fy
+        c10 = fx * (1.0 - fy)
+        c11 = fx * fy
+        grid[0, i, j] += w * c00
+        grid[0, i, j + 1] += w * c01
+        grid[0, i + 1, j] += w * c10
+        grid[0, i + 1, j + 1] += w * c11
+        if grad:
+            rho = math.sqrt(ox * ox + oz * oz)
+            ga = (pp * (ox * mz[k] - oz * mx[k]) + qq * ox) / rho
+            gb = (pp * (rho * rho * my[k] - oy * (ox * mx[k] + oz * mz[k])) - qq * oz * oy) / rho
+            grid[1, i, j] += ga * c00
+            grid[1, i, j + 1] += ga * c01
+            grid[1, i + 1, j] += ga * c10
+            grid[1, i + 1, j + 1] += ga * c11
+            grid[2, i, j] += gb * c00
+            grid[2, i, j + 1] += gb * c01
+            grid[2, i + 1, j] += gb * c10
+            grid[2, i + 1, j + 1] += gb * c11
     return grid, total
 
 
@@ -283,8 +380,15 @@ def cone_response_numba(
     g0: float,
     g1: float,
     o_in: float,
+    m1: FloatArray,
 ) -> float:  # pragma: no cover - numba
-    """``sum_k w_k O(gamma_k)``, gamma_k the angle between wo_k and the detector axis d."""
+    """``sum_k [w_k O(gamma_k) + (grad w_k . e_k) M1(gamma_k)]`` over the facets.
+
+    gamma_k is the angle between wo_k and the detector axis d, e_k the unit tangent at wo_k
+    towards d, O the cap-overlap fraction (``table`` on [g0, g1], ``o_in`` inside g0) and M1
+    the first moment of the overlap along e_k (``m1`` on [0, g1]): the weight's variation
+    across the source cone to first order (:func:`_weight_grad`).
+    """
     wx, wy, wz = wi[0], wi[1], wi[2]
     dx, dy, dz = d[0], d[1], d[2]
     # beyond g1 the caps do not meet: reject on the cosine, before any asin
@@ -292,9 +396,12 @@ def cone_response_numba(
     acc = 0.0
     for k in range(mx.size):
         ox, oy, oz, c = _mirror(mx[k], my[k], mz[k], wx, wy, wz)
-        if c == 0.0 or ox * dx + oy * dy + oz * dz < cos_g1:
+        if c == 0.0:
             continue
-        w = _weight(c, mz[k], wz, n_re, n_im, seed)
+        cos_g = ox * dx + oy * dy + oz * dz
+        if cos_g < cos_g1:
+            continue
+        w, pp, qq = _weight_grad(c, mz[k], wz, n_re, n_im, seed)
         ex = ox - dx
         ey = oy - dy
         ez = oz - dz
@@ -303,6 +410,14 @@ def cone_response_numba(
             continue
         g = 2.0 * math.asin(half_chord)
         acc += w * _table(g, table, g0, g1, o_in)
+        # tangent at wo towards d: d - (d.wo) wo, of length sin(gamma)
+        tx = dx - cos_g * ox
+        ty = dy - cos_g * oy
+        tz = dz - cos_g * oz
+        tn = math.sqrt(tx * tx + ty * ty + tz * tz)
+        if tn > 1e-300:
+            grad = (pp * (tx * mx[k] + ty * my[k] + tz * mz[k]) + qq * tz) / tn
+            acc += grad * _table(g, m1, 0.0, g1, 0.0)
     return acc
 
 
@@ -368,6 +483,57 @@ def reflect_numpy(
     f = fresnel(np.clip(c, 0.0, 1.0), complex(n_re, n_im))
     w = f if seed else c / (mz * wi[2]) * f
     return ox, oy, oz, np.where(keep, w, 0.0)
+
+
+def fresnel_d_numpy(c: FloatArray, n_re: float, n_im: float) -> tuple[FloatArray, FloatArray]:
+    """Numpy twin of :func:`_fresnel_d_scalar`: ``(F, dF/dc)`` for ``c`` clipped to [0, 1]."""
+    cc = np.clip(c, 0.0, 1.0).astype(np.complex128)
+    eta = complex(n_re, n_im)
+    tir = (n_im == 0.0) & ((1.0 - cc.real**2) / (n_re * n_re) >= 1.0)
+    ct = np.sqrt(1.0 - (1.0 - cc * cc) / (eta * eta))
+    ct = np.where(tir, 1.0, ct)
+    dct = cc / (eta * eta * ct)
+    den_s = cc + eta * ct
+    den_p = eta * cc + ct
+    r_s = (cc - eta * ct) / den_s
+    r_p = (eta * cc - ct) / den_p
+    num = 2.0 * eta * (ct - cc * dct)
+    d_s = num / (den_s * den_s)
+    d_p = num / (den_p * den_p)
+    f = 0.5 * (np.abs(r_s) ** 2 + np.abs(r_p) ** 2)
+    df = (np.conj(r_s) * d_s + np.conj(r_p) * d_p).real
+    return np.where(tir, 1.0, f), np.where(tir, 0.0, df)
+
+
+def weight_grad_numpy(
+    mx: FloatArray,
+    my: FloatArray,
+    mz: FloatArray,
+    wi: FloatArray,
+    n_re: float,
+    n_im: float,
+    seed: bool,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Numpy twin of the per-facet step with :func:`_weight_grad`: ``(ox, oy, oz, w, P, Q)``.
+
+    All three coefficients are 0 for dropped facets (facing away or reflecting inwards).
+    """
+    c = wi[0] * mx + wi[1] * my + wi[2] * mz
+    ox = 2.0 * c * mx - wi[0]
+    oy = 2.0 * c * my - wi[1]
+    oz = 2.0 * c * mz - wi[2]
+    keep = (c > 0.0) & (oz > 0.0)
+    f, df = fresnel_d_numpy(c, n_re, n_im)
+    wz = wi[2]
+    if seed:
+        w, pp, qq = f, df, np.zeros_like(f)
+    else:
+        phi = c * f
+        w = phi / (mz * wz)
+        pp = (f + c * df) / (mz * wz) - 2.0 * phi / (wz * wz)
+        qq = phi / (mz * wz * wz)
+    zero = np.zeros_like(c)
+    return ox, oy, oz, np.where(keep, w, zero), np.where(keep, pp, zero), np.where(keep, qq, zero)
 
 
 def diamond_numpy(x: FloatArray, y: FloatArray) -> FloatArray:
@@ -449,25 +615,36 @@ def deposit_numpy(
     b0: float,
     hb: float,
     nb: int,
+    grad: bool,
 ) -> tuple[FloatArray, float]:
     """Numpy twin of :func:`deposit_numba`."""
-    ox, oy, oz, w = reflect_numpy(mx, my, mz, wi, n_re, n_im, seed)
+    ox, oy, oz, w, pp, qq = weight_grad_numpy(mx, my, mz, wi, n_re, n_im, seed)
     keep = w != 0.0
-    ox, oy, oz, w = ox[keep], oy[keep], oz[keep], w[keep]
+    ox, oy, oz, w, pp, qq = ox[keep], oy[keep], oz[keep], w[keep], pp[keep], qq[keep]
     total = float(w.sum())
     x = (np.arctan2(-ox, oz) - a0) / ha
     y = (oy - b0) / hb
     sel = (x >= 0.0) & (x < na - 1.0) & (y >= 0.0) & (y < nb - 1.0)
     x, y, w = x[sel], y[sel], w[sel]
+    ox, oy, oz, pp, qq = ox[sel], oy[sel], oz[sel], pp[sel], qq[sel]
+    mxs, mys, mzs = mx[keep][sel], my[keep][sel], mz[keep][sel]
+    channels = [w]
+    if grad:
+        rho = np.sqrt(ox * ox + oz * oz)
+        channels.append((pp * (ox * mzs - oz * mxs) + qq * ox) / rho)
+        channels.append((pp * (rho * rho * mys - oy * (ox * mxs + oz * mzs)) - qq * oz * oy) / rho)
     i = x.astype(np.int64)
     j = y.astype(np.int64)
     fx = x - i
     fy = y - j
-    grid = np.zeros(na * nb)
-    for di, wa in ((0, 1.0 - fx), (1, fx)):
-        for dj, wb in ((0, 1.0 - fy), (1, fy)):
-            grid += np.bincount((i + di) * nb + (j + dj), weights=w * wa * wb, minlength=na * nb)
-    return grid.reshape(na, nb), total
+    grid = np.zeros((3, na * nb))
+    for ch, val in enumerate(channels):
+        for di, wa in ((0, 1.0 - fx), (1, fx)):
+            for dj, wb in ((0, 1.0 - fy), (1, fy)):
+                grid[ch] += np.bincount(
+                    (i + di) * nb + (j + dj), weights=val * wa * wb, minlength=na * nb
+                )
+    return grid.reshape(3, na, nb), total
 
 
 def table_numpy(g: FloatArray, table: FloatArray, g0: float, g1: float, o_in: float) -> FloatArray:
@@ -493,12 +670,21 @@ def cone_response_numpy(
     g0: float,
     g1: float,
     o_in: float,
+    m1: FloatArray,
 ) -> float:
     """Numpy twin of :func:`cone_response_numba`."""
-    ox, oy, oz, w = reflect_numpy(mx, my, mz, wi, n_re, n_im, seed)
+    ox, oy, oz, w, pp, qq = weight_grad_numpy(mx, my, mz, wi, n_re, n_im, seed)
     half_chord = 0.5 * np.sqrt((ox - d[0]) ** 2 + (oy - d[1]) ** 2 + (oz - d[2]) ** 2)
     g = 2.0 * np.arcsin(np.minimum(half_chord, 1.0))
-    return float(np.sum(w * table_numpy(g, table, g0, g1, o_in)))
+    cos_g = ox * d[0] + oy * d[1] + oz * d[2]
+    tx, ty, tz = d[0] - cos_g * ox, d[1] - cos_g * oy, d[2] - cos_g * oz
+    tn = np.sqrt(tx * tx + ty * ty + tz * tz)
+    ok = tn > 1e-300
+    tn = np.where(ok, tn, 1.0)
+    grad = np.where(ok, (pp * (tx * mx + ty * my + tz * mz) + qq * tz) / tn, 0.0)
+    o_val = table_numpy(g, table, g0, g1, o_in)
+    m1_val = table_numpy(g, m1, 0.0, g1, 0.0)
+    return float(np.sum(w * o_val + grad * m1_val))
 
 
 def interval_overlap_numpy(x: FloatArray, s: float, r: float) -> FloatArray:

@@ -49,8 +49,12 @@ def test_flat_mirror_curve_peak_and_fwhm(capsys: pytest.CaptureFixture[str]) -> 
     peak = out["peak"]
     assert peak["of"] == "luminance_pct"
     f45 = float(fresnel_dielectric(math.cos(math.radians(45.0)), 1.55))
-    assert peak["amplitude"] == pytest.approx(100 * f45, rel=1e-9)
-    assert peak["position_deg"] == pytest.approx(45.0, abs=1e-6)
+    # at tr = ti the image of the source is centred on the detector: exactly F(45) to
+    # first order; F's growth with the incidence angle tilts the flanks, so the refined
+    # vertex sits a hair off 45 deg and above the sample (second order: 1e-5 here)
+    assert out["luminance_pct"][100] == pytest.approx(100 * f45, rel=1e-9)
+    assert peak["amplitude"] == pytest.approx(100 * f45, rel=1e-4)
+    assert peak["position_deg"] == pytest.approx(45.0, abs=0.01)
 
     def half_lens(d: float) -> float:  # planar lens of two unit circles at distance d, minus half
         return 2 * math.acos(d / 2) - 0.5 * d * math.sqrt(4 - d * d) - 0.5 * math.pi
