@@ -5,10 +5,11 @@ from __future__ import annotations
 import asyncio
 import threading
 from collections.abc import Callable
+from typing import Any, cast
 
 import pytest
 
-from drivers.base import DeviceError
+from drivers.base import DeviceError, Goniometer
 from goniolab.optics.apertures import Cone
 from goniolab.scan.events import (
     ArmsMoved,
@@ -32,6 +33,12 @@ from .conftest import LOBE_AMPLITUDE_PCT, LOBE_SIGMA_DEG, FakeLab
 MOTION = ArmMotion(20.0, 40.0, 20.0, 40.0)
 
 
+def as_goniometer(lab: FakeLab) -> Goniometer:
+    """The fake satisfies the Goniometer protocol structurally; its arms are FakeAxis
+    instances (mutable protocol attributes are invariant for mypy)."""
+    return cast(Goniometer, lab.goniometer)
+
+
 def make_runner(
     lab: FakeLab, store: RunStore, plan: BrdfPlan, run_id: int | None = None, **kw: object
 ) -> tuple[ScanRunner, EventBus]:
@@ -44,7 +51,7 @@ def make_runner(
         lab.spectro.specimen = which
 
     runner = ScanRunner(
-        goniometer=lab.goniometer, spectro=lab.spectro, clock=lab.clock, plan=plan, store=store,
+        goniometer=as_goniometer(lab), spectro=lab.spectro, clock=lab.clock, plan=plan, store=store,
         run_id=run_id, bus=bus, motion=MOTION,
         predictor=Predictor(lab.model, Cone(6.0), Cone(6.0)),
         park_deg=lab.goniometer.park_deg, specimen_hook=specimen, **kw,  # type: ignore[arg-type]
@@ -77,7 +84,7 @@ async def drive(
 
 def test_dry_run_eta_is_the_trapezoid_sum(fake_lab: FakeLab) -> None:
     plan = BrdfPlan(45.0, (0.0, 10.0, 20.0), repeats=2, dwell_s=0.5, exposure_us=10000)
-    dr = dry_run(plan.points(), fake_lab.goniometer, MOTION, start_deg=(0.0, 0.0),
+    dr = dry_run(plan.points(), as_goniometer(fake_lab), MOTION, start_deg=(0.0, 0.0),
                  dwell_s=0.5, reading_time_s=0.01)  # fmt: skip
     # lamp 0->45 at v=20, a=40: 45/20 + 20/40 = 2.75 s (detector stays at 0);
     # detector 0->10 and 10->20: v^2/a = 10 deg, so 10/20 + 20/40 = 1.0 s each;
@@ -85,7 +92,7 @@ def test_dry_run_eta_is_the_trapezoid_sum(fake_lab: FakeLab) -> None:
     assert dr.eta_s == pytest.approx(2.75 + 1.0 + 1.0 + 3 * 0.5 + 6 * 0.01, abs=1e-12)
     assert dr.n_moves == 3 and dr.n_readings == 6
     # a short, triangular move: 2 sqrt(d/a) for d < v^2/a
-    dr2 = dry_run(BrdfPlan(45.0, (20.0, 22.5)).points(), fake_lab.goniometer, MOTION,
+    dr2 = dry_run(BrdfPlan(45.0, (20.0, 22.5)).points(), as_goniometer(fake_lab), MOTION,
                   start_deg=(45.0, 20.0), dwell_s=0.0, reading_time_s=0.0)  # fmt: skip
     assert dr2.eta_s == pytest.approx(2 * (2.5 / 40.0) ** 0.5, abs=1e-12)
 
@@ -140,10 +147,10 @@ async def test_full_run_stores_every_reading_and_matches_the_model(
     assert states == [RunState.RUNNING, RunState.DONE]
 
 
-def runner_summary(events: list[Event]) -> dict[str, object]:
+def runner_summary(events: list[Event]) -> dict[str, Any]:
     fin = [e for e in events if isinstance(e, RunFinished)]
     assert len(fin) == 1
-    return fin[0].summary  # type: ignore[return-value]
+    return fin[0].summary
 
 
 async def test_tilted_sample_gives_the_misalignment_hint(
@@ -157,7 +164,7 @@ async def test_tilted_sample_gives_the_misalignment_hint(
     assert s["peak_offset_deg"] == pytest.approx(2.0, abs=0.05)
     assert "tilted by about 1.0" in str(s["hint"])
     assert "2.0" in str(s["hint"])
-    assert s["rmse_pct"] > 1.0  # type: ignore[operator]
+    assert s["rmse_pct"] > 1.0
 
 
 async def test_pause_then_resume_removes_arms_moved_by_hand(
