@@ -11,7 +11,9 @@ from pathlib import Path
 import pytest
 
 from goniolab.cli import build_parser, main
+from goniolab.commands.scan import point_detail
 from goniolab.config import configs_dir
+from goniolab.scan.events import PointMeasured
 from goniolab.scan.plans import BrdfPlan, parse_angles
 from goniolab.store import RunStore
 
@@ -228,3 +230,10 @@ def test_runs_show_gloss_prints_the_prediction_beside_the_mean(
     # mean 59.0, sample std sqrt(0.5) = 0.707 of 58.5 and 59.5
     assert "  plan: gloss 60 deg, 2 readings\n" in out
     assert "  G60: 59.0 +- 0.7 GU (n = 2), predicted 59.0 GU\n" in out
+
+
+def test_progress_detail_shows_prediction_and_residual() -> None:
+    ev = PointMeasured(run_id=1, index=3, repeat=0, theta_i_deg=45.0, theta_r_deg=44.0,
+                       luminance_pct=2.678, measured_theta_i_deg=45.0, measured_theta_r_deg=44.0)  # fmt: skip
+    assert point_detail(ev, 2.668) == "theta_r=44 L=2.678 % pred 2.668 % res +0.010"
+    assert point_detail(ev, None) == "theta_r=44 L=2.678 %"

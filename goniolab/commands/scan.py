@@ -29,6 +29,7 @@ from goniolab.scan.events import (
     EventBus,
     InstrumentError,
     PointMeasured,
+    PointPredicted,
     Progress,
     RunFinished,
     RunState,
@@ -42,6 +43,7 @@ __all__ = [
     "check_sample_arg",
     "format_eta",
     "format_summary",
+    "point_detail",
     "register",
     "run_lab",
     "with_sample",
@@ -145,12 +147,23 @@ class ProgressBar:
             self.stream.flush()
 
 
+def point_detail(ev: PointMeasured, predicted_pct: float | None) -> str:
+    """Progress-line detail of a reading: angle, luminance, prediction and residual."""
+    text = f"theta_r={ev.theta_r_deg:g} L={ev.luminance_pct:.3f} %"
+    if predicted_pct is not None:
+        text += f" pred {predicted_pct:.3f} % res {ev.luminance_pct - predicted_pct:+.3f}"
+    return text
+
+
 async def _report(bus_q: asyncio.Queue[Any], bar: ProgressBar) -> None:
     detail = ""
+    predicted: dict[int, float] = {}
     while (ev := await bus_q.get()) is not None:
-        if isinstance(ev, PointMeasured):
-            pred = "" if ev.predicted_pct is None else f" (pred {ev.predicted_pct:.3f} %)"
-            detail = f"theta_r={ev.theta_r_deg:g} L={ev.luminance_pct:.3f} %{pred}"
+        if isinstance(ev, PointPredicted):
+            predicted[ev.index] = ev.predicted_pct
+        elif isinstance(ev, PointMeasured):
+            pred = ev.predicted_pct if ev.predicted_pct is not None else predicted.get(ev.index)
+            detail = point_detail(ev, pred)
         elif isinstance(ev, Progress):
             bar.update(ev, detail)
         elif isinstance(ev, InstrumentError):
