@@ -2,16 +2,19 @@
 
 from __future__ import annotations
 
+import asyncio
 import csv
 import io
 import json
 import math
+import os
+import sys
 from pathlib import Path
 
 import pytest
 
 from goniolab.cli import build_parser, main
-from goniolab.commands.scan import point_detail
+from goniolab.commands.scan import point_detail, read_stdin_line
 from goniolab.config import configs_dir
 from goniolab.scan.events import PointMeasured
 from goniolab.scan.plans import BrdfPlan, parse_angles
@@ -237,3 +240,19 @@ def test_progress_detail_shows_prediction_and_residual() -> None:
                        luminance_pct=2.678, measured_theta_i_deg=45.0, measured_theta_r_deg=44.0)  # fmt: skip
     assert point_detail(ev, 2.668) == "theta_r=44 L=2.678 % pred 2.668 % res +0.010"
     assert point_detail(ev, None) == "theta_r=44 L=2.678 %"
+
+
+async def test_operator_prompt_reads_a_line_and_a_cancel_ends_the_wait(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    r, w = os.pipe()
+    with os.fdopen(r, "r") as stdin, os.fdopen(w, "w") as feed:
+        monkeypatch.setattr(sys, "stdin", stdin)
+        waiting = asyncio.create_task(read_stdin_line())
+        await asyncio.sleep(0)  # the task now waits for stdin to become readable
+        waiting.cancel()  # Ctrl-C twice: no thread is left blocked in readline()
+        with pytest.raises(asyncio.CancelledError):
+            await waiting
+        feed.write("ok\n")
+        feed.flush()
+        assert await read_stdin_line() == "ok\n"

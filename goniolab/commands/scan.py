@@ -44,6 +44,7 @@ __all__ = [
     "format_eta",
     "format_summary",
     "point_detail",
+    "read_stdin_line",
     "register",
     "run_lab",
     "with_sample",
@@ -180,11 +181,37 @@ def _config_snapshot(cfg: Any) -> dict[str, Any]:
     return snap
 
 
+async def read_stdin_line() -> str:
+    """One line from stdin without a blocking thread, so that Ctrl-C (an abort, then a
+    cancellation) ends the wait at once; a regular file or a closed stdin falls back to
+    a worker-thread read (it never blocks for long)."""
+    loop = asyncio.get_running_loop()
+    try:
+        fd = sys.stdin.fileno()
+    except (AttributeError, OSError, ValueError):  # replaced or closed stdin
+        return await asyncio.to_thread(sys.stdin.readline)
+    ready: asyncio.Future[None] = loop.create_future()
+
+    def on_readable() -> None:
+        if not ready.done():
+            ready.set_result(None)
+
+    try:
+        loop.add_reader(fd, on_readable)
+    except (OSError, ValueError):  # epoll refuses regular files
+        return await asyncio.to_thread(sys.stdin.readline)
+    try:
+        await ready
+    finally:
+        loop.remove_reader(fd)
+    return sys.stdin.readline()
+
+
 async def _specimen_prompt(which: str) -> None:
     """Ask the operator to place the mirror (or the sample back) and press Enter."""
     what = "the reference MIRROR" if which == "mirror" else "the SAMPLE"
     print(f"goniolab: place {what} under the instruments, then press Enter", file=sys.stderr)
-    line = await asyncio.to_thread(sys.stdin.readline)
+    line = await read_stdin_line()
     if not line:
         raise UserError(f"no operator confirmation on stdin for placing {what}", exit_code=1)
 

@@ -35,7 +35,7 @@ import math
 import time
 from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeVar
 
 from drivers.base import (
     DeviceError,
@@ -76,13 +76,15 @@ __all__ = [
 #: returns once the operator (or the simulated lab) has swapped the specimen.
 SpecimenHook = Callable[[str], Awaitable[None]]
 
+_T = TypeVar("_T")
+
 
 class PlanRefused(Exception):
     """The dry run found a geometry the goniometer must not reach (names point and reason)."""
 
 
-class _MoveAborted(Exception):
-    """An abort arrived while the arms were moving (the move was interrupted)."""
+class _Aborted(Exception):
+    """An abort arrived while the runner waited on a move or the specimen hook."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -328,28 +330,33 @@ class ScanRunner:
             self._verify_position = True
         return True
 
+    async def _abortable(self, aw: Awaitable[_T]) -> _T:
+        """Await ``aw`` unless :meth:`abort` is called first: then cancel it, raise _Aborted."""
+        work = asyncio.ensure_future(aw)
+        aborted = asyncio.ensure_future(self._abort_event.wait())
+        try:
+            await asyncio.wait({work, aborted}, return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            aborted.cancel()
+            if not work.done():  # an abort, or a cancellation from outside
+                work.cancel()
+                with contextlib.suppress(asyncio.CancelledError, DeviceError):
+                    await work
+        if work.cancelled():
+            raise _Aborted
+        return work.result()
+
     async def _move(self, target: tuple[float, float]) -> None:
         self.bus.publish(
             ArmsMoved(run_id=self.run_id, theta_i_deg=target[0], theta_r_deg=target[1], moving=True)
         )
-        move = asyncio.ensure_future(
-            self.goniometer.move_to(target[0], target[1], self.move_timeout_s)
-        )
-        aborted = asyncio.ensure_future(self._abort_event.wait())
         try:
-            await asyncio.wait({move, aborted}, return_when=asyncio.FIRST_COMPLETED)
-        finally:
-            aborted.cancel()
-            if not move.done():
-                # an abort (or an outside cancellation): leave the move; _park stops the
-                # arms where they are before driving them to park
-                move.cancel()
-                with contextlib.suppress(asyncio.CancelledError, DeviceError):
-                    await move
-        if move.cancelled():
-            self._target = None
-            raise _MoveAborted
-        measured = move.result()
+            measured = await self._abortable(
+                self.goniometer.move_to(target[0], target[1], self.move_timeout_s)
+            )
+        except _Aborted:
+            self._target = None  # somewhere between two geometries; _park stops the arms
+            raise
         self._measured_deg = (float(measured[0]), float(measured[1]))
         self._target = target
         self.bus.publish(
@@ -488,12 +495,17 @@ class ScanRunner:
                 want = "mirror" if p.index == MIRROR_INDEX else "sample"
                 if want != specimen:
                     assert self.specimen_hook is not None
-                    await self.specimen_hook(want)
+                    try:
+                        await self._abortable(self.specimen_hook(want))
+                    except _Aborted:
+                        state = RunState.ABORTED
+                        reason = f"aborted by the operator while placing the {want}"
+                        break
                     specimen = want
                 target = (p.theta_i_deg, p.theta_r_deg)
                 try:
                     moved = await self._ensure_position(target)
-                except _MoveAborted:
+                except _Aborted:
                     state, reason = RunState.ABORTED, "aborted by the operator during a move"
                     break
                 if moved:

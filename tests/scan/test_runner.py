@@ -54,7 +54,7 @@ def make_runner(
         goniometer=as_goniometer(lab), spectro=lab.spectro, clock=lab.clock, plan=plan, store=store,
         run_id=run_id, bus=bus, motion=MOTION,
         predictor=Predictor(lab.model, Cone(6.0), Cone(6.0)),
-        park_deg=lab.goniometer.park_deg, specimen_hook=specimen, **kw,  # type: ignore[arg-type]
+        park_deg=lab.goniometer.park_deg, **{"specimen_hook": specimen, **kw},  # type: ignore[arg-type]
     )  # fmt: skip
     return runner, bus
 
@@ -403,3 +403,20 @@ async def test_resume_after_a_crash_in_the_mirror_phase_puts_the_sample_back(
     # the sample's lobe at 45 deg, relative to the stored mirror level 80 %
     assert pts[(1, 1)].luminance_pct == pytest.approx(LOBE_AMPLITUDE_PCT * 100.0 / 80.0, rel=1e-12)
     assert fake_lab.spectro.specimen == "sample"
+
+
+async def test_abort_while_waiting_for_the_operator_to_place_the_mirror(
+    fake_lab: FakeLab, store: RunStore
+) -> None:
+    plan = BrdfPlan(45.0, (44.0, 45.0, 46.0), mirror_reference=True)
+    never = asyncio.Event()
+
+    async def operator_away(which: str) -> None:
+        await never.wait()
+
+    runner, bus = make_runner(fake_lab, store, plan, specimen_hook=operator_away)
+    seen = await drive(runner, bus, lambda ev: runner.abort() if isinstance(ev, Progress) else None)
+    fin = next(e for e in seen if isinstance(e, RunFinished))
+    assert fin.state is RunState.ABORTED and fin.reason.endswith("while placing the mirror")
+    assert fake_lab.spectro.n_reads == 0 and store.count_points(runner.run_id) == 0
+    assert fake_lab.goniometer.park_calls == 1
