@@ -23,8 +23,9 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Awaitable
 from dataclasses import dataclass
+from typing import TypeVar
 
 from drivers.base import (
     DeviceError,
@@ -41,6 +42,12 @@ from goniolab.store import RunStore
 from sim.clock import Clock
 
 __all__ = ["GlossLogger", "GlossResult", "predict_gloss"]
+
+_T = TypeVar("_T")
+
+
+class _Stopped(Exception):
+    """:meth:`GlossLogger.stop` ended a wait."""
 
 
 async def predict_gloss(model: ReflectanceModel, angles_deg: tuple[int, ...]) -> dict[int, float]:
@@ -117,12 +124,31 @@ class GlossLogger:
         self.max_backoff_s = max_backoff_s
         self.max_failures = max_failures
         self._stop = False
+        self._stop_event = asyncio.Event()
         self._values: list[dict[int, float | None]] = []
         self.reconnects = 0
 
     def stop(self) -> None:
-        """End the session after the current reading."""
+        """End the session: a requested reading is completed and stored; a wait for a
+        pushed reading, the interval between readings or a reconnect backoff ends now."""
         self._stop = True
+        self._stop_event.set()
+
+    async def _until_stop(self, aw: Awaitable[_T]) -> _T:
+        """Await ``aw`` unless :meth:`stop` comes first: then cancel it, raise _Stopped."""
+        work = asyncio.ensure_future(aw)
+        stopped = asyncio.ensure_future(self._stop_event.wait())
+        try:
+            await asyncio.wait({work, stopped}, return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            stopped.cancel()
+            if not work.done():
+                work.cancel()
+                with contextlib.suppress(asyncio.CancelledError, DeviceError):
+                    await work
+        if work.cancelled():
+            raise _Stopped
+        return work.result()
 
     def _record(self, reading: GlossReading) -> None:
         values = {a: reading.values_gu.get(a) for a in self.plan.angles_deg}
@@ -152,14 +178,14 @@ class GlossLogger:
         delay = min(self.max_backoff_s, self.backoff_s * 2 ** max(0, attempt - 1))
         with contextlib.suppress(DeviceError):
             await self.meter.close()
-        await self.clock.sleep(delay)
+        await self._until_stop(self.clock.sleep(delay))
         await self.meter.connect()
         self.reconnects += 1
 
     async def _next_reading(self, stream: AsyncIterator[GlossReading] | None) -> GlossReading:
         if stream is None:
             return await self.meter.measure(self.plan.angles_deg)
-        return await anext(stream)
+        return await self._until_stop(anext(stream))
 
     async def run(self) -> GlossResult:
         """Log readings until ``count`` are stored, :meth:`stop` is called, or the meter is lost."""
@@ -171,6 +197,8 @@ class GlossLogger:
         while not self._done():
             try:
                 reading = await self._next_reading(stream)
+            except _Stopped:
+                break
             except StopAsyncIteration:
                 state, reason = RunState.DONE, "the meter stopped sending"
                 break
@@ -192,6 +220,8 @@ class GlossLogger:
                     continue
                 try:
                     await self._reconnect(failures)
+                except _Stopped:
+                    break
                 except DeviceError as exc2:
                     self.bus.publish(
                         InstrumentError(
@@ -219,7 +249,8 @@ class GlossLogger:
             failures = 0
             self._record(reading)
             if stream is None and self.interval_s > 0 and not self._done():
-                await self.clock.sleep(self.interval_s)
+                with contextlib.suppress(_Stopped):
+                    await self._until_stop(self.clock.sleep(self.interval_s))
         if (
             self._stop
             and state is RunState.DONE

@@ -236,6 +236,7 @@ class FakeGlossmeter:
         self.script = list(script)
         self.connects = 0
         self.closes = 0
+        self.wait_when_empty = False
 
     async def connect(self) -> None:
         self.connects += 1
@@ -255,6 +256,8 @@ class FakeGlossmeter:
     async def readings(self) -> AsyncIterator[GlossReading]:
         while self.script:
             yield await self.measure()
+        if self.wait_when_empty:  # nobody presses the meter's button again
+            await asyncio.Event().wait()
 
 
 @dataclass

@@ -115,3 +115,42 @@ async def test_stop_ends_an_open_ended_session(store: RunStore) -> None:
     assert n in (3, 4) and result.state is RunState.DONE
     assert len(store.gloss_readings(result.run_id)) == n
     assert result.stats.mean_gu[20] == pytest.approx(70.0 + (n - 1) / 2, abs=1e-12)
+
+
+async def test_stop_ends_the_wait_for_a_pushed_reading(store: RunStore) -> None:
+    script: list[GlossReading | Exception] = [reading(70.0, 80.0, 90.0, 1.0)]
+    logger, meter, bus, _ = make(store, script, 5, mode="push")
+    meter.wait_when_empty = True
+    q = bus.subscribe()
+
+    async def stop_after_the_first() -> None:
+        while not isinstance(await q.get(), GlossRead):
+            pass
+        logger.stop()  # Ctrl-C while the meter waits for its button
+
+    watcher = asyncio.create_task(stop_after_the_first())
+    result = await logger.run()
+    await watcher
+    assert result.state is RunState.ABORTED and result.reason == "stopped by the operator"
+    assert result.readings == 1 and len(store.gloss_readings(result.run_id)) == 1
+
+
+async def test_stop_ends_a_reconnect_backoff(store: RunStore) -> None:
+    script: list[GlossReading | Exception] = [
+        reading(70.0, 80.0, 90.0, 1.0),
+        Disconnected("USB cable pulled", device="glossmeter"),
+    ]
+    logger, meter, bus, clock = make(store, script, 0, backoff_s=60.0)
+    q = bus.subscribe()
+
+    async def stop_on_the_disconnect() -> None:
+        while not isinstance(await q.get(), InstrumentError):
+            pass
+        logger.stop()
+
+    watcher = asyncio.create_task(stop_on_the_disconnect())
+    result = await logger.run()
+    await watcher
+    # the 60 s backoff was cut short: no lab time passed, no reconnect was made
+    assert clock.now() == 0.0 and result.reconnects == 0 and meter.connects == 0
+    assert result.state is RunState.DONE and result.readings == 1
