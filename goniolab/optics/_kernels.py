@@ -33,6 +33,8 @@ from numpy.typing import NDArray
 from goniolab.optics.fresnel import fresnel
 
 __all__ = [
+    "GRAD_COARSEN",
+    "coarse_size",
     "cone_response_numba",
     "cone_response_numpy",
     "deposit_numba",
@@ -295,6 +297,18 @@ def hemisphere_numba(
     return hist, total
 
 
+#: The gradient channels of the deposit live on a grid this many times coarser per axis
+#: (same origin): they carry a smooth first-order correction, and the fine grid's three
+#: channels would not stay in cache.
+GRAD_COARSEN: int = 4
+
+
+@njit(cache=True, nogil=True)
+def coarse_size(n_fine: int) -> int:  # pragma: no cover - numba (also callable from Python)
+    """Nodes of the coarse gradient grid covering a fine grid of ``n_fine`` nodes."""
+    return -(-(n_fine - 1) // GRAD_COARSEN) + 2
+
+
 @njit(cache=True, nogil=True, fastmath=False)
 def deposit_numba(
     mx: FloatArray,
@@ -311,59 +325,73 @@ def deposit_numba(
     hb: float,
     nb: int,
     grad: bool,
-) -> tuple[FloatArray, float]:  # pragma: no cover - numba
+) -> tuple[FloatArray, FloatArray, float]:  # pragma: no cover - numba
     """Cloud-in-cell deposit of the weights on nodes ``(a0 + i ha, b0 + j hb)``.
 
     Coordinates: in-plane angle ``alpha = atan2(-wo_x, wo_z)`` (radians) and
     ``sin(beta) = wo_y`` (beta the out-of-plane angle). A facet is deposited on the four
     nodes of its cell only when the whole cell lies in the grid (callers keep a margin of
-    empty nodes). ``grid[0]`` holds the weights; with ``grad``, ``grid[1]`` and ``grid[2]``
-    hold their gradients over the source image (:func:`_weight_grad`) along the unit
-    tangents ``t_alpha = (-wo_z, 0, wo_x)/rho`` and ``t_beta = (-wo_x wo_y, rho^2,
-    -wo_z wo_y)/rho`` (``rho = cos beta``), else zeros.
+    empty nodes). Returns the weight grid ``(na, nb)``, the gradient grid
+    ``(coarse_size(na), coarse_size(nb), 2)`` on nodes ``GRAD_COARSEN`` times further apart
+    (zeros unless ``grad``): the weights' gradients over the source image
+    (:func:`_weight_grad`) along the unit tangents ``t_alpha = (-wo_z, 0, wo_x)/rho`` and
+    ``t_beta = (-wo_x wo_y, rho^2, -wo_z wo_y)/rho`` (``rho = cos beta``), and the total
+    deposited weight (facets outside the grid are never weighed).
     """
-    grid = np.zeros((3, na, nb))
+    grid = np.zeros((na, nb))
+    ggrid = np.zeros((coarse_size(na), coarse_size(nb), 2))
     wx, wy, wz = wi[0], wi[1], wi[2]
     total = 0.0
     x_hi = na - 1.0
     y_hi = nb - 1.0
+    inv_c = 1.0 / GRAD_COARSEN
     for k in range(mx.size):
         ox, oy, oz, c = _mirror(mx[k], my[k], mz[k], wx, wy, wz)
         if c == 0.0:
             continue
-        w, pp, qq = _weight_grad(c, mz[k], wz, n_re, n_im, seed)
-        total += w
         y = (oy - b0) / hb
         if y < 0.0 or y >= y_hi:
             continue
         x = (math.atan2(-ox, oz) - a0) / ha
         if x < 0.0 or x >= x_hi:
             continue
+        if grad:
+            w, pp, qq = _weight_grad(c, mz[k], wz, n_re, n_im, seed)
+            rho = math.sqrt(ox * ox + oz * oz)
+            ga = (pp * (ox * mz[k] - oz * mx[k]) + qq * ox) / rho
+            gb = (pp * (rho * rho * my[k] - oy * (ox * mx[k] + oz * mz[k])) - qq * oz * oy) / rho
+            xc = x * inv_c
+            yc = y * inv_c
+            ic = int(xc)
+            jc = int(yc)
+            gx = xc - ic
+            gy = yc - jc
+            c00 = (1.0 - gx) * (1.0 - gy)
+            c01 = (1.0 - gx) * gy
+            c10 = gx * (1.0 - gy)
+            c11 = gx * gy
+            ggrid[ic, jc, 0] += ga * c00
+            ggrid[ic, jc, 1] += gb * c00
+            ggrid[ic, jc + 1, 0] += ga * c01
+            ggrid[ic, jc + 1, 1] += gb * c01
+            ggrid[ic + 1, jc, 0] += ga * c10
+            ggrid[ic + 1, jc, 1] += gb * c10
+            ggrid[ic + 1, jc + 1, 0] += ga * c11
+            ggrid[ic + 1, jc + 1, 1] += gb * c11
+        else:
+            w = _weight(c, mz[k], wz, n_re, n_im, seed)
+        total += w
         i = int(x)
         j = int(y)
         fx = x - i
         fy = y - j
-        c00 = (1.0 - fx) * (1.0 - fy)
-        c01 = (1.0 - fx) * fy
-        c10 = fx * (1.0 - fy)
-        c11 = fx * fy
-        grid[0, i, j] += w * c00
-        grid[0, i, j + 1] += w * c01
-        grid[0, i + 1, j] += w * c10
-        grid[0, i + 1, j + 1] += w * c11
-        if grad:
-            rho = math.sqrt(ox * ox + oz * oz)
-            ga = (pp * (ox * mz[k] - oz * mx[k]) + qq * ox) / rho
-            gb = (pp * (rho * rho * my[k] - oy * (ox * mx[k] + oz * mz[k])) - qq * oz * oy) / rho
-            grid[1, i, j] += ga * c00
-            grid[1, i, j + 1] += ga * c01
-            grid[1, i + 1, j] += ga * c10
-            grid[1, i + 1, j + 1] += ga * c11
-            grid[2, i, j] += gb * c00
-            grid[2, i, j + 1] += gb * c01
-            grid[2, i + 1, j] += gb * c10
-            grid[2, i + 1, j + 1] += gb * c11
-    return grid, total
+        w0 = w * (1.0 - fx)
+        w1 = w * fx
+        grid[i, j] += w0 * (1.0 - fy)
+        grid[i, j + 1] += w0 * fy
+        grid[i + 1, j] += w1 * (1.0 - fy)
+        grid[i + 1, j + 1] += w1 * fy
+    return grid, ggrid, total
 
 
 @njit(cache=True, nogil=True, fastmath=False)
@@ -616,35 +644,40 @@ def deposit_numpy(
     hb: float,
     nb: int,
     grad: bool,
-) -> tuple[FloatArray, float]:
+) -> tuple[FloatArray, FloatArray, float]:
     """Numpy twin of :func:`deposit_numba`."""
     ox, oy, oz, w, pp, qq = weight_grad_numpy(mx, my, mz, wi, n_re, n_im, seed)
     keep = w != 0.0
     ox, oy, oz, w, pp, qq = ox[keep], oy[keep], oz[keep], w[keep], pp[keep], qq[keep]
-    total = float(w.sum())
     x = (np.arctan2(-ox, oz) - a0) / ha
     y = (oy - b0) / hb
     sel = (x >= 0.0) & (x < na - 1.0) & (y >= 0.0) & (y < nb - 1.0)
     x, y, w = x[sel], y[sel], w[sel]
-    ox, oy, oz, pp, qq = ox[sel], oy[sel], oz[sel], pp[sel], qq[sel]
-    mxs, mys, mzs = mx[keep][sel], my[keep][sel], mz[keep][sel]
-    channels = [w]
-    if grad:
-        rho = np.sqrt(ox * ox + oz * oz)
-        channels.append((pp * (ox * mzs - oz * mxs) + qq * ox) / rho)
-        channels.append((pp * (rho * rho * mys - oy * (ox * mxs + oz * mzs)) - qq * oz * oy) / rho)
-    i = x.astype(np.int64)
-    j = y.astype(np.int64)
-    fx = x - i
-    fy = y - j
-    grid = np.zeros((3, na * nb))
-    for ch, val in enumerate(channels):
+
+    def cic(xs: FloatArray, ys: FloatArray, val: FloatArray, n0: int, n1: int) -> FloatArray:
+        i = xs.astype(np.int64)
+        j = ys.astype(np.int64)
+        fx, fy = xs - i, ys - j
+        out = np.zeros(n0 * n1)
         for di, wa in ((0, 1.0 - fx), (1, fx)):
             for dj, wb in ((0, 1.0 - fy), (1, fy)):
-                grid[ch] += np.bincount(
-                    (i + di) * nb + (j + dj), weights=val * wa * wb, minlength=na * nb
+                out += np.bincount(
+                    (i + di) * n1 + (j + dj), weights=val * wa * wb, minlength=n0 * n1
                 )
-    return grid.reshape(3, na, nb), total
+        return out.reshape(n0, n1)
+
+    nac, nbc = coarse_size(na), coarse_size(nb)
+    ggrid = np.zeros((nac, nbc, 2))
+    if grad:
+        ox, oy, oz, pp, qq = ox[sel], oy[sel], oz[sel], pp[sel], qq[sel]
+        mxs, mys, mzs = mx[keep][sel], my[keep][sel], mz[keep][sel]
+        rho = np.sqrt(ox * ox + oz * oz)
+        ga = (pp * (ox * mzs - oz * mxs) + qq * ox) / rho
+        gb = (pp * (rho * rho * mys - oy * (ox * mxs + oz * mzs)) - qq * oz * oy) / rho
+        xc, yc = x / GRAD_COARSEN, y / GRAD_COARSEN
+        ggrid[..., 0] = cic(xc, yc, ga, nac, nbc)
+        ggrid[..., 1] = cic(xc, yc, gb, nac, nbc)
+    return cic(x, y, w, na, nb), ggrid, float(w.sum())
 
 
 def table_numpy(g: FloatArray, table: FloatArray, g0: float, g1: float, o_in: float) -> FloatArray:

@@ -277,6 +277,13 @@ def _cone_table(a_s: float, a_d: float) -> tuple[FloatArray, float, float, float
     return table, g0, g1, o_in, m1
 
 
+def _node_gamma(d_alpha: FloatArray, beta: FloatArray) -> FloatArray:
+    """Angle between a node (in-plane offset d_alpha, out-of-plane beta) and the detector axis."""
+    s2 = np.sin(0.5 * beta) ** 2 + np.cos(beta) * np.sin(0.5 * d_alpha) ** 2
+    out: FloatArray = 2.0 * np.arcsin(np.sqrt(np.clip(s2, 0.0, 1.0)))
+    return out
+
+
 def _zero_solid_angle(ap: Aperture) -> bool:
     if isinstance(ap, Cone):
         return ap.full_angle_deg == 0.0
@@ -655,6 +662,16 @@ class FacetModel:
             f"{type(source).__name__} and {type(receptor).__name__}"
         )
 
+    def _g2_nodes(self, wi: FloatArray, alpha_deg: FloatArray, beta_rad: FloatArray) -> FloatArray:
+        """Smith G2 at grid nodes (in-plane angle alpha in degrees x out-of-plane beta)."""
+        al = np.radians(alpha_deg)[:, None]
+        be = beta_rad[None, :]
+        wo = np.stack(
+            np.broadcast_arrays(-np.sin(al) * np.cos(be), np.sin(be), np.cos(al) * np.cos(be)),
+            axis=-1,
+        )
+        return self.masking_g2(wi, wo)
+
     def _g2_at(self, wi: FloatArray, wo: FloatArray) -> FloatArray:
         return self.masking_g2(wi, wo) if self.masking else np.ones(wo.shape[:-1])
 
@@ -726,38 +743,42 @@ class FacetModel:
     def _kernel_values(
         self, source: Aperture, detector: Aperture, d_alpha: FloatArray, beta: FloatArray
     ) -> FloatArray:
-        """Response weights of a grid node at (d_alpha, beta) from the detector axis (rad).
-
-        Returns the three channels matching the deposit's (weight, gradient along t_alpha,
-        gradient along t_beta). Cones: ``O(gamma)`` and ``M1(gamma) (e . t)`` with e the unit
-        tangent at the node towards the detector; in the frame turned so that the detector
-        is at alpha = 0, ``e . t_alpha = -sin(d_alpha)/sin(gamma)`` and
-        ``e . t_beta = -cos(d_alpha) sin(beta)/sin(gamma)``. Rectangles: the product of the
-        1-D overlaps and no gradient channels.
-        """
+        """Overlap weight ``O`` of grid nodes at (d_alpha, beta) from the detector axis (rad)."""
         if isinstance(source, Cone) and isinstance(detector, Cone):
             a_s = math.radians(source.half_angle_deg)
             a_d = math.radians(detector.half_angle_deg)
-            table, g0, g1, o_in, m1 = _cone_table(a_s, a_d)
-            s2 = np.sin(0.5 * beta) ** 2 + np.cos(beta) * np.sin(0.5 * d_alpha) ** 2
-            g = 2.0 * np.arcsin(np.sqrt(np.clip(s2, 0.0, 1.0)))
-            o_val, m1_val = np.broadcast_arrays(
-                K.table_numpy(g, table, g0, g1, o_in), K.table_numpy(g, m1, 0.0, g1, 0.0)
-            )
-            sin_g = np.sin(g)
-            ok = sin_g > 1e-12
-            scale = np.where(ok, m1_val / np.where(ok, sin_g, 1.0), 0.0)
-            return np.stack(
-                [o_val, -np.sin(d_alpha) * scale, -np.cos(d_alpha) * np.sin(beta) * scale]
-            )
+            table, g0, g1, o_in, _ = _cone_table(a_s, a_d)
+            return K.table_numpy(_node_gamma(d_alpha, beta), table, g0, g1, o_in)
         assert isinstance(source, Rect) and isinstance(detector, Rect)
-        rect = K.interval_overlap_numpy(
+        return K.interval_overlap_numpy(
             d_alpha, math.radians(source.in_plane_deg), math.radians(detector.in_plane_deg)
         ) * K.interval_overlap_numpy(
             beta, math.radians(source.perp_deg), math.radians(detector.perp_deg)
         )
-        zero = np.zeros_like(rect)
-        return np.stack([rect, zero, zero])
+
+    @staticmethod
+    def _gradient_kernel(
+        source: Cone, detector: Cone, d_alpha: FloatArray, beta: FloatArray
+    ) -> FloatArray:
+        """First-moment weights ``M1(gamma) (e . t_alpha), M1(gamma) (e . t_beta)`` (last axis).
+
+        e is the unit tangent at the node towards the detector; in the frame turned so that
+        the detector is at alpha = 0, ``e . t_alpha = -sin(d_alpha)/sin(gamma)`` and
+        ``e . t_beta = -cos(d_alpha) sin(beta)/sin(gamma)``.
+        """
+        a_s = math.radians(source.half_angle_deg)
+        a_d = math.radians(detector.half_angle_deg)
+        _, _, g1, _, m1 = _cone_table(a_s, a_d)
+        g = _node_gamma(d_alpha, beta)
+        m1_val = K.table_numpy(g, m1, 0.0, g1, 0.0)
+        sin_g = np.sin(g)
+        ok = sin_g > 1e-12
+        scale = np.where(ok, m1_val / np.where(ok, sin_g, 1.0), 0.0)
+        ka, kb = np.broadcast_arrays(
+            -np.sin(d_alpha) * scale, -np.cos(d_alpha) * np.sin(beta) * scale
+        )
+        out: FloatArray = np.stack([ka, kb], axis=-1)
+        return out
 
     def luminance_pct(
         self,
@@ -838,19 +859,20 @@ class FacetModel:
             nb,
             kind == "cone",
         )
-        grid = np.sum([g for g, _ in parts], axis=0)
+        grid = np.sum([p[0] for p in parts], axis=0)
+        ggrid = np.sum([p[1] for p in parts], axis=0)
         beta_nodes = np.arcsin(np.clip(hv * np.arange(-v, v + 1), -1.0, 1.0))
+        cf = K.GRAD_COARSEN
+        beta_coarse = np.arcsin(np.clip(hv * (cf * np.arange(ggrid.shape[1]) - v), -1.0, 1.0))
         if self.masking:
-            al = np.radians(a0 + h * np.arange(na))[:, None]
-            be = beta_nodes[None, :]
-            wo = np.stack(
-                np.broadcast_arrays(-np.sin(al) * np.cos(be), np.sin(be), np.cos(al) * np.cos(be)),
-                axis=-1,
-            )
-            grid = grid * self.masking_g2(wi, wo)[None, :, :]
+            grid = grid * self._g2_nodes(wi, a0 + h * np.arange(na), beta_nodes)
+            g2c = self._g2_nodes(wi, a0 + cf * h * np.arange(ggrid.shape[0]), beta_coarse)
+            ggrid = ggrid * g2c[:, :, None]
         out = np.empty(flat.size)
         kernels: dict[float, FloatArray] = {}
         offsets = np.arange(-u, u + 1, dtype=np.float64)
+        uc = u // cf + 2
+        use_grad = kind == "cone"
         for k, t in enumerate(flat):
             x = t / h - i_lo
             ix = math.floor(x + 1e-7)
@@ -858,7 +880,15 @@ class FacetModel:
             if frac not in kernels:
                 d_alpha = np.radians((offsets - frac) * h)[:, None]
                 kernels[frac] = self._kernel_values(source, detector, d_alpha, beta_nodes[None, :])
-            out[k] = float(np.sum(grid[:, ix - u : ix + u + 1] * kernels[frac]))
+            out[k] = float(np.sum(grid[ix - u : ix + u + 1] * kernels[frac]))
+            if use_grad:
+                assert isinstance(source, Cone) and isinstance(detector, Cone)
+                xc = x / cf
+                ixc = math.floor(xc)
+                lo, hi = max(ixc - uc, 0), min(ixc + uc + 1, ggrid.shape[0])
+                d_alpha_c = np.radians((np.arange(lo, hi) - xc) * cf * h)[:, None]
+                kg = self._gradient_kernel(source, detector, d_alpha_c, beta_coarse[None, :])
+                out[k] += float(np.sum(ggrid[lo:hi] * kg))
         result: FloatArray = 100.0 * out.reshape(tr_deg.shape) / self.surface.n_facets
         return result
 

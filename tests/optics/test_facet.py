@@ -241,11 +241,13 @@ def test_numba_kernels_equal_numpy_twins(gauss_surface_256: Surface) -> None:
         assert t1 == pytest.approx(t2, rel=1e-12)
         for grad in (False, True):
             grid = (-0.3, math.radians(0.05), 1500, -0.1, math.radians(0.05), 121, grad)
-            g1, _ = K.deposit_numba(*args, *grid)
-            g2, _ = K.deposit_numpy(*args, *grid)
-            np.testing.assert_allclose(g1, g2, rtol=1e-10, atol=1e-12 * np.abs(g1).max())
-            assert 0 < g1[0].sum() <= t1 * (1 + 1e-12)
-            assert np.any(g1[1:] != 0.0) == grad
+            g1, gg1, s1 = K.deposit_numba(*args, *grid)
+            g2, gg2, s2 = K.deposit_numpy(*args, *grid)
+            np.testing.assert_allclose(g1, g2, rtol=1e-10, atol=1e-12 * g1.max())
+            np.testing.assert_allclose(gg1, gg2, rtol=1e-10, atol=1e-12 * np.abs(gg1).max())
+            assert s1 == pytest.approx(s2, rel=1e-12) and s1 == pytest.approx(g1.sum(), rel=1e-9)
+            assert 0 < s1 <= t1 * (1 + 1e-12)
+            assert np.any(gg1 != 0.0) == grad
         d = np.array([-math.sin(0.9), 0.0, math.cos(0.9)])
         gam = np.linspace(0, 0.1, 4097)
         table = cap_overlap_fraction(gam, 0.05, 0.05)
