@@ -280,6 +280,7 @@ class ScanRunner:
         self._abort_requested = False
         self._wake = asyncio.Event()
         self._abort_event = asyncio.Event()
+        self._homing_interrupted = False
         self._verify_position = False
         self._predicted: dict[int, float] = {}
         self._target: tuple[float, float] | None = None
@@ -392,10 +393,17 @@ class ScanRunner:
             await self.goniometer.home(self.home_timeout_s)
 
     async def _park(self) -> str:
-        """Stop and park the arms, best effort; returns "" or what went wrong."""
+        """Stop and park the arms, best effort; returns "" or what went wrong.
+
+        After an interrupted homing the arms are only stopped: their positions are not
+        referenced, so no move is made.
+        """
         problems: list[str] = []
         with contextlib.suppress(DeviceError):
             await self.goniometer.stop()
+        if self._homing_interrupted:
+            self._target = None
+            return "homing interrupted: arms stopped, not parked; home them before use"
         try:
             await self.goniometer.park(self.home_timeout_s)
         except DeviceError as exc:
@@ -479,7 +487,12 @@ class ScanRunner:
         state = RunState.DONE
         reason = ""
         try:
-            await self._ensure_homed()
+            try:
+                await self._abortable(self._ensure_homed())
+            except _Aborted:
+                state, reason = RunState.ABORTED, "aborted by the operator during homing"
+                self._homing_interrupted = True
+                todo = []
             await self.spectro.set_exposure_us(self.plan.exposure_us)
             mirror_pct = self._mirror_level()
             # What lies under the instruments: the sample at the start of a new run; unknown

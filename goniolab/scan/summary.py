@@ -93,7 +93,8 @@ def summarize_brdf(
         ``measured_peak``/``predicted_peak`` (:func:`goniolab.optics.metrics.peak_metrics`
         on the repeat means and on the predictions, both over the measured geometries),
         ``peak_offset_deg``, ``amplitude_ratio`` and ``hint`` (``None`` unless both maxima
-        lie inside the measured range; ``peak_note`` then says why).
+        lie inside the measured range and it contains the specular direction; ``peak_note``
+        then says why).
     """
     by_index: dict[int, list[float]] = {}
     mirror: list[float] = []
@@ -157,10 +158,11 @@ def summarize_brdf(
     if not all(i in predictions for i in measured_idx):
         return out
     # Measured and predicted curves are compared on the same geometries (an interrupted
-    # run compares what it measured), and only when the measured range brackets the
-    # predicted specular peak of the whole plan and the measured maximum lies inside it:
-    # otherwise the "peak" of a partial curve is its end or a bump of the off-specular
-    # floor, and an "offset" would be the distance to it, not a misalignment.
+    # run compares what it measured), and only when the measured range contains the
+    # specular direction theta_r = theta_i and brackets the predicted peak of the whole
+    # plan, with the measured maximum inside it: otherwise the "peak" of the curve is its
+    # end or a bump of the off-specular floor, and an "offset" would be the distance to
+    # it, not a misalignment.
     pred_curve = np.array([predictions[i] for i in measured_idx])
     pp = peak_metrics(theta, pred_curve)
     out["predicted_peak"] = _peak_dict(pp)
@@ -170,11 +172,18 @@ def summarize_brdf(
     else:
         pp_plan = pp
     k_meas = int(np.argmax(means))
-    if not (theta[0] < pp_plan.position_deg < theta[-1] and 0 < k_meas < len(measured_idx) - 1):
+    lo, hi = float(theta[0]), float(theta[-1])
+    if not lo < plan.theta_i_deg < hi:
         out["peak_note"] = (
-            f"the measured range {theta[0]:g}..{theta[-1]:g} deg does not bracket the "
-            f"specular peak (predicted maximum at {pp_plan.position_deg:.2f} deg, measured "
-            f"maximum at {mp.position_deg:.2f} deg): no peak comparison"
+            f"the measured range {lo:g}..{hi:g} deg does not contain the specular direction "
+            f"theta_r = {plan.theta_i_deg:g} deg: no peak comparison"
+        )
+        return out
+    if not (lo < pp_plan.position_deg < hi and 0 < k_meas < len(measured_idx) - 1):
+        out["peak_note"] = (
+            f"the measured range {lo:g}..{hi:g} deg does not bracket the specular peak "
+            f"(predicted maximum at {pp_plan.position_deg:.2f} deg, measured maximum at "
+            f"{mp.position_deg:.2f} deg): no peak comparison"
         )
         return out
     out["peak_offset_deg"] = float(mp.position_deg - pp.position_deg)

@@ -410,13 +410,37 @@ async def test_abort_while_waiting_for_the_operator_to_place_the_mirror(
 ) -> None:
     plan = BrdfPlan(45.0, (44.0, 45.0, 46.0), mirror_reference=True)
     never = asyncio.Event()
+    asked: list[str] = []
 
     async def operator_away(which: str) -> None:
+        asked.append(which)
+        asyncio.get_running_loop().call_soon(runner.abort)  # Ctrl-C during the prompt
         await never.wait()
 
     runner, bus = make_runner(fake_lab, store, plan, specimen_hook=operator_away)
-    seen = await drive(runner, bus, lambda ev: runner.abort() if isinstance(ev, Progress) else None)
+    seen = await drive(runner, bus, lambda ev: None)
     fin = next(e for e in seen if isinstance(e, RunFinished))
+    assert asked == ["mirror"]
     assert fin.state is RunState.ABORTED and fin.reason.endswith("while placing the mirror")
     assert fake_lab.spectro.n_reads == 0 and store.count_points(runner.run_id) == 0
     assert fake_lab.goniometer.park_calls == 1
+
+
+async def test_abort_during_homing_stops_and_does_not_park(
+    fake_lab: FakeLab, store: RunStore
+) -> None:
+    g = fake_lab.goniometer
+
+    async def slow_home(timeout_s: float) -> None:  # a 30 s home search
+        g.home_calls += 1
+        await fake_lab.clock.sleep(30.0)
+        g.lamp.homed = g.detector.homed = True
+
+    g.home = slow_home  # type: ignore[method-assign]
+    runner, bus = make_runner(fake_lab, store, BrdfPlan(45.0, (44.0, 45.0, 46.0)))
+    seen = await drive(runner, bus, lambda ev: runner.abort() if isinstance(ev, Progress) else None)
+    fin = next(e for e in seen if isinstance(e, RunFinished))
+    assert fin.state is RunState.ABORTED and "during homing" in fin.reason
+    assert "not parked" in fin.reason  # unreferenced arms are only stopped
+    assert g.home_calls == 1 and g.stop_calls >= 1 and g.park_calls == 0 and g.moves == []
+    assert fake_lab.clock.now() == 0.0 and fake_lab.spectro.n_reads == 0

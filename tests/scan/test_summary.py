@@ -60,7 +60,7 @@ def test_interrupted_run_before_the_peak_gives_no_offset_and_no_hint() -> None:
     s = summarize_brdf(PLAN, _rows(PLAN, 9, 0.0), _predictions(PLAN))
     assert s["readings"] == 9 and s["complete"] is False
     assert s["peak_offset_deg"] is None and s["amplitude_ratio"] is None and s["hint"] is None
-    assert "does not bracket the specular peak (predicted maximum at 45.00 deg" in s["peak_note"]
+    assert "0..8 deg does not contain the specular direction theta_r = 45 deg" in s["peak_note"]
 
 
 def test_interrupted_run_past_the_peak_compares_on_the_measured_geometries() -> None:
@@ -76,3 +76,23 @@ def test_measured_maximum_at_the_end_of_the_range_is_not_a_peak() -> None:
     s = summarize_brdf(PLAN, _rows(PLAN, 47, 5.0), _predictions(PLAN))
     assert s["peak_offset_deg"] is None and s["hint"] is None
     assert "measured maximum at 46.00 deg" in s["peak_note"]
+
+
+def test_a_bump_of_the_off_specular_floor_is_not_a_peak() -> None:
+    # a complete 0..20 deg scan at theta_i = 45 deg: measured and predicted curves each have
+    # a small interior maximum (1 deg apart), but no specular peak lies in the range
+    plan = BrdfPlan(45.0, parse_angles("0:20:1"))
+    floor = {
+        i: 0.005 * math.exp(-0.5 * ((tr - 5.0) / 2.0) ** 2) for i, tr in enumerate(plan.theta_r_deg)
+    }
+    rows = [
+        PointRow(
+            index=i, repeat=0, theta_i_deg=45.0, theta_r_deg=tr, measured_theta_i_deg=45.0,
+            measured_theta_r_deg=tr, luminance_pct=floor[min(i + 1, 20)], raw={}, timestamp=0.0,
+        )
+        for i, tr in enumerate(plan.theta_r_deg)
+    ]  # fmt: skip
+    s = summarize_brdf(plan, rows, floor)
+    assert s["complete"] is True
+    assert s["peak_offset_deg"] is None and s["hint"] is None
+    assert "does not contain the specular direction theta_r = 45 deg" in s["peak_note"]
