@@ -264,9 +264,13 @@ async def _execute(
             raise UserError(f"plan refused (no arm moved): {exc}") from exc
         wall = check.eta_s / clock_scale if clock_scale > 0 else 0.0
         lab_time = "" if clock_scale == 1.0 else f" ({check.eta_s:.2f} s of lab clock)"
+        homed = (await lab.goniometer.lamp.status()).homed and (
+            await lab.goniometer.detector.status()
+        ).homed
         print(
             f"goniolab: {check.n_readings} readings, {check.n_moves} moves, "
-            f"ETA {format_eta(wall)}{lab_time}",
+            f"ETA {format_eta(wall)}{lab_time}"
+            + ("" if homed else " after homing the arms (the home search is not estimated)"),
             file=sys.stderr,
         )
         if run_id is None:
