@@ -872,6 +872,8 @@ class FacetModel:
         kernels: dict[float, FloatArray] = {}
         offsets = np.arange(-u, u + 1, dtype=np.float64)
         uc = u // cf + 2
+        offsets_c = np.arange(-uc, uc + 1, dtype=np.float64)
+        kernels_c: dict[float, FloatArray] = {}
         use_grad = kind == "cone"
         for k, t in enumerate(flat):
             x = t / h - i_lo
@@ -884,10 +886,15 @@ class FacetModel:
             if use_grad:
                 assert isinstance(source, Cone) and isinstance(detector, Cone)
                 xc = x / cf
-                ixc = math.floor(xc)
+                ixc = math.floor(xc + 1e-7)
+                frac_c = round(max(0.0, xc - ixc), 6)
+                if frac_c not in kernels_c:
+                    d_alpha_c = np.radians((offsets_c - frac_c) * cf * h)[:, None]
+                    kernels_c[frac_c] = self._gradient_kernel(
+                        source, detector, d_alpha_c, beta_coarse[None, :]
+                    )
                 lo, hi = max(ixc - uc, 0), min(ixc + uc + 1, ggrid.shape[0])
-                d_alpha_c = np.radians((np.arange(lo, hi) - xc) * cf * h)[:, None]
-                kg = self._gradient_kernel(source, detector, d_alpha_c, beta_coarse[None, :])
+                kg = kernels_c[frac_c][lo - (ixc - uc) : hi - (ixc - uc)]
                 out[k] += float(np.sum(ggrid[lo:hi] * kg))
         result: FloatArray = 100.0 * out.reshape(tr_deg.shape) / self.surface.n_facets
         return result
