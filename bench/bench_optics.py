@@ -9,7 +9,8 @@ reported separately) and ``repeats`` times; the table shows the medians against 
 targets:
 
 - full-hemisphere BRDF, 0.5 deg bins, ti = 45 (target <= 20 ms)
-- in-plane luminance curve, 71 points 0..70 deg, ti = 45, 6 deg cones (<= 50 ms)
+- in-plane luminance curve, 71 points 0..70 deg, ti = 45, 6 deg cones (<= 50 ms; one
+  cloud-in-cell deposit of the weights plus their first-order gradient channels)
 - ISO 2813 gloss triplet 20/60/85 (<= 50 ms)
 
 Columns: median wall time, best wall time, median process CPU time (all threads; on an

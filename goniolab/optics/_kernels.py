@@ -101,13 +101,13 @@ def _fresnel_d_scalar(
         if s2 >= 1.0:
             return 1.0, 0.0
         ct = math.sqrt(1.0 - s2)
-        dct = c / (n_re * n_re * ct)
-        den_s = c + n_re * ct
-        den_p = n_re * c + ct
-        rs = (c - n_re * ct) / den_s
-        rp = (n_re * c - ct) / den_p
-        num = 2.0 * n_re * (ct - c * dct)
-        return 0.5 * (rs * rs + rp * rp), rs * num / (den_s * den_s) + rp * num / (den_p * den_p)
+        # ct - c dct = (ct^2 - c^2/n^2)/ct = (1 - 1/n^2)/ct
+        num = 2.0 * n_re * (1.0 - 1.0 / (n_re * n_re)) / ct
+        inv_s = 1.0 / (c + n_re * ct)
+        inv_p = 1.0 / (n_re * c + ct)
+        rs = (c - n_re * ct) * inv_s
+        rp = (n_re * c - ct) * inv_p
+        return 0.5 * (rs * rs + rp * rp), num * (rs * inv_s * inv_s + rp * inv_p * inv_p)
     eta = complex(n_re, n_im)
     cc = complex(c, 0.0)
     ctc = cmath.sqrt(1.0 - (1.0 - cc * cc) / (eta * eta))
