@@ -94,7 +94,7 @@ class GonioApp(App[int]):
         self.ready = asyncio.Event()
         self._redraw_pending = False
         self._last_redraw_s = -math.inf
-        self._closed = False
+        self._lab_released = False
         self._starting = False
         self._pause_on_start = False
         self._queue = backend.bus.subscribe()
@@ -141,11 +141,14 @@ class GonioApp(App[int]):
 
     async def poll_once(self) -> None:
         """Read both arms once and show them (errors shown as link lost)."""
-        panel = self.query_one(StatusPanel)
+        try:
+            panel = self.query_one(StatusPanel)
+        except NoMatches:  # shutting down
+            return
         try:
             for arm in await self.backend.arm_states():
                 panel.show_arm(arm)
-        except (DeviceError, OSError) as exc:
+        except (DeviceError, UserError, OSError) as exc:
             for name in ("lamp", "detector"):
                 panel.show_arm(ArmState(name, None, False, False, None, False, str(exc)))
 
@@ -355,9 +358,11 @@ class GonioApp(App[int]):
 
     async def close_backend(self) -> None:
         """Abort any scan (the runner parks the arms) and release the instruments, once."""
-        if self._closed:
+        if self._lab_released:
             return
-        self._closed = True
+        self._lab_released = True
+        # Stop polling first: a status read on an instrument being closed may never answer.
+        self.workers.cancel_group(self, "poll")
         try:
             if self.backend.running:
                 self.backend.abort()
@@ -366,7 +371,16 @@ class GonioApp(App[int]):
             self.log.error(f"closing the lab: {exc}")
 
     async def action_quit(self) -> None:
-        """Abort any scan, release the instruments and leave (key ``q``)."""
+        """Abort any scan, release the instruments and leave (key ``q``).
+
+        The closing (the runner parks the arms) runs in a worker so the screen stays live.
+        """
+        if self.backend.running:
+            self.notify("aborting the scan and parking the arms...", title="Quit")
+        self._quit()
+
+    @work(exclusive=True, group="quit")
+    async def _quit(self) -> None:
         await self.close_backend()
         self.exit(0)
 

@@ -106,6 +106,7 @@ class LabBackend:
         self._gloss_task: asyncio.Task[None] | None = None
         self._gloss_run_id: int | None = None
         self._models: dict[str, ReflectanceModel] = {}
+        self._closed = False
 
     # ------------------------------------------------------------------ lifecycle
     @property
@@ -134,6 +135,7 @@ class LabBackend:
 
     async def close(self) -> None:
         """Abort a running scan (the runner parks the arms), then release everything."""
+        self._closed = True
         if self._runner is not None and self.running:
             self._runner.abort()
         for task in (self._task, self._gloss_task):
@@ -315,6 +317,8 @@ class LabBackend:
 
     # ------------------------------------------------------------------ status
     async def arm_states(self) -> tuple[ArmState, ArmState]:
+        if self._closed:
+            raise UserError("the lab is closed", exit_code=1)
         lab, _ = self._require_open()
         return (
             await _arm_state("lamp", lab.goniometer.lamp),
@@ -389,12 +393,21 @@ class LabBackend:
             return StoredRun(summary, measured, predicted, gloss)
 
 
+#: A status read that takes longer than this shows the arm's link as lost (seconds).
+STATUS_TIMEOUT_S = 2.0
+
+
 async def _arm_state(name: str, axis: Any) -> ArmState:
-    """One arm's status; a device error shows as a lost link with its message."""
+    """One arm's status; a device error or no answer shows as a lost link with the reason."""
     try:
-        st = await axis.status()
+        async with asyncio.timeout(STATUS_TIMEOUT_S):
+            st = await axis.status()
     except DeviceError as exc:
         return ArmState(name, None, False, False, None, False, exc.message)
+    except TimeoutError:
+        return ArmState(
+            name, None, False, False, None, False, f"no status in {STATUS_TIMEOUT_S:g} s"
+        )
     return ArmState(
         name,
         float(st.position_deg),

@@ -212,3 +212,18 @@ async def test_arm_alarm_fails_the_run_and_shows_in_the_status_panel(tmp_path: P
         assert str(arms.get_cell("lamp", "alarm")) == "-"
         assert app.query_one("#banner").has_class("shown")
         assert app.is_running
+
+
+async def test_quit_during_a_scan_aborts_it_and_exits(tmp_path: Path) -> None:
+    app = make_app(tmp_path)
+    async with app.run_test(size=SIZE) as pilot:
+        await wait_until(pilot, app.ready.is_set)
+        app.action_start_scan()
+        app.action_toggle_pause()
+        await wait_until(pilot, lambda: app.run_state is RunState.PAUSED)
+        await pilot.press("q")
+        await wait_until(pilot, lambda: app.return_code is not None)
+    assert app.return_code == 0
+    with RunStore(tmp_path / "runs.sqlite") as store:
+        run = store.get_run(app.run_id)
+        assert (run.status, run.reason) == ("aborted", "aborted by the operator")
