@@ -197,7 +197,12 @@ def _cmd_brdf(args: argparse.Namespace) -> int:
             raise UserError(f"--source-deg/--detector-deg: {exc}") from None
         if det.full_angle_deg == 0.0:
             raise UserError("--detector-deg 0 has no solid angle: use --point for the BRDF")
-        lum = np.asarray(model.luminance_pct(ti, tr, source=src, detector=det), dtype=np.float64)
+        try:
+            lum = np.asarray(
+                model.luminance_pct(ti, tr, source=src, detector=det), dtype=np.float64
+            )
+        except ValueError as exc:
+            raise UserError(f"--theta-i {ti:g} / --source-deg: {exc}") from None
         omega = np.array([_projected_solid_angle_sr(det, float(t)) for t in tr])
         brdf = np.where(omega > 0, lum / 100.0 / np.where(omega > 0, omega, 1.0), 0.0)
         out["source_deg"] = src.full_angle_deg

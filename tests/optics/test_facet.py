@@ -531,6 +531,20 @@ def test_cone_overlap_matches_source_sampling_off_45_deg(
         np.testing.assert_allclose(100 * np.array(two), brute[[1, 3]], rtol=tol)
 
 
+def test_source_reaching_the_horizon_is_rejected(gauss_surface_256: Surface) -> None:
+    """theta_i + source half width >= 90 deg lights the surface from below: a clear error,
+    not a reading (the first-order weight expansion turns negative there: -60 % at 89.9)."""
+    m = FacetModel(gauss_surface_256)
+    with pytest.raises(ValueError, match=r"cone of half width 3 deg at theta_i_deg = 87.*horizon"):
+        m.luminance_pct(87.0, [80.0, 85.0, 88.0])
+    with pytest.raises(ValueError, match="horizon"):
+        m.reflected_fraction(88.0, 85.0, Cone(6.0), Cone(6.0))
+    with pytest.raises(ValueError, match=r"rectangle of half width 0\.375"):
+        m.luminance_pct(89.7, [85.0], source=ISO2813_SOURCE, detector=ISO2813_RECEPTOR[85])
+    lum = m.luminance_pct(86.9, [80.0, 85.0, 88.0])  # just inside: positive readings
+    assert np.all(lum > 0)
+
+
 def test_rect_luminance_grid_matches_exact_per_facet_rect(gauss_surface_256: Surface) -> None:
     """ISO 2813 rectangles through the luminance grid vs the exact per-facet overlap."""
     m = FacetModel(gauss_surface_256)

@@ -126,3 +126,9 @@ def test_point_brdf_curve_reports_its_peak(capsys: pytest.CaptureFixture[str]) -
     assert out["peak"]["amplitude"] == pytest.approx(max(out["brdf_sr"]), rel=0.2)
     two = _run_json(capsys, "predict", "brdf", "sample:flat", "--theta-r=44,46")
     assert "peak" not in two
+
+
+def test_source_cone_reaching_the_horizon_exits_2(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["predict", "brdf", "sample:flat", "--theta-i", "88", "--theta-r", "80,85"]) == 2
+    err = capsys.readouterr().err
+    assert "--theta-i 88" in err and "horizon" in err
