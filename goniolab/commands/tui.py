@@ -44,18 +44,27 @@ def register(sub: Any) -> None:
         action="store_true",
         help="once homed, take a gloss reading and start the form's scan",
     )
+    p.add_argument(
+        "--gloss-every",
+        type=float,
+        default=0.0,
+        metavar="S",
+        help="take a glossmeter reading every S seconds (0 = only on the g key); default 0",
+    )
     p.set_defaults(func=_cmd_tui)
 
 
 def _cmd_tui(args: argparse.Namespace) -> int:
     if args.time_scale is not None and not args.time_scale >= 0:
         raise UserError(f"--time-scale must be >= 0, got {args.time_scale}")
+    if not args.gloss_every >= 0:
+        raise UserError(f"--gloss-every must be >= 0 s, got {args.gloss_every}")
     from goniolab.tui.app import GonioApp
     from goniolab.tui.lab_backend import LabBackend
 
     backend = LabBackend(
         args.config, time_scale=args.time_scale, sample=args.sample, store_path=args.store
     )
-    app = GonioApp(backend, autostart=args.autostart)
+    app = GonioApp(backend, autostart=args.autostart, gloss_every_s=args.gloss_every)
     code = app.run()
     return 0 if code is None else int(code)

@@ -56,6 +56,9 @@ class GonioApp(App[int]):
         Start a scan with the form's values as soon as the goniometer is homed.
     poll_hz
         Arm status polling rate in Hz (0 disables polling; ArmsMoved events still update).
+    gloss_every_s
+        Take a glossmeter reading every this many seconds once the lab is ready (0: only on
+        ``g``), so the gloss log fills while a scan runs.
     """
 
     TITLE = "goniolab"
@@ -81,11 +84,19 @@ class GonioApp(App[int]):
     #banner.shown { display: block; }
     """
 
-    def __init__(self, backend: Backend, *, autostart: bool = False, poll_hz: float = 4.0) -> None:
+    def __init__(
+        self,
+        backend: Backend,
+        *,
+        autostart: bool = False,
+        poll_hz: float = 4.0,
+        gloss_every_s: float = 0.0,
+    ) -> None:
         super().__init__()
         self.backend = backend
         self.autostart = autostart
         self.poll_hz = poll_hz
+        self.gloss_every_s = gloss_every_s
         self.comparison = Comparison()
         self.run_state = RunState.IDLE
         self.run_id = 0
@@ -135,6 +146,8 @@ class GonioApp(App[int]):
         if self.poll_hz > 0:
             self.poll_arms()
         self.ready.set()
+        if self.gloss_every_s > 0:
+            self.set_interval(self.gloss_every_s, self.action_read_gloss)
         if self.autostart:
             self.action_read_gloss()
             self.action_start_scan()
@@ -192,6 +205,9 @@ class GonioApp(App[int]):
     async def _read_gloss(self) -> None:
         try:
             sample = self.query_one(ScanForm).read_sample()
+        except NoMatches:  # shutting down (a gloss timer may still fire)
+            return
+        try:
             await self.backend.read_gloss(sample)
         except UserError as exc:
             self.notify(str(exc), title="Glossmeter", severity="warning")

@@ -43,10 +43,10 @@ from sim.samples import sample_names
 
 __all__ = ["LabBackend"]
 
-#: The default scan of the form: an in-plane sweep through the specular peak at 20 deg
-#: incidence (Wittmann et al. 2021, sec. 2.3 measure in-plane curves around specular).
-DEFAULT_THETA_I_DEG = 20.0
-DEFAULT_THETA_R_DEG = (0.0, 40.0, 1.0)
+#: The default scan of the form: the seed's in-plane sweep, theta_i = 45 deg, detector
+#: 0..70 deg in 1 deg steps (Wittmann et al. 2021, sec. 2.3 and 4.2; the seed repeats 5 times).
+DEFAULT_THETA_I_DEG = 45.0
+DEFAULT_THETA_R_DEG = (0.0, 70.0, 1.0)
 DEFAULT_REPEATS = 3
 
 

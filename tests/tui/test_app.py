@@ -198,3 +198,25 @@ async def test_gloss_log_and_runs_browser() -> None:
         assert cell(table, "amplitude", "measured") == f"{AMP_PCT:.2f}"
         await pilot.press("escape")
         await wait_until(pilot, lambda: not isinstance(app.screen, RunsScreen))
+
+
+async def test_gloss_every_fills_the_log_while_idle() -> None:
+    """``gloss_every_s`` polls the glossmeter on a timer; every reading lands in the log."""
+    backend = ScriptedBackend(gated=False)
+    app = GonioApp(backend, poll_hz=0, gloss_every_s=0.02)
+    async with app.run_test(size=SIZE) as pilot:
+        log = app.query_one("#gloss-log", GlossLog)
+        await wait_until(pilot, lambda: log.row_count >= 3, max_turns=20000)
+        # one reading per tick, in order (scripted meter: G60 = 60 + k for reading k)
+        assert backend.gloss_samples[:3] == ["sample:wittmann-3"] * 3
+        assert [log.get_row_at(k)[2] for k in range(3)] == ["61.0", "62.0", "63.0"]
+
+
+async def test_no_gloss_polling_by_default() -> None:
+    backend = ScriptedBackend(gated=False)
+    app = GonioApp(backend, poll_hz=0)
+    async with app.run_test(size=SIZE) as pilot:
+        await wait_until(pilot, lambda: app.ready.is_set())
+        for _ in range(50):
+            await pilot.pause()
+        assert backend.gloss_samples == []
