@@ -15,7 +15,7 @@ $(STAMP): pyproject.toml
 venv: $(STAMP)
 
 run: $(STAMP)
-	$(BIN)/goniolab tui --config configs/lab-sim.toml
+	$(BIN)/goniolab tui --config configs/lab-sim.toml --autostart --gloss-every 5
 
 check: $(STAMP)
 	$(BIN)/ruff check goniolab drivers sim tests bench
