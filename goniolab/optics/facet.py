@@ -902,8 +902,9 @@ class FacetModel:
             if frac not in kernels:
                 d_alpha = np.radians((offsets - frac) * h)[:, None]
                 kernels[frac] = self._kernel_values(source, detector, d_alpha, beta_nodes[None, :])
-            # contiguous row blocks: one BLAS dot each, no temporary
-            out[k] = float(np.vdot(grid[ix - u : ix + u + 1], kernels[frac]))
+            # einsum: no temporary, and no BLAS call (its spinning threads would compete
+            # with the numba workers of the next deposit)
+            out[k] = float(np.einsum("ij,ij->", grid[ix - u : ix + u + 1], kernels[frac]))
             if use_grad:
                 assert isinstance(source, Cone) and isinstance(detector, Cone)
                 xc = x / cf
@@ -916,7 +917,7 @@ class FacetModel:
                     )
                 lo, hi = max(ixc - uc, 0), min(ixc + uc + 1, ggrid.shape[0])
                 kg = kernels_c[frac_c][lo - (ixc - uc) : hi - (ixc - uc)]
-                out[k] += float(np.vdot(ggrid[lo:hi], kg))
+                out[k] += float(np.einsum("ijk,ijk->", ggrid[lo:hi], kg))
         result: FloatArray = 100.0 * out.reshape(tr_deg.shape) / self.surface.n_facets
         return result
 
