@@ -814,7 +814,7 @@ class FacetModel:
         evaluated exactly with :meth:`reflected_fraction`. For more, the weights are
         deposited once (cloud-in-cell) on a grid of in-plane angle x out-of-plane angle
         nodes ``grid_step_deg`` apart around the in-plane arc, with (cones) the weights'
-        gradients over the source image in two more channels; each reading is the grid
+        gradients over the source image on a 4x coarser grid; each reading is the grid
         weighted by the aperture overlap ``O`` (and the first moments) at every node (see
         :meth:`reflected_fraction` for the exact per-facet form this approximates to
         second order in the grid step). A point source (``Cone(0)``) reads the flux whose
