@@ -7,8 +7,11 @@ States (:class:`~goniolab.scan.events.RunState`)::
                        +--abort-----------+--> aborted   (arms parked)
                        +--DeviceError--------> failed    (arms parked, reason kept)
 
-Pause, resume and abort are commands (plain method calls, safe from any task on the loop)
-honoured *between* readings. Resume re-reads the arm positions and re-moves them when they
+Pause, resume and abort are commands (plain method calls, safe from any task on the loop).
+Pause is honoured *between* readings; abort also interrupts a move (the arms are stopped
+where they are, then parked), homing (the arms are only stopped: unreferenced) and a wait
+for the operator to swap the specimen, but never a reading: a reading in progress is
+completed and stored. Resume re-reads the arm positions and re-moves them when they
 drifted or were moved by hand while paused. A fault (any :class:`drivers.base.DeviceError`)
 stops the arms, parks them (best effort) and marks the run ``failed`` with the reason; every
 reading measured before the fault stays in the store.
@@ -24,7 +27,11 @@ The runner publishes events on an :class:`~goniolab.scan.events.EventBus`
 Before any motion, :func:`dry_run` checks every geometry with
 ``Goniometer.check_geometry`` (soft limits + arm-separation interlock) and estimates the run
 time from the trapezoidal motion model (:func:`sim.motion.trapezoid_duration_s`,
-Biagiotti & Melchiorri sec. 3.2) plus dwell and reading time.
+Biagiotti & Melchiorri sec. 3.2) plus dwell and reading time and the final park move
+(a home search is controller-specific and not estimated).
+
+One runner at a time measures a run: :meth:`ScanRunner.run` holds
+:meth:`goniolab.store.RunStore.claim_run` (a lock the kernel drops when the process dies).
 """
 
 from __future__ import annotations
