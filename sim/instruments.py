@@ -201,7 +201,32 @@ def spectrum_for_luminance(luminance_pct: float) -> tuple[float, ...]:
     return tuple(float(v) for v in luminance_pct * shape / y_shape)
 
 
-class SimAxis:
+class _SimLink:
+    """The connection state and fault injection every simulated instrument shares.
+
+    Operations on a closed link raise :class:`drivers.base.Disconnected`; each operation
+    then passes the fault injector (timeouts, garbled replies, disconnects).
+    """
+
+    name: str
+    faults: FaultInjector
+    _connected: bool = False
+
+    async def connect(self) -> None:
+        """Open the (simulated) link."""
+        self._connected = True
+
+    async def close(self) -> None:
+        """Close the link."""
+        self._connected = False
+
+    def _op(self, operation: str) -> None:
+        if not self._connected:
+            raise Disconnected(f"not connected ({operation})", device=self.name)
+        self.faults.check(operation)
+
+
+class SimAxis(_SimLink):
     """A simulated goniometer arm (implements :class:`drivers.base.Axis`).
 
     Parameters
@@ -237,21 +262,12 @@ class SimAxis:
         self._tracker: asyncio.Task[None] | None = None
 
     # -------------------------------------------------------------- connection
-    async def connect(self) -> None:
-        """Open the (simulated) link."""
-        self._connected = True
-
     async def close(self) -> None:
         """Close the link; a running move continues (as on a real controller)."""
-        self._connected = False
+        await super().close()
         if self._tracker is not None and not self._tracker.done():
             self._tracker.cancel()
         self._tracker = None
-
-    def _op(self, operation: str) -> None:
-        if not self._connected:
-            raise Disconnected(f"not connected ({operation})", device=self.name)
-        self.faults.check(operation)
 
     # -------------------------------------------------------------- time keeping
     def ensure_tracker(self) -> None:
@@ -398,7 +414,7 @@ class SimAxis:
         self.motor.reset_alarm(self.clock.now())
 
 
-class SimSpectro:
+class SimSpectro(_SimLink):
     """A simulated STIL Ruby spectro-colorimeter (implements ``Spectrocolorimeter``).
 
     Parameters
@@ -460,19 +476,6 @@ class SimSpectro:
         self.exposure_us = exposure_us
         self.faults = faults or FaultInjector(name)
         self._connected = False
-
-    async def connect(self) -> None:
-        """Open the (simulated) port."""
-        self._connected = True
-
-    async def close(self) -> None:
-        """Close the port."""
-        self._connected = False
-
-    def _op(self, operation: str) -> None:
-        if not self._connected:
-            raise Disconnected(f"not connected ({operation})", device=self.name)
-        self.faults.check(operation)
 
     async def identify(self) -> str:
         """Identification string."""
@@ -551,7 +554,7 @@ class SimSpectro:
         )
 
 
-class SimGlossmeter:
+class SimGlossmeter(_SimLink):
     """A simulated ISO 2813 glossmeter (implements ``Glossmeter``), ZGM1120-like.
 
     Parameters
@@ -601,19 +604,6 @@ class SimGlossmeter:
         self.faults = faults or FaultInjector(name)
         self._connected = False
         self._gloss_cache: dict[int, float] = {}
-
-    async def connect(self) -> None:
-        """Open the (simulated) port."""
-        self._connected = True
-
-    async def close(self) -> None:
-        """Close the port."""
-        self._connected = False
-
-    def _op(self, operation: str) -> None:
-        if not self._connected:
-            raise Disconnected(f"not connected ({operation})", device=self.name)
-        self.faults.check(operation)
 
     async def predicted_gu(self, angles_deg: Sequence[int]) -> dict[int, float]:
         """Noise-free model gloss per geometry (cached: the sample does not change)."""
