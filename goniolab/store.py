@@ -175,6 +175,35 @@ class _ClaimFile:
         cls._open[lock_path] = (fd, held)
 
     @classmethod
+    def is_held(cls, lock_path: Path, run_id: int) -> bool | None:
+        """Whether a runner (any process) holds ``run_id``; ``None`` when it cannot be told.
+
+        The probe takes the lock for an instant: a runner claiming the run in exactly that
+        instant is refused (and says so); it never breaks a held claim.
+        """
+        fd, held = cls._open.get(lock_path, (-1, set()))
+        if run_id in held:
+            return True
+        if not lock_path.exists():
+            return False
+        own = fd < 0
+        if own:
+            try:
+                fd = os.open(lock_path, os.O_RDWR)
+            except OSError:  # a read-only store: no write lock can be tried
+                return None
+        try:
+            fcntl.lockf(fd, fcntl.LOCK_EX | fcntl.LOCK_NB, 1, run_id)
+        except OSError:
+            return True
+        else:
+            fcntl.lockf(fd, fcntl.LOCK_UN, 1, run_id)
+            return False
+        finally:
+            if own:  # this process holds no lock on the file: closing drops nothing
+                os.close(fd)
+
+    @classmethod
     def release(cls, lock_path: Path, run_id: int) -> None:
         fd, held = cls._open[lock_path]
         fcntl.lockf(fd, fcntl.LOCK_UN, 1, run_id)
@@ -394,7 +423,7 @@ class RunStore:
         The claim is a POSIX record lock on byte ``run_id`` of ``<store>-lock`` beside the
         store file, released on exit and by the kernel when the process dies.
         """
-        lock_path = self.path.resolve().with_name(self.path.name + "-lock")
+        lock_path = self._lock_path
         try:
             _ClaimFile.acquire(lock_path, run_id)
         except RunBusy as exc:
@@ -405,6 +434,16 @@ class RunStore:
             yield
         finally:
             _ClaimFile.release(lock_path, run_id)
+
+    def is_claimed(self, run_id: int) -> bool | None:
+        """Whether a runner (this or another process) is measuring ``run_id`` right now;
+        ``None`` when the store is read-only and it cannot be told. A run whose status
+        says ``running`` but that nobody claims was interrupted (e.g. ``kill -9``)."""
+        return _ClaimFile.is_held(self._lock_path, run_id)
+
+    @property
+    def _lock_path(self) -> Path:
+        return self.path.resolve().with_name(self.path.name + "-lock")
 
     # ------------------------------------------------------------------ runs
     def create_run(

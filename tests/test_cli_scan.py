@@ -256,3 +256,24 @@ async def test_operator_prompt_reads_a_line_and_a_cancel_ends_the_wait(
         feed.write("ok\n")
         feed.flush()
         assert await read_stdin_line() == "ok\n"
+
+
+def test_runs_list_tells_an_interrupted_run_from_a_running_one(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / "s.sqlite"
+    with RunStore(path) as s:
+        plan = BrdfPlan(45.0, (44.0, 45.0, 46.0)).to_dict()
+        rid = s.create_run(kind="brdf", plan=plan, config={}, sample="", model={}, version="t")
+        s.set_status(rid, "running")  # its process was killed -9: nobody claims it
+        assert main(["runs", "list", "--store", str(path), "--json"]) == 0
+        assert json.loads(capsys.readouterr().out)[0]["interrupted"] is True
+        with s.claim_run(rid):  # a runner is measuring it
+            assert main(["runs", "list", "--store", str(path)]) == 0
+            assert f"{rid:>5}  brdf   running " in capsys.readouterr().out
+        assert main(["runs", "list", "--store", str(path)]) == 0
+        assert f"{rid:>5}  brdf   interrupted " in capsys.readouterr().out
+        assert main(["runs", "show", str(rid), "--store", str(path)]) == 0
+        assert "running (interrupted: no goniolab process is measuring it)" in (
+            capsys.readouterr().out
+        )

@@ -243,10 +243,14 @@ def test_a_run_is_claimed_by_one_runner_and_freed_when_its_process_dies(tmp_path
         )
         try:
             assert proc.stdout is not None and proc.stdout.readline() == "held\n"
+            assert s.is_claimed(rid) is True and s.is_claimed(other) is False
             with pytest.raises(RunBusy, match="another goniolab process"), s.claim_run(rid):
                 pass
+            assert s.is_claimed(rid) is True  # probing never breaks the other's claim
         finally:
             proc.kill()
             proc.wait()
-        with s.claim_run(rid):  # the kernel dropped the dead process's lock
+        assert s.is_claimed(rid) is False  # the kernel dropped the dead process's lock
+        with s.claim_run(rid):
+            assert s.is_claimed(rid) is True
             pass

@@ -84,15 +84,21 @@ def _cmd_list(args: argparse.Namespace) -> int:
             print(f"no runs in {store.path}", file=sys.stderr)
             return 0
         print(
-            f"{'RUN':>5}  {'KIND':5}  {'STATUS':8}  {'READINGS':>8}  {'CREATED (UTC)':19}  SAMPLE"
+            f"{'RUN':>5}  {'KIND':5}  {'STATUS':11}  {'READINGS':>8}  {'CREATED (UTC)':19}  SAMPLE"
         )
         for r in runs:
             b = _brief(store, r)
+            status = "interrupted" if b["interrupted"] else r.status
             print(
-                f"{r.id:>5}  {r.kind:5}  {r.status:8}  {b['readings']:>8}  "
+                f"{r.id:>5}  {r.kind:5}  {status:11}  {b['readings']:>8}  "
                 f"{_when(r.created_at):19}  {r.sample}"
             )
     return 0
+
+
+def interrupted(store: RunStore, r: RunRecord) -> bool:
+    """A run stored as running/paused that no runner holds (its process died)."""
+    return r.status in ("running", "paused") and store.is_claimed(r.id) is False
 
 
 def _brief(store: RunStore, r: RunRecord) -> dict[str, Any]:
@@ -101,6 +107,7 @@ def _brief(store: RunStore, r: RunRecord) -> dict[str, Any]:
         "id": r.id,
         "kind": r.kind,
         "status": r.status,
+        "interrupted": interrupted(store, r),
         "reason": r.reason,
         "sample": r.sample,
         "readings": n,
@@ -142,9 +149,13 @@ def _cmd_show(args: argparse.Namespace) -> int:
         rec = _get_run(store, args.run)
         summary = run_summary(store, rec)
         if args.json:
-            print(json.dumps({"run": rec.as_dict(), "summary": summary}, indent=2))
+            doc = {"run": rec.as_dict(), "interrupted": interrupted(store, rec), "summary": summary}
+            print(json.dumps(doc, indent=2))
             return 0
-        print(f"run {rec.id} ({rec.kind}) on {rec.sample or '-'}: {rec.status}")
+        status = rec.status
+        if interrupted(store, rec):
+            status += " (interrupted: no goniolab process is measuring it)"
+        print(f"run {rec.id} ({rec.kind}) on {rec.sample or '-'}: {status}")
         if rec.reason:
             print(f"  reason: {rec.reason}")
         print(f"  created {_when(rec.created_at)} UTC, finished {_when(rec.finished_at)} UTC")
