@@ -19,7 +19,7 @@ from textual.binding import Binding, BindingType
 from textual.containers import Horizontal, Vertical
 from textual.css.query import NoMatches
 from textual.notifications import SeverityLevel
-from textual.widgets import Footer, Header, Static
+from textual.widgets import Footer, Header, Input, Select, Static
 
 from drivers.base import DeviceError
 from goniolab.errors import UserError
@@ -36,7 +36,7 @@ from goniolab.scan.events import (
     RunState,
     StateChanged,
 )
-from goniolab.tui.backend import ArmState, Backend
+from goniolab.tui.backend import ArmState, Backend, ScanSetup
 from goniolab.tui.comparison import Comparison
 from goniolab.tui.palette import ScanCommands
 from goniolab.tui.screens import RunsScreen
@@ -78,7 +78,7 @@ class GonioApp(App[int]):
     ]
     CSS = """
     #top { height: 1fr; }
-    #left { width: 52; }
+    #left { width: 42; }
     #gloss-log { height: 9; border: round $primary; }
     #banner { display: none; background: $error; color: $text; height: auto; padding: 0 1; }
     #banner.shown { display: block; }
@@ -108,6 +108,7 @@ class GonioApp(App[int]):
         self._lab_released = False
         self._starting = False
         self._pause_on_start = False
+        self._starts = 0  # scans started: a prediction preview older than a start is dropped
         self._queue = backend.bus.subscribe()
 
     # ------------------------------------------------------------------ layout
@@ -116,7 +117,11 @@ class GonioApp(App[int]):
         yield Static("", id="banner")
         with Horizontal(id="top"):
             with Vertical(id="left"):
-                yield ScanForm(self.backend.sample_names(), self.backend.default_setup())
+                yield ScanForm(
+                    self.backend.sample_names(),
+                    self.backend.default_setup(),
+                    sample_note=self.backend.sample_note,
+                )
                 yield StatusPanel()
             yield ComparisonPanel(id="live")
         yield GlossLog(id="gloss-log")
@@ -140,6 +145,7 @@ class GonioApp(App[int]):
             self.show_banner(f"lab not ready: {exc}")
             self.notify(str(exc), title="Lab", severity="error", timeout=10)
             self.query_one(StatusPanel).show_run("run: idle (lab not ready)")
+            await self.poll_once()  # connected but not homed: the arms' alarm shows
             return
         self.query_one(StatusPanel).show_run("run: idle (homed)")
         await self.poll_once()
@@ -151,6 +157,8 @@ class GonioApp(App[int]):
         if self.autostart:
             self.action_read_gloss()
             self.action_start_scan()
+        else:
+            self.preview_prediction()
 
     async def poll_once(self) -> None:
         """Read both arms once and show them (errors shown as link lost)."""
@@ -213,6 +221,55 @@ class GonioApp(App[int]):
             self.notify(str(exc), title="Glossmeter", severity="warning")
         except (DeviceError, OSError) as exc:
             self.notify(str(exc), title="Glossmeter", severity="error", timeout=8)
+
+    #: Sweeps with more points than this get no live preview (a typo like step 0.0001).
+    PREVIEW_MAX_POINTS = 2000
+
+    def on_select_changed(self, event: Select.Changed) -> None:
+        """A new sample: show its predicted curve (the scan will measure that sample)."""
+        if event.select.id == "sample":
+            self.preview_prediction()
+
+    def on_input_changed(self, event: Input.Changed) -> None:
+        """A new θi or θr range: show the prediction for it."""
+        self.preview_prediction()
+
+    def preview_prediction(self) -> None:
+        """Between scans, draw the model's curve for the form's sample and sweep."""
+        if not self.ready.is_set() or self.backend.running or self._starting:
+            return
+        try:
+            setup = self.query_one(ScanForm).read()
+        except (UserError, NoMatches):
+            return  # incomplete form (typing in progress): keep what is shown
+        if len(setup.theta_r_values_deg()) > self.PREVIEW_MAX_POINTS:
+            return
+        self._preview(setup)
+
+    @work(exclusive=True, group="preview")
+    async def _preview(self, setup: ScanSetup) -> None:
+        starts = self._starts
+        try:
+            values = await self.backend.predict_curve(setup)
+        except (UserError, DeviceError, OSError, ValueError) as exc:
+            self.notify(str(exc), title="Prediction", severity="warning")
+            return
+        if self._starts != starts or self.backend.running or self._starting:
+            return  # a scan started meanwhile: its own events fill the view
+        self.comparison.clear(run_id=0, sample=setup.sample)
+        for index, (theta_r_deg, value) in enumerate(
+            zip(setup.theta_r_values_deg(), values, strict=True)
+        ):
+            self.comparison.add_predicted(
+                PointPredicted(
+                    run_id=0,
+                    index=index,
+                    theta_i_deg=setup.theta_i_deg,
+                    theta_r_deg=theta_r_deg,
+                    predicted_pct=value,
+                )
+            )
+        self.schedule_redraw()
 
     # ------------------------------------------------------------------ events
     def apply_event(self, ev: Event) -> None:
@@ -324,6 +381,7 @@ class GonioApp(App[int]):
             self.notify("a scan is already running", title="Scan", severity="warning")
             return
         self._starting = True
+        self._starts += 1
         self._start()
 
     def action_toggle_pause(self) -> None:

@@ -140,6 +140,16 @@ class Backend(Protocol):
         ...
 
     @property
+    def sample_note(self) -> str:
+        """One line under the sample picker saying what the instruments measure."""
+        ...
+
+    async def predict_curve(self, setup: ScanSetup) -> list[float]:
+        """The model's luminance in % of a mirror for ``setup.sample`` at every detector
+        angle of the sweep (``setup.theta_r_values_deg()``), computed off the event loop."""
+        ...
+
+    @property
     def running(self) -> bool:
         """A run is in progress (running or paused)."""
         ...

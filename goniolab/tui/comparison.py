@@ -43,6 +43,24 @@ def _peak_or_nan(theta_deg: FloatArray, values: FloatArray) -> PeakMetrics:
     return peak_metrics(theta, vals)
 
 
+def _is_a_peak(theta_deg: FloatArray, values: FloatArray, predicted_deg: float) -> bool:
+    """The measured maximum is a peak: not at either end of the measured range and, when
+    the predicted peak is known, the measured range contains the predicted peak position.
+
+    :mod:`goniolab.scan.summary` applies the same rule to a finished run (no peak
+    comparison unless the measured range contains the specular direction; the peak
+    metrics are those of Wittmann et al. 2021, sec. 4.2).
+    """
+    ok = np.isfinite(theta_deg) & np.isfinite(values)
+    theta, vals = theta_deg[ok], values[ok]
+    if theta.size < 3:
+        return False
+    k = int(np.argmax(vals))
+    if k in (0, theta.size - 1):
+        return False
+    return not math.isfinite(predicted_deg) or bool(theta[0] <= predicted_deg <= theta[-1])
+
+
 @dataclass(frozen=True, slots=True)
 class CurveArrays:
     """The per-point arrays the plots draw, sorted by ``theta_r_deg``.
@@ -156,6 +174,11 @@ class Comparison:
         a = self.arrays()
         measured = _peak_or_nan(a.theta_r_deg, a.mean_pct)
         predicted = _peak_or_nan(a.theta_r_deg, a.predicted_pct)
+        if not _is_a_peak(a.theta_r_deg, a.mean_pct, predicted.position_deg):
+            # A scan still climbing towards the specular direction (or one that
+            # stops short of it) has its maximum at the last reading: a flank, not a
+            # peak, and comparing its "amplitude" and "position" would mislead.
+            measured = PeakMetrics(math.nan, math.nan, math.nan)
         res = a.residual_pct
         res = res[np.isfinite(res)]
         rmse = float(np.sqrt(np.mean(res**2))) if res.size else math.nan

@@ -104,7 +104,8 @@ class LabBackend:
         self._runner: ScanRunner | None = None
         self._task: asyncio.Task[None] | None = None
         self._gloss_task: asyncio.Task[None] | None = None
-        self._gloss_run_id: int | None = None
+        self._gloss_runs: dict[str, int] = {}
+        self._scan_sample = ""
         self._models: dict[str, ReflectanceModel] = {}
         self._closed = False
 
@@ -162,6 +163,50 @@ class LabBackend:
             repeats=DEFAULT_REPEATS,
         )
 
+    @property
+    def simulated(self) -> bool:
+        """The instruments are simulated (in-process or served on the wire)."""
+        lab = self.config.lab
+        return lab.mode == "sim" or lab.start_sim_servers
+
+    @property
+    def sample_note(self) -> str:
+        if self.simulated:
+            return "the simulated lab measures the selected sample"
+        return "place the selected sample under the instruments"
+
+    def _predictor(self, model: ReflectanceModel) -> Predictor:
+        cfg = self.config
+        return Predictor(
+            model, Cone(cfg.goniometer.source_cone_deg), Cone(cfg.spectro.detector_cone_deg)
+        )
+
+    async def predict_curve(self, setup: ScanSetup) -> list[float]:
+        """The prediction of ``setup.sample`` over the sweep (model built and evaluated in
+        worker threads, see :class:`~goniolab.scan.predict.Predictor`)."""
+        setup.validate()
+        model = await self.model(setup.sample)
+        values = await asyncio.to_thread(
+            self._predictor(model).predict_sync,
+            setup.theta_i_deg,
+            setup.theta_r_values_deg(),
+        )
+        return [float(v) for v in values]
+
+    def _place_sample(self, model: ReflectanceModel) -> None:
+        """Simulated lab: the spectro and the glossmeter now read ``model`` (the sample
+        picked in the form), as if the technician had put that sample under them.
+        A real lab measures whatever lies there; nothing to do."""
+        lab, _ = self._require_open()
+        if lab.sims is None or lab.sims.spectro.model is model:
+            return
+        lab.sims.spectro.model = model
+        gm = lab.sims.glossmeter
+        gm.model = model
+        # SimGlossmeter caches the model's gloss ("the sample does not change") and has
+        # no public way to swap the sample; its cache belongs to the old one.
+        gm._gloss_cache.clear()
+
     # ------------------------------------------------------------------ scans
     @property
     def running(self) -> bool:
@@ -201,11 +246,12 @@ class LabBackend:
         except PlanError as exc:
             raise UserError(f"scan setup: {exc}") from exc
         cfg = self.config
-        predictor = Predictor(
-            await self.model(setup.sample),
-            Cone(cfg.goniometer.source_cone_deg),
-            Cone(cfg.spectro.detector_cone_deg),
-        )
+        model = await self.model(setup.sample)
+        if self.running:  # started meanwhile (the model was built in a thread)
+            raise UserError("a scan is already running")
+        predictor = self._predictor(model)
+        self._place_sample(model)
+        self._scan_sample = setup.sample
         run_id = store.create_run(
             kind="brdf",
             plan=plan.to_dict(),
@@ -281,17 +327,26 @@ class LabBackend:
     async def read_gloss(self, sample: str) -> None:
         """Take one glossmeter reading (20/60/85) in the background, logged in the store.
 
-        All readings of one TUI session go into one ``gloss`` run; the prediction of
-        ``sample`` (ISO 2813, :func:`goniolab.scan.gloss.predict_gloss`) is shown beside.
+        The readings of one TUI session go into one ``gloss`` run per sample; the
+        prediction of ``sample`` (ISO 2813, :func:`goniolab.scan.gloss.predict_gloss`) is
+        shown beside. During a scan the scan's sample lies under the instruments, so the
+        reading is taken (and predicted) for that one.
         """
         lab, store = self._require_open()
+        if self.running:
+            sample = self._scan_sample
         if self.gloss_busy:
             raise UserError("a glossmeter reading is already in progress")
         model = await self.model(sample)
         predicted = await predict_gloss(model, GLOSS_ANGLES_DEG)
+        if self.gloss_busy:
+            raise UserError("a glossmeter reading is already in progress")
+        if not self.running:  # a running scan's sample stays under the instruments
+            self._place_sample(model)
         plan = GlossPlan(count=1, angles_deg=GLOSS_ANGLES_DEG, sample=sample)
-        if self._gloss_run_id is None:
-            self._gloss_run_id = store.create_run(
+        run_id = self._gloss_runs.get(sample)
+        if run_id is None:
+            run_id = self._gloss_runs[sample] = store.create_run(
                 kind="gloss",
                 plan=plan.to_dict(),
                 config=self.config.model_dump(mode="json"),
@@ -302,7 +357,7 @@ class LabBackend:
         logger = GlossLogger(
             meter=lab.glossmeter,
             store=store,
-            run_id=self._gloss_run_id,
+            run_id=run_id,
             bus=self.bus,
             clock=lab.clock,
             plan=plan,

@@ -54,9 +54,9 @@ class MetricsTable(DataTable[str]):
         self.cursor_type = "none"
         self.zebra_stripes = True
         self.add_column("metric", key="metric")
-        self.add_column("meas.", key="measured", width=7)
-        self.add_column("pred.", key="predicted", width=7)
-        self.add_column("Δ", key="delta", width=7)
+        self.add_column("meas.", key="measured", width=6)
+        self.add_column("pred.", key="predicted", width=6)
+        self.add_column("Δ", key="delta", width=6)
         for key, label in self.ROWS:
             self.add_row(label, "-", "-", "-", key=key)
 
@@ -88,7 +88,7 @@ class ComparisonPanel(Horizontal):
     DEFAULT_CSS = """
     ComparisonPanel { height: 1fr; }
     ComparisonPanel > .main-plot { width: 3fr; border: round $primary; }
-    ComparisonPanel > Vertical { width: 2fr; }
+    ComparisonPanel > Vertical { width: 2fr; min-width: 38; }
     ComparisonPanel .side-plot { height: 1fr; border: round $secondary; }
     ComparisonPanel MetricsTable { height: 9; }
     """
@@ -99,7 +99,7 @@ class ComparisonPanel(Horizontal):
 
     def compose(self) -> ComposeResult:
         main = PlotWidget(classes="main-plot", allow_pan_and_zoom=True)
-        main.border_title = "luminance % vs θr °: measured ▪ predicted ─"
+        main.border_title = "luminance % vs θr °"
         yield main
         with Vertical():
             side = PlotWidget(classes="side-plot", allow_pan_and_zoom=True)
@@ -123,6 +123,7 @@ class ComparisonPanel(Horizontal):
         """Redraw both plots and the metrics table from ``comparison``."""
         a = comparison.arrays()
         main = self.main_plot
+        main.border_subtitle = comparison.sample.removeprefix("sample:")
         main.clear()
         main.set_xlabel("θr (deg)")
         has_pred = np.isfinite(a.predicted_pct)
@@ -158,7 +159,7 @@ class ComparisonPanel(Horizontal):
         side.clear()
         side.set_xlabel("θr (deg)")
         if self.log_view:
-            side.border_title = "log10 luminance %: measured ● predicted ─"
+            side.border_title = "log10 luminance %"
             pos_p = has_pred & (a.predicted_pct > 0)
             pos_m = has_meas & (a.mean_pct > 0)
             if pos_p.any():
@@ -208,12 +209,12 @@ class StatusPanel(Vertical):
             ("angle", "angle °", 8),
             ("motion", "motion", 6),
             ("homed", "homed", 5),
-            ("link", "link", 4),
+            ("link", "link", 5),
             ("alarm", "alarm", 5),
         ):
             table.add_column(label, key=key, width=width)
-        table.add_row("-", "-", "-", "connecting", "-", key="lamp", label="lamp")
-        table.add_row("-", "-", "-", "connecting", "-", key="detector", label="detector")
+        table.add_row("-", "-", "-", "…", "-", key="lamp", label="lamp")
+        table.add_row("-", "-", "-", "…", "-", key="detector", label="detector")
 
     def _set(self, row: str, col: str, text: str) -> None:
         """Update one cell, skipping unchanged values (polling must not repaint idly)."""
@@ -276,6 +277,7 @@ class ScanForm(Vertical):
     ScanForm .field { height: 1; margin: 0 0 1 0; }
     ScanForm .field Label { width: 11; }
     ScanForm .field Input { width: 1fr; }
+    ScanForm #sample-note { height: auto; color: $text-muted; margin: 0 0 1 0; }
     """
 
     FIELDS = (
@@ -286,10 +288,11 @@ class ScanForm(Vertical):
         ("repeats", "repeats"),
     )
 
-    def __init__(self, samples: list[str], setup: ScanSetup) -> None:
+    def __init__(self, samples: list[str], setup: ScanSetup, *, sample_note: str = "") -> None:
         super().__init__()
         self._samples = samples
         self._setup = setup
+        self._sample_note = sample_note
 
     def compose(self) -> ComposeResult:
         name = self._setup.sample.removeprefix("sample:")
@@ -297,6 +300,8 @@ class ScanForm(Vertical):
         if name not in self._samples:
             options.insert(0, (name, name))
         yield Select(options, value=name, allow_blank=False, id="sample")
+        if self._sample_note:
+            yield Static(self._sample_note, id="sample-note")
         for key, label in self.FIELDS:
             with Horizontal(classes="field"):
                 yield Label(label)

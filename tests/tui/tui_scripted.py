@@ -38,6 +38,8 @@ PEAK_DEG = 20.0
 SIGMA_DEG = 3.0
 PRED_SCALE = 0.9  # predicted = PRED_SCALE * measured mean
 SPREAD_PCT = 0.5
+#: Preview prediction of each scripted sample, relative to the scan's PRED_SCALE curve.
+PREVIEW_SCALE = {"sample:wittmann-3": 1.0, "sample:wittmann-1": 0.5, "sample:flat": 2.0}
 T0 = 1_767_225_600.0  # 2026-01-01 00:00:00 UTC: fixed timestamps for snapshots
 
 
@@ -66,6 +68,7 @@ class ScriptedBackend:
         self.position = (45.0, 45.0)
         self.stored: dict[int, StoredRun] = {}
         self.gloss_samples: list[str] = []
+        self.previews: list[ScanSetup] = []
 
     @property
     def title(self) -> str:
@@ -91,6 +94,17 @@ class ScriptedBackend:
 
     def default_setup(self) -> ScanSetup:
         return ScanSetup("sample:wittmann-3", 20.0, 10.0, 30.0, 2.0, 3)
+
+    @property
+    def sample_note(self) -> str:
+        return "the scripted lab measures the selected sample"
+
+    async def predict_curve(self, setup: ScanSetup) -> list[float]:
+        """PREVIEW_SCALE[sample] x PRED_SCALE x the scripted Gaussian."""
+        setup.validate()
+        self.previews.append(setup)
+        scale = PREVIEW_SCALE[setup.sample]
+        return [scale * PRED_SCALE * gaussian_pct(t) for t in setup.theta_r_values_deg()]
 
     @property
     def running(self) -> bool:
