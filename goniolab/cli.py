@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import logging
 import pkgutil
 import sys
 from collections.abc import Sequence
@@ -43,17 +44,25 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _quiet_library_logs(debug: bool) -> None:
+    """Keep library log lines (pymodbus prints "Failed to connect ..." at ERROR) off the
+    terminal: the drivers turn those failures into one clear error of their own."""
+    if not debug:
+        logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``goniolab`` console script; returns the process exit code."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    if not getattr(args, "func", None):
-        parser.print_help()
-        return 2
     try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        if not getattr(args, "func", None):
+            parser.print_help()
+            return 2
+        _quiet_library_logs(args.debug)
         code: int = args.func(args)
     except UserError as exc:
-        if args.debug:
+        if "args" in locals() and args.debug:
             raise
         print(f"goniolab: error: {exc}", file=sys.stderr)
         return exc.exit_code
