@@ -44,8 +44,10 @@ async def test_limits_and_interlock_refuse_before_moving(lab: Lab) -> None:
     g = lab.goniometer
     with pytest.raises(LimitError, match="lamp"):
         await g.move_to(90.0, 45.0, timeout_s=30.0)
+    with pytest.raises(LimitError, match="detector"):
+        await g.move_to(20.0, -15.0, timeout_s=30.0)  # detector arm spans 0..70 deg
     with pytest.raises(InterlockError, match="below the minimum 10"):
-        await g.move_to(20.0, -15.0, timeout_s=30.0)  # arms 5 deg apart
+        await g.move_to(2.0, 3.0, timeout_s=30.0)  # both arms near the normal: 5 deg apart
     assert await g.positions_deg() == pytest.approx((45.0, 45.0))
 
 
@@ -91,7 +93,7 @@ async def test_stall_is_detected(lab: Lab) -> None:
     assert err.value.device == "detector"
 
 
-@pytest.mark.parametrize("theta_r_deg", [45.0, 47.5, 30.0, -20.0])
+@pytest.mark.parametrize("theta_r_deg", [45.0, 47.5, 30.0, 5.0])
 async def test_spectro_reads_the_model_at_the_geometry(lab: Lab, theta_r_deg: float) -> None:
     await lab.goniometer.move_to(45.0, theta_r_deg, timeout_s=30.0)
     reading = await lab.spectro.measure()
