@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
@@ -46,7 +46,7 @@ from sim.instruments import MirrorModel, SimAxis, SimGlossmeter, SimSpectro
 from sim.motion import SimMotor
 from sim.servers import ModbusAxisServer, SimLabServer, StilPtyDevice, WireAxis, ZgmPtyDevice
 
-__all__ = ["Lab", "SimInstruments", "build_sim_instruments", "build_sim_server", "sample_model"]
+__all__ = ["INSTRUMENTS", "Lab", "SimInstruments", "build_sim_instruments", "build_sim_server", "sample_model"]
 
 
 @dataclass
@@ -241,6 +241,10 @@ def build_sim_server(cfg: LabConfig, sims: SimInstruments) -> SimLabServer:
     return SimLabServer(modbus, spectro, gloss)
 
 
+#: The lab's instruments, in the order they are connected.
+INSTRUMENTS: tuple[str, ...] = ("goniometer", "spectro", "glossmeter")
+
+
 class Lab:
     """Instruments, model and clock of one lab; use ``async with Lab.from_config(...)``.
 
@@ -253,6 +257,9 @@ class Lab:
     model
         Use this reflectance model instead of building the one of ``[sample]``
         (tests, or a caller that already has it).
+    instruments
+        Which instruments to connect (default: all three). A glossmeter session opens
+        only ``("glossmeter",)`` so it works while the goniometer is off or unreachable.
     """
 
     def __init__(
@@ -261,9 +268,16 @@ class Lab:
         *,
         time_scale: float | None = None,
         model: ReflectanceModel | None = None,
+        instruments: Iterable[str] = INSTRUMENTS,
     ) -> None:
         if time_scale is not None and not time_scale >= 0:
             raise UserError(f"--time-scale must be >= 0, got {time_scale}")
+        self.instruments = frozenset(instruments)
+        unknown = self.instruments - set(INSTRUMENTS)
+        if unknown or not self.instruments:
+            raise ValueError(
+                f"instruments must be a non-empty subset of {INSTRUMENTS}, got {sorted(unknown)}"
+            )
         self.config = config
         self.time_scale = config.lab.time_scale if time_scale is None else float(time_scale)
         self.source = Cone(config.goniometer.source_cone_deg)
@@ -285,6 +299,7 @@ class Lab:
         *,
         time_scale: float | None = None,
         model: ReflectanceModel | None = None,
+        instruments: Iterable[str] = INSTRUMENTS,
     ) -> Lab:
         """A lab from a config file (loaded and validated) or an already loaded config."""
         cfg = (
@@ -292,10 +307,12 @@ class Lab:
             if isinstance(path_or_config, LabConfig)
             else load_lab_config(path_or_config)
         )
-        return cls(cfg, time_scale=time_scale, model=model)
+        return cls(cfg, time_scale=time_scale, model=model, instruments=instruments)
 
     # ------------------------------------------------------------------ accessors
     def _need(self, what: str, value: Any) -> Any:
+        if what in INSTRUMENTS and what not in self.instruments:
+            raise RuntimeError(f"this lab was opened without the {what}")
         if value is None:
             raise RuntimeError(f"lab not open: use 'async with Lab.from_config(...)' ({what})")
         return value
@@ -449,7 +466,15 @@ class Lab:
         )
 
     async def _connect(self) -> None:
-        for part in (self._goniometer, self._spectro, self._glossmeter):
+        parts = {
+            "goniometer": self._goniometer,
+            "spectro": self._spectro,
+            "glossmeter": self._glossmeter,
+        }
+        for name in INSTRUMENTS:
+            if name not in self.instruments:
+                continue
+            part = parts[name]
             assert part is not None
             await part.connect()
             self._closers.append(part.close)

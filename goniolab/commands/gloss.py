@@ -105,7 +105,9 @@ async def _session(args: argparse.Namespace, store: RunStore, plan: GlossPlan) -
             from goniolab.lab import Lab
 
             cfg = with_sample(load_lab_config(args.config), plan.sample)
-            lab = await stack.enter_async_context(Lab.from_config(cfg, time_scale=args.time_scale))
+            lab = await stack.enter_async_context(
+                Lab.from_config(cfg, time_scale=args.time_scale, instruments=("glossmeter",))
+            )
             meter = lab.glossmeter
             clock: Any = lab.clock
             config = lab.config.model_dump(mode="json")
