@@ -78,7 +78,7 @@ class GonioApp(App[int]):
     ]
     CSS = """
     #top { height: 1fr; }
-    #left { width: 42; }
+    #left { width: 50; overflow-y: auto; }
     #gloss-log { height: 9; border: round $primary; }
     #banner { display: none; background: $error; color: $text; height: auto; padding: 0 1; }
     #banner.shown { display: block; }

@@ -174,10 +174,12 @@ class Comparison:
         a = self.arrays()
         measured = _peak_or_nan(a.theta_r_deg, a.mean_pct)
         predicted = _peak_or_nan(a.theta_r_deg, a.predicted_pct)
+        # A curve still climbing towards the specular direction (a scan in progress, or
+        # one that stops short of it) has its maximum at an end: a flank, not a peak, and
+        # its "amplitude" and "position" would mislead.
+        if not _is_a_peak(a.theta_r_deg, a.predicted_pct, math.nan):
+            predicted = PeakMetrics(math.nan, math.nan, math.nan)
         if not _is_a_peak(a.theta_r_deg, a.mean_pct, predicted.position_deg):
-            # A scan still climbing towards the specular direction (or one that
-            # stops short of it) has its maximum at the last reading: a flank, not a
-            # peak, and comparing its "amplitude" and "position" would mislead.
             measured = PeakMetrics(math.nan, math.nan, math.nan)
         res = a.residual_pct
         res = res[np.isfinite(res)]

@@ -41,7 +41,7 @@ class MetricsTable(DataTable[str]):
     """Measured vs predicted: amplitude, peak position, FWHM, RMSE and gloss."""
 
     ROWS = (
-        ("amplitude", "amplitude %"),
+        ("amplitude", "peak %"),
         ("position", "peak θr °"),
         ("fwhm", "FWHM °"),
         ("rmse", "RMSE %"),
@@ -88,7 +88,7 @@ class ComparisonPanel(Horizontal):
     DEFAULT_CSS = """
     ComparisonPanel { height: 1fr; }
     ComparisonPanel > .main-plot { width: 3fr; border: round $primary; }
-    ComparisonPanel > Vertical { width: 2fr; min-width: 38; }
+    ComparisonPanel > Vertical { width: 2fr; min-width: 36; }
     ComparisonPanel .side-plot { height: 1fr; border: round $secondary; }
     ComparisonPanel MetricsTable { height: 9; }
     """
@@ -194,22 +194,28 @@ class StatusPanel(Vertical):
 
     DEFAULT_CSS = """
     StatusPanel { height: auto; border: round $primary; }
-    StatusPanel DataTable { height: 4; }
-    StatusPanel #run-state { height: 2; }
+    StatusPanel DataTable { height: 3; }
+    StatusPanel #arm-note { height: auto; color: $warning; }
+    StatusPanel #run-state { height: auto; margin: 1 0 0 0; }
     """
 
+    def __init__(self) -> None:
+        super().__init__()
+        self._notes: dict[str, str] = {}
+
     def compose(self) -> ComposeResult:
-        yield DataTable[str](id="arms", cursor_type="none")
+        yield DataTable[str](id="arms", cursor_type="none", show_cursor=False)
+        yield Static("", id="arm-note")
         yield Static("run: idle", id="run-state")
 
     def on_mount(self) -> None:
         self.border_title = "instrument"
         table = self.query_one("#arms", DataTable)
         for key, label, width in (
-            ("angle", "angle °", 8),
+            ("angle", "angle °", 7),
             ("motion", "motion", 6),
             ("homed", "homed", 5),
-            ("link", "link", 5),
+            ("link", "link", 4),
             ("alarm", "alarm", 5),
         ):
             table.add_column(label, key=key, width=width)
@@ -228,10 +234,11 @@ class StatusPanel(Vertical):
         self._set(arm.name, "motion", "moving" if arm.moving else "idle")
         self._set(arm.name, "homed", "yes" if arm.homed else "no")
         self._set(arm.name, "link", "ok" if arm.connected else "lost")
-        alarm = "-" if arm.alarm_code is None else f"{arm.alarm_code}"
-        if arm.message:
-            alarm = arm.message[:24]
-        self._set(arm.name, "alarm", alarm)
+        self._set(arm.name, "alarm", "-" if arm.alarm_code is None else f"{arm.alarm_code:#x}")
+        # The reason (alarm text, lost link) in full on its own line under the table.
+        self._notes[arm.name] = f"{arm.name}: {arm.message}" if arm.message else ""
+        note = "\n".join(n for n in (self._notes.get("lamp"), self._notes.get("detector")) if n)
+        self.query_one("#arm-note", Static).update(note)
 
     def show_angles(self, theta_i_deg: float, theta_r_deg: float, moving: bool) -> None:
         """Update both arms from an ArmsMoved event (angles in degrees)."""
@@ -274,7 +281,7 @@ class ScanForm(Vertical):
 
     DEFAULT_CSS = """
     ScanForm { height: auto; border: round $primary; }
-    ScanForm .field { height: 1; margin: 0 0 1 0; }
+    ScanForm .field { height: 1; }
     ScanForm .field Label { width: 11; }
     ScanForm .field Input { width: 1fr; }
     ScanForm #sample-note { height: auto; color: $text-muted; margin: 0 0 1 0; }

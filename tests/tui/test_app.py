@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from textual.widgets import DataTable, Input, Static
+from textual.widgets import DataTable, Input, Select, Static
 from textual_plot import PlotWidget
 
 from goniolab.scan.events import RunState
@@ -17,6 +17,7 @@ from tests.tui.tui_scripted import (
     AMP_PCT,
     PEAK_DEG,
     PRED_SCALE,
+    PREVIEW_SCALE,
     SIGMA_DEG,
     ScriptedBackend,
     gaussian_pct,
@@ -60,6 +61,13 @@ async def test_scan_points_appear_in_plot_and_metrics() -> None:
         arms = status.query_one("#arms", DataTable)
         assert cell(arms, "detector", "angle") == "14.00"
         assert "3/11" in str(status.query_one("#run-state", Static).render())
+        # 10..14 deg is the rising flank of the peak at 20 deg: its maximum (the last
+        # reading) is no peak, and the predictions received so far are the same flank:
+        # no peak metrics yet on either side.
+        table = app.query_one("#live", ComparisonPanel).query_one(MetricsTable)
+        for row in ("amplitude", "position", "fwhm"):
+            assert cell(table, row, "measured") == "-"
+            assert cell(table, row, "predicted") == "-"
 
         await backend.release(100)
         await wait_until(pilot, lambda: app.run_state is RunState.DONE)
@@ -220,3 +228,63 @@ async def test_no_gloss_polling_by_default() -> None:
         for _ in range(50):
             await pilot.pause()
         assert backend.gloss_samples == []
+
+
+async def test_sample_picker_changes_the_prediction_and_a_new_scan_clears_old_metrics() -> None:
+    backend = ScriptedBackend(gated=False)
+    app = GonioApp(backend, poll_hz=0)
+    async with app.run_test(size=SIZE) as pilot:
+        await wait_until(pilot, app.ready.is_set)
+        grid = np.arange(10.0, 30.1, 2.0)  # the scripted default sweep
+        note = str(app.query_one("#sample-note", Static).render())
+        assert note == "the scripted lab measures the selected sample"
+        # Between scans the plot shows the selected sample's prediction, and a new pick
+        # redraws it: scripted truth PREVIEW_SCALE[sample] x 0.9 x the Gaussian.
+        for name in ("wittmann-3", "wittmann-1", "flat"):
+            if name != "wittmann-3":
+                app.query_one("#sample", Select).value = name
+            await wait_until(pilot, lambda n=name: app.comparison.sample == f"sample:{n}")
+            await settle(pilot, app)
+            x, y = plot_xy(app, "predicted")
+            assert x.tolist() == grid.tolist()
+            scale = PREVIEW_SCALE[f"sample:{name}"] * PRED_SCALE
+            np.testing.assert_allclose(y, [scale * gaussian_pct(t) for t in grid])
+        table = app.query_one("#live", ComparisonPanel).query_one(MetricsTable)
+        assert cell(table, "amplitude", "predicted") == f"{2.0 * PRED_SCALE * AMP_PCT:.2f}"
+
+        # A full scan of "flat", then a second one of 24..30 deg (no peak inside: the
+        # maximum is at its first point): the first scan's metrics must not linger.
+        await pilot.press("s")
+        await wait_until(pilot, lambda: app.run_state is RunState.DONE)
+        await settle(pilot, app)
+        assert backend.setups[-1].sample == "sample:flat"
+        assert cell(table, "amplitude", "measured") == f"{AMP_PCT:.2f}"
+        app.query_one("#theta_r_start_deg", Input).value = "24"
+        await pilot.press("s")
+        await wait_until(pilot, lambda: app.run_id == 2 and app.run_state is RunState.DONE)
+        await settle(pilot, app)
+        x, _ = plot_xy(app, "measured")
+        assert x.tolist() == [24.0, 26.0, 28.0, 30.0]
+        for row in ("amplitude", "position", "fwhm"):
+            assert cell(table, row, "measured") == "-"
+
+
+async def test_layout_fits_120x35_nothing_cut_off() -> None:
+    backend = ScriptedBackend()
+    app = GonioApp(backend, poll_hz=0)
+    async with app.run_test(size=(120, 35)) as pilot:
+        await wait_until(pilot, app.ready.is_set)
+        await pilot.pause()
+        arms = app.query_one("#arms", DataTable)
+        metrics = app.query_one(MetricsTable)
+        for table in (arms, metrics):
+            # The whole table is on screen: no horizontal scrolling, no row hidden.
+            assert table.virtual_size.width <= table.content_region.width, table
+            assert table.virtual_size.height <= table.content_region.height, table
+            assert table.region.right <= 120
+        left = app.query_one("#left")
+        status = app.query_one(StatusPanel)
+        assert status.region.bottom <= left.region.bottom  # the run line and border show
+        # Every fixed-width status cell holds its longest value.
+        for key, longest in (("angle", "-80.00"), ("motion", "moving"), ("link", "lost")):
+            assert arms.columns[key].width >= len(longest)  # type: ignore[index]
