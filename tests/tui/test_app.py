@@ -243,7 +243,12 @@ async def test_sample_picker_changes_the_prediction_and_a_new_scan_clears_old_me
         for name in ("wittmann-3", "wittmann-1", "flat"):
             if name != "wittmann-3":
                 app.query_one("#sample", Select).value = name
-            await wait_until(pilot, lambda n=name: app.comparison.sample == f"sample:{n}")
+            spec = f"sample:{name}"
+
+            def shown(spec: str = spec) -> bool:
+                return app.comparison.sample == spec
+
+            await wait_until(pilot, shown)
             await settle(pilot, app)
             x, y = plot_xy(app, "predicted")
             assert x.tolist() == grid.tolist()
