@@ -107,6 +107,7 @@ class GonioApp(App[int]):
         self._last_redraw_s = -math.inf
         self._lab_released = False
         self._starting = False
+        self._opening = False  # backend.open() in progress (connecting, homing)
         self._pause_on_start = False
         self._starts = 0  # scans started: a prediction preview older than a start is dropped
         self._queue = backend.bus.subscribe()
@@ -138,19 +139,22 @@ class GonioApp(App[int]):
     async def startup(self) -> None:
         """Connect and home the lab, then poll the arms and (optionally) start a scan."""
         self.query_one(StatusPanel).show_run("run: idle (homing...)")
+        self._opening = True
+        if self.poll_hz > 0:
+            self.poll_arms()  # already while homing: the arms move
         try:
             await self.backend.open()
         except (DeviceError, UserError, OSError, ValueError, RuntimeError) as exc:
             # Unreachable instrument, bad map/profile, port busy: shown, the UI stays up.
+            self._opening = False
             self.show_banner(f"lab not ready: {exc}")
             self.notify(str(exc), title="Lab", severity="error", timeout=10)
             self.query_one(StatusPanel).show_run("run: idle (lab not ready)")
             await self.poll_once()  # connected but not homed: the arms' alarm shows
             return
+        self._opening = False
         self.query_one(StatusPanel).show_run("run: idle (homed)")
         await self.poll_once()
-        if self.poll_hz > 0:
-            self.poll_arms()
         self.ready.set()
         if self.gloss_every_s > 0:
             self.set_interval(self.gloss_every_s, self.action_read_gloss)
@@ -169,7 +173,12 @@ class GonioApp(App[int]):
         try:
             for arm in await self.backend.arm_states():
                 panel.show_arm(arm)
-        except (DeviceError, UserError, OSError) as exc:
+        except UserError as exc:
+            if self._opening:
+                return  # the lab is still connecting: the rows keep "…"
+            for name in ("lamp", "detector"):
+                panel.show_arm(ArmState(name, None, False, False, None, False, str(exc)))
+        except (DeviceError, OSError) as exc:
             for name in ("lamp", "detector"):
                 panel.show_arm(ArmState(name, None, False, False, None, False, str(exc)))
 

@@ -293,3 +293,22 @@ async def test_layout_fits_120x35_nothing_cut_off() -> None:
         # Every fixed-width status cell holds its longest value.
         for key, longest in (("angle", "-80.00"), ("motion", "moving"), ("link", "lost")):
             assert arms.columns[key].width >= len(longest)  # type: ignore[index]
+
+
+async def test_status_panel_follows_the_arms_while_homing() -> None:
+    # poll_hz > 0: the arms are polled from the start, not only once homed.
+    backend = ScriptedBackend(hold_open=True)
+    app = GonioApp(backend, poll_hz=100.0)
+    async with app.run_test(size=SIZE) as pilot:
+        arms = app.query_one("#arms", DataTable)
+        run_line = app.query_one("#run-state", Static)
+        backend.position = (12.5, 3.0)  # the arms on their way to the reference
+        await wait_until(pilot, lambda: cell(arms, "lamp", "angle") == "12.50", max_turns=10**5)
+        assert cell(arms, "detector", "angle") == "3.00"
+        assert str(run_line.render()) == "run: idle (homing...)"
+        assert not app.ready.is_set()
+        backend.position = (0.0, 0.0)
+        backend.homed.set()
+        await wait_until(pilot, app.ready.is_set)
+        await wait_until(pilot, lambda: cell(arms, "lamp", "angle") == "0.00", max_turns=10**5)
+        assert str(run_line.render()) == "run: idle (homed)"

@@ -51,8 +51,14 @@ def gaussian_pct(theta_r_deg: float) -> float:
 class ScriptedBackend:
     """Implements :class:`goniolab.tui.backend.Backend` with a scripted event publisher."""
 
-    def __init__(self, *, gated: bool = True, fail_open: bool = False) -> None:
+    def __init__(
+        self, *, gated: bool = True, fail_open: bool = False, hold_open: bool = False
+    ) -> None:
         self.bus = EventBus()
+        #: With ``hold_open``, open() (connect and home) returns only once this is set.
+        self.homed = asyncio.Event()
+        if not hold_open:
+            self.homed.set()
         self.gated = gated
         self.fail_open = fail_open
         self._allowed = 0
@@ -75,6 +81,7 @@ class ScriptedBackend:
         return "scripted lab"
 
     async def open(self) -> None:
+        await self.homed.wait()
         if self.fail_open:
             raise DeviceTimeout("no answer to homing within 30.0 s", device="lamp")
         self.opened = True
