@@ -71,6 +71,7 @@ class GonioApp(App[int]):
         Binding("space", "toggle_pause", "Pause/Resume", key_display="space", priority=True),
         Binding("x", "abort_scan", "Abort"),
         Binding("g", "read_gloss", "Gloss"),
+        Binding("h", "home", "Home"),
         Binding("l", "toggle_log", "Residual/log"),
         Binding("r", "browse_runs", "Runs"),
         Binding("q", "quit", "Quit"),
@@ -107,7 +108,8 @@ class GonioApp(App[int]):
         self._last_redraw_s = -math.inf
         self._lab_released = False
         self._starting = False
-        self._opening = False  # backend.open() in progress (connecting, homing)
+        self._opening = False  # backend.open() or home() in progress
+        self._gloss_polling = False
         self._pause_on_start = False
         self._starts = 0  # scans started: a prediction preview older than a start is dropped
         self._queue = backend.bus.subscribe()
@@ -136,14 +138,15 @@ class GonioApp(App[int]):
 
     # ------------------------------------------------------------------ workers
     @work(exclusive=True, group="startup")
-    async def startup(self) -> None:
-        """Connect and home the lab, then poll the arms and (optionally) start a scan."""
+    async def startup(self, rehome: bool = False) -> None:
+        """Connect and home the lab (``rehome``: reset alarms and home again), then poll
+        the arms and (optionally) start a scan."""
         self.query_one(StatusPanel).show_run("run: idle (homing...)")
         self._opening = True
         if self.poll_hz > 0:
             self.poll_arms()  # already while homing: the arms move
         try:
-            await self.backend.open()
+            await (self.backend.home() if rehome else self.backend.open())
         except (DeviceError, UserError, OSError, ValueError, RuntimeError) as exc:
             # Unreachable instrument, bad map/profile, port busy: shown, the UI stays up.
             self._opening = False
@@ -153,12 +156,14 @@ class GonioApp(App[int]):
             await self.poll_once()  # connected but not homed: the arms' alarm shows
             return
         self._opening = False
+        self.hide_banner()
         self.query_one(StatusPanel).show_run("run: idle (homed)")
         await self.poll_once()
         self.ready.set()
-        if self.gloss_every_s > 0:
+        if self.gloss_every_s > 0 and not self._gloss_polling:
+            self._gloss_polling = True
             self.set_interval(self.gloss_every_s, self.action_read_gloss)
-        if self.autostart:
+        if self.autostart and not rehome:
             self.action_read_gloss()
             self.action_start_scan()
         else:
@@ -417,6 +422,17 @@ class GonioApp(App[int]):
             self.notify("aborting after the current point", title="Scan", severity="warning")
         else:
             self.notify("no scan running", title="Scan", severity="warning")
+
+    def action_home(self) -> None:
+        """Reset the arms' alarms and home them again, e.g. after an alarm (key ``h``)."""
+        if self.backend.running or self._starting:
+            self.notify("a scan is running: abort it first (x)", title="Home", severity="warning")
+            return
+        if self._opening:
+            self.notify("already connecting / homing", title="Home", severity="warning")
+            return
+        self.ready.clear()
+        self.startup(rehome=True)
 
     def action_blur(self) -> None:
         """Leave a form field so that the single-key commands work again (``escape``)."""

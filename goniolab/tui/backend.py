@@ -131,6 +131,11 @@ class Backend(Protocol):
         """Stop any run and release the instruments."""
         ...
 
+    async def home(self) -> None:
+        """Reset the arms' alarms and home the goniometer again (connecting first if
+        :meth:`open` failed before the instruments were reached)."""
+        ...
+
     def sample_names(self) -> list[str]:
         """Built-in samples for the picker (without the ``sample:`` prefix)."""
         ...

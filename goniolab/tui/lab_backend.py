@@ -134,6 +134,18 @@ class LabBackend:
         home_timeout_s = 4.0 * self.config.goniometer.move_timeout_s
         await self.lab.goniometer.home(home_timeout_s)
 
+    async def home(self) -> None:
+        """Reset both arms' alarms and home again; :meth:`open` if the lab is not built."""
+        if self.lab is None:
+            await self.open()
+            return
+        if self.running:
+            raise UserError("a scan is running: abort it before homing")
+        gonio = self.lab.goniometer
+        for axis in (gonio.lamp, gonio.detector):
+            await axis.reset_alarm()
+        await gonio.home(4.0 * self.config.goniometer.move_timeout_s)
+
     async def close(self) -> None:
         """Abort a running scan (the runner parks the arms), then release everything."""
         self._closed = True

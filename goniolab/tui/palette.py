@@ -14,6 +14,7 @@ SCAN_COMMANDS: tuple[tuple[str, str, str], ...] = (
     ("Pause / resume scan", "toggle_pause", "Pause after the current point, or resume (space)"),
     ("Abort scan", "abort_scan", "Stop after the current point; run marked aborted (x)"),
     ("Read glossmeter", "read_gloss", "One 20/60/85 reading beside the prediction (g)"),
+    ("Home the arms", "home", "Reset the arms' alarms and home them again (h)"),
     ("Toggle residual / log view", "toggle_log", "Side plot: residuals or log10 curves (l)"),
     ("Browse stored runs", "browse_runs", "Reopen a stored run's comparison (r)"),
     ("Quit", "quit", "Leave goniolab (q)"),

@@ -134,6 +134,15 @@ async def test_homing_timeout_shows_banner_and_blocks_start() -> None:
         await pilot.press("s")
         assert notes(app)[-1] == "Scan: the lab is not ready (not homed)"
         assert backend.setups == []
+        # The fault cleared: h homes again, the banner goes, a scan can start.
+        backend.fail_open = False
+        await pilot.press("h")
+        await wait_until(pilot, app.ready.is_set)
+        assert backend.homings == 1
+        assert not banner.has_class("shown")
+        assert str(app.query_one("#run-state", Static).render()) == "run: idle (homed)"
+        await pilot.press("s")
+        await wait_until(pilot, lambda: len(backend.setups) == 1)
 
 
 async def test_bad_form_value_names_the_field() -> None:

@@ -278,3 +278,22 @@ async def test_the_sim_lab_measures_the_sample_picked_in_the_form(tmp_path: Path
             assert float(row[4 + k]) == pytest.approx(gloss[angle], abs=0.051)
         with RunStore(tmp_path / "runs.sqlite") as store:
             assert store.get_run(app.run_id).sample == "sample:wittmann-1"
+
+
+async def test_alarm_while_homing_shows_and_h_resets_and_homes_again(tmp_path: Path) -> None:
+    # The detector passes 30 deg on its way from park (45) to its reference: alarm 0x30
+    # (injected once). The lab is not ready, the arms' state shows the alarm; h resets
+    # the alarm and homes again.
+    app = make_app(tmp_path, faults="detector_alarm_at_deg = 30.0\nalarm_code = 48\n")
+    async with app.run_test(size=SIZE) as pilot:
+        banner = app.query_one("#banner", Static)
+        await wait_until(pilot, lambda: banner.has_class("shown"))
+        assert "detector" in str(banner.render()) and "0x30" in str(banner.render())
+        arms = app.query_one(StatusPanel).query_one("#arms", DataTable)
+        await wait_until(pilot, lambda: str(arms.get_cell("detector", "alarm")) == "0x30")
+        await pilot.press("h")
+        await wait_until(pilot, app.ready.is_set)
+        await app.poll_once()
+        assert str(arms.get_cell("detector", "alarm")) == "-"
+        assert str(arms.get_cell("detector", "angle")) == "0.00"  # at its reference
+        assert not banner.has_class("shown")

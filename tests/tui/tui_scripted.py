@@ -75,6 +75,7 @@ class ScriptedBackend:
         self.stored: dict[int, StoredRun] = {}
         self.gloss_samples: list[str] = []
         self.previews: list[ScanSetup] = []
+        self.homings = 0
 
     @property
     def title(self) -> str:
@@ -85,6 +86,10 @@ class ScriptedBackend:
         if self.fail_open:
             raise DeviceTimeout("no answer to homing within 30.0 s", device="lamp")
         self.opened = True
+
+    async def home(self) -> None:
+        self.homings += 1
+        await self.open()
 
     async def close(self) -> None:
         self.closed = True
