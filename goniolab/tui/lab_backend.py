@@ -16,7 +16,7 @@ from contextlib import AsyncExitStack
 from pathlib import Path
 from typing import Any
 
-from drivers.base import GLOSS_ANGLES_DEG, DeviceError
+from drivers.base import GLOSS_ANGLES_DEG, DeviceError, InterlockError, LimitError
 from goniolab import __version__
 from goniolab.config import LabConfig, load_lab_config
 from goniolab.errors import UserError
@@ -257,6 +257,16 @@ class LabBackend:
             )
         except PlanError as exc:
             raise UserError(f"scan setup: {exc}") from exc
+        # The runner's dry run would refuse these too, but only after the run is stored
+        # as failed: a geometry out of the arms' reach is a form error.
+        for theta_r_deg in plan.theta_r_deg:
+            try:
+                lab.goniometer.check_geometry(plan.theta_i_deg, theta_r_deg)
+            except (LimitError, InterlockError) as exc:
+                raise UserError(
+                    f"scan setup: theta_i {plan.theta_i_deg:g} deg, theta_r {theta_r_deg:g} "
+                    f"deg is out of the goniometer's reach: {exc.message}"
+                ) from None
         cfg = self.config
         model = await self.model(setup.sample)
         if self.running:  # started meanwhile (the model was built in a thread)

@@ -7,6 +7,7 @@ predicted agree to rounding, point by point.
 
 from __future__ import annotations
 
+import math
 import re
 from pathlib import Path
 
@@ -15,6 +16,7 @@ import pytest
 from textual.pilot import Pilot
 from textual.widgets import DataTable, Input, Select, Static
 
+from goniolab.config import load_lab_config
 from goniolab.maps import model_for
 from goniolab.optics.analytic import AnalyticModel
 from goniolab.optics.apertures import Cone
@@ -297,3 +299,47 @@ async def test_alarm_while_homing_shows_and_h_resets_and_homes_again(tmp_path: P
         assert str(arms.get_cell("detector", "alarm")) == "-"
         assert str(arms.get_cell("detector", "angle")) == "0.00"  # at its reference
         assert not banner.has_class("shown")
+
+
+async def test_geometry_out_of_reach_is_a_form_error(tmp_path: Path) -> None:
+    # Beyond the detector's limits (from the config), and arms closer than the minimum
+    # separation (theta_i 5, theta_r 0: 5 deg apart): refused before a run is stored.
+    cfg = load_lab_config(sim_config(tmp_path))
+    lo_deg, hi_deg = cfg.goniometer.detector.limits_deg
+    min_sep_deg = cfg.goniometer.min_separation_deg
+    first_out = math.floor(hi_deg) + 1
+    cases = [
+        (
+            {
+                "theta_i_deg": "45",
+                "theta_r_start_deg": f"{max(lo_deg, 0.0):g}",
+                "theta_r_stop_deg": f"{hi_deg + 5:g}",
+            },
+            f"theta_r {first_out} deg is out of the goniometer's reach",
+            "detector arm limits",
+        ),
+        (
+            {
+                "theta_i_deg": f"{min_sep_deg / 2:g}",
+                "theta_r_start_deg": "0",
+                "theta_r_stop_deg": "20",
+            },
+            f"theta_i {min_sep_deg / 2:g} deg, theta_r 0 deg is out of the goniometer's reach",
+            "apart",
+        ),
+    ]
+    app = make_app(tmp_path)
+    async with app.run_test(size=SIZE) as pilot:
+        await wait_until(pilot, app.ready.is_set)
+        for form, where, why in cases:
+            await set_form(pilot, app, theta_r_step_deg="1", **form)
+            app.clear_notifications()
+            await pilot.press("s")
+            await wait_until(
+                pilot, lambda: any(n.title == "Scan setup" for n in app._notifications)
+            )
+            note = next(n.message for n in app._notifications if n.title == "Scan setup")
+            assert where in note and why in note, note
+        assert not app.query_one("#banner").has_class("shown")
+        with RunStore(tmp_path / "runs.sqlite") as store:
+            assert store.list_runs() == []
