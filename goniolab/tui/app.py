@@ -64,6 +64,8 @@ class GonioApp(App[int]):
     TITLE = "goniolab"
     #: Minimum time between two redraws of the live plots (wall seconds).
     REDRAW_INTERVAL_S = 0.25
+    #: Minimum time between two toasts for non-fatal errors of one device (wall seconds).
+    ERROR_TOAST_INTERVAL_S = 10.0
     AUTO_FOCUS = None
     COMMANDS: ClassVar = App.COMMANDS | {ScanCommands}
     BINDINGS: ClassVar[list[BindingType]] = [
@@ -110,6 +112,7 @@ class GonioApp(App[int]):
         self._starting = False
         self._opening = False  # backend.open() or home() in progress
         self._gloss_polling = False
+        self._error_toast_s: dict[str, float] = {}  # device -> time of its last error toast
         self._pause_on_start = False
         self._starts = 0  # scans started: a prediction preview older than a start is dropped
         self._queue = backend.bus.subscribe()
@@ -317,12 +320,18 @@ class GonioApp(App[int]):
             self.query_one("#gloss-log", GlossLog).add_reading(ev)
             self.schedule_redraw()
         elif isinstance(ev, InstrumentError):
-            self.notify(
-                ev.message,
-                title=f"{ev.device} error" + (" (fatal)" if ev.fatal else ""),
-                severity="error",
-                timeout=10,
-            )
+            now_s = time.monotonic()
+            last_s = self._error_toast_s.get(ev.device, -math.inf)
+            # Retries of a flaky device report every failure: one toast per device per
+            # ERROR_TOAST_INTERVAL_S (the fatal one always), not a stack of ten.
+            if ev.fatal or now_s - last_s >= self.ERROR_TOAST_INTERVAL_S:
+                self._error_toast_s[ev.device] = now_s
+                self.notify(
+                    ev.message,
+                    title=f"{ev.device} error" + (" (fatal)" if ev.fatal else ""),
+                    severity="error",
+                    timeout=10,
+                )
             if ev.fatal:
                 self.show_banner(f"{ev.device}: {ev.message}")
         elif isinstance(ev, RunFinished):

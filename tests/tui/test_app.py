@@ -9,7 +9,7 @@ import pytest
 from textual.widgets import DataTable, Input, Select, Static
 from textual_plot import PlotWidget
 
-from goniolab.scan.events import RunState
+from goniolab.scan.events import InstrumentError, RunState
 from goniolab.tui.app import GonioApp
 from goniolab.tui.screens import RunsScreen
 from goniolab.tui.widgets import ComparisonPanel, GlossLog, MetricsTable, StatusPanel
@@ -122,6 +122,18 @@ async def test_instrument_timeout_is_a_notification_not_a_crash() -> None:
         await wait_until(pilot, lambda: any("spectro error" in n for n in notes(app)))
         assert app.is_running
         assert "no reply to 'MEASURE' within 2.0 s" in notes(app)[-1]
+        # A retrying device reports every failure: one toast for the burst, not five;
+        # the fatal error that ends the retries is shown too.
+        for _ in range(4):
+            backend.publish_timeout()
+        backend.bus.publish(
+            InstrumentError(run_id=0, device="spectro", message="gave up", fatal=True)
+        )
+        await wait_until(pilot, lambda: any("gave up" in n for n in notes(app)))
+        assert [n for n in notes(app) if n.startswith("spectro error")] == [
+            "spectro error: no reply to 'MEASURE' within 2.0 s",
+            "spectro error (fatal): gave up",
+        ]
 
 
 async def test_homing_timeout_shows_banner_and_blocks_start() -> None:
