@@ -6,6 +6,7 @@ import math
 from datetime import UTC, datetime
 
 import numpy as np
+from textual import events
 from textual.app import ComposeResult
 from textual.containers import Horizontal, Vertical
 from textual.widgets import DataTable, Input, Label, Select, Static
@@ -18,6 +19,7 @@ from goniolab.tui.comparison import Comparison, ComparisonMetrics
 
 __all__ = [
     "ComparisonPanel",
+    "FormInput",
     "GlossLog",
     "MetricsTable",
     "ScanForm",
@@ -276,6 +278,28 @@ class GlossLog(DataTable[str]):
         self.move_cursor(row=self.row_count - 1)
 
 
+class FormInput(Input):
+    """A number field that takes only what a number can contain, so that the app's
+    single-letter commands (s, x, g, h, l, r, q) still work while it has focus.
+
+    Textual drops an app binding whose key the focused widget may consume
+    (:meth:`check_consume_key`); a plain :class:`Input` claims every printable key.
+    """
+
+    def _accepts(self, character: str | None) -> bool:
+        allowed = "0123456789+-" if self.type == "integer" else "0123456789+-.eE"
+        return character is not None and len(character) == 1 and character in allowed
+
+    def check_consume_key(self, key: str, character: str | None) -> bool:
+        return self._accepts(character)
+
+    async def _on_key(self, event: events.Key) -> None:
+        if event.is_printable and not self._accepts(event.character):
+            event.prevent_default()  # not for the field: let it reach the app's bindings
+            return
+        await super()._on_key(event)
+
+
 class ScanForm(Vertical):
     """Sample, theta_i, theta_r range and repeats of the next scan."""
 
@@ -313,7 +337,7 @@ class ScanForm(Vertical):
             with Horizontal(classes="field"):
                 yield Label(label)
                 value = getattr(self._setup, key)
-                yield Input(
+                yield FormInput(
                     f"{value:g}" if isinstance(value, float) else str(value),
                     id=key,
                     type="integer" if key == "repeats" else "number",

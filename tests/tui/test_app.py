@@ -333,3 +333,23 @@ async def test_status_panel_follows_the_arms_while_homing() -> None:
         await wait_until(pilot, app.ready.is_set)
         await wait_until(pilot, lambda: cell(arms, "lamp", "angle") == "0.00", max_turns=10**5)
         assert str(run_line.render()) == "run: idle (homed)"
+
+
+async def test_single_key_commands_work_while_a_form_field_has_focus() -> None:
+    # Typing a value and pressing s starts the scan with that value; x aborts from the
+    # field too (letters are no part of a number, so the field does not take them).
+    backend = ScriptedBackend()
+    app = GonioApp(backend, poll_hz=0)
+    async with app.run_test(size=SIZE) as pilot:
+        await wait_until(pilot, app.ready.is_set)
+        field = app.query_one("#theta_i_deg", Input)
+        field.focus()
+        await pilot.press("end", "backspace", "backspace", "3", "5", ".", "5", "s")
+        await wait_until(pilot, lambda: len(backend.setups) == 1)
+        assert backend.setups[0].theta_i_deg == 35.5
+        assert app.focused is field and field.value == "35.5"
+        await wait_until(pilot, lambda: app.run_state is RunState.RUNNING)
+        await pilot.press("x")
+        await backend.release(1)
+        await wait_until(pilot, lambda: app.run_state is RunState.ABORTED)
+        assert field.value == "35.5"
