@@ -248,8 +248,10 @@ class GonioApp(App[int]):
             self.preview_prediction()
 
     def on_input_changed(self, event: Input.Changed) -> None:
-        """A new θi or θr range: show the prediction for it."""
-        self.preview_prediction()
+        """A new θi or θr range: show the prediction for it, unless a finished scan is
+        shown (editing the next sweep must not wipe it; a new sample pick does)."""
+        if self.comparison.n_readings == 0:
+            self.preview_prediction()
 
     def preview_prediction(self) -> None:
         """Between scans, draw the model's curve for the form's sample and sweep."""

@@ -286,6 +286,9 @@ async def test_sample_picker_changes_the_prediction_and_a_new_scan_clears_old_me
         assert backend.setups[-1].sample == "sample:flat"
         assert cell(table, "amplitude", "measured") == f"{AMP_PCT:.2f}"
         app.query_one("#theta_r_start_deg", Input).value = "24"
+        for _ in range(5):
+            await pilot.pause()
+        assert app.comparison.n_readings == 33  # editing the next sweep keeps the result
         await pilot.press("s")
         await wait_until(pilot, lambda: app.run_id == 2 and app.run_state is RunState.DONE)
         await settle(pilot, app)
