@@ -46,10 +46,13 @@ from typing import Any, TypeVar
 
 from drivers.base import (
     DeviceError,
+    DeviceTimeout,
     Goniometer,
     InterlockError,
     LimitError,
+    ProtocolError,
     Spectrocolorimeter,
+    SpectroReading,
 )
 from goniolab.scan.events import (
     ArmsMoved,
@@ -242,6 +245,11 @@ class ScanRunner:
         Swaps mirror and sample for the mirror reference (``None`` when the plan has none).
     misalignment_threshold_deg
         Peak offset above which the summary carries a misalignment hint.
+    reading_retries
+        A reading that times out or comes back garbled (:class:`drivers.base.DeviceTimeout`,
+        :class:`drivers.base.ProtocolError`) is taken again up to this many times, each
+        retry reported as a non-fatal :class:`~goniolab.scan.events.InstrumentError`;
+        an alarm, a disconnect or the last failed retry fails the run.
     """
 
     def __init__(
@@ -263,7 +271,10 @@ class ScanRunner:
         position_tolerance_deg: float = 0.05,
         specimen_hook: SpecimenHook | None = None,
         misalignment_threshold_deg: float = 0.5,
+        reading_retries: int = 2,
     ) -> None:
+        if reading_retries < 0:
+            raise ValueError(f"reading_retries must be >= 0, got {reading_retries}")
         self.goniometer = goniometer
         self.spectro = spectro
         self.clock = clock
@@ -280,6 +291,7 @@ class ScanRunner:
         self.position_tolerance_deg = position_tolerance_deg
         self.specimen_hook = specimen_hook
         self.misalignment_threshold_deg = misalignment_threshold_deg
+        self.reading_retries = reading_retries
         if plan.mirror_reference and specimen_hook is None:
             raise ValueError("a plan with a mirror reference needs a specimen_hook")
         self._state = RunState.IDLE
@@ -439,6 +451,26 @@ class ScanRunner:
                     )
                 )
 
+    async def _read_spectro(self, p: PlanPoint) -> SpectroReading:
+        """One spectro reading, taken again after a transient fault (timeout, garbled reply)
+        up to ``reading_retries`` times; each retry is reported, nothing is stored twice."""
+        for attempt in range(self.reading_retries + 1):
+            try:
+                return await self.spectro.measure()
+            except (DeviceTimeout, ProtocolError) as exc:
+                if attempt == self.reading_retries:
+                    raise
+                self.bus.publish(
+                    InstrumentError(
+                        run_id=self.run_id,
+                        device=exc.device or "spectro",
+                        message=f"{exc} (point {p.index}, repeat {p.repeat}: "
+                        f"retry {attempt + 1} of {self.reading_retries})",
+                        fatal=False,
+                    )
+                )
+        raise AssertionError("unreachable")  # pragma: no cover - the loop returns or raises
+
     def _mirror_level(self) -> float | None:
         vals = [p.luminance_pct for p in self.store.points(self.run_id) if p.index == MIRROR_INDEX]
         if len(vals) < self.plan.repeats:
@@ -530,7 +562,7 @@ class ScanRunner:
                     break
                 if moved:
                     await self.clock.sleep(self.plan.dwell_s)
-                reading = await self.spectro.measure()
+                reading = await self._read_spectro(p)
                 raw_pct = float(reading.luminance_pct)
                 if p.index == MIRROR_INDEX:
                     value = raw_pct

@@ -9,7 +9,7 @@ from typing import Any, cast
 
 import pytest
 
-from drivers.base import DeviceError, Goniometer
+from drivers.base import DeviceError, DeviceTimeout, Goniometer, ProtocolError
 from goniolab.optics.apertures import Cone
 from goniolab.scan.events import (
     ArmsMoved,
@@ -444,3 +444,54 @@ async def test_abort_during_homing_stops_and_does_not_park(
     assert "not parked" in fin.reason  # unreferenced arms are only stopped
     assert g.home_calls == 1 and g.stop_calls >= 1 and g.park_calls == 0 and g.moves == []
     assert fake_lab.clock.now() == 0.0 and fake_lab.spectro.n_reads == 0
+
+
+class _FlakySpectro:
+    """Wraps the fake spectro: the listed measure() calls (1-based) fail with ``exc``."""
+
+    def __init__(self, inner: Any, failing_calls: set[int], exc: Exception) -> None:
+        self.inner = inner
+        self.name = inner.name
+        self.failing_calls = failing_calls
+        self.exc = exc
+        self.calls = 0
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.inner, name)
+
+    async def measure(self) -> Any:
+        self.calls += 1
+        if self.calls in self.failing_calls:
+            raise self.exc
+        return await self.inner.measure()
+
+
+async def test_transient_reading_faults_are_retried_and_reported(
+    fake_lab: FakeLab, store: RunStore
+) -> None:
+    # calls 2 and 3 (the second reading, twice) and call 5 (the third reading) time out
+    flaky = _FlakySpectro(fake_lab.spectro, {2, 3, 5}, DeviceTimeout("no reply", device="spectro"))
+    fake_lab.spectro = flaky  # type: ignore[assignment]
+    plan = BrdfPlan(45.0, parse_angles("44:46:1"), repeats=1)
+    runner, bus = make_runner(fake_lab, store, plan, reading_retries=2)
+    events = await drive(runner, bus, lambda ev: None)
+    assert runner.state is RunState.DONE
+    assert store.count_points(runner.run_id) == 3  # every reading stored once
+    assert flaky.calls == 6  # 3 readings + 3 retries
+    warnings = [e for e in events if isinstance(e, InstrumentError)]
+    assert [e.fatal for e in warnings] == [False, False, False]
+    assert "retry 1 of 2" in warnings[0].message and "retry 2 of 2" in warnings[1].message
+
+
+async def test_a_reading_that_keeps_failing_fails_the_run(
+    fake_lab: FakeLab, store: RunStore
+) -> None:
+    flaky = _FlakySpectro(fake_lab.spectro, {2, 3, 4}, ProtocolError("garbled", device="spectro"))
+    fake_lab.spectro = flaky  # type: ignore[assignment]
+    plan = BrdfPlan(45.0, parse_angles("44:46:1"), repeats=1)
+    runner, bus = make_runner(fake_lab, store, plan, reading_retries=2)
+    events = await drive(runner, bus, lambda ev: None)
+    assert runner.state is RunState.FAILED
+    assert store.count_points(runner.run_id) == 1  # the first reading is kept
+    assert "garbled" in store.get_run(runner.run_id).reason
+    assert [e.fatal for e in events if isinstance(e, InstrumentError)] == [False, False, True]
