@@ -594,6 +594,7 @@ class SimGlossmeter(_SimLink):
         name: str = "glossmeter",
     ) -> None:
         self.name = name
+        self._gloss_cache: dict[int, float] = {}
         self.model = model
         self.clock = clock
         self.noise_pct = noise_pct
@@ -603,10 +604,19 @@ class SimGlossmeter(_SimLink):
         self.temperature_c = temperature_c
         self.faults = faults or FaultInjector(name)
         self._connected = False
-        self._gloss_cache: dict[int, float] = {}
+
+    @property
+    def model(self) -> ReflectanceModel:
+        """The sample under the meter; setting it (another sample) forgets the cached gloss."""
+        return self._model
+
+    @model.setter
+    def model(self, model: ReflectanceModel) -> None:
+        self._model = model
+        self._gloss_cache.clear()
 
     async def predicted_gu(self, angles_deg: Sequence[int]) -> dict[int, float]:
-        """Noise-free model gloss per geometry (cached: the sample does not change)."""
+        """Noise-free model gloss per geometry (cached until the sample changes)."""
         missing = [a for a in angles_deg if a not in self._gloss_cache]
         if missing:
             values = await asyncio.to_thread(self.model.gloss, tuple(missing))

@@ -213,11 +213,7 @@ class LabBackend:
         if lab.sims is None or lab.sims.spectro.model is model:
             return
         lab.sims.spectro.model = model
-        gm = lab.sims.glossmeter
-        gm.model = model
-        # SimGlossmeter caches the model's gloss ("the sample does not change") and has
-        # no public way to swap the sample; its cache belongs to the old one.
-        gm._gloss_cache.clear()
+        lab.sims.glossmeter.model = model  # forgets the gloss cached for the old sample
 
     # ------------------------------------------------------------------ scans
     @property

@@ -261,3 +261,12 @@ async def test_glossmeter_rounds_model_gloss_flags_overflow_and_streams() -> Non
     assert clock.now() - t0 == pytest.approx(5.0 + gm.measure_time_s)
     with pytest.raises(ValueError, match="geometry 45 deg"):
         await gm.measure([45])
+
+
+async def test_glossmeter_reads_the_new_sample_after_a_swap() -> None:
+    """Putting another sample under the meter (``model = ...``) drops the cached gloss."""
+    gm = SimGlossmeter(LobeModel(), SimClock(0), noise_pct=0.0)
+    await gm.connect()
+    assert (await gm.measure([60])).values_gu[60] == 93.0
+    gm.model = LobeModel(gloss_gu={20: 10.0, 60: 42.04, 85: 50.0})
+    assert (await gm.measure([60])).values_gu[60] == 42.0
