@@ -21,6 +21,8 @@ from typing import Any
 from drivers.base import GLOSS_ANGLES_DEG
 
 __all__ = [
+    "MAX_ANGLES",
+    "MAX_READINGS",
     "MIRROR_INDEX",
     "BrdfPlan",
     "GlossPlan",
@@ -30,6 +32,11 @@ __all__ = [
     "gloss_statistics",
     "parse_angles",
 ]
+
+#: Most detector angles one plan may hold (a 0.01 deg step over 90 deg is 9001).
+MAX_ANGLES = 10_000
+#: Most readings (angles x repeats) one plan may hold.
+MAX_READINGS = 100_000
 
 #: Plan index of the mirror reference reading (stored like any point, before index 0).
 MIRROR_INDEX = -1
@@ -74,6 +81,11 @@ def parse_angles(spec: str | Sequence[float], *, name: str = "theta_r") -> tuple
             if stop < start:
                 raise PlanError(f"{name}: stop < start in {spec!r}")
             n = math.floor((stop - start) / step + 1e-9) + 1
+            if n > MAX_ANGLES:
+                raise PlanError(
+                    f"{name}: range {spec!r} has {n} angles, more than the {MAX_ANGLES} a plan "
+                    "may hold (a 0.01 deg step over 90 deg is 9001): use a coarser step"
+                )
             return tuple(round(start + k * step, 9) for k in range(n))
         try:
             values = [float(p) for p in text.split(",") if p.strip()]
@@ -142,6 +154,16 @@ class BrdfPlan:
             raise PlanError(f"theta_r_deg: repeated detector angles in {list(self.theta_r_deg)}")
         if self.repeats < 1:
             raise PlanError(f"repeats must be >= 1, got {self.repeats}")
+        if len(self.theta_r_deg) > MAX_ANGLES:
+            raise PlanError(
+                f"theta_r_deg: {len(self.theta_r_deg)} angles, more than the {MAX_ANGLES} a plan "
+                "may hold"
+            )
+        if len(self.theta_r_deg) * self.repeats > MAX_READINGS:
+            raise PlanError(
+                f"{len(self.theta_r_deg)} angles x {self.repeats} repeats = "
+                f"{len(self.theta_r_deg) * self.repeats} readings, more than {MAX_READINGS}"
+            )
         if not (math.isfinite(self.dwell_s) and self.dwell_s >= 0):
             raise PlanError(f"dwell_s must be >= 0, got {self.dwell_s}")
         if not 500 <= self.exposure_us <= 250000:

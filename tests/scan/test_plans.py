@@ -7,6 +7,8 @@ import math
 import pytest
 
 from goniolab.scan.plans import (
+    MAX_ANGLES,
+    MAX_READINGS,
     MIRROR_INDEX,
     BrdfPlan,
     GlossPlan,
@@ -113,3 +115,17 @@ def test_gloss_single_reading_has_zero_spread() -> None:
 def test_gloss_plan_rejects_non_iso_angles() -> None:
     with pytest.raises(PlanError, match="20, 60, 85"):
         GlossPlan(count=3, angles_deg=(45,))
+
+
+def test_oversized_sweeps_are_refused_before_they_are_expanded() -> None:
+    # 0:90:0.01 is 9001 angles: allowed; a 1e-7 deg step would be 9e8 angles in memory
+    assert len(parse_angles("0:90:0.01")) == 9001
+    with pytest.raises(PlanError, match="900000001 angles, more than the 10000"):
+        parse_angles("0:90:0.0000001")
+    with pytest.raises(PlanError, match=r"10001 angles, more than the 10000"):
+        BrdfPlan(45.0, tuple(k * 1e-3 for k in range(MAX_ANGLES + 1)))
+    angles = parse_angles("0:99.99:0.01")  # 10000 angles x 11 repeats = 110000 readings
+    with pytest.raises(PlanError, match=r"= 110000 readings, more than 100000"):
+        BrdfPlan(45.0, angles, repeats=11)
+    assert BrdfPlan(45.0, angles, repeats=10).n_geometries == MAX_ANGLES
+    assert MAX_READINGS == 100_000
