@@ -46,7 +46,14 @@ from sim.instruments import MirrorModel, SimAxis, SimGlossmeter, SimSpectro
 from sim.motion import SimMotor
 from sim.servers import ModbusAxisServer, SimLabServer, StilPtyDevice, WireAxis, ZgmPtyDevice
 
-__all__ = ["INSTRUMENTS", "Lab", "SimInstruments", "build_sim_instruments", "build_sim_server", "sample_model"]
+__all__ = [
+    "INSTRUMENTS",
+    "Lab",
+    "SimInstruments",
+    "build_sim_instruments",
+    "build_sim_server",
+    "sample_model",
+]
 
 
 @dataclass
