@@ -9,7 +9,9 @@ weight (PHYSICS.md)
 .. math:: w = \\frac{\\max(0, w_i\\cdot m)}{m_z \\cos\\theta_i} F(\\iota),
           \\qquad \\cos\\iota = w_i\\cdot m,
 
-(the facet's area projected on x-y is one pixel) or, with ``weighting="seed"``, ``w = F``
+(the facet's area projected on x-y is one pixel). The local incidence angle iota is the
+angle between wi and the facet normal: the seed's eq. 10 writes theta_r, phi_r where it means
+theta_N, phi_N; ``cos iota = wi.m`` is the corrected form. With ``weighting="seed"``, ``w = F``
 as in the seed, which weighs the slope histogram by Fresnel alone. Facets facing away from
 the lamp get no light; facets whose mirror direction points into the surface
 (``wo_z <= 0``) are dropped: their flux would need multiple scattering, which the model
