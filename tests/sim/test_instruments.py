@@ -3,11 +3,9 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 
 import numpy as np
 import pytest
-from numpy.typing import ArrayLike, NDArray
 
 from drivers.base import (
     Axis,
@@ -20,7 +18,7 @@ from drivers.base import (
     Spectrocolorimeter,
     StallError,
 )
-from goniolab.optics.apertures import Aperture, Cone
+from goniolab.optics.apertures import Cone
 from sim.clock import SimClock
 from sim.faults import FaultInjector, FaultSpec
 from sim.instruments import (
@@ -31,43 +29,9 @@ from sim.instruments import (
     spectrum_for_luminance,
 )
 from sim.motion import ALARM_OVERLOAD, SimMotor, trapezoid_duration_s
+from tests.sim.lobe import LobeModel
 
 CONE6 = Cone(6.0)
-
-
-class LobeModel:
-    """A Gaussian specular lobe: L = 100 exp(-((tr - ti) / w)^2) cos-free, known in closed form."""
-
-    def __init__(self, width_deg: float = 4.0, gloss_gu: dict[int, float] | None = None) -> None:
-        self.width_deg = width_deg
-        self.gloss_gu = gloss_gu or {20: 81.26, 60: 93.04, 85: 2500.0}
-        self.calls: list[tuple[float, float, Aperture, Aperture]] = []
-
-    def brdf_point(self, theta_i_deg: float, theta_r_deg: float, phi_r_deg: float = 180.0) -> float:
-        return float(self.luminance_pct(theta_i_deg, [theta_r_deg])[0])
-
-    def brdf_inplane(self, theta_i_deg: float, theta_r_deg: ArrayLike) -> NDArray[np.float64]:
-        return self.luminance_pct(theta_i_deg, theta_r_deg)
-
-    def luminance_pct(
-        self,
-        theta_i_deg: float,
-        theta_r_deg: ArrayLike,
-        *,
-        source: Aperture = CONE6,
-        detector: Aperture = CONE6,
-    ) -> NDArray[np.float64]:
-        tr = np.asarray(theta_r_deg, dtype=np.float64)
-        self.calls.append((theta_i_deg, float(tr.reshape(-1)[0]), source, detector))
-        return 100.0 * np.exp(-(((tr - theta_i_deg) / self.width_deg) ** 2))
-
-    def reflected_fraction(
-        self, theta_i_deg: float, theta_r_deg: float, source: Aperture, receptor: Aperture
-    ) -> float:
-        return float(self.luminance_pct(theta_i_deg, [theta_r_deg])[0]) / 100.0
-
-    def gloss(self, angles_deg: Sequence[int] = (20, 60, 85)) -> dict[int, float]:
-        return {a: self.gloss_gu[a] for a in angles_deg}
 
 
 def make_axis(

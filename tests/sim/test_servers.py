@@ -5,58 +5,26 @@ from __future__ import annotations
 
 import asyncio
 import shutil
-from collections.abc import AsyncIterator, Awaitable, Callable, Sequence
+from collections.abc import AsyncIterator, Awaitable, Callable
 from pathlib import Path
 
 import numpy as np
 import pytest
 import serial_asyncio_fast
-from numpy.typing import ArrayLike, NDArray
 from pymodbus.client import AsyncModbusSerialClient, AsyncModbusTcpClient
 
 from drivers.profiles import load_stepper_profile, load_stil_profile, load_zgm_profile
-from goniolab.optics.apertures import Aperture, Cone
 from sim.clock import SimClock
 from sim.faults import FaultInjector, FaultSpec
 from sim.instruments import SimAxis, SimGlossmeter, SimSpectro
 from sim.motion import ALARM_OVERLOAD, SimMotor, trapezoid_duration_s
 from sim.servers import ModbusAxisServer, SimLabServer, StilPtyDevice, WireAxis, ZgmPtyDevice
+from tests.sim.lobe import LobeModel
 
 pytestmark = pytest.mark.wire
 
 FEEDBACK, STATUS, ALARM, INPUT, DIRECT = 0x0120, 0x007E, 0x0080, 0x007C, 0x0058
 IN_POS, MOVE, ALM_A, HOME_END = 1 << 14, 1 << 13, 1 << 7, 1 << 4
-
-CONE6 = Cone(6.0)
-
-
-class Lobe:
-    """L = 100 exp(-((tr - ti)/4)^2); gloss fixed. Closed-form truth for the wire tests."""
-
-    def brdf_point(self, theta_i_deg: float, theta_r_deg: float, phi_r_deg: float = 180.0) -> float:
-        return float(self.luminance_pct(theta_i_deg, [theta_r_deg])[0])
-
-    def brdf_inplane(self, theta_i_deg: float, theta_r_deg: ArrayLike) -> NDArray[np.float64]:
-        return self.luminance_pct(theta_i_deg, theta_r_deg)
-
-    def luminance_pct(
-        self,
-        theta_i_deg: float,
-        theta_r_deg: ArrayLike,
-        *,
-        source: Aperture = CONE6,
-        detector: Aperture = CONE6,
-    ) -> NDArray[np.float64]:
-        tr = np.asarray(theta_r_deg, dtype=np.float64)
-        return 100.0 * np.exp(-(((tr - theta_i_deg) / 4.0) ** 2))
-
-    def reflected_fraction(
-        self, theta_i_deg: float, theta_r_deg: float, source: Aperture, receptor: Aperture
-    ) -> float:
-        return self.brdf_point(theta_i_deg, theta_r_deg) / 100.0
-
-    def gloss(self, angles_deg: Sequence[int] = (20, 60, 85)) -> dict[int, float]:
-        return {a: {20: 81.26, 60: 93.04, 85: 2500.0}[a] for a in angles_deg}
 
 
 def axis(clock: SimClock, name: str, start_deg: float, faults: FaultSpec | None = None) -> SimAxis:
@@ -237,8 +205,8 @@ async def test_disconnected_unit_answers_gateway_no_response() -> None:
 async def ptys(tmp_path: Path) -> AsyncIterator[tuple[SimLabServer, Path]]:
     clock = SimClock(0)
     lamp, det = axis(clock, "lamp", 45.0), axis(clock, "detector", 47.0)
-    spectro = SimSpectro(Lobe(), lamp, det, clock, noise_pct=0.0)
-    gloss = SimGlossmeter(Lobe(), clock, noise_pct=0.0, autosend_interval_s=2.0)
+    spectro = SimSpectro(LobeModel(), lamp, det, clock, noise_pct=0.0)
+    gloss = SimGlossmeter(LobeModel(), clock, noise_pct=0.0, autosend_interval_s=2.0)
     lab = SimLabServer(
         [],
         StilPtyDevice(spectro, load_stil_profile("stil-ruby"), tmp_path / "sim" / "spectro"),
@@ -365,36 +333,13 @@ async def test_goniolab_sim_serve_subprocess(tmp_path: Path) -> None:
             await proc.wait()
 
 
-class CountingLobe(Lobe):
-    """:class:`Lobe` that counts its evaluations."""
-
-    def __init__(self) -> None:
-        self.luminance_calls = 0
-        self.gloss_calls = 0
-
-    def luminance_pct(
-        self,
-        theta_i_deg: float,
-        theta_r_deg: ArrayLike,
-        *,
-        source: Aperture = CONE6,
-        detector: Aperture = CONE6,
-    ) -> NDArray[np.float64]:
-        self.luminance_calls += 1
-        return super().luminance_pct(theta_i_deg, theta_r_deg, source=source, detector=detector)
-
-    def gloss(self, angles_deg: Sequence[int] = (20, 60, 85)) -> dict[int, float]:
-        self.gloss_calls += 1
-        return super().gloss(angles_deg)
-
-
 async def test_models_are_evaluated_before_the_ptys_accept_commands(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """The first evaluation of a real facet model (kernel loading, tables) must not eat a
     driver's reply timeout: SimLabServer evaluates spectro and gloss models first."""
     clock = SimClock(0)
-    model = CountingLobe()
+    model = LobeModel()
     lamp, det = axis(clock, "lamp", 45.0), axis(clock, "detector", 45.0)
     spectro = StilPtyDevice(
         SimSpectro(model, lamp, det, clock), load_stil_profile("stil-ruby"), tmp_path / "s"
@@ -410,7 +355,7 @@ async def test_models_are_evaluated_before_the_ptys_accept_commands(
         original = dev.start
 
         async def start(original: Callable[[], Awaitable[None]] = original) -> None:
-            seen_at_start.append((model.luminance_calls, model.gloss_calls))
+            seen_at_start.append((len(model.calls), model.gloss_calls))
             await original()
 
         monkeypatch.setattr(dev, "start", start)
