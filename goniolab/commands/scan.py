@@ -24,7 +24,6 @@ from drivers.base import DeviceError
 from goniolab import __version__
 from goniolab.config import LabConfig, load_lab_config
 from goniolab.errors import UserError
-from goniolab.optics.apertures import Cone
 from goniolab.scan.events import (
     EventBus,
     InstrumentError,
@@ -234,15 +233,9 @@ async def _execute(
     lab_config = with_sample(load_lab_config(config_path), plan.sample)
     async with Lab.from_config(lab_config, time_scale=time_scale) as lab:
         cfg = lab.config
-        predictor = Predictor(
-            lab.model,
-            Cone(cfg.goniometer.source_cone_deg),
-            Cone(cfg.spectro.detector_cone_deg),
-        )
+        predictor = Predictor.from_config(lab.model, cfg)
         g = cfg.goniometer
-        motion = ArmMotion(
-            g.lamp.speed_deg_s, g.lamp.accel_deg_s2, g.detector.speed_deg_s, g.detector.accel_deg_s2
-        )
+        motion = ArmMotion.from_config(g)
         park_deg = (g.park.theta_i_deg, g.park.theta_r_deg)
         clock_scale = float(getattr(lab.clock, "scale", 1.0))
         # refuse an unsafe plan before any motion, and before a new run is even recorded

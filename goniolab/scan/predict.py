@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from goniolab.config import LabConfig
 from goniolab.optics.apertures import Cone
 from goniolab.optics.models import ReflectanceModel
 
@@ -48,6 +49,16 @@ class Predictor:
     source: Cone
     detector: Cone
     chunk: int = 8
+
+    @classmethod
+    def from_config(cls, model: ReflectanceModel, config: LabConfig) -> Predictor:
+        """Predictions through a lab config's lamp cone (``[goniometer] source_cone_deg``)
+        and detector cone (``[spectro] detector_cone_deg``)."""
+        return cls(
+            model,
+            Cone(config.goniometer.source_cone_deg),
+            Cone(config.spectro.detector_cone_deg),
+        )
 
     def predict_sync(self, theta_i_deg: float, theta_r_deg: Sequence[float]) -> NDArray[np.float64]:
         """Predicted luminance in % of a mirror at ``theta_r_deg`` (blocking; for threads)."""

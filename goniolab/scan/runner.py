@@ -54,6 +54,7 @@ from drivers.base import (
     Spectrocolorimeter,
     SpectroReading,
 )
+from goniolab.config import GoniometerConfig
 from goniolab.scan.events import (
     ArmsMoved,
     EventBus,
@@ -105,6 +106,12 @@ class ArmMotion:
     lamp_accel_deg_s2: float
     detector_speed_deg_s: float
     detector_accel_deg_s2: float
+
+    @classmethod
+    def from_config(cls, goniometer: GoniometerConfig) -> ArmMotion:
+        """The arms' speeds and accelerations of a lab config's ``[goniometer]``."""
+        lamp, det = goniometer.lamp, goniometer.detector
+        return cls(lamp.speed_deg_s, lamp.accel_deg_s2, det.speed_deg_s, det.accel_deg_s2)
 
     def move_time_s(self, start: tuple[float, float], target: tuple[float, float]) -> float:
         """Time of a two-arm move; the arms move together, so the slower arm sets it."""

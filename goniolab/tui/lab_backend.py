@@ -22,7 +22,6 @@ from goniolab.config import LabConfig, load_lab_config
 from goniolab.errors import UserError
 from goniolab.lab import Lab
 from goniolab.maps import model_for
-from goniolab.optics.apertures import Cone
 from goniolab.optics.models import ReflectanceModel
 from goniolab.scan.events import (
     EventBus,
@@ -188,10 +187,7 @@ class LabBackend:
         return "place the selected sample under the instruments"
 
     def _predictor(self, model: ReflectanceModel) -> Predictor:
-        cfg = self.config
-        return Predictor(
-            model, Cone(cfg.goniometer.source_cone_deg), Cone(cfg.spectro.detector_cone_deg)
-        )
+        return Predictor.from_config(model, self.config)
 
     async def predict_curve(self, setup: ScanSetup) -> list[float]:
         """The prediction of ``setup.sample`` over the sweep (model built and evaluated in
@@ -287,12 +283,7 @@ class LabBackend:
             store=store,
             run_id=run_id,
             bus=self.bus,
-            motion=ArmMotion(
-                g.lamp.speed_deg_s,
-                g.lamp.accel_deg_s2,
-                g.detector.speed_deg_s,
-                g.detector.accel_deg_s2,
-            ),
+            motion=ArmMotion.from_config(g),
             predictor=predictor,
             move_timeout_s=g.move_timeout_s,
             park_deg=(g.park.theta_i_deg, g.park.theta_r_deg),
