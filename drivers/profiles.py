@@ -3,7 +3,7 @@
 Every fact about an instrument that is not fixed by a public document (PROTOCOLS.md)
 lives in a profile, so a lab can correct it from its own manual without touching Python.
 Both the drivers (``drivers.modbus_stepper``, ``drivers.stil``, ``drivers.glossmeter``)
-and the simulated lab (``sim.servers``) read the same profile, so they speak the same bytes.
+and the simulated lab (``sim.wire``) read the same profile, so they speak the same bytes.
 
 Loading
 -------

@@ -4,7 +4,7 @@
 
 * ``lab.goniometer`` (:class:`drivers.goniometer.TwoArmGoniometer`), ``lab.spectro``,
   ``lab.glossmeter``: objects implementing the :mod:`drivers.base` Protocols;
-* ``lab.model``: the reflectance model of ``[sample]`` (``goniolab.maps.model_for``,
+* ``lab.model``: the reflectance model of ``[sample]`` (``goniolab.models.model_for``,
   built in a worker thread), ``lab.source`` / ``lab.detector`` (the lamp and detector
   cones), ``lab.clock`` (the sim clock, or a real one), ``lab.config``.
 
@@ -13,7 +13,7 @@ Modes (``[lab] mode``):
 * ``"sim"``: in-process simulated instruments (:mod:`sim.instruments`) reading the model.
 * ``"drivers"``: the real drivers of :mod:`drivers` to the configured endpoints; with
   ``start_sim_servers = true`` the simulated lab is first served on those endpoints
-  (:class:`sim.servers.SimLabServer`: Modbus TCP, or RTU over ``socket://``, + ptys), so
+  (:class:`sim.wire.SimLabServer`: Modbus TCP, or RTU over ``socket://``, + ptys), so
   the drivers run end to end against it. Port 0 there (``port = 0``, ``serial_port =
   "socket://127.0.0.1:0"``) binds a free port and hands it to the drivers.
 
@@ -36,15 +36,15 @@ import numpy as np
 from drivers.base import DeviceError, Glossmeter, ProfileError, Spectrocolorimeter
 from drivers.goniometer import TwoArmGoniometer
 from drivers.profiles import load_stepper_profile, load_stil_profile, load_zgm_profile
+from drivers.timing import Clock, RealClock, SimClock
 from goniolab.config import AxisConfig, ConfigError, LabConfig, load_lab_config
 from goniolab.errors import UserError
 from goniolab.optics.apertures import Cone
 from goniolab.optics.models import ReflectanceModel
-from sim.clock import Clock, RealClock, SimClock
 from sim.faults import FaultInjector, FaultSpec
 from sim.instruments import MirrorModel, SimAxis, SimGlossmeter, SimSpectro
 from sim.motion import SimMotor
-from sim.servers import ModbusAxisServer, SimLabServer, StilPtyDevice, WireAxis, ZgmPtyDevice
+from sim.wire import ModbusAxisServer, SimLabServer, StilPtyDevice, WireAxis, ZgmPtyDevice
 
 __all__ = [
     "INSTRUMENTS",
@@ -88,7 +88,7 @@ def sample_model(cfg: LabConfig) -> ReflectanceModel:
     ConfigError
         The map cannot be resolved or loaded (names the config key ``sample.map``).
     """
-    from goniolab.maps import model_for
+    from goniolab.models import model_for
 
     try:
         model: ReflectanceModel = model_for(_map_spec(cfg), n=cfg.sample.n)

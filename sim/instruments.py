@@ -45,10 +45,10 @@ from drivers.base import (
     SpectroReading,
     StallError,
 )
+from drivers.timing import Clock
 from goniolab.optics.apertures import Aperture, Cone
 from goniolab.optics.facet import cap_overlap_fraction
 from goniolab.optics.models import ReflectanceModel
-from sim.clock import Clock
 from sim.faults import FaultInjector
 from sim.motion import MotorFault, SimMotor
 

@@ -5,7 +5,7 @@ setter, it moves along a velocity profile that respects speed and acceleration, 
 timeouts, ETAs and "read while moving" behave as on the bench. Unlike a polled
 simulation, every quantity here is an analytic function of time: the motor stores the
 current :class:`MoveProfile` and answers ``position_deg(now_s)`` exactly, so the same
-model runs at any clock speed (see :mod:`sim.clock`).
+model runs at any clock speed (see :mod:`drivers.timing`).
 
 Coordinates
 -----------
@@ -30,8 +30,9 @@ References
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
+
+from drivers.timing import MoveProfile
 
 __all__ = [
     "ALARM_EXCESSIVE_DEVIATION",
@@ -39,9 +40,7 @@ __all__ = [
     "ALARM_OVERLOAD",
     "ALARM_SW_OVERTRAVEL",
     "MotorFault",
-    "MoveProfile",
     "SimMotor",
-    "trapezoid_duration_s",
 ]
 
 #: Oriental AZ alarm: excessive position deviation (the motor could not follow).
@@ -60,142 +59,6 @@ class MotorFault(Exception):
     def __init__(self, message: str, code: int) -> None:
         self.code = code
         super().__init__(message)
-
-
-def trapezoid_duration_s(distance_deg: float, speed_deg_s: float, accel_deg_s2: float) -> float:
-    """Duration of a rest-to-rest move with a symmetric trapezoidal velocity profile.
-
-    Parameters
-    ----------
-    distance_deg
-        Move length (its sign is ignored).
-    speed_deg_s, accel_deg_s2
-        Maximum speed and acceleration (= deceleration), both > 0.
-
-    Returns
-    -------
-    float
-        ``d/v + v/a`` when the move reaches full speed (``d >= v^2/a``), else the
-        triangular-profile duration ``2 sqrt(d/a)`` (Biagiotti & Melchiorri, sec. 3.2).
-    """
-    d = abs(distance_deg)
-    v, a = speed_deg_s, accel_deg_s2
-    if d >= v * v / a:
-        return d / v + v / a
-    return 2.0 * math.sqrt(d / a)
-
-
-@dataclass(frozen=True, slots=True)
-class MoveProfile:
-    """A rest-to-rest trapezoidal (or triangular) move, positions in degrees.
-
-    Attributes
-    ----------
-    start_deg, target_deg
-        Start and end positions (same coordinate frame).
-    speed_deg_s, accel_deg_s2
-        Maximum speed and acceleration; the peak speed is lower for short moves.
-    t0_s
-        Clock time at which the move starts.
-    """
-
-    start_deg: float
-    target_deg: float
-    speed_deg_s: float
-    accel_deg_s2: float
-    t0_s: float
-
-    def __post_init__(self) -> None:
-        if not (self.speed_deg_s > 0.0 and self.accel_deg_s2 > 0.0):
-            raise ValueError(
-                f"speed and acceleration must be > 0, got {self.speed_deg_s} deg/s, "
-                f"{self.accel_deg_s2} deg/s^2"
-            )
-
-    @property
-    def distance_deg(self) -> float:
-        """Unsigned move length."""
-        return abs(self.target_deg - self.start_deg)
-
-    @property
-    def direction(self) -> float:
-        """+1 for increasing angle, -1 for decreasing, 0 for a null move."""
-        return math.copysign(1.0, self.target_deg - self.start_deg) if self.distance_deg else 0.0
-
-    @property
-    def peak_speed_deg_s(self) -> float:
-        """Speed at the end of the acceleration phase: ``min(v, sqrt(a d))``."""
-        return min(self.speed_deg_s, math.sqrt(self.accel_deg_s2 * self.distance_deg))
-
-    @property
-    def accel_time_s(self) -> float:
-        """Length of the acceleration (and of the deceleration) phase."""
-        return self.peak_speed_deg_s / self.accel_deg_s2
-
-    @property
-    def duration_s(self) -> float:
-        """Total move time, :func:`trapezoid_duration_s`."""
-        return trapezoid_duration_s(self.distance_deg, self.speed_deg_s, self.accel_deg_s2)
-
-    @property
-    def end_s(self) -> float:
-        """Clock time at which the move ends."""
-        return self.t0_s + self.duration_s
-
-    def travelled_deg(self, t_s: float) -> float:
-        """Unsigned distance covered ``t_s`` after the start (clamped to [0, d])."""
-        a, vp, ta, total = (
-            self.accel_deg_s2,
-            self.peak_speed_deg_s,
-            self.accel_time_s,
-            self.duration_s,
-        )
-        d = self.distance_deg
-        if t_s <= 0.0:
-            return 0.0
-        if t_s >= total:
-            return d
-        if t_s < ta:
-            return 0.5 * a * t_s * t_s
-        t_dec = total - ta
-        if t_s <= t_dec:
-            return 0.5 * a * ta * ta + vp * (t_s - ta)
-        rem = total - t_s
-        return d - 0.5 * a * rem * rem
-
-    def position_at(self, now_s: float) -> float:
-        """Position at clock time ``now_s`` (start before ``t0_s``, target after the end)."""
-        return self.start_deg + self.direction * self.travelled_deg(now_s - self.t0_s)
-
-    def velocity_at(self, now_s: float) -> float:
-        """Signed velocity at clock time ``now_s``."""
-        t = now_s - self.t0_s
-        total, ta, a = self.duration_s, self.accel_time_s, self.accel_deg_s2
-        if t <= 0.0 or t >= total:
-            return 0.0
-        speed = a * t if t < ta else (a * (total - t) if t > total - ta else self.peak_speed_deg_s)
-        return self.direction * speed
-
-    def time_at(self, position_deg: float) -> float | None:
-        """First clock time the move passes ``position_deg``, ``None`` if it never does."""
-        s = (position_deg - self.start_deg) * self.direction
-        d = self.distance_deg
-        if d == 0.0 or s < 0.0 or s > d:
-            return None
-        a, vp, ta, total = (
-            self.accel_deg_s2,
-            self.peak_speed_deg_s,
-            self.accel_time_s,
-            self.duration_s,
-        )
-        s_acc = 0.5 * a * ta * ta
-        if s <= s_acc:
-            t = math.sqrt(2.0 * s / a)
-        elif s <= d - s_acc:
-            t = ta + (s - s_acc) / vp
-        else:
-            t = total - math.sqrt(max(0.0, 2.0 * (d - s) / a))
-        return self.t0_s + t
 
 
 @dataclass(frozen=True, slots=True)

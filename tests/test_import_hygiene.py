@@ -69,12 +69,15 @@ def test_drivers_import_no_goniolab_or_sim() -> None:
     assert offenders(modules, ("goniolab", "sim", "textual")) == []
 
 
-def test_sim_imports_only_optics_from_goniolab() -> None:
+def test_sim_imports_only_physics_and_surfaces_from_goniolab() -> None:
     imported, modules = loaded_after_importing(["sim"])
-    assert "sim.servers" in imported and "sim.instruments" in imported
-    bad = offenders(modules, ("goniolab", "textual"), ("goniolab.optics",))
+    assert "sim.wire.lab" in imported and "sim.instruments" in imported
+    allowed = ("goniolab.optics", "goniolab.colour", "goniolab.surfaces", "goniolab.errors")
+    bad = offenders(modules, ("goniolab", "textual"), allowed)
     assert [m for m in bad if m != "goniolab"] == [], bad
-    drivers_used = offenders(modules, ("drivers",), ("drivers.base", "drivers.profiles"))
+    drivers_used = offenders(
+        modules, ("drivers",), ("drivers.base", "drivers.profiles", "drivers.timing")
+    )
     assert drivers_used in ([], ["drivers"]), drivers_used
 
 

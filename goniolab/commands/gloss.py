@@ -94,7 +94,7 @@ def _open_meter_from_port(args: argparse.Namespace) -> Any:
 
 
 async def _session(args: argparse.Namespace, store: RunStore, plan: GlossPlan) -> GlossResult:
-    from sim.clock import RealClock
+    from drivers.timing import RealClock
 
     async with AsyncExitStack() as stack:
         config: dict[str, Any] = {}
@@ -119,7 +119,7 @@ async def _session(args: argparse.Namespace, store: RunStore, plan: GlossPlan) -
             await meter.connect()
             stack.push_async_callback(meter.close)
             if plan.sample:
-                from goniolab.maps import model_for
+                from goniolab.models import model_for
 
                 model = await asyncio.to_thread(model_for, plan.sample, n=args.n)
         predicted = None if model is None else await predict_gloss(model, plan.angles_deg)

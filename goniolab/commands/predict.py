@@ -1,11 +1,11 @@
 """``goniolab predict stats|gloss|brdf MAP``: roughness, gloss and BRDF predicted from a map.
 
-MAP is a height-map file or ``sample:NAME`` (:func:`goniolab.maps.resolve_map`). The facet
+MAP is a height-map file or ``sample:NAME`` (:func:`goniolab.surfaces.resolve_map`). The facet
 model (Wittmann et al. 2021, PHYSICS.md) gives
 
 - ``stats``: Ra, Sq (nm), Sdq and the zero-slope histogram fraction h_r;
 - ``gloss``: ISO 2813 G20/G60/G85, the ASTM D4039 haze index, ASTM E430 haze and DOI and the
-  ASTM D523 recommended geometry (:func:`goniolab.optics.instruments.gloss_report`);
+  ASTM D523 recommended geometry (:func:`goniolab.optics.gloss_standards.gloss_report`);
 - ``brdf``: the in-plane curve at ``--theta-i`` over ``--theta-r``: the goniometer reading
   (``luminance_pct``, % of a mirror, source and detector cones) and the aperture-averaged
   BRDF ``luminance / 100 / (projected solid angle of the detector)``, or with ``--point`` the
@@ -26,11 +26,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from goniolab.errors import UserError
-from goniolab.maps import model_for, resolve_map
+from goniolab.models import model_for
 from goniolab.optics.apertures import Cone, inplane_centre, sample_aperture
-from goniolab.optics.instruments import gloss_report
+from goniolab.optics.gloss_standards import gloss_report
 from goniolab.optics.metrics import PeakMetrics, peak_metrics
 from goniolab.optics.surface import roughness_stats
+from goniolab.surfaces.resolve import resolve_map
 
 __all__ = ["parse_index", "parse_theta_list", "register"]
 

@@ -12,7 +12,7 @@ __all__ = ["register"]
 
 
 def _cmd_samples(args: argparse.Namespace) -> int:
-    from sim.samples import SampleError, sample_info, sample_names
+    from goniolab.surfaces.samples import SampleError, sample_info, sample_names
 
     try:
         infos = [sample_info(name) for name in sample_names()]

@@ -380,7 +380,7 @@ def _specimen_hook(lab: Any) -> Any:
 def check_sample_arg(spec: str) -> None:
     """Name ``--sample`` (not the config) when the sample does not exist."""
     if spec.startswith("sample:"):
-        from sim.samples import sample_names
+        from goniolab.surfaces.samples import sample_names
 
         names = sample_names()
         if spec.removeprefix("sample:") not in names:

@@ -7,7 +7,7 @@ height map (:mod:`~goniolab.optics.heightmap`) -> slopes and slope distribution
 (:mod:`~goniolab.optics.fresnel`, seed eq. 9; :mod:`~goniolab.optics.facet`, seed eqs. 4-8
 with the eq. 4 sign and eq. 10 angles fixed and the radiometric facet weight added) ->
 integrated over each instrument's aperture (:mod:`~goniolab.optics.apertures`, Mihalik
-eqs. 15-17; :mod:`~goniolab.optics.instruments`, ISO 2813 / ASTM D523 / D4039 / E430).
+eqs. 15-17; :mod:`~goniolab.optics.gloss_standards`, ISO 2813 / ASTM D523 / D4039 / E430).
 Analytic comparison models (Beckmann, GGX, Cook-Torrance, Ward) and fits to readings are in
 :mod:`~goniolab.optics.analytic` and :mod:`~goniolab.optics.fit`.
 
@@ -38,15 +38,13 @@ from goniolab.optics.apertures import (
 from goniolab.optics.facet import FacetModel, HemisphereBRDF
 from goniolab.optics.fit import FitResult, fit_to_curve, fit_to_gloss
 from goniolab.optics.fresnel import fresnel, fresnel_conductor, fresnel_dielectric
+from goniolab.optics.gloss_standards import GlossReport, d523_recommended_angle, gloss_report
 from goniolab.optics.heightmap import (
     HeightMap,
     HeightMapError,
     fill_missing,
     level_plane,
-    load_heightmap,
-    save_heightmap,
 )
-from goniolab.optics.instruments import GlossReport, d523_recommended_angle, gloss_report
 from goniolab.optics.metrics import PeakMetrics, peak_metrics
 from goniolab.optics.models import ReflectanceModel
 from goniolab.optics.surface import (
@@ -88,10 +86,8 @@ __all__ = [
     "gloss_report",
     "integrate_brdf",
     "level_plane",
-    "load_heightmap",
     "peak_metrics",
     "roughness_stats",
-    "save_heightmap",
     "slope_histogram",
     "slopes",
 ]

@@ -35,11 +35,11 @@ from drivers.base import (
     GlossReading,
     ProtocolError,
 )
+from drivers.timing import Clock
 from goniolab.optics.models import ReflectanceModel
 from goniolab.scan.events import EventBus, GlossRead, InstrumentError, RunState, StateChanged
 from goniolab.scan.plans import GlossPlan, GlossStats, gloss_statistics
 from goniolab.store import RunStore
-from sim.clock import Clock
 
 __all__ = ["GlossLogger", "GlossResult", "predict_gloss"]
 

@@ -54,6 +54,7 @@ from drivers.base import (
     Spectrocolorimeter,
     SpectroReading,
 )
+from drivers.timing import Clock, trapezoid_duration_s
 from goniolab.config import GoniometerConfig
 from goniolab.scan.events import (
     ArmsMoved,
@@ -71,8 +72,6 @@ from goniolab.scan.plans import MIRROR_INDEX, BrdfPlan, PlanPoint
 from goniolab.scan.predict import Predictor
 from goniolab.scan.summary import summarize_brdf
 from goniolab.store import RunStore
-from sim.clock import Clock
-from sim.motion import trapezoid_duration_s
 
 __all__ = [
     "ArmMotion",

@@ -21,7 +21,7 @@ from goniolab import __version__
 from goniolab.config import LabConfig, load_lab_config
 from goniolab.errors import UserError
 from goniolab.lab import Lab
-from goniolab.maps import model_for
+from goniolab.models import model_for
 from goniolab.optics.models import ReflectanceModel
 from goniolab.scan.events import (
     EventBus,
@@ -37,8 +37,8 @@ from goniolab.scan.plans import BrdfPlan, GlossPlan, PlanError
 from goniolab.scan.predict import Predictor
 from goniolab.scan.runner import ArmMotion, PlanRefused, ScanRunner
 from goniolab.store import RunStore, StoreError, resolve_store_path
+from goniolab.surfaces.samples import sample_names
 from goniolab.tui.backend import ArmState, RunSummary, ScanSetup, StoredRun
-from sim.samples import sample_names
 
 __all__ = ["LabBackend"]
 
@@ -223,7 +223,7 @@ class LabBackend:
 
     async def model(self, sample: str) -> ReflectanceModel:
         """The prediction model of ``sample``: the lab's own for the configured sample,
-        else :func:`goniolab.maps.model_for` (built in a worker thread, cached)."""
+        else :func:`goniolab.models.model_for` (built in a worker thread, cached)."""
         lab, _ = self._require_open()
         if sample == self.config.sample.map:
             return lab.model

@@ -8,12 +8,12 @@ from pathlib import Path
 import pytest
 
 from drivers.base import Disconnected
+from drivers.timing import SimClock
 from goniolab.config import configs_dir, load_lab_config
 from goniolab.errors import UserError
 from goniolab.lab import Lab
-from goniolab.maps import model_for
+from goniolab.models import model_for
 from goniolab.optics.apertures import Cone
-from sim.clock import SimClock
 
 
 def quiet_sim_config(tmp_path: Path) -> Path:

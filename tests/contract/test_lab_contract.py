@@ -20,12 +20,12 @@ from drivers.base import (
     ProtocolError,
     StallError,
 )
+from drivers.timing import SimClock
 from goniolab.config import ConfigError, load_lab_config
 from goniolab.lab import Lab, build_sim_instruments, build_sim_server
 from goniolab.optics.apertures import Cone
-from sim.clock import SimClock
 from sim.motion import ALARM_OVERLOAD
-from sim.servers import SimLabServer
+from sim.wire import SimLabServer
 from tests.contract.contract_support import MODEL, lab_toml
 
 STEP_DEG = 1e-3  # 1000 steps/deg on the wire

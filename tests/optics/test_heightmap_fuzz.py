@@ -16,7 +16,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from goniolab.optics.heightmap import HeightMap, HeightMapError, load_heightmap, save_heightmap
+from goniolab.optics.heightmap import HeightMap, HeightMapError
+from goniolab.surfaces import load_heightmap, save_heightmap
 
 FUZZ = settings(
     max_examples=150,

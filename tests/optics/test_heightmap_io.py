@@ -14,9 +14,8 @@ from goniolab.optics.heightmap import (
     HeightMapError,
     fill_missing,
     level_plane,
-    load_heightmap,
-    save_heightmap,
 )
+from goniolab.surfaces import load_heightmap, save_heightmap
 
 
 def _sample_map(ny: int = 5, nx: int = 7, *, with_nan: bool = True) -> HeightMap:

@@ -8,13 +8,13 @@ import pytest
 
 from goniolab.optics.analytic import AnalyticModel
 from goniolab.optics.facet import FacetModel
-from goniolab.optics.instruments import (
+from goniolab.optics.gloss_standards import (
     GlossReport,
     d523_recommended_angle,
     gloss_report,
 )
 from goniolab.optics.surface import Surface
-from sim.samples import make_sample
+from goniolab.surfaces.samples import make_sample
 
 
 def _flat(n: float) -> FacetModel:

@@ -28,9 +28,8 @@ from drivers.base import (
     SpectroReading,
     StallError,
 )
+from drivers.timing import SimClock, trapezoid_duration_s
 from goniolab.store import RunStore
-from sim.clock import SimClock
-from sim.motion import trapezoid_duration_s
 
 LOBE_AMPLITUDE_PCT = 40.0
 LOBE_SIGMA_DEG = 3.0

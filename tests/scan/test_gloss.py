@@ -7,11 +7,11 @@ import asyncio
 import pytest
 
 from drivers.base import Disconnected, GlossReading, ProtocolError
+from drivers.timing import SimClock
 from goniolab.scan.events import EventBus, GlossRead, InstrumentError, RunState
 from goniolab.scan.gloss import GlossLogger, predict_gloss
 from goniolab.scan.plans import GlossPlan
 from goniolab.store import RunStore
-from sim.clock import SimClock
 
 from .conftest import FakeGlossmeter, FakeModel
 

@@ -18,8 +18,8 @@ from drivers.base import (
     Spectrocolorimeter,
     StallError,
 )
+from drivers.timing import SimClock, trapezoid_duration_s
 from goniolab.optics.apertures import Cone
-from sim.clock import SimClock
 from sim.faults import FaultInjector, FaultSpec
 from sim.instruments import (
     SimAxis,
@@ -28,7 +28,7 @@ from sim.instruments import (
     effective_angles,
     spectrum_for_luminance,
 )
-from sim.motion import ALARM_OVERLOAD, SimMotor, trapezoid_duration_s
+from sim.motion import ALARM_OVERLOAD, SimMotor
 from tests.sim.lobe import LobeModel
 
 CONE6 = Cone(6.0)

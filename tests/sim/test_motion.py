@@ -6,14 +6,13 @@ import math
 
 import pytest
 
+from drivers.timing import MoveProfile, trapezoid_duration_s
 from sim.motion import (
     ALARM_HW_OVERTRAVEL,
     ALARM_OVERLOAD,
     ALARM_SW_OVERTRAVEL,
     MotorFault,
-    MoveProfile,
     SimMotor,
-    trapezoid_duration_s,
 )
 
 

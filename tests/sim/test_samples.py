@@ -1,4 +1,4 @@
-"""The built-in synthetic sample library (sim/samples.py, configs/samples.toml)."""
+"""The built-in synthetic sample library (goniolab/surfaces/samples.py, configs/samples.toml)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from scipy.stats import spearmanr
 
 from goniolab.optics.facet import FacetModel
 from goniolab.optics.surface import Surface, roughness_stats
-from sim.samples import SampleError, make_sample, sample_info, sample_names
+from goniolab.surfaces.samples import SampleError, make_sample, sample_info, sample_names
 
 WITTMANN = [f"wittmann-{i}" for i in range(1, 9)]
 #: Wittmann et al. (2021) table 1: Ra (nm) and G60 (GU) of the eight PU coatings.

@@ -17,7 +17,7 @@ from textual.pilot import Pilot
 from textual.widgets import DataTable, Input, Select, Static
 
 from goniolab.config import load_lab_config
-from goniolab.maps import model_for
+from goniolab.models import model_for
 from goniolab.optics.analytic import AnalyticModel
 from goniolab.optics.apertures import Cone
 from goniolab.scan.events import RunState

@@ -6,7 +6,7 @@ import asyncio
 
 import pytest
 
-from sim.clock import Clock, RealClock, SimClock
+from drivers.timing import Clock, RealClock, SimClock
 
 
 async def test_scale0_sleep_advances_virtual_time_exactly() -> None:
@@ -63,7 +63,7 @@ async def test_scaled_clock_uses_scaled_wall_time(monkeypatch: pytest.MonkeyPatc
     async def fake_sleep(dt: float) -> None:
         slept.append(dt)
 
-    monkeypatch.setattr("sim.clock.asyncio.sleep", fake_sleep)
+    monkeypatch.setattr("drivers.timing.asyncio.sleep", fake_sleep)
     await clock.sleep(30.0)
     assert slept == [3.0]
 

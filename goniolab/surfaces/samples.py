@@ -29,7 +29,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-import goniolab.optics
 from goniolab.optics.heightmap import HeightMap
 
 __all__ = [
@@ -43,8 +42,8 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 
-_REPO_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "samples.toml"
-_WHEEL_CONFIG = Path(goniolab.optics.__file__).resolve().parents[1] / "_configs" / "samples.toml"
+_REPO_CONFIG = Path(__file__).resolve().parents[2] / "configs" / "samples.toml"
+_WHEEL_CONFIG = Path(__file__).resolve().parents[1] / "_configs" / "samples.toml"
 #: The sample library: the repository's ``configs/samples.toml`` (or the wheel's copy).
 SAMPLES_TOML: Path = _REPO_CONFIG if _REPO_CONFIG.exists() else _WHEEL_CONFIG
 
@@ -305,7 +304,7 @@ def _make_cached(name: str, shape: tuple[int, int], step_um: float, seed: int) -
         "description": info.description,
         "n": str(info.n.real) if info.n.imag == 0 else str(info.n),
         "seed": str(seed),
-        "generator": "sim.samples",
+        "generator": "goniolab.surfaces.samples",
     }
     return HeightMap(z_um=z, dx_um=step_um, dy_um=step_um, source=f"sample:{name}", meta=meta)
 

@@ -14,11 +14,11 @@ import serial_asyncio_fast
 from pymodbus.client import AsyncModbusSerialClient, AsyncModbusTcpClient
 
 from drivers.profiles import load_stepper_profile, load_stil_profile, load_zgm_profile
-from sim.clock import SimClock
+from drivers.timing import SimClock, trapezoid_duration_s
 from sim.faults import FaultInjector, FaultSpec
 from sim.instruments import SimAxis, SimGlossmeter, SimSpectro
-from sim.motion import ALARM_OVERLOAD, SimMotor, trapezoid_duration_s
-from sim.servers import ModbusAxisServer, SimLabServer, StilPtyDevice, WireAxis, ZgmPtyDevice
+from sim.motion import ALARM_OVERLOAD, SimMotor
+from sim.wire import ModbusAxisServer, SimLabServer, StilPtyDevice, WireAxis, ZgmPtyDevice
 from tests.sim.lobe import LobeModel
 
 pytestmark = pytest.mark.wire

@@ -1,0 +1,160 @@
+"""Helpers shared by the height-map readers and writers: steps, units, quantisation, limits."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from goniolab.optics.heightmap import FloatArray, HeightMap, HeightMapError, StepArg, _fail
+
+
+def _steps_from_arg(name: str, step_um: StepArg) -> tuple[float, float] | None:
+    if step_um is None:
+        return None
+    if isinstance(step_um, tuple):
+        if len(step_um) != 2:
+            raise _fail(name, f"step_um must be a number or (dx_um, dy_um), got {step_um!r}")
+        dx, dy = step_um
+    else:
+        dx = dy = step_um
+    try:
+        dx_f, dy_f = float(dx), float(dy)
+    except (TypeError, ValueError):
+        raise _fail(name, f"step_um must be a number or (dx_um, dy_um), got {step_um!r}") from None
+    for value in (dx_f, dy_f):
+        if not (math.isfinite(value) and value > 0.0):
+            raise _fail(name, f"step_um must be finite and > 0, got {step_um!r}")
+    return dx_f, dy_f
+
+
+def _resolve_steps(
+    name: str,
+    file_steps: tuple[float, float] | None,
+    step_um: StepArg,
+    *,
+    what: str = "the file",
+) -> tuple[float, float]:
+    """Combine the steps a file carries with the ``step_um`` option.
+
+    The file's steps win; ``step_um`` fills in when the file carries none. A ``step_um``
+    that contradicts the file is an error rather than a silent choice.
+    """
+    arg = _steps_from_arg(name, step_um)
+    if file_steps is None:
+        if arg is None:
+            raise _fail(
+                name, f"no lateral step in {what}: pass step_um (--step-um on the command line)"
+            )
+        return arg
+    for value in file_steps:
+        if not (math.isfinite(value) and value > 0.0):
+            raise _fail(name, f"lateral step in {what} must be finite and > 0, got {value!r}")
+    if arg is not None and not np.allclose(arg, file_steps, rtol=1e-9, atol=0.0):
+        raise _fail(
+            name,
+            f"step_um={step_um!r} contradicts the step in {what} "
+            f"(dx_um={file_steps[0]!r}, dy_um={file_steps[1]!r})",
+        )
+    return file_steps
+
+
+def _make(
+    name: str, z_um: ArrayLike, dx_um: float, dy_um: float, meta: dict[str, str]
+) -> HeightMap:
+    z = np.asarray(z_um, dtype=np.float64)
+    if np.isinf(z).any():
+        raise _fail(name, "heights overflow to infinity after scaling: implausible z scale")
+    return HeightMap(z_um=z, dx_um=dx_um, dy_um=dy_um, source=name, meta=meta)
+
+
+# Length units accepted in headers, as micrometres per unit. The micro sign appears as
+# U+00B5 (latin-1 0xB5, Digital Surf and Gwyddion) or U+03BC; both normalise to "u".
+_UM_PER_UNIT: dict[str, float] = {
+    "m": 1e6,
+    "mm": 1e3,
+    "um": 1.0,
+    "nm": 1e-3,
+    "pm": 1e-6,
+    "a": 1e-4,
+    "å": 1e-4,
+}
+
+
+def _um_per(name: str, unit: str, what: str) -> float:
+    key = unit.strip().replace("\u00b5", "u").replace("\u03bc", "u").replace("&#181;", "u")
+    key = key.lower()
+    if key not in _UM_PER_UNIT:
+        raise _fail(name, f"unknown {what} unit {unit!r} (known: m, mm, um, nm, pm, A)")
+    return _UM_PER_UNIT[key]
+
+
+def _snap(value: float) -> float:
+    """Undo the last-digit noise of a unit conversion (e.g. 0.1e-6 m * 1e6 -> 0.1 um)."""
+    return float(f"{value:.15g}")
+
+
+def _mib(n_bytes: int) -> str:
+    if n_bytes < 1024 * 1024:
+        return f"{n_bytes} bytes"
+    return f"{n_bytes / (1024 * 1024):.3g} MiB"
+
+
+def _truncated(name: str, ny: int, nx: int, item: int, have: int) -> HeightMapError:
+    need = ny * nx * item
+    return _fail(
+        name,
+        f"truncated: header says {nx}x{ny} points of {item} bytes ({_mib(need)}) "
+        f"but file has {_mib(max(have, 0))} of data",
+    )
+
+
+def _quantise(
+    z_um: FloatArray, n_max: int, *, offset: bool
+) -> tuple[NDArray[np.int64], float, float]:
+    """Map heights to integers ``0..n_max`` (or ``-n_max..n_max`` without offset).
+
+    Returns ``(raw, step_um, offset_um)`` with ``z ~= raw * step_um + offset_um`` and an error
+    of at most ``step_um / 2`` (plus float rounding) on every valid point. Both numbers are
+    representable in float32 so that the .sur header (float32 fields) stores them exactly.
+    """
+    valid = ~np.isnan(z_um)
+    if valid.any():
+        lo, hi = float(np.min(z_um[valid])), float(np.max(z_um[valid]))
+    else:
+        lo = hi = 0.0
+    if offset:
+        off = float(np.float32(lo))
+        if off > lo:
+            off = float(np.nextafter(np.float32(lo), np.float32(-np.inf)))
+        span = hi - off
+    else:
+        off = 0.0
+        span = max(abs(lo), abs(hi))
+    step = span / n_max if span > 0 else 1e-6
+    step32 = np.float32(step)
+    if float(step32) < step:
+        step32 = np.nextafter(step32, np.float32(np.inf))
+    step = float(step32)
+    raw = np.zeros(z_um.shape, dtype=np.int64)
+    raw[valid] = np.rint((z_um[valid] - off) / step).astype(np.int64)
+    return raw, step, off
+
+
+def _decode_text(raw: bytes) -> str:
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        return raw.decode("latin-1")
+
+
+def _cstr(value: bytes) -> str:
+    return value.split(b"\0", 1)[0].decode("latin-1").strip()
+
+
+@dataclass(frozen=True)
+class _ReadOptions:
+    step_um: StepArg
+    missing_value: float | None

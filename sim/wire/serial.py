@@ -1,0 +1,360 @@
+"""The serial instruments on the wire: pseudo-terminals speaking the STIL and ZGM1120 protocols.
+
+* :class:`StilPtyDevice`: the STIL line protocol of a ``stil-spectro`` profile
+  (``configs/profiles/stil-ruby.toml``).
+* :class:`ZgmPtyDevice`: the Zehntner ZGM1120 protocol (Technical Manual rev. 3.0, 2021,
+  pp. 16-28).
+
+Injected faults (:mod:`sim.faults`): a timed-out request gets no answer, a garbled one has
+one byte of the reply flipped, a disconnected device closes its port.
+"""
+
+from __future__ import annotations
+
+import abc
+import asyncio
+import contextlib
+import os
+import termios
+import tty
+from pathlib import Path
+from typing import Any
+
+from drivers.profiles import StilProfile, ZgmProfile, template_regex
+from sim.faults import Fault
+from sim.instruments import SPECTRUM_WAVELENGTHS_NM, SimGlossmeter, SimSpectro
+
+__all__ = ["StilPtyDevice", "ZgmPtyDevice"]
+
+#: Unread output a pty device keeps before it drops further replies (bytes).
+_PTY_OUTPUT_LIMIT = 64 * 1024
+
+
+class PtyDevice(abc.ABC):
+    """A line-oriented device on the master side of a pseudo-terminal.
+
+    The slave side (what a driver opens) is put in raw mode and published through a
+    symlink at ``link_path`` (replacing a stale link, never a regular file).
+    """
+
+    name = "device"
+
+    def __init__(self, link_path: str | Path, *, terminator: bytes) -> None:
+        self.link_path = Path(link_path)
+        self.terminator = terminator
+        self._master = -1
+        self._slave = -1
+        self._buf = b""
+        self._out = b""
+        self._writer_armed = False
+        self._drained = asyncio.Event()
+        self._drained.set()
+        self._tasks: set[asyncio.Task[None]] = set()
+        self.slave_name = ""
+
+    @property
+    def open(self) -> bool:
+        """The device is serving."""
+        return self._master >= 0
+
+    async def start(self) -> None:
+        """Create the pty, set raw mode, publish the symlink, start reading.
+
+        Raises
+        ------
+        FileExistsError
+            ``link_path`` exists and is not a symlink (we never delete real files).
+        """
+        master, slave = os.openpty()
+        tty.setraw(slave, termios.TCSANOW)
+        os.set_blocking(master, False)
+        self._master, self._slave = master, slave
+        self.slave_name = os.ttyname(slave)
+        link = self.link_path
+        link.parent.mkdir(parents=True, exist_ok=True)
+        if link.is_symlink():
+            link.unlink()
+        elif link.exists():
+            self._close_fds()
+            raise FileExistsError(f"{link}: exists and is not a symlink; not replacing it")
+        link.symlink_to(self.slave_name)
+        asyncio.get_running_loop().add_reader(master, self._on_readable)
+
+    def _on_readable(self) -> None:
+        try:
+            data = os.read(self._master, 4096)
+        except BlockingIOError:
+            return
+        except OSError:
+            data = b""
+        if not data:
+            return
+        self._buf += data
+        while self.terminator in self._buf:
+            line, self._buf = self._buf.split(self.terminator, 1)
+            task = asyncio.get_running_loop().create_task(self._handle_line(line))
+            self._tasks.add(task)
+            task.add_done_callback(self._tasks.discard)
+
+    @abc.abstractmethod
+    async def _handle_line(self, line: bytes) -> None:
+        """Answer one command line (without its terminator)."""
+
+    def write(self, data: bytes) -> None:
+        """Queue bytes for the driver; flushed as the pty accepts them (no-op once closed).
+
+        Output beyond :data:`_PTY_OUTPUT_LIMIT` unread bytes is dropped, as a device's
+        transmit buffer overflows when nobody reads the line.
+        """
+        if self._master < 0:
+            return
+        if len(self._out) + len(data) > _PTY_OUTPUT_LIMIT:
+            return
+        was_empty = not self._out
+        self._out += data
+        if was_empty:
+            self._flush()
+
+    def _flush(self) -> None:
+        if self._master < 0:
+            self._out = b""
+            return
+        loop = asyncio.get_running_loop()
+        try:
+            n = os.write(self._master, self._out)
+        except BlockingIOError:
+            n = 0
+        except OSError:
+            self._out = b""
+            n = 0
+        self._out = self._out[n:]
+        if self._out:
+            self._drained.clear()
+        else:
+            self._drained.set()
+        if self._out and not self._writer_armed:
+            loop.add_writer(self._master, self._flush)
+            self._writer_armed = True
+        elif not self._out and self._writer_armed:
+            loop.remove_writer(self._master)
+            self._writer_armed = False
+
+    def disconnect(self) -> None:
+        """Drop off the line: stop reading and close the pty (the driver sees EOF/EIO)."""
+        if self._master >= 0:
+            with contextlib.suppress(Exception):
+                loop = asyncio.get_running_loop()
+                loop.remove_reader(self._master)
+                loop.remove_writer(self._master)
+        self._writer_armed = False
+        self._out = b""
+        self._drained.set()
+        self._close_fds()
+
+    def _close_fds(self) -> None:
+        for fd in (self._master, self._slave):
+            if fd >= 0:
+                with contextlib.suppress(OSError):
+                    os.close(fd)
+        self._master = self._slave = -1
+
+    async def stop(self) -> None:
+        """Stop serving, close the pty and remove the symlink."""
+        for task in list(self._tasks):
+            task.cancel()
+        self.disconnect()
+        if self.link_path.is_symlink():
+            with contextlib.suppress(OSError):
+                self.link_path.unlink()
+
+
+class StilPtyDevice(PtyDevice):
+    """The simulated STIL spectro-colorimeter behind a pty, speaking a ``stil-spectro`` profile.
+
+    Commands and reply lines are the profile's templates (``[commands]``, ``[replies]``);
+    readings come from the in-process :class:`sim.instruments.SimSpectro`.
+    """
+
+    name = "spectro"
+
+    def __init__(self, spectro: SimSpectro, profile: StilProfile, link_path: str | Path) -> None:
+        super().__init__(link_path, terminator=profile.command_terminator.encode(profile.encoding))
+        self.spectro = spectro
+        self.profile = profile
+        self._exposure_re = template_regex(profile.cmd_set_exposure)
+
+    def _reply(self, lines: list[str], fault: Fault) -> None:
+        p = self.profile
+        data = "".join(line + p.reply_terminator for line in lines).encode(p.encoding)
+        if fault is Fault.GARBLE:
+            data = self.spectro.faults.garble(data, keep=p.reply_terminator.encode(p.encoding))
+        self.write(data)
+
+    def _error(self, code: int, message: str) -> list[str]:
+        return [self.profile.reply_error.format(code=code, message=message)]
+
+    async def _handle_line(self, line: bytes) -> None:
+        p = self.profile
+        text = line.decode(p.encoding, errors="replace").strip("\r\n")
+        if not text:
+            return
+        fault = self.spectro.faults.decide()
+        if fault is Fault.DISCONNECT:
+            self.disconnect()
+            return
+        if fault is Fault.TIMEOUT:
+            return
+        if text == p.cmd_identify:
+            lines = [p.reply_identify.format(ident="STIL RUBY SN 000000 (goniolab simulator)")]
+        elif (m := self._exposure_re.match(text)) is not None:
+            exposure = int(m.group("exposure_us"))
+            if not p.exposure_min_us <= exposure <= p.exposure_max_us:
+                lines = self._error(
+                    2, f"exposure out of range {p.exposure_min_us}..{p.exposure_max_us} us"
+                )
+            else:
+                self.spectro.exposure_us = exposure
+                lines = [p.reply_set_exposure.format(exposure_us=exposure)]
+        elif text == p.cmd_measure:
+            lines = await self._measure_lines()
+        else:
+            lines = self._error(1, f"unknown command {text[:40]}")
+        self._reply(lines, fault)
+
+    async def _measure_lines(self) -> list[str]:
+        from sim.instruments import spectrum_for_luminance
+
+        lum = await self.spectro.read_luminance_pct()
+        values = spectrum_for_luminance(lum)
+        wl = SPECTRUM_WAVELENGTHS_NM
+        fields: dict[str, Any] = {
+            "luminance_pct": lum,
+            "start_nm": int(wl[0]),
+            "step_nm": int(wl[1] - wl[0]),
+            "count": len(values),
+            "values": ",".join(f"{v:.4f}" for v in values),
+            "exposure_us": self.spectro.exposure_us,
+            "ident": "STIL RUBY",
+        }
+        return [t.format(**fields) for t in self.profile.reply_measure]
+
+
+class ZgmPtyDevice(PtyDevice):
+    """The simulated Zehntner ZGM1120 glossmeter behind a pty.
+
+    Protocol (Technical Manual rev. 3.0, 2021, pp. 16-28): ASCII fields separated by
+    ``|``, commands end with ``:``, replies end with the profile's ``reply_terminator``.
+    Measure request ``1| SN|xy|mask|count|tempflag:`` (mask bit0 20 deg, bit1 60 deg,
+    bit2 85 deg); reply ``1| SN|xy|v20|a20|v60|a60|v85|a85|count|temp`` with values in
+    0.1 GU, -1 = not measured, -2 = overflow; the ``a`` fields are raw ADC readings.
+    Opcode 6 AutoSend (``6| SN|xy|mask|count|tempflag:``, not acknowledged): the meter
+    then pushes a reply ``6| SN|xy|...`` (measure-reply fields, the request's transaction
+    id) for every reading -- simulated as a button press every ``autosend_interval_s``;
+    mask 0 switches it off.
+    Requests for another serial number are ignored (RS-232 multi-drop behaviour).
+    """
+
+    name = "glossmeter"
+
+    #: Raw ADC counts per GU of the simulated photodiode chain (any positive number).
+    ADC_PER_GU = 10.0
+
+    def __init__(
+        self,
+        gloss: SimGlossmeter,
+        profile: ZgmProfile,
+        link_path: str | Path,
+        *,
+        serial_number: str,
+    ) -> None:
+        super().__init__(link_path, terminator=b":")
+        self.gloss = gloss
+        self.profile = profile
+        self.serial_number = serial_number.strip()
+        self._autosend: asyncio.Task[None] | None = None
+
+    async def _reading_fields(self, angles: list[int]) -> list[str]:
+        values, overflow = await self.gloss.read_values_gu(angles)
+        out: list[str] = []
+        for a in (20, 60, 85):
+            v = values.get(a)
+            if a in overflow:
+                out += ["-2", "-2"]
+            elif v is None:
+                out += ["-1", "-1"]
+            else:
+                out += [str(round(v * 10)), str(round(v * self.ADC_PER_GU))]
+        return out
+
+    async def _measure_reply(self, tid: str, mask: int, count: int, *, opcode: str = "1") -> str:
+        angles = [a for bit, a in enumerate((20, 60, 85)) if mask >> bit & 1]
+        fields = await self._reading_fields(angles)
+        return "|".join(
+            [
+                opcode,
+                f" {self.serial_number}",
+                tid,
+                *fields,
+                str(count),
+                str(round(self.gloss.temperature_c)),
+            ]
+        )
+
+    async def _handle_line(self, line: bytes) -> None:
+        text = line.decode("ascii", errors="replace").strip("\r\n ")
+        parts = text.split("|")
+        if len(parts) < 3 or parts[1].strip() != self.serial_number:
+            return
+        fault = self.gloss.faults.decide()
+        if fault is Fault.DISCONNECT:
+            self.disconnect()
+            return
+        if fault is Fault.TIMEOUT:
+            return
+        opcode, tid, args = parts[0].strip(), parts[2], parts[3:]
+        reply: str
+        if opcode == "1":
+            try:
+                mask = int(args[0]) if args else 7
+                count = int(args[1]) if len(args) > 1 else 1
+            except ValueError:
+                return
+            reply = await self._measure_reply(tid, mask & 7, count)
+        elif opcode == "6":
+            try:
+                mask = int(args[0]) if args else 7
+            except ValueError:
+                return
+            self._set_autosend(tid, mask & 7)
+            return  # AutoSend is not acknowledged: readings follow as they are taken
+        elif opcode == "36":
+            reply = "|".join(
+                ["36", f" {self.serial_number}", tid, str(round(self.gloss.temperature_c))]
+            )
+        elif opcode in ("28", "48", "52", "64", "72"):
+            reply = "|".join([opcode, f" {self.serial_number}", tid, "0"])
+        else:
+            return
+        data = reply.encode("ascii")
+        if fault is Fault.GARBLE:
+            data = self.gloss.faults.garble(data)
+        self.write(data + self.profile.reply_terminator.encode("ascii"))
+
+    def _set_autosend(self, tid: str, mask: int) -> None:
+        if self._autosend is not None:
+            self._autosend.cancel()
+            self._autosend = None
+        if mask and self.gloss.autosend_interval_s > 0:
+            self._autosend = asyncio.get_running_loop().create_task(self._push(tid, mask))
+
+    async def _push(self, tid: str, mask: int) -> None:
+        while self.open:
+            await self.gloss.clock.sleep(self.gloss.autosend_interval_s)
+            await self._drained.wait()  # back-pressure: the line took the last reading
+            reply = await self._measure_reply(tid, mask, 1, opcode="6")
+            self.write(reply.encode("ascii") + self.profile.reply_terminator.encode("ascii"))
+
+    async def stop(self) -> None:
+        """Stop auto-send and the pty."""
+        self._set_autosend("", 0)
+        await super().stop()
