@@ -75,8 +75,7 @@ def test_room_imports_point_one_way(room: str) -> None:
         f"{f.relative_to(ROOT)}:{line}: imports {mod}"
         for f in files
         for line, mod in imports_of(f)
-        if _hit(mod, FORBIDDEN[room])
-        and not _hit(mod, DOORS.get(str(f.relative_to(ROOT)), ()))
+        if _hit(mod, FORBIDDEN[room]) and not _hit(mod, DOORS.get(str(f.relative_to(ROOT)), ()))
     ]
     assert bad == [], "\n".join(bad)
 

@@ -1,4 +1,4 @@
-"""Tests for goniolab.optics.heightmap: the container, levelling and file I/O."""
+"""Tests for goniolab.surfaces (height-map files) and goniolab.optics.heightmap (the container, levelling)."""
 
 from __future__ import annotations
 
