@@ -6,7 +6,9 @@ every module there exposes ``register(subparsers)`` which adds its parser and se
 
 Errors a user can act on (bad file, bad config, unreachable instrument) are printed as one
 line on stderr, ``goniolab: error: ...``, with exit code 2 for bad input and 1 for
-instrument or run failures; a traceback is shown only with ``--debug``.
+instrument or run failures; a traceback is shown only with ``--debug``. A reader that
+goes away early (``goniolab runs export 1 | head``) ends the command quietly with exit
+status 141 (128 + SIGPIPE, as a C tool killed by SIGPIPE reports it).
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
 import pkgutil
 import sys
 from collections.abc import Sequence
@@ -21,7 +24,10 @@ from collections.abc import Sequence
 from goniolab import __version__
 from goniolab.errors import UserError
 
-__all__ = ["build_parser", "main"]
+__all__ = ["EXIT_BROKEN_PIPE", "build_parser", "main"]
+
+#: Exit status when stdout's reader went away (128 + SIGPIPE).
+EXIT_BROKEN_PIPE = 141
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -51,6 +57,17 @@ def _quiet_library_logs(debug: bool) -> None:
         logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
 
 
+def _silence_stdout() -> None:
+    """Point stdout at /dev/null: the interpreter flushes it again at exit, and that flush
+    must not raise a second BrokenPipeError (Python docs, "Note on SIGPIPE")."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError, AttributeError):  # stdout replaced by a non-file (tests)
+        pass
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``goniolab`` console script; returns the process exit code."""
     try:
@@ -61,6 +78,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 2
         _quiet_library_logs(args.debug)
         code: int = args.func(args)
+        sys.stdout.flush()  # a closed pipe shows here, not in the interpreter's exit
+    except BrokenPipeError:
+        _silence_stdout()
+        return EXIT_BROKEN_PIPE
     except UserError as exc:
         if "args" in locals() and args.debug:
             raise
