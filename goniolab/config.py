@@ -180,17 +180,31 @@ class FaultsConfig(_Strict):
 
     The rates apply to each device named in ``devices``; stall and alarm positions are
     encoder angles of the lamp / detector arm (``nan`` or absent = none).
+    ``disconnect_after`` cuts a device off for good after that many operations;
+    ``disconnect_rate`` drops its link now and then, and it is back ``recover_after_s``
+    seconds (lab clock) later (:mod:`sim.faults`).
     """
 
     devices: tuple[Literal["lamp", "detector", "spectro", "glossmeter"], ...] = ()
     timeout_rate: Annotated[float, Field(ge=0.0, le=1.0)] = 0.0
     garble_rate: Annotated[float, Field(ge=0.0, le=1.0)] = 0.0
     disconnect_after: Annotated[int, Field(ge=0)] = 0
+    disconnect_rate: Annotated[float, Field(ge=0.0, le=1.0)] = 0.0
+    recover_after_s: Annotated[float, Field(ge=0.0, le=3600.0)] = 0.5
     lamp_stall_at_deg: float | None = None
     detector_stall_at_deg: float | None = None
     lamp_alarm_at_deg: float | None = None
     detector_alarm_at_deg: float | None = None
     alarm_code: Annotated[int, Field(ge=1, le=0xFFFF)] = 0x30
+
+    @model_validator(mode="after")
+    def _rates_sum_to_at_most_one(self) -> FaultsConfig:
+        total = self.timeout_rate + self.garble_rate + self.disconnect_rate
+        if total > 1.0:
+            raise ValueError(
+                f"timeout_rate + garble_rate + disconnect_rate must be <= 1, got {total:g}"
+            )
+        return self
 
     @field_validator(
         "lamp_stall_at_deg", "detector_stall_at_deg", "lamp_alarm_at_deg", "detector_alarm_at_deg"

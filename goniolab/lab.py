@@ -102,7 +102,11 @@ def _fault_spec(cfg: LabConfig, device: str) -> FaultSpec:
     if device not in f.devices:
         return FaultSpec()
     return FaultSpec(
-        timeout_rate=f.timeout_rate, garble_rate=f.garble_rate, disconnect_after=f.disconnect_after
+        timeout_rate=f.timeout_rate,
+        garble_rate=f.garble_rate,
+        disconnect_after=f.disconnect_after,
+        disconnect_rate=f.disconnect_rate,
+        recover_after_s=f.recover_after_s,
     )
 
 

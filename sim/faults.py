@@ -6,11 +6,21 @@ times out, returns a garbled frame, or finds the device disconnected. The in-pro
 instruments turn a decision into the :mod:`drivers.base` error a real driver would
 raise; the wire servers act it out on the bytes (no reply, corrupted reply, closed
 port), so the real drivers meet the same faults.
+
+Two kinds of disconnect:
+
+* ``disconnect_after = N``: the device is gone for good after N operations (a cable cut).
+* ``disconnect_rate = p``: each operation drops the link with probability p (a loose
+  connector, a USB adapter re-enumerating): the driver sees the link close, and the
+  device accepts a new connection ``recover_after_s`` seconds of lab clock later
+  (:meth:`FaultInjector.drop`, :meth:`FaultInjector.is_down`). A driver that reopens
+  the port after that carries on.
 """
 
 from __future__ import annotations
 
 import enum
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -27,6 +37,8 @@ class Fault(enum.Enum):
     TIMEOUT = "timeout"
     GARBLE = "garble"
     DISCONNECT = "disconnect"
+    #: The link drops, the device comes back after ``recover_after_s`` (a recoverable disconnect).
+    DROP = "drop"
 
 
 @dataclass(frozen=True, slots=True)
@@ -40,25 +52,41 @@ class FaultSpec:
     garble_rate
         Probability in [0, 1] that an answer is corrupted.
     disconnect_after
-        The device drops off after this many operations (0 = never).
+        The device drops off for good after this many operations (0 = never).
+    disconnect_rate
+        Probability in [0, 1] that an operation drops the link; the device is back
+        ``recover_after_s`` later (a disconnect that recovers).
+    recover_after_s
+        Lab-clock seconds a dropped device stays unreachable (>= 0).
     """
 
     timeout_rate: float = 0.0
     garble_rate: float = 0.0
     disconnect_after: int = 0
+    disconnect_rate: float = 0.0
+    recover_after_s: float = 0.5
 
     def __post_init__(self) -> None:
-        for name in ("timeout_rate", "garble_rate"):
+        for name in ("timeout_rate", "garble_rate", "disconnect_rate"):
             v = getattr(self, name)
             if not 0.0 <= v <= 1.0:
                 raise ValueError(f"{name} must be in [0, 1], got {v}")
+        total = self.timeout_rate + self.garble_rate + self.disconnect_rate
+        if total > 1.0:
+            raise ValueError(
+                f"timeout_rate + garble_rate + disconnect_rate must be <= 1, got {total:g}"
+            )
         if self.disconnect_after < 0:
             raise ValueError(f"disconnect_after must be >= 0, got {self.disconnect_after}")
+        if not (self.recover_after_s >= 0.0 and math.isfinite(self.recover_after_s)):
+            raise ValueError(f"recover_after_s must be finite and >= 0, got {self.recover_after_s}")
 
     @property
     def active(self) -> bool:
         """Any fault configured."""
-        return bool(self.timeout_rate or self.garble_rate or self.disconnect_after)
+        return bool(
+            self.timeout_rate or self.garble_rate or self.disconnect_after or self.disconnect_rate
+        )
 
 
 class FaultInjector:
@@ -83,6 +111,9 @@ class FaultInjector:
         self._rng = rng if rng is not None else np.random.default_rng(0)
         self.operations = 0
         self.disconnected = False
+        #: Recoverable drops so far, and the lab-clock time the last one ends.
+        self.drops = 0
+        self.down_until_s = -math.inf
 
     def decide(self) -> Fault:
         """Count one operation and return what happens to it."""
@@ -98,7 +129,26 @@ class FaultInjector:
             return Fault.TIMEOUT
         if u < spec.timeout_rate + spec.garble_rate:
             return Fault.GARBLE
+        if u < spec.timeout_rate + spec.garble_rate + spec.disconnect_rate:
+            return Fault.DROP
         return Fault.NONE
+
+    def drop(self, now_s: float) -> None:
+        """Record a recoverable drop at lab-clock ``now_s``: down for ``recover_after_s``."""
+        self.drops += 1
+        self.down_until_s = now_s + self.spec.recover_after_s
+
+    def is_down(self, now_s: float) -> bool:
+        """The device dropped off and is not back yet at lab-clock ``now_s``."""
+        return now_s < self.down_until_s
+
+    def error_for(self, fault: Fault, operation: str) -> DeviceTimeout | ProtocolError | None:
+        """In-process use: the driver error a timeout or garbled reply turns into."""
+        if fault is Fault.TIMEOUT:
+            return DeviceTimeout(f"simulated timeout: no answer to {operation}", device=self.device)
+        if fault is Fault.GARBLE:
+            return ProtocolError(f"simulated garbled reply to {operation}", device=self.device)
+        return None
 
     def check(self, operation: str) -> None:
         """In-process use: raise the driver error for this operation's fault, if any.
@@ -113,10 +163,15 @@ class FaultInjector:
                 f"simulated disconnect after {self.spec.disconnect_after} operations ({operation})",
                 device=self.device,
             )
-        if fault is Fault.TIMEOUT:
-            raise DeviceTimeout(f"simulated timeout: no answer to {operation}", device=self.device)
-        if fault is Fault.GARBLE:
-            raise ProtocolError(f"simulated garbled reply to {operation}", device=self.device)
+        if fault is Fault.DROP:
+            raise Disconnected(
+                f"simulated link drop during {operation} (back after "
+                f"{self.spec.recover_after_s:g} s)",
+                device=self.device,
+            )
+        error = self.error_for(fault, operation)
+        if error is not None:
+            raise error
 
     def garble(self, frame: bytes, *, keep: bytes = b"\r\n") -> bytes:
         """Corrupt a reply frame reproducibly: flip bits (XOR 0x5A) in one byte.

@@ -49,7 +49,7 @@ from drivers.timing import Clock
 from goniolab.optics.apertures import Aperture, Cone
 from goniolab.optics.facet import cap_overlap_fraction
 from goniolab.optics.models import ReflectanceModel
-from sim.faults import FaultInjector
+from sim.faults import Fault, FaultInjector
 from sim.motion import MotorFault, SimMotor
 
 __all__ = [
@@ -205,15 +205,31 @@ class _SimLink:
     """The connection state and fault injection every simulated instrument shares.
 
     Operations on a closed link raise :class:`drivers.base.Disconnected`; each operation
-    then passes the fault injector (timeouts, garbled replies, disconnects).
+    then passes the fault injector (timeouts, garbled replies, disconnects). A recoverable
+    drop (:attr:`sim.faults.Fault.DROP`) closes the link; :meth:`connect` succeeds again
+    once the device is back (``recover_after_s`` of lab clock later).
     """
 
     name: str
     faults: FaultInjector
+    clock: Clock
     _connected: bool = False
 
     async def connect(self) -> None:
-        """Open the (simulated) link."""
+        """Open the (simulated) link.
+
+        Raises
+        ------
+        drivers.base.Disconnected
+            The device dropped off the line and is not back yet.
+        """
+        now = self.clock.now()
+        if self.faults.is_down(now):
+            raise Disconnected(
+                f"no answer: the device dropped off the line and is back in "
+                f"{self.faults.down_until_s - now:.3g} s",
+                device=self.name,
+            )
         self._connected = True
 
     async def close(self) -> None:
@@ -223,7 +239,24 @@ class _SimLink:
     def _op(self, operation: str) -> None:
         if not self._connected:
             raise Disconnected(f"not connected ({operation})", device=self.name)
-        self.faults.check(operation)
+        fault = self.faults.decide()
+        if fault is Fault.DROP:
+            self._connected = False
+            self.faults.drop(self.clock.now())
+            raise Disconnected(
+                f"simulated link drop during {operation}: reconnect after "
+                f"{self.faults.spec.recover_after_s:g} s",
+                device=self.name,
+            )
+        if fault is Fault.DISCONNECT:
+            raise Disconnected(
+                f"simulated disconnect after {self.faults.spec.disconnect_after} operations "
+                f"({operation})",
+                device=self.name,
+            )
+        error = self.faults.error_for(fault, operation)
+        if error is not None:
+            raise error
 
 
 class SimAxis(_SimLink):

@@ -12,11 +12,14 @@ ALM-RST in the latched input-command word act.
 Injected faults (:mod:`sim.faults`): a timed-out request gets no answer (not executed, no
 reply sent); a garbled one a corrupted MBAP header (TCP) or a wrong CRC (RTU), which a
 master's framer rejects; a disconnected device gateway exception 0x0B ("target device
-failed to respond").
+failed to respond"); a recoverable drop closes the masters' connections (no reply), and
+until the unit is back (``recover_after_s``) a master that reconnects is dropped again at
+its first request to that unit.
 """
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import errno
 from dataclasses import dataclass, field
@@ -258,12 +261,19 @@ class ModbusAxisServer:
             registers: list[int],
             set_values: list[int] | list[bool] | None,
         ) -> ExcCodes | None:
-            fault = wire.axis.faults.decide()
+            faults = wire.axis.faults
+            now = wire.axis.clock.now()
+            if faults.is_down(now):
+                fault = Fault.DROP  # still off the line: the reconnected master is dropped again
+            else:
+                fault = faults.decide()
+                if fault is Fault.DROP:
+                    faults.drop(now)
             if fault is Fault.DISCONNECT:
                 return ExcCodes.GATEWAY_NO_RESPONSE
             if fault is not Fault.NONE:
                 self._pending[wire.unit_id].append(fault)
-            if set_values is not None and fault is not Fault.TIMEOUT:
+            if set_values is not None and fault not in (Fault.TIMEOUT, Fault.DROP):
                 wire.apply_write(registers, start_address, address, [int(v) for v in set_values])
             wire.refresh(registers, start_address)
             return None
@@ -285,11 +295,23 @@ class ModbusAxisServer:
         if not pending:
             return data
         fault = pending.pop(0)
+        if fault is Fault.DROP:
+            asyncio.get_running_loop().call_soon(self._drop_connections)
+            return b""  # the link goes down before the answer
         if fault is Fault.TIMEOUT:
             return b""  # no answer at all
         out = bytearray(data)
         out[5 if self.transport == "tcp" else -1] ^= 0x3C  # MBAP length / CRC high byte
         return bytes(out)
+
+    def _drop_connections(self) -> None:
+        """Close every master's connection (the server keeps listening)."""
+        server = self._server
+        if server is None:
+            return
+        for conn in list(server.active_connections.values()):
+            with contextlib.suppress(Exception):
+                conn.close()
 
     async def start(self) -> None:
         """Bind and serve in the background.

@@ -6,7 +6,10 @@
   pp. 16-28).
 
 Injected faults (:mod:`sim.faults`): a timed-out request gets no answer, a garbled one has
-one byte of the reply flipped, a disconnected device closes its port.
+one byte of the reply flipped, a disconnected device closes its port. A recoverable drop
+closes the pty and removes the link (a USB adapter unplugged); ``recover_after_s`` of lab
+clock later a fresh pty is published at the same link path, where a driver reopening the
+port finds the device again.
 """
 
 from __future__ import annotations
@@ -21,7 +24,8 @@ from pathlib import Path
 from typing import Any
 
 from drivers.profiles import StilProfile, ZgmProfile, template_regex
-from sim.faults import Fault
+from drivers.timing import Clock
+from sim.faults import Fault, FaultInjector
 from sim.instruments import SPECTRUM_WAVELENGTHS_NM, SimGlossmeter, SimSpectro
 
 __all__ = ["StilPtyDevice", "ZgmPtyDevice"]
@@ -38,6 +42,9 @@ class PtyDevice(abc.ABC):
     """
 
     name = "device"
+    #: The device's fault injector and lab clock (set by the subclasses).
+    faults: FaultInjector
+    clock: Clock
 
     def __init__(self, link_path: str | Path, *, terminator: bytes) -> None:
         self.link_path = Path(link_path)
@@ -50,6 +57,7 @@ class PtyDevice(abc.ABC):
         self._drained = asyncio.Event()
         self._drained.set()
         self._tasks: set[asyncio.Task[None]] = set()
+        self._stopped = False
         self.slave_name = ""
 
     @property
@@ -65,6 +73,8 @@ class PtyDevice(abc.ABC):
         FileExistsError
             ``link_path`` exists and is not a symlink (we never delete real files).
         """
+        self._stopped = False
+        self._buf = b""
         master, slave = os.openpty()
         tty.setraw(slave, termios.TCSANOW)
         os.set_blocking(master, False)
@@ -151,6 +161,28 @@ class PtyDevice(abc.ABC):
         self._drained.set()
         self._close_fds()
 
+    def drop(self) -> None:
+        """A recoverable disconnect: close the pty and remove the link now, publish a fresh
+        pty at the same path ``recover_after_s`` of lab clock later."""
+        self.faults.drop(self.clock.now())
+        self.disconnect()
+        if self.link_path.is_symlink():
+            with contextlib.suppress(OSError):
+                self.link_path.unlink()
+        self._spawn(self._come_back())
+
+    async def _come_back(self) -> None:
+        delay_s = self.faults.down_until_s - self.clock.now()
+        if delay_s > 0:
+            await self.clock.sleep(delay_s)
+        if not self._stopped and not self.open:
+            await self.start()
+
+    def _spawn(self, coro: Any) -> None:
+        task = asyncio.get_running_loop().create_task(coro)
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
     def _close_fds(self) -> None:
         for fd in (self._master, self._slave):
             if fd >= 0:
@@ -160,6 +192,7 @@ class PtyDevice(abc.ABC):
 
     async def stop(self) -> None:
         """Stop serving, close the pty and remove the symlink."""
+        self._stopped = True
         for task in list(self._tasks):
             task.cancel()
         self.disconnect()
@@ -180,6 +213,8 @@ class StilPtyDevice(PtyDevice):
     def __init__(self, spectro: SimSpectro, profile: StilProfile, link_path: str | Path) -> None:
         super().__init__(link_path, terminator=profile.command_terminator.encode(profile.encoding))
         self.spectro = spectro
+        self.faults = spectro.faults
+        self.clock = spectro.clock
         self.profile = profile
         self._exposure_re = template_regex(profile.cmd_set_exposure)
 
@@ -198,9 +233,12 @@ class StilPtyDevice(PtyDevice):
         text = line.decode(p.encoding, errors="replace").strip("\r\n")
         if not text:
             return
-        fault = self.spectro.faults.decide()
+        fault = self.faults.decide()
         if fault is Fault.DISCONNECT:
             self.disconnect()
+            return
+        if fault is Fault.DROP:
+            self.drop()
             return
         if fault is Fault.TIMEOUT:
             return
@@ -269,6 +307,8 @@ class ZgmPtyDevice(PtyDevice):
     ) -> None:
         super().__init__(link_path, terminator=b":")
         self.gloss = gloss
+        self.faults = gloss.faults
+        self.clock = gloss.clock
         self.profile = profile
         self.serial_number = serial_number.strip()
         self._autosend: asyncio.Task[None] | None = None
@@ -305,9 +345,12 @@ class ZgmPtyDevice(PtyDevice):
         parts = text.split("|")
         if len(parts) < 3 or parts[1].strip() != self.serial_number:
             return
-        fault = self.gloss.faults.decide()
+        fault = self.faults.decide()
         if fault is Fault.DISCONNECT:
             self.disconnect()
+            return
+        if fault is Fault.DROP:
+            self.drop()
             return
         if fault is Fault.TIMEOUT:
             return
