@@ -20,6 +20,8 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -129,8 +131,29 @@ def _cmd_stats(args: argparse.Namespace) -> int:
     return 0
 
 
+def _write_out(args: argparse.Namespace, make: Any) -> None:
+    """``--out FILE.nc``: the prediction as a netCDF Dataset (units on every variable)."""
+    if not args.out:
+        return
+    from goniolab.datasets import write_netcdf
+
+    out = Path(args.out)
+    if out.suffix.lower() not in (".nc", ".nc4"):
+        raise UserError(f"--out {out}: a prediction is written as netCDF (.nc)")
+    attrs = {"map": str(args.map), "n": _index_json(args.n), "weighting": args.weighting,
+             "slope_method": args.slope_method, "masking": int(args.masking)}  # fmt: skip
+    try:
+        write_netcdf(make(attrs), out)
+    except OSError as exc:
+        raise UserError(f"cannot write {out}: {exc.strerror or exc}") from exc
+    print(f"prediction written to {out}", file=sys.stderr)
+
+
 def _cmd_gloss(args: argparse.Namespace) -> int:
     rep = gloss_report(_model(args))
+    from goniolab.datasets import gloss_dataset
+
+    _write_out(args, lambda attrs: gloss_dataset(rep, attrs=attrs))
     e = rep.e430
     out: dict[str, Any] = {
         "map": str(args.map),
@@ -218,6 +241,11 @@ def _cmd_brdf(args: argparse.Namespace) -> int:
             "position_deg": peak.position_deg,
             "fwhm_deg": None if math.isnan(peak.fwhm_deg) else peak.fwhm_deg,
         }
+    from goniolab.datasets import brdf_dataset
+
+    cones = {} if lum is None else {"source_cone_deg": out["source_deg"],
+                                    "detector_cone_deg": out["detector_deg"]}  # fmt: skip
+    _write_out(args, lambda attrs: brdf_dataset(ti, tr, brdf, lum, attrs={**attrs, **cones}))
     if args.json:
         print(json.dumps(out, indent=2))
         return 0
@@ -272,6 +300,7 @@ def register(subparsers: Any) -> None:
     stats.set_defaults(func=_cmd_stats)
     gloss = sub.add_parser("gloss", help="ISO 2813 gloss, haze, DOI, D523 geometry")
     _add_common(gloss)
+    gloss.add_argument("--out", metavar="FILE.nc", help="also write the prediction as netCDF")
     gloss.set_defaults(func=_cmd_gloss)
     brdf = sub.add_parser("brdf", help="in-plane BRDF and goniometer luminance")
     _add_common(brdf)
@@ -285,4 +314,5 @@ def register(subparsers: Any) -> None:
     brdf.add_argument("--source-deg", type=float, default=None, help="lamp cone, full angle")
     brdf.add_argument("--detector-deg", type=float, default=None, help="detector cone, full angle")
     brdf.add_argument("--point", action="store_true", help="BRDF in the exact direction")
+    brdf.add_argument("--out", metavar="FILE.nc", help="also write the curve as netCDF")
     brdf.set_defaults(func=_cmd_brdf)

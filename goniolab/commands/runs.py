@@ -179,16 +179,27 @@ def _cmd_show(args: argparse.Namespace) -> int:
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
+    from goniolab.export import FORMATS, export_run, format_for_path
+
+    fmt = args.format
+    if fmt is None:
+        fmt = (format_for_path(args.output) if args.output else None) or "csv"
+    if fmt in ("netcdf", "parquet") and not args.output:
+        raise UserError(
+            f"runs export --format {fmt}: a binary format needs -o FILE (e.g. -o run{FORMATS[fmt]})"
+        )
     with open_store(args.store, args.config) as store:
         _get_run(store, args.run)
-        text = store.export(args.run, args.format)
-    if args.output:
-        out = Path(args.output)
         try:
-            out.write_text(text, encoding="utf-8")
+            text = export_run(store, args.run, fmt, args.output)
         except OSError as exc:
-            raise UserError(f"cannot write {out}: {exc.strerror}") from exc
-        print(f"run {args.run} written to {out}", file=sys.stderr)
+            raise UserError(f"cannot write {args.output}: {exc.strerror or exc}") from exc
+    if args.output:
+        if args.json:
+            doc = {"run_id": args.run, "format": fmt, "output": str(Path(args.output).resolve())}
+            print(json.dumps(doc, indent=2))
+        else:
+            print(f"run {args.run} written to {args.output} ({fmt})", file=sys.stderr)
     else:
         sys.stdout.write(text if text.endswith("\n") or not text else text + "\n")
     return 0
@@ -214,8 +225,24 @@ def register(subparsers: Any) -> None:
     ps.add_argument("--json", action="store_true", help="print JSON")
     ps.set_defaults(func=_cmd_show)
 
-    pe = sub.add_parser("export", parents=[common], help="export one run, one row per reading")
+    pe = sub.add_parser(
+        "export",
+        parents=[common],
+        help="export one run: CSV/JSON (one row per reading), netCDF or Parquet",
+        description="Export one run. CSV and JSON go to stdout unless -o FILE; netCDF "
+        "(xarray + h5netcdf, CF-style units, the run's metadata as attributes) and Parquet "
+        "(pyarrow, the run record in the schema metadata) need -o FILE. Timestamps are "
+        "ISO 8601 UTC.",
+    )
     pe.add_argument("run", type=int, metavar="RUN")
-    pe.add_argument("--format", choices=("csv", "json"), default="csv")
+    pe.add_argument(
+        "--format",
+        choices=("csv", "json", "netcdf", "parquet"),
+        default=None,
+        help="file format (default: from the -o suffix .csv/.json/.nc/.parquet, else csv)",
+    )
     pe.add_argument("-o", "--output", help="write to FILE instead of stdout")
+    pe.add_argument(
+        "--json", action="store_true", help="with -o: print what was written as JSON on stdout"
+    )
     pe.set_defaults(func=_cmd_export)

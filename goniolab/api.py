@@ -1,0 +1,564 @@
+"""The notebook face: surfaces, predictions and runs as xarray / pandas objects.
+
+>>> import goniolab.api as gl
+>>> z = gl.load_surface("sample:wittmann-3")              # DataArray (y_um, x_um)
+>>> curve = gl.predict_brdf(z, theta_i_deg=45, theta_r_deg="0:70:1")   # Dataset on theta_r_deg
+>>> gloss = gl.predict_gloss(z)                           # Dataset on geometry_deg
+>>> run = gl.run_scan("configs/lab-sim.toml", sample="sample:wittmann-3",
+...                   theta_r_deg="30:60:2", time_scale=0, store="runs.sqlite")
+>>> ds = run.to_xarray()          # measured, predicted, residual (and colour) per point
+>>> gl.open_runs("runs.sqlite")   # every run as a pandas DataFrame
+
+Every array follows xarray's Dataset conventions: named dimensions (``theta_r_deg``,
+``repeat``, ``wavelength_nm``, ``geometry_deg``), coordinates and variables with a
+``units`` attribute, provenance as attributes (:mod:`goniolab.datasets`). Angles are in
+degrees everywhere. Errors are :class:`goniolab.errors.UserError` with one clear line.
+
+xarray, pandas and the lab are imported inside the functions that use them.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import concurrent.futures
+import math
+from collections.abc import Coroutine, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, TypeVar
+
+import numpy as np
+
+from goniolab.errors import UserError
+from goniolab.store import RunRecord, RunStore, StoreError, resolve_store_path
+
+if TYPE_CHECKING:  # pragma: no cover - typing only
+    import pandas as pd
+    import xarray as xr
+
+    from goniolab.optics.facet import FacetModel
+    from goniolab.optics.heightmap import HeightMap
+
+__all__ = [
+    "Run",
+    "load_surface",
+    "open_run",
+    "open_runs",
+    "predict_brdf",
+    "predict_gloss",
+    "run_scan",
+]
+
+_T = TypeVar("_T")
+
+#: Default source and detector cones of the Wittmann goniometer (sec. 2.3), full angles.
+DEFAULT_CONE_DEG = 6.0
+
+
+# --------------------------------------------------------------------------- surfaces
+def _heightmap(surface: Any, step_um: float | None = None) -> HeightMap:
+    from goniolab.optics.heightmap import HeightMap
+    from goniolab.surfaces.resolve import resolve_map
+
+    if isinstance(surface, HeightMap):
+        return surface
+    if isinstance(surface, str | Path):
+        return resolve_map(surface, step_um=step_um)
+    attrs = getattr(surface, "attrs", None)
+    if attrs is not None and getattr(surface, "ndim", 0) == 2:
+        try:
+            return HeightMap(
+                np.asarray(surface.values, dtype=np.float64),
+                float(attrs["dx_um"]),
+                float(attrs["dy_um"]),
+                source=str(attrs.get("source", "<DataArray>")),
+            )
+        except KeyError as exc:
+            raise UserError(
+                f"surface DataArray: no {exc.args[0]} attribute (use load_surface)"
+            ) from None
+    raise UserError(
+        f"surface: expected a file path, sample:NAME or a load_surface() DataArray, "
+        f"got {type(surface).__name__}"
+    )
+
+
+def load_surface(path: str | Path, *, step_um: float | None = None) -> xr.DataArray:
+    """A height map as a DataArray ``height_um`` with dims ``(y_um, x_um)``.
+
+    Parameters
+    ----------
+    path
+        A height-map file (``.npy``, CSV/text, ``.sdf``, ``.sur``, ``.gwy``) or
+        ``sample:NAME`` (``goniolab samples`` lists them).
+    step_um
+        The lateral step for files that carry none.
+
+    Returns
+    -------
+    xarray.DataArray
+        Heights in micrometres; coords ``y_um``/``x_um`` in micrometres; attrs ``dx_um``,
+        ``dy_um``, ``source`` and the file's metadata as ``meta_*``.
+    """
+    from goniolab.datasets import heightmap_dataarray
+
+    return heightmap_dataarray(_heightmap(path, step_um))
+
+
+def _model(
+    surface: Any,
+    *,
+    n: complex | float,
+    step_um: float | None,
+    slope_method: str,
+    weighting: str,
+    masking: bool,
+) -> FacetModel:
+    from goniolab.models import model_for
+
+    options: dict[str, Any] = {"slope_method": slope_method, "weighting": weighting}
+    if isinstance(surface, str | Path):
+        return model_for(surface, n=n, step_um=step_um, masking=masking, **options)
+    from goniolab.optics.facet import FacetModel
+    from goniolab.optics.surface import Surface
+
+    hm = _heightmap(surface, step_um)
+    try:
+        return FacetModel(
+            Surface.from_heightmap(hm, slope_method=options["slope_method"]),
+            n=n,
+            weighting=options["weighting"],
+            masking=masking,
+        )
+    except ValueError as exc:
+        raise UserError(f"{hm.source}: {exc}") from None
+
+
+def _angles(theta_r_deg: str | Sequence[float] | np.ndarray) -> np.ndarray:
+    from goniolab.scan.plans import PlanError, parse_angles
+
+    spec = theta_r_deg if isinstance(theta_r_deg, str) else [float(v) for v in theta_r_deg]
+    try:
+        return np.asarray(parse_angles(spec, name="theta_r_deg"), dtype=np.float64)
+    except PlanError as exc:
+        raise UserError(str(exc)) from None
+
+
+def _source_label(surface: Any) -> str:
+    if isinstance(surface, str | Path):
+        return str(surface)
+    return str(getattr(surface, "attrs", {}).get("source", getattr(surface, "source", "")))
+
+
+def _index_attr(n: complex | float) -> float | list[float]:
+    c = complex(n)
+    return c.real if c.imag == 0 else [c.real, c.imag]
+
+
+def predict_brdf(
+    surface: Any,
+    *,
+    theta_i_deg: float = 45.0,
+    theta_r_deg: str | Sequence[float] | np.ndarray = "0:70:1",
+    n: complex | float = 1.55,
+    source_deg: float = DEFAULT_CONE_DEG,
+    detector_deg: float = DEFAULT_CONE_DEG,
+    point: bool = False,
+    step_um: float | None = None,
+    slope_method: str = "forward",
+    weighting: str = "radiometric",
+    masking: bool = False,
+) -> xr.Dataset:
+    """The in-plane curve the facet model predicts (Wittmann et al. 2021, PHYSICS.md).
+
+    Parameters
+    ----------
+    surface
+        A path, ``sample:NAME`` or a :func:`load_surface` DataArray.
+    theta_i_deg
+        Lamp angle, degrees in [0, 90).
+    theta_r_deg
+        Detector angles: ``"start:stop:step"``, ``"a,b,c"`` or a sequence, degrees.
+    n
+        Refractive index (complex ``n + ik`` for metals).
+    source_deg, detector_deg
+        Full angles of the lamp and detector cones (the goniometer's apertures).
+    point
+        The BRDF in the exact direction only (no apertures, no ``luminance_pct``).
+
+    Returns
+    -------
+    xarray.Dataset
+        Dim ``theta_r_deg``; ``luminance_pct`` (% of a mirror, through the cones) and
+        ``brdf_sr`` (1/sr: luminance / 100 / projected solid angle of the detector, or the
+        point BRDF with ``point=True``); coords ``theta_i_deg`` and ``aspecular_deg``.
+    """
+    from goniolab.datasets import brdf_dataset
+    from goniolab.optics.apertures import Cone, inplane_centre, sample_aperture
+
+    ti = float(theta_i_deg)
+    if not (math.isfinite(ti) and 0.0 <= ti < 90.0):
+        raise UserError(f"theta_i_deg {theta_i_deg}: must be in [0, 90) deg")
+    tr = _angles(theta_r_deg)
+    if np.any(np.abs(tr) >= 90.0):
+        raise UserError("theta_r_deg: angles must be in (-90, 90) deg")
+    model = _model(
+        surface,
+        n=n,
+        step_um=step_um,
+        slope_method=slope_method,
+        weighting=weighting,
+        masking=masking,
+    )
+    attrs: dict[str, Any] = {
+        "sample": _source_label(surface),
+        "n": _index_attr(n),
+        "weighting": weighting,
+        "slope_method": slope_method,
+        "masking": int(masking),
+        "model": type(model).__name__,
+    }
+    if point:
+        brdf = np.asarray(model.brdf_inplane(ti, tr), dtype=np.float64)
+        return brdf_dataset(ti, tr, brdf, None, attrs={**attrs, "aperture": "none (point)"})
+    try:
+        src, det = Cone(float(source_deg)), Cone(float(detector_deg))
+    except ValueError as exc:
+        raise UserError(f"source_deg/detector_deg: {exc}") from None
+    if det.full_angle_deg == 0.0:
+        raise UserError("detector_deg 0 has no solid angle: use point=True for the BRDF")
+    try:
+        lum = np.asarray(model.luminance_pct(ti, tr, source=src, detector=det), dtype=np.float64)
+    except ValueError as exc:
+        raise UserError(f"theta_i_deg {ti:g} / source_deg: {exc}") from None
+    omega = []
+    for t in tr:
+        dirs, w = sample_aperture(det, *inplane_centre(float(t)), n=32)
+        omega.append(float(np.sum(np.clip(dirs[:, 2], 0.0, None) * w)))
+    om = np.asarray(omega)
+    brdf = np.where(om > 0, lum / 100.0 / np.where(om > 0, om, 1.0), 0.0)
+    attrs.update(source_cone_deg=src.full_angle_deg, detector_cone_deg=det.full_angle_deg)
+    return brdf_dataset(ti, tr, brdf, lum, attrs=attrs)
+
+
+def predict_gloss(
+    surface: Any,
+    *,
+    n: complex | float = 1.55,
+    step_um: float | None = None,
+    slope_method: str = "forward",
+    weighting: str = "radiometric",
+    masking: bool = False,
+) -> xr.Dataset:
+    """ISO 2813 gloss at 20/60/85 deg and the ASTM D4039/E430 haze and DOI readings.
+
+    Returns
+    -------
+    xarray.Dataset
+        ``gloss_gu`` along ``geometry_deg`` (20, 60, 85), scalar ``haze_index``, ``doi``
+        and the E430 readings; ``d523_recommended_angle_deg`` as an attribute.
+    """
+    from goniolab.datasets import gloss_dataset
+    from goniolab.optics.gloss_standards import gloss_report
+
+    model = _model(
+        surface,
+        n=n,
+        step_um=step_um,
+        slope_method=slope_method,
+        weighting=weighting,
+        masking=masking,
+    )
+    return gloss_dataset(
+        gloss_report(model),
+        attrs={"sample": _source_label(surface), "n": _index_attr(n), "weighting": weighting},
+    )
+
+
+# --------------------------------------------------------------------------- runs
+def _store_location(store: str | Path | None, config: str | Path | None = None) -> str | Path:
+    config_store = None
+    if config is not None:
+        from goniolab.config import load_lab_config
+
+        config_store = load_lab_config(config).lab.store
+    return resolve_store_path(None if store is None else str(store), config_store)
+
+
+def _open_readonly(location: str | Path) -> RunStore:
+    try:
+        return RunStore(location, readonly=True)
+    except StoreError as exc:
+        raise UserError(str(exc)) from exc
+
+
+@dataclass(frozen=True)
+class Run:
+    """A stored run: its record and its data as xarray / pandas.
+
+    Each method reads the store afresh (a run still being measured shows its new points).
+    """
+
+    id: int
+    store: str | Path
+
+    @property
+    def record(self) -> RunRecord:
+        """The run's row: kind, plan, config snapshot, sample, model, status, times."""
+        with _open_readonly(self.store) as s:
+            try:
+                return s.get_run(self.id)
+            except StoreError as exc:
+                raise UserError(str(exc)) from exc
+
+    @property
+    def status(self) -> str:
+        """``done``, ``running``, ``aborted``, ``failed`` ..."""
+        return self.record.status
+
+    def to_xarray(self) -> xr.Dataset:
+        """Measured, predicted, residual (and colour) per point: see
+        :func:`goniolab.datasets.run_dataset`."""
+        from goniolab.datasets import run_dataset
+
+        with _open_readonly(self.store) as s:
+            try:
+                return run_dataset(s, self.id)
+            except StoreError as exc:
+                raise UserError(str(exc)) from exc
+
+    def to_dataframe(self) -> pd.DataFrame:
+        """One row per reading (the CSV export's columns, ``timestamp`` as UTC datetimes)."""
+        from goniolab.export import run_dataframe
+
+        with _open_readonly(self.store) as s:
+            try:
+                s.get_run(self.id)
+                return run_dataframe(s, self.id)
+            except StoreError as exc:
+                raise UserError(str(exc)) from exc
+
+    def summary(self) -> dict[str, Any]:
+        """The summary ``goniolab runs show`` prints (RMSE, peaks, counts)."""
+        from goniolab.commands.runs import run_summary
+
+        with _open_readonly(self.store) as s:
+            return run_summary(s, self.record)
+
+    def plot(self, out: str | Path | None = None, *, log: bool = False) -> Any:
+        """The figure ``goniolab plot`` draws; saved to ``out`` when given."""
+        from goniolab.plot import plot_run
+
+        with _open_readonly(self.store) as s:
+            return plot_run(s, self.id, out=out, log=log)
+
+
+def open_run(run_id: int, store: str | Path | None = None) -> Run:
+    """Run ``run_id`` of the store (``None``: the default store, as the CLI's)."""
+    run = Run(int(run_id), _store_location(store))
+    run.record  # noqa: B018 - fail here, with the store's message, when it does not exist
+    return run
+
+
+def open_runs(
+    store: str | Path | None = None, *, config: str | Path | None = None, limit: int | None = None
+) -> pd.DataFrame:
+    """Every run of the store as a DataFrame indexed by run id, newest first.
+
+    Columns: ``kind``, ``status``, ``interrupted``, ``sample``, ``readings``,
+    ``created_at``/``finished_at`` (UTC datetimes), ``theta_i_deg``, ``reason``.
+    """
+    import pandas as pd
+
+    from goniolab.commands.runs import interrupted
+
+    location = _store_location(store, config)
+    rows: list[dict[str, Any]] = []
+    with _open_readonly(location) as s:
+        for r in s.list_runs(limit=limit):
+            rows.append(
+                {
+                    "id": r.id,
+                    "kind": r.kind,
+                    "status": r.status,
+                    "interrupted": interrupted(s, r),
+                    "sample": r.sample,
+                    "readings": s.count_points(r.id)
+                    if r.kind == "brdf"
+                    else len(s.gloss_readings(r.id)),
+                    "created_at": r.created_at,
+                    "finished_at": r.finished_at,
+                    "theta_i_deg": r.plan.get("theta_i_deg"),
+                    "reason": r.reason,
+                }
+            )
+    columns = ["id", "kind", "status", "interrupted", "sample", "readings", "created_at",
+               "finished_at", "theta_i_deg", "reason"]  # fmt: skip
+    df = pd.DataFrame.from_records(rows, columns=columns)
+    for col in ("created_at", "finished_at"):
+        df[col] = pd.to_datetime(df[col], unit="s", utc=True)
+    df["theta_i_deg"] = pd.to_numeric(df["theta_i_deg"], errors="coerce")
+    return df.set_index("id")
+
+
+# --------------------------------------------------------------------------- scans
+def _run_blocking(coro: Coroutine[Any, Any, _T]) -> _T:
+    """Run ``coro`` to completion from plain code or from a notebook (whose event loop
+    is already running in this thread: the scan then gets its own loop in a thread)."""
+    from drivers.base import DeviceError
+
+    try:
+        asyncio.get_running_loop()
+    except RuntimeError:
+        in_loop = False
+    else:
+        in_loop = True
+    try:
+        if not in_loop:
+            return asyncio.run(coro)
+        with concurrent.futures.ThreadPoolExecutor(1) as pool:
+            return pool.submit(asyncio.run, coro).result()
+    except DeviceError as exc:
+        raise UserError(f"instrument error: {exc}", exit_code=1) from exc
+
+
+def run_scan(
+    config: str | Path,
+    *,
+    sample: str | None = None,
+    theta_i_deg: float = 45.0,
+    theta_r_deg: str | Sequence[float] = "0:70:1",
+    repeats: int = 1,
+    dwell_s: float = 0.0,
+    exposure_us: int | None = None,
+    store: str | Path | None = None,
+    time_scale: float | None = None,
+    progress: bool = True,
+) -> Run:
+    """Run an in-plane scan in one call (blocking) and return the stored :class:`Run`.
+
+    Parameters
+    ----------
+    config
+        Lab config TOML (``configs/lab-sim.toml`` for the simulated lab).
+    sample
+        ``sample:NAME`` or a height-map path (default: the config's ``[sample] map``).
+    theta_i_deg, theta_r_deg, repeats, dwell_s, exposure_us
+        The plan, as ``goniolab scan`` takes it.
+    store
+        Run store file or ``postgresql://`` URL (default: config ``[lab] store``, else
+        the user data dir).
+    time_scale
+        Simulated lab only: clock scale (0 = no waiting).
+    progress
+        Show a progress bar (rich: in a terminal and in a notebook).
+
+    Returns
+    -------
+    Run
+        Also when the run ends ``failed``: its ``status`` and ``record.reason`` say why and
+        what was measured stays stored.
+    """
+    from goniolab.config import load_lab_config
+    from goniolab.scan.plans import BrdfPlan, PlanError
+
+    cfg = load_lab_config(config)
+    try:
+        plan = BrdfPlan(
+            theta_i_deg=float(theta_i_deg),
+            theta_r_deg=tuple(float(v) for v in _angles(theta_r_deg)),
+            repeats=int(repeats),
+            dwell_s=float(dwell_s),
+            exposure_us=cfg.spectro.exposure_us if exposure_us is None else int(exposure_us),
+            sample=sample or cfg.sample.map,
+        )
+    except PlanError as exc:
+        raise UserError(f"run_scan: {exc}") from None
+    location = resolve_store_path(None if store is None else str(store), cfg.lab.store)
+    try:
+        rs = RunStore(location)
+    except StoreError as exc:
+        raise UserError(str(exc)) from exc
+    with rs:
+        run_id = _run_blocking(_scan(str(Path(config).resolve()), plan, rs, time_scale, progress))
+    return Run(run_id, location)
+
+
+async def _scan(
+    config_path: str, plan: Any, store: RunStore, time_scale: float | None, progress: bool
+) -> int:
+    from goniolab import __version__
+    from goniolab.commands.scan import _specimen_hook, with_sample
+    from goniolab.config import load_lab_config
+    from goniolab.lab import Lab
+    from goniolab.scan.events import EventBus, Progress
+    from goniolab.scan.predict import Predictor
+    from goniolab.scan.runner import ArmMotion, PlanRefused, ScanRunner, dry_run
+
+    cfg0 = with_sample(load_lab_config(config_path), plan.sample)
+    async with Lab.from_config(cfg0, time_scale=time_scale) as lab:
+        cfg = lab.config
+        predictor = Predictor.from_config(lab.model, cfg)
+        g = cfg.goniometer
+        motion = ArmMotion.from_config(g)
+        park = (g.park.theta_i_deg, g.park.theta_r_deg)
+        start = await lab.goniometer.positions_deg()
+        try:
+            dry_run(
+                plan.points(),
+                lab.goniometer,
+                motion,
+                start_deg=(float(start[0]), float(start[1])),
+                dwell_s=plan.dwell_s,
+                reading_time_s=plan.exposure_us * 1e-6,
+                park_deg=park,
+            )
+        except PlanRefused as exc:
+            raise UserError(f"plan refused (no arm moved): {exc}") from exc
+        snapshot: dict[str, Any] = cfg.model_dump(mode="json")
+        snapshot["_source"] = config_path
+        run_id = store.create_run(
+            kind="brdf",
+            plan=plan.to_dict(),
+            config=snapshot,
+            sample=plan.sample,
+            model=predictor.describe(),
+            version=__version__,
+        )
+        bus = EventBus()
+        runner = ScanRunner(
+            goniometer=lab.goniometer,
+            spectro=lab.spectro,
+            clock=lab.clock,
+            plan=plan,
+            store=store,
+            run_id=run_id,
+            bus=bus,
+            motion=motion,
+            predictor=predictor,
+            move_timeout_s=g.move_timeout_s,
+            park_deg=park,
+            specimen_hook=_specimen_hook(lab) if plan.mirror_reference else None,
+        )
+        queue = bus.subscribe()
+
+        async def report() -> None:
+            if not progress:
+                while await queue.get() is not None:
+                    pass
+                return
+            from rich.progress import Progress as Bar
+
+            with Bar(transient=False) as bar:
+                task = bar.add_task(f"run {run_id}", total=len(plan.points()))
+                while (ev := await queue.get()) is not None:
+                    if isinstance(ev, Progress):
+                        bar.update(task, completed=ev.done, total=ev.total)
+
+        reporter = asyncio.create_task(report())
+        try:
+            await runner.run()
+        finally:
+            bus.close()
+            await reporter
+    return run_id

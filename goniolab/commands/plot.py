@@ -1,0 +1,61 @@
+"""``goniolab plot RUN [--out run.png|svg|pdf] [--log]``: a picture of a stored run.
+
+A scan: measured points with error bars, the predicted curve and a residual panel (plus
+L*, a*, b* against the aspecular angle when the run has colour data); a gloss log: the
+readings over time beside the predictions. See :mod:`goniolab.plot`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from goniolab.errors import UserError
+
+__all__ = ["register"]
+
+
+def _cmd_plot(args: argparse.Namespace) -> int:
+    from goniolab.commands.runs import _get_run, open_store
+    from goniolab.plot import PLOT_FORMATS
+
+    out = Path(args.out) if args.out else Path(f"run-{args.run}.png")
+    if out.suffix.lower() not in PLOT_FORMATS:
+        raise UserError(f"--out {out}: the suffix picks the format: {', '.join(PLOT_FORMATS)}")
+    if out.parent and not out.parent.is_dir():
+        raise UserError(f"--out {out}: no such directory {out.parent}")
+    with open_store(args.store, args.config) as store:
+        rec = _get_run(store, args.run)
+        from goniolab.plot import plot_run
+
+        try:
+            plot_run(store, args.run, out=out, log=args.log)
+        except OSError as exc:
+            raise UserError(f"cannot write {out}: {exc.strerror or exc}") from exc
+    if args.json:
+        doc = {"run_id": rec.id, "kind": rec.kind, "output": str(out.resolve())}
+        print(json.dumps(doc, indent=2))
+    else:
+        print(f"run {rec.id} ({rec.kind}) drawn to {out}", file=sys.stderr)
+    return 0
+
+
+def register(subparsers: Any) -> None:
+    """Add ``goniolab plot``."""
+    p = subparsers.add_parser(
+        "plot",
+        help="draw a stored run to PNG, SVG or PDF",
+        description="Draw a stored run: a scan's measured points with error bars, the "
+        "predicted curve and the residuals (and L*, a*, b* against the aspecular angle when "
+        "it has colour data); a gloss log's readings over time.",
+    )
+    p.add_argument("run", type=int, metavar="RUN")
+    p.add_argument("--out", "-o", help="output file .png, .svg or .pdf (default run-RUN.png)")
+    p.add_argument("--log", action="store_true", help="luminance on a log axis")
+    p.add_argument("--store", help="run store (default: config [lab] store or user data dir)")
+    p.add_argument("--config", help="lab config TOML whose [lab] store to use")
+    p.add_argument("--json", action="store_true", help="print what was written as JSON")
+    p.set_defaults(func=_cmd_plot)

@@ -1,0 +1,85 @@
+"""The notebook face: xarray / pandas objects with units, and the README's example runs."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import goniolab.api as gl
+from goniolab.errors import UserError
+from tests._runs import lum, make_store
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_load_surface_is_a_dataarray_with_units(tmp_path: Path) -> None:
+    z = np.arange(12, dtype=np.float64).reshape(3, 4) * 0.01
+    np.save(tmp_path / "m.npy", z)
+    (tmp_path / "m.npy.json").write_text('{"dx_um": 2.0, "dy_um": 3.0}')
+    da = gl.load_surface(tmp_path / "m.npy")
+    assert da.dims == ("y_um", "x_um")
+    np.testing.assert_array_equal(da.values, z)
+    np.testing.assert_array_equal(da["x_um"].values, [0.0, 2.0, 4.0, 6.0])
+    np.testing.assert_array_equal(da["y_um"].values, [0.0, 3.0, 6.0])
+    assert da.attrs["units"] == "um" and da["x_um"].attrs["units"] == "um"
+
+
+def test_predict_brdf_matches_the_cli_numbers(capsys: pytest.CaptureFixture[str]) -> None:
+    import json
+
+    from goniolab.cli import main
+
+    ds = gl.predict_brdf("sample:wittmann-3", theta_i_deg=45, theta_r_deg=[40.0, 45.0, 50.0])
+    assert main(["predict", "brdf", "sample:wittmann-3", "--theta-r", "40,45,50", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    np.testing.assert_allclose(ds["luminance_pct"].values, doc["luminance_pct"], rtol=1e-12)
+    np.testing.assert_allclose(ds["brdf_sr"].values, doc["brdf_sr"], rtol=1e-12)
+    assert ds["luminance_pct"].dims == ("theta_r_deg",)
+    assert ds["brdf_sr"].attrs["units"] == "sr-1"
+    assert ds["theta_r_deg"].attrs["units"] == "degree"
+    np.testing.assert_array_equal(ds["aspecular_deg"].values, [-5.0, 0.0, 5.0])
+
+
+def test_predict_gloss_of_a_flat_black_glass_is_100_gu() -> None:
+    # ISO 2813: the polished black glass of n = 1.567 is 100 GU at every geometry
+    ds = gl.predict_gloss("sample:flat", n=1.567)
+    np.testing.assert_allclose(ds["gloss_gu"].values, [100.0, 100.0, 100.0], rtol=1e-3)
+    assert list(ds["geometry_deg"].values) == [20, 60, 85]
+    assert ds["gloss_gu"].attrs["units"] == "GU"
+
+
+def test_open_runs_and_run_to_xarray(tmp_path: Path) -> None:
+    store = make_store(tmp_path / "s.sqlite")
+    df = gl.open_runs(store)
+    assert list(df.index) == [2, 1]
+    assert list(df["kind"]) == ["gloss", "brdf"] and list(df["readings"]) == [2, 5]
+    assert str(df["created_at"].dtype).startswith("datetime64")
+    run = gl.open_run(1, store)
+    ds = run.to_xarray()
+    assert ds["luminance_pct"].sel(theta_r_deg=45.0, repeat=1).item() == lum(1, 1)
+    assert run.to_dataframe()["luminance_pct"].tolist()[:2] == [lum(0, 0), lum(0, 1)]
+    with pytest.raises(UserError, match="no run 9"):
+        gl.open_run(9, store)
+
+
+def test_a_bad_angle_list_is_a_user_error() -> None:
+    with pytest.raises(UserError, match="theta_r_deg"):
+        gl.predict_brdf("sample:flat", theta_r_deg="10:0:1")
+
+
+def test_the_readme_example_runs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    section = text[text.index("## In a notebook") :]
+    code = re.search(r"```python\n(.*?)```", section, re.S)
+    assert code is not None
+    (tmp_path / "configs").symlink_to(ROOT / "configs")
+    monkeypatch.chdir(tmp_path)
+    exec(compile(code.group(1), "README.md", "exec"), {"__name__": "readme"})
+    assert (tmp_path / "run.png").read_bytes()[:4] == b"\x89PNG"
+    ds = gl.open_run(1, tmp_path / "runs.sqlite").to_xarray()
+    assert ds.attrs["status"] == "done" and ds.attrs["stored_readings"] == 12
+    # the simulated lab measures what the model predicts, within its noise and stray light
+    assert float(np.nanmax(np.abs(ds["residual_pct"].values))) < 0.1

@@ -1,0 +1,175 @@
+"""``runs export --format csv|json|netcdf|parquet``: what is read back equals what was stored."""
+
+from __future__ import annotations
+
+import csv
+import datetime as dt
+import io
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from goniolab.cli import main
+from tests._runs import T0, lum, make_store
+
+
+@pytest.fixture
+def store_file(tmp_path: Path) -> Path:
+    return make_store(tmp_path / "s.sqlite")
+
+
+def _export(store: Path, run: int, *extra: str) -> int:
+    return main(["runs", "export", str(run), "--store", str(store), *extra])
+
+
+def test_csv_has_iso_8601_timestamps_that_read_back(
+    store_file: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert _export(store_file, 1) == 0
+    rows = list(csv.DictReader(io.StringIO(capsys.readouterr().out)))
+    assert len(rows) == 5
+    first = rows[0]
+    assert first["timestamp"] == "2026-01-01T00:00:00.125000+00:00"
+    for row in rows:
+        k, r = int(row["index"]), int(row["repeat"])
+        back = dt.datetime.fromisoformat(row["timestamp"]).timestamp()
+        assert back == pytest.approx(T0 + 2 * k + r, abs=1e-6)
+        assert float(row["luminance_pct"]) == lum(k, r)
+
+
+def test_json_carries_the_run_and_iso_times(
+    store_file: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert _export(store_file, 1, "--format", "json") == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["run"]["status"] == "aborted" and doc["run"]["plan"]["repeats"] == 2
+    assert doc["run"]["created_at_iso"].endswith("+00:00")
+    assert [r["timestamp"][:19] for r in doc["readings"][:2]] == [
+        "2026-01-01T00:00:00",
+        "2026-01-01T00:00:01",
+    ]
+
+
+def test_netcdf_round_trip(store_file: Path, tmp_path: Path) -> None:
+    import xarray as xr
+
+    out = tmp_path / "run1.nc"
+    assert _export(store_file, 1, "-o", str(out)) == 0  # format from the suffix
+    assert out.read_bytes()[:8] == b"\x89HDF\r\n\x1a\n"  # netCDF-4 is HDF5
+    with xr.open_dataset(out, engine="h5netcdf") as ds:
+        ds.load()
+    assert ds.sizes == {"theta_r_deg": 3, "repeat": 2, "wavelength_nm": 3}
+    assert ds["theta_r_deg"].attrs["units"] == "degree"
+    assert ds["luminance_pct"].attrs["units"] == "percent"
+    assert ds["wavelength_nm"].attrs["units"] == "nm"
+    expected = np.array([[lum(k, r) for r in range(2)] for k in range(3)])
+    expected[2, 1] = np.nan  # the reading never taken
+    np.testing.assert_array_equal(ds["luminance_pct"].values, expected)
+    np.testing.assert_allclose(ds["luminance_mean_pct"].values, np.nanmean(expected, axis=1))
+    np.testing.assert_allclose(ds["predicted_pct"].values, [1.0, 12.0, 3.0])
+    np.testing.assert_allclose(
+        ds["residual_pct"].values, np.nanmean(expected, axis=1) - [1.0, 12.0, 3.0]
+    )
+    np.testing.assert_allclose(ds["aspecular_deg"].values, [-5.0, 0.0, 5.0])
+    np.testing.assert_array_equal(ds["reflectance_pct"].sel(theta_r_deg=45.0).values[:, :2],
+                                  [[1.0, 0.0], [1.0, 1.0]])  # fmt: skip
+    t = ds["time"].values
+    assert np.isnat(t[2, 1])
+    assert t[1, 1] == np.datetime64(round((T0 + 3) * 1e9), "ns")
+    # the run's metadata as attributes
+    assert ds.attrs["run_id"] == 1 and ds.attrs["status"] == "aborted"
+    assert ds.attrs["reason"] == "aborted by the operator"
+    assert json.loads(ds.attrs["plan_json"])["theta_r_deg"] == [40.0, 45.0, 50.0]
+    assert json.loads(ds.attrs["config_json"]) == {"lab": {"name": "t"}}
+    assert ds.attrs["stored_readings"] == 5 and ds.attrs["planned_readings"] == 6
+
+
+def test_parquet_round_trip(store_file: Path, tmp_path: Path) -> None:
+    import pandas as pd
+    import pyarrow.parquet as pq
+
+    from goniolab.export import PARQUET_RUN_KEY
+
+    out = tmp_path / "run1.parquet"
+    assert _export(store_file, 1, "--format", "parquet", "-o", str(out)) == 0
+    df = pd.read_parquet(out)
+    assert len(df) == 5
+    assert str(df["timestamp"].dtype) == "datetime64[us, UTC]"
+    for row in df.itertuples():
+        k, r = int(row.index), int(row.repeat)
+        assert row.luminance_pct == lum(k, r)
+        assert row.timestamp.timestamp() == pytest.approx(T0 + 2 * k + r, abs=1e-6)
+    assert list(df["predicted_pct"]) == [1.0, 1.0, 12.0, 12.0, 3.0]
+    meta = pq.read_schema(out).metadata
+    run = json.loads(meta[PARQUET_RUN_KEY])
+    assert run["id"] == 1 and run["plan"]["theta_i_deg"] == 45.0
+
+
+def test_gloss_log_to_netcdf(store_file: Path, tmp_path: Path) -> None:
+    import xarray as xr
+
+    out = tmp_path / "gloss.nc"
+    assert _export(store_file, 2, "--format", "netcdf", "-o", str(out)) == 0
+    with xr.open_dataset(out, engine="h5netcdf") as ds:
+        ds.load()
+    np.testing.assert_array_equal(ds["g60_gu"].values, [90.0, 91.0])
+    np.testing.assert_array_equal(ds["predicted_g20_gu"].values, [81.0, 81.0])
+    assert ds["g60_gu"].attrs["units"] == "GU"
+    assert ds["temperature_c"].attrs["units"] == "degC"
+    assert ds.attrs["kind"] == "gloss"
+    dt_s = (ds["time"].values[1] - ds["time"].values[0]) / np.timedelta64(1, "s")
+    assert math.isclose(dt_s, 60.0)
+
+
+def test_binary_format_to_stdout_is_one_line_error(
+    store_file: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert _export(store_file, 1, "--format", "netcdf") == 2
+    err = capsys.readouterr().err
+    assert err.startswith("goniolab: error: ") and err.count("\n") == 1 and "-o" in err
+
+
+def test_export_json_flag_reports_the_file(
+    store_file: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "r.parquet"
+    assert _export(store_file, 1, "-o", str(out), "--json") == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc == {"run_id": 1, "format": "parquet", "output": str(out.resolve())}
+
+
+def test_predict_brdf_out_netcdf_round_trip(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import xarray as xr
+
+    out = tmp_path / "curve.nc"
+    args = ["predict", "brdf", "sample:wittmann-3", "--theta-r", "40,45,50", "--json"]
+    assert main([*args, "--out", str(out)]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    with xr.open_dataset(out, engine="h5netcdf") as ds:
+        ds.load()
+    np.testing.assert_array_equal(ds["luminance_pct"].values, doc["luminance_pct"])
+    np.testing.assert_array_equal(ds["brdf_sr"].values, doc["brdf_sr"])
+    np.testing.assert_array_equal(ds["theta_r_deg"].values, [40.0, 45.0, 50.0])
+    assert ds["brdf_sr"].attrs["units"] == "sr-1"
+    assert float(ds["theta_i_deg"]) == 45.0
+    assert ds.attrs["map"] == "sample:wittmann-3" and ds.attrs["detector_cone_deg"] == 6.0
+
+
+def test_predict_gloss_out_netcdf(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    import xarray as xr
+
+    out = tmp_path / "gloss.nc"
+    assert (
+        main(["predict", "gloss", "sample:flat", "--n", "1.567", "--json", "--out", str(out)]) == 0
+    )
+    doc = json.loads(capsys.readouterr().out)
+    with xr.open_dataset(out, engine="h5netcdf") as ds:
+        ds.load()
+    np.testing.assert_array_equal(ds["gloss_gu"].values, [doc["G20"], doc["G60"], doc["G85"]])
+    assert float(ds["haze_index"]) == doc["haze_index"]
+    assert ds.attrs["d523_recommended_angle_deg"] == doc["d523_angle"]

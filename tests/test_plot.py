@@ -1,0 +1,87 @@
+"""``goniolab plot``: the files are real pictures and show the stored numbers."""
+
+from __future__ import annotations
+
+import json
+import struct
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from goniolab.cli import main
+from goniolab.store import RunStore
+from tests._runs import lum, make_store
+
+
+@pytest.fixture
+def store_file(tmp_path: Path) -> Path:
+    return make_store(tmp_path / "s.sqlite")
+
+
+def _plot(store: Path, *args: str) -> int:
+    return main(["plot", *args, "--store", str(store)])
+
+
+def test_png_has_the_figure_size(store_file: Path, tmp_path: Path) -> None:
+    out = tmp_path / "r.png"
+    assert _plot(store_file, "1", "--out", str(out)) == 0
+    data = out.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    assert data[12:16] == b"IHDR"
+    width, height = struct.unpack(">II", data[16:24])
+    assert (width, height) == (8 * 120, 6 * 120)  # 8 x 6 in at 120 dpi
+    assert len(data) > 20_000  # drawn, not blank
+
+
+def test_svg_parses_and_names_the_panels(store_file: Path, tmp_path: Path) -> None:
+    out = tmp_path / "r.svg"
+    assert _plot(store_file, "1", "--out", str(out), "--log") == 0
+    root = ET.parse(out).getroot()
+    assert root.tag.endswith("svg")
+    # matplotlib draws text as paths and keeps each string in a comment beside it
+    text = out.read_text()
+    assert "<!-- run 1 on sample:x: aborted (aborted by the operator) -->" in text
+    assert "<!-- measured - -->" in text or "measured -" in text
+
+
+def test_pdf_of_a_gloss_log(store_file: Path, tmp_path: Path) -> None:
+    out = tmp_path / "g.pdf"
+    assert _plot(store_file, "2", "-o", str(out)) == 0
+    assert out.read_bytes()[:5] == b"%PDF-" and out.stat().st_size > 5_000
+
+
+def test_the_figure_shows_the_stored_values(store_file: Path) -> None:
+    from goniolab.plot import plot_run
+
+    with RunStore(store_file, readonly=True) as s:
+        fig = plot_run(s, 1, log=True)
+    main_ax, resid_ax = fig.axes[:2]
+    assert main_ax.get_yscale() == "log"
+    lines = {ln.get_label(): ln for ln in main_ax.get_lines()}
+    pred = lines["predicted (facet model)"]
+    np.testing.assert_array_equal(pred.get_xdata(), [40.0, 45.0, 50.0])
+    np.testing.assert_array_equal(pred.get_ydata(), [1.0, 12.0, 3.0])
+    # the error-bar markers sit at the repeat means (the last geometry has one reading)
+    means = [np.mean([lum(0, 0), lum(0, 1)]), np.mean([lum(1, 0), lum(1, 1)]), lum(2, 0)]
+    markers = [ln for ln in main_ax.get_lines() if ln.get_marker() == "o"]
+    np.testing.assert_allclose(markers[0].get_ydata(), means)
+    res = resid_ax.get_lines()[-1]
+    np.testing.assert_allclose(res.get_ydata(), np.array(means) - [1.0, 12.0, 3.0])
+
+
+def test_bad_suffix_is_one_line_error(
+    store_file: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert _plot(store_file, "1", "--out", str(tmp_path / "r.jpg")) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("goniolab: error: --out") and err.count("\n") == 1
+
+
+def test_json_names_the_file(
+    store_file: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "x.png"
+    assert _plot(store_file, "1", "--out", str(out), "--json") == 0
+    assert json.loads(capsys.readouterr().out)["output"] == str(out.resolve())
