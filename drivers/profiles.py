@@ -5,6 +5,12 @@ lives in a profile, so a lab can correct it from its own manual without touching
 Both the drivers (``drivers.modbus_stepper``, ``drivers.stil``, ``drivers.glossmeter``)
 and the simulated lab (``sim.wire``) read the same profile, so they speak the same bytes.
 
+Each kind of file is a pydantic model (``_StepperFile``, ``_StilFile``, ``_ZgmFile``,
+``_LineGlossFile``: the schema below, as code); the small tables (``[serial]``,
+``[status_bits]``, ``[input_bits]``, ``[direct_data]``, ``[opcodes]``) are pydantic
+dataclasses that the profile objects carry as they are. Types are strict: ``true`` is not
+a number, ``"0x7E"`` is not an integer, ``1.0`` is not an integer.
+
 Loading
 -------
 ``load_profile(name_or_path)`` returns one of :class:`StepperProfile`,
@@ -13,8 +19,9 @@ top-level ``kind`` key); the typed loaders ``load_stepper_profile``, ``load_stil
 ``load_zgm_profile`` and ``load_line_gloss_profile`` also check the kind. A bare name such
 as ``"oriental-az"`` means ``configs/profiles/oriental-az.toml``; anything ending in
 ``.toml`` or containing a path separator is a path. Every problem raises
-:class:`drivers.base.ProfileError` whose message names the file, the key and the reason.
-Unknown keys are errors too (a typo must not silently fall back to a default).
+:class:`drivers.base.ProfileError` whose message names the file, the key and the reason
+(``oriental-az.toml: key 'status_bits.moving': 40 is above the maximum 31``; the first
+problem found). Unknown keys are errors too (a typo must not silently fall back to a default).
 
 Schema common to every profile
 ------------------------------
@@ -115,15 +122,28 @@ kind = "line-gloss"
 
 from __future__ import annotations
 
+import dataclasses
 import re
 import string
-import tomllib
-from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal, Self, TypeVar
+
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    ModelWrapValidatorHandler,
+    Strict,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
+from pydantic.dataclasses import dataclass as table
 
 from drivers.base import ProfileError
+from drivers.toml_schema import KeyedValueError, TomlFileError, first_issue, plain_reason, read_toml
 
 __all__ = [
     "PROFILES_DIR",
@@ -163,86 +183,122 @@ def _find_profiles_dir() -> Path:
 PROFILES_DIR: Path = _find_profiles_dir()
 
 
-# --------------------------------------------------------------------------- dataclasses
-@dataclass(frozen=True, slots=True)
+# --------------------------------------------------------------------------- value types
+def _one_of(*allowed: int) -> AfterValidator:
+    def check(value: int) -> int:
+        if value not in allowed:
+            raise ValueError(f"expected {' or '.join(map(str, allowed))}, got {value}")
+        return value
+
+    return AfterValidator(check)
+
+
+def _known_encoding(value: str) -> str:
+    try:
+        "".encode(value)
+    except LookupError:
+        raise ValueError(f"unknown encoding {value!r}") from None
+    return value
+
+
+#: Strict scalars: TOML ``true`` is not a number, ``"0x7E"`` and ``1.0`` are not integers.
+Int = Annotated[int, Strict()]
+Bit = Annotated[int, Strict(), Field(ge=0, le=31)]
+Word = Annotated[int, Strict(), Field(ge=0, le=0xFFFF)]
+Address = Annotated[int, Strict(), Field(ge=0)]
+Positive = Annotated[float, Strict(), Field(gt=0, allow_inf_nan=False)]
+Text = Annotated[str, Strict()]
+NonEmpty = Annotated[str, Strict(), Field(min_length=1)]
+Encoding = Annotated[str, Strict(), AfterValidator(_known_encoding)]
+
+_TABLE = ConfigDict(extra="forbid")
+
+
+# --------------------------------------------------------------------------- tables
+@table(frozen=True, slots=True, config=_TABLE)
 class SerialSettings:
     """Serial line settings (also used for Modbus RTU)."""
 
-    baudrate: int
-    bytesize: int = 8
-    parity: str = "N"
-    stopbits: int = 1
+    baudrate: Annotated[int, Strict(), Field(ge=300, le=4_000_000)]
+    bytesize: Annotated[int, Strict(), Field(ge=5, le=8)] = 8
+    parity: Literal["N", "E", "O"] = "N"
+    stopbits: Annotated[int, Strict(), _one_of(1, 2)] = 1
 
 
-@dataclass(frozen=True, slots=True)
+@table(frozen=True, slots=True, config=_TABLE)
 class StepperRegisters:
-    """0-based protocol addresses of a stepper controller's registers (see module doc)."""
+    """0-based protocol addresses of a stepper controller's registers (see module doc).
 
-    output_status: int
-    alarm_code: int
-    feedback_position: int
-    command_position: int | None = None
-    input_command: int | None = None
-    direct_data: int | None = None
-    command: int | None = None
-    accel: int | None = None
-    decel: int | None = None
-    velocity: int | None = None
-    target_position: int | None = None
+    While a file is validated the fields hold the numbers as written; the loader then
+    subtracts ``register_base``.
+    """
+
+    output_status: Address
+    alarm_code: Address
+    feedback_position: Address
+    command_position: Address | None = None
+    input_command: Address | None = None
+    direct_data: Address | None = None
+    command: Address | None = None
+    accel: Address | None = None
+    decel: Address | None = None
+    velocity: Address | None = None
+    target_position: Address | None = None
 
 
-@dataclass(frozen=True, slots=True)
+@table(frozen=True, slots=True, config=_TABLE)
 class StatusBits:
     """Bit numbers (from the LSB of the 32-bit status word); ``None`` = not available."""
 
-    in_position: int
-    moving: int
-    alarm: int
-    ready: int | None = None
-    busy: int | None = None
-    home_end: int | None = None
-    fault: int | None = None
-    homing: int | None = None
-    stopping: int | None = None
+    in_position: Bit
+    moving: Bit
+    alarm: Bit
+    ready: Bit | None = None
+    busy: Bit | None = None
+    home_end: Bit | None = None
+    fault: Bit | None = None
+    homing: Bit | None = None
+    stopping: Bit | None = None
 
 
-@dataclass(frozen=True, slots=True)
+@table(frozen=True, slots=True, config=_TABLE)
 class InputBits:
     """Bit numbers of the 32-bit driver input command word (direct-data style)."""
 
-    start: int
-    zhome: int
-    stop: int
-    free: int
-    alarm_reset: int
-    fw_pos: int
-    rv_pos: int
+    start: Bit
+    zhome: Bit
+    stop: Bit
+    free: Bit
+    alarm_reset: Bit
+    fw_pos: Bit
+    rv_pos: Bit
 
 
-@dataclass(frozen=True, slots=True)
+@table(frozen=True, slots=True, config=_TABLE)
 class DirectDataDefaults:
     """Constant fields of the direct-data block."""
 
-    data_number: int = 0
-    operation_type: int = 1
-    current: int = 1000
-    trigger: int = 1
-    destination: int = 0
+    data_number: Annotated[int, Strict(), Field(ge=0)] = 0
+    operation_type: Annotated[int, Strict(), Field(ge=0)] = 1
+    current: Annotated[int, Strict(), Field(ge=0, le=1000)] = 1000
+    trigger: Int = 1
+    destination: Annotated[int, Strict(), Field(ge=0, le=1)] = 0
 
 
-@dataclass(frozen=True, slots=True)
+@table(frozen=True, slots=True, config=_TABLE)
 class Opcodes:
     """Command-register opcodes (command-opcode style)."""
 
-    absolute_move: int
-    relative_move: int
-    enable: int
-    disable: int
-    stop: int
-    home: int
-    alarm_reset: int
+    absolute_move: Word
+    relative_move: Word
+    enable: Word
+    disable: Word
+    stop: Word
+    home: Word
+    alarm_reset: Word
 
 
+# --------------------------------------------------------------------------- profiles
 @dataclass(frozen=True, slots=True)
 class StepperProfile:
     """A Modbus stepper controller register map (``kind = "modbus-stepper"``)."""
@@ -368,344 +424,327 @@ def template_regex(template: str) -> re.Pattern[str]:
     return re.compile("^" + "".join(parts) + "$")
 
 
-# --------------------------------------------------------------------------- reader
-class _Table:
-    """Typed access to one TOML table with errors naming file and dotted key."""
-
-    def __init__(self, path: Path, data: Mapping[str, Any], prefix: str = "") -> None:
-        self.path = path
-        self.data = data
-        self.prefix = prefix
-        self.used: set[str] = set()
-
-    def key(self, key: str) -> str:
-        return f"{self.prefix}{key}"
-
-    def error(self, key: str, reason: str) -> ProfileError:
-        return ProfileError(f"{self.path}: key '{self.key(key)}': {reason}")
-
-    def has(self, key: str) -> bool:
-        return key in self.data
-
-    def _get(self, key: str, default: Any, required: bool) -> Any:
-        self.used.add(key)
-        if key not in self.data:
-            if required:
-                raise self.error(key, "missing")
-            return default
-        return self.data[key]
-
-    def get_int(
-        self,
-        key: str,
-        default: int | None = None,
-        *,
-        required: bool = True,
-        lo: int | None = None,
-        hi: int | None = None,
-    ) -> int:
-        value = self._get(key, default, required and default is None)
-        if not isinstance(value, int) or isinstance(value, bool):
-            raise self.error(key, f"expected an integer, got {value!r}")
-        if lo is not None and value < lo:
-            raise self.error(key, f"{value} is below the minimum {lo}")
-        if hi is not None and value > hi:
-            raise self.error(key, f"{value} is above the maximum {hi}")
-        return value
-
-    def opt_int(self, key: str, *, lo: int | None = None, hi: int | None = None) -> int | None:
-        if key not in self.data:
-            self.used.add(key)
-            return None
-        return self.get_int(key, lo=lo, hi=hi)
-
-    def get_float(self, key: str, default: float | None = None, *, positive: bool = False) -> float:
-        value = self._get(key, default, default is None)
-        if not isinstance(value, int | float) or isinstance(value, bool):
-            raise self.error(key, f"expected a number, got {value!r}")
-        if positive and not value > 0:
-            raise self.error(key, f"must be > 0, got {value!r}")
-        return float(value)
-
-    def get_str(self, key: str, default: str | None = None, *, nonempty: bool = False) -> str:
-        value = self._get(key, default, default is None)
-        if not isinstance(value, str):
-            raise self.error(key, f"expected a string, got {value!r}")
-        if nonempty and not value:
-            raise self.error(key, "must not be empty")
-        return value
-
-    def str_list(self, key: str, default: list[str] | None = None) -> tuple[str, ...]:
-        value = self._get(key, default, default is None)
-        if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
-            raise self.error(key, f"expected a list of strings, got {value!r}")
-        return tuple(value)
-
-    def get_table(self, key: str, *, required: bool = True) -> _Table:
-        value = self._get(key, {}, required)
-        if not isinstance(value, dict):
-            raise self.error(key, f"expected a table, got {value!r}")
-        return _Table(self.path, value, f"{self.prefix}{key}.")
-
-    def finish(self) -> None:
-        unknown = sorted(set(self.data) - self.used)
-        if unknown:
-            raise self.error(unknown[0], "unknown key (typo?)")
-
-
-def _serial(top: _Table, default_parity: str = "N") -> SerialSettings:
-    t = top.get_table("serial")
-    parity = t.get_str("parity", default_parity)
-    if parity not in ("N", "E", "O"):
-        raise t.error("parity", f"expected 'N', 'E' or 'O', got {parity!r}")
-    stopbits = t.get_int("stopbits", 1)
-    if stopbits not in (1, 2):
-        raise t.error("stopbits", f"expected 1 or 2, got {stopbits}")
-    settings = SerialSettings(
-        baudrate=t.get_int("baudrate", lo=300, hi=4_000_000),
-        bytesize=t.get_int("bytesize", 8, lo=5, hi=8),
-        parity=parity,
-        stopbits=stopbits,
-    )
-    t.finish()
-    return settings
-
-
-def _check_unconfirmed(top: _Table, data: Mapping[str, Any]) -> tuple[str, ...]:
-    keys = top.str_list("unconfirmed", [])
-    for dotted in keys:
-        node: Any = data
-        for part in dotted.split("."):
-            if not isinstance(node, dict) or part not in node:
-                raise top.error("unconfirmed", f"lists {dotted!r}, which is not a key of the file")
-            node = node[part]
-    return keys
-
-
-def _bit(t: _Table, key: str, *, required: bool = True) -> int | None:
-    if not required and not t.has(key):
-        t.used.add(key)
-        return None
-    return t.get_int(key, lo=0, hi=31)
-
-
-# --------------------------------------------------------------------------- per kind
-def _stepper(path: Path, top: _Table, data: Mapping[str, Any]) -> StepperProfile:
-    style = top.get_str("move_style")
-    if style not in ("direct-data", "command-opcode"):
-        raise top.error("move_style", f"expected 'direct-data' or 'command-opcode', got {style!r}")
-    base = top.get_int("register_base", 0)
-    if base not in (0, 40001):
-        raise top.error("register_base", f"expected 0 or 40001, got {base}")
-
-    reg = top.get_table("registers")
-
-    def addr(key: str, *, required: bool = True) -> int | None:
-        if not required and not reg.has(key):
-            reg.used.add(key)
-            return None
-        value = reg.get_int(key, lo=base, hi=base + 0xFFFF)
-        return value - base
-
-    needed_dd = style == "direct-data"
-    registers = StepperRegisters(
-        output_status=addr("output_status") or 0,
-        alarm_code=addr("alarm_code") or 0,
-        feedback_position=addr("feedback_position") or 0,
-        command_position=addr("command_position", required=False),
-        input_command=addr("input_command", required=needed_dd),
-        direct_data=addr("direct_data", required=needed_dd),
-        command=addr("command", required=not needed_dd),
-        accel=addr("accel", required=not needed_dd),
-        decel=addr("decel", required=not needed_dd),
-        velocity=addr("velocity", required=not needed_dd),
-        target_position=addr("target_position", required=not needed_dd),
-    )
-    reg.finish()
-
-    sb = top.get_table("status_bits")
-    status_bits = StatusBits(
-        in_position=_bit(sb, "in_position") or 0,
-        moving=_bit(sb, "moving") or 0,
-        alarm=_bit(sb, "alarm") or 0,
-        ready=_bit(sb, "ready", required=False),
-        busy=_bit(sb, "busy", required=False),
-        home_end=_bit(sb, "home_end", required=False),
-        fault=_bit(sb, "fault", required=False),
-        homing=_bit(sb, "homing", required=False),
-        stopping=_bit(sb, "stopping", required=False),
-    )
-    sb.finish()
-
-    input_bits = direct = None
-    opcodes = None
-    if needed_dd:
-        ib = top.get_table("input_bits")
-        input_bits = InputBits(
-            **{k: ib.get_int(k, lo=0, hi=31) for k in InputBits.__dataclass_fields__}
-        )
-        ib.finish()
-        dd = top.get_table("direct_data")
-        direct = DirectDataDefaults(
-            data_number=dd.get_int("data_number", 0, lo=0),
-            operation_type=dd.get_int("operation_type", 1, lo=0),
-            current=dd.get_int("current", 1000, lo=0, hi=1000),
-            trigger=dd.get_int("trigger", 1),
-            destination=dd.get_int("destination", 0, lo=0, hi=1),
-        )
-        dd.finish()
-    else:
-        op = top.get_table("opcodes")
-        opcodes = Opcodes(
-            **{k: op.get_int(k, lo=0, hi=0xFFFF) for k in Opcodes.__dataclass_fields__}
-        )
-        op.finish()
-
-    un = top.get_table("units")
-    if un.has("speed_counts_per_step_s"):
-        speed = un.get_float("speed_counts_per_step_s", positive=True)
-        accel = un.get_float("accel_counts_per_step_s2", positive=True)
-    else:
-        steps_per_rev = un.get_float("steps_per_rev", positive=True)
-        speed = un.get_float("speed_counts_per_rev_s", positive=True) / steps_per_rev
-        accel = un.get_float("accel_counts_per_rev_s2", positive=True) / steps_per_rev
-    un.finish()
-
-    return StepperProfile(
-        name=top.get_str("name", nonempty=True),
-        path=path,
-        description=top.get_str("description", ""),
-        move_style="direct-data" if needed_dd else "command-opcode",
-        serial=_serial(top, "E"),
-        registers=registers,
-        status_bits=status_bits,
-        speed_counts_per_step_s=speed,
-        accel_counts_per_step_s2=accel,
-        input_bits=input_bits,
-        direct_data=direct,
-        opcodes=opcodes,
-        unconfirmed=_check_unconfirmed(top, data),
-    )
-
-
-def _template(t: _Table, key: str, value: str) -> str:
+def _reply_template(value: str) -> str:
     try:
         template_regex(value)
     except ValueError as exc:
-        raise t.error(key, f"bad reply template {value!r}: {exc}") from None
+        raise ValueError(f"bad reply template {value!r}: {exc}") from None
     return value
 
 
-def _stil(path: Path, top: _Table, data: Mapping[str, Any]) -> StilProfile:
-    ex = top.get_table("exposure")
-    lo = ex.get_int("min_us", lo=1)
-    hi = ex.get_int("max_us", lo=lo)
-    default = ex.get_int("default_us", lo=lo, hi=hi)
-    ex.finish()
-    cmd = top.get_table("commands")
-    identify = cmd.get_str("identify", nonempty=True)
-    set_exposure = cmd.get_str("set_exposure", nonempty=True)
+ReplyTemplate = Annotated[str, Strict(), Field(min_length=1), AfterValidator(_reply_template)]
+
+
+# --------------------------------------------------------------------------- file schema
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+def _is_key(data: Any, dotted: str) -> bool:
+    node = data
+    for part in dotted.split("."):
+        if not isinstance(node, dict) or part not in node:
+            return False
+        node = node[part]
+    return True
+
+
+class _File(_Section):
+    """The keys every profile has (module doc, "Schema common to every profile")."""
+
+    name: NonEmpty
+    description: Text = ""
+    unconfirmed: list[Text] = []
+    serial: SerialSettings
+
+    @model_validator(mode="wrap")
+    @classmethod
+    def _unconfirmed_keys_exist(cls, data: Any, handler: ModelWrapValidatorHandler[Self]) -> Self:
+        checked = handler(data)  # every other key first: a typo is reported as such
+        for dotted in checked.unconfirmed:
+            if not _is_key(data, dotted):
+                raise KeyedValueError(
+                    "unconfirmed", f"lists {dotted!r}, which is not a key of the file"
+                )
+        return checked
+
+
+class _Units(_Section):
+    """``[units]``: register counts per step, given per step or per motor revolution."""
+
+    speed_counts_per_step_s: Positive | None = None
+    accel_counts_per_step_s2: Positive | None = None
+    steps_per_rev: Positive | None = None
+    speed_counts_per_rev_s: Positive | None = None
+    accel_counts_per_rev_s2: Positive | None = None
+
+    @model_validator(mode="after")
+    def _one_convention(self) -> _Units:
+        per_step = ("speed_counts_per_step_s", "accel_counts_per_step_s2")
+        per_rev = ("steps_per_rev", "speed_counts_per_rev_s", "accel_counts_per_rev_s2")
+        given, other = (
+            (per_step, per_rev) if self.speed_counts_per_step_s is not None else (per_rev, per_step)
+        )
+        for key in given:
+            if getattr(self, key) is None:
+                raise KeyedValueError(key, "missing")
+        for key in other:
+            if getattr(self, key) is not None:
+                raise KeyedValueError(key, f"give either {' and '.join(given)} or {key}, not both")
+        return self
+
+    def counts_per_step(self) -> tuple[float, float]:
+        """(speed counts per step/s, acceleration counts per step/s^2)."""
+        if self.speed_counts_per_step_s is not None and self.accel_counts_per_step_s2 is not None:
+            return self.speed_counts_per_step_s, self.accel_counts_per_step_s2
+        assert self.steps_per_rev and self.speed_counts_per_rev_s and self.accel_counts_per_rev_s2
+        return (
+            self.speed_counts_per_rev_s / self.steps_per_rev,
+            self.accel_counts_per_rev_s2 / self.steps_per_rev,
+        )
+
+
+_STYLE_REGISTERS: dict[str, tuple[str, ...]] = {
+    "direct-data": ("input_command", "direct_data"),
+    "command-opcode": ("command", "accel", "decel", "velocity", "target_position"),
+}
+_STYLE_TABLES: dict[str, tuple[str, ...]] = {
+    "direct-data": ("input_bits", "direct_data"),
+    "command-opcode": ("opcodes",),
+}
+
+
+class _StepperFile(_File):
+    """``kind = "modbus-stepper"``."""
+
+    kind: Literal["modbus-stepper"]
+    move_style: Literal["direct-data", "command-opcode"]
+    register_base: Annotated[int, Strict(), _one_of(0, 40001)] = 0
+    registers: StepperRegisters
+    status_bits: StatusBits
+    input_bits: InputBits | None = None
+    direct_data: DirectDataDefaults | None = None
+    opcodes: Opcodes | None = None
+    units: _Units
+
+    @field_validator("serial", mode="before")
+    @classmethod
+    def _rtu_parity_even(cls, value: Any) -> Any:
+        # a stepper's serial line is Modbus RTU, whose default frame is 8 data bits, even parity
+        return {"parity": "E", **value} if isinstance(value, dict) else value
+
+    @model_validator(mode="after")
+    def _style_and_base(self) -> _StepperFile:
+        style = self.move_style
+        for key, addr in _fields(self.registers).items():
+            if addr is None:
+                if key in _STYLE_REGISTERS[style]:
+                    raise KeyedValueError(f"registers.{key}", "missing")
+            elif addr < self.register_base:
+                raise KeyedValueError(
+                    f"registers.{key}", f"{addr} is below the minimum {self.register_base}"
+                )
+            elif addr > self.register_base + 0xFFFF:
+                raise KeyedValueError(
+                    f"registers.{key}",
+                    f"{addr} is above the maximum {self.register_base + 0xFFFF}",
+                )
+        for styled, tables in _STYLE_TABLES.items():
+            for key in tables:
+                present = getattr(self, key) is not None
+                if styled == style and not present:
+                    raise KeyedValueError(key, "missing")
+                if styled != style and present:
+                    raise KeyedValueError(key, f"not used with move_style {style!r}")
+        return self
+
+    def profile(self, path: Path) -> StepperProfile:
+        base = self.register_base
+        numbers = _fields(self.registers).items()
+        addresses = {k: v - base for k, v in numbers if v is not None}
+        speed, accel = self.units.counts_per_step()
+        return StepperProfile(
+            name=self.name,
+            path=path,
+            description=self.description,
+            move_style=self.move_style,
+            serial=self.serial,
+            registers=dataclasses.replace(self.registers, **addresses),
+            status_bits=self.status_bits,
+            speed_counts_per_step_s=speed,
+            accel_counts_per_step_s2=accel,
+            input_bits=self.input_bits,
+            direct_data=self.direct_data,
+            opcodes=self.opcodes,
+            unconfirmed=tuple(self.unconfirmed),
+        )
+
+
+class _Exposure(_Section):
+    min_us: Annotated[int, Strict(), Field(ge=1)]
+    max_us: Int
+    default_us: Int
+
+    @model_validator(mode="after")
+    def _ordered(self) -> _Exposure:
+        if self.max_us < self.min_us:
+            raise KeyedValueError("max_us", f"{self.max_us} is below the minimum {self.min_us}")
+        if not self.min_us <= self.default_us <= self.max_us:
+            raise KeyedValueError(
+                "default_us",
+                f"{self.default_us} is outside [min_us, max_us] = [{self.min_us}, {self.max_us}]",
+            )
+        return self
+
+
+class _Commands(_Section):
+    identify: NonEmpty
+    set_exposure: NonEmpty
+    measure: NonEmpty
+
+    @field_validator("set_exposure")
+    @classmethod
+    def _formats(cls, value: str) -> str:
+        try:
+            value.format(exposure_us=1)
+        except (KeyError, IndexError, ValueError) as exc:
+            raise ValueError(f"bad template {value!r}: {exc}") from None
+        return value
+
+
+class _Replies(_Section):
+    identify: ReplyTemplate
+    set_exposure: ReplyTemplate
+    measure: list[Text]
+    error: ReplyTemplate
+
+    @field_validator("measure")
+    @classmethod
+    def _measure_lines(cls, lines: list[str]) -> list[str]:
+        if not lines:
+            raise ValueError("must list at least one reply line")
+        for line in lines:
+            _reply_template(line)
+        fields = {f for line in lines for _, f, _, _ in string.Formatter().parse(line) if f}
+        missing = {"luminance_pct", "values"} - fields
+        if missing:
+            raise ValueError(f"templates lack the field(s) {sorted(missing)}")
+        return lines
+
+
+class _StilFile(_File):
+    """``kind = "stil-spectro"``."""
+
+    kind: Literal["stil-spectro"]
+    command_terminator: NonEmpty
+    reply_terminator: NonEmpty
+    encoding: Encoding = "ascii"
+    timeout_s: Positive
+    exposure: _Exposure
+    commands: _Commands
+    replies: _Replies
+
+    def profile(self, path: Path) -> StilProfile:
+        return StilProfile(
+            name=self.name,
+            path=path,
+            description=self.description,
+            serial=self.serial,
+            command_terminator=self.command_terminator,
+            reply_terminator=self.reply_terminator,
+            encoding=self.encoding,
+            timeout_s=self.timeout_s,
+            exposure_min_us=self.exposure.min_us,
+            exposure_max_us=self.exposure.max_us,
+            exposure_default_us=self.exposure.default_us,
+            cmd_identify=self.commands.identify,
+            cmd_set_exposure=self.commands.set_exposure,
+            cmd_measure=self.commands.measure,
+            reply_identify=self.replies.identify,
+            reply_set_exposure=self.replies.set_exposure,
+            reply_measure=tuple(self.replies.measure),
+            reply_error=self.replies.error,
+            unconfirmed=tuple(self.unconfirmed),
+        )
+
+
+class _ZgmFile(_File):
+    """``kind = "zgm1120"``."""
+
+    kind: Literal["zgm1120"]
+    reply_terminator: NonEmpty
+    timeout_s: Positive
+
+    def profile(self, path: Path) -> ZgmProfile:
+        return ZgmProfile(
+            name=self.name,
+            path=path,
+            description=self.description,
+            serial=self.serial,
+            reply_terminator=self.reply_terminator,
+            timeout_s=self.timeout_s,
+            unconfirmed=tuple(self.unconfirmed),
+        )
+
+
+def _line_pattern(value: str) -> str:
     try:
-        set_exposure.format(exposure_us=1)
-    except (KeyError, IndexError, ValueError) as exc:
-        raise cmd.error("set_exposure", f"bad template {set_exposure!r}: {exc}") from None
-    measure = cmd.get_str("measure", nonempty=True)
-    cmd.finish()
-    rep = top.get_table("replies")
-    r_identify = _template(rep, "identify", rep.get_str("identify", nonempty=True))
-    r_exposure = _template(rep, "set_exposure", rep.get_str("set_exposure", nonempty=True))
-    r_measure = rep.str_list("measure")
-    if not r_measure:
-        raise rep.error("measure", "must list at least one reply line")
-    for line in r_measure:
-        _template(rep, "measure", line)
-    fields = {f for line in r_measure for _, f, _, _ in string.Formatter().parse(line) if f}
-    missing = {"luminance_pct", "values"} - fields
-    if missing:
-        raise rep.error("measure", f"templates lack the field(s) {sorted(missing)}")
-    r_error = _template(rep, "error", rep.get_str("error", nonempty=True))
-    rep.finish()
-    encoding = top.get_str("encoding", "ascii")
-    try:
-        "".encode(encoding)
-    except LookupError:
-        raise top.error("encoding", f"unknown encoding {encoding!r}") from None
-    return StilProfile(
-        name=top.get_str("name", nonempty=True),
-        path=path,
-        description=top.get_str("description", ""),
-        serial=_serial(top),
-        command_terminator=top.get_str("command_terminator", nonempty=True),
-        reply_terminator=top.get_str("reply_terminator", nonempty=True),
-        encoding=encoding,
-        timeout_s=top.get_float("timeout_s", positive=True),
-        exposure_min_us=lo,
-        exposure_max_us=hi,
-        exposure_default_us=default,
-        cmd_identify=identify,
-        cmd_set_exposure=set_exposure,
-        cmd_measure=measure,
-        reply_identify=r_identify,
-        reply_set_exposure=r_exposure,
-        reply_measure=r_measure,
-        reply_error=r_error,
-        unconfirmed=_check_unconfirmed(top, data),
-    )
-
-
-def _zgm(path: Path, top: _Table, data: Mapping[str, Any]) -> ZgmProfile:
-    return ZgmProfile(
-        name=top.get_str("name", nonempty=True),
-        path=path,
-        description=top.get_str("description", ""),
-        serial=_serial(top),
-        reply_terminator=top.get_str("reply_terminator", nonempty=True),
-        timeout_s=top.get_float("timeout_s", positive=True),
-        unconfirmed=_check_unconfirmed(top, data),
-    )
-
-
-def _line_gloss(path: Path, top: _Table, data: Mapping[str, Any]) -> LineGlossProfile:
-    raw = top.get_str("pattern", nonempty=True)
-    try:
-        pattern = re.compile(raw)
+        pattern = re.compile(value)
     except re.error as exc:
-        raise top.error("pattern", f"invalid regex: {exc}") from None
+        raise ValueError(f"invalid regex: {exc}") from None
     groups = set(pattern.groupindex)
     if not groups & {"g20", "g60", "g85"}:
-        raise top.error("pattern", "needs at least one named group g20, g60 or g85")
+        raise ValueError("needs at least one named group g20, g60 or g85")
     extra = groups - {"g20", "g60", "g85", "temperature"}
     if extra:
-        raise top.error("pattern", f"unknown named group(s) {sorted(extra)}")
-    encoding = top.get_str("encoding", "ascii")
-    try:
-        "".encode(encoding)
-    except LookupError:
-        raise top.error("encoding", f"unknown encoding {encoding!r}") from None
-    return LineGlossProfile(
-        name=top.get_str("name", nonempty=True),
-        path=path,
-        description=top.get_str("description", ""),
-        serial=_serial(top),
-        pattern=pattern,
-        overflow_tokens=top.str_list("overflow_tokens", []),
-        trigger=top.get_str("trigger", ""),
-        line_terminator=top.get_str("line_terminator", nonempty=True),
-        encoding=encoding,
-        timeout_s=top.get_float("timeout_s", positive=True),
-        unconfirmed=_check_unconfirmed(top, data),
-    )
+        raise ValueError(f"unknown named group(s) {sorted(extra)}")
+    return value
 
 
-_KINDS: dict[str, Callable[[Path, _Table, Mapping[str, Any]], Profile]] = {
-    "modbus-stepper": _stepper,
-    "stil-spectro": _stil,
-    "zgm1120": _zgm,
-    "line-gloss": _line_gloss,
+class _LineGlossFile(_File):
+    """``kind = "line-gloss"``."""
+
+    kind: Literal["line-gloss"]
+    pattern: Annotated[str, Strict(), Field(min_length=1), AfterValidator(_line_pattern)]
+    overflow_tokens: list[Text] = []
+    trigger: Text = ""
+    line_terminator: NonEmpty
+    encoding: Encoding = "ascii"
+    timeout_s: Positive
+
+    def profile(self, path: Path) -> LineGlossProfile:
+        return LineGlossProfile(
+            name=self.name,
+            path=path,
+            description=self.description,
+            serial=self.serial,
+            pattern=re.compile(self.pattern),
+            overflow_tokens=tuple(self.overflow_tokens),
+            trigger=self.trigger,
+            line_terminator=self.line_terminator,
+            encoding=self.encoding,
+            timeout_s=self.timeout_s,
+            unconfirmed=tuple(self.unconfirmed),
+        )
+
+
+def _fields(obj: StepperRegisters) -> dict[str, int | None]:
+    return {k: getattr(obj, k) for k in obj.__dataclass_fields__}
+
+
+_KINDS: dict[str, type[_StepperFile | _StilFile | _ZgmFile | _LineGlossFile]] = {
+    "modbus-stepper": _StepperFile,
+    "stil-spectro": _StilFile,
+    "zgm1120": _ZgmFile,
+    "line-gloss": _LineGlossFile,
 }
 
 
 # --------------------------------------------------------------------------- public
+def _error(path: Path, key: str, reason: str) -> ProfileError:
+    return ProfileError(f"{path}: key '{key}': {reason}")
+
+
 def profile_path(name_or_path: str | Path) -> Path:
     """Resolve a profile name (``"oriental-az"``) or a path to a file path."""
     text = str(name_or_path)
@@ -725,56 +764,51 @@ def load_profile(name_or_path: str | Path) -> Profile:
     """
     path = profile_path(name_or_path)
     try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        known = sorted(p.stem for p in PROFILES_DIR.glob("*.toml"))
-        raise ProfileError(
-            f"{path}: profile file not found (built-in profiles: {', '.join(known)})"
-        ) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ProfileError(f"{path}: cannot read profile: {exc}") from None
+        data = read_toml(path, what="profile file")
+    except TomlFileError as exc:
+        hint = ""
+        if exc.not_found:
+            known = sorted(p.stem for p in PROFILES_DIR.glob("*.toml"))
+            hint = f" (built-in profiles: {', '.join(known)})"
+        raise ProfileError(f"{exc}{hint}") from None
+    kind = data.get("kind")
+    if kind is None:
+        raise _error(path, "kind", "missing")
+    if not isinstance(kind, str) or kind not in _KINDS:
+        raise _error(path, "kind", f"expected one of {sorted(_KINDS)}, got {kind!r}")
     try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ProfileError(f"{path}: TOML syntax error: {exc}") from None
-    top = _Table(path, data)
-    kind = top.get_str("kind")
-    if kind not in _KINDS:
-        raise top.error("kind", f"expected one of {sorted(_KINDS)}, got {kind!r}")
-    profile = _KINDS[kind](path, top, data)
-    top.finish()
-    return profile
+        schema = _KINDS[kind].model_validate(data)
+    except ValidationError as exc:
+        raise _error(path, *first_issue(exc, plain_reason)) from None
+    return schema.profile(path)
 
 
-def _typed(name_or_path: str | Path, cls: type[Any]) -> Any:
+_P = TypeVar("_P", StepperProfile, StilProfile, ZgmProfile, LineGlossProfile)
+
+
+def _typed(name_or_path: str | Path, cls: type[_P]) -> _P:
     profile = load_profile(name_or_path)
     if not isinstance(profile, cls):
-        raise ProfileError(
-            f"{profile.path}: key 'kind': expected {cls.__dataclass_fields__['kind'].default!r}, "
-            f"got {profile.kind!r}"
-        )
+        expected = cls.__dataclass_fields__["kind"].default
+        raise _error(profile.path, "kind", f"expected {expected!r}, got {profile.kind!r}")
     return profile
 
 
 def load_stepper_profile(name_or_path: str | Path) -> StepperProfile:
     """Load a ``kind = "modbus-stepper"`` profile (see :func:`load_profile`)."""
-    result: StepperProfile = _typed(name_or_path, StepperProfile)
-    return result
+    return _typed(name_or_path, StepperProfile)
 
 
 def load_stil_profile(name_or_path: str | Path) -> StilProfile:
     """Load a ``kind = "stil-spectro"`` profile (see :func:`load_profile`)."""
-    result: StilProfile = _typed(name_or_path, StilProfile)
-    return result
+    return _typed(name_or_path, StilProfile)
 
 
 def load_zgm_profile(name_or_path: str | Path) -> ZgmProfile:
     """Load a ``kind = "zgm1120"`` profile (see :func:`load_profile`)."""
-    result: ZgmProfile = _typed(name_or_path, ZgmProfile)
-    return result
+    return _typed(name_or_path, ZgmProfile)
 
 
 def load_line_gloss_profile(name_or_path: str | Path) -> LineGlossProfile:
     """Load a ``kind = "line-gloss"`` profile (see :func:`load_profile`)."""
-    result: LineGlossProfile = _typed(name_or_path, LineGlossProfile)
-    return result
+    return _typed(name_or_path, LineGlossProfile)

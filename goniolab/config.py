@@ -8,7 +8,8 @@ and the REASON, for example::
 
     configs/x.toml: goniometer.lamp.limits_deg: lower limit 10 must be below upper limit 5
 
-TOML syntax errors carry the line and column. Device profile names (``"oriental-az"``)
+TOML syntax errors carry the line and column. Reading the file and naming the key of a
+pydantic error are shared with the device profiles (:mod:`drivers.toml_schema`). Device profile names (``"oriental-az"``)
 are resolved against the ``configs/profiles`` directory found next to the package source
 (``Path(goniolab.__file__).parents[1] / "configs"``) or, in an installed wheel,
 ``goniolab/_configs``; relative profile paths are tried next to the config file first.
@@ -19,13 +20,13 @@ config key that names it.
 from __future__ import annotations
 
 import math
-import tomllib
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 import goniolab
+from drivers.toml_schema import TomlFileError, first_issue, read_toml
 from goniolab.errors import UserError
 
 __all__ = [
@@ -267,30 +268,6 @@ def resolve_profile(name: str, *, relative_to: Path | None = None) -> Path:
     return configs_dir() / p
 
 
-def _dotted(loc: tuple[int | str, ...]) -> str:
-    parts: list[str] = []
-    for item in loc:
-        if isinstance(item, int):
-            parts.append(f"[{item}]")
-        else:
-            parts.append(("." if parts else "") + item)
-    return "".join(parts)
-
-
-def _reason(err: Any) -> str:
-    msg = str(err.get("msg", "invalid value"))
-    kind = err.get("type", "")
-    if kind == "extra_forbidden":
-        return "unknown key (typo?)"
-    if kind == "missing":
-        return "required key missing"
-    msg = msg.removeprefix("Value error, ")
-    value = err.get("input")
-    if kind not in ("value_error",) and not isinstance(value, dict):
-        msg = f"{msg} (got {value!r})"
-    return msg
-
-
 def _get(data: dict[str, Any], dotted: str) -> Any:
     node: Any = data
     for part in dotted.split("."):
@@ -320,22 +297,15 @@ def load_lab_config(path: str | Path) -> LabConfig:
     """
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ConfigError(p, "", "config file not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(p, "", f"cannot read config file: {exc}") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(p, "", f"TOML syntax error: {exc}") from None
+        data = read_toml(p, what="config file")
+    except TomlFileError as exc:
+        raise ConfigError(p, "", exc.reason) from None
     if "source" in data:
         raise ConfigError(p, "source", "unknown key (typo?)")
     try:
         cfg = LabConfig.model_validate({**data, "source": str(p)})
     except ValidationError as exc:
-        first = exc.errors()[0]
-        raise ConfigError(p, _dotted(tuple(first["loc"])), _reason(first)) from None
+        raise ConfigError(p, *first_issue(exc)) from None
     _cross_checks(cfg, p)
     return _resolve_profiles(cfg, p, data)
 

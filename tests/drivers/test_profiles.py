@@ -117,6 +117,29 @@ def write(tmp_path: Path, text: str, name: str = "bad.toml") -> Path:
             "units.speed_counts_per_step_s",
             "must be > 0",
         ),
+        # strict types: TOML true is not a number, 1.0 is not an integer
+        (
+            "baudrate = 115200",
+            "baudrate = true",
+            "serial.baudrate",
+            "expected an integer, got True",
+        ),
+        (
+            "speed_counts_per_step_s = 1.0",
+            "speed_counts_per_step_s = true",
+            "units.speed_counts_per_step_s",
+            "expected a number, got True",
+        ),
+        ("current = 1000 ", "current = 1000.0 ", "direct_data.current", "got 1000.0"),
+        (
+            "feedback_position = 0x0120",
+            "feedback_position = -1",
+            "registers.feedback_position",
+            "-1 is below the minimum 0",
+        ),
+        ('name = "oriental-az"', 'name = "oriental-az"\ncolour = "red"', "colour", "unknown key"),
+        # a typo in a listed key is reported as the typo, not as a stale `unconfirmed` entry
+        ("[status_bits]", "[status_bitz]", "status_bitz", "unknown key"),
     ],
 )
 def test_errors_name_file_key_and_reason(
@@ -129,6 +152,30 @@ def test_errors_name_file_key_and_reason(
     message = str(info.value)
     assert message.startswith(f"{path}: key '{key}': ")
     assert reason in message
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "key", "reason"),
+    [
+        # Modicon numbers: 40001 is the first holding register, so 1 is no address at all
+        ("alarm_code = 40001", "alarm_code = 1", "registers.alarm_code", "below the minimum 40001"),
+        ("command = 40125", "command = 105537", "registers.command", "above the maximum 105536"),
+        ("target_position = 40351", "", "registers.target_position", "missing"),
+        ("register_base = 40001", "register_base = 1", "register_base", "expected 0 or 40001"),
+        ("steps_per_rev = 20000", "steps_per_rev = false", "units.steps_per_rev", "got False"),
+        ("[units]", "[direct_data]\n[units]", "direct_data", "not used with move_style"),
+    ],
+)
+def test_command_opcode_errors_name_file_key_and_reason(
+    tmp_path: Path, old: str, new: str, key: str, reason: str
+) -> None:
+    text = (PROFILES_DIR / "applied-motion-mdx.toml").read_text()
+    assert old in text
+    path = write(tmp_path, text.replace(old, new, 1))
+    with pytest.raises(ProfileError) as info:
+        load_profile(path)
+    assert str(info.value).startswith(f"{path}: key '{key}': ")
+    assert reason in str(info.value)
 
 
 def test_missing_file_lists_builtin_profiles() -> None:

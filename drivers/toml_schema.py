@@ -1,0 +1,188 @@
+"""Reading a TOML file into pydantic models, with errors that name the file, the key and the reason.
+
+Shared by the device profiles (:mod:`drivers.profiles`) and the lab configs
+(:mod:`goniolab.config`); it lives in ``drivers`` because drivers import nothing from
+``goniolab``, so the config reuses it rather than the other way round.
+
+* :func:`read_toml` reads and parses a file; every failure is a :class:`TomlFileError`
+  whose ``reason`` is one line ("profile file not found", "TOML syntax error: ... (at
+  line 3, column 8)").
+* :func:`first_issue` turns a pydantic :class:`~pydantic.ValidationError` into the dotted
+  key of its first error (``registers.output_status``, ``replies.measure[1]``) and a reason.
+  Two phrasings: :func:`pydantic_reason` keeps pydantic's words ("Input should be greater
+  than 0 (got -1)"), :func:`plain_reason` says it shortly ("-1 is below the minimum 0",
+  "expected an integer, got True").
+* A validator that checks several keys at once raises :class:`KeyedValueError` to blame
+  the one key a user would edit; :func:`first_issue` appends it to the validator's location.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from pydantic import ValidationError
+
+__all__ = [
+    "KeyedValueError",
+    "TomlFileError",
+    "dotted",
+    "first_issue",
+    "plain_reason",
+    "pydantic_reason",
+    "read_toml",
+]
+
+
+class TomlFileError(ValueError):
+    """A TOML file could not be read or parsed.
+
+    Attributes
+    ----------
+    path
+        The file.
+    reason
+        One line: ``"<what> not found"``, ``"cannot read <what>: ..."`` or
+        ``"TOML syntax error: ... (at line L, column C)"``.
+    not_found
+        True when the file does not exist (callers add a hint, e.g. the known names).
+    """
+
+    def __init__(self, path: Path, reason: str, *, not_found: bool = False) -> None:
+        self.path = path
+        self.reason = reason
+        self.not_found = not_found
+        super().__init__(f"{path}: {reason}")
+
+
+class KeyedValueError(ValueError):
+    """Raised inside a validator to blame ``key`` (dotted, relative to the validated model).
+
+    Parameters
+    ----------
+    key
+        Dotted key below the model whose validator raises (``"registers.command"``).
+    reason
+        What is wrong, in words a user can act on.
+    """
+
+    def __init__(self, key: str, reason: str) -> None:
+        self.key = key
+        self.reason = reason
+        super().__init__(reason)
+
+
+def read_toml(path: Path, *, what: str) -> dict[str, Any]:
+    """Read and parse a TOML file.
+
+    Parameters
+    ----------
+    path
+        The file.
+    what
+        How the file is named in messages (``"profile file"``, ``"config file"``).
+
+    Raises
+    ------
+    TomlFileError
+        Missing or unreadable file, not UTF-8, or a TOML syntax error (with line and column).
+    """
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise TomlFileError(path, f"{what} not found", not_found=True) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise TomlFileError(path, f"cannot read {what}: {exc}") from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise TomlFileError(path, f"TOML syntax error: {exc}") from None
+
+
+def dotted(loc: Sequence[int | str]) -> str:
+    """A pydantic error location as a dotted key: ``("replies", "measure", 1)`` -> ``replies.measure[1]``."""
+    parts: list[str] = []
+    for item in loc:
+        if isinstance(item, int):
+            parts.append(f"[{item}]")
+        else:
+            parts.append(("." if parts else "") + item)
+    return "".join(parts)
+
+
+_UNKNOWN = ("extra_forbidden", "unexpected_keyword_argument")
+_MISSING = ("missing", "missing_argument", "missing_keyword_only_argument")
+
+
+def pydantic_reason(err: Mapping[str, Any]) -> str:
+    """Pydantic's own message, plus the offending value (``"Input should be ... (got 'x')"``)."""
+    kind = err.get("type", "")
+    if kind in _UNKNOWN:
+        return "unknown key (typo?)"
+    if kind in _MISSING:
+        return "required key missing"
+    msg = str(err.get("msg", "invalid value")).removeprefix("Value error, ")
+    value = err.get("input")
+    if kind != "value_error" and not isinstance(value, dict):
+        msg = f"{msg} (got {value!r})"
+    return msg
+
+
+def plain_reason(err: Mapping[str, Any]) -> str:
+    """A short reason in the words of a datasheet (``"40 is above the maximum 31"``)."""
+    kind = err.get("type", "")
+    ctx: Mapping[str, Any] = err.get("ctx") or {}
+    value = err.get("input")
+    if kind in _UNKNOWN:
+        return "unknown key (typo?)"
+    if kind in _MISSING:
+        return "missing"
+    phrases: dict[str, Callable[[], str]] = {
+        "int_type": lambda: f"expected an integer, got {value!r}",
+        "float_type": lambda: f"expected a number, got {value!r}",
+        "finite_number": lambda: f"must be a finite number, got {value!r}",
+        "string_type": lambda: f"expected a string, got {value!r}",
+        "list_type": lambda: f"expected a list, got {value!r}",
+        "dict_type": lambda: f"expected a table, got {value!r}",
+        "model_type": lambda: f"expected a table, got {value!r}",
+        "dataclass_type": lambda: f"expected a table, got {value!r}",
+        "greater_than_equal": lambda: f"{value!r} is below the minimum {ctx.get('ge')!r}",
+        "less_than_equal": lambda: f"{value!r} is above the maximum {ctx.get('le')!r}",
+        "greater_than": lambda: f"must be > {ctx.get('gt')!r}, got {value!r}",
+        "less_than": lambda: f"must be < {ctx.get('lt')!r}, got {value!r}",
+        "string_too_short": lambda: "must not be empty",
+        "literal_error": lambda: f"expected {ctx.get('expected')}, got {value!r}",
+    }
+    if kind in phrases:
+        return phrases[kind]()
+    return str(err.get("msg", "invalid value")).removeprefix("Value error, ")
+
+
+def first_issue(
+    exc: ValidationError, reason: Callable[[Mapping[str, Any]], str] = pydantic_reason
+) -> tuple[str, str]:
+    """The dotted key and the reason of the first error of a validation (unknown keys first).
+
+    Parameters
+    ----------
+    exc
+        What ``Model.model_validate(data)`` raised.
+    reason
+        :func:`pydantic_reason` or :func:`plain_reason`.
+
+    Returns
+    -------
+    tuple of str
+        ``(key, reason)``; ``key`` is ``""`` when the whole document is at fault.
+    """
+    errors = exc.errors()
+    # a misspelt key is also a missing one: the typo is what to fix
+    unknown = [e for e in errors if e["type"] in _UNKNOWN]
+    err = (unknown or errors)[0]
+    loc: list[int | str] = list(err["loc"])
+    cause = (err.get("ctx") or {}).get("error")
+    if isinstance(cause, KeyedValueError):
+        return dotted([*loc, *cause.key.split(".")]), cause.reason
+    return dotted(loc), reason(err)
