@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 import re
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -183,14 +184,25 @@ async def test_gloss_reading_and_runs_browser_on_the_sim_lab(tmp_path: Path) -> 
         np.testing.assert_allclose(reopened.predicted_pct, live.predicted_pct)
 
 
-async def test_instrument_timeout_during_scan_is_reported(tmp_path: Path) -> None:
+async def test_instrument_timeout_during_scan_is_reported(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     # The spectro never answers: the run fails with the device named, the app keeps running.
     app = make_app(tmp_path, faults='devices = ["spectro"]\ntimeout_rate = 1.0\n')
+    # every toast shown, not the ones still on screen: the fatal one expires after 10 s,
+    # and parking the arms after the failure may take longer than that on a loaded machine
+    titles: list[str] = []
+    notify = app.notify
+
+    def record(message: str, *, title: str = "", **kwargs: Any) -> None:
+        titles.append(title)
+        notify(message, title=title, **kwargs)
+
+    monkeypatch.setattr(app, "notify", record)
     async with app.run_test(size=SIZE) as pilot:
         await wait_until(pilot, app.ready.is_set)
         await pilot.press("s")
         await wait_until(pilot, lambda: app.run_state is RunState.FAILED)
-        titles = [n.title for n in app._notifications]
         assert "spectro error (fatal)" in titles
         assert app.query_one("#banner").has_class("shown")
         assert app.is_running
