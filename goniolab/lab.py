@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-from collections.abc import Callable, Iterable
+from collections.abc import Awaitable, Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
@@ -301,7 +301,8 @@ class Lab:
         self._spectro: Spectrocolorimeter | None = None
         self._glossmeter: Glossmeter | None = None
         self._closers: list[Callable[[], Any]] = []
-        self.place_specimen: Callable[[str], Any] | None = None
+        self._sample_under: ReflectanceModel | None = None
+        self.place_specimen: Callable[[str], Awaitable[None]] | None = None
 
     @classmethod
     def from_config(
@@ -490,6 +491,18 @@ class Lab:
             await part.connect()
             self._closers.append(part.close)
 
+    def put_sample(self, model: ReflectanceModel) -> None:
+        """Simulated lab: the spectro and the glossmeter read ``model`` from now on, as if
+        that sample had been put under the instruments (``place_specimen("sample")`` puts
+        it back after a mirror reference). A real lab measures whatever lies there."""
+        if self.sims is None:
+            return
+        self._sample_under = model
+        if self.sims.spectro.model is not model:
+            self.sims.spectro.model = model
+        if self.sims.glossmeter.model is not model:
+            self.sims.glossmeter.model = model  # forgets the gloss cached for the old sample
+
     async def _place_specimen(self, which: str) -> None:
         """Simulated lab: put the reference mirror (``"mirror"``) or the sample under the
         instruments (the spectro then reads :class:`sim.instruments.MirrorModel` or the
@@ -499,7 +512,7 @@ class Lab:
         if which == "mirror":
             self.sims.spectro.model = MirrorModel()
         elif which == "sample":
-            self.sims.spectro.model = self.model
+            self.sims.spectro.model = self._sample_under or self.model
         else:
             raise ValueError(f"specimen must be 'mirror' or 'sample', got {which!r}")
 

@@ -131,7 +131,7 @@ def test_unknown_sample_names_the_option(
     args = ["scan", "--config", cfg, "--sample", "sample:nope", "--store", str(tmp_path / "s")]
     assert main(args) == 2
     err = capsys.readouterr().err
-    assert "--sample sample:nope: unknown sample" in err and "wittmann-3" in err
+    assert "--sample sample:nope: no built-in sample 'nope'" in err and "wittmann-3" in err
 
 
 def test_unsafe_plan_is_refused_and_not_recorded(

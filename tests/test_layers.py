@@ -28,6 +28,7 @@ FORBIDDEN: dict[str, tuple[str, ...]] = {
     ),
     "goniolab/scan": ("sim", "goniolab.session", "goniolab.commands", "goniolab.tui", "textual"),
     "goniolab/store.py": ("sim", "goniolab.commands", "goniolab.tui", "textual"),
+    "goniolab/session.py": ("sim", "goniolab.commands", "goniolab.tui", "textual"),
     "goniolab/commands": ("sim", "goniolab.tui", "textual"),
     "goniolab/tui": ("sim", "goniolab.commands"),
     "goniolab/cli.py": ("sim", "goniolab.tui", "textual"),

@@ -22,11 +22,10 @@ import sys
 from contextlib import AsyncExitStack
 from typing import Any
 
-from goniolab import __version__
 from goniolab.commands.scan import run_lab
 from goniolab.errors import UserError
-from goniolab.scan.events import EventBus, GlossRead, InstrumentError, RunState
-from goniolab.scan.gloss import GlossLogger, GlossResult, predict_gloss
+from goniolab.scan.events import GlossRead, InstrumentError, RunState
+from goniolab.scan.gloss import GlossResult
 from goniolab.scan.plans import GlossPlan, PlanError
 from goniolab.store import RunStore, StoreError, resolve_store_path
 
@@ -94,66 +93,43 @@ def _open_meter_from_port(args: argparse.Namespace) -> Any:
 
 
 async def _session(args: argparse.Namespace, store: RunStore, plan: GlossPlan) -> GlossResult:
-    from drivers.timing import RealClock
+    from goniolab.session import GlossSession, SampleModels
 
     async with AsyncExitStack() as stack:
-        config: dict[str, Any] = {}
-        model: Any = None
         if args.config:
-            from goniolab.commands.scan import with_sample
             from goniolab.config import load_lab_config
-            from goniolab.lab import Lab
 
-            cfg = with_sample(load_lab_config(args.config), plan.sample)
-            lab = await stack.enter_async_context(
-                Lab.from_config(cfg, time_scale=args.time_scale, instruments=("glossmeter",))
+            session = await stack.enter_async_context(
+                GlossSession.open(
+                    load_lab_config(args.config),
+                    store,
+                    sample=plan.sample,
+                    time_scale=args.time_scale,
+                )
             )
-            meter = lab.glossmeter
-            clock: Any = lab.clock
-            config = lab.config.model_dump(mode="json")
-            model = lab.model
         else:
+            from drivers.timing import RealClock
+
             meter = _open_meter_from_port(args)
-            clock = RealClock()
-            config = {"port": args.port, "protocol": args.protocol, "baudrate": args.baudrate}
             await meter.connect()
             stack.push_async_callback(meter.close)
-            if plan.sample:
-                from goniolab.models import model_for
-
-                model = await asyncio.to_thread(model_for, plan.sample, n=args.n)
-        predicted = None if model is None else await predict_gloss(model, plan.angles_deg)
-        run_id = store.create_run(
-            kind="gloss",
-            plan=plan.to_dict(),
-            config=config,
-            sample=plan.sample,
-            model={}
-            if model is None
-            else {"model": type(model).__name__, "predicted_gu": predicted},
-            version=__version__,
-        )
-        bus = EventBus()
+            session = GlossSession(
+                meter,
+                RealClock(),
+                store,
+                config={"port": args.port, "protocol": args.protocol, "baudrate": args.baudrate},
+                models=SampleModels(args.n),
+            )
         mode = args.mode or ("push" if args.protocol == "line" and not args.config else "measure")
-        logger = GlossLogger(
-            meter=meter,
-            store=store,
-            run_id=run_id,
-            bus=bus,
-            clock=clock,
-            plan=plan,
-            predicted_gu=predicted,
-            mode=mode,
-            interval_s=args.interval,
-        )
-        printer = asyncio.create_task(_print_events(bus.subscribe(), args.json))
+        logger = await session.start(plan, mode=mode, interval_s=args.interval)
+        printer = asyncio.create_task(_print_events(session.bus.subscribe(), args.json))
         loop = asyncio.get_running_loop()
         loop.add_signal_handler(signal.SIGINT, logger.stop)
         try:
             result = await logger.run()
         finally:
             loop.remove_signal_handler(signal.SIGINT)
-            bus.close()
+            session.bus.close()
             await printer
         return result
 
@@ -172,9 +148,9 @@ def _cmd_log(args: argparse.Namespace) -> int:
     config_store = None
     sample = args.sample or ""
     if args.sample:
-        from goniolab.commands.scan import check_sample_arg
+        from goniolab.session import check_sample
 
-        check_sample_arg(args.sample)
+        check_sample(args.sample)
     if args.config:
         from goniolab.config import load_lab_config
 

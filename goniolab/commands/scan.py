@@ -17,15 +17,12 @@ import re
 import signal
 import sys
 from collections.abc import Coroutine
-from pathlib import Path
 from typing import Any, TextIO, TypeVar
 
 from drivers.base import DeviceError
-from goniolab import __version__
-from goniolab.config import LabConfig, load_lab_config
+from goniolab.config import load_lab_config
 from goniolab.errors import UserError
 from goniolab.scan.events import (
-    EventBus,
     InstrumentError,
     PointMeasured,
     PointPredicted,
@@ -34,19 +31,16 @@ from goniolab.scan.events import (
     RunState,
 )
 from goniolab.scan.plans import BrdfPlan, PlanError, parse_angles
-from goniolab.scan.predict import Predictor
-from goniolab.scan.runner import ArmMotion, PlanRefused, RunResult, ScanRunner, dry_run
+from goniolab.scan.runner import PlanRefused, RunResult
 from goniolab.store import RunBusy, RunStore, StoreError, resolve_store_path
 
 __all__ = [
-    "check_sample_arg",
     "format_eta",
     "format_summary",
     "point_detail",
     "read_stdin_line",
     "register",
     "run_lab",
-    "with_sample",
 ]
 
 _T = TypeVar("_T")
@@ -174,12 +168,6 @@ async def _report(bus_q: asyncio.Queue[Any], bar: ProgressBar) -> None:
             return
 
 
-def _config_snapshot(cfg: Any) -> dict[str, Any]:
-    snap: dict[str, Any] = cfg.model_dump(mode="json")
-    snap["_source"] = str(Path(cfg.source).resolve()) if cfg.source else ""
-    return snap
-
-
 async def read_stdin_line() -> str:
     """One line from stdin without a blocking thread, so that Ctrl-C (an abort, then a
     cancellation) ends the wait at once; a regular file or a closed stdin falls back to
@@ -218,80 +206,42 @@ async def _specimen_prompt(which: str) -> None:
 async def _execute(
     *,
     config_path: str,
-    sample: str | None = None,
     time_scale: float | None,
     store: RunStore,
     plan: BrdfPlan | None,
     run_id: int | None,
     json_out: bool,
 ) -> int:
-    from goniolab.lab import Lab
+    from goniolab.session import ScanSession
 
     if plan is None:
         assert run_id is not None
         plan = BrdfPlan.from_dict(store.get_run(run_id).plan)
-    lab_config = with_sample(load_lab_config(config_path), plan.sample)
-    async with Lab.from_config(lab_config, time_scale=time_scale) as lab:
-        cfg = lab.config
-        predictor = Predictor.from_config(lab.model, cfg)
-        g = cfg.goniometer
-        motion = ArmMotion.from_config(g)
-        park_deg = (g.park.theta_i_deg, g.park.theta_r_deg)
-        clock_scale = float(getattr(lab.clock, "scale", 1.0))
+    cfg = load_lab_config(config_path)
+    async with ScanSession.open(
+        cfg, store, sample=plan.sample, time_scale=time_scale, operator=_specimen_prompt
+    ) as session:
         # refuse an unsafe plan before any motion, and before a new run is even recorded
         # (the runner checks again); a resumed run checks only the readings still to take
-        done = set() if run_id is None else store.done_keys(run_id)
-        todo = [pt for pt in plan.points() if pt.key not in done]
-        start = await lab.goniometer.positions_deg()
         try:
-            check = dry_run(
-                todo,
-                lab.goniometer,
-                motion,
-                start_deg=(float(start[0]), float(start[1])),
-                dwell_s=plan.dwell_s,
-                reading_time_s=plan.exposure_us * 1e-6,
-                park_deg=park_deg,
-            )
+            scan = await session.prepare(plan, run_id)
         except PlanRefused as exc:
             raise UserError(f"plan refused (no arm moved): {exc}") from exc
+        clock_scale = session.clock_scale
+        check = scan.check
         wall = check.eta_s / clock_scale if clock_scale > 0 else 0.0
         lab_time = "" if clock_scale == 1.0 else f" ({check.eta_s:.2f} s of lab clock)"
-        homed = (await lab.goniometer.lamp.status()).homed and (
-            await lab.goniometer.detector.status()
-        ).homed
+        homed = await session.homed()
         print(
             f"goniolab: {check.n_readings} readings, {check.n_moves} moves, "
             f"ETA {format_eta(wall)}{lab_time}"
             + ("" if homed else " after homing the arms (the home search is not estimated)"),
             file=sys.stderr,
         )
-        if run_id is None:
-            run_id = store.create_run(
-                kind="brdf",
-                plan=plan.to_dict(),
-                config=_config_snapshot(cfg),
-                sample=plan.sample,
-                model=predictor.describe(),
-                version=__version__,
-            )
-        bus = EventBus()
-        runner = ScanRunner(
-            goniometer=lab.goniometer,
-            spectro=lab.spectro,
-            clock=lab.clock,
-            plan=plan,
-            store=store,
-            run_id=run_id,
-            bus=bus,
-            motion=motion,
-            predictor=predictor,
-            move_timeout_s=g.move_timeout_s,
-            park_deg=park_deg,
-            specimen_hook=_specimen_hook(lab) if plan.mirror_reference else None,
-        )
+        runner = session.start(scan)
+        run_id = runner.run_id
         bar = ProgressBar(sys.stderr, clock_scale)
-        report = asyncio.create_task(_report(bus.subscribe(), bar))
+        report = asyncio.create_task(_report(session.bus.subscribe(), bar))
         loop = asyncio.get_running_loop()
         main_task = asyncio.current_task()
         interrupts = 0
@@ -309,9 +259,8 @@ async def _execute(
 
         loop.add_signal_handler(signal.SIGINT, on_sigint)
         try:
-            result: RunResult = await runner.run()
+            result: RunResult = await session.run(runner)
         except PlanRefused as exc:
-            store.set_status(run_id, RunState.FAILED.value, f"plan refused: {exc}")
             raise UserError(f"plan refused (no arm moved): {exc}") from exc
         except RunBusy as exc:
             raise UserError(f"{exc} (no arm moved)") from exc
@@ -324,7 +273,7 @@ async def _execute(
             return 130
         finally:
             loop.remove_signal_handler(signal.SIGINT)
-            bus.close()
+            session.bus.close()
             await report
             bar.close()
     payload = {
@@ -358,44 +307,15 @@ def run_lab(coro: Coroutine[Any, Any, _T]) -> _T:
         raise UserError(f"instrument error: {exc}", exit_code=1) from exc
 
 
-def with_sample(cfg: LabConfig, sample: str) -> LabConfig:
-    """``cfg`` with ``[sample] map`` set to ``sample``: in a simulated lab that is the sample
-    under the instruments, in a real lab the one the prediction is made for."""
-    if not sample or sample == cfg.sample.map:
-        return cfg
-    return cfg.model_copy(update={"sample": cfg.sample.model_copy(update={"map": sample})})
-
-
-def _specimen_hook(lab: Any) -> Any:
-    swap = getattr(lab, "place_specimen", None)
-    if swap is not None:
-
-        async def hook(which: str) -> None:
-            await swap(which)
-
-        return hook
-    return _specimen_prompt
-
-
-def check_sample_arg(spec: str) -> None:
-    """Name ``--sample`` (not the config) when the sample does not exist."""
-    if spec.startswith("sample:"):
-        from goniolab.surfaces.samples import sample_names
-
-        names = sample_names()
-        if spec.removeprefix("sample:") not in names:
-            raise UserError(f"--sample {spec}: unknown sample; known: {', '.join(names)}")
-    elif not Path(spec).is_file():
-        raise UserError(f"--sample {spec}: no such file (use sample:NAME or a height-map path)")
-
-
 def _cmd_scan(args: argparse.Namespace) -> int:
     if not args.config:
         raise UserError("scan: --config FILE is required (e.g. configs/lab-sim.toml)")
     cfg = load_lab_config(args.config)
     sample = args.sample or cfg.sample.map
     if args.sample:
-        check_sample_arg(args.sample)
+        from goniolab.session import check_sample
+
+        check_sample(args.sample)
     try:
         plan = BrdfPlan(
             theta_i_deg=args.theta_i,
@@ -441,17 +361,9 @@ def _cmd_resume(args: argparse.Namespace) -> int:
             rec = store.get_run(args.run)
         except StoreError as exc:
             raise UserError(str(exc)) from exc
-        if rec.kind != "brdf":
-            raise UserError(f"run {rec.id} is a {rec.kind} run; only scans can be resumed")
-        if rec.status == RunState.DONE.value:
-            raise UserError(f"run {rec.id} is already done ({store.count_points(rec.id)} readings)")
-        config_path = args.config or rec.config.get("_source", "")
-        if not config_path:
-            raise UserError(f"run {rec.id}: no config file recorded; pass --config FILE")
-        if not Path(config_path).exists():
-            raise UserError(
-                f"run {rec.id}: config {config_path} no longer exists; pass --config FILE"
-            )
+        from goniolab.session import resume_target
+
+        config_path = resume_target(rec, args.config, store.count_points(rec.id))
         print(
             f"goniolab: resuming run {rec.id}: {store.count_points(rec.id)} readings stored",
             file=sys.stderr,

@@ -90,7 +90,31 @@ _T = TypeVar("_T")
 
 
 class PlanRefused(Exception):
-    """The dry run found a geometry the goniometer must not reach (names point and reason)."""
+    """The dry run found a geometry the goniometer must not reach (names point and reason).
+
+    ``what`` is ``"park position"``, ``"mirror reference"`` or ``"point N"``; ``cause``
+    the goniometer's refusal (soft limits or arm-separation interlock).
+    """
+
+    def __init__(
+        self, what: str, theta_i_deg: float, theta_r_deg: float, cause: DeviceError
+    ) -> None:
+        self.what = what
+        self.theta_i_deg = theta_i_deg
+        self.theta_r_deg = theta_r_deg
+        self.reason = cause.message
+        super().__init__(
+            f"{what} (theta_i={theta_i_deg:g} deg, theta_r={theta_r_deg:g} deg) is unsafe: {cause}"
+        )
+
+    @property
+    def out_of_reach(self) -> str:
+        """The refusal as a form error: the geometry first, then the reason."""
+        where = "the park position: " if self.what == "park position" else ""
+        return (
+            f"{where}theta_i {self.theta_i_deg:g} deg, theta_r {self.theta_r_deg:g} deg is "
+            f"out of the goniometer's reach: {self.reason}"
+        )
 
 
 class _Aborted(Exception):
@@ -182,10 +206,7 @@ def dry_run(
         try:
             goniometer.check_geometry(*park_deg)
         except (LimitError, InterlockError) as exc:
-            raise PlanRefused(
-                f"park position theta_i={park_deg[0]:g} deg, theta_r={park_deg[1]:g} deg "
-                f"is unsafe: {exc}"
-            ) from exc
+            raise PlanRefused("park position", *park_deg, exc) from exc
     times: list[float] = []
     pos = start_deg
     moves = 0
@@ -197,10 +218,7 @@ def dry_run(
                 goniometer.check_geometry(*target)
             except (LimitError, InterlockError) as exc:
                 what = "mirror reference" if p.index == MIRROR_INDEX else f"point {p.index}"
-                raise PlanRefused(
-                    f"{what} (theta_i={p.theta_i_deg:g} deg, theta_r={p.theta_r_deg:g} deg) "
-                    f"is unsafe: {exc}"
-                ) from exc
+                raise PlanRefused(what, *target, exc) from exc
             checked.add(target)
         t = reading_time_s
         if target != pos:

@@ -16,12 +16,9 @@ from contextlib import AsyncExitStack
 from pathlib import Path
 from typing import Any
 
-from drivers.base import GLOSS_ANGLES_DEG, DeviceError, InterlockError, LimitError
-from goniolab import __version__
+from drivers.base import GLOSS_ANGLES_DEG, DeviceError
 from goniolab.config import LabConfig, load_lab_config
 from goniolab.errors import UserError
-from goniolab.lab import Lab
-from goniolab.models import model_for
 from goniolab.optics.models import ReflectanceModel
 from goniolab.scan.events import (
     EventBus,
@@ -32,10 +29,10 @@ from goniolab.scan.events import (
     RunFinished,
     RunState,
 )
-from goniolab.scan.gloss import GlossLogger, predict_gloss
 from goniolab.scan.plans import BrdfPlan, GlossPlan, PlanError
 from goniolab.scan.predict import Predictor
-from goniolab.scan.runner import ArmMotion, PlanRefused, ScanRunner
+from goniolab.scan.runner import PlanRefused, ScanRunner
+from goniolab.session import GlossSession, ScanSession, check_sample
 from goniolab.store import RunStore, StoreError, resolve_store_path
 from goniolab.surfaces.samples import sample_names
 from goniolab.tui.backend import ArmState, RunSummary, ScanSetup, StoredRun
@@ -86,26 +83,17 @@ class LabBackend:
         self.sample = self.config.sample.map
         if sample:
             self.sample = _sample_spec(sample)
-            if self.sample.startswith("sample:"):
-                name = self.sample.removeprefix("sample:")
-                if name not in self.sample_names():
-                    raise UserError(
-                        f"--sample {sample}: no built-in sample {name!r} "
-                        f"(known: {', '.join(self.sample_names())})"
-                    )
-            elif not Path(self.sample).exists():
-                raise UserError(f"--sample {sample}: no such height-map file")
+            check_sample(self.sample, given=sample)
         self.store_path = resolve_store_path(store_path, self.config.lab.store)
         self.bus = EventBus()
-        self.lab: Lab | None = None
-        self.store: RunStore | None = None
+        self.session: ScanSession | None = None
+        self.gloss: GlossSession | None = None
         self._stack = AsyncExitStack()
         self._runner: ScanRunner | None = None
         self._task: asyncio.Task[None] | None = None
         self._gloss_task: asyncio.Task[None] | None = None
         self._gloss_runs: dict[str, int] = {}
         self._scan_sample = ""
-        self._models: dict[str, ReflectanceModel] = {}
         self._closed = False
 
     # ------------------------------------------------------------------ lifecycle
@@ -119,31 +107,35 @@ class LabBackend:
     async def open(self) -> None:
         """Build the lab (connect every instrument), open the store, home the goniometer."""
         try:
-            self.lab = await self._stack.enter_async_context(
-                Lab.from_config(self.config, time_scale=self.time_scale, model=self._lab_model)
+            store = RunStore(self.store_path)
+            self._stack.callback(store.close)
+            session = await self._stack.enter_async_context(
+                ScanSession.open(
+                    self.config,
+                    store,
+                    time_scale=self.time_scale,
+                    model=self._lab_model,
+                    bus=self.bus,
+                )
             )
-            self.store = RunStore(self.store_path)
-            self._stack.callback(self.store.close)
         except StoreError as exc:
             await self._stack.aclose()
             raise UserError(str(exc), exit_code=1) from exc
         except BaseException:
             await self._stack.aclose()
             raise
-        home_timeout_s = 4.0 * self.config.goniometer.move_timeout_s
-        await self.lab.goniometer.home(home_timeout_s)
+        self.session = session
+        self.gloss = GlossSession.of_lab(session.lab, store, models=session.models, bus=self.bus)
+        await session.home()
 
     async def home(self) -> None:
         """Reset both arms' alarms and home again; :meth:`open` if the lab is not built."""
-        if self.lab is None:
+        if self.session is None:
             await self.open()
             return
         if self.running:
             raise UserError("a scan is running: abort it before homing")
-        gonio = self.lab.goniometer
-        for axis in (gonio.lamp, gonio.detector):
-            await axis.reset_alarm()
-        await gonio.home(4.0 * self.config.goniometer.move_timeout_s)
+        await self.session.home(reset_alarms=True)
 
     async def close(self) -> None:
         """Abort a running scan (the runner parks the arms), then release everything."""
@@ -186,56 +178,37 @@ class LabBackend:
             return "the simulated lab measures the selected sample"
         return "place the selected sample under the instruments"
 
-    def _predictor(self, model: ReflectanceModel) -> Predictor:
-        return Predictor.from_config(model, self.config)
-
     async def predict_curve(self, setup: ScanSetup) -> list[float]:
         """The prediction of ``setup.sample`` over the sweep (model built and evaluated in
         worker threads, see :class:`~goniolab.scan.predict.Predictor`)."""
         setup.validate()
         model = await self.model(setup.sample)
         values = await asyncio.to_thread(
-            self._predictor(model).predict_sync,
+            Predictor.from_config(model, self.config).predict_sync,
             setup.theta_i_deg,
             setup.theta_r_values_deg(),
         )
         return [float(v) for v in values]
-
-    def _place_sample(self, model: ReflectanceModel) -> None:
-        """Simulated lab: the spectro and the glossmeter now read ``model`` (the sample
-        picked in the form), as if the technician had put that sample under them.
-        A real lab measures whatever lies there; nothing to do."""
-        lab, _ = self._require_open()
-        if lab.sims is None or lab.sims.spectro.model is model:
-            return
-        lab.sims.spectro.model = model
-        lab.sims.glossmeter.model = model  # forgets the gloss cached for the old sample
 
     # ------------------------------------------------------------------ scans
     @property
     def running(self) -> bool:
         return self._task is not None and not self._task.done()
 
-    def _require_open(self) -> tuple[Lab, RunStore]:
-        if self.lab is None or self.store is None:
+    def _require_open(self) -> ScanSession:
+        if self.session is None:
             raise UserError("the lab is not connected", exit_code=1)
-        return self.lab, self.store
+        return self.session
 
     async def model(self, sample: str) -> ReflectanceModel:
         """The prediction model of ``sample``: the lab's own for the configured sample,
         else :func:`goniolab.models.model_for` (built in a worker thread, cached)."""
-        lab, _ = self._require_open()
-        if sample == self.config.sample.map:
-            return lab.model
-        if sample not in self._models:
-            self._models[sample] = await asyncio.to_thread(
-                model_for, sample, n=self.config.sample.n
-            )
-        return self._models[sample]
+        return await self._require_open().models.get(sample)
 
     async def start(self, setup: ScanSetup) -> int:
-        """Create the run in the store and start the runner in a task; return the run id."""
-        lab, store = self._require_open()
+        """Check the plan (every geometry and the park position), then create the run in
+        the store and start the runner in a task; return the run id."""
+        session = self._require_open()
         setup.validate()
         if self.running:
             raise UserError("a scan is already running")
@@ -251,55 +224,26 @@ class LabBackend:
             raise UserError(f"scan setup: {exc}") from exc
         # The runner's dry run would refuse these too, but only after the run is stored
         # as failed: a geometry out of the arms' reach is a form error.
-        for theta_r_deg in plan.theta_r_deg:
-            try:
-                lab.goniometer.check_geometry(plan.theta_i_deg, theta_r_deg)
-            except (LimitError, InterlockError) as exc:
-                raise UserError(
-                    f"scan setup: theta_i {plan.theta_i_deg:g} deg, theta_r {theta_r_deg:g} "
-                    f"deg is out of the goniometer's reach: {exc.message}"
-                ) from None
-        cfg = self.config
-        model = await self.model(setup.sample)
+        try:
+            scan = await session.prepare(plan)
+        except PlanRefused as exc:
+            raise UserError(f"scan setup: {exc.out_of_reach}") from None
         if self.running:  # started meanwhile (the model was built in a thread)
             raise UserError("a scan is already running")
-        predictor = self._predictor(model)
-        self._place_sample(model)
         self._scan_sample = setup.sample
-        run_id = store.create_run(
-            kind="brdf",
-            plan=plan.to_dict(),
-            config=cfg.model_dump(mode="json"),
-            sample=plan.sample,
-            model=predictor.describe(),
-            version=__version__,
-        )
-        g = cfg.goniometer
-        self._runner = ScanRunner(
-            goniometer=lab.goniometer,
-            spectro=lab.spectro,
-            clock=lab.clock,
-            plan=plan,
-            store=store,
-            run_id=run_id,
-            bus=self.bus,
-            motion=ArmMotion.from_config(g),
-            predictor=predictor,
-            move_timeout_s=g.move_timeout_s,
-            park_deg=(g.park.theta_i_deg, g.park.theta_r_deg),
-        )
+        self._runner = runner = session.start(scan)
         self._task = asyncio.get_running_loop().create_task(
-            self._run(self._runner, store, run_id), name=f"tui-run-{run_id}"
+            self._run(session, runner), name=f"tui-run-{runner.run_id}"
         )
-        return run_id
+        return runner.run_id
 
-    async def _run(self, runner: ScanRunner, store: RunStore, run_id: int) -> None:
+    async def _run(self, session: ScanSession, runner: ScanRunner) -> None:
         """Run to the end; a refused plan or an unexpected error becomes events, not a crash."""
+        run_id = runner.run_id
         try:
-            await runner.run()
+            await session.run(runner)
         except PlanRefused as exc:
             reason = f"plan refused (no arm moved): {exc}"
-            store.set_status(run_id, RunState.FAILED.value, reason)
             self.bus.publish(
                 InstrumentError(run_id=run_id, device="goniometer", message=reason, fatal=True)
             )
@@ -341,38 +285,22 @@ class LabBackend:
         shown beside. During a scan the scan's sample lies under the instruments, so the
         reading is taken (and predicted) for that one.
         """
-        lab, store = self._require_open()
+        session = self._require_open()
+        assert self.gloss is not None
         if self.running:
             sample = self._scan_sample
         if self.gloss_busy:
             raise UserError("a glossmeter reading is already in progress")
-        model = await self.model(sample)
-        predicted = await predict_gloss(model, GLOSS_ANGLES_DEG)
+        prediction = await self.gloss.predict(sample, GLOSS_ANGLES_DEG)
         if self.gloss_busy:
             raise UserError("a glossmeter reading is already in progress")
-        if not self.running:  # a running scan's sample stays under the instruments
-            self._place_sample(model)
+        if not self.running and prediction.model is not None:
+            session.lab.put_sample(prediction.model)  # a scan's sample stays under them
         plan = GlossPlan(count=1, angles_deg=GLOSS_ANGLES_DEG, sample=sample)
         run_id = self._gloss_runs.get(sample)
         if run_id is None:
-            run_id = self._gloss_runs[sample] = store.create_run(
-                kind="gloss",
-                plan=plan.to_dict(),
-                config=self.config.model_dump(mode="json"),
-                sample=sample,
-                model={"model": type(model).__name__, "predicted_gu": predicted},
-                version=__version__,
-            )
-        logger = GlossLogger(
-            meter=lab.glossmeter,
-            store=store,
-            run_id=run_id,
-            bus=self.bus,
-            clock=lab.clock,
-            plan=plan,
-            predicted_gu=predicted,
-            mode="measure",
-        )
+            run_id = self._gloss_runs[sample] = self.gloss.create_run(plan, prediction)
+        logger = self.gloss.logger(plan, run_id, prediction)
 
         async def _one() -> None:
             await logger.run()
@@ -383,10 +311,10 @@ class LabBackend:
     async def arm_states(self) -> tuple[ArmState, ArmState]:
         if self._closed:
             raise UserError("the lab is closed", exit_code=1)
-        lab, _ = self._require_open()
+        gonio = self._require_open().lab.goniometer
         return (
-            await _arm_state("lamp", lab.goniometer.lamp),
-            await _arm_state("detector", lab.goniometer.detector),
+            await _arm_state("lamp", gonio.lamp),
+            await _arm_state("detector", gonio.detector),
         )
 
     # ------------------------------------------------------------------ store

@@ -1,0 +1,459 @@
+"""One scan session and one gloss session over a lab, shared by the CLI and the TUI.
+
+``goniolab scan`` (and ``scan resume``), ``goniolab gloss log`` and the TUI's backend
+wire the same parts here, so a run started from either stores the same rows:
+
+* :class:`ScanSession`: open the lab, home the arms, refuse an unsafe plan before anything
+  is stored (every geometry *and* the park position, :func:`~goniolab.scan.runner.dry_run`),
+  put the plan's sample under the instruments (simulated lab), record the run with the
+  config it ran with (``_source`` names the file, so ``goniolab scan resume RUN`` needs no
+  ``--config``), and run it (:class:`~goniolab.scan.runner.ScanRunner`: every reading
+  stored as it is taken, the arms parked at the end, on an abort or a fault); a stored
+  run that is not done is resumed the same way (:func:`resume_target`).
+* :class:`GlossSession`: the sample's ISO 2813 prediction, a ``gloss`` run in the store,
+  readings taken or received by :class:`~goniolab.scan.gloss.GlossLogger` (which
+  reconnects after a timeout or a lost link).
+
+No UI here: the callers show the :class:`~goniolab.scan.events.EventBus` events and turn the
+errors into their own messages.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import AsyncIterator, Awaitable, Callable
+from contextlib import asynccontextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from drivers.base import Glossmeter
+from drivers.timing import Clock
+from goniolab import __version__
+from goniolab.config import LabConfig
+from goniolab.errors import UserError
+from goniolab.lab import Lab
+from goniolab.optics.models import ReflectanceModel
+from goniolab.scan.events import EventBus, RunState
+from goniolab.scan.gloss import GlossLogger, predict_gloss
+from goniolab.scan.plans import BrdfPlan, GlossPlan
+from goniolab.scan.predict import Predictor
+from goniolab.scan.runner import ArmMotion, DryRun, PlanRefused, RunResult, ScanRunner, dry_run
+from goniolab.store import RunRecord, RunStore
+
+__all__ = [
+    "HOME_TIMEOUT_MOVES",
+    "GlossPrediction",
+    "GlossSession",
+    "PreparedScan",
+    "SampleModels",
+    "ScanSession",
+    "check_sample",
+    "config_snapshot",
+    "home_timeout_s",
+    "resume_target",
+    "with_sample",
+]
+
+#: Homing (and parking, which may follow a home search) may take this many move timeouts.
+HOME_TIMEOUT_MOVES = 4.0
+
+#: Swaps the specimen ("mirror" or "sample") and returns once it lies under the instruments.
+SpecimenHook = Callable[[str], Awaitable[None]]
+
+
+def home_timeout_s(cfg: LabConfig) -> float:
+    """Time allowed to home (or park) both arms: ``HOME_TIMEOUT_MOVES`` x
+    ``[goniometer] move_timeout_s`` (120 s with the default 30 s)."""
+    return HOME_TIMEOUT_MOVES * cfg.goniometer.move_timeout_s
+
+
+def with_sample(cfg: LabConfig, sample: str) -> LabConfig:
+    """``cfg`` with ``[sample] map`` set to ``sample``: in a simulated lab that is the sample
+    under the instruments, in a real lab the one the prediction is made for."""
+    if not sample or sample == cfg.sample.map:
+        return cfg
+    return cfg.model_copy(update={"sample": cfg.sample.model_copy(update={"map": sample})})
+
+
+def config_snapshot(cfg: LabConfig) -> dict[str, Any]:
+    """The config stored with a run: every key, and ``_source``, the absolute path of the
+    file it was read from (what ``scan resume`` opens when no ``--config`` is given)."""
+    snap: dict[str, Any] = cfg.model_dump(mode="json")
+    snap["_source"] = str(Path(cfg.source).resolve()) if cfg.source else ""
+    return snap
+
+
+def check_sample(spec: str, *, option: str = "--sample", given: str = "") -> None:
+    """Raise :class:`UserError` naming ``option`` and the value as ``given`` (default:
+    ``spec``) when ``spec`` (``sample:NAME`` or a height-map path) names no built-in
+    sample or no file."""
+    arg = f"{option} {given or spec}"
+    if spec.startswith("sample:"):
+        from goniolab.surfaces.samples import sample_names
+
+        name = spec.removeprefix("sample:")
+        names = sample_names()
+        if name not in names:
+            raise UserError(f"{arg}: no built-in sample {name!r} (known: {', '.join(names)})")
+    elif not Path(spec).is_file():
+        raise UserError(f"{arg}: no such file (use sample:NAME or a height-map path)")
+
+
+class SampleModels:
+    """The reflectance model of each sample spec, built once in a worker thread.
+
+    Parameters
+    ----------
+    n
+        Refractive index of samples not in ``known`` (the config's ``[sample] n``).
+    known
+        Models already built, by spec (the lab's own model of its ``[sample] map``).
+    """
+
+    def __init__(self, n: complex | float, known: dict[str, ReflectanceModel] | None = None):
+        self.n = n
+        self._models: dict[str, ReflectanceModel] = dict(known or {})
+
+    @classmethod
+    def of_lab(cls, lab: Lab) -> SampleModels:
+        """The lab's model for its configured sample; other samples with its index."""
+        return cls(lab.config.sample.n, {lab.config.sample.map: lab.model})
+
+    async def get(self, sample: str) -> ReflectanceModel:
+        """The model of ``sample`` (:func:`goniolab.models.model_for`, cached)."""
+        if sample not in self._models:
+            from goniolab.models import model_for
+
+            self._models[sample] = await asyncio.to_thread(model_for, sample, n=self.n)
+        return self._models[sample]
+
+
+@dataclass(frozen=True, slots=True)
+class PreparedScan:
+    """A plan that passed the dry run, with its prediction model; nothing stored yet
+    unless ``run_id`` (a run being resumed) is set."""
+
+    plan: BrdfPlan
+    run_id: int | None
+    check: DryRun
+    model: ReflectanceModel
+    predictor: Predictor
+
+
+class ScanSession:
+    """BRDF scans on an open lab: home, dry run, store, run, park, resume.
+
+    Parameters
+    ----------
+    lab
+        An open :class:`~goniolab.lab.Lab` with its goniometer and spectro.
+    store
+        The run store.
+    bus
+        Where the runner publishes (default: a new one).
+    models
+        Prediction models by sample (default: the lab's, :meth:`SampleModels.of_lab`).
+    operator
+        Asks the operator to swap mirror and sample for a mirror reference on a real lab
+        (a simulated lab swaps them itself).
+    """
+
+    def __init__(
+        self,
+        lab: Lab,
+        store: RunStore,
+        *,
+        bus: EventBus | None = None,
+        models: SampleModels | None = None,
+        operator: SpecimenHook | None = None,
+    ) -> None:
+        self.lab = lab
+        self.store = store
+        self.bus = EventBus() if bus is None else bus
+        self.models = SampleModels.of_lab(lab) if models is None else models
+        self.operator = operator
+
+    @classmethod
+    @asynccontextmanager
+    async def open(
+        cls,
+        config: LabConfig,
+        store: RunStore,
+        *,
+        sample: str = "",
+        time_scale: float | None = None,
+        model: ReflectanceModel | None = None,
+        bus: EventBus | None = None,
+        operator: SpecimenHook | None = None,
+    ) -> AsyncIterator[ScanSession]:
+        """Open the lab of ``config`` (with ``sample`` under the instruments), close it after."""
+        lab_cfg = with_sample(config, sample)
+        async with Lab.from_config(lab_cfg, time_scale=time_scale, model=model) as lab:
+            yield cls(lab, store, bus=bus, operator=operator)
+
+    @property
+    def config(self) -> LabConfig:
+        """The lab's config."""
+        return self.lab.config
+
+    @property
+    def clock_scale(self) -> float:
+        """Lab-clock seconds per wall second (a sim clock's scale, 1 for a real lab)."""
+        return float(getattr(self.lab.clock, "scale", 1.0))
+
+    async def homed(self) -> bool:
+        """Both arms have their reference."""
+        g = self.lab.goniometer
+        return bool((await g.lamp.status()).homed and (await g.detector.status()).homed)
+
+    async def home(self, *, reset_alarms: bool = False) -> None:
+        """Home both arms (after resetting their alarms when asked)."""
+        g = self.lab.goniometer
+        if reset_alarms:
+            for axis in (g.lamp, g.detector):
+                await axis.reset_alarm()
+        await g.home(home_timeout_s(self.config))
+
+    async def prepare(self, plan: BrdfPlan, run_id: int | None = None) -> PreparedScan:
+        """Dry-run the readings still to take (all of them for a new run) from where the
+        arms stand, and build the sample's prediction model. Nothing moves, nothing is
+        stored.
+
+        Raises
+        ------
+        PlanRefused
+            A geometry of the plan, or the park position, is out of the arms' reach.
+        """
+        g = self.config.goniometer
+        done = set() if run_id is None else self.store.done_keys(run_id)
+        start = await self.lab.goniometer.positions_deg()
+        check = dry_run(
+            [pt for pt in plan.points() if pt.key not in done],
+            self.lab.goniometer,
+            ArmMotion.from_config(g),
+            start_deg=(float(start[0]), float(start[1])),
+            dwell_s=plan.dwell_s,
+            reading_time_s=plan.exposure_us * 1e-6,
+            park_deg=(g.park.theta_i_deg, g.park.theta_r_deg),
+        )
+        model = await self.models.get(plan.sample)
+        return PreparedScan(plan, run_id, check, model, Predictor.from_config(model, self.config))
+
+    async def prepare_resume(self, run_id: int) -> PreparedScan:
+        """:meth:`prepare` for the stored plan of ``run_id``."""
+        return await self.prepare(BrdfPlan.from_dict(self.store.get_run(run_id).plan), run_id)
+
+    def start(self, scan: PreparedScan) -> ScanRunner:
+        """Put the plan's sample under the instruments (simulated lab), record a new run
+        in the store, and return its runner (call :meth:`run`)."""
+        plan, cfg = scan.plan, self.config
+        hook = self._specimen_hook() if plan.mirror_reference else None
+        self.lab.put_sample(scan.model)
+        run_id = scan.run_id
+        if run_id is None:
+            run_id = self.store.create_run(
+                kind="brdf",
+                plan=plan.to_dict(),
+                config=config_snapshot(with_sample(cfg, plan.sample)),
+                sample=plan.sample,
+                model=scan.predictor.describe(),
+                version=__version__,
+            )
+        g = cfg.goniometer
+        return ScanRunner(
+            goniometer=self.lab.goniometer,
+            spectro=self.lab.spectro,
+            clock=self.lab.clock,
+            plan=plan,
+            store=self.store,
+            run_id=run_id,
+            bus=self.bus,
+            motion=ArmMotion.from_config(g),
+            predictor=scan.predictor,
+            move_timeout_s=g.move_timeout_s,
+            home_timeout_s=home_timeout_s(cfg),
+            park_deg=(g.park.theta_i_deg, g.park.theta_r_deg),
+            specimen_hook=hook,
+        )
+
+    async def run(self, runner: ScanRunner) -> RunResult:
+        """Run to the end (done, aborted or failed: the arms are parked).
+
+        Raises
+        ------
+        PlanRefused
+            The runner's own dry run refused the plan (the arms moved meanwhile); the run
+            is marked ``failed`` with the reason, nothing moved.
+        goniolab.store.RunBusy
+            Another runner holds the run; nothing moved.
+        """
+        try:
+            return await runner.run()
+        except PlanRefused as exc:
+            self.store.set_status(
+                runner.run_id, RunState.FAILED.value, f"plan refused (no arm moved): {exc}"
+            )
+            raise
+
+    def _specimen_hook(self) -> SpecimenHook:
+        if self.lab.place_specimen is not None:  # a simulated lab swaps the specimen itself
+            return self.lab.place_specimen
+        if self.operator is None:
+            raise UserError("a mirror reference needs an operator to swap mirror and sample")
+        return self.operator
+
+
+def resume_target(rec: RunRecord, config_path: str | None, done_readings: int) -> str:
+    """The config file to resume the stored run ``rec`` with: ``config_path`` when given,
+    else the one the run was started with (its ``_source``).
+
+    Raises
+    ------
+    UserError
+        The run is no scan, is already done, or names no config file that still exists.
+    """
+    if rec.kind != "brdf":
+        raise UserError(f"run {rec.id} is a {rec.kind} run; only scans can be resumed")
+    if rec.status == RunState.DONE.value:
+        raise UserError(f"run {rec.id} is already done ({done_readings} readings)")
+    path = config_path or rec.config.get("_source", "")
+    if not path:
+        raise UserError(f"run {rec.id}: no config file recorded; pass --config FILE")
+    if not Path(path).exists():
+        raise UserError(f"run {rec.id}: config {path} no longer exists; pass --config FILE")
+    return str(path)
+
+
+@dataclass(frozen=True, slots=True)
+class GlossPrediction:
+    """A sample's model and its ISO 2813 gloss (both ``None`` without a sample)."""
+
+    model: ReflectanceModel | None
+    gloss_gu: dict[int, float] | None
+
+    def describe(self) -> dict[str, Any]:
+        """The ``model`` column of a gloss run."""
+        if self.model is None:
+            return {}
+        return {"model": type(self.model).__name__, "predicted_gu": self.gloss_gu}
+
+
+class GlossSession:
+    """Glossmeter readings logged in the store beside the sample's predicted gloss.
+
+    Parameters
+    ----------
+    meter, clock
+        A connected glossmeter and the lab clock (backoff and interval waits).
+    store
+        The run store.
+    config
+        The lab config (stored with each run, ``[sample] map`` set to the run's sample),
+        or what describes a meter opened without one (port, protocol).
+    models
+        Prediction models by sample; ``None``: no prediction.
+    bus
+        Where the logger publishes (default: a new one).
+    """
+
+    def __init__(
+        self,
+        meter: Glossmeter,
+        clock: Clock,
+        store: RunStore,
+        *,
+        config: LabConfig | dict[str, Any],
+        models: SampleModels | None = None,
+        bus: EventBus | None = None,
+    ) -> None:
+        self.meter = meter
+        self.clock = clock
+        self.store = store
+        self.config = config
+        self.models = models
+        self.bus = EventBus() if bus is None else bus
+
+    @classmethod
+    def of_lab(
+        cls,
+        lab: Lab,
+        store: RunStore,
+        *,
+        models: SampleModels | None = None,
+        bus: EventBus | None = None,
+    ) -> GlossSession:
+        """The glossmeter of an open lab."""
+        models = SampleModels.of_lab(lab) if models is None else models
+        return cls(lab.glossmeter, lab.clock, store, config=lab.config, models=models, bus=bus)
+
+    @classmethod
+    @asynccontextmanager
+    async def open(
+        cls,
+        config: LabConfig,
+        store: RunStore,
+        *,
+        sample: str = "",
+        time_scale: float | None = None,
+        bus: EventBus | None = None,
+    ) -> AsyncIterator[GlossSession]:
+        """Open only the glossmeter of ``config`` (it works while the goniometer is off)."""
+        lab_cfg = with_sample(config, sample)
+        async with Lab.from_config(
+            lab_cfg, time_scale=time_scale, instruments=("glossmeter",)
+        ) as lab:
+            yield cls.of_lab(lab, store, bus=bus)
+
+    async def predict(self, sample: str, angles_deg: tuple[int, ...]) -> GlossPrediction:
+        """The model of ``sample`` and its gloss at ``angles_deg`` (worker threads)."""
+        if not sample or self.models is None:
+            return GlossPrediction(None, None)
+        model = await self.models.get(sample)
+        return GlossPrediction(model, await predict_gloss(model, angles_deg))
+
+    def create_run(self, plan: GlossPlan, prediction: GlossPrediction) -> int:
+        """Record a new ``gloss`` run for ``plan``; return its id."""
+        config = (
+            config_snapshot(with_sample(self.config, plan.sample))
+            if isinstance(self.config, LabConfig)
+            else dict(self.config)
+        )
+        return self.store.create_run(
+            kind="gloss",
+            plan=plan.to_dict(),
+            config=config,
+            sample=plan.sample,
+            model=prediction.describe(),
+            version=__version__,
+        )
+
+    def logger(
+        self,
+        plan: GlossPlan,
+        run_id: int,
+        prediction: GlossPrediction,
+        *,
+        mode: str = "measure",
+        interval_s: float = 0.0,
+    ) -> GlossLogger:
+        """The logger of ``plan`` into run ``run_id`` (call its ``run()``; ``stop()`` ends it)."""
+        return GlossLogger(
+            meter=self.meter,
+            store=self.store,
+            run_id=run_id,
+            bus=self.bus,
+            clock=self.clock,
+            plan=plan,
+            predicted_gu=prediction.gloss_gu,
+            mode=mode,
+            interval_s=interval_s,
+        )
+
+    async def start(
+        self, plan: GlossPlan, *, mode: str = "measure", interval_s: float = 0.0
+    ) -> GlossLogger:
+        """Predict ``plan.sample``, record a new run, and return its logger."""
+        prediction = await self.predict(plan.sample, plan.angles_deg)
+        run_id = self.create_run(plan, prediction)
+        return self.logger(plan, run_id, prediction, mode=mode, interval_s=interval_s)
