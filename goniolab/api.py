@@ -487,59 +487,19 @@ def run_scan(
 async def _scan(
     config_path: str, plan: Any, store: RunStore, time_scale: float | None, progress: bool
 ) -> int:
-    from goniolab import __version__
-    from goniolab.commands.scan import _specimen_hook, with_sample
     from goniolab.config import load_lab_config
-    from goniolab.lab import Lab
-    from goniolab.scan.events import EventBus, Progress
-    from goniolab.scan.predict import Predictor
-    from goniolab.scan.runner import ArmMotion, PlanRefused, ScanRunner, dry_run
+    from goniolab.scan.events import Progress
+    from goniolab.scan.runner import PlanRefused
+    from goniolab.session import ScanSession
 
-    cfg0 = with_sample(load_lab_config(config_path), plan.sample)
-    async with Lab.from_config(cfg0, time_scale=time_scale) as lab:
-        cfg = lab.config
-        predictor = Predictor.from_config(lab.model, cfg)
-        g = cfg.goniometer
-        motion = ArmMotion.from_config(g)
-        park = (g.park.theta_i_deg, g.park.theta_r_deg)
-        start = await lab.goniometer.positions_deg()
+    cfg = load_lab_config(config_path)
+    async with ScanSession.open(cfg, store, sample=plan.sample, time_scale=time_scale) as session:
         try:
-            dry_run(
-                plan.points(),
-                lab.goniometer,
-                motion,
-                start_deg=(float(start[0]), float(start[1])),
-                dwell_s=plan.dwell_s,
-                reading_time_s=plan.exposure_us * 1e-6,
-                park_deg=park,
-            )
+            runner = session.start(await session.prepare(plan))
         except PlanRefused as exc:
             raise UserError(f"plan refused (no arm moved): {exc}") from exc
-        snapshot: dict[str, Any] = cfg.model_dump(mode="json")
-        snapshot["_source"] = config_path
-        run_id = store.create_run(
-            kind="brdf",
-            plan=plan.to_dict(),
-            config=snapshot,
-            sample=plan.sample,
-            model=predictor.describe(),
-            version=__version__,
-        )
-        bus = EventBus()
-        runner = ScanRunner(
-            goniometer=lab.goniometer,
-            spectro=lab.spectro,
-            clock=lab.clock,
-            plan=plan,
-            store=store,
-            run_id=run_id,
-            bus=bus,
-            motion=motion,
-            predictor=predictor,
-            move_timeout_s=g.move_timeout_s,
-            park_deg=park,
-            specimen_hook=_specimen_hook(lab) if plan.mirror_reference else None,
-        )
+        run_id = runner.run_id
+        bus = session.bus
         queue = bus.subscribe()
 
         async def report() -> None:
@@ -557,7 +517,7 @@ async def _scan(
 
         reporter = asyncio.create_task(report())
         try:
-            await runner.run()
+            await session.run(runner)
         finally:
             bus.close()
             await reporter
