@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import math
 import time
 from collections.abc import Awaitable, Callable, Sequence
 from typing import Any, Literal, NoReturn
@@ -69,6 +70,7 @@ from drivers.serial_io import busy_hint
 __all__ = ["ModbusStepperAxis"]
 
 _INT32 = ModbusClientMixin.DATATYPE.INT32
+_INT32_MAX = 2**31 - 1
 _UINT32 = ModbusClientMixin.DATATYPE.UINT32
 #: Received bytes quoted in a "garbled reply" error (the tail of the receive buffer).
 _GARBLE_QUOTE_BYTES = 32
@@ -167,10 +169,10 @@ class ModbusStepperAxis:
             raise ValueError(f"{name}: transport must be 'tcp' or 'rtu', got {transport!r}")
         if transport == "rtu" and not serial_port:
             raise ValueError(f"{name}: transport 'rtu' needs serial_port")
-        if not steps_per_deg > 0:
-            raise ValueError(f"{name}: steps_per_deg must be > 0, got {steps_per_deg}")
-        if not gear_ratio > 0:
-            raise ValueError(f"{name}: gear_ratio must be > 0, got {gear_ratio}")
+        if not (steps_per_deg > 0 and math.isfinite(steps_per_deg)):
+            raise ValueError(f"{name}: steps_per_deg must be > 0 and finite, got {steps_per_deg}")
+        if not (gear_ratio > 0 and math.isfinite(gear_ratio)):
+            raise ValueError(f"{name}: gear_ratio must be > 0 and finite, got {gear_ratio}")
         lo, hi = (float(v) for v in limits_deg)
         if not lo < hi:
             raise ValueError(
@@ -196,6 +198,12 @@ class ModbusStepperAxis:
         self.unit_id = unit_id
         self.gear_ratio = float(gear_ratio)
         self.steps_per_deg = float(steps_per_deg) * self.gear_ratio  # per degree of the arm
+        for limit in (lo, hi):
+            if not abs(limit * self.steps_per_deg) <= _INT32_MAX:
+                raise ValueError(
+                    f"{name}: limit {limit:g} deg at {self.steps_per_deg:g} steps/deg is "
+                    f"{limit * self.steps_per_deg:.4g} steps, beyond the int32 position register"
+                )
         self.limits_deg: tuple[float, float] = (lo, hi)
         self.speed_deg_s = float(speed_deg_s)
         self.accel_deg_s2 = float(accel_deg_s2)
@@ -219,8 +227,9 @@ class ModbusStepperAxis:
 
     # ------------------------------------------------------------------ helpers
     def _counts(self, label: str, value_per_s: float, counts_per_step: float) -> int:
-        counts = round(value_per_s * self.steps_per_deg * counts_per_step)
-        limit = 0xFFFF if self.profile.move_style == "command-opcode" else 0x7FFFFFFF
+        exact = value_per_s * self.steps_per_deg * counts_per_step
+        counts = round(exact) if math.isfinite(exact) else -1
+        limit = 0xFFFF if self.profile.move_style == "command-opcode" else _INT32_MAX
         if not 1 <= counts <= limit:
             raise ValueError(
                 f"{self.name}: {label}={value_per_s} gives {counts} register counts with profile "

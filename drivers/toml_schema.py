@@ -33,6 +33,7 @@ __all__ = [
     "plain_reason",
     "pydantic_reason",
     "read_toml",
+    "short_repr",
 ]
 
 
@@ -99,6 +100,18 @@ def read_toml(path: Path, *, what: str) -> dict[str, Any]:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise TomlFileError(path, f"TOML syntax error: {exc}") from None
+    except RecursionError:  # tomllib recurses once per nested array / inline table
+        raise TomlFileError(path, f"arrays or tables nested too deeply to be a {what}") from None
+
+
+def short_repr(value: Any, limit: int = 60) -> str:
+    """``repr(value)`` cut to ``limit`` characters, so an error stays one short line
+    whatever was written (a 5000-deep array, a megabyte string)."""
+    try:
+        text = repr(value)
+    except RecursionError:
+        text = f"<{type(value).__name__} nested too deeply>"
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def dotted(loc: Sequence[int | str]) -> str:
@@ -126,7 +139,7 @@ def pydantic_reason(err: Mapping[str, Any]) -> str:
     msg = str(err.get("msg", "invalid value")).removeprefix("Value error, ")
     value = err.get("input")
     if kind != "value_error" and not isinstance(value, dict):
-        msg = f"{msg} (got {value!r})"
+        msg = f"{msg} (got {short_repr(value)})"
     return msg
 
 
@@ -140,20 +153,20 @@ def plain_reason(err: Mapping[str, Any]) -> str:
     if kind in _MISSING:
         return "missing"
     phrases: dict[str, Callable[[], str]] = {
-        "int_type": lambda: f"expected an integer, got {value!r}",
-        "float_type": lambda: f"expected a number, got {value!r}",
-        "finite_number": lambda: f"must be a finite number, got {value!r}",
-        "string_type": lambda: f"expected a string, got {value!r}",
-        "list_type": lambda: f"expected a list, got {value!r}",
-        "dict_type": lambda: f"expected a table, got {value!r}",
-        "model_type": lambda: f"expected a table, got {value!r}",
-        "dataclass_type": lambda: f"expected a table, got {value!r}",
-        "greater_than_equal": lambda: f"{value!r} is below the minimum {ctx.get('ge')!r}",
-        "less_than_equal": lambda: f"{value!r} is above the maximum {ctx.get('le')!r}",
-        "greater_than": lambda: f"must be > {ctx.get('gt')!r}, got {value!r}",
-        "less_than": lambda: f"must be < {ctx.get('lt')!r}, got {value!r}",
+        "int_type": lambda: f"expected an integer, got {short_repr(value)}",
+        "float_type": lambda: f"expected a number, got {short_repr(value)}",
+        "finite_number": lambda: f"must be a finite number, got {short_repr(value)}",
+        "string_type": lambda: f"expected a string, got {short_repr(value)}",
+        "list_type": lambda: f"expected a list, got {short_repr(value)}",
+        "dict_type": lambda: f"expected a table, got {short_repr(value)}",
+        "model_type": lambda: f"expected a table, got {short_repr(value)}",
+        "dataclass_type": lambda: f"expected a table, got {short_repr(value)}",
+        "greater_than_equal": lambda: f"{short_repr(value)} is below the minimum {ctx.get('ge')!r}",
+        "less_than_equal": lambda: f"{short_repr(value)} is above the maximum {ctx.get('le')!r}",
+        "greater_than": lambda: f"must be > {ctx.get('gt')!r}, got {short_repr(value)}",
+        "less_than": lambda: f"must be < {ctx.get('lt')!r}, got {short_repr(value)}",
         "string_too_short": lambda: "must not be empty",
-        "literal_error": lambda: f"expected {ctx.get('expected')}, got {value!r}",
+        "literal_error": lambda: f"expected {ctx.get('expected')}, got {short_repr(value)}",
     }
     if kind in phrases:
         return phrases[kind]()

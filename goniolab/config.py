@@ -15,6 +15,20 @@ are resolved against the ``configs/profiles`` directory found next to the packag
 ``goniolab/_configs``; relative profile paths are tried next to the config file first.
 Each profile is loaded once at config time so that a bad profile is reported against the
 config key that names it.
+
+Whatever would only fail at run time is refused at load:
+
+* numbers are strict: TOML ``true`` is not 1 and ``1.5`` is not an integer (an integer is
+  accepted where a float is expected);
+* safety limits have a floor: ``min_separation_deg`` >= :data:`MIN_SEPARATION_FLOOR_DEG`
+  (0 would switch the arm interlock off) and >= half the sum of the lamp and detector
+  cones (closer, the detector would look into the lamp);
+* every register value derived from an arm's settings fits its register with the arm's
+  profile: positions ``limit_deg x steps_per_deg x gear_ratio`` in the int32 position
+  register, speed and acceleration counts in theirs (int32, or 16 bits for a
+  ``command-opcode`` drive), one step no coarser than ``stall_tolerance_deg``;
+* ``spectro.exposure_us`` lies in the range of the spectro's profile;
+* a file nested too deeply for the TOML parser is one error, not a RecursionError.
 """
 
 from __future__ import annotations
@@ -30,6 +44,8 @@ from drivers.toml_schema import TomlFileError, first_issue, read_toml
 from goniolab.errors import UserError
 
 __all__ = [
+    "INT32_MAX",
+    "MIN_SEPARATION_FLOOR_DEG",
     "AxisConfig",
     "ConfigError",
     "FaultsConfig",
@@ -67,13 +83,24 @@ def configs_dir() -> Path:
     return here.parent / "configs"
 
 
+#: Smallest ``min_separation_deg`` a config may set: 0 would switch the interlock off.
+MIN_SEPARATION_FLOOR_DEG = 1.0
+#: Largest value of a signed 32-bit register (positions, and speeds of direct-data drives).
+INT32_MAX = 2**31 - 1
+#: Largest value of a 16-bit register (speeds and accelerations of command-opcode drives).
+UINT16_MAX = 0xFFFF
+
+
 class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True)
 
 
-PositiveFloat = Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
-NonNegFloat = Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
-FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
+# Numbers are strict (a TOML boolean is not a number, a float is not an integer); an
+# integer is still accepted where a float is expected.
+PositiveFloat = Annotated[float, Field(strict=True, gt=0.0, allow_inf_nan=False)]
+NonNegFloat = Annotated[float, Field(strict=True, ge=0.0, allow_inf_nan=False)]
+FiniteFloat = Annotated[float, Field(strict=True, allow_inf_nan=False)]
+AngleOrNone = Annotated[float, Field(strict=True)] | None
 
 
 class LabSection(_Strict):
@@ -96,7 +123,7 @@ class SampleConfig(_Strict):
     """``[sample]``: the height map (path or ``sample:NAME``) and refractive index."""
 
     map: str = "sample:wittmann-3"
-    n: Annotated[float, Field(gt=1.0, lt=4.0, allow_inf_nan=False)] = 1.55
+    n: Annotated[float, Field(strict=True, gt=1.0, lt=4.0, allow_inf_nan=False)] = 1.55
 
 
 class ParkConfig(_Strict):
@@ -113,10 +140,10 @@ class AxisConfig(_Strict):
     transport: Literal["tcp", "rtu"] = "tcp"
     host: str = "127.0.0.1"
     # 0 = any free port, picked when the lab serves its own simulated controllers
-    port: Annotated[int, Field(ge=0, le=65535)] = 5020
-    unit_id: Annotated[int, Field(ge=1, le=247)] = 1
+    port: Annotated[int, Field(strict=True, ge=0, le=65535)] = 5020
+    unit_id: Annotated[int, Field(strict=True, ge=1, le=247)] = 1
     serial_port: str = ""
-    baudrate: Annotated[int, Field(ge=300, le=4_000_000)] = 115200
+    baudrate: Annotated[int, Field(strict=True, ge=300, le=4_000_000)] = 115200
     parity: Literal["N", "E", "O"] = "E"
     steps_per_deg: PositiveFloat = 1000.0  # motor steps per degree of the motor shaft
     gear_ratio: PositiveFloat = 1.0  # motor turns per arm turn (1 = direct drive)
@@ -146,12 +173,22 @@ class AxisConfig(_Strict):
 class GoniometerConfig(_Strict):
     """``[goniometer]``: interlock, source cone, park, move timeout and the two arms."""
 
-    min_separation_deg: NonNegFloat = 10.0
-    source_cone_deg: Annotated[float, Field(ge=0.0, lt=90.0)] = 6.0
+    min_separation_deg: FiniteFloat = 10.0
+    source_cone_deg: Annotated[float, Field(strict=True, ge=0.0, lt=90.0)] = 6.0
     park: ParkConfig = ParkConfig()
     move_timeout_s: PositiveFloat = 30.0
     lamp: AxisConfig = AxisConfig(unit_id=1, limits_deg=(0.0, 85.0))
     detector: AxisConfig = AxisConfig(unit_id=2, limits_deg=(-85.0, 85.0))
+
+    @field_validator("min_separation_deg")
+    @classmethod
+    def _interlock_floor(cls, v: float) -> float:
+        if v < MIN_SEPARATION_FLOOR_DEG:
+            raise ValueError(
+                f"{v:g} deg is below the floor {MIN_SEPARATION_FLOOR_DEG:g} deg: the arm "
+                "interlock cannot be switched off"
+            )
+        return v
 
 
 class SpectroConfig(_Strict):
@@ -159,9 +196,9 @@ class SpectroConfig(_Strict):
 
     profile: str = "stil-ruby"
     port: str = "/tmp/goniolab-sim/spectro"
-    baudrate: Annotated[int, Field(ge=300, le=4_000_000)] = 115200
-    exposure_us: Annotated[int, Field(ge=1)] = 10000
-    detector_cone_deg: Annotated[float, Field(ge=0.0, lt=90.0)] = 6.0
+    baudrate: Annotated[int, Field(strict=True, ge=300, le=4_000_000)] = 115200
+    exposure_us: Annotated[int, Field(strict=True, ge=1)] = 10000
+    detector_cone_deg: Annotated[float, Field(strict=True, ge=0.0, lt=90.0)] = 6.0
     timeout_s: PositiveFloat = 2.0
 
 
@@ -172,7 +209,7 @@ class GlossmeterConfig(_Strict):
     profile: str = "zgm1120"
     port: str = "/tmp/goniolab-sim/gloss"
     serial_number: str = "401120999"
-    baudrate: Annotated[int, Field(ge=300, le=4_000_000)] = 9600
+    baudrate: Annotated[int, Field(strict=True, ge=300, le=4_000_000)] = 9600
     timeout_s: PositiveFloat = 2.0
 
 
@@ -187,16 +224,16 @@ class FaultsConfig(_Strict):
     """
 
     devices: tuple[Literal["lamp", "detector", "spectro", "glossmeter"], ...] = ()
-    timeout_rate: Annotated[float, Field(ge=0.0, le=1.0)] = 0.0
-    garble_rate: Annotated[float, Field(ge=0.0, le=1.0)] = 0.0
-    disconnect_after: Annotated[int, Field(ge=0)] = 0
-    disconnect_rate: Annotated[float, Field(ge=0.0, le=1.0)] = 0.0
-    recover_after_s: Annotated[float, Field(ge=0.0, le=3600.0)] = 0.5
-    lamp_stall_at_deg: float | None = None
-    detector_stall_at_deg: float | None = None
-    lamp_alarm_at_deg: float | None = None
-    detector_alarm_at_deg: float | None = None
-    alarm_code: Annotated[int, Field(ge=1, le=0xFFFF)] = 0x30
+    timeout_rate: Annotated[float, Field(strict=True, ge=0.0, le=1.0)] = 0.0
+    garble_rate: Annotated[float, Field(strict=True, ge=0.0, le=1.0)] = 0.0
+    disconnect_after: Annotated[int, Field(strict=True, ge=0)] = 0
+    disconnect_rate: Annotated[float, Field(strict=True, ge=0.0, le=1.0)] = 0.0
+    recover_after_s: Annotated[float, Field(strict=True, ge=0.0, le=3600.0)] = 0.5
+    lamp_stall_at_deg: AngleOrNone = None
+    detector_stall_at_deg: AngleOrNone = None
+    lamp_alarm_at_deg: AngleOrNone = None
+    detector_alarm_at_deg: AngleOrNone = None
+    alarm_code: Annotated[int, Field(strict=True, ge=1, le=0xFFFF)] = 0x30
 
     @model_validator(mode="after")
     def _rates_sum_to_at_most_one(self) -> FaultsConfig:
@@ -222,11 +259,11 @@ class FaultsConfig(_Strict):
 class SimConfig(_Strict):
     """``[sim]``: seed, noise and misalignments of the simulated lab."""
 
-    seed: Annotated[int, Field(ge=0)] = 1
-    noise_pct: Annotated[float, Field(ge=0.0, le=50.0)] = 0.5
-    sample_tilt_deg: Annotated[float, Field(ge=-10.0, le=10.0)] = 0.0
-    lamp_zero_offset_deg: Annotated[float, Field(ge=-10.0, le=10.0)] = 0.0
-    detector_zero_offset_deg: Annotated[float, Field(ge=-10.0, le=10.0)] = 0.0
+    seed: Annotated[int, Field(strict=True, ge=0)] = 1
+    noise_pct: Annotated[float, Field(strict=True, ge=0.0, le=50.0)] = 0.5
+    sample_tilt_deg: Annotated[float, Field(strict=True, ge=-10.0, le=10.0)] = 0.0
+    lamp_zero_offset_deg: Annotated[float, Field(strict=True, ge=-10.0, le=10.0)] = 0.0
+    detector_zero_offset_deg: Annotated[float, Field(strict=True, ge=-10.0, le=10.0)] = 0.0
     gloss_autosend_s: NonNegFloat = 0.0
     faults: FaultsConfig = FaultsConfig()
 
@@ -306,8 +343,17 @@ def load_lab_config(path: str | Path) -> LabConfig:
         cfg = LabConfig.model_validate({**data, "source": str(p)})
     except ValidationError as exc:
         raise ConfigError(p, *first_issue(exc)) from None
+    except RecursionError:
+        raise ConfigError(p, "", TOO_DEEP) from None
     _cross_checks(cfg, p)
-    return _resolve_profiles(cfg, p, data)
+    cfg, profiles = _resolve_profiles(cfg, p)
+    _register_checks(cfg, p, profiles)
+    _exposure_check(cfg, p, profiles["spectro.profile"])
+    return cfg
+
+
+#: The reason given for a TOML file nested deeper than the parser's recursion allows.
+TOO_DEEP = "arrays or tables nested too deeply to be a lab config"
 
 
 def _cross_checks(cfg: LabConfig, path: Path) -> None:
@@ -322,6 +368,16 @@ def _cross_checks(cfg: LabConfig, path: Path) -> None:
             raise ConfigError(
                 path, key, f"{value:g} deg outside the arm limits [{lo:g}, {hi:g}] deg"
             )
+    cones_deg = (g.source_cone_deg + cfg.spectro.detector_cone_deg) / 2.0
+    if g.min_separation_deg < cones_deg:
+        raise ConfigError(
+            path,
+            "goniometer.min_separation_deg",
+            f"{g.min_separation_deg:g} deg is closer than the lamp and detector cones allow "
+            f"(source_cone_deg {g.source_cone_deg:g} and spectro.detector_cone_deg "
+            f"{cfg.spectro.detector_cone_deg:g} overlap below {cones_deg:g} deg: the detector "
+            "would look into the lamp)",
+        )
     sep = abs(g.park.theta_i_deg + g.park.theta_r_deg)
     if sep < g.min_separation_deg:
         raise ConfigError(
@@ -358,12 +414,15 @@ def _cross_checks(cfg: LabConfig, path: Path) -> None:
         )
 
 
-def _resolve_profiles(cfg: LabConfig, path: Path, data: dict[str, Any]) -> LabConfig:
+def _resolve_profiles(cfg: LabConfig, path: Path) -> tuple[LabConfig, dict[str, Any]]:
+    """Load every profile the config names; the config with resolved paths, and the
+    loaded profiles by config key."""
     import drivers.profiles as dp  # drivers never import goniolab: this direction is allowed
     from drivers.base import ProfileError
 
     base = path.resolve().parent
     resolved: dict[str, str] = {}
+    loaded: dict[str, Any] = {}
     keys = list(_PROFILE_KEYS)
     if cfg.glossmeter.protocol == "zgm1120":
         keys.append(("glossmeter.profile", "zgm1120", "load_zgm_profile"))
@@ -373,7 +432,7 @@ def _resolve_profiles(cfg: LabConfig, path: Path, data: dict[str, Any]) -> LabCo
         name = _get(cfg.model_dump(), key)
         target = resolve_profile(str(name), relative_to=base)
         try:
-            getattr(dp, loader)(target)
+            loaded[key] = getattr(dp, loader)(target)
         except ProfileError as exc:
             reason = str(exc)
             if "key 'kind'" in reason:
@@ -381,7 +440,7 @@ def _resolve_profiles(cfg: LabConfig, path: Path, data: dict[str, Any]) -> LabCo
             raise ConfigError(path, key, reason) from None
         resolved[key] = str(target)
     g = cfg.goniometer
-    return cfg.model_copy(
+    resolved_cfg = cfg.model_copy(
         update={
             "goniometer": g.model_copy(
                 update={
@@ -399,3 +458,70 @@ def _resolve_profiles(cfg: LabConfig, path: Path, data: dict[str, Any]) -> LabCo
             ),
         }
     )
+    return resolved_cfg, loaded
+
+
+def _register_checks(cfg: LabConfig, path: Path, profiles: dict[str, Any]) -> None:
+    """Every register value an arm's settings produce must fit its register.
+
+    The stepper driver (:mod:`drivers.modbus_stepper`) writes positions as
+    ``round(deg x steps_per_deg x gear_ratio)`` into int32 registers, and speed and
+    acceleration as ``round(value x steps_per_deg x gear_ratio x counts_per_step)`` into
+    int32 (direct-data) or 16-bit (command-opcode) registers. A value that does not fit
+    would end in a packing error in the middle of a run.
+    """
+    for name in ("lamp", "detector"):
+        ax: AxisConfig = getattr(cfg.goniometer, name)
+        prof = profiles[f"goniometer.{name}.profile"]
+        where = f"goniometer.{name}"
+        spd = ax.steps_per_deg * ax.gear_ratio
+        how = f"{ax.steps_per_deg:g} steps/deg" + (
+            f" x gear_ratio {ax.gear_ratio:g} = {spd:g} steps per arm degree"
+            if ax.gear_ratio != 1.0
+            else ""
+        )
+        if not math.isfinite(spd):
+            raise ConfigError(path, f"{where}.steps_per_deg", f"{how} overflows")
+        if 1.0 / spd > ax.stall_tolerance_deg:
+            raise ConfigError(
+                path,
+                f"{where}.steps_per_deg",
+                f"{how}: one step is {1.0 / spd:.4g} deg, coarser than stall_tolerance_deg "
+                f"{ax.stall_tolerance_deg:g}: no position can be commanded or checked",
+            )
+        for label, limit_deg in zip(("lower", "upper"), ax.limits_deg, strict=True):
+            steps = limit_deg * spd
+            if not abs(steps) <= INT32_MAX:
+                raise ConfigError(
+                    path,
+                    f"{where}.steps_per_deg",
+                    f"{how} puts the {label} limit {limit_deg:g} deg at {steps:.4g} steps, "
+                    f"beyond the int32 position register (-{INT32_MAX + 1}..{INT32_MAX})",
+                )
+        top = UINT16_MAX if prof.move_style == "command-opcode" else INT32_MAX
+        for key, value, per_step, unit in (
+            ("speed_deg_s", ax.speed_deg_s, prof.speed_counts_per_step_s, "deg/s"),
+            ("accel_deg_s2", ax.accel_deg_s2, prof.accel_counts_per_step_s2, "deg/s^2"),
+        ):
+            counts = value * spd * per_step
+            rounded = round(counts) if math.isfinite(counts) else counts
+            if not 1 <= rounded <= top:
+                raise ConfigError(
+                    path,
+                    f"{where}.{key}",
+                    f"{value:g} {unit} at {spd:g} steps per arm degree gives {counts:.4g} "
+                    f"counts in the {key.split('_')[0]} register of profile {prof.name!r}; "
+                    f"must be 1..{top}",
+                )
+
+
+def _exposure_check(cfg: LabConfig, path: Path, profile: Any) -> None:
+    """``spectro.exposure_us`` within the range the spectro's profile accepts."""
+    lo, hi = int(profile.exposure_min_us), int(profile.exposure_max_us)
+    value = cfg.spectro.exposure_us
+    if not lo <= value <= hi:
+        raise ConfigError(
+            path,
+            "spectro.exposure_us",
+            f"{value} us outside the range {lo}..{hi} us of profile {profile.name!r}",
+        )
