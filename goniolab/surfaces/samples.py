@@ -138,6 +138,10 @@ def _library() -> _Library:
         raise SampleError(f"{SAMPLES_TOML}: cannot read the sample library: {exc}") from None
     except tomllib.TOMLDecodeError as exc:
         raise SampleError(f"{SAMPLES_TOML}: not valid TOML: {exc}") from None
+    except RecursionError:
+        raise SampleError(
+            f"{SAMPLES_TOML}: arrays or tables nested too deeply to be a sample library"
+        ) from None
     defaults = data.get("defaults", {})
     size = int(_num(defaults, "size", "defaults", default=512))
     step = _num(defaults, "step_um", "defaults", default=1.0)

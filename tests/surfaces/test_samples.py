@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -123,3 +124,22 @@ def test_unfilled_coat_is_high_gloss_at_20_deg() -> None:
     g = FacetModel(Surface.from_heightmap(make_sample("wittmann-1")), n=1.55).gloss((20, 60))
     assert g[60] > 70.0
     assert g[60] - g[20] < 10.0
+
+
+def test_a_sample_library_nested_too_deeply_is_one_clear_error(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A library file nested a thousand deep is a SampleError naming the file, not a
+    RecursionError traceback (issue 10, defect 8)."""
+    import goniolab.surfaces.samples as samples_mod
+
+    bad = tmp_path / "samples.toml"
+    bad.write_text("x = " + "[" * 5000 + "]" * 5000 + "\n")
+    monkeypatch.setattr(samples_mod, "SAMPLES_TOML", bad)
+    samples_mod._library.cache_clear()
+    try:
+        with pytest.raises(samples_mod.SampleError, match="nested too deeply") as info:
+            samples_mod.sample_names()
+        assert str(info.value).startswith(str(bad))
+    finally:
+        samples_mod._library.cache_clear()
