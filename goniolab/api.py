@@ -169,7 +169,7 @@ def predict_brdf(
     weighting: str = "radiometric",
     masking: bool = False,
 ) -> xr.Dataset:
-    """The in-plane curve the facet model predicts (Wittmann et al. 2021, PHYSICS.md).
+    """The in-plane curve the facet model predicts (Wittmann et al. 2021; docs/PHYSICS.md).
 
     Parameters
     ----------

@@ -159,8 +159,8 @@ def effective_angles(
 def _y_weights() -> NDArray[np.float64]:
     """Normalised luminance weights ybar(l) S_D65(l) on :data:`SPECTRUM_WAVELENGTHS_NM`.
 
-    CIE 1964 10 deg observer and illuminant D65 (colour-science tables), as PHYSICS.md
-    prescribes for the colour maths; imported lazily (colour-science is slow to import).
+    CIE 1964 10 deg observer and illuminant D65 (colour-science tables), as
+    docs/PHYSICS.md, "Colour and the paint layer" prescribes for the colour maths; imported lazily (colour-science is slow to import).
     """
     import warnings
 

@@ -32,7 +32,7 @@ def test_flat_black_glass_reads_100(capsys: pytest.CaptureFixture[str]) -> None:
 
 
 def test_flat_pu_reads_the_fresnel_ratio(capsys: pytest.CaptureFixture[str]) -> None:
-    # PHYSICS.md: n = 1.55 gives 95.4 / 97.3 / 99.8 at 20 / 60 / 85.
+    # docs/PHYSICS.md, "Truths any implementation must hold": n = 1.55 gives 95.4 / 97.3 / 99.8 at 20 / 60 / 85.
     rep = _run_json(capsys, "predict", "gloss", "sample:flat")
     assert [round(rep[k], 1) for k in ("G20", "G60", "G85")] == [95.4, 97.3, 99.8]
 
@@ -47,7 +47,7 @@ def test_stats_of_a_gaussian_sample(capsys: pytest.CaptureFixture[str]) -> None:
 
 
 def test_brdf_of_a_gaussian_sample_matches_beckmann(capsys: pytest.CaptureFixture[str]) -> None:
-    # PHYSICS.md truth: a Gaussian surface of per-axis rms slope s has the facet BRDF
+    # docs/PHYSICS.md truth: a Gaussian surface of per-axis rms slope s has the facet BRDF
     # F P22 / (4 ci co cos^4 th), i.e. Beckmann with alpha = s sqrt(2) (masking ~1 here).
     out = _run_json(
         capsys,

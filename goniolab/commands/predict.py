@@ -1,7 +1,7 @@
 """``goniolab predict stats|gloss|brdf MAP``: roughness, gloss and BRDF predicted from a map.
 
 MAP is a height-map file or ``sample:NAME`` (:func:`goniolab.surfaces.resolve_map`). The facet
-model (Wittmann et al. 2021, PHYSICS.md) gives
+model (Wittmann et al. 2021; docs/PHYSICS.md) gives
 
 - ``stats``: Ra, Sq (nm), Sdq and the zero-slope histogram fraction h_r;
 - ``gloss``: ISO 2813 G20/G60/G85, the ASTM D4039 haze index, ASTM E430 haze and DOI and the
@@ -281,7 +281,7 @@ def _add_common(p: argparse.ArgumentParser) -> None:
         "--weighting",
         choices=("radiometric", "seed"),
         default="radiometric",
-        help="facet weight: radiometric (PHYSICS.md) or the seed's Fresnel-only",
+        help="facet weight: radiometric (docs/PHYSICS.md) or the seed's Fresnel-only",
     )
     p.add_argument("--masking", action="store_true", help="Smith masking from the slopes")
     p.add_argument("--json", action="store_true", help="machine-readable output")

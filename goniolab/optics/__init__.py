@@ -1,6 +1,7 @@
 """Pure-numpy optics: BRDF and ISO 2813 gloss predicted from a measured height map.
 
-The chain of Wittmann et al. (2021), with the slips listed in shared/PHYSICS.md corrected:
+The chain of Wittmann et al. (2021), with the slips listed in docs/PHYSICS.md
+("The seed's slips, in one list") corrected:
 
 height map (:mod:`~goniolab.optics.heightmap`) -> slopes and slope distribution
 (:mod:`~goniolab.optics.surface`, seed sec. 3.1) -> facets reflecting with Fresnel

@@ -1,7 +1,8 @@
 """Fused per-facet kernels of the facet model, each in numba and as a pure-numpy twin.
 
 Every kernel walks the facet normals ``m = (mx, my, mz)`` once for one incident direction
-``wi`` and does, per facet (Wittmann et al. 2021, eqs. 5-10, with the PHYSICS.md weight):
+``wi`` and does, per facet (Wittmann et al. 2021, eqs. 5-10, with the radiometric
+weight of docs/PHYSICS.md, "The facet weight and the facet BRDF"):
 
 - ``c = wi . m`` (cosine of the local incidence angle iota); facets with ``c <= 0`` face
   away from the lamp and get no light;

@@ -11,7 +11,7 @@ Four specular models, each a :class:`goniolab.optics.models.ReflectanceModel`:
 ``"cook-torrance"``
     Beckmann distribution with the V-cavity attenuation of Cook & Torrance (1982), Mihalik
     eq. 12; the normalisation is Walter's ``1/(4 cos ti cos to)`` (the 1982 paper has ``1/pi``,
-    which does not conserve energy: PHYSICS.md).
+    which does not conserve energy: docs/PHYSICS.md, "Analytic comparison models").
 ``"ward"``
     The specular lobe of Ward (1992), Mihalik eq. 14,
     ``f = rho_s exp(-tan^2 th_h / s^2) / (4 pi s^2 sqrt(cos ti cos to))``, with ``s = alpha``
@@ -129,7 +129,7 @@ def beckmann_lambda(cos_t: ArrayLike, alpha: float) -> FloatArray:
 def beckmann_g1(cos_t: ArrayLike, alpha: float) -> FloatArray:
     """Exact Smith masking of Beckmann, ``G1 = 2 / (1 + erf(u) + exp(-u^2) / (u sqrt(pi)))``.
 
-    ``u = 1 / (a tan t)`` (Walter et al. 2007, eq. 27; PHYSICS.md). Equals ``1 / (1 + Lambda)``.
+    ``u = 1 / (a tan t)`` (Walter et al. 2007, eq. 27; docs/PHYSICS.md, "Analytic comparison models"). Equals ``1 / (1 + Lambda)``.
     """
     return np.asarray(1.0 / (1.0 + beckmann_lambda(cos_t, alpha)))
 

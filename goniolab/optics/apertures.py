@@ -117,7 +117,7 @@ MAX_CONE_RINGS: int = 64
 def direction(theta_deg: ArrayLike, phi_deg: ArrayLike) -> FloatArray:
     """Unit vector(s) at polar angle ``theta_deg`` from +z and azimuth ``phi_deg`` from +x.
 
-    Returns an array of shape ``(..., 3)``: ``(sin t cos p, sin t sin p, cos t)`` (PHYSICS.md,
+    Returns an array of shape ``(..., 3)``: ``(sin t cos p, sin t sin p, cos t)`` (docs/PHYSICS.md,
     "Frame and angles").
     """
     t = np.radians(np.asarray(theta_deg, dtype=np.float64))

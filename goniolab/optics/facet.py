@@ -4,7 +4,7 @@ Every pixel of a levelled height map is a small mirror (facet) of normal
 ``m = (-p, -q, 1)/sqrt(1 + p^2 + q^2)``. For the incident direction
 ``wi = (sin ti, 0, cos ti)`` a facet reflects towards ``wo = 2 (wi.m) m - wi`` (Wittmann
 et al. 2021, eqs. 5-8) the fraction ``w / N`` of the incident flux, with the radiometric
-weight (PHYSICS.md)
+weight (docs/PHYSICS.md, "The facet weight and the facet BRDF")
 
 .. math:: w = \\frac{\\max(0, w_i\\cdot m)}{m_z \\cos\\theta_i} F(\\iota),
           \\qquad \\cos\\iota = w_i\\cdot m,
@@ -370,7 +370,7 @@ class FacetModel:
     n : float or complex
         Refractive index; complex ``n + ik`` selects the conductor Fresnel term.
     weighting : {"radiometric", "seed"}
-        Facet weight: ``c/(m_z cos ti) F`` (radiometric, PHYSICS.md) or ``F`` (Wittmann).
+        Facet weight: ``c/(m_z cos ti) F`` (radiometric, docs/PHYSICS.md) or ``F`` (Wittmann).
     masking : bool
         Without masking the model is the seed's: unshadowed facets. It is reciprocal, but at
         grazing incidence on rough surfaces (slopes above cot ti) the lit facets intercept
@@ -543,7 +543,7 @@ class FacetModel:
         """Smith ``Lambda(w)`` of the measured slopes for unit directions ``w`` (..., 3).
 
         ``Lambda(w) = mean(max(0, cos t - sin t (p cos ph + q sin ph))) / cos t - 1``
-        (PHYSICS.md; Heitz 2014, Smith Lambda of the empirical slope distribution), tabulated on a
+        (docs/PHYSICS.md, "Masking and shadowing"; Heitz 2014, Smith Lambda of the empirical slope distribution), tabulated on a
         0.5 deg x 5 deg (theta, phi) grid from at most 2**17 facets and interpolated
         bilinearly. Infinite at grazing directions.
         """

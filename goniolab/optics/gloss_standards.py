@@ -6,7 +6,7 @@ standard geometries:
 - ISO 2813 / ASTM D523 specular gloss G20, G60, G85 (``model.gloss``), and the D523 rule for
   the geometry to report: 60 deg in general, 20 deg when G60 > 70, 85 deg when G60 < 10.
 - ASTM D4039 haze index ``HI = G60 - G20``.
-- ASTM E430 (PHYSICS.md "What the instruments see"):
+- ASTM E430 (docs/PHYSICS.md, "What the instruments see"):
   method B: gloss at 20 deg with haze receptors at 18.1 and 21.9 deg;
   method A: 30 deg incidence, specular receptor, narrow-angle haze receptors at 28/32 deg,
   wide-angle haze at 25/35 deg, and distinctness of image ``DOI = 100 (Rs - R0.3) / Rs``

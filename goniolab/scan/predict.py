@@ -4,7 +4,7 @@ The prediction for plan point (theta_i, theta_r) is what the goniospectrophotome
 Wittmann et al. (2021, sec. 2.3) would read from the modelled surface: relative luminance in
 % of a mirror, ``100 x`` the flux reaching the detector cone (6 deg opening), averaged over
 the lamp's source cone (6 deg divergence) -- ``ReflectanceModel.luminance_pct`` with the
-configured cones (PHYSICS.md, "What the instruments see"; Mihalik eqs. 15-17 for the
+configured cones (docs/PHYSICS.md, "What the instruments see"; Mihalik eqs. 15-17 for the
 source-and-receptor integration).
 
 Evaluating the model is numeric work (an aperture quadrature per geometry), so it runs in a

@@ -48,7 +48,7 @@ def test_distribution_projected_area_is_one(
 
 
 def _lambda_from_slopes(pdf: Callable[[float], float], theta_deg: float) -> float:
-    """Smith Lambda from the marginal slope density (PHYSICS.md; Heitz 2014 eq. 65).
+    """Smith Lambda from the marginal slope density (docs/PHYSICS.md, "Masking and shadowing"; Heitz 2014 eq. 65).
 
     Lambda(w) = E[max(0, cos t - sin t p)] / cos t - 1 = E[max(0, 1 - tan t p)] - 1.
     """
@@ -67,7 +67,7 @@ def test_beckmann_smith_lambda_matches_the_slope_space_integral(
     expected = _lambda_from_slopes(pdf, theta_deg)
     cos_t = math.cos(math.radians(theta_deg))
     assert float(beckmann_lambda(cos_t, alpha)) == pytest.approx(expected, rel=1e-6, abs=1e-9)
-    # The exact G1 of PHYSICS.md / Walter eq. 27, written out independently.
+    # The exact G1 of docs/PHYSICS.md / Walter eq. 27, written out independently.
     u = 1.0 / (alpha * math.tan(math.radians(theta_deg)))
     g1 = 2.0 / (1.0 + math.erf(u) + math.exp(-(u**2)) / (u * math.sqrt(math.pi)))
     assert float(beckmann_g1(cos_t, alpha)) == pytest.approx(g1, rel=1e-12)
@@ -169,7 +169,7 @@ def test_gloss_of_a_smooth_black_glass_surface_is_100() -> None:
     g = AnalyticModel("beckmann", alpha=0.002, n=1.567).gloss()
     for t in (20, 60, 85):
         assert g[t] == pytest.approx(100.0, abs=0.3)
-    # PHYSICS.md truth for n = 1.55: 95.4 / 97.3 / 99.8.
+    # docs/PHYSICS.md truth for n = 1.55: 95.4 / 97.3 / 99.8.
     g155 = AnalyticModel("beckmann", alpha=0.002, n=1.55).gloss()
     assert [round(g155[t], 1) for t in (20, 60, 85)] == pytest.approx([95.4, 97.3, 99.8], abs=0.3)
 
@@ -201,7 +201,7 @@ def test_bad_parameters_are_named() -> None:
 
 
 def test_cook_torrance_vcavity_by_hand() -> None:
-    """Cook-Torrance at a geometry where the V-cavity term binds (PHYSICS.md, Mihalik eq. 12).
+    """Cook-Torrance at a geometry where the V-cavity term binds (docs/PHYSICS.md, "Analytic comparison models"; Mihalik eq. 12).
 
     ti = 80, wo in plane at 40 deg on the lamp side: h is 60 deg from the normal and both
     directions make 20 deg with h, so G = min(1, 2 cos 60 cos 40 / cos 20, 2 cos 60 cos 80

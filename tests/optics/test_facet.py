@@ -1,4 +1,4 @@
-"""The facet model against analytic truths (PHYSICS.md "Truths any implementation must hold")."""
+"""The facet model against analytic truths (docs/PHYSICS.md, "Truths any implementation must hold")."""
 
 from __future__ import annotations
 
@@ -61,7 +61,7 @@ def _sigma(surface: Surface) -> tuple[float, float]:
 # --------------------------------------------------------------------------- flat surfaces
 @pytest.mark.parametrize("backend", ["numba", "numpy"])
 def test_flat_gloss_truths(flat_surface: Surface, backend: str) -> None:
-    # PHYSICS.md: flat n = 1.567 reads 100.0 at every geometry; n = 1.55: 95.4 / 97.3 / 99.8
+    # docs/PHYSICS.md: flat n = 1.567 reads 100.0 at every geometry; n = 1.55: 95.4 / 97.3 / 99.8
     g = FacetModel(flat_surface, n=1.567, backend=backend).gloss()  # type: ignore[arg-type]
     for t in (20, 60, 85):
         assert g[t] == pytest.approx(100.0, abs=1e-9)

@@ -39,7 +39,7 @@ def test_normal_incidence_limit_and_grazing(n: float) -> None:
 
 
 def test_iso2813_black_glass_values() -> None:
-    # PHYSICS.md: n = 1.567 black glass, 0.04908 (20), 0.10006 (60), 0.61915 (85)
+    # docs/PHYSICS.md, "Fresnel reflectance": n = 1.567 black glass, 0.04908 (20), 0.10006 (60), 0.61915 (85)
     cos_t = np.cos(np.radians([20.0, 60.0, 85.0]))
     np.testing.assert_allclose(
         fresnel_dielectric(cos_t, 1.567), [0.04908, 0.10006, 0.61915], atol=5e-6

@@ -35,7 +35,7 @@ def test_flat_black_glass_reads_100_no_haze_full_doi() -> None:
 
 
 def test_flat_pu_haze_index_is_the_fresnel_difference() -> None:
-    # PHYSICS.md truth: flat n = 1.55 reads 95.4 (20) and 97.3 (60), so HI = 1.9.
+    # docs/PHYSICS.md truth: flat n = 1.55 reads 95.4 (20) and 97.3 (60), so HI = 1.9.
     rep = gloss_report(_flat(1.55))
     assert rep.haze_index == pytest.approx(97.3 - 95.4, abs=0.1)
     assert rep.e430.haze_b == 0.0 and rep.e430.doi == 100.0
