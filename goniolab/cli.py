@@ -15,19 +15,32 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import logging
 import os
 import pkgutil
 import sys
 from collections.abc import Sequence
+from typing import Any
 
-from goniolab import __version__
 from goniolab.errors import UserError
 
 __all__ = ["EXIT_BROKEN_PIPE", "build_parser", "main"]
 
 #: Exit status when stdout's reader went away (128 + SIGPIPE).
 EXIT_BROKEN_PIPE = 141
+
+
+class _VersionAction(argparse.Action):
+    """``--version``: looks the version up only when asked (see :mod:`goniolab`)."""
+
+    def __init__(self, option_strings: Sequence[str], dest: str, **kwargs: Any) -> None:
+        kwargs.setdefault("nargs", 0)
+        kwargs.setdefault("default", argparse.SUPPRESS)
+        super().__init__(option_strings, dest, **kwargs)
+
+    def __call__(self, parser: argparse.ArgumentParser, *_: Any) -> None:
+        from goniolab import __version__
+
+        parser.exit(message=f"goniolab {__version__}\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -39,7 +52,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Goniospectrophotometer and glossmeter control, with BRDF and gloss "
         "predicted from surface roughness (Wittmann et al. 2021).",
     )
-    parser.add_argument("--version", action="version", version=f"goniolab {__version__}")
+    parser.add_argument("--version", action=_VersionAction, help="show the version and exit")
     parser.add_argument("--debug", action="store_true", help="show tracebacks on errors")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for info in sorted(pkgutil.iter_modules(commands_pkg.__path__), key=lambda m: m.name):
@@ -54,6 +67,8 @@ def _quiet_library_logs(debug: bool) -> None:
     """Keep library log lines (pymodbus prints "Failed to connect ..." at ERROR) off the
     terminal: the drivers turn those failures into one clear error of their own."""
     if not debug:
+        import logging
+
         logging.getLogger("pymodbus").setLevel(logging.CRITICAL)
 
 

@@ -13,21 +13,22 @@ and loses nothing already read. Ctrl-C ends the session after the current readin
 from __future__ import annotations
 
 import argparse
-import asyncio
 import datetime as dt
 import json
 import os
-import signal
 import sys
-from contextlib import AsyncExitStack
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from goniolab.commands.scan import run_lab
 from goniolab.errors import UserError
-from goniolab.scan.events import GlossRead, InstrumentError, RunState
-from goniolab.scan.gloss import GlossResult
-from goniolab.scan.plans import GlossPlan, PlanError
-from goniolab.store import RunStore, StoreError, resolve_store_path
+
+if TYPE_CHECKING:  # loaded when a session runs, not at --help (tests/test_startup.py)
+    import asyncio
+
+    from goniolab.scan.events import GlossRead
+    from goniolab.scan.gloss import GlossResult
+    from goniolab.scan.plans import GlossPlan
+    from goniolab.store import RunStore
 
 __all__ = ["format_reading", "register"]
 
@@ -68,6 +69,8 @@ def reading_json(ev: GlossRead, seq: int) -> str:
 
 
 async def _print_events(q: asyncio.Queue[Any], json_out: bool) -> None:
+    from goniolab.scan.events import GlossRead, InstrumentError
+
     seq = 0
     while (ev := await q.get()) is not None:
         if isinstance(ev, GlossRead):
@@ -93,6 +96,10 @@ def _open_meter_from_port(args: argparse.Namespace) -> Any:
 
 
 async def _session(args: argparse.Namespace, store: RunStore, plan: GlossPlan) -> GlossResult:
+    import asyncio
+    import signal
+    from contextlib import AsyncExitStack
+
     from goniolab.session import GlossSession, SampleModels
 
     async with AsyncExitStack() as stack:
@@ -137,6 +144,10 @@ async def _session(args: argparse.Namespace, store: RunStore, plan: GlossPlan) -
 def _cmd_log(args: argparse.Namespace) -> int:
     if not args.config and not args.port:
         raise UserError("gloss log: give --config FILE, or --port PORT --protocol zgm1120|line")
+    from goniolab.scan.events import RunState
+    from goniolab.scan.plans import GlossPlan, PlanError
+    from goniolab.store import RunStore, StoreError, resolve_store_path
+
     if args.config and args.port:
         raise UserError("gloss log: --config and --port exclude each other")
     if args.port and "://" not in args.port and not os.path.exists(args.port):

@@ -22,18 +22,16 @@ import json
 import math
 import sys
 from pathlib import Path
-from typing import Any
-
-import numpy as np
-from numpy.typing import NDArray
+from typing import TYPE_CHECKING, Any
 
 from goniolab.errors import UserError
-from goniolab.models import model_for
-from goniolab.optics.apertures import Cone, inplane_centre, sample_aperture
-from goniolab.optics.gloss_standards import gloss_report
-from goniolab.optics.metrics import PeakMetrics, peak_metrics
-from goniolab.optics.surface import roughness_stats
-from goniolab.surfaces.resolve import resolve_map
+
+if TYPE_CHECKING:  # numpy and the optics load when a command runs, not at --help
+    import numpy as np
+    from numpy.typing import NDArray
+
+    from goniolab.optics.apertures import Cone
+    from goniolab.optics.metrics import PeakMetrics
 
 __all__ = ["parse_index", "parse_theta_list", "register"]
 
@@ -64,6 +62,8 @@ def parse_index(text: str) -> complex:
 
 def parse_theta_list(text: str, option: str = "--theta-r") -> NDArray[np.float64]:
     """Parse ``start:stop:step`` (stop included when on the grid) or a comma list of degrees."""
+    import numpy as np
+
     t = text.strip()
     if ":" in t:
         parts = t.split(":")
@@ -93,6 +93,8 @@ def _index_json(n: complex) -> float | list[float]:
 
 
 def _model(args: argparse.Namespace) -> Any:
+    from goniolab.models import model_for
+
     return model_for(
         args.map,
         n=args.n,
@@ -104,6 +106,9 @@ def _model(args: argparse.Namespace) -> Any:
 
 
 def _cmd_stats(args: argparse.Namespace) -> int:
+    from goniolab.optics.surface import roughness_stats
+    from goniolab.surfaces.resolve import resolve_map
+
     hm = resolve_map(args.map, step_um=args.step_um)
     try:
         st = roughness_stats(hm, slope_method=args.slope_method)
@@ -150,6 +155,8 @@ def _write_out(args: argparse.Namespace, make: Any) -> None:
 
 
 def _cmd_gloss(args: argparse.Namespace) -> int:
+    from goniolab.optics.gloss_standards import gloss_report
+
     rep = gloss_report(_model(args))
     from goniolab.datasets import gloss_dataset
 
@@ -185,6 +192,10 @@ def _cmd_gloss(args: argparse.Namespace) -> int:
 
 def _projected_solid_angle_sr(detector: Cone, theta_r_deg: float) -> float:
     """int cos(theta) dOmega over the detector cone (above the horizon), in sr."""
+    import numpy as np
+
+    from goniolab.optics.apertures import inplane_centre, sample_aperture
+
     t, p = inplane_centre(theta_r_deg)
     dirs, w = sample_aperture(detector, t, p, n=32)
     return float(np.sum(np.clip(dirs[:, 2], 0.0, None) * w))
@@ -192,12 +203,20 @@ def _projected_solid_angle_sr(detector: Cone, theta_r_deg: float) -> float:
 
 def _peak(tr: NDArray[np.float64], values: NDArray[np.float64]) -> PeakMetrics | None:
     """Peak metrics of the curve when the angles are >= 3 and strictly increasing."""
+    import numpy as np
+
+    from goniolab.optics.metrics import peak_metrics
+
     if tr.size < 3 or np.any(np.diff(tr) <= 0):
         return None
     return peak_metrics(tr, values)
 
 
 def _cmd_brdf(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from goniolab.optics.apertures import Cone
+
     ti = float(args.theta_i)
     if not (math.isfinite(ti) and 0.0 <= ti < 90.0):
         raise UserError(f"--theta-i {args.theta_i}: must be in [0, 90) deg")

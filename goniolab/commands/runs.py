@@ -9,18 +9,20 @@ import json
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from goniolab.errors import UserError
-from goniolab.scan.plans import BrdfPlan, PlanError
-from goniolab.scan.summary import summarize_brdf
-from goniolab.store import RunRecord, RunStore, StoreError, resolve_store_path
+
+if TYPE_CHECKING:  # sqlite3 and the plans load when a command runs, not at --help
+    from goniolab.store import RunRecord, RunStore
 
 __all__ = ["angles_text", "open_store", "plan_text", "register", "run_summary", "store_path"]
 
 
 def store_path(store_arg: str | None, config_arg: str | None = None) -> Path:
     """The store chosen by ``--store``, else config ``[lab] store``, else the default."""
+    from goniolab.store import resolve_store_path
+
     config_store: str | None = None
     if config_arg:
         from goniolab.config import load_lab_config
@@ -31,6 +33,8 @@ def store_path(store_arg: str | None, config_arg: str | None = None) -> Path:
 
 def open_store(store_arg: str | None, config_arg: str | None = None) -> RunStore:
     """Open the chosen store for reading (nothing is created or written; it must exist)."""
+    from goniolab.store import RunStore, StoreError
+
     try:
         return RunStore(store_path(store_arg, config_arg), readonly=True)
     except StoreError as exc:
@@ -44,6 +48,8 @@ def _when(ts: float | None) -> str:
 
 
 def _get_run(store: RunStore, run_id: int) -> RunRecord:
+    from goniolab.store import StoreError
+
     try:
         return store.get_run(run_id)
     except StoreError as exc:
@@ -53,6 +59,9 @@ def _get_run(store: RunStore, run_id: int) -> RunRecord:
 def run_summary(store: RunStore, rec: RunRecord) -> dict[str, Any]:
     """The summary of a stored run, recomputed from its stored readings and predictions."""
     if rec.kind == "brdf":
+        from goniolab.scan.plans import BrdfPlan, PlanError
+        from goniolab.scan.summary import summarize_brdf  # numpy: only when a run is shown
+
         try:
             plan = BrdfPlan.from_dict(rec.plan)
         except PlanError as exc:

@@ -10,29 +10,22 @@ Ctrl-C cancels at once (the arms are still parked, best effort).
 from __future__ import annotations
 
 import argparse
-import asyncio
 import json
 import math
 import re
-import signal
 import sys
 from collections.abc import Coroutine
-from typing import Any, TextIO, TypeVar
+from typing import TYPE_CHECKING, Any, TextIO, TypeVar
 
-from drivers.base import DeviceError
-from goniolab.config import load_lab_config
 from goniolab.errors import UserError
-from goniolab.scan.events import (
-    InstrumentError,
-    PointMeasured,
-    PointPredicted,
-    Progress,
-    RunFinished,
-    RunState,
-)
-from goniolab.scan.plans import BrdfPlan, PlanError, parse_angles
-from goniolab.scan.runner import PlanRefused, RunResult
-from goniolab.store import RunBusy, RunStore, StoreError, resolve_store_path
+
+if TYPE_CHECKING:  # loaded when a scan runs, not at --help (tests/test_startup.py)
+    import asyncio
+
+    from goniolab.scan.events import PointMeasured, Progress, RunState
+    from goniolab.scan.plans import BrdfPlan
+    from goniolab.scan.runner import RunResult
+    from goniolab.store import RunStore
 
 __all__ = [
     "format_eta",
@@ -48,7 +41,11 @@ _T = TypeVar("_T")
 #: A negative number, or an angle range/list starting with one ("-40:-30:5", "-10,0,10").
 _NEGATIVE_ARG = re.compile(r"^-\d+$|^-\d*\.\d+$|^-[\d.]+[:,][\d.:,\-]*$")
 
-_EXIT = {RunState.DONE: 0, RunState.FAILED: 1, RunState.ABORTED: 130}
+
+
+def _exit_code(state: RunState) -> int:
+    """0 done, 1 failed, 130 aborted."""
+    return {"done": 0, "failed": 1, "aborted": 130}[state.value]
 
 
 def format_eta(seconds: float) -> str:
@@ -150,6 +147,14 @@ def point_detail(ev: PointMeasured, predicted_pct: float | None) -> str:
 
 
 async def _report(bus_q: asyncio.Queue[Any], bar: ProgressBar) -> None:
+    from goniolab.scan.events import (
+        InstrumentError,
+        PointMeasured,
+        PointPredicted,
+        Progress,
+        RunFinished,
+    )
+
     detail = ""
     predicted: dict[int, float] = {}
     while (ev := await bus_q.get()) is not None:
@@ -172,6 +177,8 @@ async def read_stdin_line() -> str:
     """One line from stdin without a blocking thread, so that Ctrl-C (an abort, then a
     cancellation) ends the wait at once; a regular file or a closed stdin falls back to
     a worker-thread read (it never blocks for long)."""
+    import asyncio
+
     loop = asyncio.get_running_loop()
     try:
         fd = sys.stdin.fileno()
@@ -212,7 +219,15 @@ async def _execute(
     run_id: int | None,
     json_out: bool,
 ) -> int:
+    import asyncio
+    import signal
+
+    from goniolab.config import load_lab_config
+    from goniolab.scan.events import RunState
+    from goniolab.scan.plans import BrdfPlan
+    from goniolab.scan.runner import PlanRefused
     from goniolab.session import ScanSession
+    from goniolab.store import RunBusy
 
     if plan is None:
         assert run_id is not None
@@ -295,12 +310,16 @@ async def _execute(
             f"goniolab scan resume {run_id}",
             file=sys.stderr,
         )
-    return _EXIT[result.state]
+    return _exit_code(result.state)
 
 
 def run_lab(coro: Coroutine[Any, Any, _T]) -> _T:
     """``asyncio.run(coro)``; an instrument that cannot be reached (or fails outside a
     run, which records its own faults) becomes one line naming the device, exit code 1."""
+    import asyncio
+
+    from drivers.base import DeviceError
+
     try:
         return asyncio.run(coro)
     except DeviceError as exc:
@@ -310,6 +329,9 @@ def run_lab(coro: Coroutine[Any, Any, _T]) -> _T:
 def _cmd_scan(args: argparse.Namespace) -> int:
     if not args.config:
         raise UserError("scan: --config FILE is required (e.g. configs/lab-sim.toml)")
+    from goniolab.config import load_lab_config
+    from goniolab.scan.plans import BrdfPlan, PlanError, parse_angles
+
     cfg = load_lab_config(args.config)
     sample = args.sample or cfg.sample.map
     if args.sample:
@@ -345,6 +367,8 @@ def _cmd_scan(args: argparse.Namespace) -> int:
 
 
 def _open(store_arg: str | None, config_store: str | None, *, create: bool = True) -> RunStore:
+    from goniolab.store import RunStore, StoreError, resolve_store_path
+
     try:
         return RunStore(resolve_store_path(store_arg, config_store), create=create)
     except StoreError as exc:
@@ -352,6 +376,9 @@ def _open(store_arg: str | None, config_store: str | None, *, create: bool = Tru
 
 
 def _cmd_resume(args: argparse.Namespace) -> int:
+    from goniolab.config import load_lab_config
+    from goniolab.store import StoreError
+
     config_store = None
     if args.config:
         config_store = load_lab_config(args.config).lab.store

@@ -8,9 +8,7 @@ and runs until SIGINT or SIGTERM, then stops cleanly with exit code 0.
 from __future__ import annotations
 
 import argparse
-import asyncio
 import json
-import signal
 import sys
 from typing import Any
 
@@ -58,10 +56,15 @@ def _usage(parser: argparse.ArgumentParser) -> int:
 def _cmd_serve(args: argparse.Namespace) -> int:
     if args.time_scale is not None and not args.time_scale >= 0:
         raise UserError(f"--time-scale must be >= 0, got {args.time_scale}")
+    import asyncio
+
     return asyncio.run(_serve(args.config, args.time_scale, args.json))
 
 
 async def _serve(config_path: str, time_scale: float | None, as_json: bool) -> int:
+    import asyncio
+    import signal
+
     from drivers.timing import SimClock
     from goniolab.config import load_lab_config
     from goniolab.lab import build_sim_instruments, build_sim_server, sample_model

@@ -23,39 +23,102 @@ References
 .. [3] B. Walter, S. Marschner, H. Li, K. Torrance, "Microfacet models for refraction through
    rough surfaces", EGSR 2007. E. Heitz, "Understanding the masking-shadowing function in
    microfacet-based BRDFs", JCGT 3(2) 2014.
+
+Importing the package is cheap: its names are loaded from their modules on first use
+(PEP 562), so ``goniolab.optics.apertures`` does not drag in scipy (``fit``, ``analytic``)
+or numba (``facet``) with it.
 """
 
-from goniolab.optics.analytic import AnalyticModel
-from goniolab.optics.apertures import (
-    GONIO_CONE,
-    ISO2813_BLACK_GLASS_N,
-    ISO2813_RECEPTOR,
-    ISO2813_SOURCE,
-    Aperture,
-    Cone,
-    Rect,
-    integrate_brdf,
-)
-from goniolab.optics.facet import FacetModel, HemisphereBRDF
-from goniolab.optics.fit import FitResult, fit_to_curve, fit_to_gloss
-from goniolab.optics.fresnel import fresnel, fresnel_conductor, fresnel_dielectric
-from goniolab.optics.gloss_standards import GlossReport, d523_recommended_angle, gloss_report
-from goniolab.optics.heightmap import (
-    HeightMap,
-    HeightMapError,
-    fill_missing,
-    level_plane,
-)
-from goniolab.optics.metrics import PeakMetrics, peak_metrics
-from goniolab.optics.models import ReflectanceModel
-from goniolab.optics.surface import (
-    RoughnessStats,
-    SlopeHistogram,
-    Surface,
-    roughness_stats,
-    slope_histogram,
-    slopes,
-)
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+# Loaded at once: the function shares its name with its module, and a lazy name would be
+# shadowed by the submodule as soon as anything imports goniolab.optics.fresnel.
+from goniolab.optics.fresnel import fresnel
+
+if TYPE_CHECKING:
+    from goniolab.optics.analytic import AnalyticModel
+    from goniolab.optics.apertures import (
+        GONIO_CONE,
+        ISO2813_BLACK_GLASS_N,
+        ISO2813_RECEPTOR,
+        ISO2813_SOURCE,
+        Aperture,
+        Cone,
+        Rect,
+        integrate_brdf,
+    )
+    from goniolab.optics.facet import FacetModel, HemisphereBRDF
+    from goniolab.optics.fit import FitResult, fit_to_curve, fit_to_gloss
+    from goniolab.optics.fresnel import fresnel_conductor, fresnel_dielectric
+    from goniolab.optics.gloss_standards import GlossReport, d523_recommended_angle, gloss_report
+    from goniolab.optics.heightmap import (
+        HeightMap,
+        HeightMapError,
+        fill_missing,
+        level_plane,
+    )
+    from goniolab.optics.metrics import PeakMetrics, peak_metrics
+    from goniolab.optics.models import ReflectanceModel
+    from goniolab.optics.surface import (
+        RoughnessStats,
+        SlopeHistogram,
+        Surface,
+        roughness_stats,
+        slope_histogram,
+        slopes,
+    )
+
+_LAZY: dict[str, str] = {
+    "AnalyticModel": "goniolab.optics.analytic",
+    "Aperture": "goniolab.optics.apertures",
+    "Cone": "goniolab.optics.apertures",
+    "FacetModel": "goniolab.optics.facet",
+    "FitResult": "goniolab.optics.fit",
+    "GONIO_CONE": "goniolab.optics.apertures",
+    "GlossReport": "goniolab.optics.gloss_standards",
+    "HeightMap": "goniolab.optics.heightmap",
+    "HeightMapError": "goniolab.optics.heightmap",
+    "HemisphereBRDF": "goniolab.optics.facet",
+    "ISO2813_BLACK_GLASS_N": "goniolab.optics.apertures",
+    "ISO2813_RECEPTOR": "goniolab.optics.apertures",
+    "ISO2813_SOURCE": "goniolab.optics.apertures",
+    "PeakMetrics": "goniolab.optics.metrics",
+    "Rect": "goniolab.optics.apertures",
+    "ReflectanceModel": "goniolab.optics.models",
+    "RoughnessStats": "goniolab.optics.surface",
+    "SlopeHistogram": "goniolab.optics.surface",
+    "Surface": "goniolab.optics.surface",
+    "d523_recommended_angle": "goniolab.optics.gloss_standards",
+    "fill_missing": "goniolab.optics.heightmap",
+    "fit_to_curve": "goniolab.optics.fit",
+    "fit_to_gloss": "goniolab.optics.fit",
+    "fresnel_conductor": "goniolab.optics.fresnel",
+    "fresnel_dielectric": "goniolab.optics.fresnel",
+    "gloss_report": "goniolab.optics.gloss_standards",
+    "integrate_brdf": "goniolab.optics.apertures",
+    "level_plane": "goniolab.optics.heightmap",
+    "peak_metrics": "goniolab.optics.metrics",
+    "roughness_stats": "goniolab.optics.surface",
+    "slope_histogram": "goniolab.optics.surface",
+    "slopes": "goniolab.optics.surface",
+}
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'goniolab.optics' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))
+
 
 __all__ = [
     "GONIO_CONE",

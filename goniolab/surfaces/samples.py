@@ -24,12 +24,15 @@ import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
-from numpy.typing import NDArray
+if TYPE_CHECKING:  # numpy loads when a map is generated: listing the library needs none
+    import numpy as np
+    from numpy.typing import NDArray
 
-from goniolab.optics.heightmap import HeightMap
+    from goniolab.optics.heightmap import HeightMap
+
+    FloatArray = NDArray[np.float64]
 
 __all__ = [
     "SAMPLES_TOML",
@@ -40,7 +43,6 @@ __all__ = [
     "sample_names",
 ]
 
-FloatArray = NDArray[np.float64]
 
 _REPO_CONFIG = Path(__file__).resolve().parents[2] / "configs" / "samples.toml"
 _WHEEL_CONFIG = Path(__file__).resolve().parents[1] / "_configs" / "samples.toml"
@@ -200,6 +202,8 @@ def _gaussian_field(
     White noise filtered in Fourier space by sqrt(PSD) = exp(-k^2 L^2 / 8), the square root of
     the PSD of that ACF (Wiener-Khinchin), then normalised to unit variance.
     """
+    import numpy as np
+
     ny, nx = shape
     noise = rng.standard_normal(shape)
     ky = 2.0 * np.pi * np.fft.fftfreq(ny, d=step_um)
@@ -213,12 +217,16 @@ def _gaussian_field(
 
 def _rms_forward_slope(z: FloatArray, step_um: float) -> float:
     """Mean of the per-axis rms forward-difference slopes (periodic)."""
+    import numpy as np
+
     sx = np.sqrt(np.mean((np.roll(z, -1, axis=1) - z) ** 2)) / step_um
     sy = np.sqrt(np.mean((np.roll(z, -1, axis=0) - z) ** 2)) / step_um
     return float(0.5 * (sx + sy))
 
 
 def _ra(z: FloatArray) -> float:
+    import numpy as np
+
     return float(np.mean(np.abs(z - z.mean())))
 
 
@@ -236,6 +244,8 @@ def _caps(
     z(r) = sqrt(R^2 - r^2) - (R - h) for r < a. The number of caps is
     area_fraction * area / (pi <a^2>); overlapping caps add (filler piling up).
     """
+    import numpy as np
+
     ny, nx = shape
     d_min, d_max = diameter_um
     a_mean_sq = (d_min**2 + d_min * d_max + d_max**2) / 12.0  # <(d/2)^2>, d uniform
@@ -268,6 +278,8 @@ def _caps(
 
 
 def _generate(info: SampleInfo, shape: tuple[int, int], step_um: float, seed: int) -> FloatArray:
+    import numpy as np
+
     p = info.params
     # One independent stream per (seed, sample) so samples do not share noise.
     key = [int(b) for b in info.name.encode()]
@@ -301,6 +313,8 @@ def _generate(info: SampleInfo, shape: tuple[int, int], step_um: float, seed: in
 
 @functools.lru_cache(maxsize=32)
 def _make_cached(name: str, shape: tuple[int, int], step_um: float, seed: int) -> HeightMap:
+    from goniolab.optics.heightmap import HeightMap
+
     info = sample_info(name)
     z = _generate(info, shape, step_um, seed)
     meta = {

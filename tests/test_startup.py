@@ -1,0 +1,101 @@
+"""Start-up cost: building the CLI parser (``goniolab --help``) and ``goniolab samples``
+must not import what they do not use (issue 13). Each check runs in a fresh interpreter and
+looks at ``sys.modules``; no timing is asserted (bench/bench_startup.py measures it)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+#: Loaded only by the commands that use them. numpy, pydantic, asyncio and sqlite3 are not
+#: "heavy" libraries, but each costs tens to hundreds of milliseconds at start-up.
+HEAVY = (
+    "numba",
+    "scipy",
+    "colour",
+    "textual",
+    "textual_plot",
+    "xarray",
+    "matplotlib",
+    "dask",
+    "distributed",
+    "rich",
+    "numpy",
+    "pydantic",
+    "asyncio",
+    "sqlite3",
+)
+
+
+def loaded(code: str) -> set[str]:
+    probe = code + "\nimport json, sys\nprint(json.dumps(sorted(sys.modules)))\n"
+    out = subprocess.run(
+        [sys.executable, "-c", probe],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=120,
+    )
+    return set(json.loads(out.stdout.strip().splitlines()[-1]))
+
+
+def heavy_in(modules: set[str]) -> list[str]:
+    return sorted(m for m in modules if m.split(".")[0] in HEAVY)
+
+
+def test_building_the_parser_imports_nothing_heavy() -> None:
+    mods = loaded(
+        "from goniolab.cli import build_parser\n"
+        "p = build_parser()\n"
+        # every sub-command registered its parser (the probe really built them)
+        "assert {'predict', 'scan', 'samples', 'tui', 'runs'} <= set(p._subparsers._group_actions[0].choices)\n"
+    )
+    assert "goniolab.commands.predict" in mods and "goniolab.commands.scan" in mods
+    assert heavy_in(mods) == []
+
+
+def test_help_and_version_import_nothing_heavy() -> None:
+    mods = loaded(
+        "import contextlib, io\n"
+        "from goniolab.cli import main\n"
+        "for argv in (['--help'], ['predict', 'brdf', '--help'], ['--version']):\n"
+        "    with contextlib.redirect_stdout(io.StringIO()):\n"
+        "        try:\n"
+        "            main(argv)\n"
+        "        except SystemExit:\n"
+        "            pass\n"
+    )
+    assert heavy_in(mods) == []
+
+
+def test_samples_lists_the_library_without_numpy() -> None:
+    mods = loaded(
+        "import contextlib, io\n"
+        "from goniolab.cli import main\n"
+        "buf = io.StringIO()\n"
+        "with contextlib.redirect_stdout(buf):\n"
+        "    assert main(['samples', '--json']) == 0\n"
+        "assert 'wittmann-3' in buf.getvalue()\n"
+    )
+    assert heavy_in(mods) == []
+
+
+def test_optics_package_loads_its_names_on_first_use() -> None:
+    mods = loaded("from goniolab.optics.apertures import Cone\nimport goniolab.optics")
+    assert "numpy" in mods  # apertures is numpy code
+    assert [m for m in heavy_in(mods) if m.split(".")[0] != "numpy"] == []
+    # every public name still resolves, from the module the lazy table names
+    code = (
+        "import goniolab.optics as o, goniolab.surfaces as s\n"
+        "for pkg in (o, s):\n"
+        "    assert set(pkg._LAZY) | set(vars(pkg)) >= set(pkg.__all__), pkg.__name__\n"
+        "    for name in pkg.__all__:\n"
+        "        mod = pkg._LAZY.get(name, pkg.__name__ + '.' + name)  # eager: fresnel\n"
+        "        assert getattr(pkg, name) is getattr(__import__(mod, fromlist=['x']), name), name\n"
+    )
+    subprocess.run([sys.executable, "-c", code], cwd=ROOT, check=True, timeout=120)
