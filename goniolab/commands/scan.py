@@ -42,7 +42,6 @@ _T = TypeVar("_T")
 _NEGATIVE_ARG = re.compile(r"^-\d+$|^-\d*\.\d+$|^-[\d.]+[:,][\d.:,\-]*$")
 
 
-
 def _exit_code(state: RunState) -> int:
     """0 done, 1 failed, 130 aborted."""
     return {"done": 0, "failed": 1, "aborted": 130}[state.value]
