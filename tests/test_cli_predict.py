@@ -87,6 +87,11 @@ def test_theta_list_forms(capsys: pytest.CaptureFixture[str]) -> None:
     assert out["theta_r_deg"] == [0.0, 2.5, 5.0, 7.5, 10.0]
     out = _run_json(capsys, "predict", "brdf", "sample:flat", "--point", "--theta-r=-20,5")
     assert out["theta_r_deg"] == [-20.0, 5.0]
+    # a negative start is a range, not an option (as for `goniolab scan`), no "=" needed
+    out = _run_json(capsys, "predict", "brdf", "sample:flat", "--point", "--theta-r", "-20:20:10")
+    assert out["theta_r_deg"] == [-20.0, -10.0, 0.0, 10.0, 20.0]
+    out = _run_json(capsys, "predict", "brdf", "sample:flat", "--point", "--theta-r", "0:0.3:0.1")
+    assert out["theta_r_deg"] == [0.0, 0.1, 0.2, 0.3]  # 3 x 0.1 lands on 0.3
 
 
 def test_bad_file_exits_2_with_one_line_naming_it(

@@ -160,7 +160,12 @@ def test_unsafe_plan_is_refused_and_not_recorded(
 
 @pytest.mark.parametrize(
     ("spec", "angles"),
-    [("-40:-30:5", (-40.0, -35.0, -30.0)), ("-10,0,10", (-10.0, 0.0, 10.0)), ("-7.5", (-7.5,))],
+    [
+        ("-40:-30:5", (-40.0, -35.0, -30.0)),
+        ("-10,0,10", (-10.0, 0.0, 10.0)),
+        ("-7.5", (-7.5,)),
+        ("-20:20:10", (-20.0, -10.0, 0.0, 10.0, 20.0)),
+    ],
 )
 def test_theta_r_may_start_on_the_lamp_side(spec: str, angles: tuple[float, ...]) -> None:
     args = build_parser().parse_args(["scan", "--config", "x.toml", "--theta-r", spec])

@@ -24,6 +24,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from goniolab.commands._angles import allow_negative_angles
 from goniolab.errors import UserError
 
 if TYPE_CHECKING:  # numpy and the optics load when a command runs, not at --help
@@ -33,12 +34,10 @@ if TYPE_CHECKING:  # numpy and the optics load when a command runs, not at --hel
     from goniolab.optics.apertures import Cone
     from goniolab.optics.metrics import PeakMetrics
 
-__all__ = ["parse_index", "parse_theta_list", "register"]
+__all__ = ["parse_index", "register"]
 
 #: Default source and detector cones of the Wittmann goniometer (sec. 2.3), full angles.
 DEFAULT_CONE_DEG = 6.0
-#: Most points a --theta-r range may expand to.
-MAX_THETA_POINTS = 10_000
 
 
 def parse_index(text: str) -> complex:
@@ -58,34 +57,6 @@ def parse_index(text: str) -> complex:
     if value.real <= 0 or value.imag < 0:
         raise argparse.ArgumentTypeError(f"--n {text!r}: needs n > 0 and k >= 0")
     return value
-
-
-def parse_theta_list(text: str, option: str = "--theta-r") -> NDArray[np.float64]:
-    """Parse ``start:stop:step`` (stop included when on the grid) or a comma list of degrees."""
-    import numpy as np
-
-    t = text.strip()
-    if ":" in t:
-        parts = t.split(":")
-        if len(parts) != 3:
-            raise UserError(f"{option} {text!r}: use start:stop:step or a comma list")
-        try:
-            start, stop, step = (float(p) for p in parts)
-        except ValueError:
-            raise UserError(f"{option} {text!r}: start, stop and step must be numbers") from None
-        if not all(math.isfinite(v) for v in (start, stop, step)) or step <= 0 or stop < start:
-            raise UserError(f"{option} {text!r}: needs step > 0 and stop >= start")
-        count = math.floor((stop - start) / step + 1e-9) + 1
-        if count > MAX_THETA_POINTS:
-            raise UserError(f"{option} {text!r}: {count} points, at most {MAX_THETA_POINTS}")
-        return np.round(start + step * np.arange(count), 10)
-    try:
-        values = np.array([float(v) for v in t.split(",") if v.strip()], dtype=np.float64)
-    except ValueError:
-        raise UserError(f"{option} {text!r}: not a comma list of numbers") from None
-    if values.size == 0 or not np.all(np.isfinite(values)):
-        raise UserError(f"{option} {text!r}: no angles given")
-    return values
 
 
 def _index_json(n: complex) -> float | list[float]:
@@ -216,11 +187,15 @@ def _cmd_brdf(args: argparse.Namespace) -> int:
     import numpy as np
 
     from goniolab.optics.apertures import Cone
+    from goniolab.scan.plans import PlanError, parse_angles
 
     ti = float(args.theta_i)
     if not (math.isfinite(ti) and 0.0 <= ti < 90.0):
         raise UserError(f"--theta-i {args.theta_i}: must be in [0, 90) deg")
-    tr = parse_theta_list(args.theta_r)
+    try:
+        tr = np.asarray(parse_angles(args.theta_r, name="--theta-r"), dtype=np.float64)
+    except PlanError as exc:
+        raise UserError(str(exc)) from None
     if np.any(np.abs(tr) >= 90.0):
         raise UserError(f"--theta-r {args.theta_r!r}: angles must be in (-90, 90) deg")
     if args.point and (args.detector_deg is not None or args.source_deg is not None):
@@ -327,11 +302,11 @@ def register(subparsers: Any) -> None:
     brdf.add_argument(
         "--theta-r",
         default="0:70:1",
-        help="detector angles: start:stop:step (stop included) or a comma list; "
-        "write --theta-r=-20,20 for negative starts (default 0:70:1)",
+        help="detector angles: start:stop:step (stop included) or a comma list (default 0:70:1)",
     )
     brdf.add_argument("--source-deg", type=float, default=None, help="lamp cone, full angle")
     brdf.add_argument("--detector-deg", type=float, default=None, help="detector cone, full angle")
     brdf.add_argument("--point", action="store_true", help="BRDF in the exact direction")
     brdf.add_argument("--out", metavar="FILE.nc", help="also write the curve as netCDF")
+    allow_negative_angles(brdf)  # "--theta-r -20:20:1" is a range, not an option
     brdf.set_defaults(func=_cmd_brdf)

@@ -12,11 +12,11 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import re
 import sys
 from collections.abc import Coroutine
 from typing import TYPE_CHECKING, Any, TextIO, TypeVar
 
+from goniolab.commands._angles import allow_negative_angles
 from goniolab.errors import UserError
 
 if TYPE_CHECKING:  # loaded when a scan runs, not at --help (tests/test_startup.py)
@@ -37,9 +37,6 @@ __all__ = [
 ]
 
 _T = TypeVar("_T")
-
-#: A negative number, or an angle range/list starting with one ("-40:-30:5", "-10,0,10").
-_NEGATIVE_ARG = re.compile(r"^-\d+$|^-\d*\.\d+$|^-[\d.]+[:,][\d.:,\-]*$")
 
 
 def _exit_code(state: RunState) -> int:
@@ -439,10 +436,7 @@ def register(subparsers: Any) -> None:
         action="store_true",
         help="read a mirror at the specular geometry first; it sets the 100 %% level",
     )
-    # "--theta-r -40:-30:5" is an angle list, not an option: widen argparse's test for
-    # "negative number" arguments (a private attribute, stable since Python 3.2) so that
-    # lamp-side ranges and lists need no "--theta-r=" spelling.
-    p._negative_number_matcher = _NEGATIVE_ARG
+    allow_negative_angles(p)  # "--theta-r -40:-30:5" is a lamp-side range, not an option
     p.set_defaults(func=_cmd_scan)
     sub = p.add_subparsers(dest="scan_command", metavar="resume")
     pr = sub.add_parser("resume", help="continue an interrupted run (also after a crash)")

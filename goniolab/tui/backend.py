@@ -14,6 +14,7 @@ from typing import Protocol
 
 from goniolab.errors import UserError
 from goniolab.scan.events import EventBus, GlossRead, PointMeasured, PointPredicted
+from goniolab.scan.plans import PlanError, angle_range
 
 __all__ = ["ArmState", "Backend", "RunSummary", "ScanSetup", "StoredRun"]
 
@@ -69,13 +70,22 @@ class ScanSetup:
             )
         if self.repeats < 1:
             raise UserError(f"scan setup: repeats must be >= 1, got {self.repeats}")
+        try:
+            self.theta_r_values_deg()  # refuses a sweep of more than MAX_ANGLES angles
+        except PlanError as exc:
+            raise UserError(str(exc)) from None
 
     def theta_r_values_deg(self) -> list[float]:
-        """The detector angles of the sweep, start to stop inclusive, in degrees."""
-        n = math.floor(
-            (self.theta_r_stop_deg - self.theta_r_start_deg) / self.theta_r_step_deg + 1e-9
+        """The detector angles of the sweep, start to stop inclusive, in degrees
+        (:func:`goniolab.scan.plans.angle_range`)."""
+        return list(
+            angle_range(
+                self.theta_r_start_deg,
+                self.theta_r_stop_deg,
+                self.theta_r_step_deg,
+                name="scan setup: theta_r",
+            )
         )
-        return [round(self.theta_r_start_deg + k * self.theta_r_step_deg, 9) for k in range(n + 1)]
 
 
 @dataclass(frozen=True, slots=True)

@@ -13,9 +13,11 @@ from goniolab.scan.plans import (
     BrdfPlan,
     GlossPlan,
     PlanError,
+    angle_range,
     gloss_statistics,
     parse_angles,
 )
+from goniolab.tui.backend import ScanSetup
 
 
 def test_range_is_inclusive_like_the_seed_sweep() -> None:
@@ -28,6 +30,35 @@ def test_range_is_inclusive_like_the_seed_sweep() -> None:
 def test_fractional_step_lands_on_the_grid() -> None:
     assert parse_angles("0:1:0.1") == tuple(k / 10 for k in range(11))
     assert parse_angles("-10:10:2.5") == (-10.0, -7.5, -5.0, -2.5, 0.0, 2.5, 5.0, 7.5, 10.0)
+
+
+@pytest.mark.parametrize(
+    ("start", "stop", "step", "expected"),
+    [
+        (-20.0, 20.0, 10.0, (-20.0, -10.0, 0.0, 10.0, 20.0)),
+        (-20.0, 20.0, 1.0, tuple(float(k) for k in range(-20, 21))),
+        (0.0, 0.3, 0.1, (0.0, 0.1, 0.2, 0.3)),  # 0.1 * 3 = 0.30000000000000004 -> 0.3
+        (0.0, 1.0, 0.3, (0.0, 0.3, 0.6, 0.9)),  # stop off the grid: not included
+        (10.0, 10.0, 1.0, (10.0,)),
+        (-1.05, -1.0, 0.01, (-1.05, -1.04, -1.03, -1.02, -1.01, -1.0)),
+    ],
+)
+def test_one_range_expansion_for_the_cli_and_the_tui(
+    start: float, stop: float, step: float, expected: tuple[float, ...]
+) -> None:
+    # the CLI's "start:stop:step" (scan and predict) and the TUI's sweep form expand alike
+    assert angle_range(start, stop, step) == expected
+    assert parse_angles(f"{start!r}:{stop!r}:{step!r}") == expected
+    setup = ScanSetup("sample:flat", 45.0, start, stop, step, repeats=1)
+    assert setup.theta_r_values_deg() == list(expected)
+
+
+def test_a_huge_sweep_in_the_form_is_a_form_error_before_it_is_expanded() -> None:
+    from goniolab.errors import UserError
+
+    setup = ScanSetup("sample:flat", 45.0, 0.0, 90.0, 1e-7, repeats=1)
+    with pytest.raises(UserError, match=r"scan setup: theta_r: range .* more than the 10000"):
+        setup.validate()
 
 
 def test_lists_keep_their_order() -> None:
