@@ -19,8 +19,8 @@ from goniolab.cli import main
 from goniolab.config import configs_dir
 from goniolab.scan.events import RunFinished, RunState, StateChanged
 from goniolab.store import RunStore
-from goniolab.tui.backend import ScanSetup
-from goniolab.tui.lab_backend import LabBackend
+from goniolab.tui.session_backend import SessionBackend
+from goniolab.tui.view_model import ScanSetup
 
 #: theta_i 30 deg, detector 20..40 deg in 5 deg steps, 2 repeats: 10 readings.
 CLI_PLAN = ["--theta-i", "30", "--theta-r", "20:40:5", "--repeats", "2"]
@@ -47,7 +47,7 @@ async def _until(q: asyncio.Queue[Any], want: type, **fields: Any) -> Any:
 
 async def _tui_scan(cfg: Path, store: Path, *, abort: bool = False) -> int:
     """Run (or start, pause and abort) the scan through the TUI's backend; its run id."""
-    backend = LabBackend(cfg, store_path=str(store))
+    backend = SessionBackend(cfg, store_path=str(store))
     await backend.open()
     try:
         q = backend.bus.subscribe()

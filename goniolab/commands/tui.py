@@ -60,9 +60,9 @@ def _cmd_tui(args: argparse.Namespace) -> int:
     if not args.gloss_every >= 0:
         raise UserError(f"--gloss-every must be >= 0 s, got {args.gloss_every}")
     from goniolab.tui.app import GonioApp
-    from goniolab.tui.lab_backend import LabBackend
+    from goniolab.tui.session_backend import SessionBackend
 
-    backend = LabBackend(
+    backend = SessionBackend(
         args.config, time_scale=args.time_scale, sample=args.sample, store_path=args.store
     )
     app = GonioApp(backend, autostart=args.autostart, gloss_every_s=args.gloss_every)

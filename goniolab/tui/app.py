@@ -36,10 +36,10 @@ from goniolab.scan.events import (
     RunState,
     StateChanged,
 )
-from goniolab.tui.backend import ArmState, Backend, ScanSetup
 from goniolab.tui.comparison import Comparison
 from goniolab.tui.palette import ScanCommands
 from goniolab.tui.screens import RunsScreen
+from goniolab.tui.view_model import ArmState, Backend, ScanSetup
 from goniolab.tui.widgets import ComparisonPanel, GlossLog, ScanForm, StatusPanel
 
 __all__ = ["GonioApp"]

@@ -11,8 +11,8 @@ from textual.binding import Binding, BindingType
 from textual.screen import Screen
 from textual.widgets import DataTable, Footer, Header, Static
 
-from goniolab.tui.backend import Backend, RunSummary, StoredRun
 from goniolab.tui.comparison import Comparison
+from goniolab.tui.view_model import Backend, RunSummary, StoredRun
 from goniolab.tui.widgets import ComparisonPanel
 
 __all__ = ["RunsScreen"]

@@ -14,8 +14,8 @@ from textual_plot import HiResMode, LegendLocation, PlotWidget
 
 from goniolab.errors import UserError
 from goniolab.scan.events import GlossRead
-from goniolab.tui.backend import ArmState, ScanSetup
 from goniolab.tui.comparison import Comparison, ComparisonMetrics
+from goniolab.tui.view_model import ArmState, ScanSetup
 
 __all__ = [
     "ComparisonPanel",

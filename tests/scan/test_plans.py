@@ -17,7 +17,7 @@ from goniolab.scan.plans import (
     gloss_statistics,
     parse_angles,
 )
-from goniolab.tui.backend import ScanSetup
+from goniolab.tui.view_model import ScanSetup
 
 
 def test_range_is_inclusive_like_the_seed_sweep() -> None:

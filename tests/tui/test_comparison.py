@@ -8,8 +8,8 @@ import pytest
 
 from goniolab.errors import UserError
 from goniolab.scan.events import PointMeasured, PointPredicted
-from goniolab.tui.backend import ScanSetup
 from goniolab.tui.comparison import Comparison
+from goniolab.tui.view_model import ScanSetup
 
 
 def _meas(index: int, repeat: int, tr: float, value: float) -> PointMeasured:

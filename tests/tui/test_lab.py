@@ -24,8 +24,8 @@ from goniolab.optics.apertures import Cone
 from goniolab.scan.events import RunState
 from goniolab.store import RunStore
 from goniolab.tui.app import GonioApp
-from goniolab.tui.lab_backend import LabBackend
 from goniolab.tui.screens import RunsScreen
+from goniolab.tui.session_backend import SessionBackend
 from goniolab.tui.widgets import ComparisonPanel, GlossLog, MetricsTable, StatusPanel
 from tests.tui.tui_scripted import settle, wait_until
 
@@ -47,7 +47,7 @@ def sim_config(tmp_path: Path, *, faults: str = "") -> Path:
 
 
 def make_app(tmp_path: Path, *, faults: str = "", autostart: bool = False) -> GonioApp:
-    backend = LabBackend(
+    backend = SessionBackend(
         sim_config(tmp_path, faults=faults), model=AnalyticModel("beckmann", alpha=ALPHA)
     )
     return GonioApp(backend, autostart=autostart, poll_hz=0)

@@ -31,7 +31,7 @@ from goniolab.scan.events import (
     StateChanged,
 )
 from goniolab.tui.app import GonioApp
-from goniolab.tui.backend import ArmState, RunSummary, ScanSetup, StoredRun
+from goniolab.tui.view_model import ArmState, RunSummary, ScanSetup, StoredRun
 
 AMP_PCT = 40.0
 PEAK_DEG = 20.0
@@ -49,7 +49,7 @@ def gaussian_pct(theta_r_deg: float) -> float:
 
 
 class ScriptedBackend:
-    """Implements :class:`goniolab.tui.backend.Backend` with a scripted event publisher."""
+    """Implements :class:`goniolab.tui.view_model.Backend` with a scripted event publisher."""
 
     def __init__(
         self, *, gated: bool = True, fail_open: bool = False, hold_open: bool = False

@@ -1,8 +1,10 @@
-"""What the TUI needs from the lab, as a small Protocol (no Textual here).
+"""The TUI's data, and what it needs from the lab as a small Protocol (no Textual here).
 
-The app never talks to drivers, the runner or the store directly: it calls a
-:class:`Backend` and consumes the backend's :class:`~goniolab.scan.events.EventBus`.
-:class:`goniolab.tui.lab_backend.LabBackend` implements it over a real or simulated
+The scan form (:class:`ScanSetup`), an arm's status (:class:`ArmState`), a row of the runs
+browser (:class:`RunSummary`) and a stored run (:class:`StoredRun`). The app never talks
+to drivers, the runner or the store directly: it calls a :class:`Backend` and consumes
+the backend's :class:`~goniolab.scan.events.EventBus`.
+:class:`goniolab.tui.session_backend.SessionBackend` implements it over a real or simulated
 :class:`~goniolab.lab.Lab`; tests may implement it with a scripted publisher.
 """
 

@@ -1,9 +1,10 @@
-"""The TUI's :class:`~goniolab.tui.backend.Backend` over a real or simulated :class:`Lab`.
+"""The TUI's :class:`~goniolab.tui.view_model.Backend` over :mod:`goniolab.session`.
 
-It wires the same parts as ``goniolab scan`` and ``goniolab gloss``: a
-:class:`~goniolab.scan.runner.ScanRunner` with a :class:`~goniolab.scan.predict.Predictor`
-for BRDF scans, a :class:`~goniolab.scan.gloss.GlossLogger` for glossmeter readings, and the
-:class:`~goniolab.store.RunStore` where every reading is committed as it is taken. All
+The same sessions as ``goniolab scan`` and ``goniolab gloss log`` (a real or simulated
+:class:`~goniolab.lab.Lab`): :class:`~goniolab.session.ScanSession` for BRDF scans and
+:class:`~goniolab.session.GlossSession` for glossmeter readings, every reading committed
+to the :class:`~goniolab.store.RunStore` as it is taken, so a run started here stores the
+same rows as one started from the CLI (and ``goniolab scan resume`` continues it). All
 publish on one :class:`~goniolab.scan.events.EventBus` that the app consumes.
 No Textual here.
 """
@@ -35,9 +36,9 @@ from goniolab.scan.runner import PlanRefused, ScanRunner
 from goniolab.session import GlossSession, ScanSession, check_sample
 from goniolab.store import RunStore, StoreError, resolve_store_path
 from goniolab.surfaces.samples import sample_names
-from goniolab.tui.backend import ArmState, RunSummary, ScanSetup, StoredRun
+from goniolab.tui.view_model import ArmState, RunSummary, ScanSetup, StoredRun
 
-__all__ = ["LabBackend"]
+__all__ = ["SessionBackend"]
 
 #: The default scan of the form: the seed's in-plane sweep, theta_i = 45 deg, detector
 #: 0..70 deg in 1 deg steps (Wittmann et al. 2021, sec. 2.3 and 4.2; the seed repeats 5 times).
@@ -46,7 +47,7 @@ DEFAULT_THETA_R_DEG = (0.0, 70.0, 1.0)
 DEFAULT_REPEATS = 3
 
 
-class LabBackend:
+class SessionBackend:
     """The lab behind the TUI.
 
     Parameters
