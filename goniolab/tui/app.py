@@ -181,6 +181,8 @@ class GonioApp(App[int]):
         try:
             for arm in await self.backend.arm_states():
                 panel.show_arm(arm)
+        except NoMatches:  # the app shut down while the arms were read
+            return
         except UserError as exc:
             if self._opening:
                 return  # the lab is still connecting: the rows keep "…"
