@@ -21,6 +21,15 @@ Ordering rule used by :meth:`TwoArmGoniometer.move_to` (``sigma`` = sign of the 
 * opposite signs: the arm that widens the gap moves first, then the other. The
   intermediate gap exceeds the start gap, and the second move is monotone from there to
   the (safe) target.
+
+Homing (:meth:`TwoArmGoniometer.home`, :func:`plan_homing`) is planned the same way: a home
+search moves one arm from where it stands to its home position (encoder zero: 0 deg for
+both arms), a single-arm move like any other, so it is safe when both its end points are.
+Both arms at 0 deg would touch, so one arm is homed, moved clear (to its park coordinate
+when that is far enough), and then the other is homed; each step is checked before it
+runs and the positions are checked against the interlock after it. A home search is
+assumed to run straight to the home position (a controller that first searches the other
+way for its switch needs the switch on the side it searches first).
 """
 
 from __future__ import annotations
@@ -28,10 +37,12 @@ from __future__ import annotations
 import asyncio
 import math
 from collections.abc import Awaitable, Sequence
+from dataclasses import dataclass
+from typing import Literal
 
 from drivers.base import Axis, DeviceError, InterlockError, LimitError
 
-__all__ = ["TwoArmGoniometer", "plan_moves"]
+__all__ = ["HomingStep", "TwoArmGoniometer", "plan_homing", "plan_moves"]
 
 
 def plan_moves(
@@ -68,6 +79,143 @@ def plan_moves(
     return [("lamp",), ("detector",)] if d_i > 0.0 else [("detector",), ("lamp",)]
 
 
+@dataclass(frozen=True, slots=True)
+class HomingStep:
+    """One step of a homing plan: ``arm`` runs its home search (``target_deg`` = its home
+    position) or, for ``action == "move"``, moves to ``target_deg``."""
+
+    action: Literal["home", "move"]
+    arm: Literal["lamp", "detector"]
+    target_deg: float
+
+
+def _clear_of(
+    other_deg: Sequence[float],
+    sigma: float,
+    min_separation_deg: float,
+    limits_deg: tuple[float, float],
+) -> tuple[float, float] | None:
+    """The range ``(low, high)`` of one arm's positions whose separation from every position in
+    ``other_deg`` of the other arm is at least ``min_separation_deg`` with sign ``sigma``
+    (``sigma * (mine + other) >= min_separation_deg``), within the arm's limits; ``None``
+    when there is none."""
+    lo, hi = limits_deg
+    bound = min_separation_deg - min(sigma * o for o in other_deg)  # sigma * mine >= bound
+    if sigma > 0:
+        lo = max(lo, bound)
+    else:
+        hi = min(hi, -bound)
+    return (lo, hi) if lo <= hi else None
+
+
+def plan_homing(
+    start_deg: tuple[float, float],
+    *,
+    home_deg: tuple[float, float],
+    limits_deg: tuple[tuple[float, float], tuple[float, float]],
+    min_separation_deg: float,
+    park_deg: tuple[float, float],
+    margin_deg: float = 1.0,
+) -> list[HomingStep]:
+    """Plan the homing of both arms from ``start_deg`` so that they never come closer than
+    ``min_separation_deg`` (nor cross).
+
+    A home search moves one arm from where it stands to its home position, as any single-arm
+    move does (monotonically), so it is safe when both its end points are (module
+    docstring). Both arms cannot stand at their homes together when the homes are closer
+    than the minimum (the encoder zeros of both arms: 0 and 0 deg), so the plan is: home
+    arm A; move A clear of B's home; home B -- with, when B stands where A's home would
+    come too close, a first move of B clear of A's home. A clear position is A's park
+    coordinate when that is far enough, else the nearest safe position plus ``margin_deg``
+    (within the arm's limits). The lamp arm is homed first when both orders are possible.
+
+    Parameters
+    ----------
+    start_deg
+        ``(theta_i, theta_r)`` now, from the arms' feedback.
+    home_deg
+        Where each arm stands after its home search (``(theta_i, theta_r)``).
+    limits_deg
+        ``(lamp limits, detector limits)``, each ``(low, high)``.
+    min_separation_deg
+        Smallest allowed ``|theta_i + theta_r|``.
+    park_deg
+        The park geometry (its coordinates are the preferred clear positions).
+    margin_deg
+        Extra distance from the interlock boundary when a clear position is not the park's.
+
+    Returns
+    -------
+    list of HomingStep
+        In order; every arm is homed exactly once.
+
+    Raises
+    ------
+    InterlockError
+        The arms stand closer than the minimum now, or no order of homing and clearing
+        moves keeps them apart with the configured homes and limits; the message says why.
+    """
+    m = min_separation_deg
+    s0 = start_deg[0] + start_deg[1]
+    if abs(s0) < m:
+        raise InterlockError(
+            f"cannot plan the homing: the arms stand {abs(s0):.3f} deg apart "
+            f"(theta_i={start_deg[0]:.3f}, theta_r={start_deg[1]:.3f} deg), below the minimum "
+            f"{m:g} deg; move them apart by hand first",
+            device="goniometer",
+        )
+    sigma = 1.0 if s0 > 0 else -1.0
+    arms = ("lamp", "detector")
+    reasons: list[str] = []
+    for first in (0, 1):
+        a, b = first, 1 - first
+        pos = list(start_deg)
+        steps: list[HomingStep] = []
+        # 1. A's home search: needs B clear of A's home (and of where A stands now).
+        if sigma * (home_deg[a] + pos[b]) < m:
+            rng = _clear_of((home_deg[a], pos[a]), sigma, m, limits_deg[b])
+            if rng is None:
+                reasons.append(
+                    f"homing the {arms[a]} arm first needs the {arms[b]} arm "
+                    f"{m:g} deg clear of the {arms[a]} home ({home_deg[a]:g} deg), "
+                    f"beyond its limits {list(limits_deg[b])}"
+                )
+                continue
+            pos[b] = _pick(rng, park_deg[b], sigma, margin_deg)
+            steps.append(HomingStep("move", arms[b], pos[b]))  # type: ignore[arg-type]
+        steps.append(HomingStep("home", arms[a], home_deg[a]))  # type: ignore[arg-type]
+        pos[a] = home_deg[a]
+        # 2. A clear of B's home and of where B stands, 3. B's home search.
+        rng = _clear_of((home_deg[b], pos[b]), sigma, m, limits_deg[a])
+        if rng is None:
+            reasons.append(
+                f"homing the {arms[b]} arm second needs the {arms[a]} arm {m:g} deg clear "
+                f"of the {arms[b]} home ({home_deg[b]:g} deg), beyond its limits "
+                f"{list(limits_deg[a])}"
+            )
+            continue
+        clear = _pick(rng, park_deg[a], sigma, margin_deg)
+        if clear != pos[a]:
+            steps.append(HomingStep("move", arms[a], clear))  # type: ignore[arg-type]
+        steps.append(HomingStep("home", arms[b], home_deg[b]))  # type: ignore[arg-type]
+        return steps
+    raise InterlockError(
+        "the home positions cannot be reached safely: " + "; ".join(reasons),
+        device="goniometer",
+    )
+
+
+def _pick(rng: tuple[float, float], preferred: float, sigma: float, margin_deg: float) -> float:
+    """``preferred`` when it lies in ``rng``, else the boundary on the safe side plus the
+    margin (the boundary itself when the margin does not fit)."""
+    lo, hi = rng
+    if lo <= preferred <= hi:
+        return preferred
+    if sigma > 0:
+        return min(lo + margin_deg, hi)
+    return max(hi - margin_deg, lo)
+
+
 class TwoArmGoniometer:
     """Lamp arm (theta_i) + detector arm (theta_r) with limit and separation interlocks.
 
@@ -81,6 +229,9 @@ class TwoArmGoniometer:
         Smallest allowed ``|theta_i_deg + theta_r_deg|``.
     park_deg
         ``(theta_i_deg, theta_r_deg)`` of the park position (checked at construction).
+    home_deg
+        Where each arm stands after its home search (the encoder zero: ``(0, 0)``). That
+        homing can be planned from the park position is checked at construction.
     """
 
     def __init__(
@@ -90,6 +241,7 @@ class TwoArmGoniometer:
         *,
         min_separation_deg: float,
         park_deg: tuple[float, float] = (45.0, 45.0),
+        home_deg: tuple[float, float] = (0.0, 0.0),
     ) -> None:
         if not (math.isfinite(min_separation_deg) and min_separation_deg >= 0.0):
             raise ValueError(
@@ -105,6 +257,11 @@ class TwoArmGoniometer:
             raise ValueError(
                 f"goniometer: park position {self.park_deg} is invalid: {exc}"
             ) from None
+        self.home_deg = (float(home_deg[0]), float(home_deg[1]))
+        try:
+            self.plan_homing(self.park_deg)
+        except InterlockError as exc:
+            raise ValueError(f"goniometer: {exc.message} (from the park position)") from None
 
     def _axis(self, name: str) -> Axis:
         return self.lamp if name == "lamp" else self.detector
@@ -183,15 +340,54 @@ class TwoArmGoniometer:
             await self._run_stage(stage, target, timeout_s)
         return await self.positions_deg()
 
-    async def home(self, timeout_s: float) -> None:
-        """Home the lamp arm, then the detector arm (one at a time).
+    def plan_homing(self, start_deg: tuple[float, float]) -> list[HomingStep]:
+        """The homing steps from ``start_deg`` (see :func:`plan_homing`)."""
+        return plan_homing(
+            start_deg,
+            home_deg=self.home_deg,
+            limits_deg=(self.lamp.limits_deg, self.detector.limits_deg),
+            min_separation_deg=self.min_separation_deg,
+            park_deg=self.park_deg,
+        )
 
-        Homing runs the controllers' own home searches; their switch positions, not our
-        separation check, define where the arms go, so the arms are never homed at once.
+    async def home(self, timeout_s: float) -> None:
+        """Home both arms, one at a time, never closer than ``min_separation_deg``.
+
+        The plan (:func:`plan_homing`) homes one arm, moves it clear, then homes the other
+        (moving that one clear first when it stands too close to the first one's home).
+        After every step the arm positions are read back and checked against the
+        interlock; any error stops both arms and is re-raised.
+
+        Raises
+        ------
+        InterlockError
+            The arms stand too close now, the homes cannot be reached safely with these
+            limits (nothing moves), or a step ended closer than allowed (arms stopped).
         """
+        start = await self.positions_deg()
+        steps = self.plan_homing(start)
+        sigma = 1.0 if start[0] + start[1] > 0 else -1.0
         try:
-            await self.lamp.home(timeout_s)
-            await self.detector.home(timeout_s)
+            for step in steps:
+                axis = self._axis(step.arm)
+                if step.action == "home":
+                    await axis.home(timeout_s)
+                else:
+                    await axis.move_to(step.target_deg)
+                    await axis.wait_in_position(timeout_s)
+                ti, tr = await self.positions_deg()
+                if sigma * (ti + tr) < self.min_separation_deg:
+                    what = (
+                        f"homing the {step.arm} arm"
+                        if step.action == "home"
+                        else (f"moving the {step.arm} arm clear to {step.target_deg:g} deg")
+                    )
+                    raise InterlockError(
+                        f"after {what} the arms stand at theta_i={ti:.3f}, theta_r={tr:.3f} "
+                        f"deg, {sigma * (ti + tr):.3f} deg apart (minimum "
+                        f"{self.min_separation_deg:g} deg): homing stopped",
+                        device="goniometer",
+                    )
         except BaseException:
             await self._stop_all()
             raise

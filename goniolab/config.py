@@ -27,6 +27,8 @@ Whatever would only fail at run time is refused at load:
   profile: positions ``limit_deg x steps_per_deg x gear_ratio`` in the int32 position
   register, speed and acceleration counts in theirs (int32, or 16 bits for a
   ``command-opcode`` drive), one step no coarser than ``stall_tolerance_deg``;
+* homing can be planned from the park position (:func:`drivers.goniometer.plan_homing`:
+  one arm must be able to stand clear of the other's home within its limits);
 * ``spectro.exposure_us`` lies in the range of the spectro's profile;
 * a file nested too deeply for the TOML parser is one error, not a RecursionError.
 """
@@ -379,6 +381,23 @@ def _cross_checks(cfg: LabConfig, path: Path) -> None:
             "would look into the lamp)",
         )
     sep = abs(g.park.theta_i_deg + g.park.theta_r_deg)
+    if sep >= g.min_separation_deg:
+        from drivers.base import InterlockError
+        from drivers.goniometer import plan_homing
+
+        park = (g.park.theta_i_deg, g.park.theta_r_deg)
+        try:
+            plan_homing(
+                park,
+                home_deg=(0.0, 0.0),
+                limits_deg=(g.lamp.limits_deg, g.detector.limits_deg),
+                min_separation_deg=g.min_separation_deg,
+                park_deg=park,
+            )
+        except InterlockError as exc:
+            raise ConfigError(
+                path, "goniometer", f"{exc.message} (from the park position)"
+            ) from None
     if sep < g.min_separation_deg:
         raise ConfigError(
             path,

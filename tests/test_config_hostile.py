@@ -185,3 +185,16 @@ def test_a_device_profile_nested_too_deeply_is_one_clear_error(tmp_path: Path) -
     assert str(info.value).startswith(str(p)) and len(str(info.value)) < 300
     err = load(tmp_path, f'[goniometer.lamp]\nprofile = "{p}"\n')
     assert err.key == "goniometer.lamp.profile" and "nested too deeply" in err.reason
+
+
+# -------------------------------------------------------------- defect 1: homing reachable
+def test_homes_that_cannot_be_reached_safely_are_refused_at_load(tmp_path: Path) -> None:
+    """A lamp arm limited to 0..5 deg can never stand 10 deg clear of the detector's home
+    (0 deg), and the detector cannot home beside the lamp: homing would be refused."""
+    err = load(
+        tmp_path,
+        "[goniometer]\npark = { theta_i_deg = 5.0, theta_r_deg = 45.0 }\n"
+        "[goniometer.lamp]\nlimits_deg = [0.0, 5.0]\n",
+    )
+    assert err.key == "goniometer"
+    assert "home positions cannot be reached safely" in err.reason

@@ -54,7 +54,10 @@ async def test_limits_and_interlock_refuse_before_moving(lab: Lab) -> None:
 async def test_home_then_park(lab: Lab) -> None:
     g = lab.goniometer
     await g.home(timeout_s=30.0)
-    assert await g.positions_deg() == pytest.approx((0.0, 0.0))
+    # both homes are 0 deg, closer than min_separation_deg: the lamp homes, moves clear to
+    # its park coordinate, then the detector homes (issue 10, defect 1)
+    assert await g.positions_deg() == pytest.approx((45.0, 0.0))
+    assert all([(await g.lamp.status()).homed, (await g.detector.status()).homed])
     await g.park(timeout_s=30.0)
     assert await g.positions_deg() == pytest.approx((45.0, 45.0), abs=STEP_DEG)
 
