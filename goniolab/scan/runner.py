@@ -89,6 +89,21 @@ SpecimenHook = Callable[[str], Awaitable[None]]
 _T = TypeVar("_T")
 
 
+def _describe(exc: BaseException) -> str:
+    """``Type: message`` of an unexpected error (``struct.error: argument out of range``),
+    the message alone for a :class:`~drivers.base.DeviceError` (it names its device)."""
+    if isinstance(exc, DeviceError):
+        return str(exc)
+    kind = type(exc)
+    name = (
+        kind.__qualname__
+        if kind.__module__ == "builtins"
+        else f"{kind.__module__}.{kind.__qualname__}"
+    )
+    text = str(exc)
+    return f"{name}: {text}" if text else name
+
+
 class PlanRefused(Exception):
     """The dry run found a geometry the goniometer must not reach (names point and reason).
 
@@ -442,15 +457,20 @@ class ScanRunner:
         referenced, so no move is made.
         """
         problems: list[str] = []
-        with contextlib.suppress(DeviceError):
+        try:
             await self.goniometer.stop()
+        except Exception as exc:  # best effort: any failure is reported, never raised
+            problems.append(f"stopping the arms failed: {_describe(exc)}")
         if self._homing_interrupted:
             self._target = None
-            return "homing interrupted: arms stopped, not parked; home them before use"
+            problems.append("homing interrupted: arms stopped, not parked; home them before use")
+            return "; ".join(problems)
         try:
             await self.goniometer.park(self.home_timeout_s)
-        except DeviceError as exc:
-            problems.append(f"parking failed: {exc}")
+        except Exception as exc:  # a bug or a dead link must not leave the run 'running'
+            problems.append(
+                f"parking failed: {_describe(exc)}; arms not parked: check them before use"
+            )
         self._target = None
         return "; ".join(problems)
 
@@ -655,12 +675,17 @@ class ScanRunner:
             self._set_state(RunState.ABORTED, why)
             raise
         except Exception as exc:
-            # Not an instrument fault (a bug, a full disk): still leave the arms parked and
-            # the run resumable, then let the error surface.
+            # Not an instrument fault (a bug, a full disk): still leave the arms parked (or
+            # say they are not) and the run failed and resumable, then let the error surface.
             predict_task.cancel()
             park_problem = await self._park()
-            why = f"internal error: {exc!r}" + (f"; {park_problem}" if park_problem else "")
+            why = f"internal error: {_describe(exc)}" + (
+                f"; {park_problem}" if park_problem else ""
+            )
             self._set_state(RunState.FAILED, why)
+            self.bus.publish(
+                RunFinished(run_id=self.run_id, state=RunState.FAILED, reason=why, summary={})
+            )
             raise
         park_problem = await self._park()
         if park_problem:
@@ -681,12 +706,17 @@ class ScanRunner:
                     fatal=False,
                 )
             )
-        summary = summarize_brdf(
-            self.plan,
-            self.store.points(self.run_id),
-            self.store.predictions(self.run_id),
-            misalignment_threshold_deg=self.misalignment_threshold_deg,
-        )
+        try:
+            summary = summarize_brdf(
+                self.plan,
+                self.store.points(self.run_id),
+                self.store.predictions(self.run_id),
+                misalignment_threshold_deg=self.misalignment_threshold_deg,
+            )
+        except Exception as exc:  # every reading is stored: the run keeps its state
+            summary = {}
+            problem = f"summary failed: {_describe(exc)}"
+            reason = f"{reason}; {problem}" if reason else problem
         self._set_state(state, reason)
         self.bus.publish(
             RunFinished(run_id=self.run_id, state=state, reason=reason, summary=summary)

@@ -1,0 +1,90 @@
+"""Any failure during a run leaves the run ``failed`` (or ``aborted``) with its reason and the
+arms parked or flagged -- never ``running`` with an empty reason (issue 10, defect 3: a
+struct.error packing an out-of-range register failed the move *and* the park, and the run
+stayed ``running``)."""
+
+from __future__ import annotations
+
+import asyncio
+import struct
+
+import pytest
+
+import goniolab.scan.runner as runner_mod
+from goniolab.scan.events import PointMeasured, RunState
+from goniolab.scan.plans import BrdfPlan, parse_angles
+from goniolab.store import RunStore
+
+from .conftest import FakeLab
+from .test_runner import drive, make_runner
+
+
+def _pack_overflow() -> struct.error:
+    try:
+        struct.pack(">i", 2**40)
+    except struct.error as exc:
+        return exc
+    raise AssertionError("unreachable")
+
+
+async def test_an_internal_error_whose_park_also_fails_leaves_the_run_failed(
+    fake_lab: FakeLab, store: RunStore
+) -> None:
+    gonio = fake_lab.goniometer
+    real_move = gonio.move_to
+
+    async def move_to(ti: float, tr: float, timeout_s: float) -> tuple[float, float]:
+        if len(gonio.moves) >= 2:  # the third move (and every park) packs out of range
+            gonio.moves.append((ti, tr))
+            raise _pack_overflow()
+        return await real_move(ti, tr, timeout_s)
+
+    gonio.move_to = move_to  # type: ignore[method-assign]
+    runner, bus = make_runner(fake_lab, store, BrdfPlan(45.0, parse_angles("40:50:1")))
+    with pytest.raises(struct.error):
+        await drive(runner, bus, lambda ev: None)
+    rec = store.get_run(runner.run_id)
+    assert rec.status == "failed"
+    assert f"struct.error: {_pack_overflow()}" in rec.reason
+    assert "parking failed" in rec.reason and "arms not parked" in rec.reason
+    assert store.count_points(runner.run_id) == 2  # the two readings before the fault stay
+    assert runner.state is RunState.FAILED
+
+
+async def test_a_cancelled_run_whose_park_fails_is_still_recorded(
+    fake_lab: FakeLab, store: RunStore
+) -> None:
+    gonio = fake_lab.goniometer
+
+    async def broken_park(timeout_s: float) -> None:
+        raise RuntimeError("controller link gone")
+
+    gonio.park = broken_park  # type: ignore[method-assign]
+    runner, bus = make_runner(fake_lab, store, BrdfPlan(45.0, parse_angles("30:60:1")))
+    q = bus.subscribe()
+    task = asyncio.create_task(runner.run())
+    while True:  # wait, event by event, for the third reading
+        ev = await q.get()
+        if isinstance(ev, PointMeasured) and ev.index == 2:
+            break
+    task.cancel()
+    with pytest.raises(asyncio.CancelledError):
+        await task
+    rec = store.get_run(runner.run_id)
+    assert rec.status == "aborted"
+    assert "parking failed" in rec.reason and "controller link gone" in rec.reason
+
+
+async def test_a_failing_summary_does_not_leave_the_run_running(
+    fake_lab: FakeLab, store: RunStore, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    def broken_summary(*args: object, **kw: object) -> dict[str, object]:
+        raise FloatingPointError("overflow in the peak fit")
+
+    monkeypatch.setattr(runner_mod, "summarize_brdf", broken_summary)
+    runner, bus = make_runner(fake_lab, store, BrdfPlan(45.0, (44.0, 45.0, 46.0)))
+    await drive(runner, bus, lambda ev: None)
+    rec = store.get_run(runner.run_id)
+    assert rec.status == "done"  # every reading is in; only the summary is missing
+    assert "summary failed" in rec.reason and "overflow in the peak fit" in rec.reason
+    assert store.count_points(runner.run_id) == 3
