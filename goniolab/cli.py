@@ -23,14 +23,22 @@ from typing import Any
 
 from goniolab.errors import UserError
 
-__all__ = ["EXIT_BROKEN_PIPE", "build_parser", "main"]
+__all__ = ["EXIT_BROKEN_PIPE", "build_parser", "main", "version_text"]
 
 #: Exit status when stdout's reader went away (128 + SIGPIPE).
 EXIT_BROKEN_PIPE = 141
 
 
+def _log() -> Any:
+    """The ``goniolab`` logger (logging is imported once a command runs, not for --help)."""
+    import logging
+
+    return logging.getLogger("goniolab")
+
+
 class _VersionAction(argparse.Action):
-    """``--version``: looks the version up only when asked (see :mod:`goniolab`)."""
+    """``--version``: the version (looked up only when asked, see :mod:`goniolab`), then
+    where goniolab keeps things: the default store, the config, the log file."""
 
     def __init__(self, option_strings: Sequence[str], dest: str, **kwargs: Any) -> None:
         kwargs.setdefault("nargs", 0)
@@ -38,9 +46,7 @@ class _VersionAction(argparse.Action):
         super().__init__(option_strings, dest, **kwargs)
 
     def __call__(self, parser: argparse.ArgumentParser, *_: Any) -> None:
-        from goniolab import __version__
-
-        parser.exit(message=f"goniolab {__version__}\n")
+        parser.exit(message=version_text() + "\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -52,8 +58,19 @@ def build_parser() -> argparse.ArgumentParser:
         description="Goniospectrophotometer and glossmeter control, with BRDF and gloss "
         "predicted from surface roughness (Wittmann et al. 2021).",
     )
-    parser.add_argument("--version", action=_VersionAction, help="show the version and exit")
+    parser.add_argument(
+        "--version",
+        action=_VersionAction,
+        help="show the version, the store and config in use and the log file, then exit",
+    )
     parser.add_argument("--debug", action="store_true", help="show tracebacks on errors")
+    parser.add_argument(
+        "--log-level",
+        choices=("DEBUG", "INFO", "WARNING", "ERROR"),
+        default="INFO",
+        type=str.upper,
+        help="what goes into the log file (default INFO; the file: goniolab --version)",
+    )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for info in sorted(pkgutil.iter_modules(commands_pkg.__path__), key=lambda m: m.name):
         if info.name.startswith("_"):
@@ -61,6 +78,24 @@ def build_parser() -> argparse.ArgumentParser:
         module = importlib.import_module(f"goniolab.commands.{info.name}")
         module.register(sub)
     return parser
+
+
+def version_text() -> str:
+    """``goniolab X.Y.Z`` and the default store, config and log file, one per line."""
+    from goniolab import __version__
+    from goniolab.logs import log_path, redact
+    from goniolab.store import resolve_store_path
+
+    return "\n".join(
+        [
+            f"goniolab {__version__}",
+            f"store:  {redact(str(resolve_store_path(None, None)))} "
+            "(default; --store or a config's [lab] store chooses another)",
+            "config: none by default; commands that drive instruments take --config FILE "
+            "(configs/lab-sim.toml is the simulated lab)",
+            f"log:    {log_path()}",
+        ]
+    )
 
 
 def _quiet_library_logs(debug: bool) -> None:
@@ -83,6 +118,20 @@ def _silence_stdout() -> None:
         pass
 
 
+def _start_log(args: argparse.Namespace, argv: Sequence[str] | None) -> None:
+    """Open the log file and record the command (passwords blanked by the log filter)."""
+    from goniolab import __version__
+    from goniolab.logs import setup_logging
+
+    setup_logging(getattr(args, "log_level", "INFO"))
+    words = list(sys.argv[1:] if argv is None else argv)
+    _log().info("goniolab %s: %s", __version__, " ".join(words))
+    for name in ("config", "store"):
+        value = getattr(args, name, None)
+        if value:
+            _log().info("%s: %s", name, value)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``goniolab`` console script; returns the process exit code."""
     try:
@@ -92,6 +141,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             parser.print_help()
             return 2
         _quiet_library_logs(args.debug)
+        _start_log(args, argv)
         code: int = args.func(args)
         sys.stdout.flush()  # a closed pipe shows here, not in the interpreter's exit
     except BrokenPipeError:
@@ -100,7 +150,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except UserError as exc:
         if "args" in locals() and args.debug:
             raise
-        print(f"goniolab: error: {exc}", file=sys.stderr)
+        from goniolab.logs import redact
+
+        message = redact(str(exc))
+        _log().error("error: %s", message)
+        print(f"goniolab: error: {message}", file=sys.stderr)
         return exc.exit_code
     except KeyboardInterrupt:
         print("goniolab: interrupted", file=sys.stderr)

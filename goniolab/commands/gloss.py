@@ -174,6 +174,9 @@ def _cmd_log(args: argparse.Namespace) -> int:
         raise UserError(f"gloss log: {exc}") from exc
     try:
         store = RunStore(resolve_store_path(args.store, config_store))
+        from goniolab.commands.scan import announce_store
+
+        announce_store(store)
     except StoreError as exc:
         raise UserError(str(exc)) from exc
     with store:

@@ -366,9 +366,22 @@ def _open(store_arg: str | None, config_store: str | None, *, create: bool = Tru
     from goniolab.store import RunStore, StoreError, resolve_store_path
 
     try:
-        return RunStore(resolve_store_path(store_arg, config_store), create=create)
+        store = RunStore(resolve_store_path(store_arg, config_store), create=create)
     except StoreError as exc:
         raise UserError(str(exc)) from exc
+    announce_store(store)
+    return store
+
+
+def announce_store(store: RunStore) -> None:
+    """Say (stderr and the log) which store the readings go to."""
+    import logging
+
+    from goniolab.datasets import store_label
+
+    where = store_label(store)
+    print(f"goniolab: store {where}", file=sys.stderr)
+    logging.getLogger("goniolab").info("store: %s", where)
 
 
 def _cmd_resume(args: argparse.Namespace) -> int:

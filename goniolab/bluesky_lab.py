@@ -1,0 +1,354 @@
+"""bluesky / ophyd-async face of the lab (extra ``goniolab[bluesky]``).
+
+ophyd-async devices built on the same drivers as the CLI and the TUI (any lab a config
+describes: real controllers, the wire sim, or the in-process twin):
+
+- :class:`GonioArm` -- one arm of the two-arm goniometer as a bluesky ``Movable``
+  (``set(angle_deg)`` returns an ``AsyncStatus``): the move goes through
+  :meth:`drivers.goniometer.TwoArmGoniometer.move_to`, so the arm limits and the two-arm
+  separation interlock refuse an unsafe target (the status fails, nothing moves);
+  ``readback_deg`` is the hinted reading, the limits are configuration signals.
+- :class:`Spectro` -- the spectro-colorimeter as a triggerable detector: ``luminance_pct``
+  (hinted), the ``spectrum_pct`` array and CIE ``L_star``, ``a_star``, ``b_star``
+  (D65, CIE 1964 10 deg, ASTM E308); ``wavelengths_nm`` and ``exposure_us`` are configuration.
+- :class:`Glossmeter` -- ``g20_gu``, ``g60_gu``, ``g85_gu`` (ISO 2813).
+
+:func:`connect_lab` opens the lab in the RunEngine's event loop (where ophyd-async devices
+live) and homes the arms; :func:`inplane_scan` is the in-plane BRDF scan as a bluesky plan
+(lamp to theta_i, then the detector over theta_r, ``repeats`` readings per geometry, one
+event each). Like ophyd-async's own ``StandardReadable`` devices (``sim/_motor.py``), the
+devices are defined by their signals; the motion itself is the drivers' (trapezoid moves in
+the twin).
+
+Example
+-------
+>>> from bluesky import RunEngine
+>>> from goniolab.bluesky_lab import connect_lab, inplane_scan
+>>> RE = RunEngine()
+>>> lab = connect_lab("configs/lab-sim.toml", time_scale=0)
+>>> RE(inplane_scan(lab, theta_i_deg=45, theta_r_deg=[40, 45, 50], repeats=2))
+>>> lab.close()
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Generator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from goniolab.errors import UserError
+
+try:
+    from bluesky import plan_stubs as bps
+    from bluesky import preprocessors as bpp
+    from bluesky.run_engine import call_in_bluesky_event_loop
+    from ophyd_async.core import (
+        Array1D,
+        AsyncStatus,
+        StandardReadable,
+        soft_signal_r_and_setter,
+    )
+    from ophyd_async.core import StandardReadableFormat as Format
+except ImportError as _exc:  # pragma: no cover - depends on the installed extras
+    raise UserError(
+        f"the bluesky devices need the extra: pip install 'goniolab[bluesky]' ({_exc})"
+    ) from None
+
+__all__ = ["Glossmeter", "GonioArm", "LabDevices", "Spectro", "connect_lab", "inplane_scan"]
+
+#: Timeout of one arm move, seconds (the config's ``move_timeout_s`` when known).
+DEFAULT_MOVE_TIMEOUT_S = 60.0
+
+
+def lab_of_spectrum(wavelengths_nm: ArrayLike, values_pct: ArrayLike) -> tuple[float, ...]:
+    """CIE L*, a*, b* of a reflectance-factor spectrum in % (D65, CIE 1964 10 deg, ASTM E308).
+
+    Returns NaNs when the spectrum does not cover 380-780 nm evenly (colour undefined).
+    """
+    import importlib
+
+    try:  # the colour package of issue 11, where it is installed
+        spectrum_to_colour = importlib.import_module("goniolab.colour.spectra").spectrum_to_colour
+    except ImportError:
+        spectrum_to_colour = None
+    wl = np.asarray(wavelengths_nm, dtype=np.float64)
+    factors = np.asarray(values_pct, dtype=np.float64) / 100.0
+    if spectrum_to_colour is not None:
+        try:
+            c = spectrum_to_colour(wl, factors)
+        except ValueError:
+            return (math.nan, math.nan, math.nan)
+        return (float(c.L), float(c.a), float(c.b))
+    import warnings
+
+    import colour
+
+    if wl.size < 2 or wl[0] > 380.0 or wl[-1] < 780.0 or np.ptp(np.diff(wl)) > 1e-6:
+        return (math.nan, math.nan, math.nan)
+    observer = "CIE 1964 10 Degree Standard Observer"
+    sd = colour.SpectralDistribution(dict(zip(wl.tolist(), factors.tolist(), strict=True)))
+    cmfs = colour.MSDS_CMFS[observer]
+    with warnings.catch_warnings():  # colour-science notes its trimming of the CMFs
+        warnings.simplefilter("ignore", colour.utilities.ColourRuntimeWarning)
+        xyz = colour.sd_to_XYZ(sd, cmfs, colour.SDS_ILLUMINANTS["D65"], method="ASTM E308") / 100
+    lab = colour.XYZ_to_Lab(xyz, colour.CCS_ILLUMINANTS[observer]["D65"])
+    return (float(lab[0]), float(lab[1]), float(lab[2]))
+
+
+class GonioArm(StandardReadable):
+    """One arm (``"lamp"`` = theta_i or ``"detector"`` = theta_r) of a two-arm goniometer.
+
+    Parameters
+    ----------
+    goniometer
+        A :class:`drivers.goniometer.TwoArmGoniometer` (limits and interlock live there).
+    which
+        ``"lamp"`` or ``"detector"``.
+    move_timeout_s
+        Timeout of each move.
+    """
+
+    def __init__(
+        self,
+        goniometer: Any,
+        which: str,
+        *,
+        move_timeout_s: float = DEFAULT_MOVE_TIMEOUT_S,
+        name: str = "",
+    ) -> None:
+        if which not in ("lamp", "detector"):
+            raise ValueError(f"which must be 'lamp' or 'detector', got {which!r}")
+        self._gonio = goniometer
+        self._which = which
+        self._timeout_s = float(move_timeout_s)
+        axis = goniometer.lamp if which == "lamp" else goniometer.detector
+        lo, hi = axis.limits_deg
+        with self.add_children_as_readables(Format.HINTED_SIGNAL):
+            self.readback_deg, self._set_readback = soft_signal_r_and_setter(
+                float, math.nan, units="deg"
+            )
+        with self.add_children_as_readables(Format.CONFIG_SIGNAL):
+            self.low_limit_deg, _ = soft_signal_r_and_setter(float, float(lo), units="deg")
+            self.high_limit_deg, _ = soft_signal_r_and_setter(float, float(hi), units="deg")
+            self.min_separation_deg, _ = soft_signal_r_and_setter(
+                float, float(goniometer.min_separation_deg), units="deg"
+            )
+        super().__init__(name=name)
+
+    async def refresh(self) -> float:
+        """Read the arm's position from the controller into ``readback_deg``."""
+        ti, tr = await self._gonio.positions_deg()
+        value = float(ti if self._which == "lamp" else tr)
+        self._set_readback(value)
+        return value
+
+    @AsyncStatus.wrap
+    async def set(self, value: float) -> None:
+        """Move this arm to ``value`` deg, the other arm staying where it is.
+
+        The goniometer checks the arm limits and the separation interlock first; an unsafe
+        target fails the status (``LimitError`` / ``InterlockError``) and nothing moves.
+        """
+        ti, tr = await self._gonio.positions_deg()
+        target = (float(value), tr) if self._which == "lamp" else (ti, float(value))
+        reached = await self._gonio.move_to(*target, self._timeout_s)
+        self._set_readback(float(reached[0] if self._which == "lamp" else reached[1]))
+
+    async def stop(self, success: bool = True) -> None:
+        """Stop both arms (bluesky calls this on pause and abort)."""
+        await self._gonio.stop()
+
+
+class Spectro(StandardReadable):
+    """The spectro-colorimeter as a triggerable detector (one reading per trigger)."""
+
+    def __init__(self, spectro: Any, *, exposure_us: int = 10000, name: str = "") -> None:
+        self._spectro = spectro
+        with self.add_children_as_readables(Format.HINTED_SIGNAL):
+            self.luminance_pct, self._set_luminance = soft_signal_r_and_setter(
+                float, math.nan, units="%"
+            )
+        with self.add_children_as_readables():
+            self.spectrum_pct, self._set_spectrum = soft_signal_r_and_setter(
+                Array1D[np.float64], units="%"
+            )
+            self.L_star, self._set_L = soft_signal_r_and_setter(float, math.nan)
+            self.a_star, self._set_a = soft_signal_r_and_setter(float, math.nan)
+            self.b_star, self._set_b = soft_signal_r_and_setter(float, math.nan)
+        with self.add_children_as_readables(Format.CONFIG_SIGNAL):
+            self.wavelengths_nm, self._set_wavelengths = soft_signal_r_and_setter(
+                Array1D[np.float64], units="nm"
+            )
+            self.exposure_us, self._set_exposure = soft_signal_r_and_setter(
+                int, int(exposure_us), units="us"
+            )
+        super().__init__(name=name)
+
+    @AsyncStatus.wrap
+    async def trigger(self) -> None:
+        """Take one reading and publish it on the signals."""
+        reading = await self._spectro.measure()
+        wl = np.asarray(reading.wavelengths_nm, dtype=np.float64)
+        values = np.asarray(reading.values, dtype=np.float64)
+        self._set_wavelengths(wl)
+        self._set_spectrum(values)
+        self._set_exposure(int(reading.exposure_us))
+        self._set_luminance(float(reading.luminance_pct))
+        L, a, b = lab_of_spectrum(wl, values)
+        self._set_L(L)
+        self._set_a(a)
+        self._set_b(b)
+
+
+class Glossmeter(StandardReadable):
+    """The glossmeter as a triggerable detector: G20, G60, G85 in GU (ISO 2813)."""
+
+    def __init__(self, glossmeter: Any, *, name: str = "") -> None:
+        self._gloss = glossmeter
+        with self.add_children_as_readables(Format.HINTED_SIGNAL):
+            self.g20_gu, self._set_20 = soft_signal_r_and_setter(float, math.nan, units="GU")
+            self.g60_gu, self._set_60 = soft_signal_r_and_setter(float, math.nan, units="GU")
+            self.g85_gu, self._set_85 = soft_signal_r_and_setter(float, math.nan, units="GU")
+        super().__init__(name=name)
+
+    @AsyncStatus.wrap
+    async def trigger(self) -> None:
+        """Take one 20/60/85 deg reading (a geometry the meter does not report is NaN)."""
+        reading = await self._gloss.measure()
+        for angle, setter in ((20, self._set_20), (60, self._set_60), (85, self._set_85)):
+            v = reading.values_gu.get(angle)
+            setter(math.nan if v is None else float(v))
+
+
+@dataclass
+class LabDevices:
+    """The devices of one open lab (:func:`connect_lab`); ``close()`` parks and releases."""
+
+    lab: Any
+    lamp: GonioArm
+    detector: GonioArm
+    spectro: Spectro
+    glossmeter: Glossmeter | None
+    sample: str
+
+    def close(self) -> None:
+        """Park the arms and release the instruments (in the RunEngine's loop)."""
+
+        async def _close() -> None:
+            try:
+                g = self.lab.config.goniometer
+                await self.lab.goniometer.park(g.move_timeout_s)
+            finally:
+                await self.lab.__aexit__(None, None, None)
+
+        call_in_bluesky_event_loop(_close())
+
+
+def connect_lab(
+    config: str | Path, *, sample: str | None = None, time_scale: float | None = None
+) -> LabDevices:
+    """Open the lab of ``config`` in the bluesky event loop, home the arms, build the devices.
+
+    A :class:`bluesky.RunEngine` must exist (it owns the loop the devices live in).
+    """
+    from goniolab.commands.scan import with_sample
+    from goniolab.config import load_lab_config
+    from goniolab.lab import Lab
+
+    cfg = load_lab_config(config)
+    if sample:
+        cfg = with_sample(cfg, sample)
+
+    async def _open() -> LabDevices:
+        lab = Lab.from_config(cfg, time_scale=time_scale)
+        await lab.__aenter__()
+        try:
+            c = lab.config
+            gonio = lab.goniometer
+            lamp_status = await gonio.lamp.status()
+            det_status = await gonio.detector.status()
+            if not (lamp_status.homed and det_status.homed):
+                await gonio.home(4.0 * c.goniometer.move_timeout_s)
+            timeout = c.goniometer.move_timeout_s
+            devices = LabDevices(
+                lab=lab,
+                lamp=GonioArm(gonio, "lamp", move_timeout_s=timeout, name="lamp"),
+                detector=GonioArm(gonio, "detector", move_timeout_s=timeout, name="detector"),
+                spectro=Spectro(lab.spectro, exposure_us=c.spectro.exposure_us, name="spectro"),
+                glossmeter=None
+                if getattr(lab, "glossmeter", None) is None
+                else Glossmeter(lab.glossmeter, name="glossmeter"),
+                sample=c.sample.map,
+            )
+            for dev in (devices.lamp, devices.detector, devices.spectro, devices.glossmeter):
+                if dev is not None:
+                    await dev.connect()
+            await devices.lamp.refresh()
+            await devices.detector.refresh()
+            await lab.spectro.set_exposure_us(c.spectro.exposure_us)
+            return devices
+        except BaseException:
+            await lab.__aexit__(None, None, None)
+            raise
+
+    result: LabDevices = call_in_bluesky_event_loop(_open())
+    return result
+
+
+def inplane_scan(
+    lab: LabDevices,
+    *,
+    theta_i_deg: float,
+    theta_r_deg: Sequence[float],
+    repeats: int = 1,
+    md: dict[str, Any] | None = None,
+) -> Generator[Any, Any, str]:
+    """The in-plane BRDF scan as a bluesky plan.
+
+    Moves the lamp to ``theta_i_deg``, then for each detector angle moves the detector and
+    takes ``repeats`` readings of the spectro (one event each, with both arms' readbacks).
+    The start document carries the plan (``plan_name = "goniolab_inplane_scan"``, the
+    angles, the sample) so that a bluesky-side analysis finds the geometry.
+
+    Returns
+    -------
+    str
+        The run's uid.
+    """
+    angles = [float(t) for t in theta_r_deg]
+    if not angles:
+        raise ValueError("theta_r_deg: no detector angles")
+    if repeats < 1:
+        raise ValueError(f"repeats must be >= 1, got {repeats}")
+    detectors = [lab.spectro]
+    metadata = {
+        "plan_name": "goniolab_inplane_scan",
+        "plan_args": {
+            "theta_i_deg": float(theta_i_deg),
+            "theta_r_deg": angles,
+            "repeats": int(repeats),
+        },
+        "sample": lab.sample,
+        "detectors": [d.name for d in detectors],
+        "motors": [lab.lamp.name, lab.detector.name],
+        "num_points": len(angles) * int(repeats),
+        "hints": {"dimensions": [([lab.detector.readback_deg.name], "primary")]},
+        **(md or {}),
+    }
+
+    @bpp.stage_decorator([*detectors, lab.lamp, lab.detector])
+    @bpp.run_decorator(md=metadata)
+    def inner() -> Generator[Any, Any, None]:
+        yield from bps.mv(lab.lamp, float(theta_i_deg))
+        for tr in angles:
+            yield from bps.mv(lab.detector, tr)
+            for _ in range(int(repeats)):
+                yield from bps.trigger_and_read([*detectors, lab.lamp, lab.detector])
+
+    uid: str = yield from inner()  # run_decorator returns the run's uid
+    return uid

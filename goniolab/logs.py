@@ -1,0 +1,109 @@
+"""The log file every command and the TUI write: rotating, in the user log dir.
+
+``<user log dir>/goniolab.log`` (platformdirs: ``~/.local/state/goniolab/log`` on Linux;
+``GONIOLAB_LOG_DIR`` overrides it), 1 MB per file, five old files kept. ``--log-level``
+sets what goes in (default ``INFO``: commands, configs, stores, runs started and finished,
+instrument errors). Passwords never reach the file: :class:`RedactingFilter` blanks the
+password of any ``postgresql://user:password@`` URL and the value of ``PGPASSWORD`` in
+every record.
+"""
+
+from __future__ import annotations
+
+import logging
+import logging.handlers
+import os
+import re
+from pathlib import Path
+
+__all__ = [
+    "LEVELS",
+    "RedactingFilter",
+    "log_dir",
+    "log_path",
+    "redact",
+    "setup_logging",
+]
+
+LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR")
+_MAX_BYTES = 1_000_000
+_BACKUPS = 5
+_MARK = "_goniolab_file_handler"
+#: ``scheme://user:password@`` in any URL (libpq's own URI form included).
+_URL_PASSWORD = re.compile(r"(?P<head>[a-zA-Z][a-zA-Z0-9+.-]*://[^:/@\s]*):(?P<pw>[^@\s/]*)@")
+#: ``password=...`` in a libpq key/value connection string.
+_KV_PASSWORD = re.compile(r"(?P<head>\bpassword\s*=\s*)(?P<pw>'(?:[^'\\]|\\.)*'|\S+)", re.I)
+
+
+def redact(text: str) -> str:
+    """``text`` with URL passwords, ``password=`` values and ``$PGPASSWORD`` blanked."""
+    out = _URL_PASSWORD.sub(lambda m: f"{m.group('head')}:***@", text)
+    out = _KV_PASSWORD.sub(lambda m: f"{m.group('head')}***", out)
+    secret = os.environ.get("PGPASSWORD")
+    if secret:
+        out = out.replace(secret, "***")
+    return out
+
+
+class RedactingFilter(logging.Filter):
+    """Blank passwords in a record's final message (see :func:`redact`)."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        try:
+            message = record.getMessage()
+        except (TypeError, ValueError):  # a malformed record: leave it to the formatter
+            return True
+        clean = redact(message)
+        if clean != message or record.args:
+            record.msg, record.args = clean, None
+        if record.exc_info and record.exc_info[1] is not None:
+            record.exc_text = redact(logging.Formatter().formatException(record.exc_info))
+            record.exc_info = None
+        return True
+
+
+def log_dir() -> Path:
+    """The directory of the log file (``GONIOLAB_LOG_DIR`` or platformdirs' user log dir)."""
+    env = os.environ.get("GONIOLAB_LOG_DIR")
+    if env:
+        return Path(env).expanduser()
+    import platformdirs
+
+    return Path(platformdirs.user_log_dir("goniolab", appauthor=False))
+
+
+def log_path() -> Path:
+    """The log file ``goniolab.log`` in :func:`log_dir`."""
+    return log_dir() / "goniolab.log"
+
+
+def setup_logging(level: str = "INFO") -> Path | None:
+    """Send log records at ``level`` and above to the rotating log file.
+
+    Calling it again (the TUI, tests that call ``main`` many times) replaces the handler.
+    A log dir that cannot be created (read-only home) leaves file logging off and returns
+    ``None``; nothing else changes.
+    """
+    root = logging.getLogger()
+    for h in list(root.handlers):
+        if getattr(h, _MARK, False):
+            root.removeHandler(h)
+            h.close()
+    path = log_path()
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        handler = logging.handlers.RotatingFileHandler(
+            path, maxBytes=_MAX_BYTES, backupCount=_BACKUPS, encoding="utf-8"
+        )
+    except OSError:
+        return None
+    setattr(handler, _MARK, True)
+    handler.setLevel(getattr(logging, level.upper()))
+    handler.addFilter(RedactingFilter())
+    handler.setFormatter(
+        logging.Formatter("%(asctime)s %(process)d %(levelname)s %(name)s: %(message)s")
+    )
+    root.addHandler(handler)
+    if root.level > handler.level or root.level == logging.NOTSET:
+        root.setLevel(handler.level)
+    return path

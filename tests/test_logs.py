@@ -1,0 +1,51 @@
+"""The log file: every command writes it, --log-level filters it, passwords never reach it."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import pytest
+
+from goniolab.cli import main
+from goniolab.logs import redact
+
+
+def test_a_command_and_its_error_land_in_the_log(
+    _log_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["runs", "show", "7", "--store", str(tmp_path / "none.sqlite")]) == 2
+    text = (_log_dir / "goniolab.log").read_text()
+    assert "INFO goniolab: goniolab " in text and "runs show 7" in text
+    assert "ERROR goniolab: error: store " in text and "no such file" in text
+    assert capsys.readouterr().err.startswith("goniolab: error: store ")
+
+
+def test_log_level_filters(_log_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["--log-level", "warning", "samples", "--json"]) == 0
+    assert main(["--log-level", "DEBUG", "samples", "--json"]) == 0
+    capsys.readouterr()
+    logging.getLogger("goniolab.test").debug("a debug line")
+    lines = (_log_dir / "goniolab.log").read_text().splitlines()
+    commands = [ln for ln in lines if "samples --json" in ln]
+    assert len(commands) == 1 and "--log-level DEBUG" in commands[0]  # WARNING kept INFO out
+    assert any("DEBUG goniolab.test: a debug line" in ln for ln in lines)
+
+
+def test_version_names_store_config_and_log(
+    _log_dir: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    with pytest.raises(SystemExit) as ex:
+        main(["--version"])
+    assert ex.value.code == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith("goniolab ")
+    assert out[1].startswith("store:") and "goniolab.sqlite" in out[1]
+    assert out[2].startswith("config:")
+    assert out[3] == f"log:    {_log_dir / 'goniolab.log'}"
+
+
+def test_redact_blanks_url_passwords_and_pgpassword(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("PGPASSWORD", "s3cr3t-planted")
+    text = "postgresql://lab:hunter2@db.example:5432/runs password=abc x s3cr3t-planted"
+    assert redact(text) == "postgresql://lab:***@db.example:5432/runs password=*** x ***"
