@@ -1,4 +1,14 @@
-"""The run store: one SQLite file in WAL mode, every reading committed as it is measured.
+"""The run store: one SQLite file in WAL mode (default) or a shared PostgreSQL database,
+every reading committed as it is measured.
+
+``RunStore(path)`` opens an SQLite file; ``RunStore("postgresql://user@host/db")`` a
+PostgreSQL database (psycopg 3, the ``goniolab[postgres]`` extra) with the same tables,
+the same per-reading commit and the same claim semantics: a claim is a row lock on
+``run_claims`` held by a connection of the claiming process, dropped by the server when
+that process dies (also on ``kill -9``), as the file lock is by the kernel. Credentials come
+from libpq's own sources (``PGPASSWORD``, ``~/.pgpass``, ``PGSSLMODE`` and certificate
+files, or the URL); a password never appears in a message, a log line or a run's config
+snapshot (:func:`goniolab.logs.redact`).
 
 Tables
 ------
@@ -39,6 +49,8 @@ from typing import Any, ClassVar
 
 import platformdirs
 
+from goniolab.logs import redact
+
 __all__ = [
     "GlossRow",
     "PointRow",
@@ -47,6 +59,7 @@ __all__ = [
     "RunStore",
     "StoreError",
     "default_store_path",
+    "is_store_url",
     "resolve_store_path",
 ]
 
@@ -108,6 +121,69 @@ CREATE TABLE IF NOT EXISTS gloss_readings (
 );
 CREATE INDEX IF NOT EXISTS points_run ON points(run_id, idx, repeat);
 """
+
+#: The same tables in PostgreSQL (``DOUBLE PRECISION`` where SQLite's REAL is 8 bytes),
+#: plus ``run_claims``: one row per claimed run, row-locked while a runner holds it.
+_PG_SCHEMA = """
+CREATE TABLE IF NOT EXISTS meta (
+    key TEXT PRIMARY KEY,
+    value TEXT NOT NULL
+);
+CREATE TABLE IF NOT EXISTS runs (
+    id BIGSERIAL PRIMARY KEY,
+    kind TEXT NOT NULL,
+    plan_json TEXT NOT NULL,
+    config_json TEXT NOT NULL,
+    sample TEXT NOT NULL,
+    model_json TEXT NOT NULL,
+    version TEXT NOT NULL,
+    status TEXT NOT NULL,
+    reason TEXT NOT NULL DEFAULT '',
+    created_at DOUBLE PRECISION NOT NULL,
+    updated_at DOUBLE PRECISION NOT NULL,
+    finished_at DOUBLE PRECISION
+);
+CREATE TABLE IF NOT EXISTS points (
+    id BIGSERIAL PRIMARY KEY,
+    run_id BIGINT NOT NULL REFERENCES runs(id),
+    idx INTEGER NOT NULL,
+    repeat INTEGER NOT NULL,
+    theta_i_deg DOUBLE PRECISION NOT NULL,
+    theta_r_deg DOUBLE PRECISION NOT NULL,
+    measured_theta_i_deg DOUBLE PRECISION NOT NULL,
+    measured_theta_r_deg DOUBLE PRECISION NOT NULL,
+    luminance_pct DOUBLE PRECISION NOT NULL,
+    raw_json TEXT NOT NULL,
+    timestamp DOUBLE PRECISION NOT NULL,
+    UNIQUE (run_id, idx, repeat)
+);
+CREATE TABLE IF NOT EXISTS predictions (
+    run_id BIGINT NOT NULL REFERENCES runs(id),
+    idx INTEGER NOT NULL,
+    theta_i_deg DOUBLE PRECISION NOT NULL,
+    theta_r_deg DOUBLE PRECISION NOT NULL,
+    predicted_pct DOUBLE PRECISION NOT NULL,
+    PRIMARY KEY (run_id, idx)
+);
+CREATE TABLE IF NOT EXISTS gloss_readings (
+    id BIGSERIAL PRIMARY KEY,
+    run_id BIGINT NOT NULL REFERENCES runs(id),
+    seq INTEGER NOT NULL,
+    g20_gu DOUBLE PRECISION,
+    g60_gu DOUBLE PRECISION,
+    g85_gu DOUBLE PRECISION,
+    temperature_c DOUBLE PRECISION,
+    predicted_json TEXT,
+    raw TEXT NOT NULL,
+    timestamp DOUBLE PRECISION NOT NULL,
+    UNIQUE (run_id, seq)
+);
+CREATE TABLE IF NOT EXISTS run_claims (
+    run_id BIGINT PRIMARY KEY REFERENCES runs(id)
+);
+"""
+#: Advisory-lock key serialising schema creation by concurrent first users of a database.
+_PG_SCHEMA_LOCK = 0x60_1010_AB
 
 
 #: CSV columns of a scan export (one row per reading) and of a gloss export.
@@ -280,13 +356,25 @@ def default_store_path() -> Path:
     return Path(platformdirs.user_data_dir("goniolab", appauthor=False)) / "goniolab.sqlite"
 
 
-def resolve_store_path(cli_store: str | None, config_store: str | None = None) -> Path:
-    """Pick the store file: ``--store`` first, then config ``[lab] store``, then the default."""
-    if cli_store:
-        return Path(cli_store).expanduser()
-    if config_store:
-        return Path(config_store).expanduser()
+def is_store_url(location: str | Path) -> bool:
+    """Whether ``location`` names a PostgreSQL database (``postgresql://`` or ``postgres://``)."""
+    return isinstance(location, str) and location.startswith(("postgresql://", "postgres://"))
+
+
+def resolve_store_path(cli_store: str | None, config_store: str | None = None) -> Path | str:
+    """Pick the store: ``--store`` first, then config ``[lab] store``, then the default file.
+
+    A ``postgresql://`` URL is returned as it is (a string); a file as a :class:`Path`.
+    """
+    for choice in (cli_store, config_store):
+        if choice:
+            return choice if is_store_url(choice) else Path(choice).expanduser()
     return default_store_path()
+
+
+def _pg_why(exc: BaseException) -> str:
+    """psycopg's reason on one line (libpq's messages span lines)."""
+    return " ".join(str(exc).split()) or type(exc).__name__
 
 
 def _why(exc: BaseException) -> str:
@@ -299,6 +387,51 @@ def _why(exc: BaseException) -> str:
 
 def _dumps(obj: Any) -> str:
     return json.dumps(obj, sort_keys=True, default=str)
+
+
+def _redacted(obj: Any) -> Any:
+    """``obj`` with every string passed through :func:`goniolab.logs.redact` (a config
+    snapshot keeps the store URL, never its password)."""
+    if isinstance(obj, str):
+        return redact(obj)
+    if isinstance(obj, Mapping):
+        return {k: _redacted(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_redacted(v) for v in obj]
+    return obj
+
+
+class _PgConnection:
+    """A psycopg connection that speaks the SQLite store's SQL: ``?`` placeholders,
+    ``BEGIN IMMEDIATE``; autocommit outside explicit transactions."""
+
+    def __init__(self, conn: Any) -> None:
+        self.conn = conn
+
+    @staticmethod
+    def _sql(sql: str) -> str:
+        return "BEGIN" if sql == "BEGIN IMMEDIATE" else sql.replace("?", "%s")
+
+    def execute(self, sql: str, params: Sequence[Any] = ()) -> Any:
+        return self.conn.execute(self._sql(sql), tuple(params))
+
+    def executemany(self, sql: str, rows: Sequence[Sequence[Any]]) -> Any:
+        cur = self.conn.cursor()
+        cur.executemany(self._sql(sql), [tuple(r) for r in rows])
+        return cur
+
+    def close(self) -> None:
+        self.conn.close()
+
+
+def _psycopg() -> Any:
+    try:
+        import psycopg
+    except ImportError:
+        raise StoreError(
+            "a postgresql:// store needs psycopg: pip install 'goniolab[postgres]'"
+        ) from None
+    return psycopg
 
 
 class RunStore:
@@ -328,8 +461,18 @@ class RunStore:
     """
 
     def __init__(self, path: str | Path, *, readonly: bool = False, create: bool = True) -> None:
-        self.path = Path(path)
         self.readonly = readonly
+        self.is_postgres = is_store_url(path)
+        self._claims: dict[int, Any] = {}
+        if self.is_postgres:
+            self._conninfo = str(path)
+            #: How the store names itself (a URL without its password).
+            self.location = redact(self._conninfo)
+            self.path = Path(self.location.split("://", 1)[-1])
+            self._db: Any = self._open_postgres(readonly=readonly, create=create)
+            return
+        self.path = Path(path)
+        self.location = str(self.path)
         where = f"store {self.path}"
         if self.path.is_dir():
             raise StoreError(f"{where}: is a directory, not a store file")
@@ -365,11 +508,43 @@ class RunStore:
             self._db.execute("PRAGMA foreign_keys=ON")
             self._db.executescript(_SCHEMA)
             self._db.execute(
-                "INSERT OR IGNORE INTO meta(key, value) VALUES ('schema_version', ?)",
+                "INSERT INTO meta(key, value) VALUES ('schema_version', ?)"
+                " ON CONFLICT (key) DO NOTHING",
                 (str(_SCHEMA_VERSION),),
             )
         except (OSError, sqlite3.Error) as exc:
             raise StoreError(f"{where}: cannot open: {_why(exc)}") from exc
+
+    def _open_postgres(self, *, readonly: bool, create: bool) -> _PgConnection:
+        """Connect (libpq reads PGPASSWORD, ~/.pgpass, PGSSLMODE ... itself) and create the
+        tables unless ``readonly``; every message is passed through :func:`redact`."""
+        psycopg = _psycopg()
+        where = f"store {self.location}"
+        try:
+            conn = psycopg.connect(self._conninfo, autocommit=True, connect_timeout=10)
+        except psycopg.Error as exc:
+            raise StoreError(redact(f"{where}: cannot connect: {_pg_why(exc)}")) from None
+        db = _PgConnection(conn)
+        try:
+            have = db.execute("SELECT to_regclass('runs') IS NOT NULL").fetchone()[0]
+            if not have and (readonly or not create):
+                raise StoreError(f"{where}: no goniolab run store in this database (no runs table)")
+            if not readonly:
+                with conn.transaction():
+                    conn.execute("SELECT pg_advisory_xact_lock(%s)", (_PG_SCHEMA_LOCK,))
+                    conn.execute(_PG_SCHEMA)
+                    db.execute(
+                        "INSERT INTO meta(key, value) VALUES ('schema_version', ?)"
+                        " ON CONFLICT (key) DO NOTHING",
+                        (str(_SCHEMA_VERSION),),
+                    )
+        except psycopg.Error as exc:
+            conn.close()
+            raise StoreError(redact(f"{where}: cannot open: {_pg_why(exc)}")) from None
+        except StoreError:
+            conn.close()
+            raise
+        return db
 
     def _open_readonly(self, where: str) -> sqlite3.Connection:
         """Open for reading only: ``mode=ro``; on a read-only directory (no ``-shm`` can be
@@ -391,6 +566,9 @@ class RunStore:
     # ------------------------------------------------------------------ lifecycle
     def close(self) -> None:
         """Close the connection (committed data is already on disk)."""
+        for conn in self._claims.values():
+            conn.close()
+        self._claims.clear()
         self._db.close()
 
     def __enter__(self) -> RunStore:
@@ -400,7 +578,7 @@ class RunStore:
         self.close()
 
     @contextmanager
-    def _tx(self) -> Iterator[sqlite3.Connection]:
+    def _tx(self) -> Iterator[Any]:
         self._db.execute("BEGIN IMMEDIATE")
         try:
             yield self._db
@@ -411,7 +589,9 @@ class RunStore:
 
     @property
     def journal_mode(self) -> str:
-        """The SQLite journal mode in use (``"wal"``)."""
+        """The SQLite journal mode in use (``"wal"``; ``""`` for PostgreSQL)."""
+        if self.is_postgres:
+            return ""
         return str(self._db.execute("PRAGMA journal_mode").fetchone()[0])
 
     # ------------------------------------------------------------------ claims
@@ -421,8 +601,15 @@ class RunStore:
         e.g. ``scan resume`` while the scan still runs, or this one) gets :class:`RunBusy`.
 
         The claim is a POSIX record lock on byte ``run_id`` of ``<store>-lock`` beside the
-        store file, released on exit and by the kernel when the process dies.
+        store file, released on exit and by the kernel when the process dies. In
+        PostgreSQL it is a row lock (``SELECT ... FOR UPDATE NOWAIT`` on ``run_claims``) held
+        by a connection of its own, released on exit and by the server when the process
+        (and so its connection) dies.
         """
+        if self.is_postgres:
+            with self._claim_postgres(run_id):
+                yield
+            return
         lock_path = self._lock_path
         try:
             _ClaimFile.acquire(lock_path, run_id)
@@ -439,7 +626,52 @@ class RunStore:
         """Whether a runner (this or another process) is measuring ``run_id`` right now;
         ``None`` when the store is read-only and it cannot be told. A run whose status
         says ``running`` but that nobody claims was interrupted (e.g. ``kill -9``)."""
+        if self.is_postgres:
+            if run_id in self._claims:
+                return True
+            with self._tx() as db:
+                free = db.execute(
+                    "SELECT run_id FROM run_claims WHERE run_id = ? FOR UPDATE SKIP LOCKED",
+                    (run_id,),
+                ).fetchone()
+                exists = db.execute(
+                    "SELECT COUNT(*) FROM run_claims WHERE run_id = ?", (run_id,)
+                ).fetchone()[0]
+            return bool(exists) and free is None
         return _ClaimFile.is_held(self._lock_path, run_id)
+
+    @contextmanager
+    def _claim_postgres(self, run_id: int) -> Iterator[None]:
+        psycopg = _psycopg()
+        where = f"store {self.location}"
+        if run_id in self._claims:
+            raise RunBusy(f"{where}: run {run_id} is already being measured by this process")
+        self.get_run(run_id)
+        self._db.execute(
+            "INSERT INTO run_claims(run_id) VALUES (?) ON CONFLICT (run_id) DO NOTHING", (run_id,)
+        )
+        try:
+            conn = psycopg.connect(self._conninfo, autocommit=False, connect_timeout=10)
+        except psycopg.Error as exc:
+            raise StoreError(
+                redact(f"{where}: cannot claim run {run_id}: {_pg_why(exc)}")
+            ) from None
+        try:
+            conn.execute(
+                "SELECT run_id FROM run_claims WHERE run_id = %s FOR UPDATE NOWAIT", (run_id,)
+            )
+        except psycopg.errors.LockNotAvailable:
+            conn.close()
+            raise RunBusy(
+                f"{where}: run {run_id} is being measured by another goniolab process; "
+                "stop that one first"
+            ) from None
+        self._claims[run_id] = conn
+        try:
+            yield
+        finally:
+            self._claims.pop(run_id, None)
+            conn.close()  # ends the transaction: the row lock goes with it
 
     @property
     def _lock_path(self) -> Path:
@@ -460,15 +692,14 @@ class RunStore:
         """Insert a run and return its id."""
         now = time.time()
         with self._tx() as db:
-            cur = db.execute(
+            row = db.execute(
                 "INSERT INTO runs(kind, plan_json, config_json, sample, model_json, version,"
-                " status, reason, created_at, updated_at) VALUES (?,?,?,?,?,?,?,?,?,?)",
-                (kind, _dumps(plan), _dumps(config), sample, _dumps(model), version, status, "",
-                 now, now),
-            )  # fmt: skip
-            run_id = cur.lastrowid
-        assert run_id is not None
-        return int(run_id)
+                " status, reason, created_at, updated_at) VALUES (?,?,?,?,?,?,?,?,?,?)"
+                " RETURNING id",
+                (kind, _dumps(plan), _dumps(_redacted(config)), sample, _dumps(model), version,
+                 status, "", now, now),
+            ).fetchone()  # fmt: skip
+        return int(row[0])
 
     def set_status(self, run_id: int, status: str, reason: str = "") -> None:
         """Record the run's state; terminal states (done, aborted, failed) set ``finished_at``."""
@@ -481,7 +712,7 @@ class RunStore:
                 (status, reason, now, finished, run_id),
             )
             if cur.rowcount != 1:
-                raise StoreError(f"store {self.path}: no run {run_id}")
+                raise StoreError(f"store {self.location}: no run {run_id}")
 
     def get_run(self, run_id: int) -> RunRecord:
         """Return run ``run_id``; :class:`StoreError` naming the file when it does not exist."""
@@ -491,7 +722,7 @@ class RunStore:
             (run_id,),
         ).fetchone()
         if row is None:
-            raise StoreError(f"store {self.path}: no run {run_id}")
+            raise StoreError(f"store {self.location}: no run {run_id}")
         return self._record(row)
 
     def list_runs(self, limit: int | None = None) -> list[RunRecord]:
@@ -592,8 +823,10 @@ class RunStore:
         """Store predictions ``(index, theta_i_deg, theta_r_deg, predicted_pct)`` (upsert)."""
         with self._tx() as db:
             db.executemany(
-                "INSERT OR REPLACE INTO predictions(run_id, idx, theta_i_deg, theta_r_deg,"
-                " predicted_pct) VALUES (?,?,?,?,?)",
+                "INSERT INTO predictions(run_id, idx, theta_i_deg, theta_r_deg,"
+                " predicted_pct) VALUES (?,?,?,?,?) ON CONFLICT (run_id, idx) DO UPDATE SET"
+                " theta_i_deg = excluded.theta_i_deg, theta_r_deg = excluded.theta_r_deg,"
+                " predicted_pct = excluded.predicted_pct",
                 [(run_id, int(i), float(ti), float(tr), float(p)) for i, ti, tr, p in rows],
             )
 
@@ -657,6 +890,66 @@ class RunStore:
                 )
             )
         return out
+
+    # ------------------------------------------------------------------ migration
+    def table_columns(self, table: str) -> list[str]:
+        """The column names of ``table`` in this store."""
+        if self.is_postgres:
+            rows = self._db.execute(
+                "SELECT column_name FROM information_schema.columns"
+                " WHERE table_schema = current_schema() AND table_name = ?"
+                " ORDER BY ordinal_position",
+                (table,),
+            ).fetchall()
+        else:
+            rows = [(r[1],) for r in self._db.execute(f"PRAGMA table_info({table})").fetchall()]
+        return [str(r[0]) for r in rows]
+
+    def copy_run_from(self, src: RunStore, run_id: int) -> tuple[int, bool]:
+        """Copy run ``run_id`` of ``src`` (with its readings, predictions and gloss readings)
+        into this store in one transaction; returns ``(new id, copied)``.
+
+        The source run is remembered (``meta``): copying it again returns the id of the
+        first copy and ``copied = False``, so a migration can be re-run after a failure.
+        Columns both stores have are copied (a newer source's extra columns are dropped).
+        """
+        key = f"migrated:{src.location}:{run_id}"
+        done = self._db.execute("SELECT value FROM meta WHERE key = ?", (key,)).fetchone()
+        if done is not None:
+            return int(done[0]), False
+        src_run = src._db.execute("SELECT * FROM runs WHERE id = ?", (run_id,))
+        names = [d[0] for d in src_run.description]
+        row = src_run.fetchone()
+        if row is None:
+            raise StoreError(f"store {src.location}: no run {run_id}")
+        record = dict(zip(names, row, strict=True))
+        record["config_json"] = _dumps(_redacted(json.loads(record["config_json"])))
+        run_cols = [c for c in self.table_columns("runs") if c in record and c != "id"]
+        with self._tx() as db:
+            new_id = int(
+                db.execute(
+                    f"INSERT INTO runs({', '.join(run_cols)}) VALUES"
+                    f" ({', '.join('?' for _ in run_cols)}) RETURNING id",
+                    [record[c] for c in run_cols],
+                ).fetchone()[0]
+            )
+            for table in ("points", "predictions", "gloss_readings"):
+                theirs = src.table_columns(table)
+                cols = [c for c in self.table_columns(table) if c in theirs and c != "id"]
+                rows = src._db.execute(
+                    f"SELECT {', '.join(cols)} FROM {table} WHERE run_id = ?", (run_id,)
+                ).fetchall()
+                if not rows:
+                    continue
+                at = cols.index("run_id")
+                values = [[new_id if k == at else v for k, v in enumerate(r)] for r in rows]
+                db.executemany(
+                    f"INSERT INTO {table}({', '.join(cols)}) VALUES"
+                    f" ({', '.join('?' for _ in cols)})",
+                    values,
+                )
+            db.execute("INSERT INTO meta(key, value) VALUES (?, ?)", (key, str(new_id)))
+        return new_id, True
 
     # ------------------------------------------------------------------ export
     def export_rows(self, run_id: int) -> list[dict[str, Any]]:

@@ -19,7 +19,7 @@ if TYPE_CHECKING:  # sqlite3 and the plans load when a command runs, not at --he
 __all__ = ["angles_text", "open_store", "plan_text", "register", "run_summary", "store_path"]
 
 
-def store_path(store_arg: str | None, config_arg: str | None = None) -> Path:
+def store_path(store_arg: str | None, config_arg: str | None = None) -> Path | str:
     """The store chosen by ``--store``, else config ``[lab] store``, else the default."""
     from goniolab.store import resolve_store_path
 
@@ -65,7 +65,7 @@ def run_summary(store: RunStore, rec: RunRecord) -> dict[str, Any]:
         try:
             plan = BrdfPlan.from_dict(rec.plan)
         except PlanError as exc:
-            raise UserError(f"store {store.path}: run {rec.id}: {exc}") from exc
+            raise UserError(f"store {store.location}: run {rec.id}: {exc}") from exc
         return summarize_brdf(plan, store.points(rec.id), store.predictions(rec.id))
     from goniolab.scan.plans import gloss_statistics
 
@@ -78,7 +78,7 @@ def run_summary(store: RunStore, rec: RunRecord) -> dict[str, Any]:
 
 def _cmd_list(args: argparse.Namespace) -> int:
     path = store_path(args.store, args.config)
-    if not path.exists():
+    if isinstance(path, Path) and not path.exists():
         # a fresh installation (or a mistyped --store): nothing to list, nothing created
         if args.json:
             print("[]")
@@ -90,7 +90,7 @@ def _cmd_list(args: argparse.Namespace) -> int:
             print(json.dumps([_brief(store, r) for r in runs], indent=2))
             return 0
         if not runs:
-            print(f"no runs in {store.path}", file=sys.stderr)
+            print(f"no runs in {store.location}", file=sys.stderr)
             return 0
         print(
             f"{'RUN':>5}  {'KIND':5}  {'STATUS':11}  {'READINGS':>8}  {'CREATED (UTC)':19}  SAMPLE"
@@ -214,12 +214,53 @@ def _cmd_export(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_migrate(args: argparse.Namespace) -> int:
+    """Copy every run of an SQLite store (or another store) into the target store."""
+    from goniolab.store import is_store_url
+
+    source = args.source if is_store_url(args.source) else Path(args.source).expanduser()
+    target = store_path(args.store, args.config)
+    if str(source) == str(target):
+        raise UserError(f"runs migrate: {args.source} is the target store itself")
+    try:
+        src = RunStore(source, readonly=True)
+    except StoreError as exc:
+        raise UserError(str(exc)) from exc
+    moved: list[dict[str, Any]] = []
+    with src:
+        try:
+            dst = RunStore(target)
+        except StoreError as exc:
+            raise UserError(str(exc)) from exc
+        with dst:
+            for rec in sorted(src.list_runs(), key=lambda r: r.id):
+                if rec.status in ("running", "paused") and src.is_claimed(rec.id):
+                    raise UserError(
+                        f"run {rec.id} of {src.location} is being measured right now; "
+                        "migrate when it has finished"
+                    )
+                new_id, copied = dst.copy_run_from(src, rec.id)
+                moved.append({"from": rec.id, "to": new_id, "copied": copied})
+                if not args.json:
+                    what = "copied as" if copied else "already there as"
+                    print(f"run {rec.id} ({rec.kind}, {rec.status}): {what} run {new_id}")
+            where = dst.location
+    if args.json:
+        print(json.dumps({"source": src.location, "target": where, "runs": moved}, indent=2))
+    else:
+        n = sum(1 for m in moved if m["copied"])
+        print(f"{n} of {len(moved)} runs copied from {src.location} to {where}", file=sys.stderr)
+    return 0
+
+
 def register(subparsers: Any) -> None:
     """Add ``runs`` and its sub-commands."""
     p = subparsers.add_parser("runs", help="list, show and export stored runs")
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument(
-        "--store", help="SQLite store file (default: config [lab] store or user data dir)"
+        "--store",
+        help="SQLite store file or postgresql:// URL (default: config [lab] store or the "
+        "user data dir)",
     )
     common.add_argument("--config", help="lab config TOML whose [lab] store to use")
     sub = p.add_subparsers(dest="runs_command", metavar="ACTION", required=True)
@@ -255,3 +296,15 @@ def register(subparsers: Any) -> None:
         "--json", action="store_true", help="with -o: print what was written as JSON on stdout"
     )
     pe.set_defaults(func=_cmd_export)
+
+    pm = sub.add_parser(
+        "migrate",
+        parents=[common],
+        help="copy every run of an SQLite store into this store (e.g. a shared PostgreSQL)",
+        description="Copy the runs of --from (an instrument's SQLite file) into the store "
+        "chosen by --store/--config (e.g. postgresql://lab@dbhost/goniolab). Runs get new ids; "
+        "a run already copied is skipped, so the command can be re-run.",
+    )
+    pm.add_argument("--from", dest="source", required=True, metavar="STORE")
+    pm.add_argument("--json", action="store_true", help="print the id mapping as JSON")
+    pm.set_defaults(func=_cmd_migrate)

@@ -418,7 +418,9 @@ def _cmd_resume(args: argparse.Namespace) -> int:
 
 def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument(
-        "--store", help="SQLite run store (default: config [lab] store or user data dir)"
+        "--store",
+        help="run store: SQLite file or postgresql:// URL (default: config [lab] store or "
+        "the user data dir)",
     )
     p.add_argument("--time-scale", type=float, default=None, help="sim clock scale (0 = instant)")
     p.add_argument("--json", action="store_true", help="print only the summary JSON on stdout")
