@@ -129,6 +129,9 @@ async def _session(args: argparse.Namespace, store: RunStore, plan: GlossPlan) -
             )
         mode = args.mode or ("push" if args.protocol == "line" and not args.config else "measure")
         logger = await session.start(plan, mode=mode, interval_s=args.interval)
+        from goniolab.commands.scan import announce_store
+
+        announce_store(store, logger.run_id)
         printer = asyncio.create_task(_print_events(session.bus.subscribe(), args.json))
         loop = asyncio.get_running_loop()
         loop.add_signal_handler(signal.SIGINT, logger.stop)
@@ -174,9 +177,6 @@ def _cmd_log(args: argparse.Namespace) -> int:
         raise UserError(f"gloss log: {exc}") from exc
     try:
         store = RunStore(resolve_store_path(args.store, config_store))
-        from goniolab.commands.scan import announce_store
-
-        announce_store(store)
     except StoreError as exc:
         raise UserError(str(exc)) from exc
     with store:

@@ -251,6 +251,7 @@ async def _execute(
         )
         runner = session.start(scan)
         run_id = runner.run_id
+        announce_store(store, run_id)
         bar = ProgressBar(sys.stderr, clock_scale)
         report = asyncio.create_task(_report(session.bus.subscribe(), bar))
         loop = asyncio.get_running_loop()
@@ -369,19 +370,16 @@ def _open(store_arg: str | None, config_store: str | None, *, create: bool = Tru
         store = RunStore(resolve_store_path(store_arg, config_store), create=create)
     except StoreError as exc:
         raise UserError(str(exc)) from exc
-    announce_store(store)
     return store
 
 
-def announce_store(store: RunStore) -> None:
-    """Say (stderr and the log) which store the readings go to."""
+def announce_store(store: RunStore, run_id: int) -> None:
+    """Say (stderr and the log) which run of which store the readings go to."""
     import logging
 
-    from goniolab.datasets import store_label
-
-    where = store_label(store)
-    print(f"goniolab: store {where}", file=sys.stderr)
-    logging.getLogger("goniolab").info("store: %s", where)
+    where = store.location
+    print(f"goniolab: run {run_id} in store {where}", file=sys.stderr)
+    logging.getLogger("goniolab").info("run %d in store %s", run_id, where)
 
 
 def _cmd_resume(args: argparse.Namespace) -> int:
