@@ -256,7 +256,7 @@ def connect_lab(
 
     A :class:`bluesky.RunEngine` must exist (it owns the loop the devices live in).
     """
-    from goniolab.commands.scan import with_sample
+    from goniolab.session import home_timeout_s, with_sample
     from goniolab.config import load_lab_config
     from goniolab.lab import Lab
 
@@ -273,7 +273,7 @@ def connect_lab(
             lamp_status = await gonio.lamp.status()
             det_status = await gonio.detector.status()
             if not (lamp_status.homed and det_status.homed):
-                await gonio.home(4.0 * c.goniometer.move_timeout_s)
+                await gonio.home(home_timeout_s(c))
             timeout = c.goniometer.move_timeout_s
             devices = LabDevices(
                 lab=lab,
