@@ -34,6 +34,7 @@ power loss; nothing is buffered in memory.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import fcntl
 import io
@@ -671,7 +672,11 @@ class RunStore:
             yield
         finally:
             self._claims.pop(run_id, None)
-            conn.close()  # ends the transaction: the row lock goes with it
+            # a round trip: the row lock is gone when it returns (close alone is async);
+            # on a dead connection the server drops the lock with it
+            with contextlib.suppress(psycopg.Error):
+                conn.rollback()
+            conn.close()
 
     @property
     def _lock_path(self) -> Path:
