@@ -256,9 +256,9 @@ def connect_lab(
 
     A :class:`bluesky.RunEngine` must exist (it owns the loop the devices live in).
     """
-    from goniolab.session import home_timeout_s, with_sample
     from goniolab.config import load_lab_config
     from goniolab.lab import Lab
+    from goniolab.session import home_timeout_s, with_sample
 
     cfg = load_lab_config(config)
     if sample:
