@@ -17,9 +17,10 @@ import argparse
 import importlib
 import os
 import pkgutil
+import re
 import sys
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, NoReturn
 
 from goniolab.errors import UserError
 
@@ -49,11 +50,29 @@ class _VersionAction(argparse.Action):
         parser.exit(message=version_text() + "\n")
 
 
+#: A negative number, or an angle range/list starting with one ("-40:-30:5", "-10,0,10"): a
+#: value, not an option, so ``--theta-r -20:20:1`` needs no ``=``.
+_NEGATIVE_ARG = re.compile(r"^-\d+$|^-\d*\.\d+$|^-[\d.]+[:,][\d.:,\-]*$")
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with goniolab's one-line errors (``goniolab: error: ...``, exit 2) and
+    negative angle ranges taken as values; sub-command parsers are of the same class."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        # a private attribute (stable since Python 3.2): widen "looks like a negative number"
+        self._negative_number_matcher = _NEGATIVE_ARG
+
+    def error(self, message: str) -> NoReturn:
+        raise UserError(f"{self.prog}: {message} (see {self.prog} --help)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Build the top-level parser with every sub-command found in ``goniolab.commands``."""
     import goniolab.commands as commands_pkg
 
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="goniolab",
         description="Goniospectrophotometer and glossmeter control, with BRDF and gloss "
         "predicted from surface roughness (Wittmann et al. 2021).",
@@ -118,6 +137,17 @@ def _silence_stdout() -> None:
         pass
 
 
+def _one_line_warnings() -> None:
+    """Show warnings (e.g. heights that look like nm read as um) as one line, like errors."""
+    import warnings
+
+    def show(message: Warning | str, category: type[Warning], *_: object, **__: object) -> None:
+        print(f"goniolab: warning: {message}", file=sys.stderr)
+        _log().warning("%s", message)
+
+    warnings.showwarning = show
+
+
 def _start_log(args: argparse.Namespace, argv: Sequence[str] | None) -> None:
     """Open the log file and record the command (passwords blanked by the log filter)."""
     from goniolab import __version__
@@ -141,6 +171,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             parser.print_help()
             return 2
         _quiet_library_logs(args.debug)
+        _one_line_warnings()
         _start_log(args, argv)
         code: int = args.func(args)
         sys.stdout.flush()  # a closed pipe shows here, not in the interpreter's exit
@@ -153,7 +184,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         from goniolab.logs import redact
 
         message = redact(str(exc))
-        _log().error("error: %s", message)
+        if "logging" in sys.modules and sys.modules["logging"].getLogger().handlers:
+            # the log file is open (it is not before the arguments are parsed)
+            _log().error("error: %s", message)
         print(f"goniolab: error: {message}", file=sys.stderr)
         return exc.exit_code
     except KeyboardInterrupt:

@@ -302,7 +302,8 @@ def register(subparsers: Any) -> None:
     brdf.add_argument(
         "--theta-r",
         default="0:70:1",
-        help="detector angles: start:stop:step (stop included) or a comma list (default 0:70:1)",
+        help="detector angles: start:stop:step (stop included) or a comma list, e.g. "
+        "-20:20:1 (default 0:70:1)",
     )
     brdf.add_argument("--source-deg", type=float, default=None, help="lamp cone, full angle")
     brdf.add_argument("--detector-deg", type=float, default=None, help="detector cone, full angle")

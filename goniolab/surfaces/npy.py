@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import json
+import math
 import tokenize
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -13,7 +15,9 @@ from goniolab.surfaces._common import (
     _make,
     _ReadOptions,
     _resolve_steps,
+    _snap,
     _truncated,
+    _um_per,
 )
 
 
@@ -61,17 +65,102 @@ def _read_npy(path: Path, opts: _ReadOptions) -> HeightMap:
     file_steps: tuple[float, float] | None = None
     side = _sidecar(path)
     if side.exists():
-        try:
-            info = json.loads(side.read_text(encoding="utf-8"))
-            file_steps = (float(info["dx_um"]), float(info["dy_um"]))
-            extra = info.get("meta", {})
-            if not isinstance(extra, dict):
-                raise TypeError("meta is not an object")
-            meta.update({str(k): str(v) for k, v in extra.items()})
-        except (OSError, ValueError, KeyError, TypeError, RecursionError) as exc:
-            raise _fail(side.name, f"bad step sidecar for {name}: {exc!r}") from None
+        file_steps, z_um_per, extra = _read_sidecar(side, name)
+        if z_um_per != 1.0:
+            z = z * z_um_per
+        meta.update(extra)
     dx, dy = _resolve_steps(name, file_steps, opts.step_um, what=side.name)
-    return _make(name, z, dx, dy, meta)
+    hm = _make(name, z, dx, dy, meta)
+    _warn_if_nm(hm)
+    return hm
+
+
+#: Keys a ``.npy.json`` sidecar may hold.
+_SIDECAR_KEYS = ("dx_um", "dy_um", "step_um", "z_unit", "z_scale", "meta")
+
+
+def _read_sidecar(side: Path, name: str) -> tuple[tuple[float, float], float, dict[str, str]]:
+    """Steps, heights' micrometres per stored unit, and metadata of a ``.npy.json`` sidecar.
+
+    ``{"dx_um": 0.5, "dy_um": 0.5}`` or ``{"step_um": 0.5}`` (``dy_um`` defaults to
+    ``dx_um``, as the CSV header's ``dx_um``); ``"z_unit": "nm"`` (m, mm, um, nm, pm, A;
+    default um) and ``"z_scale": 2.0`` (a factor applied first) convert the stored heights
+    to micrometres; ``"meta"`` is free text.
+    """
+
+    def bad(reason: str) -> HeightMapError:
+        return _fail(side.name, f"bad sidecar for {name}: {reason}")
+
+    try:
+        info = json.loads(side.read_text(encoding="utf-8"))
+    except (OSError, ValueError, RecursionError) as exc:
+        raise bad(f"not readable JSON ({exc})") from None
+    if not isinstance(info, dict):
+        raise bad('must be a JSON object like {"dx_um": 0.5, "dy_um": 0.5}')
+    unknown = sorted(set(info) - set(_SIDECAR_KEYS))
+    if unknown:
+        raise bad(f"unknown key {unknown[0]!r} (known: {', '.join(_SIDECAR_KEYS)})")
+
+    def number(key: str) -> float:
+        value = info[key]
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise bad(f"{key} must be a number, got {value!r}")
+        return float(value)
+
+    if "dy_um" in info and "dx_um" not in info:
+        raise bad("dy_um needs dx_um (or give step_um alone)")
+    if "dx_um" in info:
+        if "step_um" in info:
+            raise bad("give dx_um (and dy_um) or step_um, not both")
+        dx = number("dx_um")
+        dy = number("dy_um") if "dy_um" in info else dx
+    elif "step_um" in info:
+        dx = dy = number("step_um")
+    else:
+        raise bad("no lateral step: give dx_um (and dy_um, default dx_um) or step_um")
+    scale = number("z_scale") if "z_scale" in info else 1.0
+    if not (math.isfinite(scale) and scale > 0):
+        raise bad(f"z_scale must be finite and > 0, got {scale!r}")
+    unit = info.get("z_unit", "um")
+    if not isinstance(unit, str):
+        raise bad(f'z_unit must be a unit name like "nm", got {unit!r}')
+    um_per = _um_per(side.name, unit, "z")
+    extra = info.get("meta", {})
+    if not isinstance(extra, dict):
+        raise bad("meta must be an object of text values")
+    meta = {str(k): str(v) for k, v in extra.items()}
+    if unit != "um" or scale != 1.0:
+        meta["z_stored_unit"] = f"{scale:g} {unit}" if scale != 1.0 else unit
+    return (dx, dy), _snap(scale * um_per), meta
+
+
+#: A map whose heights look like nanometres read as micrometres (rms slope and rms height
+#: no coating has): warned about, not refused.
+NM_SUSPECT_SDQ = 5.0
+NM_SUSPECT_SQ_UM = 50.0
+
+
+def _warn_if_nm(hm: HeightMap) -> None:
+    z = np.asarray(hm.z_um, dtype=np.float64)
+    if z.shape[0] < 2 or z.shape[1] < 2 or not np.isfinite(z).any():
+        return
+    sq = float(np.nanstd(z))
+    if sq <= NM_SUSPECT_SQ_UM:
+        return
+    gy, gx = np.gradient(z, hm.dy_um, hm.dx_um)
+    sdq = float(np.sqrt(np.nanmean(gx**2 + gy**2)))
+    if sdq > NM_SUSPECT_SDQ:
+        warnings.warn(
+            f"{hm.source}: heights read as micrometres give Sq = {sq:.3g} um and Sdq = "
+            f'{sdq:.3g}; if they are nanometres, put "z_unit": "nm" in the .npy.json '
+            "sidecar",
+            HeightUnitsWarning,
+            stacklevel=2,
+        )
+
+
+class HeightUnitsWarning(UserWarning):
+    """Heights that look like they are in the wrong unit (nm read as um)."""
 
 
 def _write_npy(hm: HeightMap, path: Path) -> None:
