@@ -216,7 +216,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
 def _cmd_migrate(args: argparse.Namespace) -> int:
     """Copy every run of an SQLite store (or another store) into the target store."""
-    from goniolab.store import is_store_url
+    from goniolab.store import RunStore, StoreError, is_store_url
 
     source = args.source if is_store_url(args.source) else Path(args.source).expanduser()
     target = store_path(args.store, args.config)
