@@ -47,7 +47,8 @@ class _VersionAction(argparse.Action):
         super().__init__(option_strings, dest, **kwargs)
 
     def __call__(self, parser: argparse.ArgumentParser, *_: Any) -> None:
-        parser.exit(message=version_text() + "\n")
+        print(version_text())  # on stdout, as argparse's own version action
+        parser.exit()
 
 
 #: A negative number, or an angle range/list starting with one ("-40:-30:5", "-10,0,10"): a
@@ -101,15 +102,19 @@ def build_parser() -> argparse.ArgumentParser:
 
 def version_text() -> str:
     """``goniolab X.Y.Z`` and the default store, config and log file, one per line."""
-    from goniolab import __version__
-    from goniolab.logs import log_path, redact
-    from goniolab.store import resolve_store_path
+    from pathlib import Path
 
+    import platformdirs
+
+    from goniolab import __version__
+    from goniolab.logs import log_path
+
+    # goniolab.store.default_store_path, without importing the store (and sqlite3) here
+    store = Path(platformdirs.user_data_dir("goniolab", appauthor=False)) / "goniolab.sqlite"
     return "\n".join(
         [
             f"goniolab {__version__}",
-            f"store:  {redact(str(resolve_store_path(None, None)))} "
-            "(default; --store or a config's [lab] store chooses another)",
+            f"store:  {store} (default; --store or a config's [lab] store chooses another)",
             "config: none by default; commands that drive instruments take --config FILE "
             "(configs/lab-sim.toml is the simulated lab)",
             f"log:    {log_path()}",

@@ -40,7 +40,9 @@ def test_version_names_store_config_and_log(
     assert ex.value.code == 0
     out = capsys.readouterr().out.splitlines()
     assert out[0].startswith("goniolab ")
-    assert out[1].startswith("store:") and "goniolab.sqlite" in out[1]
+    from goniolab.store import default_store_path
+
+    assert out[1].startswith(f"store:  {default_store_path()} ")
     assert out[2].startswith("config:")
     assert out[3] == f"log:    {_log_dir / 'goniolab.log'}"
 
