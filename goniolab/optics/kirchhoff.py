@@ -1,0 +1,257 @@
+"""Scalar Kirchhoff (tangent-plane) scattering from a height map, by FFT of the phase screen.
+
+The NIST appearance project (seed "nist-appearance-ray-method-and-kirchhoff", section
+"The Kirchhoff approximation") computes the BRDF of its epoxy coatings from the measured
+topography with Beckmann's Kirchhoff integral, windowed by a smooth Schwartz-type function;
+PHYSICS.md ("Where the facet model stops") gives the form used here. For the incident
+direction ``wi`` (towards the lamp), an outgoing ``wo``, ``v = k (wi + wo)`` and
+``k = 2 pi / lambda``, the scattered field is
+
+.. math:: U(w_o) = \\sum_{x,y} W(x, y)\\, e^{-i (v_x x + v_y y + v_z h(x, y))},
+
+one FFT of the windowed phase screen ``W exp(-i v_z h)`` giving every ``(v_x, v_y)`` of the
+grid at once (:mod:`goniolab.optics.physical`). The flux fraction of a cell is
+
+.. math:: P = R(w_i\\cdot\\hat h)\\,|G|^2\\,\\frac{|U|^2}{N\\,\\sum W^2},\\qquad
+          |G|^2 = \\frac{|w_i + w_o|^4}{4\\cos\\theta_i\\cos\\theta_o
+                  (\\cos\\theta_i + \\cos\\theta_o)^2}
+                = F_3^2\\,\\frac{\\cos\\theta_i}{\\cos\\theta_o},
+
+with ``F_3 = (1 + wi.wo)/(cos ti (cos ti + cos to))`` Beckmann's geometric factor
+(PHYSICS.md's ``F_geom``) and ``R`` the Fresnel reflectance at the local incidence angle of
+the stationary-phase facet (half vector ``h``). The normalisation is the discrete Parseval
+identity: a flat map puts ``sum P = R(ti)`` into the few cells of the window's transform
+around specular (``G = 1`` there), the exact Fresnel mirror. The factor ``cos ti / cos to``
+turns Beckmann's intensity ratio into a BRDF; with it the Kirchhoff BRDF tends, for
+``Sq >> lambda``, to the facet BRDF ``R P22 / (4 cos ti cos to cos^4 theta_h)`` exactly
+(stationary phase: ``|U|^2 -> 4 pi^2 P22 / v_z^2`` per unit area).
+
+The screen depends on ``v_z = k (cos ti + cos to)``, different for every direction. It is
+expanded about band centres ``v_c``:
+``exp(-i v_z h) = exp(-i v_c h) sum_n (-i (v_z - v_c) h)^n / n!``; one FFT per term and band
+serves every cell (and every wavelength: ``(v_x, v_y, v_z)`` fix the cell's value, lambda
+only moves which directions the cells are). The bands and orders are chosen so that
+``(|v_z - v_c| h_max)^(N+1)/(N+1)! <= tol`` (default 1e-4, a bound on the per-pixel phase
+factor) at the fewest FFTs (:func:`band_plan`). Heights are float32 and tiles of at most
+``tile`` points (:mod:`goniolab.optics.psd`), so memory is bounded: one tile's few
+complex64 arrays (about 60 MB for 1024 x 1024) whatever the map size.
+
+Coherent and diffuse parts: the coherent specular reflectance is
+``R(ti) |sum W exp(-i v_z h)|^2 / (sum W)^2`` (:meth:`KirchhoffModel.specular_reflectance`),
+which is ``R exp(-(4 pi Sq cos ti / lambda)^2)`` for Gaussian heights (the Debye-Waller /
+TIS relation); the diffuse part is the rest of ``P``.
+
+Limits: PHYSICS.md's Gaussian-ACF series is the test truth for the diffuse part; the map
+resolves directions within ``lambda/(2 step)`` of specular in direction cosines and
+angles down to ``lambda / field`` (:meth:`PhysicalOpticsModel.coverage`). The phase screen
+is only meaningful when neighbouring pixels differ in phase by less than pi,
+``v_z * slope * step < pi``: rough maps at fine wavelengths need a finer step (the facet
+model is then the right model anyway; :mod:`goniolab.optics.model_choice`).
+
+References
+----------
+.. [1] NIST appearance project, "Ray method and Kirchhoff approximation" (seed text),
+   section "The Kirchhoff approximation" (window, map spline-sampled about ten points per
+   wavelength, normalisation to the flat specular).
+.. [2] P. Beckmann, A. Spizzichino, "The Scattering of Electromagnetic Waves from Rough
+   Surfaces", Pergamon 1963, ch. 3 and 5 (F_3, Gaussian-surface series).
+.. [3] J. E. Harvey, "Light-scattering characteristics of optical surfaces", PhD thesis,
+   1976 (direction-cosine form).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from goniolab.optics.fresnel import fresnel
+from goniolab.optics.physical import FloatArray, PhysicalOpticsModel, _Box, _check_theta_i
+
+__all__ = ["DEFAULT_TAYLOR_TOL", "KirchhoffModel", "band_plan"]
+
+#: Bound on the truncated Taylor remainder of the phase factor, per pixel.
+DEFAULT_TAYLOR_TOL: float = 1e-4
+_BAND_X: tuple[float, ...] = (0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0)
+
+
+def band_plan(
+    v_lo: float, v_hi: float, h_max_um: float, tol: float = DEFAULT_TAYLOR_TOL
+) -> list[tuple[float, float, float, int]]:
+    """Bands ``(lo, hi, centre, order)`` of ``v_z`` (1/um) covering ``[v_lo, v_hi]``.
+
+    Each band of half-width ``d`` uses Taylor order N with ``(d h_max)^(N+1)/(N+1)! <= tol``;
+    the band width is picked among a few multiples of ``1/h_max`` for the fewest FFTs
+    (bands x (N + 1)).
+    """
+    span = max(float(v_hi) - float(v_lo), 0.0)
+    if h_max_um <= 0.0 or span == 0.0:
+        c = 0.5 * (v_lo + v_hi)
+        order = 0
+        x = 0.5 * span * h_max_um
+        while x ** (order + 1) / math.factorial(order + 1) > tol:
+            order += 1
+        return [(v_lo, v_hi, c, order)]
+    best: tuple[int, int, int] | None = None
+    for x in _BAND_X:
+        nb = max(1, math.ceil(span * h_max_um / (2.0 * x)))
+        xa = span * h_max_um / (2.0 * nb)
+        order = 0
+        while xa ** (order + 1) / math.factorial(order + 1) > tol:
+            order += 1
+        cost = nb * (order + 1)
+        if best is None or cost < best[0]:
+            best = (cost, nb, order)
+    assert best is not None
+    _, nb, order = best
+    edges = np.linspace(v_lo, v_hi, nb + 1)
+    return [
+        (float(edges[b]), float(edges[b + 1]), float(0.5 * (edges[b] + edges[b + 1])), order)
+        for b in range(nb)
+    ]
+
+
+class KirchhoffModel(PhysicalOpticsModel):
+    """Scalar Kirchhoff model of a height map (module docstring; parameters as
+    :class:`~goniolab.optics.physical.PhysicalOpticsModel`).
+
+    Example (API for spectral code)::
+
+        base = KirchhoffModel(hm, n=1.5, wavelength_nm=550)
+        for lam, n in zip(lams, indices):
+            r = base.with_optics(n=n, wavelength_nm=lam).luminance_pct(45, [45])
+    """
+
+    kind = "kirchhoff"
+    taylor_tol: float = DEFAULT_TAYLOR_TOL
+
+    def _raw_power(
+        self, theta_i_deg: float, lams_um: Sequence[float], boxes: Sequence[_Box]
+    ) -> tuple[list[FloatArray], list[float]]:
+        """Diffuse ``sum_tiles |U_d|^2 / (n_tiles N sum W^2)`` per cell (0 for evanescent
+        cells) and the coherent factor ``mean_tiles |sum W e^(-i v_z h)|^2 / (sum W)^2`` at
+        the specular cell (0 when the box does not hold it), per wavelength.
+
+        ``U_d`` is the field minus the tile's mean field times the window's transform: the
+        coherent beam is a delta in the specular direction (the lit spot is far larger than
+        the map), kept out of the cells it would smear over.
+        """
+        import scipy.fft
+
+        sh = self._shared
+        t = sh.tiled
+        cz_i = math.cos(math.radians(theta_i_deg))
+        geo = []
+        v_all_lo, v_all_hi = math.inf, -math.inf
+        for lam, box in zip(lams_um, boxes, strict=True):
+            _, _, z, ok = self._geometry(theta_i_deg, lam, box)
+            vz = (2.0 * math.pi / lam) * (cz_i + z)
+            if np.any(ok):
+                v_all_lo = min(v_all_lo, float(vz[ok].min()))
+                v_all_hi = max(v_all_hi, float(vz[ok].max()))
+            geo.append((ok, vz))
+        shapes = [(b.iy.size, b.ix.size) for b in boxes]
+        acc = [np.zeros(s) for s in shapes]
+        coh_acc = [0.0 for _ in boxes]
+        if not math.isfinite(v_all_lo):
+            return acc, coh_acc
+        h_max = sh.h_max_um
+        plan = band_plan(v_all_lo, v_all_hi, h_max, self.taylor_tol)
+        total = t.n_tiles * sum(order + 1 for *_, order in plan)
+        done = 0
+        # per band and wavelength: the cells it owns and their scaled offsets (v_z - v_c) h_max
+        owned: list[list[tuple[np.ndarray, np.ndarray] | None]] = []
+        for b, (lo, hi, vc, _order) in enumerate(plan):
+            row: list[tuple[np.ndarray, np.ndarray] | None] = []
+            last = b == len(plan) - 1
+            for ok, vz in geo:
+                sel = ok & (vz >= lo) & ((vz <= hi) if last else (vz < hi))
+                row.append((sel, (vz - vc) * h_max) if np.any(sel) else None)
+            owned.append(row)
+        gathers = [np.ix_(b.iy % t.ny_t, b.ix % t.nx_t) for b in boxes]
+        # the window's own transform, normalised at DC: the coherent field's shape per cell
+        w_hat = scipy.fft.fft2(t.wy[:, None] * t.wx[None, :], workers=-1)
+        w_shape = [w_hat[g] / w_hat[0, 0] for g in gathers]
+        sum_w = float(np.sum(t.wy, dtype=np.float64) * np.sum(t.wx, dtype=np.float64))
+        spec_idx = [
+            (-b.iy0, -b.ix0) if (b.ix0 <= 0 <= b.ix1 and b.iy0 <= 0 <= b.iy1) else None
+            for b in boxes
+        ]
+        for k in range(t.n_tiles):
+            h, w = t.tile(k)
+            u = (h / np.float32(h_max)).astype(np.float32) if h_max > 0 else h
+            fields = [np.zeros(s, dtype=np.complex128) for s in shapes]
+            coh = [0j for _ in boxes]
+            for (_lo, _hi, vc, order), row in zip(plan, owned, strict=True):
+                if all(r is None for r in row):
+                    done += order + 1
+                    continue
+                term = (w * np.exp(-1j * np.float32(vc) * h)).astype(np.complex64)
+                coefs = [None if r is None else r[0].astype(np.complex128) for r in row]
+                for n_term in range(order + 1):
+                    spec = scipy.fft.fft2(term, workers=-1)
+                    for li, r in enumerate(row):
+                        c = coefs[li]
+                        if r is None or c is None:
+                            continue
+                        if n_term > 0:
+                            c *= (-1j * r[1]) / n_term
+                        # diffuse field: minus the coherent part (the tile's mean field x W)
+                        fields[li] += (spec[gathers[li]] - spec[0, 0] * w_shape[li]) * c
+                        if spec_idx[li] is not None:
+                            coh[li] += complex(spec[0, 0]) * complex(c[spec_idx[li]])
+                    if n_term < order:
+                        term *= u
+                    done += 1
+                    if self.progress is not None:
+                        self.progress(done, total, "kirchhoff FFT")
+            for li in range(len(boxes)):
+                acc[li] += np.abs(fields[li]) ** 2
+                coh_acc[li] += abs(coh[li]) ** 2 / sum_w**2
+        norm = t.n_tiles * t.ny_t * t.nx_t * t.sum_w2
+        diffuse = [np.where(g[0], a / norm, 0.0) for a, g in zip(acc, geo, strict=True)]
+        return diffuse, [c / t.n_tiles for c in coh_acc]
+
+    def _cell_powers(
+        self, theta_i_deg: float, lams_um: Sequence[float], boxes: Sequence[_Box]
+    ) -> list[FloatArray]:
+        key = (
+            "kirchhoff",
+            round(theta_i_deg, 9),
+            tuple(round(v, 12) for v in lams_um),
+            tuple((b.ix0, b.ix1, b.iy0, b.iy1) for b in boxes),
+        )
+        raw, coh = self._shared.cached(key, lambda: self._raw_power(theta_i_deg, lams_um, boxes))
+        t = math.radians(theta_i_deg)
+        ci = math.cos(t)
+        out = []
+        r_spec = float(fresnel(ci, self.n))
+        for lam, box, r, c in zip(lams_um, boxes, raw, coh, strict=True):
+            x, y, z, ok = self._geometry(theta_i_deg, lam, box)
+            s2 = (x + math.sin(t)) ** 2 + y * y + (z + ci) ** 2
+            co = np.where(ok, z, 1.0)
+            g2 = np.where(ok, s2 * s2 / (4.0 * ci * co * (ci + co) ** 2), 0.0)
+            p = r * g2 * self._fresnel_geom(theta_i_deg, x, y, z, ok)
+            if box.ix0 <= 0 <= box.ix1 and box.iy0 <= 0 <= box.iy1:
+                p[-box.iy0, -box.ix0] += r_spec * c
+            out.append(p)
+        return out
+
+    def coherent_factor(self, theta_i_deg: float) -> float:
+        """``|sum W exp(-i v_z h)|^2 / (sum W)^2`` at specular, averaged over the tiles."""
+        ti = _check_theta_i(theta_i_deg)
+        t = self._shared.tiled
+        v = 2.0 * (2.0 * math.pi / (self.wavelength_nm * 1e-3)) * math.cos(math.radians(ti))
+        acc = 0.0
+        for k in range(t.n_tiles):
+            h, w = t.tile(k)
+            c = np.sum(w * np.exp(-1j * v * h.astype(np.float64))) / np.sum(w, dtype=np.float64)
+            acc += float(abs(c) ** 2)
+        return acc / t.n_tiles
+
+    def specular_reflectance(self, theta_i_deg: float) -> float:
+        """Coherent specular reflectance ``R(ti) |<exp(-i v_z h)>_W|^2`` (module docstring)."""
+        ti = _check_theta_i(theta_i_deg)
+        r = float(fresnel(math.cos(math.radians(ti)), self.n))
+        return r * self.coherent_factor(ti)

@@ -1,0 +1,217 @@
+"""Windows, tiles and the 2-D power spectral density of a height map (physical optics input).
+
+The physical-optics models (:mod:`goniolab.optics.kirchhoff`,
+:mod:`goniolab.optics.rayleigh_rice`) Fourier-transform a height map. Three things are
+shared here:
+
+- the window. The NIST appearance project (seed "nist-appearance-ray-method-and-kirchhoff",
+  section "The Kirchhoff approximation") multiplies the phase integral by a smooth window
+  that vanishes outside a finite region, built on the test function Schwartz uses in the
+  theory of distributions, ``psi(t) = exp(-1/t)`` for ``t > 0``: the hard edge of the
+  illuminated patch would otherwise add a sinc ringing to every direction.
+  :func:`schwartz_taper` is 1 over the middle of the map and falls to 0 over ``taper`` of
+  its length at each end through the C-infinity step ``psi(t)/(psi(t) + psi(1 - t))``, so
+  its transform decays faster than any power and the coherent specular beam stays
+  within a few cells of the FFT grid;
+- the tiles. A big map (4096 x 4096 and more) is cut into equal tiles (at most ``tile``
+  points per side, the remainder of fewer points than tiles dropped); every tile is windowed
+  and transformed alone and the powers are summed (Bartlett averaging). Memory is then
+  bounded by one tile's transforms whatever the map size; the angular resolution is that of
+  a tile, ``lambda / (tile * step)``;
+- the PSD. With the window ``W`` and the tile's heights ``h`` (window-weighted mean
+  removed), ``PSD(f_m) = |DFT(W h)_m|^2 dx dy / sum(W^2)`` (um^4), averaged over the tiles,
+  so that ``sum_m PSD(f_m) df_x df_y`` is the window-weighted mean square height Sq^2
+  (discrete Parseval). Spatial frequencies ``f = fftfreq(n, step)`` in cycles per um.
+
+References
+----------
+.. [1] NIST appearance project, "Ray method and Kirchhoff approximation" (seed text),
+   section "The Kirchhoff approximation": smooth Schwartz-type window of the phase integral.
+.. [2] J. C. Stover, "Optical Scattering: Measurement and Analysis", 3rd ed., SPIE 2012,
+   ch. 2 and 4 (PSD of a profile/surface, its normalisation to the rms roughness).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from goniolab.optics.heightmap import HeightMap, fill_missing, level_plane
+
+__all__ = [
+    "DEFAULT_TAPER",
+    "DEFAULT_TILE",
+    "PSD2",
+    "TiledMap",
+    "psd2",
+    "schwartz_taper",
+    "tile_starts",
+]
+
+FloatArray = NDArray[np.float64]
+
+#: Fraction of each side over which the window falls from 1 to 0.
+DEFAULT_TAPER: float = 0.25
+#: Largest tile side (points) transformed at once.
+DEFAULT_TILE: int = 1024
+
+
+def schwartz_taper(n: int, taper: float = DEFAULT_TAPER) -> FloatArray:
+    """1-D window of ``n`` points: 1 in the middle, a Schwartz C-infinity step at each end.
+
+    ``w = s(d / (taper n))`` with ``d`` the distance of the sample centre from the nearest
+    end and ``s(t) = psi(t)/(psi(t) + psi(1 - t))``, ``psi(t) = exp(-1/t)`` (0 for t <= 0),
+    ``s = 1`` for ``t >= 1``. ``taper`` in (0, 0.5].
+    """
+    if n < 1:
+        raise ValueError(f"window length must be >= 1, got {n}")
+    if not (0.0 < taper <= 0.5):
+        raise ValueError(f"taper must be in (0, 0.5], got {taper}")
+    x = (np.arange(n, dtype=np.float64) + 0.5) / n
+    t = np.minimum(x, 1.0 - x) / taper
+    t = np.clip(t, 0.0, 1.0)
+
+    def psi(u: FloatArray) -> FloatArray:
+        pos = u > 0.0
+        out: FloatArray = np.where(pos, np.exp(-1.0 / np.where(pos, u, 1.0)), 0.0)
+        return out
+
+    a, b = psi(t), psi(1.0 - t)
+    out: FloatArray = np.where(t >= 1.0, 1.0, a / np.where(a + b > 0.0, a + b, 1.0))
+    return out
+
+
+def tile_starts(n: int, tile: int) -> tuple[list[int], int]:
+    """Start indices and common length of the equal tiles along one axis of ``n`` points."""
+    if tile < 8:
+        raise ValueError(f"tile must be >= 8 points, got {tile}")
+    n_seg = max(1, math.ceil(n / tile))
+    size = n // n_seg
+    return [k * size for k in range(n_seg)], size
+
+
+@dataclass(frozen=True, eq=False)
+class TiledMap:
+    """A levelled, gap-filled height map cut into equal windowed tiles (float32).
+
+    Attributes
+    ----------
+    z_um : ndarray
+        The levelled map (float32, NaN filled by the nearest valid point).
+    dx_um, dy_um : float
+        Steps.
+    ys, xs : list of int
+        Tile start rows and columns; ``ny_t``, ``nx_t`` the tile shape.
+    wy, wx : ndarray
+        The 1-D windows (float32); the tile window is their outer product.
+    sum_w2 : float
+        ``sum(W^2)`` of one tile.
+    source : str
+        Where the map came from.
+    filled : int
+        Number of missing points that were filled.
+    """
+
+    z_um: NDArray[np.float32]
+    dx_um: float
+    dy_um: float
+    ys: list[int]
+    xs: list[int]
+    ny_t: int
+    nx_t: int
+    wy: NDArray[np.float32]
+    wx: NDArray[np.float32]
+    sum_w2: float
+    source: str
+    filled: int
+
+    @classmethod
+    def from_heightmap(
+        cls, hm: HeightMap, *, tile: int = DEFAULT_TILE, taper: float = DEFAULT_TAPER
+    ) -> TiledMap:
+        """Level (best plane), fill missing points (nearest), cut into tiles."""
+        ny, nx = hm.shape
+        if min(ny, nx) < 16:
+            raise ValueError(
+                f"{hm.source}: map of {nx} x {ny} points is too small for physical optics "
+                "(at least 16 x 16)"
+            )
+        filled = int(hm.z_um.size - hm.n_valid)
+        if filled:
+            hm = fill_missing(hm, "nearest")
+        lev = level_plane(hm)
+        z = np.asarray(lev.z_um, dtype=np.float32)
+        ys, nyt = tile_starts(ny, tile)
+        xs, nxt = tile_starts(nx, tile)
+        wy = schwartz_taper(nyt, taper).astype(np.float32)
+        wx = schwartz_taper(nxt, taper).astype(np.float32)
+        sum_w2 = float(np.sum(wy.astype(np.float64) ** 2) * np.sum(wx.astype(np.float64) ** 2))
+        return cls(
+            z_um=z,
+            dx_um=float(hm.dx_um),
+            dy_um=float(hm.dy_um),
+            ys=ys,
+            xs=xs,
+            ny_t=nyt,
+            nx_t=nxt,
+            wy=wy,
+            wx=wx,
+            sum_w2=sum_w2,
+            source=hm.source,
+            filled=filled,
+        )
+
+    @property
+    def n_tiles(self) -> int:
+        return len(self.ys) * len(self.xs)
+
+    def tile(self, k: int) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+        """Heights of tile ``k`` (window-weighted mean removed) and its window (float32)."""
+        iy, ix = divmod(k, len(self.xs))
+        y0, x0 = self.ys[iy], self.xs[ix]
+        h = self.z_um[y0 : y0 + self.ny_t, x0 : x0 + self.nx_t]
+        w = self.wy[:, None] * self.wx[None, :]
+        mean = float(np.sum(w * h, dtype=np.float64) / np.sum(w, dtype=np.float64))
+        return (h - np.float32(mean)).astype(np.float32), w
+
+
+@dataclass(frozen=True, eq=False)
+class PSD2:
+    """Two-sided 2-D PSD of a height map on the tile's FFT grid.
+
+    ``psd_um4[i, j]`` at ``fy[i]``, ``fx[j]`` (cycles/um, numpy ``fftfreq`` order);
+    ``sq_um`` the rms height the PSD integrates to.
+    """
+
+    fx: FloatArray
+    fy: FloatArray
+    psd_um4: FloatArray
+    sq_um: float
+
+    @property
+    def df_x(self) -> float:
+        return float(abs(self.fx[1] - self.fx[0])) if self.fx.size > 1 else 0.0
+
+    @property
+    def df_y(self) -> float:
+        return float(abs(self.fy[1] - self.fy[0])) if self.fy.size > 1 else 0.0
+
+
+def psd2(tiled: TiledMap) -> PSD2:
+    """PSD of a tiled map, averaged over the tiles (module docstring for the normalisation)."""
+    import scipy.fft
+
+    acc = np.zeros((tiled.ny_t, tiled.nx_t), dtype=np.float64)
+    for k in range(tiled.n_tiles):
+        h, w = tiled.tile(k)
+        spec = scipy.fft.fft2(w * h, workers=-1)
+        acc += np.abs(spec).astype(np.float64) ** 2
+    psd = acc * tiled.dx_um * tiled.dy_um / (tiled.sum_w2 * tiled.n_tiles)
+    fx = np.fft.fftfreq(tiled.nx_t, tiled.dx_um).astype(np.float64)
+    fy = np.fft.fftfreq(tiled.ny_t, tiled.dy_um).astype(np.float64)
+    df = (1.0 / (tiled.nx_t * tiled.dx_um)) * (1.0 / (tiled.ny_t * tiled.dy_um))
+    sq = math.sqrt(float(np.sum(psd)) * df)
+    return PSD2(fx=fx, fy=fy, psd_um4=psd, sq_um=sq)
