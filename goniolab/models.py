@@ -4,19 +4,29 @@ Every command, the lab and the TUI name a surface the same way (a height-map fil
 ``sample:NAME``, :func:`goniolab.surfaces.resolve_map`); :func:`model_for` turns it into the
 model that predicts it, cached per spec, file version and options. Errors become
 :class:`goniolab.errors.UserError` (exit code 2) naming the file or sample and the reason.
+
+Models (``model=``, the CLI's ``--model``): ``facet`` (geometric optics, Wittmann et al.),
+``kirchhoff`` (scalar Kirchhoff by FFT of the map's phase screen), ``rayleigh-rice``
+(first-order perturbation from the map's PSD) and ``auto`` (the default: per geometry, the
+regime rule of :mod:`goniolab.optics.model_choice`).
 """
 
 from __future__ import annotations
 
 import functools
 from pathlib import Path
+from typing import Any
 
 from goniolab.errors import UserError
 from goniolab.optics.facet import FacetModel, Weighting
+from goniolab.optics.models import ReflectanceModel
 from goniolab.optics.surface import SlopeMethod, Surface
 from goniolab.surfaces.resolve import SAMPLE_PREFIX, one_line, resolve_map
 
-__all__ = ["model_for"]
+__all__ = ["MODEL_NAMES", "model_for"]
+
+#: Names accepted by ``model=`` / ``--model``.
+MODEL_NAMES: tuple[str, ...] = ("auto", "facet", "kirchhoff", "rayleigh-rice")
 
 
 def _spec_key(spec: str | Path) -> tuple[str, int, int]:
@@ -41,11 +51,31 @@ def _model(
     slope_method: SlopeMethod,
     weighting: Weighting,
     masking: bool,
-) -> FacetModel:
+    model: str,
+    wavelength_nm: float | None,
+) -> Any:
     hm = resolve_map(spec, step_um=step_um)
     try:
-        surface = Surface.from_heightmap(hm, slope_method=slope_method)
-        return FacetModel(surface, n=n, weighting=weighting, masking=masking)
+        if model == "facet":
+            surface = Surface.from_heightmap(hm, slope_method=slope_method)
+            return FacetModel(surface, n=n, weighting=weighting, masking=masking)
+        opts: dict[str, Any] = {
+            "wavelength_nm": 550.0 if wavelength_nm is None else wavelength_nm,
+            "gloss_weighting": "iso2813" if wavelength_nm is None else "single",
+            "masking": masking,
+        }
+        if model == "auto":
+            from goniolab.optics.model_choice import AutoModel
+
+            facet = _model(key, spec, n, step_um, slope_method, weighting, masking, "facet", None)
+            return AutoModel(hm, facet, **opts)
+        if model == "kirchhoff":
+            from goniolab.optics.kirchhoff import KirchhoffModel
+
+            return KirchhoffModel(hm, n=n, **opts)
+        from goniolab.optics.rayleigh_rice import RayleighRiceModel
+
+        return RayleighRiceModel(hm, n=n, **opts)
     except ValueError as exc:
         raise UserError(one_line(f"{spec}: {exc}")) from None
 
@@ -58,8 +88,10 @@ def model_for(
     slope_method: SlopeMethod = "forward",
     weighting: Weighting = "radiometric",
     masking: bool = False,
-) -> FacetModel:
-    """The facet model of a height map (cached per spec, file version and options).
+    model: str = "facet",
+    wavelength_nm: float | None = None,
+) -> ReflectanceModel:
+    """The reflectance model of a height map (cached per spec, file version and options).
 
     Parameters
     ----------
@@ -68,12 +100,28 @@ def model_for(
     n
         Refractive index; complex ``n + ik`` for conductors.
     slope_method, weighting, masking
-        Passed to :meth:`Surface.from_heightmap` and :class:`FacetModel`.
+        Passed to :meth:`Surface.from_heightmap` and :class:`FacetModel` (masking also to
+        the physical-optics models).
+    model
+        One of :data:`MODEL_NAMES`.
+    wavelength_nm
+        For the wave-optics models: the wavelength of every response, gloss included.
+        ``None``: BRDF and goniometer responses at 550 nm, gloss weighted over wavelength by
+        CIE illuminant C x V(lambda) as ISO 2813 does.
 
     Raises
     ------
     UserError
-        Bad spec or file (see :func:`resolve_map`), or a map with no usable facets.
+        Bad spec or file (see :func:`resolve_map`), unknown model, or a map with no usable
+        facets.
     """
+    if model not in MODEL_NAMES:
+        raise UserError(f"unknown model {model!r}; use one of {', '.join(MODEL_NAMES)}")
+    if wavelength_nm is not None and not (100.0 <= float(wavelength_nm) <= 20000.0):
+        raise UserError(f"wavelength {wavelength_nm} nm: must be in [100, 20000] nm")
     key = _spec_key(spec)
-    return _model(key, str(spec), complex(n), step_um, slope_method, weighting, bool(masking))
+    wl = None if wavelength_nm is None else float(wavelength_nm)
+    out: ReflectanceModel = _model(
+        key, str(spec), complex(n), step_um, slope_method, weighting, bool(masking), model, wl
+    )
+    return out

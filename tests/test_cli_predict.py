@@ -58,6 +58,9 @@ def test_brdf_of_a_gaussian_sample_matches_beckmann(capsys: pytest.CaptureFixtur
         "45",
         "--theta-r",
         "39:51:3",
+        "--model",
+        "facet",
+        "--no-masking",
     )
     tr = np.array(out["theta_r_deg"])
     np.testing.assert_allclose(tr, [39.0, 42.0, 45.0, 48.0, 51.0])
@@ -73,7 +76,16 @@ def test_brdf_of_a_gaussian_sample_matches_beckmann(capsys: pytest.CaptureFixtur
 def test_point_brdf_scales_with_the_complex_fresnel(capsys: pytest.CaptureFixture[str]) -> None:
     # At the in-plane specular direction the facets are level: the local incidence is 45 deg
     # for every contributing facet, so the metal/dielectric ratio is the Fresnel ratio.
-    args = ("predict", "brdf", "sample:gaussian-s0.05", "--point", "--theta-r", "45")
+    args = (
+        "predict",
+        "brdf",
+        "sample:gaussian-s0.05",
+        "--point",
+        "--theta-r",
+        "45",
+        "--model",
+        "facet",
+    )
     diel = _run_json(capsys, *args)
     metal = _run_json(capsys, *args, "--n", "0.27+3.41j")
     assert "luminance_pct" not in diel
@@ -131,3 +143,62 @@ def test_samples_command_lists_the_library(capsys: pytest.CaptureFixture[str]) -
     assert by_name["flat"]["n"] == 1.55
     assert main(["samples"]) == 0
     assert "wittmann-8" in capsys.readouterr().out
+
+
+def test_model_and_wavelength_options_and_the_model_in_json(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    # the regime rule per geometry: wittmann-1 (Sq ~ 44 nm) is Kirchhoff at 20 and 60 deg,
+    # Rayleigh-Rice at 85 deg (g = (4 pi Sq cos 85 / 0.55)^2 ~ 0.008)
+    rep = _run_json(capsys, "predict", "gloss", "sample:wittmann-1")
+    assert rep["model"]["G20"] == "kirchhoff" and rep["model"]["G85"] == "rayleigh-rice"
+    assert rep["wavelength_nm"] == "ISO 2813 C x V"
+    facet = _run_json(capsys, "predict", "gloss", "sample:wittmann-1", "--model", "facet")
+    assert facet["model"] == {"G20": "facet", "G60": "facet", "G85": "facet"}
+    red = _run_json(
+        capsys,
+        "predict",
+        "gloss",
+        "sample:wittmann-1",
+        "--model",
+        "kirchhoff",
+        "--wavelength-nm",
+        "700",
+    )
+    blue = _run_json(
+        capsys,
+        "predict",
+        "gloss",
+        "sample:wittmann-1",
+        "--model",
+        "kirchhoff",
+        "--wavelength-nm",
+        "420",
+    )
+    # shorter wavelength, larger Rayleigh factor, weaker specular beam
+    assert blue["G20"] < red["G20"]
+    assert red["model"]["G20"] == "kirchhoff" and red["wavelength_nm"] == 700.0
+    curve = _run_json(
+        capsys,
+        "predict",
+        "brdf",
+        "sample:wittmann-1",
+        "--theta-i",
+        "45",
+        "--theta-r",
+        "0:70:10",
+    )
+    assert curve["model"]["auto"] == "kirchhoff"
+    # the 512 um map at 1 um resolves +-0.275 in sin around specular: 0..20 deg is facet
+    assert set(curve["fallback"]) >= {"0", "10", "20"} and "40" not in curve["fallback"]
+    assert main(["predict", "gloss", "sample:flat", "--wavelength-nm", "5"]) == 2
+    assert "--wavelength-nm" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["predict", "gloss", "sample:flat", "--model", "wave"])
+    capsys.readouterr()
+
+
+def test_stats_say_the_regime_per_geometry(capsys: pytest.CaptureFixture[str]) -> None:
+    st = _run_json(capsys, "predict", "stats", "sample:wittmann-8")
+    assert st["regime"]["20"]["model"] == "facet"
+    assert st["regime"]["20"]["g"] > 20

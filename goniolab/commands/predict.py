@@ -6,6 +6,11 @@ model (Wittmann et al. 2021; docs/PHYSICS.md) gives
 - ``stats``: Ra, Sq (nm), Sdq and the zero-slope histogram fraction h_r;
 - ``gloss``: ISO 2813 G20/G60/G85, the ASTM D4039 haze index, ASTM E430 haze and DOI and the
   ASTM D523 recommended geometry (:func:`goniolab.optics.gloss_standards.gloss_report`);
+- every command takes ``--model auto|facet|kirchhoff|rayleigh-rice`` (default ``auto``: per
+  geometry, the regime rule of :mod:`goniolab.optics.model_choice`) and ``--wavelength-nm``
+  (default: gloss weighted over wavelength by CIE C x V(lambda) as ISO 2813 does, BRDFs at
+  550 nm); ``--json`` names the model used per geometry under ``"model"`` and any geometry
+  the map cannot resolve (read from the facet model) under ``"fallback"``;
 - ``brdf``: the in-plane curve at ``--theta-i`` over ``--theta-r``: the goniometer reading
   (``luminance_pct``, % of a mirror, source and detector cones) and the aperture-averaged
   BRDF ``luminance / 100 / (projected solid angle of the detector)``, or with ``--point`` the
@@ -21,6 +26,7 @@ import argparse
 import json
 import math
 import sys
+import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -33,6 +39,9 @@ if TYPE_CHECKING:  # numpy and the optics load when a command runs, not at --hel
 
     from goniolab.optics.apertures import Cone
     from goniolab.optics.metrics import PeakMetrics
+
+#: ``--model`` choices (goniolab.models.MODEL_NAMES; literal here: no optics import at --help).
+MODEL_NAMES: tuple[str, ...] = ("auto", "facet", "kirchhoff", "rayleigh-rice")
 
 __all__ = ["parse_index", "register"]
 
@@ -63,17 +72,127 @@ def _index_json(n: complex) -> float | list[float]:
     return n.real if n.imag == 0 else [n.real, n.imag]
 
 
+class _Progress:
+    """Progress on stderr for model work that runs over ~2 s (only on a terminal)."""
+
+    def __init__(self) -> None:
+        self.start = time.monotonic()
+        self.shown = False
+
+    def __call__(self, done: int, total: int, what: str) -> None:
+        if not sys.stderr.isatty() or time.monotonic() - self.start < 2.0:
+            return
+        self.shown = True
+        end = "\n" if done >= total else ""
+        print(
+            f"\r{what}: {100 * done // max(total, 1):3d} % ({done}/{total})",
+            end=end,
+            file=sys.stderr,
+            flush=True,
+        )
+
+
 def _model(args: argparse.Namespace) -> Any:
     from goniolab.models import model_for
 
-    return model_for(
+    if args.wavelength_nm is not None and not (
+        math.isfinite(args.wavelength_nm) and 100.0 <= args.wavelength_nm <= 20000.0
+    ):
+        raise UserError(f"--wavelength-nm {args.wavelength_nm:g}: must be in [100, 20000] nm")
+    model = model_for(
         args.map,
         n=args.n,
         step_um=args.step_um,
         slope_method=args.slope_method,
         weighting=args.weighting,
         masking=args.masking,
+        model=args.model,
+        wavelength_nm=args.wavelength_nm,
     )
+    from goniolab.optics.physical import PhysicalOpticsModel
+
+    progress = _Progress()
+    for m in (model, getattr(model, "kirchhoff", None), getattr(model, "rayleigh_rice", None)):
+        if isinstance(m, PhysicalOpticsModel):
+            m.progress = progress
+    return model
+
+
+def _model_name(model: Any) -> str:
+    kind = getattr(model, "kind", None)
+    return kind if isinstance(kind, str) and kind in MODEL_NAMES else "facet"
+
+
+def _gloss_models(model: Any) -> tuple[dict[str, Any], dict[str, Any]]:
+    """``"model"`` per geometry (G20/G60/G85) and the facet fallbacks, for --json."""
+    from goniolab.optics import gloss_standards as gs
+    from goniolab.optics.model_choice import AutoModel
+    from goniolab.optics.physical import PhysicalOpticsModel
+
+    if isinstance(model, AutoModel):
+        ex = model.explain_gloss()
+        names: dict[str, Any] = {f"G{k}": v["model"] for k, v in ex.items()}
+        fb = {f"G{k}": v["fallback_facet"] for k, v in ex.items() if "fallback_facet" in v}
+        names["rule"] = {f"G{k}": {"g": v["g"], "reason": v["reason"]} for k, v in ex.items()}
+    else:
+        name = _model_name(model)
+        names = {f"G{t}": name for t in (20, 60, 85)}
+        fb = {}
+        if isinstance(model, PhysicalOpticsModel):
+            fb = {f"G{k}": v for k, v in model.gloss_fallbacks().items()}
+    # ASTM E430 readings: narrow slits a small map may not resolve
+    e430 = [
+        (
+            "E430 B haze",
+            gs.E430_B_ANGLE_DEG,
+            gs.E430_B_HAZE_OFFSET_DEG,
+            gs.E430_B_SOURCE,
+            gs.E430_B_HAZE_RECEPTOR,
+        ),
+        (
+            "E430 A Rs/DOI",
+            gs.E430_A_ANGLE_DEG,
+            gs.E430_A_DOI_OFFSET_DEG,
+            gs.E430_A_SOURCE,
+            gs.E430_A_SPECULAR_RECEPTOR,
+        ),
+        (
+            "E430 A wide haze",
+            gs.E430_A_ANGLE_DEG,
+            gs.E430_A_WIDE_HAZE_OFFSET_DEG,
+            gs.E430_A_SOURCE,
+            gs.E430_A_HAZE_RECEPTOR,
+        ),
+    ]
+    for label, t, off, src, rec in e430:
+        target = model.model_at(t) if isinstance(model, AutoModel) else model
+        if isinstance(target, PhysicalOpticsModel):
+            why = target.coverage(t, t + off, src, rec)
+            if why is not None:
+                fb[label] = why
+    return names, fb
+
+
+def _curve_model(
+    model: Any, ti: float, tr: NDArray[np.float64], src: Cone, det: Cone
+) -> tuple[Any, dict[str, str]]:
+    """``"model"`` of a curve at theta_i and its per-angle facet fallbacks."""
+    from goniolab.optics.model_choice import AutoModel
+    from goniolab.optics.physical import PhysicalOpticsModel
+
+    target = model
+    name: Any = _model_name(model)
+    if isinstance(model, AutoModel):
+        ch = model.choice(ti)
+        name = {"auto": ch.model, "g": ch.g, "reason": ch.reason}
+        target = model.model_at(ti)
+    fb: dict[str, str] = {}
+    if isinstance(target, PhysicalOpticsModel) and det.full_angle_deg > 0:
+        for t in tr:
+            why = target.coverage(ti, float(t), src, det)
+            if why is not None:
+                fb[f"{float(t):g}"] = why
+    return name, fb
 
 
 def _cmd_stats(args: argparse.Namespace) -> int:
@@ -85,6 +204,17 @@ def _cmd_stats(args: argparse.Namespace) -> int:
         st = roughness_stats(hm, slope_method=args.slope_method)
     except ValueError as exc:
         raise UserError(f"{args.map}: {exc}") from None
+    regime: dict[str, Any] = {}
+    try:
+        from goniolab.optics.model_choice import choose_model
+        from goniolab.optics.physical import _Shared
+
+        ms = _Shared(hm, 1024, 0.25).stats
+        lam = 550.0 if args.wavelength_nm is None else float(args.wavelength_nm)
+        for t in (20, 60, 85):
+            regime[f"{t}"] = choose_model(ms, t, lam).as_dict()
+    except ValueError as exc:
+        regime = {"error": str(exc)}
     out = {
         "map": str(args.map),
         "Ra_nm": st.Ra_nm,
@@ -94,6 +224,7 @@ def _cmd_stats(args: argparse.Namespace) -> int:
         "slope_rms_x": st.slope_rms_x,
         "slope_rms_y": st.slope_rms_y,
         "n_facets": st.n_facets,
+        "regime": regime,
     }
     if args.json:
         print(json.dumps(out, indent=2))
@@ -104,6 +235,9 @@ def _cmd_stats(args: argparse.Namespace) -> int:
     print(f"  Sq   {st.Sq_nm:10.1f} nm")
     print(f"  Sdq  {st.Sdq:10.4f}")
     print(f"  h_r  {st.h_r:10.4f}   (facets in the zero-slope bin, 1e-3)")
+    for t_key, ch in regime.items():
+        if isinstance(ch, dict):
+            print(f"  {t_key:>2} deg: {ch['model']:<13} ({ch['reason']})")
     return 0
 
 
@@ -117,7 +251,10 @@ def _write_out(args: argparse.Namespace, make: Any) -> None:
     if out.suffix.lower() not in (".nc", ".nc4"):
         raise UserError(f"--out {out}: a prediction is written as netCDF (.nc)")
     attrs = {"map": str(args.map), "n": _index_json(args.n), "weighting": args.weighting,
-             "slope_method": args.slope_method, "masking": int(args.masking)}  # fmt: skip
+             "slope_method": args.slope_method, "masking": int(args.masking),
+             "model": args.model}  # fmt: skip
+    if args.wavelength_nm is not None:
+        attrs["wavelength_nm"] = float(args.wavelength_nm)
     try:
         write_netcdf(make(attrs), out)
     except OSError as exc:
@@ -128,14 +265,23 @@ def _write_out(args: argparse.Namespace, make: Any) -> None:
 def _cmd_gloss(args: argparse.Namespace) -> int:
     from goniolab.optics.gloss_standards import gloss_report
 
-    rep = gloss_report(_model(args))
+    model = _model(args)
+    try:
+        rep = gloss_report(model)
+    except ValueError as exc:
+        raise UserError(f"{args.map}: {exc}") from None
     from goniolab.datasets import gloss_dataset
 
     _write_out(args, lambda attrs: gloss_dataset(rep, attrs=attrs))
+    names, fallback = _gloss_models(model)
     e = rep.e430
     out: dict[str, Any] = {
         "map": str(args.map),
         "n": _index_json(args.n),
+        "model": names,
+        "wavelength_nm": (
+            args.wavelength_nm if args.wavelength_nm is not None else "ISO 2813 C x V"
+        ),
         "G20": rep.G20,
         "G60": rep.G60,
         "G85": rep.G85,
@@ -143,11 +289,19 @@ def _cmd_gloss(args: argparse.Namespace) -> int:
         "e430": rep.as_dict()["e430"],
         "d523_angle": rep.d523_recommended_angle,
     }
+    if fallback:
+        out["fallback"] = fallback
     if args.json:
         print(json.dumps(out, indent=2))
         return 0
     print(f"{args.map} (n = {args.n.real:g}{f'+{args.n.imag:g}i' if args.n.imag else ''})")
     print(f"  gloss (ISO 2813)   G20 {rep.G20:6.1f}   G60 {rep.G60:6.1f}   G85 {rep.G85:6.1f} GU")
+    print(
+        "  model              "
+        + "   ".join(f"{k} {v}" for k, v in names.items() if isinstance(v, str))
+    )
+    for k, why in fallback.items():
+        print(f"  {k}: facet model used: {why}")
     print(f"  D523 geometry      {rep.d523_recommended_angle} deg")
     print(f"  haze index (D4039) {rep.haze_index:6.1f}")
     print(
@@ -202,9 +356,15 @@ def _cmd_brdf(args: argparse.Namespace) -> int:
         raise UserError("--point takes no --detector-deg/--source-deg (no aperture)")
     model = _model(args)
     out: dict[str, Any] = {"map": str(args.map), "n": _index_json(args.n), "theta_i_deg": ti}
+    if args.wavelength_nm is not None:
+        out["wavelength_nm"] = args.wavelength_nm
     out["theta_r_deg"] = tr.tolist()
     if args.point:
-        brdf = np.asarray(model.brdf_inplane(ti, tr), dtype=np.float64)
+        out["model"], fb = _curve_model(model, ti, tr, Cone(1.0), Cone(0.0))
+        try:
+            brdf = np.asarray(model.brdf_inplane(ti, tr), dtype=np.float64)
+        except ValueError as exc:
+            raise UserError(f"--theta-i {ti:g}: {exc}") from None
         out["brdf_sr"] = brdf.tolist()
         lum = None
     else:
@@ -215,6 +375,9 @@ def _cmd_brdf(args: argparse.Namespace) -> int:
             raise UserError(f"--source-deg/--detector-deg: {exc}") from None
         if det.full_angle_deg == 0.0:
             raise UserError("--detector-deg 0 has no solid angle: use --point for the BRDF")
+        out["model"], fb = _curve_model(model, ti, tr, src, det)
+        if fb:
+            out["fallback"] = fb
         try:
             lum = np.asarray(
                 model.luminance_pct(ti, tr, source=src, detector=det), dtype=np.float64
@@ -277,7 +440,25 @@ def _add_common(p: argparse.ArgumentParser) -> None:
         default="radiometric",
         help="facet weight: radiometric (docs/PHYSICS.md) or the seed's Fresnel-only",
     )
-    p.add_argument("--masking", action="store_true", help="Smith masking from the slopes")
+    p.add_argument(
+        "--masking",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="Smith masking-shadowing from the measured slopes (default on)",
+    )
+    p.add_argument(
+        "--model",
+        choices=MODEL_NAMES,
+        default="auto",
+        help="scattering model (default auto: per geometry, by Sq/lambda, slope, correlation)",
+    )
+    p.add_argument(
+        "--wavelength-nm",
+        type=float,
+        default=None,
+        help="wavelength of every response (default: gloss weighted over CIE C x V(lambda), "
+        "BRDFs at 550 nm)",
+    )
     p.add_argument("--json", action="store_true", help="machine-readable output")
 
 

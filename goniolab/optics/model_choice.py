@@ -1,0 +1,279 @@
+"""Which scattering model a geometry needs, and the ``auto`` model that applies the rule.
+
+Regime rule (per geometry, not per surface)
+-------------------------------------------
+For incidence ``theta`` at wavelength ``lambda`` and a map of rms height ``Sq``, rms gradient
+``Sdq``, correlation length ``l`` and step ``dx``, the specular Rayleigh factor is
+
+.. math:: g = (4 \\pi\\, Sq \\cos\\theta / \\lambda)^2
+
+(the coherent specular beam is ``F exp(-g)``). ``auto`` picks, in this order:
+
+1. ``rayleigh-rice`` when ``g <= 0.15`` and ``Sdq <= 0.15``: first-order perturbation holds
+   (its second-order terms are ~ g/2 of the diffuse part, a few % of it; the coherent beam
+   carries ``> 86 %``). Also when the correlation length is below the wavelength and
+   ``g <= 1`` (tangent planes are then meaningless, heights still small).
+2. ``facet`` when ``g >= 20``: the coherent beam is below ``exp(-20)`` and diffraction
+   widens the geometric lobe by ~``1/g <= 5 %`` (Kirchhoff -> facet, tested).
+3. ``kirchhoff`` otherwise, provided the map samples the phase screen: neighbouring
+   points must differ in phase by well under pi, ``(4 pi cos theta / lambda) (Sdq/sqrt 2)
+   dx <= 0.5`` rad rms; a coarser map falls back to ``facet`` (stated).
+
+Because ``g`` scales with ``cos^2 theta``, one coating can need three models: for a Gaussian
+map of Sq 177 nm, l 5 um at 550 nm, ``g`` is 14.6 at 20 deg (Kirchhoff), 4.1 at 60 deg
+(Kirchhoff) and 0.12 at 85 deg (Rayleigh-Rice), where the facet model reads a G85 of a
+third of the physical one. Within the chosen wave model, directions the map cannot resolve
+(beyond ``lambda / (2 dx)`` of specular, or a field too small for the aperture) are read
+from the facet model, and :meth:`AutoModel.explain` says so.
+
+:class:`AutoModel` implements ``ReflectanceModel``; the models it delegates to share the
+map. It keeps the facet model's masking on by default (Smith G2 from the measured
+slopes), which keeps the facet directional albedo at or below the Fresnel reflectance at
+grazing incidence.
+
+References
+----------
+.. [1] PHYSICS.md, "Where the facet model stops: physical optics".
+.. [2] J. C. Stover, "Optical Scattering", 3rd ed., SPIE 2012, ch. 2 and 5 (TIS, the
+   smooth-surface limit of Rayleigh-Rice).
+.. [3] P. Beckmann, A. Spizzichino, "The Scattering of Electromagnetic Waves from Rough
+   Surfaces", 1963 (the Kirchhoff series and its geometric-optics limit).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from goniolab.optics.apertures import (
+    GONIO_CONE,
+    ISO2813_RECEPTOR,
+    Aperture,
+)
+from goniolab.optics.facet import FacetModel
+from goniolab.optics.heightmap import HeightMap
+from goniolab.optics.kirchhoff import KirchhoffModel
+from goniolab.optics.physical import (
+    GlossWeighting,
+    MapStats,
+    PhysicalOpticsModel,
+    Progress,
+    _Shared,
+)
+from goniolab.optics.psd import DEFAULT_TAPER, DEFAULT_TILE
+from goniolab.optics.rayleigh_rice import RayleighRiceModel
+
+__all__ = [
+    "FACET_MIN_G",
+    "MODEL_NAMES",
+    "RR_MAX_G",
+    "RR_MAX_SDQ",
+    "AutoModel",
+    "Choice",
+    "ModelName",
+    "choose_model",
+    "rayleigh_g",
+]
+
+ModelName = Literal["facet", "kirchhoff", "rayleigh-rice"]
+#: Names accepted by ``--model``.
+MODEL_NAMES: tuple[str, ...] = ("auto", "facet", "kirchhoff", "rayleigh-rice")
+#: Rayleigh-Rice when g is at most this ...
+RR_MAX_G: float = 0.15
+#: ... and the rms gradient at most this.
+RR_MAX_SDQ: float = 0.15
+#: Facet model from this g on.
+FACET_MIN_G: float = 20.0
+#: Largest rms phase step between neighbouring map points for the Kirchhoff screen (rad).
+MAX_PHASE_STEP_RAD: float = 0.5
+
+FloatArray = NDArray[np.float64]
+
+
+def rayleigh_g(sq_um: float, theta_deg: float, wavelength_nm: float) -> float:
+    """``g = (4 pi Sq cos theta / lambda)^2`` of the specular beam."""
+    lam = wavelength_nm * 1e-3
+    return (4.0 * math.pi * sq_um * math.cos(math.radians(theta_deg)) / lam) ** 2
+
+
+@dataclass(frozen=True)
+class Choice:
+    """The model picked for one geometry, and why (the rule of the module docstring)."""
+
+    model: ModelName
+    g: float
+    reason: str
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"model": self.model, "g": self.g, "reason": self.reason}
+
+
+def choose_model(stats: MapStats, theta_deg: float, wavelength_nm: float) -> Choice:
+    """Apply the regime rule (module docstring) at incidence ``theta_deg``."""
+    g = rayleigh_g(stats.sq_um, theta_deg, wavelength_nm)
+    lam_um = wavelength_nm * 1e-3
+    if g <= RR_MAX_G and stats.sdq <= RR_MAX_SDQ:
+        return Choice("rayleigh-rice", g, f"g = {g:.3g} <= {RR_MAX_G:g}, Sdq {stats.sdq:.3g}")
+    if stats.corr_length_um < lam_um and g <= 1.0:
+        return Choice(
+            "rayleigh-rice",
+            g,
+            f"correlation length {stats.corr_length_um:.3g} um < lambda, g = {g:.3g} <= 1",
+        )
+    if g >= FACET_MIN_G:
+        return Choice("facet", g, f"g = {g:.3g} >= {FACET_MIN_G:g}: geometric optics")
+    phase = (
+        (4.0 * math.pi * math.cos(math.radians(theta_deg)) / lam_um)
+        * (stats.sdq / math.sqrt(2.0))
+        * stats.step_um
+    )
+    if phase > MAX_PHASE_STEP_RAD:
+        return Choice(
+            "facet",
+            g,
+            f"g = {g:.3g} needs Kirchhoff, but the map step {stats.step_um:g} um samples the "
+            f"phase screen at {phase:.2g} rad rms per point (> {MAX_PHASE_STEP_RAD:g}): "
+            "facet model used",
+        )
+    return Choice("kirchhoff", g, f"{RR_MAX_G:g} < g = {g:.3g} < {FACET_MIN_G:g}")
+
+
+class AutoModel:
+    """The ``auto`` model: per geometry, the model :func:`choose_model` names.
+
+    Parameters
+    ----------
+    hm : HeightMap
+        The map.
+    facet : FacetModel
+        The facet model of the same map (its index is used everywhere).
+    wavelength_nm, gloss_weighting, masking, tile, taper, progress
+        As in :class:`~goniolab.optics.physical.PhysicalOpticsModel`; the rule is applied at
+        ``wavelength_nm`` (550 nm by default, near the peak of the ISO 2813 weighting).
+    """
+
+    kind = "auto"
+
+    def __init__(
+        self,
+        hm: HeightMap,
+        facet: FacetModel,
+        *,
+        wavelength_nm: float = 550.0,
+        gloss_weighting: GlossWeighting = "iso2813",
+        masking: bool = True,
+        tile: int = DEFAULT_TILE,
+        taper: float = DEFAULT_TAPER,
+        progress: Progress | None = None,
+    ) -> None:
+        self.facet = facet
+        self.n = facet.n
+        self.masking = bool(masking)
+        self.wavelength_nm = float(wavelength_nm)
+        shared = _Shared(hm, tile, taper)
+        shared._facets[(facet.n, facet.masking)] = facet
+        opts: dict[str, Any] = {
+            "n": facet.n,
+            "wavelength_nm": wavelength_nm,
+            "gloss_weighting": gloss_weighting,
+            "masking": masking,
+            "progress": progress,
+            "shared": shared,
+        }
+        self.kirchhoff = KirchhoffModel(**opts)
+        self.rayleigh_rice = RayleighRiceModel(**opts)
+        self.surface = facet.surface
+
+    def __repr__(self) -> str:
+        return f"AutoModel({self.kirchhoff.source!r}, n={self.n}, wavelength_nm={self.wavelength_nm:g})"
+
+    @property
+    def stats(self) -> MapStats:
+        return self.kirchhoff.stats
+
+    def choice(self, theta_deg: float) -> Choice:
+        """The model for incidence ``theta_deg``."""
+        return choose_model(self.stats, float(theta_deg), self.wavelength_nm)
+
+    def model_at(self, theta_deg: float) -> FacetModel | PhysicalOpticsModel:
+        name = self.choice(theta_deg).model
+        if name == "facet":
+            return self.facet
+        return self.kirchhoff if name == "kirchhoff" else self.rayleigh_rice
+
+    def explain(
+        self,
+        theta_i_deg: float,
+        theta_r_deg: Sequence[float] = (),
+        source: Aperture = GONIO_CONE,
+        receptor: Aperture = GONIO_CONE,
+    ) -> dict[str, Any]:
+        """The choice at theta_i and the detector angles that fall back to the facet model."""
+        ch = self.choice(theta_i_deg)
+        out: dict[str, Any] = ch.as_dict()
+        m = self.model_at(theta_i_deg)
+        if isinstance(m, PhysicalOpticsModel):
+            fb = {}
+            for t in theta_r_deg:
+                why = m.coverage(theta_i_deg, float(t), source, receptor)
+                if why is not None:
+                    fb[f"{float(t):g}"] = why
+            if fb:
+                out["fallback_facet"] = fb
+        return out
+
+    def explain_gloss(self, angles_deg: Sequence[int] = (20, 60, 85)) -> dict[str, Any]:
+        """Per ISO geometry: the model used, g, the reason, and any facet fallback."""
+        out: dict[str, Any] = {}
+        for t in angles_deg:
+            ch = self.choice(t)
+            d = ch.as_dict()
+            m = self.model_at(t)
+            if isinstance(m, PhysicalOpticsModel):
+                fb = m.gloss_fallbacks((int(t),))
+                if fb:
+                    d["fallback_facet"] = fb[int(t)]
+            out[str(int(t))] = d
+        return out
+
+    # ------------------------------------------------------------------ ReflectanceModel
+    def brdf_point(self, theta_i_deg: float, theta_r_deg: float, phi_r_deg: float = 180.0) -> float:
+        return self.model_at(theta_i_deg).brdf_point(theta_i_deg, theta_r_deg, phi_r_deg)
+
+    def brdf_inplane(self, theta_i_deg: float, theta_r_deg: ArrayLike) -> FloatArray:
+        return self.model_at(theta_i_deg).brdf_inplane(theta_i_deg, theta_r_deg)
+
+    def luminance_pct(
+        self,
+        theta_i_deg: float,
+        theta_r_deg: ArrayLike,
+        *,
+        source: Aperture = GONIO_CONE,
+        detector: Aperture = GONIO_CONE,
+    ) -> FloatArray:
+        return self.model_at(theta_i_deg).luminance_pct(
+            theta_i_deg, theta_r_deg, source=source, detector=detector
+        )
+
+    def reflected_fraction(
+        self, theta_i_deg: float, theta_r_deg: float, source: Aperture, receptor: Aperture
+    ) -> float:
+        return self.model_at(theta_i_deg).reflected_fraction(
+            theta_i_deg, theta_r_deg, source, receptor
+        )
+
+    def gloss(self, angles_deg: Sequence[int] = (20, 60, 85)) -> dict[int, float]:
+        out: dict[int, float] = {}
+        for t in angles_deg:
+            key = int(t)
+            if key not in ISO2813_RECEPTOR:
+                raise ValueError(
+                    f"no ISO 2813 geometry at {t} deg; known: {sorted(ISO2813_RECEPTOR)}"
+                )
+            out[key] = self.model_at(key).gloss((key,))[key]
+        return out
