@@ -116,10 +116,13 @@ def _model(
 ) -> FacetModel:
     from goniolab.models import model_for
 
+    from goniolab.optics.facet import FacetModel
+
     options: dict[str, Any] = {"slope_method": slope_method, "weighting": weighting}
     if isinstance(surface, str | Path):
-        return model_for(surface, n=n, step_um=step_um, masking=masking, **options)
-    from goniolab.optics.facet import FacetModel
+        model = model_for(surface, n=n, step_um=step_um, masking=masking, **options)
+        assert isinstance(model, FacetModel)  # model_for's default model is "facet"
+        return model
     from goniolab.optics.surface import Surface
 
     hm = _heightmap(surface, step_um)
