@@ -115,7 +115,6 @@ def _model(
     masking: bool,
 ) -> FacetModel:
     from goniolab.models import model_for
-
     from goniolab.optics.facet import FacetModel
 
     options: dict[str, Any] = {"slope_method": slope_method, "weighting": weighting}
