@@ -3,7 +3,8 @@
 The NIST appearance project (seed "nist-appearance-ray-method-and-kirchhoff", section
 "The Kirchhoff approximation") computes the BRDF of its epoxy coatings from the measured
 topography with Beckmann's Kirchhoff integral, windowed by a smooth Schwartz-type function;
-PHYSICS.md ("Where the facet model stops") gives the form used here. For the incident
+docs/PHYSICS.md ("Where the facet model stops: physical optics") gives the form used here.
+For the incident
 direction ``wi`` (towards the lamp), an outgoing ``wo``, ``v = k (wi + wo)`` and
 ``k = 2 pi / lambda``, the scattered field is
 

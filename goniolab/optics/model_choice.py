@@ -33,7 +33,8 @@ grazing incidence.
 
 References
 ----------
-.. [1] PHYSICS.md, "Where the facet model stops: physical optics".
+.. [1] PHYSICS.md, "Where the facet model stops: physical optics" and "Regimes of the three
+   scattering models".
 .. [2] J. C. Stover, "Optical Scattering", 3rd ed., SPIE 2012, ch. 2 and 5 (TIS, the
    smooth-surface limit of Rayleigh-Rice).
 .. [3] P. Beckmann, A. Spizzichino, "The Scattering of Electromagnetic Waves from Rough

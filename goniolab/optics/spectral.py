@@ -1,8 +1,7 @@
 """ISO 2813 spectral weighting: CIE illuminant C x photopic V(lambda).
 
 ISO 2813 / ASTM D523 specify a glossmeter whose source and receptor together respond like
-CIE illuminant C seen by the CIE 1924 photopic observer V(lambda) (PHYSICS.md, "Where the
-facet model stops"). A wavelength-dependent model (Kirchhoff, Rayleigh-Rice) reads
+CIE illuminant C seen by the CIE 1924 photopic observer V(lambda) (PHYSICS.md, "Where the facet model stops: physical optics"). A wavelength-dependent model (Kirchhoff, Rayleigh-Rice) reads
 ``G = 100 sum_l w_l Phi_l / sum_l w_l Phi_std`` with ``w_l = S_C(l) V(l)``; the black
 glass standard's reflectance is taken at its defining index 1.567 at every wavelength.
 

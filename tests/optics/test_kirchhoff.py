@@ -1,4 +1,6 @@
-"""Physical-optics models against independent truths (PHYSICS.md, "Where the facet model stops").
+"""Physical-optics models against independent truths.
+
+See PHYSICS.md, "Where the facet model stops: physical optics":
 
 - a flat map reads the exact Fresnel gloss (Kirchhoff and Rayleigh-Rice);
 - the coherent specular reflectance of a Gaussian map is F exp(-(4 pi Sq cos t / lambda)^2);
