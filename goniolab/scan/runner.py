@@ -26,7 +26,7 @@ The runner publishes events on an :class:`~goniolab.scan.events.EventBus`
 
 Before any motion, :func:`dry_run` checks every geometry with
 ``Goniometer.check_geometry`` (soft limits + arm-separation interlock) and estimates the run
-time from the trapezoidal motion model (:func:`sim.motion.trapezoid_duration_s`,
+time from the trapezoidal motion model (:func:`drivers.timing.trapezoid_duration_s`,
 Biagiotti & Melchiorri sec. 3.2) plus dwell and reading time and the final park move
 (a home search is controller-specific and not estimated).
 
@@ -133,7 +133,39 @@ class PlanRefused(Exception):
 
 
 class _Aborted(Exception):
-    """An abort arrived while the runner waited on a move or the specimen hook."""
+    """An abort ends the run's readings; ``reason`` says where it arrived."""
+
+    def __init__(self, during: str = "") -> None:
+        super().__init__(during)
+        self.reason = "aborted by the operator" + (f" {during}" if during else "")
+
+
+@dataclass(slots=True)
+class _Eta:
+    """Time left in a run: the dry-run estimate of the readings still to take (and of the
+    final park move), stretched by how much slower than estimated the run has been so far
+    (bus latency, polling, commits)."""
+
+    point_times_s: list[float]
+    park_s: float
+    t_start_s: float = 0.0
+    estimated_done_s: float = 0.0
+
+    @property
+    def total_s(self) -> float:
+        """The dry run's estimate of the whole rest of the run."""
+        return math.fsum(self.point_times_s) + self.park_s
+
+    def start(self, now_s: float) -> None:
+        """The first reading is about to be taken (lab clock)."""
+        self.t_start_s = now_s
+
+    def left_after(self, k: int, now_s: float) -> float:
+        """Estimated lab-clock seconds left once reading ``k`` (0-based) is stored."""
+        self.estimated_done_s += self.point_times_s[k]
+        elapsed_s = now_s - self.t_start_s
+        slowdown = elapsed_s / self.estimated_done_s if self.estimated_done_s > 0 else 1.0
+        return (math.fsum(self.point_times_s[k + 1 :]) + self.park_s) * max(1.0, slowdown)
 
 
 @dataclass(frozen=True, slots=True)
@@ -341,6 +373,10 @@ class ScanRunner:
         self._homing_interrupted = False
         self._verify_position = False
         self._predicted: dict[int, float] = {}
+        self._specimen: str | None = None  # what lies under the instruments (None: unknown)
+        self._mirror_pct: float | None = None
+        self._n_done = 0
+        self._total = 0
         self._target: tuple[float, float] | None = None
         self._measured_deg: tuple[float, float] = (math.nan, math.nan)
 
@@ -389,8 +425,9 @@ class ScanRunner:
             self._verify_position = True
         return True
 
-    async def _abortable(self, aw: Awaitable[_T]) -> _T:
-        """Await ``aw`` unless :meth:`abort` is called first: then cancel it, raise _Aborted."""
+    async def _abortable(self, aw: Awaitable[_T], during: str) -> _T:
+        """Await ``aw`` unless :meth:`abort` is called first: then cancel it and raise
+        :class:`_Aborted` saying ``during`` what."""
         work = asyncio.ensure_future(aw)
         aborted = asyncio.ensure_future(self._abort_event.wait())
         try:
@@ -402,7 +439,7 @@ class ScanRunner:
                 with contextlib.suppress(asyncio.CancelledError, DeviceError):
                     await work
         if work.cancelled():
-            raise _Aborted
+            raise _Aborted(during)
         return work.result()
 
     async def _move(self, target: tuple[float, float]) -> None:
@@ -411,7 +448,7 @@ class ScanRunner:
         )
         try:
             measured = await self._abortable(
-                self.goniometer.move_to(target[0], target[1], self.move_timeout_s)
+                self.goniometer.move_to(target[0], target[1], self.move_timeout_s), "during a move"
             )
         except _Aborted:
             self._target = None  # somewhere between two geometries; _park stops the arms
@@ -539,129 +576,28 @@ class ScanRunner:
         all_points = self.plan.points()
         done = self.store.done_keys(self.run_id)
         todo = [p for p in all_points if p.key not in done]
-        start_deg = await self.goniometer.positions_deg()
-        plan_dry = dry_run(
-            todo,
-            self.goniometer,
-            self.motion,
-            start_deg=(float(start_deg[0]), float(start_deg[1])),
-            dwell_s=self.plan.dwell_s,
-            reading_time_s=self.reading_time_s,
-            park_deg=self.park_deg,
-        )
-        remaining_s = list(plan_dry.point_times_s)
-        total = len(all_points)
-        n_done = total - len(todo)
-
+        eta = await self._dry_run(todo)
+        self._n_done, self._total = len(all_points) - len(todo), len(all_points)
         self.bus.publish(
             RunStarted(
                 run_id=self.run_id,
                 kind="brdf",
-                total_points=total,
+                total_points=self._total,
                 plan=self.plan.to_dict(),
                 sample=self.plan.sample,
             )
         )
         self._set_state(RunState.RUNNING)
-        self.bus.publish(
-            Progress(run_id=self.run_id, done=n_done, total=total, eta_s=plan_dry.eta_s)
-        )
+        self._publish_progress(eta.total_s)
         predict_task = asyncio.create_task(self._predict_all(), name=f"predict-run-{self.run_id}")
-        state = RunState.DONE
-        reason = ""
+        # What lies under the instruments: the sample at the start of a new run; unknown
+        # when a mirror-referenced run resumes (a crash may have left the mirror in
+        # place), so the hook confirms the specimen before the first reading.
+        self._specimen = "sample" if not (self.plan.mirror_reference and done) else None
         try:
-            try:
-                await self._abortable(self._ensure_homed())
-            except _Aborted:
-                state, reason = RunState.ABORTED, "aborted by the operator during homing"
-                self._homing_interrupted = True
-                todo = []
-            await self.spectro.set_exposure_us(self.plan.exposure_us)
-            mirror_pct = self._mirror_level()
-            # What lies under the instruments: the sample at the start of a new run; unknown
-            # when a mirror-referenced run resumes (a crash may have left the mirror in
-            # place), so the hook confirms the specimen before the first reading.
-            specimen: str | None = "sample" if not (self.plan.mirror_reference and done) else None
-            t_start_s = self.clock.now()
-            estimated_done_s = 0.0
-            for k, p in enumerate(todo):
-                if not await self._checkpoint():
-                    state, reason = RunState.ABORTED, "aborted by the operator"
-                    break
-                want = "mirror" if p.index == MIRROR_INDEX else "sample"
-                if want != specimen:
-                    assert self.specimen_hook is not None
-                    try:
-                        await self._abortable(self.specimen_hook(want))
-                    except _Aborted:
-                        state = RunState.ABORTED
-                        reason = f"aborted by the operator while placing the {want}"
-                        break
-                    specimen = want
-                target = (p.theta_i_deg, p.theta_r_deg)
-                try:
-                    moved = await self._ensure_position(target)
-                except _Aborted:
-                    state, reason = RunState.ABORTED, "aborted by the operator during a move"
-                    break
-                if moved:
-                    await self.clock.sleep(self.plan.dwell_s)
-                reading = await self._read_spectro(p)
-                raw_pct = float(reading.luminance_pct)
-                if p.index == MIRROR_INDEX:
-                    value = raw_pct
-                else:
-                    if mirror_pct is None and self.plan.mirror_reference:
-                        mirror_pct = self._mirror_level()
-                    value = raw_pct if mirror_pct is None else 100.0 * raw_pct / mirror_pct
-                ts = time.time()
-                self.store.add_point(
-                    self.run_id,
-                    index=p.index,
-                    repeat=p.repeat,
-                    theta_i_deg=p.theta_i_deg,
-                    theta_r_deg=p.theta_r_deg,
-                    measured_theta_i_deg=self._measured_deg[0],
-                    measured_theta_r_deg=self._measured_deg[1],
-                    luminance_pct=value,
-                    raw={
-                        "luminance_pct": raw_pct,
-                        "exposure_us": reading.exposure_us,
-                        "wavelengths_nm": list(reading.wavelengths_nm),
-                        "values": list(reading.values),
-                        "mirror_pct": mirror_pct,
-                        "clock_s": self.clock.now(),
-                    },
-                    timestamp=ts,
-                )
-                n_done += 1
-                self.bus.publish(
-                    PointMeasured(
-                        run_id=self.run_id,
-                        timestamp=ts,
-                        index=p.index,
-                        repeat=p.repeat,
-                        theta_i_deg=p.theta_i_deg,
-                        theta_r_deg=p.theta_r_deg,
-                        luminance_pct=value,
-                        measured_theta_i_deg=self._measured_deg[0],
-                        measured_theta_r_deg=self._measured_deg[1],
-                        predicted_pct=self._predicted.get(p.index),
-                    )
-                )
-                # the dry-run estimate of what is left, stretched by how much slower than
-                # estimated the run has been so far (bus latency, polling, commits)
-                estimated_done_s += remaining_s[k]
-                elapsed_s = self.clock.now() - t_start_s
-                slowdown = elapsed_s / estimated_done_s if estimated_done_s > 0 else 1.0
-                eta = (math.fsum(remaining_s[k + 1 :]) + plan_dry.park_s) * max(1.0, slowdown)
-                self.bus.publish(Progress(run_id=self.run_id, done=n_done, total=total, eta_s=eta))
-            if specimen == "mirror":
-                assert self.specimen_hook is not None
-                await self.specimen_hook("sample")
+            state, reason = await self._measure(todo, eta)
         except DeviceError as exc:
-            state = RunState.FAILED
-            reason = str(exc)
+            state, reason = RunState.FAILED, str(exc)
             self.bus.publish(
                 InstrumentError(
                     run_id=self.run_id, device=exc.device, message=exc.message, fatal=True
@@ -670,23 +606,141 @@ class ScanRunner:
         except asyncio.CancelledError:
             # Cancelled from outside (the process is shutting down): park, record, re-raise.
             predict_task.cancel()
-            park_problem = await asyncio.shield(self._park())
-            why = "cancelled" + (f"; {park_problem}" if park_problem else "")
-            self._set_state(RunState.ABORTED, why)
+            await asyncio.shield(self._park_and_record(RunState.ABORTED, "cancelled"))
             raise
         except Exception as exc:
             # Not an instrument fault (a bug, a full disk): still leave the arms parked (or
             # say they are not) and the run failed and resumable, then let the error surface.
             predict_task.cancel()
-            park_problem = await self._park()
-            why = f"internal error: {_describe(exc)}" + (
-                f"; {park_problem}" if park_problem else ""
-            )
-            self._set_state(RunState.FAILED, why)
+            why = await self._park_and_record(RunState.FAILED, f"internal error: {_describe(exc)}")
             self.bus.publish(
                 RunFinished(run_id=self.run_id, state=RunState.FAILED, reason=why, summary={})
             )
             raise
+        return await self._finish(state, reason, predict_task)
+
+    async def _dry_run(self, todo: Sequence[PlanPoint]) -> _Eta:
+        """:func:`dry_run` of ``todo`` from where the arms stand (raises PlanRefused)."""
+        start_deg = await self.goniometer.positions_deg()
+        check = dry_run(
+            todo,
+            self.goniometer,
+            self.motion,
+            start_deg=(float(start_deg[0]), float(start_deg[1])),
+            dwell_s=self.plan.dwell_s,
+            reading_time_s=self.reading_time_s,
+            park_deg=self.park_deg,
+        )
+        return _Eta(list(check.point_times_s), check.park_s)
+
+    async def _measure(self, todo: Sequence[PlanPoint], eta: _Eta) -> tuple[RunState, str]:
+        """Home if needed, then take the readings of ``todo`` in order, each stored before
+        the next; an abort ends the loop with its reason. A DeviceError propagates."""
+        try:
+            try:
+                await self._abortable(self._ensure_homed(), "during homing")
+            except _Aborted:
+                self._homing_interrupted = True
+                raise
+            await self.spectro.set_exposure_us(self.plan.exposure_us)
+            self._mirror_pct = self._mirror_level()
+            eta.start(self.clock.now())
+            for k, p in enumerate(todo):
+                await self._go_to(p)
+                await self._take_reading(p)
+                self._publish_progress(eta.left_after(k, self.clock.now()))
+            state, reason = RunState.DONE, ""
+        except _Aborted as stop:
+            state, reason = RunState.ABORTED, stop.reason
+        if self._specimen == "mirror":
+            assert self.specimen_hook is not None
+            await self.specimen_hook("sample")
+        return state, reason
+
+    async def _go_to(self, p: PlanPoint) -> None:
+        """Everything before reading ``p``: honour a pause or an abort, put the specimen
+        ``p`` needs under the instruments, move the arms there and let them settle.
+
+        Raises
+        ------
+        _Aborted
+            With the reason, when an abort arrives (a move is stopped where it is).
+        """
+        if not await self._checkpoint():
+            raise _Aborted("")
+        want = "mirror" if p.index == MIRROR_INDEX else "sample"
+        if want != self._specimen:
+            assert self.specimen_hook is not None
+            await self._abortable(self.specimen_hook(want), f"while placing the {want}")
+            self._specimen = want
+        if await self._ensure_position((p.theta_i_deg, p.theta_r_deg)):
+            await self.clock.sleep(self.plan.dwell_s)
+
+    async def _take_reading(self, p: PlanPoint) -> None:
+        """Read ``p`` (with retries), scale it by the mirror level, store it, publish it."""
+        reading = await self._read_spectro(p)
+        raw_pct = float(reading.luminance_pct)
+        value = raw_pct if p.index == MIRROR_INDEX else self._relative_to_mirror(raw_pct)
+        ts = time.time()
+        self.store.add_point(
+            self.run_id,
+            index=p.index,
+            repeat=p.repeat,
+            theta_i_deg=p.theta_i_deg,
+            theta_r_deg=p.theta_r_deg,
+            measured_theta_i_deg=self._measured_deg[0],
+            measured_theta_r_deg=self._measured_deg[1],
+            luminance_pct=value,
+            raw={
+                "luminance_pct": raw_pct,
+                "exposure_us": reading.exposure_us,
+                "wavelengths_nm": list(reading.wavelengths_nm),
+                "values": list(reading.values),
+                "mirror_pct": self._mirror_pct,
+                "clock_s": self.clock.now(),
+            },
+            timestamp=ts,
+        )
+        self._n_done += 1
+        self.bus.publish(
+            PointMeasured(
+                run_id=self.run_id,
+                timestamp=ts,
+                index=p.index,
+                repeat=p.repeat,
+                theta_i_deg=p.theta_i_deg,
+                theta_r_deg=p.theta_r_deg,
+                luminance_pct=value,
+                measured_theta_i_deg=self._measured_deg[0],
+                measured_theta_r_deg=self._measured_deg[1],
+                predicted_pct=self._predicted.get(p.index),
+            )
+        )
+
+    def _relative_to_mirror(self, raw_pct: float) -> float:
+        """A sample reading in % of the mirror reference (once its readings are all
+        stored), else as read."""
+        if self._mirror_pct is None and self.plan.mirror_reference:
+            self._mirror_pct = self._mirror_level()
+        return raw_pct if self._mirror_pct is None else 100.0 * raw_pct / self._mirror_pct
+
+    def _publish_progress(self, eta_s: float) -> None:
+        self.bus.publish(
+            Progress(run_id=self.run_id, done=self._n_done, total=self._total, eta_s=eta_s)
+        )
+
+    async def _park_and_record(self, state: RunState, why: str) -> str:
+        """After an error that ends the run at once: park (best effort), record the state
+        with ``why`` and what went wrong parking; return that reason."""
+        park_problem = await self._park()
+        reason = why + (f"; {park_problem}" if park_problem else "")
+        self._set_state(state, reason)
+        return reason
+
+    async def _finish(
+        self, state: RunState, reason: str, predict_task: asyncio.Task[None]
+    ) -> RunResult:
+        """Park, wait for the predictions, summarise, record and publish the end."""
         park_problem = await self._park()
         if park_problem:
             reason = f"{reason}; {park_problem}" if reason else park_problem
