@@ -29,11 +29,11 @@ from collections.abc import Awaitable, Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from drivers.base import DeviceError, Glossmeter, ProfileError, Spectrocolorimeter
+from drivers.base import Axis, DeviceError, Glossmeter, ProfileError, Spectrocolorimeter
 from drivers.goniometer import TwoArmGoniometer
 from drivers.profiles import load_stepper_profile, load_stil_profile, load_zgm_profile
 from drivers.timing import Clock, RealClock, SimClock
@@ -45,6 +45,9 @@ from sim.faults import FaultInjector, FaultSpec
 from sim.instruments import MirrorModel, SimAxis, SimGlossmeter, SimSpectro
 from sim.motion import SimMotor
 from sim.wire import ModbusAxisServer, SimLabServer, StilPtyDevice, WireAxis, ZgmPtyDevice
+
+if TYPE_CHECKING:
+    from drivers.modbus_stepper import ModbusStepperAxis
 
 __all__ = [
     "INSTRUMENTS",
@@ -379,117 +382,48 @@ class Lab:
         cfg = self.config
         if self._model is None:
             self._model = await asyncio.to_thread(sample_model, cfg)
-        g = cfg.goniometer
-        park = (g.park.theta_i_deg, g.park.theta_r_deg)
-        if cfg.lab.mode == "sim" or cfg.lab.start_sim_servers:
-            sim_clock = SimClock(self.time_scale)
-            self.clock = sim_clock
-            self.sims = build_sim_instruments(cfg, self._model, sim_clock)
-            self.place_specimen = self._place_specimen
         if cfg.lab.mode == "sim":
-            assert self.sims is not None
-            self._goniometer = TwoArmGoniometer(
-                self.sims.lamp,
-                self.sims.detector,
-                min_separation_deg=g.min_separation_deg,
-                park_deg=park,
-            )
-            self._spectro = self.sims.spectro
-            self._glossmeter = self.sims.glossmeter
+            self._wire_sims(self._build_sims(self._model))
         else:
             if cfg.lab.start_sim_servers:
-                assert self.sims is not None
-                server = build_sim_server(cfg, self.sims)
-                try:
-                    await server.start()
-                except OSError as exc:
-                    raise UserError(f"cannot start the simulated lab: {exc}", exit_code=1) from None
-                self.server = server
-            self._build_drivers(park)
+                await self._serve_sims(self._build_sims(self._model))
+            self._wire_drivers()
         await self._connect()
 
-    def _served_at(self, ax: AxisConfig) -> tuple[int, str]:
-        """``(port, serial_port)`` to reach an arm: the configured ones or, when this lab
-        serves the simulated controllers and the config says port 0 (``port = 0`` or
-        ``serial_port = "socket://host:0"``), the port the kernel gave the server."""
-        if self.server is not None:
-            for srv in self.server.modbus:
-                served = (srv.transport, srv.host, srv.requested_port)
-                if ax.transport == "tcp" and served == ("tcp", ax.host, ax.port):
-                    return srv.port, ax.serial_port
-                if ax.transport == "rtu" and served == (
-                    "rtu",
-                    *(_socket_url(ax.serial_port) or ()),
-                ):
-                    return ax.port, srv.url
-        return ax.port, ax.serial_port
-
-    def _build_drivers(self, park: tuple[float, float]) -> None:
-        from drivers.glossmeter import open_glossmeter
-        from drivers.modbus_stepper import ModbusStepperAxis
-        from drivers.stil import StilSpectro
-
-        cfg = self.config
-        g = cfg.goniometer
-
-        def axis(name: str, ax: AxisConfig) -> ModbusStepperAxis:
-            port, serial_port = self._served_at(ax)
-            return ModbusStepperAxis(
-                name,
-                profile=ax.profile,
-                transport=ax.transport,
-                host=ax.host,
-                port=port,
-                serial_port=serial_port,
-                baudrate=ax.baudrate,
-                parity=ax.parity,
-                unit_id=ax.unit_id,
-                steps_per_deg=ax.steps_per_deg,
-                gear_ratio=ax.gear_ratio,
-                limits_deg=ax.limits_deg,
-                speed_deg_s=ax.speed_deg_s,
-                accel_deg_s2=ax.accel_deg_s2,
-                stall_tolerance_deg=ax.stall_tolerance_deg,
-                timeout_s=ax.timeout_s,
-            )
-
-        self._goniometer = TwoArmGoniometer(
-            axis("lamp", g.lamp),
-            axis("detector", g.detector),
+    def _two_arms(self, lamp: Axis, detector: Axis) -> TwoArmGoniometer:
+        """The goniometer of two arm axes, with the config's interlock and park."""
+        g = self.config.goniometer
+        return TwoArmGoniometer(
+            lamp,
+            detector,
             min_separation_deg=g.min_separation_deg,
-            park_deg=park,
-        )
-        self._spectro = StilSpectro(
-            "spectro",
-            port=cfg.spectro.port,
-            profile=cfg.spectro.profile,
-            baudrate=cfg.spectro.baudrate,
-            exposure_us=cfg.spectro.exposure_us,
-            timeout_s=cfg.spectro.timeout_s,
-        )
-        gm = cfg.glossmeter
-        self._glossmeter = open_glossmeter(
-            gm.port,
-            protocol=gm.protocol,
-            profile=gm.profile,
-            serial_number=gm.serial_number,
-            baudrate=gm.baudrate,
-            timeout_s=gm.timeout_s,
+            park_deg=(g.park.theta_i_deg, g.park.theta_r_deg),
         )
 
-    async def _connect(self) -> None:
-        parts = {
-            "goniometer": self._goniometer,
-            "spectro": self._spectro,
-            "glossmeter": self._glossmeter,
-        }
-        for name in INSTRUMENTS:
-            if name not in self.instruments:
-                continue
-            part = parts[name]
-            assert part is not None
-            await part.connect()
-            self._closers.append(part.close)
+    # ------------------------------------------------------------------ simulated lab
+    def _build_sims(self, model: ReflectanceModel) -> SimInstruments:
+        """The simulated instruments reading ``model`` on a sim clock (the lab's clock)."""
+        sim_clock = SimClock(self.time_scale)
+        self.clock = sim_clock
+        self.sims = build_sim_instruments(self.config, model, sim_clock)
+        self.place_specimen = self._place_specimen
+        return self.sims
+
+    def _wire_sims(self, sims: SimInstruments) -> None:
+        """``mode = "sim"``: the lab's instruments are the simulated ones, in process."""
+        self._goniometer = self._two_arms(sims.lamp, sims.detector)
+        self._spectro = sims.spectro
+        self._glossmeter = sims.glossmeter
+
+    async def _serve_sims(self, sims: SimInstruments) -> None:
+        """``start_sim_servers``: serve the simulated instruments on the config's
+        endpoints (Modbus, ptys), for the real drivers to reach."""
+        server = build_sim_server(self.config, sims)
+        try:
+            await server.start()
+        except OSError as exc:
+            raise UserError(f"cannot start the simulated lab: {exc}", exit_code=1) from None
+        self.server = server
 
     def put_sample(self, model: ReflectanceModel) -> None:
         """Simulated lab: the spectro and the glossmeter read ``model`` from now on, as if
@@ -515,6 +449,91 @@ class Lab:
             self.sims.spectro.model = self._sample_under or self.model
         else:
             raise ValueError(f"specimen must be 'mirror' or 'sample', got {which!r}")
+
+    # ------------------------------------------------------------------ real drivers
+    def _wire_drivers(self) -> None:
+        """``mode = "drivers"``: the drivers of :mod:`drivers` to the configured endpoints
+        (or to the simulated lab this lab serves there)."""
+        from drivers.glossmeter import open_glossmeter
+        from drivers.stil import StilSpectro
+
+        cfg = self.config
+        g = cfg.goniometer
+        self._goniometer = self._two_arms(
+            self._axis_driver("lamp", g.lamp), self._axis_driver("detector", g.detector)
+        )
+        self._spectro = StilSpectro(
+            "spectro",
+            port=cfg.spectro.port,
+            profile=cfg.spectro.profile,
+            baudrate=cfg.spectro.baudrate,
+            exposure_us=cfg.spectro.exposure_us,
+            timeout_s=cfg.spectro.timeout_s,
+        )
+        gm = cfg.glossmeter
+        self._glossmeter = open_glossmeter(
+            gm.port,
+            protocol=gm.protocol,
+            profile=gm.profile,
+            serial_number=gm.serial_number,
+            baudrate=gm.baudrate,
+            timeout_s=gm.timeout_s,
+        )
+
+    def _axis_driver(self, name: str, ax: AxisConfig) -> ModbusStepperAxis:
+        """The Modbus stepper driver of one arm."""
+        from drivers.modbus_stepper import ModbusStepperAxis
+
+        port, serial_port = self._served_at(ax)
+        return ModbusStepperAxis(
+            name,
+            profile=ax.profile,
+            transport=ax.transport,
+            host=ax.host,
+            port=port,
+            serial_port=serial_port,
+            baudrate=ax.baudrate,
+            parity=ax.parity,
+            unit_id=ax.unit_id,
+            steps_per_deg=ax.steps_per_deg,
+            gear_ratio=ax.gear_ratio,
+            limits_deg=ax.limits_deg,
+            speed_deg_s=ax.speed_deg_s,
+            accel_deg_s2=ax.accel_deg_s2,
+            stall_tolerance_deg=ax.stall_tolerance_deg,
+            timeout_s=ax.timeout_s,
+        )
+
+    def _served_at(self, ax: AxisConfig) -> tuple[int, str]:
+        """``(port, serial_port)`` to reach an arm: the configured ones or, when this lab
+        serves the simulated controllers and the config says port 0 (``port = 0`` or
+        ``serial_port = "socket://host:0"``), the port the kernel gave the server."""
+        if self.server is not None:
+            for srv in self.server.modbus:
+                served = (srv.transport, srv.host, srv.requested_port)
+                if ax.transport == "tcp" and served == ("tcp", ax.host, ax.port):
+                    return srv.port, ax.serial_port
+                if ax.transport == "rtu" and served == (
+                    "rtu",
+                    *(_socket_url(ax.serial_port) or ()),
+                ):
+                    return ax.port, srv.url
+        return ax.port, ax.serial_port
+
+    # ------------------------------------------------------------------ connect / close
+    async def _connect(self) -> None:
+        parts = {
+            "goniometer": self._goniometer,
+            "spectro": self._spectro,
+            "glossmeter": self._glossmeter,
+        }
+        for name in INSTRUMENTS:
+            if name not in self.instruments:
+                continue
+            part = parts[name]
+            assert part is not None
+            await part.connect()
+            self._closers.append(part.close)
 
     async def close(self) -> None:
         """Close the instruments (each even if another fails), then stop the sim servers."""
