@@ -6,6 +6,8 @@ import json
 import struct
 import xml.etree.ElementTree as ET
 from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
 
 import numpy as np
 import pytest
@@ -85,3 +87,39 @@ def test_json_names_the_file(
     out = tmp_path / "x.png"
     assert _plot(store_file, "1", "--out", str(out), "--json") == 0
     assert json.loads(capsys.readouterr().out)["output"] == str(out.resolve())
+
+
+class _ColourStore(RunStore):
+    """The fixture store with a measured colour on each reading and a predicted L*a*b* per
+    geometry, the way the colour columns of the store give them (issue 11)."""
+
+    def points(self, run_id: int) -> list[Any]:
+        out = []
+        for p in super().points(run_id):
+            c = {"X": 1.0, "Y": 2.0, "Z": 3.0, "L": 50.0 + p.index, "a": -1.0 * p.index,
+                 "b": 2.0 * p.repeat, "C": 1.0, "h_deg": 90.0}  # fmt: skip
+            out.append(SimpleNamespace(**{f: getattr(p, f) for f in p.__slots__}, colour=c))
+        return out
+
+    def predicted_colours(self, run_id: int) -> dict[int, Any]:
+        return {k: SimpleNamespace(L=60.0 + k, a=0.5, b=-0.5) for k in range(3)}
+
+
+def test_colour_per_point_reaches_the_dataset_and_the_plot(store_file: Path) -> None:
+    from goniolab.datasets import run_dataset
+    from goniolab.plot import plot_dataset
+
+    with _ColourStore(store_file, readonly=True) as s:
+        ds = run_dataset(s, 1)
+    np.testing.assert_array_equal(ds["L_star"].values[:, 0], [50.0, 51.0, 52.0])
+    np.testing.assert_array_equal(ds["b_star"].values[1], [0.0, 2.0])
+    assert np.isnan(ds["L_star"].values[2, 1])  # the reading never taken
+    np.testing.assert_array_equal(ds["predicted_L_star"].values, [60.0, 61.0, 62.0])
+    assert ds["a_star"].dims == ("theta_r_deg", "repeat")
+    fig = plot_dataset(ds)
+    assert len(fig.axes) == 4  # luminance, residuals, L*, a*/b*
+    lab_ax = fig.axes[2]
+    assert lab_ax.get_xlabel() == "" and fig.axes[3].get_xlabel() == "aspecular angle (deg)"
+    measured = next(ln for ln in lab_ax.get_lines() if ln.get_label() == "L* measured")
+    np.testing.assert_array_equal(measured.get_xdata(), [-5.0, 0.0, 5.0])
+    np.testing.assert_array_equal(measured.get_ydata(), [50.0, 51.0, 52.0])
