@@ -88,15 +88,21 @@ def format_summary(summary: dict[str, Any]) -> str:
 
 
 class ProgressBar:
-    """A plain-text progress bar with ETA, redrawn in place on a terminal."""
+    """Scan progress with the ETA of the motion model.
+
+    On a terminal a rich progress bar (redrawn in place; messages scroll above it); to a
+    pipe or a file one plain line per 10 % (``[####......] 12/30 ETA 4s detail``), stable
+    for scripts and logs.
+    """
 
     def __init__(self, stream: TextIO, clock_scale: float, width: int = 30) -> None:
         self.stream = stream
         self.clock_scale = clock_scale
         self.width = width
         self.tty = stream.isatty()
-        self.last = ""
         self._last_pct = -1
+        self._rich: Any = None
+        self._task: Any = None
 
     def wall_s(self, lab_s: float) -> float:
         """Lab-clock seconds to wall seconds (a sim clock at scale 0 takes no wall time)."""
@@ -104,34 +110,48 @@ class ProgressBar:
             return 0.0
         return lab_s / self.clock_scale
 
+    def _start_rich(self, total: int) -> None:
+        from rich.console import Console
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
+
+        self._rich = Progress(
+            BarColumn(bar_width=self.width),
+            MofNCompleteColumn(),
+            TextColumn("ETA {task.fields[eta]}"),
+            TextColumn("{task.fields[detail]}"),
+            console=Console(file=self.stream, highlight=False),
+        )
+        self._rich.start()
+        self._task = self._rich.add_task("scan", total=total, eta="?", detail="")
+
     def update(self, ev: Progress, detail: str) -> None:
+        eta = format_eta(self.wall_s(ev.eta_s))
+        if self.tty:
+            if self._rich is None:
+                self._start_rich(ev.total)
+            self._rich.update(self._task, completed=ev.done, total=ev.total, eta=eta,
+                              detail=detail)  # fmt: skip
+            return
         frac = ev.done / ev.total if ev.total else 1.0
         n = round(frac * self.width)
-        line = (
-            f"[{'#' * n}{'.' * (self.width - n)}] {ev.done}/{ev.total} "
-            f"ETA {format_eta(self.wall_s(ev.eta_s))} {detail}"
-        )
         pct = int(frac * 100)
-        if self.tty:
-            self.stream.write("\r" + line.ljust(len(self.last)))
-            self.last = line
-            self.stream.flush()
-        elif pct // 10 != self._last_pct // 10 or ev.done == ev.total:
+        if pct // 10 != self._last_pct // 10 or ev.done == ev.total:
+            line = f"[{'#' * n}{'.' * (self.width - n)}] {ev.done}/{ev.total} ETA {eta} {detail}"
             self.stream.write(line + "\n")
             self.stream.flush()
         self._last_pct = pct
 
     def message(self, text: str) -> None:
-        if self.tty and self.last:
-            self.stream.write("\n")
-            self.last = ""
+        if self._rich is not None:
+            self._rich.console.print(text, markup=False, highlight=False, soft_wrap=True)
+            return
         self.stream.write(text + "\n")
         self.stream.flush()
 
     def close(self) -> None:
-        if self.tty and self.last:
-            self.stream.write("\n")
-            self.stream.flush()
+        if self._rich is not None:
+            self._rich.stop()
+            self._rich = None
 
 
 def point_detail(ev: PointMeasured, predicted_pct: float | None) -> str:
