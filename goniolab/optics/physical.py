@@ -17,7 +17,7 @@ of the surface sends light to ``sin ts - sin t_spec = lambda f``). Their BRDF in
 Everything an instrument reads is a sum of ``P`` over cells (:mod:`._cell_kernels`):
 goniometer cones and ISO 2813 / E430 rectangles with the source aperture (its mirror image
 around each cell's direction, as in :mod:`goniolab.optics.facet`), the gloss of
-:func:`goniolab.optics.instruments.gloss_report`, haze and DOI. With ``masking`` (the
+:func:`goniolab.optics.gloss_standards.gloss_report`, haze and DOI. With ``masking`` (the
 default) the result is multiplied by the height-correlated Smith term
 ``G2 = 1/(1 + Lambda(wi) + Lambda(wo))`` of the map's slopes at the receptor centre (Heitz
 2014), as the facet model does; it only matters at grazing angles on rough maps.
