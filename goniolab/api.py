@@ -36,8 +36,8 @@ if TYPE_CHECKING:  # pragma: no cover - typing only
     import pandas as pd
     import xarray as xr
 
-    from goniolab.optics.facet import FacetModel
     from goniolab.optics.heightmap import HeightMap
+    from goniolab.optics.models import ReflectanceModel
 
 __all__ = [
     "Run",
@@ -113,25 +113,27 @@ def _model(
     slope_method: str,
     weighting: str,
     masking: bool,
-) -> FacetModel:
-    from goniolab.models import model_for
-    from goniolab.optics.facet import FacetModel
+    model: str = "facet",
+    wavelength_nm: float | None = None,
+) -> ReflectanceModel:
+    from goniolab.models import build_model, model_for
 
-    options: dict[str, Any] = {"slope_method": slope_method, "weighting": weighting}
+    options: dict[str, Any] = {
+        "slope_method": slope_method,
+        "weighting": weighting,
+        "masking": masking,
+        "model": model,
+        "wavelength_nm": wavelength_nm,
+    }
     if isinstance(surface, str | Path):
-        model = model_for(surface, n=n, step_um=step_um, masking=masking, **options)
-        assert isinstance(model, FacetModel)  # model_for's default model is "facet"
-        return model
-    from goniolab.optics.surface import Surface
+        return model_for(surface, n=n, step_um=step_um, **options)
+    from goniolab.models import MODEL_NAMES
 
+    if model not in MODEL_NAMES:
+        raise UserError(f"unknown model {model!r}; use one of {', '.join(MODEL_NAMES)}")
     hm = _heightmap(surface, step_um)
     try:
-        return FacetModel(
-            Surface.from_heightmap(hm, slope_method=options["slope_method"]),
-            n=n,
-            weighting=options["weighting"],
-            masking=masking,
-        )
+        return build_model(hm, n=n, **options)
     except ValueError as exc:
         raise UserError(f"{hm.source}: {exc}") from None
 
@@ -170,6 +172,8 @@ def predict_brdf(
     slope_method: str = "forward",
     weighting: str = "radiometric",
     masking: bool = False,
+    model: str = "facet",
+    wavelength_nm: float | None = None,
 ) -> xr.Dataset:
     """The in-plane curve the facet model predicts (Wittmann et al. 2021; docs/PHYSICS.md).
 
@@ -187,6 +191,9 @@ def predict_brdf(
         Full angles of the lamp and detector cones (the goniometer's apertures).
     point
         The BRDF in the exact direction only (no apertures, no ``luminance_pct``).
+    model, wavelength_nm
+        ``facet`` (default), ``kirchhoff``, ``rayleigh-rice`` or ``auto``, and the wave
+        models' wavelength (see :func:`goniolab.models.model_for`).
 
     Returns
     -------
@@ -197,6 +204,7 @@ def predict_brdf(
     """
     from goniolab.datasets import brdf_dataset
     from goniolab.optics.apertures import Cone, inplane_centre, sample_aperture
+    from goniolab.scan.predict import model_name
 
     ti = float(theta_i_deg)
     if not (math.isfinite(ti) and 0.0 <= ti < 90.0):
@@ -204,13 +212,15 @@ def predict_brdf(
     tr = _angles(theta_r_deg)
     if np.any(np.abs(tr) >= 90.0):
         raise UserError("theta_r_deg: angles must be in (-90, 90) deg")
-    model = _model(
+    refl = _model(
         surface,
         n=n,
         step_um=step_um,
         slope_method=slope_method,
         weighting=weighting,
         masking=masking,
+        model=model,
+        wavelength_nm=wavelength_nm,
     )
     attrs: dict[str, Any] = {
         "sample": _source_label(surface),
@@ -218,10 +228,11 @@ def predict_brdf(
         "weighting": weighting,
         "slope_method": slope_method,
         "masking": int(masking),
-        "model": type(model).__name__,
+        "model": type(refl).__name__,
+        "model_name": model_name(refl),
     }
     if point:
-        brdf = np.asarray(model.brdf_inplane(ti, tr), dtype=np.float64)
+        brdf = np.asarray(refl.brdf_inplane(ti, tr), dtype=np.float64)
         return brdf_dataset(ti, tr, brdf, None, attrs={**attrs, "aperture": "none (point)"})
     try:
         src, det = Cone(float(source_deg)), Cone(float(detector_deg))
@@ -230,7 +241,7 @@ def predict_brdf(
     if det.full_angle_deg == 0.0:
         raise UserError("detector_deg 0 has no solid angle: use point=True for the BRDF")
     try:
-        lum = np.asarray(model.luminance_pct(ti, tr, source=src, detector=det), dtype=np.float64)
+        lum = np.asarray(refl.luminance_pct(ti, tr, source=src, detector=det), dtype=np.float64)
     except ValueError as exc:
         raise UserError(f"theta_i_deg {ti:g} / source_deg: {exc}") from None
     omega = []
@@ -251,8 +262,12 @@ def predict_gloss(
     slope_method: str = "forward",
     weighting: str = "radiometric",
     masking: bool = False,
+    model: str = "facet",
+    wavelength_nm: float | None = None,
 ) -> xr.Dataset:
     """ISO 2813 gloss at 20/60/85 deg and the ASTM D4039/E430 haze and DOI readings.
+
+    ``model`` / ``wavelength_nm`` as in :func:`predict_brdf` (default ``facet``).
 
     Returns
     -------
@@ -263,16 +278,18 @@ def predict_gloss(
     from goniolab.datasets import gloss_dataset
     from goniolab.optics.gloss_standards import gloss_report
 
-    model = _model(
+    refl = _model(
         surface,
         n=n,
         step_um=step_um,
         slope_method=slope_method,
         weighting=weighting,
         masking=masking,
+        model=model,
+        wavelength_nm=wavelength_nm,
     )
     return gloss_dataset(
-        gloss_report(model),
+        gloss_report(refl),
         attrs={"sample": _source_label(surface), "n": _index_attr(n), "weighting": weighting},
     )
 

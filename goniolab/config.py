@@ -122,10 +122,17 @@ class LabSection(_Strict):
 
 
 class SampleConfig(_Strict):
-    """``[sample]``: the height map (path or ``sample:NAME``) and refractive index."""
+    """``[sample]``: the height map (path or ``sample:NAME``), refractive index, and the
+    reflectance model that predicts it (:func:`goniolab.models.model_for`: ``facet``,
+    ``kirchhoff``, ``rayleigh-rice`` or ``auto``, the default) with its optional wavelength
+    (nm; unset: 550 nm for BRDF curves, ISO 2813 weighting for gloss)."""
 
     map: str = "sample:wittmann-3"
     n: Annotated[float, Field(strict=True, gt=1.0, lt=4.0, allow_inf_nan=False)] = 1.55
+    model: Literal["auto", "facet", "kirchhoff", "rayleigh-rice"] = "auto"
+    wavelength_nm: (
+        Annotated[float, Field(strict=True, ge=100.0, le=20000.0, allow_inf_nan=False)] | None
+    ) = None
 
 
 class ParkConfig(_Strict):

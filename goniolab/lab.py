@@ -94,7 +94,12 @@ def sample_model(cfg: LabConfig) -> ReflectanceModel:
     from goniolab.models import model_for
 
     try:
-        model: ReflectanceModel = model_for(_map_spec(cfg), n=cfg.sample.n)
+        model: ReflectanceModel = model_for(
+            _map_spec(cfg),
+            n=cfg.sample.n,
+            model=cfg.sample.model,
+            wavelength_nm=cfg.sample.wavelength_nm,
+        )
     except (UserError, ValueError, OSError) as exc:
         raise ConfigError(cfg.source or "<config>", "sample.map", str(exc)) from None
     return model

@@ -19,11 +19,12 @@ from typing import Any
 
 from goniolab.errors import UserError
 from goniolab.optics.facet import FacetModel, Weighting
+from goniolab.optics.heightmap import HeightMap
 from goniolab.optics.models import ReflectanceModel
 from goniolab.optics.surface import SlopeMethod, Surface
 from goniolab.surfaces.resolve import SAMPLE_PREFIX, one_line, resolve_map
 
-__all__ = ["MODEL_NAMES", "model_for"]
+__all__ = ["MODEL_NAMES", "build_model", "model_for"]
 
 #: Names accepted by ``model=`` / ``--model``.
 MODEL_NAMES: tuple[str, ...] = ("auto", "facet", "kirchhoff", "rayleigh-rice")
@@ -42,6 +43,47 @@ def _spec_key(spec: str | Path) -> tuple[str, int, int]:
     return str(path.resolve()), st.st_mtime_ns, st.st_size
 
 
+def build_model(
+    hm: HeightMap,
+    *,
+    n: complex | float = 1.55,
+    slope_method: SlopeMethod = "forward",
+    weighting: Weighting = "radiometric",
+    masking: bool = False,
+    model: str = "facet",
+    wavelength_nm: float | None = None,
+    facet: FacetModel | None = None,
+) -> ReflectanceModel:
+    """The ``model`` (one of :data:`MODEL_NAMES`) of a loaded height map, not cached
+    (:func:`model_for` caches by spec). ``facet``: the facet model ``auto`` falls back on,
+    if already built. Raises ``ValueError`` for a map with no usable facets."""
+    if model == "facet" or (model == "auto" and facet is None):
+        surface = Surface.from_heightmap(hm, slope_method=slope_method)
+        facet = FacetModel(surface, n=n, weighting=weighting, masking=masking)
+        if model == "facet":
+            return facet
+    opts: dict[str, Any] = {
+        "wavelength_nm": 550.0 if wavelength_nm is None else wavelength_nm,
+        "gloss_weighting": "iso2813" if wavelength_nm is None else "single",
+        "masking": masking,
+    }
+    if model == "auto":
+        from goniolab.optics.model_choice import AutoModel
+
+        assert facet is not None
+        out: ReflectanceModel = AutoModel(hm, facet, **opts)
+        return out
+    if model == "kirchhoff":
+        from goniolab.optics.kirchhoff import KirchhoffModel
+
+        return KirchhoffModel(hm, n=n, **opts)
+    if model == "rayleigh-rice":
+        from goniolab.optics.rayleigh_rice import RayleighRiceModel
+
+        return RayleighRiceModel(hm, n=n, **opts)
+    raise ValueError(f"unknown model {model!r}; use one of {', '.join(MODEL_NAMES)}")
+
+
 @functools.lru_cache(maxsize=16)
 def _model(
     key: tuple[str, int, int],
@@ -55,27 +97,20 @@ def _model(
     wavelength_nm: float | None,
 ) -> Any:
     hm = resolve_map(spec, step_um=step_um)
+    facet = None
+    if model == "auto":
+        facet = _model(key, spec, n, step_um, slope_method, weighting, masking, "facet", None)
     try:
-        if model == "facet":
-            surface = Surface.from_heightmap(hm, slope_method=slope_method)
-            return FacetModel(surface, n=n, weighting=weighting, masking=masking)
-        opts: dict[str, Any] = {
-            "wavelength_nm": 550.0 if wavelength_nm is None else wavelength_nm,
-            "gloss_weighting": "iso2813" if wavelength_nm is None else "single",
-            "masking": masking,
-        }
-        if model == "auto":
-            from goniolab.optics.model_choice import AutoModel
-
-            facet = _model(key, spec, n, step_um, slope_method, weighting, masking, "facet", None)
-            return AutoModel(hm, facet, **opts)
-        if model == "kirchhoff":
-            from goniolab.optics.kirchhoff import KirchhoffModel
-
-            return KirchhoffModel(hm, n=n, **opts)
-        from goniolab.optics.rayleigh_rice import RayleighRiceModel
-
-        return RayleighRiceModel(hm, n=n, **opts)
+        return build_model(
+            hm,
+            n=n,
+            slope_method=slope_method,
+            weighting=weighting,
+            masking=masking,
+            model=model,
+            wavelength_nm=wavelength_nm,
+            facet=facet,
+        )
     except ValueError as exc:
         raise UserError(one_line(f"{spec}: {exc}")) from None
 

@@ -111,21 +111,38 @@ class SampleModels:
         Models already built, by spec (the lab's own model of its ``[sample] map``).
     """
 
-    def __init__(self, n: complex | float, known: dict[str, ReflectanceModel] | None = None):
+    def __init__(
+        self,
+        n: complex | float,
+        known: dict[str, ReflectanceModel] | None = None,
+        *,
+        model: str = "facet",
+        wavelength_nm: float | None = None,
+    ):
         self.n = n
+        self.model = model
+        self.wavelength_nm = wavelength_nm
         self._models: dict[str, ReflectanceModel] = dict(known or {})
 
     @classmethod
     def of_lab(cls, lab: Lab) -> SampleModels:
-        """The lab's model for its configured sample; other samples with its index."""
-        return cls(lab.config.sample.n, {lab.config.sample.map: lab.model})
+        """The lab's model for its configured sample; other samples with its index and
+        the ``[sample]`` model and wavelength."""
+        s = lab.config.sample
+        return cls(s.n, {s.map: lab.model}, model=s.model, wavelength_nm=s.wavelength_nm)
 
     async def get(self, sample: str) -> ReflectanceModel:
         """The model of ``sample`` (:func:`goniolab.models.model_for`, cached)."""
         if sample not in self._models:
             from goniolab.models import model_for
 
-            self._models[sample] = await asyncio.to_thread(model_for, sample, n=self.n)
+            self._models[sample] = await asyncio.to_thread(
+                model_for,
+                sample,
+                n=self.n,
+                model=self.model,
+                wavelength_nm=self.wavelength_nm,
+            )
         return self._models[sample]
 
 

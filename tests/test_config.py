@@ -105,6 +105,8 @@ def write(tmp_path: Path, text: str) -> Path:
         ),
         ('[spectro]\nprofile = "nope"\n', "x.toml: spectro.profile: "),
         ('[spectro]\nprofile = "zgm1120"\n', "x.toml: spectro.profile: profile "),
+        ('[sample]\nmodel = "wave"\n', "x.toml: sample.model: Input should be 'auto', 'facet'"),
+        ("[sample]\nwavelength_nm = 50.0\n", "x.toml: sample.wavelength_nm: Input should be"),
         (
             "[lab]\nstart_sim_servers = true\n",
             'x.toml: lab: start_sim_servers = true needs mode = "drivers"',

@@ -234,6 +234,7 @@ async def _execute(
     plan: BrdfPlan | None,
     run_id: int | None,
     json_out: bool,
+    model: str | None = None,
 ) -> int:
     import asyncio
     import signal
@@ -249,6 +250,8 @@ async def _execute(
         assert run_id is not None
         plan = BrdfPlan.from_dict(store.get_run(run_id).plan)
     cfg = load_lab_config(config_path)
+    if model is not None:  # --model overrides the config's [sample] model
+        cfg = cfg.model_copy(update={"sample": cfg.sample.model_copy(update={"model": model})})
     async with ScanSession.open(
         cfg, store, sample=plan.sample, time_scale=time_scale, operator=_specimen_prompt
     ) as session:
@@ -379,6 +382,7 @@ def _cmd_scan(args: argparse.Namespace) -> int:
                 plan=plan,
                 run_id=None,
                 json_out=args.json,
+                model=args.model,
             )
         )
 
@@ -468,6 +472,12 @@ def register(subparsers: Any) -> None:
         "--mirror-reference",
         action="store_true",
         help="read a mirror at the specular geometry first; it sets the 100 %% level",
+    )
+    p.add_argument(
+        "--model",
+        choices=("auto", "facet", "kirchhoff", "rayleigh-rice"),
+        default=None,
+        help="prediction model (default: config [sample] model, itself default auto)",
     )
     allow_negative_angles(p)  # "--theta-r -40:-30:5" is a lamp-side range, not an option
     p.set_defaults(func=_cmd_scan)

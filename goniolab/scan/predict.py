@@ -73,19 +73,32 @@ class Predictor:
         return await asyncio.to_thread(self.predict_sync, theta_i_deg, list(theta_r_deg))
 
     def describe(self) -> dict[str, object]:
-        """Model parameters stored with a run (model class, apertures)."""
+        """Model parameters stored with a run (model class, its ``model_for`` name, apertures)."""
         return {
             "model": type(self.model).__name__,
+            "model_name": model_name(self.model),
             "source_cone_deg": self.source.full_angle_deg,
             "detector_cone_deg": self.detector.full_angle_deg,
             **_model_params(self.model),
         }
 
 
+def model_name(model: ReflectanceModel) -> str:
+    """The :func:`goniolab.models.model_for` name of ``model`` (``facet``, ``kirchhoff``,
+    ``rayleigh-rice``, ``auto``), else its class name."""
+    from goniolab.models import MODEL_NAMES
+    from goniolab.optics.facet import FacetModel
+
+    kind = getattr(model, "kind", None)
+    if isinstance(kind, str) and kind in MODEL_NAMES:
+        return kind
+    return "facet" if isinstance(model, FacetModel) else type(model).__name__
+
+
 def _model_params(model: ReflectanceModel) -> dict[str, object]:
     """Public scalar attributes of a model (refractive index, weighting, alpha, source)."""
     out: dict[str, object] = {}
-    for name in ("n", "weighting", "masking", "kind", "alpha"):
+    for name in ("n", "weighting", "masking", "kind", "alpha", "wavelength_nm"):
         v = getattr(model, name, None)
         if isinstance(v, complex):
             out[name] = [v.real, v.imag]

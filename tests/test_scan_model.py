@@ -1,0 +1,85 @@
+"""``[sample] model`` / ``goniolab scan --model``: the run is predicted with the named model
+and records its name (issue 15: the scan comparison uses the model the config names)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from goniolab.cli import main
+from goniolab.config import configs_dir, load_lab_config
+from goniolab.models import model_for
+from goniolab.optics.apertures import Cone
+from goniolab.store import RunStore
+
+SAMPLE = "sample:gloss-sq50-l2"  # a smooth sample: the wave and facet models differ
+THETA_R = (40.0, 45.0, 50.0)
+
+
+def _config(tmp_path: Path, model: str) -> Path:
+    text = (configs_dir() / "lab-sim.toml").read_text()
+    text = text.replace('model = "auto"', f'model = "{model}"', 1)
+    assert f'model = "{model}"' in text
+    path = tmp_path / f"lab-{model}.toml"
+    path.write_text(text)
+    return path
+
+
+def _scan(tmp_path: Path, config: Path, *extra: str) -> tuple[dict[str, object], list[float]]:
+    store = tmp_path / "runs.sqlite"
+    args = ["scan", "--config", str(config), "--store", str(store), "--time-scale", "0"]
+    args += ["--sample", SAMPLE, "--theta-r", "40:50:5", "--json", *extra]
+    assert main(args) == 0
+    with RunStore(store) as s:
+        rid = max(r.id for r in s.list_runs())
+        rec = s.get_run(rid)
+        preds = [v for _, v in sorted(s.predictions(rid).items())]
+    return dict(rec.model), preds
+
+
+def _expected(model: str) -> np.ndarray:
+    cfg = load_lab_config(configs_dir() / "lab-sim.toml")
+    m = model_for(SAMPLE, n=cfg.sample.n, model=model)
+    src, det = Cone(cfg.goniometer.source_cone_deg), Cone(cfg.spectro.detector_cone_deg)
+    return np.asarray(m.luminance_pct(45.0, np.asarray(THETA_R), source=src, detector=det))
+
+
+def test_config_model_predicts_and_is_recorded(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    facet_params, facet = _scan(tmp_path, _config(tmp_path, "facet"))
+    kh_params, kh = _scan(tmp_path, _config(tmp_path, "kirchhoff"))
+    capsys.readouterr()
+    assert facet_params["model_name"] == "facet"
+    assert kh_params["model_name"] == "kirchhoff"
+    # each run's predictions are its model's, computed independently here
+    np.testing.assert_allclose(facet, _expected("facet"), rtol=1e-9)
+    np.testing.assert_allclose(kh, _expected("kirchhoff"), rtol=1e-9)
+    assert not np.allclose(facet, kh, rtol=0.05)
+    # runs show tells which model predicted
+    with RunStore(tmp_path / "runs.sqlite") as s:
+        rid = max(r.id for r in s.list_runs())
+    assert main(["runs", "show", str(rid), "--store", str(tmp_path / "runs.sqlite"), "--json"]) == 0
+    assert "kirchhoff" in json.dumps(json.loads(capsys.readouterr().out))
+
+
+def test_scan_model_option_overrides_the_config(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    params, preds = _scan(tmp_path, _config(tmp_path, "kirchhoff"), "--model", "facet")
+    assert params["model_name"] == "facet"
+    np.testing.assert_allclose(preds, _expected("facet"), rtol=1e-9)
+
+
+def test_bad_model_in_the_config_is_one_error_naming_file_and_key(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = _config(tmp_path, "auto")
+    path.write_text(path.read_text().replace('model = "auto"', 'model = "wave"', 1))
+    assert main(["scan", "--config", str(path), "--store", str(tmp_path / "r.sqlite")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1
+    assert err[0].startswith("goniolab: error: ") and f"{path}: sample.model: " in err[0]
