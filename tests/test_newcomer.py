@@ -86,3 +86,23 @@ def test_a_negative_angle_range_needs_no_equals(capsys: pytest.CaptureFixture[st
     argv = ["predict", "brdf", "sample:flat", "--theta-i", "0", "--theta-r", "-20:20:10"]
     assert main([*argv, "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["theta_r_deg"] == [-20, -10, 0, 10, 20]
+
+
+def test_a_three_angle_grid_reports_no_fwhm(capsys: pytest.CaptureFixture[str]) -> None:
+    argv = ["predict", "brdf", "sample:wittmann-1", "--theta-r", "40,45,50", "--point"]
+    assert main([*argv, "--json"]) == 0
+    peak = json.loads(capsys.readouterr().out)["peak"]
+    assert peak["position_deg"] == pytest.approx(45.0, abs=0.5)
+    assert peak["fwhm_deg"] is None and "not resolved" in peak["fwhm_note"]
+    assert main(argv) == 0
+    assert "FWHM not resolved by this angle grid" in capsys.readouterr().out
+    # a grid that samples the peak does give its width
+    assert main(["predict", "brdf", "sample:wittmann-1", "--theta-r", "30:60:0.5", "--json"]) == 0
+    fine = json.loads(capsys.readouterr().out)["peak"]
+    assert fine["fwhm_deg"] is not None and "fwhm_note" not in fine
+
+
+def test_help_explains_slope_method(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        main(["predict", "gloss", "--help"])
+    assert "squares plane through 3 x 3 points" in " ".join(capsys.readouterr().out.split())

@@ -234,7 +234,10 @@ def _cmd_stats(args: argparse.Namespace) -> int:
     print(f"  Ra   {st.Ra_nm:10.1f} nm")
     print(f"  Sq   {st.Sq_nm:10.1f} nm")
     print(f"  Sdq  {st.Sdq:10.4f}")
-    print(f"  h_r  {st.h_r:10.4f}   (facets in the zero-slope bin, 1e-3)")
+    print(
+        f"  h_r  {st.h_r:10.4f}   (fraction of facets in the slope histogram's zero bin, "
+        "|p|, |q| < 5e-4; Wittmann sec. 3.1: the higher, the glossier)"
+    )
     for t_key, ch in regime.items():
         if isinstance(ch, dict):
             print(f"  {t_key:>2} deg: {ch['model']:<13} ({ch['reason']})")
@@ -312,6 +315,11 @@ def _cmd_gloss(args: argparse.Namespace) -> int:
         f"  E430 method A      Rs 30 {e.gloss_30:6.1f}   narrow haze {e.haze_narrow:6.2f}   "
         f"wide haze {e.haze_wide:6.2f}   DOI {e.doi:6.1f}"
     )
+    if e.doi < 0:
+        print(
+            "  note: DOI < 0: the 0.3 deg off-specular reading exceeds the specular one "
+            "(no distinct reflected image; DOI = 100 (Rs - R0.3) / Rs, ASTM E430)"
+        )
     return 0
 
 
@@ -390,14 +398,24 @@ def _cmd_brdf(args: argparse.Namespace) -> int:
         out["detector_deg"] = det.full_angle_deg
         out["brdf_sr"] = brdf.tolist()
         out["luminance_pct"] = lum.tolist()
-    peak = _peak(tr, brdf if lum is None else lum)
+    curve = brdf if lum is None else lum
+    peak = _peak(tr, curve)
+    fwhm_note = ""
     if peak is not None:
+        fwhm: float | None = None if math.isnan(peak.fwhm_deg) else peak.fwhm_deg
+        if math.isnan(peak.fwhm_deg):
+            fwhm_note = "outside the scanned range"
+        elif int(np.sum(curve >= peak.amplitude / 2.0)) < 2:
+            # one sample above half maximum: the "width" is the grid's, not the curve's
+            fwhm, fwhm_note = None, "not resolved by this angle grid (use a finer --theta-r)"
         out["peak"] = {
             "of": "brdf_sr" if lum is None else "luminance_pct",
             "amplitude": peak.amplitude,
             "position_deg": peak.position_deg,
-            "fwhm_deg": None if math.isnan(peak.fwhm_deg) else peak.fwhm_deg,
+            "fwhm_deg": fwhm,
         }
+        if fwhm_note:
+            out["peak"]["fwhm_note"] = fwhm_note
     from goniolab.datasets import brdf_dataset
 
     cones = {} if lum is None else {"source_cone_deg": out["source_deg"],
@@ -415,10 +433,8 @@ def _cmd_brdf(args: argparse.Namespace) -> int:
         print(line)
     if peak is not None:
         unit = "1/sr" if lum is None else "%"
-        fwhm = (
-            "outside the scanned range" if math.isnan(peak.fwhm_deg) else f"{peak.fwhm_deg:.3g} deg"
-        )
-        print(f"peak {peak.amplitude:.5g} {unit} at {peak.position_deg:.2f} deg, FWHM {fwhm}")
+        width = fwhm_note or f"{peak.fwhm_deg:.3g} deg"
+        print(f"peak {peak.amplitude:.5g} {unit} at {peak.position_deg:.2f} deg, FWHM {width}")
     return 0
 
 
@@ -433,7 +449,13 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--step-um", type=float, default=None, help="lateral step for files that carry none"
     )
-    p.add_argument("--slope-method", choices=("forward", "central", "plane8"), default="forward")
+    p.add_argument(
+        "--slope-method",
+        choices=("forward", "central", "plane8"),
+        default="forward",
+        help="facet slopes from the map: forward differences (the seed's, default), central "
+        "differences, or the least-squares plane through 3 x 3 points (smooths pixel noise)",
+    )
     p.add_argument(
         "--weighting",
         choices=("radiometric", "seed"),
