@@ -360,6 +360,35 @@ def _unit_wi(theta_i_deg: float) -> FloatArray:
     return np.array([math.sin(t), 0.0, math.cos(t)])
 
 
+#: Histogram bin of P22 for maps without slope spread (Wittmann et al. 2021, sec. 3.1).
+_HIST_BIN = 1e-3
+#: Most grid nodes per axis of the slope kernel density.
+_KDE_MAX_NODES = 2048
+
+
+def _bilinear(
+    kde: tuple[FloatArray, float, float, float, float], p: FloatArray, q: FloatArray
+) -> FloatArray:
+    """Bilinear interpolation of a gridded density at (p, q); 0 outside or for NaN."""
+    dens, p0, q0, gp, gq = kde
+    n_p, n_q = dens.shape
+    x = np.nan_to_num((p - p0) / gp, nan=-1.0, posinf=-1.0, neginf=-1.0)
+    y = np.nan_to_num((q - q0) / gq, nan=-1.0, posinf=-1.0, neginf=-1.0)
+    inside = (x >= 0) & (x <= n_p - 1) & (y >= 0) & (y <= n_q - 1)
+    x, y = np.where(inside, x, 0.0), np.where(inside, y, 0.0)
+    i = np.minimum(np.floor(x).astype(np.int64), n_p - 2)
+    j = np.minimum(np.floor(y).astype(np.int64), n_q - 2)
+    fx, fy = x - i, y - j
+    v = (
+        dens[i, j] * (1 - fx) * (1 - fy)
+        + dens[i + 1, j] * fx * (1 - fy)
+        + dens[i, j + 1] * (1 - fx) * fy
+        + dens[i + 1, j + 1] * fx * fy
+    )
+    out: FloatArray = np.where(inside, v, 0.0)
+    return out
+
+
 class FacetModel:
     """Facet model of a measured surface (implements ``ReflectanceModel``).
 
@@ -382,12 +411,17 @@ class FacetModel:
         :meth:`reflected_fraction`), not per facet.
     backend : {"numba", "numpy"}
         Fused numba kernels (threads over the facets) or their numpy twins.
-    slope_bin : float
-        Bin of the slope histogram P22 used by :meth:`brdf_point` (Wittmann: 1e-3). Its
-        relative noise is about ``1/sqrt(N P22 slope_bin^2)`` per bin, more when neighbouring
-        slopes are correlated, so small maps or rough surfaces need a coarser bin: for
-        N = 1e6 facets of rms slope 0.05, 1e-2 gives a few % near the peak (measured 4 %
-        rms in the tests), 1e-3 gives 15-30 %.
+    slope_bin : float or None
+        How :meth:`brdf_point` / :meth:`brdf` estimate the slope density P22.
+        ``None`` (default): a Gaussian kernel density of the facet slopes with Scott's rule
+        bandwidth per axis, ``h_p = sigma_p N**(-1/6)``, ``h_q = sigma_q N**(-1/6)`` (in two
+        dimensions Scott's and Silverman's rules coincide), see :meth:`slope_density`. On a
+        1024^2 Gaussian map of rms slope 0.14 it is within 5 % of the analytic Beckmann facet
+        BRDF above 10 % of the peak and within 15 % above 1 % (the 1e-3 histogram: up to
+        49 %). A float: the slope histogram of that bin (Wittmann: 1e-3), whose relative
+        noise is about ``1/sqrt(N P22 slope_bin^2)`` per bin, more when neighbouring slopes
+        are correlated: for N = 1e6 facets of rms slope 0.05, 1e-2 gives a few % near the
+        peak, 1e-3 gives 15-30 %. A map without slope spread (flat) uses the 1e-3 histogram.
     grid_step_deg : float
         Node spacing of the angular grid used by :meth:`luminance_pct`.
     """
@@ -400,7 +434,7 @@ class FacetModel:
         weighting: Weighting = "radiometric",
         masking: bool = False,
         backend: Backend = "numba",
-        slope_bin: float = 1e-3,
+        slope_bin: float | None = None,
         grid_step_deg: float = 0.05,
     ) -> None:
         if not isinstance(surface, Surface):
@@ -416,7 +450,7 @@ class FacetModel:
             raise ValueError(f"weighting must be 'radiometric' or 'seed', got {weighting!r}")
         if backend not in ("numba", "numpy"):
             raise ValueError(f"backend must be 'numba' or 'numpy', got {backend!r}")
-        if not (math.isfinite(slope_bin) and slope_bin > 0):
+        if slope_bin is not None and not (math.isfinite(slope_bin) and slope_bin > 0):
             raise ValueError(f"slope_bin must be positive, got {slope_bin}")
         if not (math.isfinite(grid_step_deg) and 0 < grid_step_deg <= 0.5):
             raise ValueError(f"grid_step_deg must be in (0, 0.5], got {grid_step_deg}")
@@ -425,7 +459,8 @@ class FacetModel:
         self.weighting: Weighting = weighting
         self.masking = bool(masking)
         self.backend: Backend = backend
-        self.slope_bin = float(slope_bin)
+        self.slope_bin = _HIST_BIN if slope_bin is None else float(slope_bin)
+        self._use_kde = slope_bin is None
         self.grid_step_deg = float(grid_step_deg)
         self._seed = weighting == "seed"
         self._mx, self._my, self._mz = surface.normals
@@ -487,8 +522,57 @@ class FacetModel:
         out: FloatArray = np.where(hit, counts[pos], 0).astype(np.float64)
         return out
 
+    @cached_property
+    def _kde_grid(self) -> tuple[FloatArray, float, float, float, float] | None:
+        """Gaussian kernel density of the slopes on a grid: (density, p0, q0, gp, gq).
+
+        Scott's rule bandwidth per axis, ``h = sigma N**(-1/6)`` (Scott 1992, d = 2). The
+        slopes are linearly binned (bilinear weights) on a grid of step ``h/4`` (coarser
+        only if the slope range needs more than 2048 nodes per axis) and convolved with the
+        Gaussian kernel (``scipy.ndimage.gaussian_filter``, truncated at 5 h): the binned
+        estimate differs from the exact kernel sum by ``O((step/h)^2)``, well under 1 %.
+        ``None`` when the slopes have no spread (a flat map): the histogram is used.
+        """
+        from scipy.ndimage import gaussian_filter
+
+        p, q = self.surface.p, self.surface.q
+        ok = np.isfinite(p) & np.isfinite(q)
+        p, q = p[ok], q[ok]
+        n = p.size
+        if n < 2:
+            return None
+        sp, sq = float(np.std(p)), float(np.std(q))
+        if not (sp > 0 and sq > 0):
+            return None
+        shrink = n ** (-1.0 / 6.0)
+        hp, hq = sp * shrink, sq * shrink
+        axes = []
+        for v, h in ((p, hp), (q, hq)):
+            lo, hi = float(v.min()) - 5.0 * h, float(v.max()) + 5.0 * h
+            step = max(h / 4.0, (hi - lo) / (_KDE_MAX_NODES - 1))
+            axes.append((lo, step, math.ceil((hi - lo) / step) + 2))
+        (p0, gp, n_p), (q0, gq, n_q) = axes
+        x, y = (p - p0) / gp, (q - q0) / gq
+        i, j = np.floor(x).astype(np.int64), np.floor(y).astype(np.int64)
+        fx, fy = x - i, y - j
+        grid = np.zeros(n_p * n_q)
+        for di, dj, w in (
+            (0, 0, (1 - fx) * (1 - fy)),
+            (1, 0, fx * (1 - fy)),
+            (0, 1, (1 - fx) * fy),
+            (1, 1, fx * fy),
+        ):
+            grid += np.bincount((i + di) * n_q + (j + dj), weights=w, minlength=n_p * n_q)
+        dens = gaussian_filter(
+            grid.reshape(n_p, n_q), sigma=(hp / gp, hq / gq), mode="constant", truncate=5.0
+        )
+        out: FloatArray = dens / (self.surface.n_facets * gp * gq)
+        return out, p0, q0, gp, gq
+
     def slope_density(self, p: ArrayLike, q: ArrayLike) -> FloatArray:
-        """Slope density P22 (per unit p per unit q) from the histogram of bin ``slope_bin``.
+        """Slope density P22 (per unit p per unit q): the Gaussian kernel density of the
+        slopes (default, see :attr:`_kde_grid`, interpolated bilinearly on its grid) or,
+        with an explicit ``slope_bin``, the histogram of that bin.
 
         The histogram (bins centred on multiples of ``slope_bin``, Wittmann sec. 3.1) is
         interpolated bilinearly between bin centres, so P22 is continuous: its error is then
@@ -500,6 +584,9 @@ class FacetModel:
             np.asarray(p, dtype=np.float64), np.asarray(q, dtype=np.float64)
         )
         finite = np.isfinite(pa) & np.isfinite(qa)
+        kde = self._kde_grid if self._use_kde else None
+        if kde is not None:
+            return _bilinear(kde, np.where(finite, pa, np.nan), np.where(finite, qa, np.nan))
         # clipped far outside any histogram, so the integer bin indices cannot overflow
         x = np.clip(np.where(finite, pa, 0.0) / b, -1e15, 1e15)
         y = np.clip(np.where(finite, qa, 0.0) / b, -1e15, 1e15)
