@@ -49,6 +49,7 @@ __all__ = [
     "INT32_MAX",
     "MIN_SEPARATION_FLOOR_DEG",
     "AxisConfig",
+    "ColourConfig",
     "ConfigError",
     "FaultsConfig",
     "GlossmeterConfig",
@@ -277,6 +278,45 @@ class SimConfig(_Strict):
     faults: FaultsConfig = FaultsConfig()
 
 
+class ColourConfig(_Strict):
+    """``[colour]``: how every spectro reading becomes colour (ASTM E308, CIE 15).
+
+    ``scale = "diffuser"`` reports reflectance factors relative to the perfect reflecting
+    diffuser (what multi-angle spectrophotometers report; the reading divided by
+    ``sin^2(a_d) cos(theta_r)``), ``"mirror"`` the spectrum as measured (% of the mirror).
+    """
+
+    illuminant: str = "D65"
+    observer: str = "CIE 1964 10 Degree Standard Observer"
+    method: Literal["ASTM E308", "Integration"] = "ASTM E308"
+    scale: Literal["diffuser", "mirror"] = "diffuser"
+
+    @field_validator("observer")
+    @classmethod
+    def _known_observer(cls, v: str) -> str:
+        from goniolab.colour.spectra import OBSERVERS
+
+        if v not in OBSERVERS:
+            raise ValueError(
+                f"unknown observer {v!r} (CIE 1964 10 Degree Standard Observer, "
+                "CIE 1931 2 Degree Standard Observer, or 10 / 2)"
+            )
+        return OBSERVERS[v]
+
+    @field_validator("illuminant")
+    @classmethod
+    def _known_illuminant(cls, v: str) -> str:
+        # only a non-default value gets here (pydantic skips defaults): colour-science's
+        # import is paid only by configs that name an illuminant
+        from goniolab.colour.spectra import ColourError, ColourSettings
+
+        try:
+            ColourSettings(illuminant=v).validated()
+        except ColourError as exc:
+            raise ValueError(str(exc)) from None
+        return v
+
+
 class LabConfig(_Strict):
     """A whole lab config file (docs/ARCHITECTURE.md, "Lab config")."""
 
@@ -286,6 +326,7 @@ class LabConfig(_Strict):
     spectro: SpectroConfig = SpectroConfig()
     glossmeter: GlossmeterConfig = GlossmeterConfig()
     sim: SimConfig = SimConfig()
+    colour: ColourConfig = ColourConfig()
     #: The file this config came from ("" when built in code).
     source: str = Field(default="", exclude=True)
 

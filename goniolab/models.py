@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import functools
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from goniolab.errors import UserError
 from goniolab.optics.facet import FacetModel, Weighting
@@ -24,7 +24,18 @@ from goniolab.optics.models import ReflectanceModel
 from goniolab.optics.surface import SlopeMethod, Surface
 from goniolab.surfaces.resolve import SAMPLE_PREFIX, one_line, resolve_map
 
-__all__ = ["MODEL_NAMES", "build_model", "model_for"]
+if TYPE_CHECKING:
+    from goniolab.colour.paint import Paint
+    from goniolab.colour.spectral import SpectralPredictor, SurfaceFactory
+
+__all__ = [
+    "MODEL_NAMES",
+    "build_model",
+    "model_for",
+    "paint_for",
+    "spectral_for",
+    "surface_factory",
+]
 
 #: Names accepted by ``model=`` / ``--model``.
 MODEL_NAMES: tuple[str, ...] = ("auto", "facet", "kirchhoff", "rayleigh-rice")
@@ -160,3 +171,97 @@ def model_for(
         key, str(spec), complex(n), step_um, slope_method, weighting, bool(masking), model, wl
     )
     return out
+
+
+# ------------------------------------------------------------------------- colour (issue 11)
+def paint_for(spec: str | Path | None, n: complex | float = 1.55) -> Paint:
+    """The paint of a surface spec: a built-in sample's ``[samples.NAME.paint]`` table, else
+    a coat of constant index ``n`` over a black body (the grey luminance model).
+
+    Raises
+    ------
+    UserError
+        The sample's paint table is malformed (names the key).
+    """
+    from goniolab.colour.dispersion import Constant
+    from goniolab.colour.paint import Paint, PaintError, paint_from_dict
+
+    text = "" if spec is None else str(spec)
+    if text.startswith(SAMPLE_PREFIX):
+        from goniolab.surfaces.samples import SampleError, sample_info
+
+        try:
+            info = sample_info(text[len(SAMPLE_PREFIX) :])
+        except SampleError as exc:
+            raise UserError(one_line(str(exc))) from None
+        table = info.params.get("paint")
+        if table is not None:
+            try:
+                return paint_from_dict(table, where=f"samples.{info.name}.paint")
+            except PaintError as exc:
+                raise UserError(one_line(str(exc))) from None
+    return Paint(coat=Constant(complex(n)))
+
+
+def surface_factory(model: ReflectanceModel) -> SurfaceFactory:
+    """The coat-surface model of ``model``'s surface for any index and wavelength.
+
+    A facet model is rebuilt on the same facets (weighting, masking kept), an analytic one
+    with the same kind and roughness, a physical-optics one (Kirchhoff, Rayleigh-Rice) by its
+    ``with_optics(n=, wavelength_nm=)`` (then evaluated at wavelength nodes); any other model
+    (``auto``) is used as it is (its own n and wavelength: the factory says so in its name).
+    """
+    from goniolab.colour.spectral import SurfaceFactory
+    from goniolab.optics.analytic import AnalyticModel
+
+    if isinstance(model, FacetModel):
+        m = model
+
+        def build_facet(n: complex, wavelength_nm: float) -> ReflectanceModel:
+            if complex(n) == m.n:
+                return m
+            return FacetModel(m.surface, n=n, weighting=m.weighting, masking=m.masking)
+
+        return SurfaceFactory(build_facet, name="facet")
+    if isinstance(model, AnalyticModel):
+        a = model
+
+        def build_analytic(n: complex, wavelength_nm: float) -> ReflectanceModel:
+            return AnalyticModel(a.kind, alpha=a.alpha, n=n)
+
+        return SurfaceFactory(build_analytic, name=f"analytic-{a.kind}")
+    with_optics = getattr(model, "with_optics", None)
+    if with_optics is not None:  # physical optics (Kirchhoff, Rayleigh-Rice): n and lambda
+
+        def build_physical(n: complex, wavelength_nm: float) -> ReflectanceModel:
+            out: ReflectanceModel = with_optics(n=n, wavelength_nm=wavelength_nm)
+            return out
+
+        kind = getattr(model, "kind", type(model).__name__)
+        return SurfaceFactory(build_physical, wavelength_dependent=True, name=str(kind))
+    return SurfaceFactory(lambda n, wl: model, name=f"{type(model).__name__} (fixed n)")
+
+
+def spectral_for(
+    model: ReflectanceModel,
+    *,
+    source_cone_deg: float = 6.0,
+    detector_cone_deg: float = 6.0,
+    step_nm: float = 10.0,
+    paint: Paint | None = None,
+) -> SpectralPredictor:
+    """The spectral predictor of a model's surface with its sample's paint (380-780 nm)."""
+    from goniolab.colour.spectra import standard_grid_nm
+    from goniolab.colour.spectral import SpectralPredictor
+    from goniolab.optics.apertures import Cone
+
+    surface = getattr(model, "surface", None)
+    spec = getattr(surface, "source", None)
+    n = complex(getattr(model, "n", 1.55))
+    return SpectralPredictor(
+        surface_factory(model),
+        paint if paint is not None else paint_for(spec, n),
+        source=Cone(source_cone_deg),
+        detector=Cone(detector_cone_deg),
+        wavelengths_nm=standard_grid_nm(step_nm),
+    )

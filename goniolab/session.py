@@ -34,6 +34,7 @@ from goniolab.config import LabConfig
 from goniolab.errors import UserError
 from goniolab.lab import Lab
 from goniolab.optics.models import ReflectanceModel
+from goniolab.scan.colour import PointColour
 from goniolab.scan.events import EventBus, RunState
 from goniolab.scan.gloss import GlossLogger, predict_gloss
 from goniolab.scan.plans import BrdfPlan, GlossPlan
@@ -292,6 +293,7 @@ class ScanSession:
             home_timeout_s=home_timeout_s(cfg),
             park_deg=(g.park.theta_i_deg, g.park.theta_r_deg),
             specimen_hook=hook,
+            point_colour=PointColour.from_config(cfg),
         )
 
     async def run(self, runner: ScanRunner) -> RunResult:

@@ -53,8 +53,10 @@ import platformdirs
 from goniolab.logs import redact
 
 __all__ = [
+    "COLOUR_KEYS",
     "GlossRow",
     "PointRow",
+    "PredictedColour",
     "RunBusy",
     "RunRecord",
     "RunStore",
@@ -122,6 +124,28 @@ CREATE TABLE IF NOT EXISTS gloss_readings (
 );
 CREATE INDEX IF NOT EXISTS points_run ON points(run_id, idx, repeat);
 """
+
+#: Colour columns (issue 11), added to stores created before them by ``ALTER TABLE``:
+#: measured CIE XYZ / L*a*b* / L*C*h per point, predicted L*a*b* and spectrum per geometry.
+COLOUR_KEYS: tuple[str, ...] = ("X", "Y", "Z", "L", "a", "b", "C", "h_deg")
+_POINT_COLOUR_COLUMNS: tuple[tuple[str, str], ...] = (
+    ("colour_X", "REAL"),
+    ("colour_Y", "REAL"),
+    ("colour_Z", "REAL"),
+    ("colour_L", "REAL"),
+    ("colour_a", "REAL"),
+    ("colour_b", "REAL"),
+    ("colour_C", "REAL"),
+    ("colour_h_deg", "REAL"),
+    ("colour_error", "TEXT"),
+)
+_PREDICTION_COLOUR_COLUMNS: tuple[tuple[str, str], ...] = (
+    ("predicted_L", "REAL"),
+    ("predicted_a", "REAL"),
+    ("predicted_b", "REAL"),
+    ("predicted_spectrum_json", "TEXT"),
+)
+_COLOUR_COLUMNS = (("points", _POINT_COLOUR_COLUMNS), ("predictions", _PREDICTION_COLOUR_COLUMNS))
 
 #: The same tables in PostgreSQL (``DOUBLE PRECISION`` where SQLite's REAL is 8 bytes),
 #: plus ``run_claims``: one row per claimed run, row-locked while a runner holds it.
@@ -198,6 +222,18 @@ _POINT_FIELDS = (
     "measured_theta_r_deg",
     "luminance_pct",
     "predicted_pct",
+    "X",
+    "Y",
+    "Z",
+    "L_star",
+    "a_star",
+    "b_star",
+    "C_star",
+    "h_deg",
+    "predicted_L_star",
+    "predicted_a_star",
+    "predicted_b_star",
+    "colour_error",
     "timestamp",
 )
 _GLOSS_FIELDS = (
@@ -338,6 +374,20 @@ class PointRow:
     luminance_pct: float
     raw: dict[str, Any]
     timestamp: float
+    #: Measured colour (keys of :data:`COLOUR_KEYS`), ``None`` when the spectrum could not
+    #: be converted (then ``colour_error`` says why) or the store predates colour.
+    colour: dict[str, float] | None = None
+    colour_error: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class PredictedColour:
+    """The predicted colour of one plan geometry (L*a*b*) and its spectrum (% of mirror)."""
+
+    L: float
+    a: float
+    b: float
+    spectrum_pct: tuple[float, ...] | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -465,6 +515,7 @@ class RunStore:
         self.readonly = readonly
         self.is_postgres = is_store_url(path)
         self._claims: dict[int, Any] = {}
+        self._colour_cols: bool | None = None
         if self.is_postgres:
             self._conninfo = str(path)
             #: How the store names itself (a URL without its password).
@@ -508,6 +559,7 @@ class RunStore:
             self._db.execute("PRAGMA synchronous=FULL")
             self._db.execute("PRAGMA foreign_keys=ON")
             self._db.executescript(_SCHEMA)
+            self._add_missing_columns()
             self._db.execute(
                 "INSERT INTO meta(key, value) VALUES ('schema_version', ?)"
                 " ON CONFLICT (key) DO NOTHING",
@@ -539,6 +591,12 @@ class RunStore:
                         " ON CONFLICT (key) DO NOTHING",
                         (str(_SCHEMA_VERSION),),
                     )
+                    for table, cols in _COLOUR_COLUMNS:
+                        for name, sql_type in cols:
+                            pg_type = "DOUBLE PRECISION" if sql_type == "REAL" else sql_type
+                            db.execute(
+                                f"ALTER TABLE {table} ADD COLUMN IF NOT EXISTS {name} {pg_type}"
+                            )
         except psycopg.Error as exc:
             conn.close()
             raise StoreError(redact(f"{where}: cannot open: {_pg_why(exc)}")) from None
@@ -546,6 +604,22 @@ class RunStore:
             conn.close()
             raise
         return db
+
+    def _add_missing_columns(self) -> None:
+        """Bring an SQLite store written by an older goniolab up to the colour columns
+        (additive: nothing stored is touched; the new columns are NULL for old rows)."""
+        for table, cols in _COLOUR_COLUMNS:
+            have = set(self.table_columns(table))
+            for name, sql_type in cols:
+                if name not in have:
+                    self._db.execute(f"ALTER TABLE {table} ADD COLUMN {name} {sql_type}")
+
+    @property
+    def _has_colour(self) -> bool:
+        """Whether this store has the colour columns (an old read-only store may not)."""
+        if self._colour_cols is None:
+            self._colour_cols = "colour_L" in self.table_columns("points")
+        return self._colour_cols
 
     def _open_readonly(self, where: str) -> sqlite3.Connection:
         """Open for reading only: ``mode=ro``; on a read-only directory (no ``-shm`` can be
@@ -773,8 +847,13 @@ class RunStore:
         luminance_pct: float,
         raw: Mapping[str, Any],
         timestamp: float,
+        colour: Mapping[str, float] | None = None,
+        colour_error: str = "",
     ) -> None:
         """Commit one reading. A second reading of the same (index, repeat) is refused.
+
+        ``colour`` (keys of :data:`COLOUR_KEYS`) is the reading's measured colour, stored in
+        the same row; ``colour_error`` says why there is none (a bad spectrum).
 
         Raises
         ------
@@ -789,6 +868,14 @@ class RunStore:
                 (run_id, index, repeat, theta_i_deg, theta_r_deg, measured_theta_i_deg,
                  measured_theta_r_deg, luminance_pct, _dumps(dict(raw)), timestamp),
             )  # fmt: skip
+            if colour is not None or colour_error:
+                values = [None if colour is None else float(colour[k]) for k in COLOUR_KEYS]
+                db.execute(
+                    "UPDATE points SET colour_X = ?, colour_Y = ?, colour_Z = ?, colour_L = ?,"
+                    " colour_a = ?, colour_b = ?, colour_C = ?, colour_h_deg = ?,"
+                    " colour_error = ? WHERE run_id = ? AND idx = ? AND repeat = ?",
+                    (*values, colour_error or None, run_id, index, repeat),
+                )
 
     def done_keys(self, run_id: int) -> set[tuple[int, int]]:
         """Return the (index, repeat) pairs already stored for ``run_id``."""
@@ -797,26 +884,43 @@ class RunStore:
 
     def points(self, run_id: int) -> list[PointRow]:
         """Return every stored reading of ``run_id`` ordered by (index, repeat)."""
+        colour_sql = (
+            ", colour_X, colour_Y, colour_Z, colour_L, colour_a, colour_b, colour_C,"
+            " colour_h_deg, colour_error"
+            if self._has_colour
+            else ""
+        )
         rows = self._db.execute(
             "SELECT idx, repeat, theta_i_deg, theta_r_deg, measured_theta_i_deg,"
-            " measured_theta_r_deg, luminance_pct, raw_json, timestamp FROM points"
-            " WHERE run_id = ? ORDER BY idx, repeat",
+            " measured_theta_r_deg, luminance_pct, raw_json, timestamp"
+            + colour_sql
+            + " FROM points WHERE run_id = ? ORDER BY idx, repeat",
             (run_id,),
         ).fetchall()
-        return [
-            PointRow(
-                index=int(r[0]),
-                repeat=int(r[1]),
-                theta_i_deg=float(r[2]),
-                theta_r_deg=float(r[3]),
-                measured_theta_i_deg=float(r[4]),
-                measured_theta_r_deg=float(r[5]),
-                luminance_pct=float(r[6]),
-                raw=json.loads(r[7]),
-                timestamp=float(r[8]),
+        out = []
+        for r in rows:
+            colour = None
+            error = ""
+            if colour_sql:
+                if r[12] is not None:
+                    colour = {k: float(v) for k, v in zip(COLOUR_KEYS, r[9:17], strict=True)}
+                error = str(r[17] or "")
+            out.append(
+                PointRow(
+                    index=int(r[0]),
+                    repeat=int(r[1]),
+                    theta_i_deg=float(r[2]),
+                    theta_r_deg=float(r[3]),
+                    measured_theta_i_deg=float(r[4]),
+                    measured_theta_r_deg=float(r[5]),
+                    luminance_pct=float(r[6]),
+                    raw=json.loads(r[7]),
+                    timestamp=float(r[8]),
+                    colour=colour,
+                    colour_error=error,
+                )
             )
-            for r in rows
-        ]
+        return out
 
     def count_points(self, run_id: int) -> int:
         """Return the number of stored readings of ``run_id``."""
@@ -834,6 +938,43 @@ class RunStore:
                 " predicted_pct = excluded.predicted_pct",
                 [(run_id, int(i), float(ti), float(tr), float(p)) for i, ti, tr, p in rows],
             )
+
+    def add_predicted_colours(
+        self, run_id: int, rows: Sequence[tuple[int, PredictedColour]]
+    ) -> None:
+        """Store the predicted colour (and spectrum) of geometries already predicted."""
+        with self._tx() as db:
+            db.executemany(
+                "UPDATE predictions SET predicted_L = ?, predicted_a = ?, predicted_b = ?,"
+                " predicted_spectrum_json = ? WHERE run_id = ? AND idx = ?",
+                [
+                    (
+                        c.L,
+                        c.a,
+                        c.b,
+                        None if c.spectrum_pct is None else json.dumps(list(c.spectrum_pct)),
+                        run_id,
+                        int(i),
+                    )
+                    for i, c in rows
+                ],
+            )
+
+    def predicted_colours(self, run_id: int) -> dict[int, PredictedColour]:
+        """Return ``{index: PredictedColour}`` for the geometries with a predicted colour."""
+        if not self._has_colour:
+            return {}
+        rows = self._db.execute(
+            "SELECT idx, predicted_L, predicted_a, predicted_b, predicted_spectrum_json"
+            " FROM predictions WHERE run_id = ? AND predicted_L IS NOT NULL",
+            (run_id,),
+        ).fetchall()
+        return {
+            int(i): PredictedColour(
+                float(lv), float(av), float(bv), None if sj is None else tuple(json.loads(sj))
+            )
+            for i, lv, av, bv, sj in rows
+        }
 
     def predictions(self, run_id: int) -> dict[int, float]:
         """Return ``{index: predicted_pct}`` for ``run_id``."""
@@ -977,6 +1118,26 @@ class RunStore:
                 for g in self.gloss_readings(run_id)
             ]
         preds = self.predictions(run_id)
+        pcols = self.predicted_colours(run_id)
+
+        def colour_cols(p: PointRow) -> dict[str, Any]:
+            c = p.colour or {}
+            pc = pcols.get(p.index)
+            return {
+                "X": c.get("X"),
+                "Y": c.get("Y"),
+                "Z": c.get("Z"),
+                "L_star": c.get("L"),
+                "a_star": c.get("a"),
+                "b_star": c.get("b"),
+                "C_star": c.get("C"),
+                "h_deg": c.get("h_deg"),
+                "predicted_L_star": None if pc is None else pc.L,
+                "predicted_a_star": None if pc is None else pc.a,
+                "predicted_b_star": None if pc is None else pc.b,
+                "colour_error": p.colour_error,
+            }
+
         return [
             {
                 "run_id": run_id,
@@ -988,6 +1149,7 @@ class RunStore:
                 "measured_theta_r_deg": p.measured_theta_r_deg,
                 "luminance_pct": p.luminance_pct,
                 "predicted_pct": preds.get(p.index),
+                **colour_cols(p),
                 "timestamp": p.timestamp,
             }
             for p in self.points(run_id)

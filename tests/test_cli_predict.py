@@ -138,7 +138,7 @@ def test_bad_options_exit_2(capsys: pytest.CaptureFixture[str]) -> None:
 def test_samples_command_lists_the_library(capsys: pytest.CaptureFixture[str]) -> None:
     rows = _run_json(capsys, "samples")
     by_name = {r["name"]: r for r in rows}
-    assert len(rows) == 16
+    assert len(rows) == 20  # 16 surfaces + 4 painted samples (issue 11)
     assert by_name["wittmann-4"]["seed_g60"] == 26.0 and by_name["wittmann-4"]["seed_ra_nm"] == 250
     assert by_name["flat"]["n"] == 1.55
     assert main(["samples"]) == 0

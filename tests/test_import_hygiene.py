@@ -95,3 +95,13 @@ def test_scan_never_imports_tui() -> None:
     imported, modules = loaded_after_importing(["goniolab.scan"])
     assert len([m for m in imported if m.startswith("goniolab.scan.")]) >= 2
     assert offenders(modules, ("goniolab.tui", "textual")) == []
+
+
+def test_colour_is_pure_and_imports_colour_science_lazily() -> None:
+    imported, modules = loaded_after_importing(["goniolab.colour"])
+    assert "goniolab.colour.paint" in imported and "goniolab.colour.spectral" in imported
+    bad = offenders(
+        modules, ("goniolab", "drivers", "sim", "textual"), ("goniolab.colour", "goniolab.optics")
+    )
+    assert [m for m in bad if m != "goniolab"] == [], bad
+    assert "colour" not in modules  # colour-science is imported inside the functions

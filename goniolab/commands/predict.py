@@ -514,3 +514,6 @@ def register(subparsers: Any) -> None:
     brdf.add_argument("--out", metavar="FILE.nc", help="also write the curve as netCDF")
     allow_negative_angles(brdf)  # "--theta-r -20:20:1" is a range, not an option
     brdf.set_defaults(func=_cmd_brdf)
+    from goniolab.commands._colour import register_predict_colour
+
+    register_predict_colour(sub, _add_common)

@@ -153,12 +153,51 @@ def plan_text(plan: dict[str, Any]) -> str:
         return json.dumps(plan, sort_keys=True)
 
 
+def run_colour(store: RunStore, rec: RunRecord) -> list[dict[str, Any]]:
+    """Per-geometry measured and predicted colour of a BRDF run ([] for gloss runs)."""
+    if rec.kind != "brdf":
+        return []
+    from goniolab.scan.colour import colour_rows
+
+    theta_i = float(rec.plan.get("theta_i_deg", 45.0))
+    return colour_rows(store.points(rec.id), store.predicted_colours(rec.id), theta_i)
+
+
+def _f(v: Any, fmt: str = "6.1f") -> str:
+    return "-" if v is None else format(float(v), fmt)
+
+
+def colour_text(rows: list[dict[str, Any]]) -> list[str]:
+    """Lines of the colour table (one per geometry) printed by ``runs show/colour``."""
+    from goniolab.scan.colour import flop_of_rows
+
+    out = ["  theta_r  aspec     L*     a*     b*     C*      h   pred L*  a*     b*    dE00"]
+    for r in rows:
+        out.append(
+            f"  {r['theta_r_deg']:7.2f} {r['aspecular_deg']:6.1f} {_f(r.get('L'))} "
+            f"{_f(r.get('a'))} {_f(r.get('b'))} {_f(r.get('C'))} {_f(r.get('h_deg'))}   "
+            f"{_f(r.get('predicted_L'))} {_f(r.get('predicted_a'))} {_f(r.get('predicted_b'))}"
+            f" {_f(r.get('dE2000'), '6.2f')}"
+        )
+    fi = flop_of_rows(rows)
+    fi_p = flop_of_rows(rows, "predicted_L")
+    if fi is not None or fi_p is not None:
+        out.append(f"  flop index: measured {_f(fi, '.2f')}, predicted {_f(fi_p, '.2f')}")
+    return out
+
+
 def _cmd_show(args: argparse.Namespace) -> int:
     with open_store(args.store, args.config) as store:
         rec = _get_run(store, args.run)
         summary = run_summary(store, rec)
+        colour = run_colour(store, rec)
         if args.json:
-            doc = {"run": rec.as_dict(), "interrupted": interrupted(store, rec), "summary": summary}
+            doc = {
+                "run": rec.as_dict(),
+                "interrupted": interrupted(store, rec),
+                "summary": summary,
+                "colour": colour,
+            }
             print(json.dumps(doc, indent=2))
             return 0
         status = rec.status
@@ -174,6 +213,9 @@ def _cmd_show(args: argparse.Namespace) -> int:
             from goniolab.commands.scan import format_summary
 
             print(format_summary(summary))
+            if any("L" in r for r in colour):
+                print("  colour (reflectance factor, per geometry):")
+                print("\n".join(colour_text(colour)))
         else:
             predicted = rec.model.get("predicted_gu") or {}
             for angle, st in summary["statistics"].items():
@@ -184,6 +226,59 @@ def _cmd_show(args: argparse.Namespace) -> int:
                 )
         if rec.status != "done" and rec.kind == "brdf":
             print(f"  continue it with: goniolab scan resume {rec.id}")
+    return 0
+
+
+def _cmd_colour(args: argparse.Namespace) -> int:
+    from goniolab.scan.colour import compare_rows, flop_of_rows
+
+    with open_store(args.store, args.config) as store:
+        rec = _get_run(store, args.run)
+        if rec.kind != "brdf":
+            raise UserError(f"run {rec.id} is a {rec.kind} run: colour needs a scan (brdf) run")
+        rows = run_colour(store, rec)
+        other_rows: list[dict[str, Any]] = []
+        if args.vs is not None:
+            other = _get_run(store, args.vs)
+            if other.kind != "brdf":
+                raise UserError(f"run {other.id} is a {other.kind} run: --vs needs a scan run")
+            other_rows = run_colour(store, other)
+    if not any("L" in r for r in rows):
+        raise UserError(f"run {rec.id} has no measured colour (no readings, or no usable spectra)")
+    doc: dict[str, Any] = {
+        "run": rec.id,
+        "colour_settings": rec.config.get("colour", {}),
+        "geometries": rows,
+        "flop_index": flop_of_rows(rows),
+        "predicted_flop_index": flop_of_rows(rows, "predicted_L"),
+    }
+    if args.vs is not None:
+        pairs = compare_rows(rows, other_rows)
+        if not pairs:
+            raise UserError(f"runs {rec.id} and {args.vs} share no detector angle with colour")
+        doc["vs"] = {
+            "run": args.vs,
+            "pairs": pairs,
+            "flop_index": flop_of_rows(other_rows),
+            "max_dE2000": max(p["dE2000"] for p in pairs),
+            "mean_dE2000": sum(p["dE2000"] for p in pairs) / len(pairs),
+        }
+    if args.json:
+        print(json.dumps(doc, indent=2))
+        return 0
+    print(f"run {rec.id} on {rec.sample or '-'}: colour per geometry")
+    print("\n".join(colour_text(rows)))
+    if args.vs is not None:
+        v = doc["vs"]
+        print(f"vs run {args.vs}:")
+        print("  theta_r  aspec     L*     a*     b*  |  L*     a*     b*   dE*ab   dE94  dE2000")
+        for p in v["pairs"]:
+            print(
+                f"  {p['theta_r_deg']:7.2f} {p['aspecular_deg']:6.1f} {p['L']:6.1f} {p['a']:6.1f}"
+                f" {p['b']:6.1f} | {p['other_L']:6.1f} {p['other_a']:6.1f} {p['other_b']:6.1f}"
+                f" {p['dE76']:6.2f} {p['dE94']:6.2f} {p['dE2000']:6.2f}"
+            )
+        print(f"  dE2000: mean {v['mean_dE2000']:.2f}, max {v['max_dE2000']:.2f}")
     return 0
 
 
@@ -274,6 +369,16 @@ def register(subparsers: Any) -> None:
     ps.add_argument("run", type=int, metavar="RUN")
     ps.add_argument("--json", action="store_true", help="print JSON")
     ps.set_defaults(func=_cmd_show)
+
+    pc = sub.add_parser(
+        "colour",
+        parents=[common],
+        help="measured vs predicted colour per geometry (dE76/94/2000, flop index)",
+    )
+    pc.add_argument("run", type=int, metavar="RUN")
+    pc.add_argument("--vs", type=int, metavar="RUN", help="compare with another run")
+    pc.add_argument("--json", action="store_true", help="print JSON")
+    pc.set_defaults(func=_cmd_colour)
 
     pe = sub.add_parser(
         "export",

@@ -346,6 +346,50 @@ def run_lab(coro: Coroutine[Any, Any, _T]) -> _T:
         raise UserError(f"instrument error: {exc}", exit_code=1) from exc
 
 
+def _e2194_geometry(args: argparse.Namespace, cfg: Any) -> tuple[float, str]:
+    """The ASTM E2194 / E2539 / DIN 6175-2 geometry: 45 deg incidence, detector at the
+    aspecular angles -15, 15, 25, 45, 75, 110 deg (ascending theta_r). Angles the detector
+    arm cannot reach (its limits, or beyond the lamp: it would pass through the lamp arm)
+    are skipped, each named on stderr with the reason."""
+    from goniolab.colour.multiangle import (
+        E2194_ASPECULAR_DEG,
+        E2194_INCIDENCE_DEG,
+        theta_r_for_aspecular,
+    )
+
+    if args.theta_i != E2194_INCIDENCE_DEG:
+        raise UserError(
+            f"scan --plan e2194: the standard lights at 45 deg, not --theta-i {args.theta_i:g}"
+        )
+    if args.theta_r_given:
+        raise UserError("scan --plan e2194 sets the detector angles itself; drop --theta-r")
+    pairs = sorted((theta_r_for_aspecular(a), a) for a in E2194_ASPECULAR_DEG)
+    lo, hi = cfg.goniometer.detector.limits_deg
+    where = f"{cfg.source or 'config'}: goniometer.detector.limits_deg"
+    keep: list[tuple[float, float]] = []
+    for t, a in pairs:
+        if t < -E2194_INCIDENCE_DEG:
+            print(
+                f"scan --plan e2194: aspecular {a:g} deg skipped: theta_r {t:g} lies beyond the "
+                f"lamp (-{E2194_INCIDENCE_DEG:g} deg), the detector arm would pass through the "
+                f"lamp arm (by reciprocity it is theta_i {-t:g}, theta_r -{E2194_INCIDENCE_DEG:g}; "
+                "a plan holds one incidence)",
+                file=sys.stderr,
+            )
+        elif not lo <= t <= hi:
+            print(
+                f"scan --plan e2194: aspecular {a:g} deg skipped: theta_r {t:g} outside the "
+                f"detector arm's {lo:g}..{hi:g} deg ({where})",
+                file=sys.stderr,
+            )
+        else:
+            keep.append((t, a))
+    if not keep:
+        raise UserError(f"scan --plan e2194: no standard angle is within reach ({where})")
+    pairs = keep
+    return E2194_INCIDENCE_DEG, ",".join(f"{t:g}" for t, _ in pairs)
+
+
 def _cmd_scan(args: argparse.Namespace) -> int:
     if not args.config:
         raise UserError("scan: --config FILE is required (e.g. configs/lab-sim.toml)")
@@ -353,15 +397,21 @@ def _cmd_scan(args: argparse.Namespace) -> int:
     from goniolab.scan.plans import BrdfPlan, PlanError, parse_angles
 
     cfg = load_lab_config(args.config)
+    args.theta_r_given = args.theta_r is not None
+    if args.theta_r is None:
+        args.theta_r = "0:70:1"
     sample = args.sample or cfg.sample.map
     if args.sample:
         from goniolab.session import check_sample
 
         check_sample(args.sample)
+    theta_i, theta_r = args.theta_i, args.theta_r
+    if args.plan == "e2194":
+        theta_i, theta_r = _e2194_geometry(args, cfg)
     try:
         plan = BrdfPlan(
-            theta_i_deg=args.theta_i,
-            theta_r_deg=parse_angles(args.theta_r, name="--theta-r"),
+            theta_i_deg=theta_i,
+            theta_r_deg=parse_angles(theta_r, name="--theta-r"),
             repeats=args.repeats,
             dwell_s=args.dwell,
             exposure_us=args.exposure_us
@@ -463,7 +513,13 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument("--theta-i", type=float, default=45.0, help="incidence angle, deg (default 45)")
     p.add_argument(
-        "--theta-r", default="0:70:1", help='detector angles: "start:stop:step" or "a,b,c"'
+        "--theta-r", default=None, help='detector angles: "start:stop:step" or "a,b,c" (0:70:1)'
+    )
+    p.add_argument(
+        "--plan",
+        choices=("sweep", "e2194"),
+        default="sweep",
+        help="sweep (--theta-r) or e2194: the ASTM E2194/E2539, DIN 6175-2 multi-angle geometry",
     )
     p.add_argument("--repeats", type=int, default=1, help="readings per geometry")
     p.add_argument("--dwell", type=float, default=0.0, help="settling time after a move, s")

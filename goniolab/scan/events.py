@@ -17,6 +17,7 @@ from typing import Any
 
 __all__ = [
     "ArmsMoved",
+    "ColourPredicted",
     "Event",
     "EventBus",
     "GlossRead",
@@ -85,6 +86,9 @@ class PointMeasured(Event):
     #: The model's prediction for this geometry when already computed (else ``None``);
     #: the residual is ``luminance_pct - predicted_pct``.
     predicted_pct: float | None = None
+    #: Measured CIE L*a*b* of the reading's spectrum (``None``: no colour, see the
+    #: InstrumentError published before it).
+    lab: tuple[float, float, float] | None = None
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -95,6 +99,15 @@ class PointPredicted(Event):
     theta_i_deg: float
     theta_r_deg: float
     predicted_pct: float
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ColourPredicted(Event):
+    """The predicted colour (CIE L*a*b*) of plan point ``index`` (spectral prediction)."""
+
+    index: int
+    theta_r_deg: float
+    lab: tuple[float, float, float]
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

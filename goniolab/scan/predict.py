@@ -20,9 +20,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from goniolab.colour.spectral import SpectralPredictor
 from goniolab.config import LabConfig
 from goniolab.optics.apertures import Cone
 from goniolab.optics.models import ReflectanceModel
+from goniolab.scan.colour import PointColour
+from goniolab.store import PredictedColour
 
 __all__ = ["Predictor"]
 
@@ -49,15 +52,29 @@ class Predictor:
     source: Cone
     detector: Cone
     chunk: int = 8
+    #: The spectral prediction (coat surface + paint) giving each geometry's predicted
+    #: colour; ``None``: luminance only.
+    spectral: SpectralPredictor | None = None
+    #: How spectra become colour (illuminant, observer, scale) for the predicted colour.
+    point_colour: PointColour | None = None
 
     @classmethod
     def from_config(cls, model: ReflectanceModel, config: LabConfig) -> Predictor:
         """Predictions through a lab config's lamp cone (``[goniometer] source_cone_deg``)
-        and detector cone (``[spectro] detector_cone_deg``)."""
+        and detector cone (``[spectro] detector_cone_deg``), with the predicted colour of
+        every geometry (the sample's paint, the config's ``[colour]``)."""
+        from goniolab.models import spectral_for
+
         return cls(
             model,
             Cone(config.goniometer.source_cone_deg),
             Cone(config.spectro.detector_cone_deg),
+            spectral=spectral_for(
+                model,
+                source_cone_deg=config.goniometer.source_cone_deg,
+                detector_cone_deg=config.spectro.detector_cone_deg,
+            ),
+            point_colour=PointColour.from_config(config),
         )
 
     def predict_sync(self, theta_i_deg: float, theta_r_deg: Sequence[float]) -> NDArray[np.float64]:
@@ -72,15 +89,49 @@ class Predictor:
         """Same as :meth:`predict_sync`, computed in a worker thread (never on the loop)."""
         return await asyncio.to_thread(self.predict_sync, theta_i_deg, list(theta_r_deg))
 
+    def predict_colour_sync(
+        self, theta_i_deg: float, theta_r_deg: Sequence[float]
+    ) -> list[PredictedColour] | None:
+        """Predicted L*a*b* and spectrum per geometry (blocking), ``None`` without spectra."""
+        if self.spectral is None:
+            return None
+        from goniolab.colour.spectra import spectra_to_xyz, xyz_to_colour
+
+        pc = self.point_colour or PointColour(detector_cone_deg=self.detector.full_angle_deg)
+        tr = np.asarray(theta_r_deg, dtype=np.float64)
+        spectra = self.spectral.spectrum_pct(theta_i_deg, tr)
+        factors = np.stack([pc.factors(s, float(t)) for s, t in zip(spectra, tr, strict=True)])
+        lab = xyz_to_colour(
+            spectra_to_xyz(self.spectral.wavelengths_nm, factors, pc.settings), pc.settings
+        )[:, 3:6]
+        return [
+            PredictedColour(float(c[0]), float(c[1]), float(c[2]), tuple(float(v) for v in s))
+            for c, s in zip(lab, spectra, strict=True)
+        ]
+
+    async def predict_colour(
+        self, theta_i_deg: float, theta_r_deg: Sequence[float]
+    ) -> list[PredictedColour] | None:
+        """Same as :meth:`predict_colour_sync`, in a worker thread."""
+        if self.spectral is None:
+            return None
+        return await asyncio.to_thread(self.predict_colour_sync, theta_i_deg, list(theta_r_deg))
+
     def describe(self) -> dict[str, object]:
-        """Model parameters stored with a run (model class, its ``model_for`` name, apertures)."""
-        return {
+        """Model parameters stored with a run (model class, its ``model_for`` name, apertures,
+        and the spectral prediction's paint and colour settings)."""
+        out: dict[str, object] = {
             "model": type(self.model).__name__,
             "model_name": model_name(self.model),
             "source_cone_deg": self.source.full_angle_deg,
             "detector_cone_deg": self.detector.full_angle_deg,
             **_model_params(self.model),
         }
+        if self.spectral is not None:
+            out["spectral"] = self.spectral.describe()
+        if self.point_colour is not None:
+            out["colour"] = self.point_colour.describe()
+        return out
 
 
 def model_name(model: ReflectanceModel) -> str:

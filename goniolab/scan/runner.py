@@ -56,8 +56,10 @@ from drivers.base import (
 )
 from drivers.timing import Clock, trapezoid_duration_s
 from goniolab.config import GoniometerConfig
+from goniolab.scan.colour import PointColour
 from goniolab.scan.events import (
     ArmsMoved,
+    ColourPredicted,
     EventBus,
     InstrumentError,
     PointMeasured,
@@ -343,6 +345,7 @@ class ScanRunner:
         specimen_hook: SpecimenHook | None = None,
         misalignment_threshold_deg: float = 0.5,
         reading_retries: int = 2,
+        point_colour: PointColour | None = None,
     ) -> None:
         if reading_retries < 0:
             raise ValueError(f"reading_retries must be >= 0, got {reading_retries}")
@@ -363,6 +366,7 @@ class ScanRunner:
         self.specimen_hook = specimen_hook
         self.misalignment_threshold_deg = misalignment_threshold_deg
         self.reading_retries = reading_retries
+        self.point_colour = point_colour if point_colour is not None else PointColour()
         if plan.mirror_reference and specimen_hook is None:
             raise ValueError("a plan with a mirror reference needs a specimen_hook")
         self._state = RunState.IDLE
@@ -532,6 +536,68 @@ class ScanRunner:
                     )
                 )
 
+    async def _predict_colours(self, after: asyncio.Task[None]) -> None:
+        """Predict the colour (spectrum and L*a*b*) of every geometry that has none yet.
+
+        Runs beside the luminance predictions; a run that ends done waits for it, a failed or
+        aborted one drops it (``scan resume`` predicts the rest).
+        """
+        if self.predictor is None or self.predictor.spectral is None:
+            return
+        try:
+            await asyncio.shield(after)  # the rows the colours are stored in
+        except Exception:
+            return  # the luminance prediction failed; the runner reports that
+        have = set(self.store.predicted_colours(self.run_id))
+        todo = [i for i in range(self.plan.n_geometries) if i not in have]
+        ti = self.plan.theta_i_deg
+        for start in range(0, len(todo), self.predictor.chunk):
+            idx = todo[start : start + self.predictor.chunk]
+            trs = [self.plan.theta_r_deg[i] for i in idx]
+            colours = await self.predictor.predict_colour(ti, trs)
+            if colours is None:
+                return
+            self.store.add_predicted_colours(self.run_id, list(zip(idx, colours, strict=True)))
+            for i, tr, c in zip(idx, trs, colours, strict=True):
+                self.bus.publish(
+                    ColourPredicted(
+                        run_id=self.run_id, index=i, theta_r_deg=tr, lab=(c.L, c.a, c.b)
+                    )
+                )
+
+    async def _colour_of(
+        self, reading: SpectroReading, p: PlanPoint, mirror_pct: float | None
+    ) -> tuple[dict[str, float] | None, str]:
+        """The reading's colour (computed in a worker thread), or why there is none.
+
+        A spectrum colour cannot be computed from (wrong length, NaN, negative values, a grid
+        short of 380-780 nm) is reported as a non-fatal instrument error; the reading is
+        stored all the same, without colour.
+        """
+        from goniolab.colour.spectra import ColourError
+
+        mirror = None if p.index == MIRROR_INDEX or not self.plan.mirror_reference else mirror_pct
+        try:
+            values = await asyncio.to_thread(
+                self.point_colour.measured,
+                reading.wavelengths_nm,
+                reading.values,
+                p.theta_r_deg,
+                mirror,
+            )
+        except (ColourError, ValueError) as exc:
+            self.bus.publish(
+                InstrumentError(
+                    run_id=self.run_id,
+                    device="spectro",
+                    message=f"point {p.index}, repeat {p.repeat}: no colour: {exc} "
+                    "(reading stored without colour)",
+                    fatal=False,
+                )
+            )
+            return None, str(exc)
+        return values.as_dict(), ""
+
     async def _read_spectro(self, p: PlanPoint) -> SpectroReading:
         """One spectro reading, taken again after a transient fault (timeout, garbled reply)
         up to ``reading_retries`` times; each retry is reported, nothing is stored twice."""
@@ -590,6 +656,9 @@ class ScanRunner:
         self._set_state(RunState.RUNNING)
         self._publish_progress(eta.total_s)
         predict_task = asyncio.create_task(self._predict_all(), name=f"predict-run-{self.run_id}")
+        colour_task = asyncio.create_task(
+            self._predict_colours(predict_task), name=f"predict-colour-run-{self.run_id}"
+        )
         # What lies under the instruments: the sample at the start of a new run; unknown
         # when a mirror-referenced run resumes (a crash may have left the mirror in
         # place), so the hook confirms the specimen before the first reading.
@@ -606,18 +675,20 @@ class ScanRunner:
         except asyncio.CancelledError:
             # Cancelled from outside (the process is shutting down): park, record, re-raise.
             predict_task.cancel()
+            colour_task.cancel()
             await asyncio.shield(self._park_and_record(RunState.ABORTED, "cancelled"))
             raise
         except Exception as exc:
             # Not an instrument fault (a bug, a full disk): still leave the arms parked (or
             # say they are not) and the run failed and resumable, then let the error surface.
             predict_task.cancel()
+            colour_task.cancel()
             why = await self._park_and_record(RunState.FAILED, f"internal error: {_describe(exc)}")
             self.bus.publish(
                 RunFinished(run_id=self.run_id, state=RunState.FAILED, reason=why, summary={})
             )
             raise
-        return await self._finish(state, reason, predict_task)
+        return await self._finish(state, reason, predict_task, colour_task)
 
     async def _dry_run(self, todo: Sequence[PlanPoint]) -> _Eta:
         """:func:`dry_run` of ``todo`` from where the arms stand (raises PlanRefused)."""
@@ -681,6 +752,7 @@ class ScanRunner:
         reading = await self._read_spectro(p)
         raw_pct = float(reading.luminance_pct)
         value = raw_pct if p.index == MIRROR_INDEX else self._relative_to_mirror(raw_pct)
+        colour, colour_error = await self._colour_of(reading, p, self._mirror_pct)
         ts = time.time()
         self.store.add_point(
             self.run_id,
@@ -700,6 +772,8 @@ class ScanRunner:
                 "clock_s": self.clock.now(),
             },
             timestamp=ts,
+            colour=colour,
+            colour_error=colour_error,
         )
         self._n_done += 1
         self.bus.publish(
@@ -714,6 +788,7 @@ class ScanRunner:
                 measured_theta_i_deg=self._measured_deg[0],
                 measured_theta_r_deg=self._measured_deg[1],
                 predicted_pct=self._predicted.get(p.index),
+                lab=None if colour is None else (colour["L"], colour["a"], colour["b"]),
             )
         )
 
@@ -738,7 +813,11 @@ class ScanRunner:
         return reason
 
     async def _finish(
-        self, state: RunState, reason: str, predict_task: asyncio.Task[None]
+        self,
+        state: RunState,
+        reason: str,
+        predict_task: asyncio.Task[None],
+        colour_task: asyncio.Task[None],
     ) -> RunResult:
         """Park, wait for the predictions, summarise, record and publish the end."""
         park_problem = await self._park()
@@ -760,6 +839,20 @@ class ScanRunner:
                     fatal=False,
                 )
             )
+        if state is RunState.DONE:
+            try:
+                await colour_task
+            except Exception as exc:  # a colour model failure must not lose the run
+                self.bus.publish(
+                    InstrumentError(
+                        run_id=self.run_id,
+                        device="model",
+                        message=f"colour prediction failed: {exc}",
+                        fatal=False,
+                    )
+                )
+        else:
+            colour_task.cancel()
         try:
             summary = summarize_brdf(
                 self.plan,

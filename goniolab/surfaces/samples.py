@@ -94,6 +94,10 @@ def _num(table: Mapping[str, Any], key: str, where: str, *, default: float | Non
 
 def _check_params(info: SampleInfo, where: str) -> None:
     p = info.params
+    # the paint table is checked where it is built (goniolab.models.paint_for: one error
+    # naming samples.NAME.paint.KEY); here only its shape, so `goniolab samples` stays light
+    if "paint" in p and not isinstance(p["paint"], Mapping):
+        raise SampleError(f"{SAMPLES_TOML}: {where}.paint must be a table")
     if info.kind == "gaussian":
         for key in ("slope_rms", "corr_length_um"):
             if _num(p, key, where) <= 0:

@@ -25,6 +25,7 @@ from drivers.base import DeviceError
 from goniolab.errors import UserError
 from goniolab.scan.events import (
     ArmsMoved,
+    ColourPredicted,
     Event,
     GlossRead,
     InstrumentError,
@@ -75,6 +76,7 @@ class GonioApp(App[int]):
         Binding("g", "read_gloss", "Gloss"),
         Binding("h", "home", "Home"),
         Binding("l", "toggle_log", "Residual/log"),
+        Binding("c", "cycle_plot", "Colour plot"),
         Binding("r", "browse_runs", "Runs"),
         Binding("q", "quit", "Quit"),
         Binding("escape", "blur", "Leave field", show=False),
@@ -317,6 +319,9 @@ class GonioApp(App[int]):
         elif isinstance(ev, PointPredicted):
             self.comparison.add_predicted(ev)
             self.schedule_redraw()
+        elif isinstance(ev, ColourPredicted):
+            self.comparison.add_colour(ev)
+            self.schedule_redraw()
         elif isinstance(ev, Progress):
             self.progress = (ev.done, ev.total, ev.eta_s)
         elif isinstance(ev, GlossRead):
@@ -463,6 +468,13 @@ class GonioApp(App[int]):
         panel = self.query_one("#live", ComparisonPanel)
         panel.toggle_log()
         panel.show(self.comparison)
+
+    def action_cycle_plot(self) -> None:
+        """Main plot: luminance, L* or a*/b* against angle (key ``c``)."""
+        panel = self.query_one("#live", ComparisonPanel)
+        mode = panel.cycle_plot_mode()
+        panel.show(self.comparison)
+        self.notify(f"main plot: {mode}", timeout=2)
 
     def action_browse_runs(self) -> None:
         """Open the stored-runs browser (key ``r``)."""

@@ -21,9 +21,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from goniolab.optics.metrics import PeakMetrics, peak_metrics
-from goniolab.scan.events import GlossRead, PointMeasured, PointPredicted
+from goniolab.scan.events import ColourPredicted, GlossRead, PointMeasured, PointPredicted
 
-__all__ = ["Comparison", "ComparisonMetrics", "CurveArrays"]
+__all__ = ["ColourArrays", "Comparison", "ComparisonMetrics", "CurveArrays"]
 
 FloatArray = NDArray[np.float64]
 
@@ -83,6 +83,22 @@ class CurveArrays:
 
 
 @dataclass(frozen=True, slots=True)
+class ColourArrays:
+    """Per point, sorted by ``theta_r_deg``: measured L*a*b* (mean of the repeats with
+    colour) and predicted L*a*b*, shape ``(n, 3)``, NaN where not (yet) known."""
+
+    theta_r_deg: FloatArray
+    measured_lab: FloatArray
+    predicted_lab: FloatArray
+
+    @property
+    def delta_e_ab(self) -> FloatArray:
+        """CIE 1976 dE*ab between measured and predicted (NaN where either is missing)."""
+        out: FloatArray = np.sqrt(np.sum((self.measured_lab - self.predicted_lab) ** 2, axis=1))
+        return out
+
+
+@dataclass(frozen=True, slots=True)
 class ComparisonMetrics:
     """What the metrics table shows: peaks of both curves, RMSE and the last gloss reading."""
 
@@ -108,6 +124,12 @@ class Comparison:
     theta_r_deg: dict[int, float] = field(default_factory=dict)
     predicted: dict[int, float] = field(default_factory=dict)
     gloss: list[GlossRead] = field(default_factory=list)
+    #: Measured L*a*b* of each repeat with a colour, per plan point.
+    lab: dict[int, list[tuple[float, float, float]]] = field(default_factory=dict)
+    #: Predicted L*a*b* per plan point.
+    predicted_lab: dict[int, tuple[float, float, float]] = field(default_factory=dict)
+    #: The plan point of the last reading with a colour (the swatch shows it).
+    last_colour_index: int | None = None
 
     def clear(self, *, run_id: int = 0, sample: str = "") -> None:
         """Forget the curve and start collecting for ``run_id``.
@@ -119,6 +141,9 @@ class Comparison:
         self.readings.clear()
         self.theta_r_deg.clear()
         self.predicted.clear()
+        self.lab.clear()
+        self.predicted_lab.clear()
+        self.last_colour_index = None
 
     def add_measured(self, ev: PointMeasured) -> None:
         """Record one reading (one repeat of plan point ``ev.index``).
@@ -130,6 +155,35 @@ class Comparison:
             return
         self.readings.setdefault(ev.index, []).append(ev.luminance_pct)
         self.theta_r_deg.setdefault(ev.index, ev.theta_r_deg)
+        if ev.lab is not None:
+            self.lab.setdefault(ev.index, []).append(ev.lab)
+            self.last_colour_index = ev.index
+
+    def add_colour(self, ev: ColourPredicted) -> None:
+        """Record the predicted colour of plan point ``ev.index``."""
+        self.predicted_lab[ev.index] = ev.lab
+        self.theta_r_deg.setdefault(ev.index, ev.theta_r_deg)
+
+    def current_lab(self) -> tuple[float, float, float] | None:
+        """Mean L*a*b* of the point read last (``None`` before the first colour)."""
+        i = self.last_colour_index
+        if i is None or i not in self.lab:
+            return None
+        m = np.mean(np.array(self.lab[i]), axis=0)
+        return (float(m[0]), float(m[1]), float(m[2]))
+
+    def colour_arrays(self) -> ColourArrays:
+        """Measured and predicted L*a*b* per point, sorted by theta_r."""
+        idx = sorted(self.theta_r_deg, key=lambda i: (self.theta_r_deg[i], i))
+        theta = np.array([self.theta_r_deg[i] for i in idx], dtype=np.float64)
+        meas = np.full((theta.size, 3), np.nan)
+        pred = np.full((theta.size, 3), np.nan)
+        for k, i in enumerate(idx):
+            if self.lab.get(i):
+                meas[k] = np.mean(np.array(self.lab[i]), axis=0)
+            if i in self.predicted_lab:
+                pred[k] = self.predicted_lab[i]
+        return ColourArrays(theta, meas, pred)
 
     def add_predicted(self, ev: PointPredicted) -> None:
         """Record the model's prediction for plan point ``ev.index``."""

@@ -16,6 +16,7 @@ SCAN_COMMANDS: tuple[tuple[str, str, str], ...] = (
     ("Read glossmeter", "read_gloss", "One 20/60/85 reading beside the prediction (g)"),
     ("Home the arms", "home", "Reset the arms' alarms and home them again (h)"),
     ("Toggle residual / log view", "toggle_log", "Side plot: residuals or log10 curves (l)"),
+    ("Cycle colour plot", "cycle_plot", "Main plot: luminance, L* or a*/b* vs angle (c)"),
     ("Browse stored runs", "browse_runs", "Reopen a stored run's comparison (r)"),
     ("Quit", "quit", "Leave goniolab (q)"),
 )

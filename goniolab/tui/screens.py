@@ -110,6 +110,8 @@ class RunsScreen(Screen[None]):
             comparison.add_measured(m)
         for p in stored.predicted:
             comparison.add_predicted(p)
+        for c in stored.colours:
+            comparison.add_colour(c)
         for g in stored.gloss:
             comparison.add_gloss(g)
         self.comparison = comparison

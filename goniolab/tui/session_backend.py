@@ -22,6 +22,7 @@ from goniolab.config import LabConfig, load_lab_config
 from goniolab.errors import UserError
 from goniolab.optics.models import ReflectanceModel
 from goniolab.scan.events import (
+    ColourPredicted,
     EventBus,
     GlossRead,
     InstrumentError,
@@ -339,6 +340,7 @@ class SessionBackend:
             measured: list[PointMeasured] = []
             predicted: list[PointPredicted] = []
             gloss: list[GlossRead] = []
+            colours: list[ColourPredicted] = []
             if rec.kind == "brdf":
                 plan = BrdfPlan.from_dict(rec.plan)
                 for p in store.points(run_id):
@@ -353,6 +355,18 @@ class SessionBackend:
                             luminance_pct=p.luminance_pct,
                             measured_theta_i_deg=p.measured_theta_i_deg,
                             measured_theta_r_deg=p.measured_theta_r_deg,
+                            lab=None
+                            if p.colour is None
+                            else (p.colour["L"], p.colour["a"], p.colour["b"]),
+                        )
+                    )
+                for index, c in sorted(store.predicted_colours(run_id).items()):
+                    colours.append(
+                        ColourPredicted(
+                            run_id=run_id,
+                            index=index,
+                            theta_r_deg=plan.theta_r_deg[index],
+                            lab=(c.L, c.a, c.b),
                         )
                     )
                 for index, value in sorted(store.predictions(run_id).items()):
@@ -383,7 +397,7 @@ class SessionBackend:
                 rec.status,
                 len(measured) if rec.kind == "brdf" else len(gloss),
             )
-            return StoredRun(summary, measured, predicted, gloss)
+            return StoredRun(summary, measured, predicted, gloss, colours)
 
 
 #: A status read that takes longer than this shows the arm's link as lost (seconds).

@@ -15,7 +15,13 @@ from dataclasses import dataclass, field
 from typing import Protocol
 
 from goniolab.errors import UserError
-from goniolab.scan.events import EventBus, GlossRead, PointMeasured, PointPredicted
+from goniolab.scan.events import (
+    ColourPredicted,
+    EventBus,
+    GlossRead,
+    PointMeasured,
+    PointPredicted,
+)
 from goniolab.scan.plans import PlanError, angle_range
 
 __all__ = ["ArmState", "Backend", "RunSummary", "ScanSetup", "StoredRun"]
@@ -123,6 +129,8 @@ class StoredRun:
     measured: list[PointMeasured] = field(default_factory=list)
     predicted: list[PointPredicted] = field(default_factory=list)
     gloss: list[GlossRead] = field(default_factory=list)
+    #: Predicted colours per plan point (issue 11; empty for older runs).
+    colours: list[ColourPredicted] = field(default_factory=list)
 
 
 class Backend(Protocol):

@@ -17,7 +17,12 @@ from goniolab.scan.events import GlossRead
 from goniolab.tui.comparison import Comparison, ComparisonMetrics
 from goniolab.tui.view_model import ArmState, ScanSetup
 
+FloatArray = np.typing.NDArray[np.float64]
+
 __all__ = [
+    "PLOT_MODES",
+    "ColourSwatch",
+    "ColourTable",
     "ComparisonPanel",
     "FormInput",
     "GlossLog",
@@ -28,6 +33,59 @@ __all__ = [
 ]
 
 GLOSS_ANGLES_DEG = (20, 60, 85)
+
+#: Main-plot modes cycled by ``c``: the luminance curve, L* against angle, a* and b* against angle.
+PLOT_MODES: tuple[str, ...] = ("luminance", "L*", "a*b*")
+
+
+class ColourSwatch(Static):
+    """The colour of the current point (display sRGB of its L*a*b*) with its numbers."""
+
+    DEFAULT_CSS = "ColourSwatch { height: 1; }"
+
+    def show_lab(self, lab: tuple[float, float, float] | None) -> None:
+        """Paint the swatch (blank without a colour)."""
+        if lab is None:
+            self.update("colour: -")
+            return
+        from goniolab.colour.spectra import lab_to_srgb  # colour-science: already imported
+        # by the runner, which converted this reading's spectrum before publishing it
+
+        r, g, b = (round(255 * float(v)) for v in lab_to_srgb(lab))
+        self.update(
+            f"[on rgb({r},{g},{b})]        [/] L* {lab[0]:.1f}  a* {lab[1]:.1f}  b* {lab[2]:.1f}"
+        )
+
+
+class ColourTable(DataTable[str]):
+    """Per point: theta_r, measured L*, a*, b*, predicted L*, dE*ab (measured - predicted)."""
+
+    def on_mount(self) -> None:
+        self.cursor_type = "none"
+        self.zebra_stripes = True
+        for label, key in (
+            ("θr °", "theta"),
+            ("L*", "L"),
+            ("a*", "a"),
+            ("b*", "b"),
+            ("pred L*", "pL"),
+            ("ΔE*ab", "dE"),
+        ):
+            self.add_column(label, key=key, width=7)
+
+    def show(self, comparison: Comparison) -> None:
+        """Refill from ``comparison`` (one row per point)."""
+        c = comparison.colour_arrays()
+        self.clear()
+        de = c.delta_e_ab
+        for k, t in enumerate(c.theta_r_deg):
+            m, p = c.measured_lab[k], c.predicted_lab[k]
+            self.add_row(
+                fmt_num(float(t), 1),
+                *(fmt_num(float(v), 1) for v in m),
+                fmt_num(float(p[0]), 1),
+                fmt_num(float(de[k]), 2),
+            )
 
 
 def fmt_num(value: float | None, digits: int = 2) -> str:
@@ -93,11 +151,13 @@ class ComparisonPanel(Horizontal):
     ComparisonPanel > Vertical { width: 2fr; min-width: 36; }
     ComparisonPanel .side-plot { height: 1fr; border: round $secondary; }
     ComparisonPanel MetricsTable { height: 9; }
+    ComparisonPanel ColourTable { height: 1fr; }
     """
 
     def __init__(self, *, id: str | None = None) -> None:
         super().__init__(id=id)
         self.log_view = False
+        self.plot_mode = PLOT_MODES[0]
 
     def compose(self) -> ComposeResult:
         main = PlotWidget(classes="main-plot", allow_pan_and_zoom=True)
@@ -108,6 +168,8 @@ class ComparisonPanel(Horizontal):
             side.border_title = "residual (meas. − pred.) %"
             yield side
             yield MetricsTable()
+            yield ColourSwatch("colour: -")
+            yield ColourTable()
 
     @property
     def main_plot(self) -> PlotWidget:
@@ -121,10 +183,62 @@ class ComparisonPanel(Horizontal):
         """Switch the side plot between residuals and log10 of both curves."""
         self.log_view = not self.log_view
 
+    def cycle_plot_mode(self) -> str:
+        """Main plot: luminance -> L* vs angle -> a*, b* vs angle -> luminance."""
+        k = PLOT_MODES.index(self.plot_mode)
+        self.plot_mode = PLOT_MODES[(k + 1) % len(PLOT_MODES)]
+        return self.plot_mode
+
+    def _show_colour_plot(self, comparison: Comparison) -> None:
+        c = comparison.colour_arrays()
+        main = self.main_plot
+        main.border_subtitle = comparison.sample.removeprefix("sample:")
+        main.clear()
+        main.set_xlabel("θr (deg)")
+        axes = ((0, "L*", "cyan", "yellow"),) if self.plot_mode == "L*" else (
+            (1, "a*", "red", "bold red"),
+            (2, "b*", "blue", "bold blue"),
+        )  # fmt: skip
+        main.border_title = f"{self.plot_mode} vs θr °"
+        ys: list[FloatArray] = []
+        for col, name, line, marker in axes:
+            pred, meas = c.predicted_lab[:, col], c.measured_lab[:, col]
+            hp, hm = np.isfinite(pred), np.isfinite(meas)
+            if hp.any():
+                main.plot(
+                    c.theta_r_deg[hp], pred[hp], line_style=line, hires_mode=HiResMode.BRAILLE,
+                    label=f"predicted {name}",
+                )  # fmt: skip
+                ys.append(pred[hp])
+            if hm.any():
+                main.scatter(
+                    c.theta_r_deg[hm], meas[hm], marker="●", marker_style=marker,
+                    label=f"measured {name}",
+                )  # fmt: skip
+                ys.append(meas[hm])
+        main.show_legend(LegendLocation.TOPRIGHT, is_visible=bool(ys))
+        if ys:
+            v = np.concatenate(ys)
+            lo, hi = float(v.min()), float(v.max())
+            pad = 0.08 * (hi - lo) if hi > lo else 1.0
+            main.set_ylimits(lo - pad, hi + pad)
+        else:
+            main.set_ylimits(None, None)
+
     def show(self, comparison: Comparison) -> None:
         """Redraw both plots and the metrics table from ``comparison``."""
+        self.query_one(ColourSwatch).show_lab(comparison.current_lab())
+        self.query_one(ColourTable).show(comparison)
+        if self.plot_mode != "luminance":
+            self._show_colour_plot(comparison)
+        else:
+            self._show_luminance_plot(comparison)
+        self._show_side(comparison)
+
+    def _show_luminance_plot(self, comparison: Comparison) -> None:
         a = comparison.arrays()
         main = self.main_plot
+        main.border_title = "luminance % vs θr °"
         main.border_subtitle = comparison.sample.removeprefix("sample:")
         main.clear()
         main.set_xlabel("θr (deg)")
@@ -157,6 +271,10 @@ class ComparisonPanel(Horizontal):
         else:
             main.set_ylimits(None, None)
 
+    def _show_side(self, comparison: Comparison) -> None:
+        a = comparison.arrays()
+        has_pred = np.isfinite(a.predicted_pct)
+        has_meas = np.isfinite(a.mean_pct)
         side = self.side_plot
         side.clear()
         side.set_xlabel("θr (deg)")

@@ -187,8 +187,12 @@ class FakeSpectro:
             lum = self.mirror_pct if abs(tr - ti) < 1e-9 else 0.0
         else:
             lum = float(lobe_pct(ti, tr, self.shift_deg))
+        # a flat spectrum over 380..780 nm (10 nm): its Y equals the luminance
         return SpectroReading(
-            wavelengths_nm=(550.0,), values=(lum,), luminance_pct=lum, exposure_us=self.exposure_us
+            wavelengths_nm=tuple(float(w) for w in range(380, 781, 10)),
+            values=(lum,) * 41,
+            luminance_pct=lum,
+            exposure_us=self.exposure_us,
         )
 
 

@@ -31,7 +31,9 @@ def test_library_names_and_reference_values() -> None:
     names = sample_names()
     assert names[:4] == ["flat", "gaussian-s0.02", "gaussian-s0.05", "gaussian-s0.1"]
     assert names[4:12] == WITTMANN
-    assert names[12:] == ["gloss-sq20-l2", "gloss-sq50-l2", "gloss-sq80-l3", "gauss-sq177-l5"]
+    assert names[12:16] == ["gloss-sq20-l2", "gloss-sq50-l2", "gloss-sq80-l3", "gauss-sq177-l5"]
+    assert names[16:] == ["solid-red", "white", "silver-metallic", "pearl"]  # painted (issue 11)
+    assert all("paint" in sample_info(n).params for n in names[16:])
     for name, (ra, g60) in SEED_TABLE.items():
         info = sample_info(name)
         assert (info.seed_ra_nm, info.seed_g60) == (ra, g60)

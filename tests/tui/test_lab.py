@@ -355,3 +355,43 @@ async def test_geometry_out_of_reach_is_a_form_error(tmp_path: Path) -> None:
         assert not app.query_one("#banner").has_class("shown")
         with RunStore(tmp_path / "runs.sqlite") as store:
             assert store.list_runs() == []
+
+
+async def test_colour_columns_swatch_and_colour_plot(tmp_path: Path) -> None:
+    from goniolab.tui.widgets import ColourSwatch, ColourTable
+
+    app = make_app(tmp_path)
+    async with app.run_test(size=SIZE) as pilot:
+        await wait_until(pilot, app.ready.is_set)
+        await set_form(
+            pilot, app, theta_i_deg="45", theta_r_start_deg="30", theta_r_stop_deg="50",
+            theta_r_step_deg="10", repeats="1",
+        )  # fmt: skip
+        await pilot.press("s")
+        await wait_until(pilot, lambda: app.run_state is RunState.DONE)
+        await wait_until(pilot, lambda: len(app.comparison.predicted_lab) == 3)
+        await settle(pilot, app)
+        c = app.comparison.colour_arrays()
+        a = app.comparison.arrays()
+        # L* of each reading from its luminance: the grey sample's spectrum is near-flat,
+        # a reflectance factor Y = lum / 100 / (sin^2 3 deg cos theta_r) (CIE 15 eq. 8.1)
+        y = (
+            a.mean_pct
+            / 100.0
+            / (math.sin(math.radians(3.0)) ** 2 * np.cos(np.radians(a.theta_r_deg)))
+        )
+        np.testing.assert_allclose(c.measured_lab[:, 0], 116.0 * np.cbrt(y) - 16.0, atol=0.3)
+        np.testing.assert_allclose(c.measured_lab[:, 0], c.predicted_lab[:, 0], atol=0.3)
+        table = app.query_one(ColourTable)
+        assert table.row_count == 3
+        assert str(table.get_cell_at((1, 1))) == f"{c.measured_lab[1, 0]:.1f}"
+        swatch = str(app.query_one(ColourSwatch).render())
+        assert f"L* {c.measured_lab[2, 0]:.1f}" in swatch  # the last point read
+        await pilot.press("c")
+        panel = app.query_one("#live", ComparisonPanel)
+        assert panel.plot_mode == "L*"
+        plot = panel.main_plot
+        ds = plot._datasets[plot._labels.index("measured L*")]
+        np.testing.assert_allclose(ds.y, c.measured_lab[:, 0])
+        await pilot.press("c")
+        assert panel.plot_mode == "a*b*" and "measured b*" in panel.main_plot._labels

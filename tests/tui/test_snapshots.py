@@ -24,11 +24,18 @@ def _finished_app() -> tuple[GonioApp, ScriptedBackend]:
     return GonioApp(backend, poll_hz=0, autostart=True), backend
 
 
+async def _wait_done(pilot: Pilot[int], app: GonioApp) -> None:
+    """The run is done *and* its "run 1 done" toast is up: StateChanged(done) arrives before
+    RunFinished, so clearing the toasts at the state alone raced the RunFinished toast."""
+    await wait_until(pilot, lambda: app.run_state is RunState.DONE)
+    await wait_until(pilot, lambda: any(n.title == "Scan" for n in app._notifications))
+
+
 def test_main_screen_after_scan(snap_compare: Callable[..., bool]) -> None:
     app, backend = _finished_app()
 
     async def run_before(pilot: Pilot[int]) -> None:
-        await wait_until(pilot, lambda: app.run_state is RunState.DONE)
+        await _wait_done(pilot, app)
         backend.publish_gloss(5, 61.25)
         backend.publish_gloss(9, 57.5)
         await wait_until(pilot, lambda: len(app.comparison.gloss) == 3)
@@ -43,7 +50,7 @@ def test_main_screen_log_view_and_timeout(snap_compare: Callable[..., bool]) -> 
     app, backend = _finished_app()
 
     async def run_before(pilot: Pilot[int]) -> None:
-        await wait_until(pilot, lambda: app.run_state is RunState.DONE)
+        await _wait_done(pilot, app)
         app.clear_notifications()
         await pilot.press("l")
         backend.publish_timeout()
@@ -57,7 +64,7 @@ def test_runs_browser(snap_compare: Callable[..., bool]) -> None:
     app, _backend = _finished_app()
 
     async def run_before(pilot: Pilot[int]) -> None:
-        await wait_until(pilot, lambda: app.run_state is RunState.DONE)
+        await _wait_done(pilot, app)
         app.clear_notifications()
         await pilot.press("r")
         await wait_until(pilot, lambda: isinstance(app.screen, RunsScreen))

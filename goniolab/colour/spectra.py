@@ -1,0 +1,330 @@
+"""Spectra to colour: CIE XYZ, L*a*b*, L*C*h and colour differences (colour-science).
+
+A reflectance spectrum R(lambda) (a factor, 1 = the perfect reflecting diffuser) becomes
+tristimulus values by CIE 15:2004 sec. 7 (``X = k sum S R xbar``, ``k = 100 / sum S ybar``),
+with the ASTM E308 weighting tables by default (``colour.sd_to_XYZ(method="ASTM E308")``),
+then CIE 1976 L*a*b* with the illuminant's white point (CIE 15:2004 eqs. 8.1-8.3) and
+L*C*h (eq. 8.4). Defaults as PHYSICS.md, "Colour and the paint layer": illuminant D65 and
+the CIE 1964 10 deg standard observer.
+
+The integration is linear in R, so for one wavelength grid it is a 3 x N matrix:
+:func:`xyz_weights` builds it once from ``colour.sd_to_XYZ`` applied to the unit spectra
+of the grid (exactly what ``sd_to_XYZ`` does to any spectrum on that grid) and caches it;
+renders and fits then convert thousands of spectra with one matrix product.
+
+colour-science is imported inside the functions (it takes seconds to import).
+
+References
+----------
+.. [1] CIE 15:2004, Colorimetry, 3rd ed., secs. 7-8.
+.. [2] ASTM E308-18, Standard Practice for Computing the Colors of Objects by Using the
+   CIE System.
+.. [3] R. Durikovic et al., "Prediction of optical properties of paints", Cent. Eur. J.
+   Phys. 5 (2007) 416, sec. 7 (D65 rendering); A. Mihalik, R. Durikovic, "Virtual
+   gonio-spectrophotometer", sec. 2.1 (D65 as the virtual instrument's source).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = [
+    "DELTA_E_METHODS",
+    "OBSERVERS",
+    "VISIBLE_NM",
+    "ColourError",
+    "ColourSettings",
+    "ColourValues",
+    "check_spectrum",
+    "colour_module",
+    "delta_e",
+    "lab_to_srgb",
+    "spectra_to_xyz",
+    "spectrum_to_colour",
+    "standard_grid_nm",
+    "xyz_to_colour",
+    "xyz_weights",
+]
+
+FloatArray = NDArray[np.float64]
+
+#: The range a spectrum must cover (ASTM E308 tables start at 360 or 380 nm; CIE 15 ends at 780).
+VISIBLE_NM: tuple[float, float] = (380.0, 780.0)
+
+#: Observers accepted by name (colour-science's ``MSDS_CMFS`` keys), with short aliases.
+OBSERVERS: dict[str, str] = {
+    "CIE 1964 10 Degree Standard Observer": "CIE 1964 10 Degree Standard Observer",
+    "CIE 1931 2 Degree Standard Observer": "CIE 1931 2 Degree Standard Observer",
+    "10": "CIE 1964 10 Degree Standard Observer",
+    "2": "CIE 1931 2 Degree Standard Observer",
+}
+
+#: Colour-difference formulas offered (colour-science ``delta_E`` method names).
+DELTA_E_METHODS: tuple[str, ...] = ("CIE 1976", "CIE 1994", "CIE 2000")
+
+Method = Literal["ASTM E308", "Integration"]
+
+
+class ColourError(ValueError):
+    """A spectrum or a colour setting is unusable; the message names what is wrong."""
+
+
+def colour_module() -> Any:
+    """colour-science, imported on first use with its optional-dependency notices silenced."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # "Matplotlib not available" and similar notices
+        import colour
+    return colour
+
+
+@dataclass(frozen=True, slots=True)
+class ColourSettings:
+    """How spectra become colour: illuminant, observer and weighting method.
+
+    Parameters
+    ----------
+    illuminant
+        A ``colour.SDS_ILLUMINANTS`` name (``"D65"``, ``"A"``, ``"C"``, ``"D50"``, ``"F2"``...).
+    observer
+        ``"CIE 1964 10 Degree Standard Observer"`` (default, alias ``"10"``) or
+        ``"CIE 1931 2 Degree Standard Observer"`` (alias ``"2"``).
+    method
+        ``"ASTM E308"`` (weighting tables, default) or ``"Integration"`` (CIE 15 plain sum).
+    """
+
+    illuminant: str = "D65"
+    observer: str = "CIE 1964 10 Degree Standard Observer"
+    method: Method = "ASTM E308"
+
+    def validated(self) -> ColourSettings:
+        """The settings with the observer alias resolved; :class:`ColourError` when unknown."""
+        observer = OBSERVERS.get(self.observer)
+        if observer is None:
+            known = ", ".join(k for k in OBSERVERS if len(k) > 2)
+            raise ColourError(f"unknown observer {self.observer!r} (known: {known}, or 2 / 10)")
+        if self.method not in ("ASTM E308", "Integration"):
+            raise ColourError(
+                f"unknown weighting method {self.method!r} (ASTM E308 or Integration)"
+            )
+        colour = colour_module()
+        if self.illuminant not in colour.SDS_ILLUMINANTS:
+            raise ColourError(
+                f"unknown illuminant {self.illuminant!r} (e.g. D65, D50, A, C, FL2, FL11)"
+            )
+        if self.illuminant not in colour.CCS_ILLUMINANTS[observer]:
+            raise ColourError(
+                f"illuminant {self.illuminant!r} has no white point for the {observer}"
+            )
+        return ColourSettings(self.illuminant, observer, self.method)
+
+    @property
+    def white_xy(self) -> FloatArray:
+        """The illuminant's chromaticity for the observer (``colour.CCS_ILLUMINANTS``)."""
+        s = self.validated()
+        return np.asarray(colour_module().CCS_ILLUMINANTS[s.observer][s.illuminant], dtype=float)
+
+
+@dataclass(frozen=True, slots=True)
+class ColourValues:
+    """One colour: CIE XYZ (Y = 100 for the perfect reflecting diffuser), L*a*b*, L*C*h."""
+
+    X: float
+    Y: float
+    Z: float
+    L: float
+    a: float
+    b: float
+    C: float
+    h_deg: float
+
+    @property
+    def lab(self) -> tuple[float, float, float]:
+        """``(L*, a*, b*)``."""
+        return (self.L, self.a, self.b)
+
+    def as_dict(self) -> dict[str, float]:
+        """Plain dict with the column names used by the store and the exports."""
+        return {
+            "X": self.X,
+            "Y": self.Y,
+            "Z": self.Z,
+            "L": self.L,
+            "a": self.a,
+            "b": self.b,
+            "C": self.C,
+            "h_deg": self.h_deg,
+        }
+
+
+def standard_grid_nm(step_nm: float = 10.0) -> FloatArray:
+    """380..780 nm in ``step_nm`` steps (the default 10 nm gives 41 wavelengths)."""
+    if not (math.isfinite(step_nm) and 0 < step_nm <= 100 and (400.0 / step_nm).is_integer()):
+        raise ColourError(f"wavelength step {step_nm} nm must divide 400 nm (e.g. 5, 10, 20)")
+    return np.linspace(380.0, 780.0, round(400.0 / step_nm) + 1)
+
+
+def check_spectrum(
+    wavelengths_nm: ArrayLike, values: ArrayLike, *, what: str = "spectrum"
+) -> tuple[FloatArray, FloatArray]:
+    """Validate a measured spectrum; return it as float arrays.
+
+    Raises
+    ------
+    ColourError
+        Naming the problem: not 1-D, lengths differ, fewer than 3 wavelengths, a NaN or
+        infinite value or wavelength, a negative value, wavelengths not ascending and evenly
+        spaced, or a grid that does not cover 380-780 nm.
+    """
+    try:
+        wl = np.asarray(wavelengths_nm, dtype=np.float64)
+        r = np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ColourError(f"{what}: not numeric ({exc})") from None
+    if wl.ndim != 1 or r.ndim != 1:
+        raise ColourError(f"{what}: wavelengths and values must be 1-D lists")
+    if wl.size != r.size:
+        raise ColourError(
+            f"{what}: {r.size} values for {wl.size} wavelengths (the lengths must match)"
+        )
+    if wl.size < 3:
+        raise ColourError(f"{what}: {wl.size} wavelengths, need at least 3")
+    if not np.all(np.isfinite(wl)):
+        raise ColourError(f"{what}: a wavelength is NaN or infinite")
+    bad = ~np.isfinite(r)
+    if np.any(bad):
+        k = int(np.argmax(bad))
+        raise ColourError(f"{what}: value at {wl[k]:g} nm is {r[k]} (NaN or infinite)")
+    neg = r < 0
+    if np.any(neg):
+        k = int(np.argmax(neg))
+        raise ColourError(f"{what}: value at {wl[k]:g} nm is negative ({r[k]:g})")
+    steps = np.diff(wl)
+    if np.any(steps <= 0):
+        raise ColourError(f"{what}: wavelengths must be ascending")
+    if np.ptp(steps) > 1e-6 * max(1.0, float(steps.mean())):
+        raise ColourError(f"{what}: wavelengths must be evenly spaced")
+    lo, hi = VISIBLE_NM
+    if wl[0] > lo + 1e-9 or wl[-1] < hi - 1e-9:
+        raise ColourError(
+            f"{what}: wavelengths {wl[0]:g}-{wl[-1]:g} nm do not cover {lo:g}-{hi:g} nm"
+        )
+    return wl, r
+
+
+@functools.lru_cache(maxsize=32)
+def _weights(wl: tuple[float, ...], settings: ColourSettings) -> FloatArray:
+    colour = colour_module()
+    s = settings.validated()
+    cmfs = colour.MSDS_CMFS[s.observer]
+    illuminant = colour.SDS_ILLUMINANTS[s.illuminant]
+    wl_arr = np.asarray(wl)
+    out = np.empty((3, wl_arr.size))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # colour warns when it interpolates/extrapolates
+        for k in range(wl_arr.size):
+            unit = np.zeros(wl_arr.size)
+            unit[k] = 1.0
+            sd = colour.SpectralDistribution(unit, wl_arr)
+            out[:, k] = colour.sd_to_XYZ(sd, cmfs, illuminant, method=s.method)
+    out.setflags(write=False)
+    return out
+
+
+def xyz_weights(wavelengths_nm: ArrayLike, settings: ColourSettings | None = None) -> FloatArray:
+    """The 3 x N matrix W with ``XYZ = W @ R`` for reflectance factors R on this grid.
+
+    Built from ``colour.sd_to_XYZ`` on each unit spectrum of the grid (its integration,
+    ASTM E308 tables included, is linear in R), cached per grid and settings.
+    """
+    s = (settings or ColourSettings()).validated()
+    wl = tuple(float(w) for w in np.asarray(wavelengths_nm, dtype=float).ravel())
+    return _weights(wl, s)
+
+
+def spectra_to_xyz(
+    wavelengths_nm: ArrayLike, factors: ArrayLike, settings: ColourSettings | None = None
+) -> FloatArray:
+    """CIE XYZ (Y = 100 for R = 1) of reflectance factors ``(..., N)``; returns ``(..., 3)``."""
+    w = xyz_weights(wavelengths_nm, settings)
+    r = np.asarray(factors, dtype=np.float64)
+    out: FloatArray = r @ w.T
+    return out
+
+
+def xyz_to_colour(xyz: ArrayLike, settings: ColourSettings | None = None) -> FloatArray:
+    """``(..., 3)`` XYZ (Y = 100 scale) to ``(..., 8)``: X, Y, Z, L*, a*, b*, C*, h (deg).
+
+    ``colour.XYZ_to_Lab`` with the illuminant's white point for the observer, then
+    ``colour.Lab_to_LCHab`` (CIE 15:2004 eqs. 8.1-8.4).
+    """
+    colour = colour_module()
+    s = (settings or ColourSettings()).validated()
+    xyz_a = np.asarray(xyz, dtype=np.float64)
+    white = np.asarray(colour.CCS_ILLUMINANTS[s.observer][s.illuminant], dtype=float)
+    lab = colour.XYZ_to_Lab(xyz_a / 100.0, white)
+    lch = colour.Lab_to_LCHab(lab)
+    out: FloatArray = np.concatenate([xyz_a, lab, lch[..., 1:]], axis=-1)
+    return out
+
+
+def _values(row: Sequence[float]) -> ColourValues:
+    return ColourValues(*(float(v) for v in row))
+
+
+def spectrum_to_colour(
+    wavelengths_nm: ArrayLike,
+    factors: ArrayLike,
+    settings: ColourSettings | None = None,
+    *,
+    what: str = "spectrum",
+) -> ColourValues:
+    """Colour of one reflectance-factor spectrum (validated by :func:`check_spectrum`).
+
+    Parameters
+    ----------
+    wavelengths_nm
+        Ascending, evenly spaced wavelengths covering 380-780 nm.
+    factors
+        Reflectance factor per wavelength (1 = perfect reflecting diffuser; a gloss peak
+        can exceed 1).
+    settings
+        Illuminant, observer and method (default D65, CIE 1964 10 deg, ASTM E308).
+    """
+    wl, r = check_spectrum(wavelengths_nm, factors, what=what)
+    xyz = spectra_to_xyz(wl, r, settings)
+    return _values(xyz_to_colour(xyz, settings).tolist())
+
+
+def delta_e(lab_1: ArrayLike, lab_2: ArrayLike, method: str = "CIE 2000") -> FloatArray:
+    """Colour difference between L*a*b* arrays (``colour.delta_E``): dE*ab (``"CIE 1976"``),
+    dE94 (``"CIE 1994"``, graphic arts weights) or dE2000 (``"CIE 2000"``)."""
+    if method not in DELTA_E_METHODS:
+        raise ColourError(f"unknown colour difference {method!r} (one of {DELTA_E_METHODS})")
+    colour = colour_module()
+    out: FloatArray = np.asarray(
+        colour.delta_E(np.asarray(lab_1, float), np.asarray(lab_2, float), method=method),
+        dtype=np.float64,
+    )
+    return out
+
+
+def lab_to_srgb(lab: ArrayLike, settings: ColourSettings | None = None) -> FloatArray:
+    """Display sRGB in [0, 1] of L*a*b* colours (for swatches): ``colour.XYZ_to_sRGB`` with
+    chromatic adaptation from the illuminant's white point, clipped to the gamut."""
+    colour = colour_module()
+    s = (settings or ColourSettings()).validated()
+    white = np.asarray(colour.CCS_ILLUMINANTS[s.observer][s.illuminant], dtype=float)
+    xyz = colour.Lab_to_XYZ(np.asarray(lab, dtype=float), white)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rgb = colour.XYZ_to_sRGB(xyz, white)
+    out: FloatArray = np.clip(np.nan_to_num(rgb), 0.0, 1.0)
+    return out

@@ -1,0 +1,85 @@
+"""Spectra -> colour: against the CIE tables, colour-science itself and Sharma's dE2000 data."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from goniolab.colour.spectra import (
+    ColourError,
+    ColourSettings,
+    check_spectrum,
+    colour_module,
+    delta_e,
+    lab_to_srgb,
+    spectrum_to_colour,
+    standard_grid_nm,
+    xyz_weights,
+)
+
+
+def test_weights_sum_to_the_d65_10deg_white_point() -> None:
+    # CIE 15:2004 table T.3: D65, 1964 10 deg observer: X = 94.811, Y = 100, Z = 107.304
+    w = xyz_weights(standard_grid_nm(10))
+    assert w.sum(axis=1) == pytest.approx([94.811, 100.0, 107.304], abs=0.02)
+
+
+def test_weights_reproduce_sd_to_xyz() -> None:
+    colour = colour_module()
+    wl = standard_grid_nm(10)
+    r = 0.1 + 0.6 * np.exp(-(((wl - 610.0) / 40.0) ** 2))
+    ref = colour.sd_to_XYZ(
+        colour.SpectralDistribution(r, wl),
+        colour.MSDS_CMFS["CIE 1964 10 Degree Standard Observer"],
+        colour.SDS_ILLUMINANTS["D65"],
+        method="ASTM E308",
+    )
+    assert xyz_weights(wl) @ r == pytest.approx(ref, rel=1e-10)
+
+
+def test_perfect_diffuser_is_white_under_any_illuminant() -> None:
+    wl = standard_grid_nm(5)
+    for ill, obs in (("D65", "10"), ("A", "2"), ("C", "CIE 1931 2 Degree Standard Observer")):
+        c = spectrum_to_colour(wl, np.ones_like(wl), ColourSettings(ill, obs))
+        assert (c.L, c.a, c.b) == pytest.approx((100.0, 0.0, 0.0), abs=0.05)
+
+
+def test_lch_and_srgb_of_a_red_spectrum() -> None:
+    wl = standard_grid_nm(10)
+    r = np.where(wl > 600, 0.8, 0.05)
+    c = spectrum_to_colour(wl, r)
+    assert c.a > 40 and pytest.approx(np.hypot(c.a, c.b)) == c.C
+    assert c.h_deg == pytest.approx(np.degrees(np.arctan2(c.b, c.a)) % 360)
+    rgb = lab_to_srgb(c.lab)
+    assert rgb[0] > 0.6 and rgb[1] < 0.3 and rgb[2] < 0.3
+
+
+def test_delta_e_2000_sharma_pairs() -> None:
+    # G. Sharma, W. Wu, E. N. Dalal, Color Res. Appl. 30 (2005) 21, table 1, pairs 1 and 7
+    assert float(delta_e([50.0, 2.6772, -79.7751], [50.0, 0.0, -82.7485])) == pytest.approx(
+        2.0425, abs=1e-4
+    )
+    assert float(delta_e([50.0, 0.0, 0.0], [50.0, -1.0, 2.0])) == pytest.approx(2.3669, abs=1e-4)
+    assert float(delta_e([50, 0, 0], [53, 4, 0], "CIE 1976")) == pytest.approx(5.0)
+
+
+@pytest.mark.parametrize(
+    ("wl", "values", "needle"),
+    [
+        (standard_grid_nm(10), np.ones(40), "40 values for 41 wavelengths"),
+        (standard_grid_nm(10), np.r_[np.ones(40), np.nan], "780 nm is nan"),
+        (standard_grid_nm(10), np.r_[-0.1, np.ones(40)], "380 nm is negative"),
+        (np.linspace(400, 700, 31), np.ones(31), "do not cover 380-780 nm"),
+        (np.r_[380.0, 390.0, 385.0], np.ones(3), "ascending"),
+    ],
+)
+def test_bad_spectra_name_the_problem(wl: np.ndarray, values: np.ndarray, needle: str) -> None:
+    with pytest.raises(ColourError, match=needle):
+        check_spectrum(wl, values)
+
+
+def test_unknown_illuminant_and_observer() -> None:
+    with pytest.raises(ColourError, match="unknown illuminant 'D66'"):
+        ColourSettings("D66").validated()
+    with pytest.raises(ColourError, match="unknown observer '5'"):
+        ColourSettings("D65", "5").validated()
