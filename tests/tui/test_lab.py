@@ -249,7 +249,8 @@ async def test_quit_during_a_scan_aborts_it_and_exits(tmp_path: Path) -> None:
 
 async def test_the_sim_lab_measures_the_sample_picked_in_the_form(tmp_path: Path) -> None:
     # The config's sample is a Beckmann surface; picking wittmann-1 puts that sample under
-    # the simulated spectro and glossmeter: readings follow wittmann-1's facet model.
+    # the simulated spectro and glossmeter: readings follow wittmann-1's model, the one the
+    # config's [sample] model names (default auto).
     app = make_app(tmp_path)
     async with app.run_test(size=SIZE) as pilot:
         await wait_until(pilot, app.ready.is_set)
@@ -260,7 +261,7 @@ async def test_the_sim_lab_measures_the_sample_picked_in_the_form(tmp_path: Path
         )
         app.query_one("#sample", Select).value = "wittmann-1"
         theta = np.array([40.0, 45.0, 50.0])
-        facet = model_for("sample:wittmann-1", n=1.55)
+        facet = model_for("sample:wittmann-1", n=1.55, model="auto")
         truth = facet.luminance_pct(45.0, theta, source=Cone(6.0), detector=Cone(6.0))
         beckmann = AnalyticModel("beckmann", alpha=ALPHA).luminance_pct(
             45.0, theta, source=Cone(6.0), detector=Cone(6.0)
