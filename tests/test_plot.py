@@ -6,8 +6,6 @@ import json
 import struct
 import xml.etree.ElementTree as ET
 from pathlib import Path
-from types import SimpleNamespace
-from typing import Any
 
 import numpy as np
 import pytest
@@ -89,33 +87,50 @@ def test_json_names_the_file(
     assert json.loads(capsys.readouterr().out)["output"] == str(out.resolve())
 
 
-class _ColourStore(RunStore):
-    """The fixture store with a measured colour on each reading and a predicted L*a*b* per
-    geometry, the way the colour columns of the store give them (issue 11)."""
+def _colour_store(path: Path) -> Path:
+    """A 3-angle x 2-repeat scan whose readings carry a measured colour and whose
+    geometries carry a predicted L*a*b* (the store's colour columns), last reading missing."""
+    from goniolab.scan.plans import BrdfPlan
+    from goniolab.store import PredictedColour
 
-    def points(self, run_id: int) -> list[Any]:
-        out = []
-        for p in super().points(run_id):
-            c = {"X": 1.0, "Y": 2.0, "Z": 3.0, "L": 50.0 + p.index, "a": -1.0 * p.index,
-                 "b": 2.0 * p.repeat, "C": 1.0, "h_deg": 90.0}  # fmt: skip
-            out.append(SimpleNamespace(**{f: getattr(p, f) for f in p.__slots__}, colour=c))
-        return out
+    plan = BrdfPlan(45.0, (40.0, 45.0, 50.0), repeats=2, sample="sample:x")
+    with RunStore(path) as s:
+        rid = s.create_run(kind="brdf", plan=plan.to_dict(), config={}, sample="sample:x",
+                           model={}, version="t")  # fmt: skip
+        for k, tr in enumerate(plan.theta_r_deg):
+            for r in range(2):
+                if (k, r) == (2, 1):
+                    continue
+                c = {"X": 1.0, "Y": 2.0, "Z": 3.0, "L": 50.0 + k, "a": -1.0 * k,
+                     "b": 2.0 * r, "C": 1.0, "h_deg": 90.0}  # fmt: skip
+                s.add_point(rid, index=k, repeat=r, theta_i_deg=45.0, theta_r_deg=tr,
+                            measured_theta_i_deg=45.0, measured_theta_r_deg=tr,
+                            luminance_pct=lum(k, r), raw={}, timestamp=1.0, colour=c)  # fmt: skip
+        s.add_predictions(rid, [(k, 45.0, tr, 1.0) for k, tr in enumerate(plan.theta_r_deg)])
+        s.add_predicted_colours(rid, [(k, PredictedColour(60.0 + k, 0.5, -0.5)) for k in range(3)])
+    return path
 
-    def predicted_colours(self, run_id: int) -> dict[int, Any]:
-        return {k: SimpleNamespace(L=60.0 + k, a=0.5, b=-0.5) for k in range(3)}
 
-
-def test_colour_per_point_reaches_the_dataset_and_the_plot(store_file: Path) -> None:
+def test_colour_per_point_reaches_the_dataset_and_the_plot(tmp_path: Path) -> None:
     from goniolab.datasets import run_dataset
     from goniolab.plot import plot_dataset
 
-    with _ColourStore(store_file, readonly=True) as s:
+    with RunStore(_colour_store(tmp_path / "c.sqlite"), readonly=True) as s:
         ds = run_dataset(s, 1)
     np.testing.assert_array_equal(ds["L_star"].values[:, 0], [50.0, 51.0, 52.0])
     np.testing.assert_array_equal(ds["b_star"].values[1], [0.0, 2.0])
     assert np.isnan(ds["L_star"].values[2, 1])  # the reading never taken
     np.testing.assert_array_equal(ds["predicted_L_star"].values, [60.0, 61.0, 62.0])
     assert ds["a_star"].dims == ("theta_r_deg", "repeat")
+    # and the netCDF export carries it
+    import xarray as xr
+
+    from goniolab.datasets import write_netcdf
+
+    write_netcdf(ds, tmp_path / "c.nc")
+    with xr.open_dataset(tmp_path / "c.nc", engine="h5netcdf") as back:
+        np.testing.assert_array_equal(back["L_star"].values, ds["L_star"].values)
+        np.testing.assert_array_equal(back["predicted_b_star"].values, [-0.5, -0.5, -0.5])
     fig = plot_dataset(ds)
     assert len(fig.axes) == 4  # luminance, residuals, L*, a*/b*
     lab_ax = fig.axes[2]
