@@ -28,7 +28,8 @@ async def test_shipped_sim_lab_reads_the_sample_model(tmp_path: Path) -> None:
     async with Lab.from_config(quiet_sim_config(tmp_path), time_scale=0) as lab:
         assert isinstance(lab.clock, SimClock) and lab.clock.scale == 0.0
         assert lab.mode == "sim" and lab.source == Cone(6.0) and lab.detector == Cone(6.0)
-        assert lab.model is model_for("sample:wittmann-3", n=1.55)  # the cached FacetModel
+        # the cached model of [sample] (its model key: auto, the regime rule, by default)
+        assert lab.model is model_for("sample:wittmann-3", n=1.55, model=lab.config.sample.model)
         await lab.goniometer.move_to(45.0, 45.0, timeout_s=30.0)
         reading = await lab.spectro.measure()
         expected = float(
