@@ -22,6 +22,10 @@ FORBIDDEN: dict[str, tuple[str, ...]] = {
         "sim", "drivers", "goniolab.surfaces", "goniolab.scan", "goniolab.store",
         "goniolab.session", "goniolab.lab", "goniolab.commands", "goniolab.tui", "textual",
     ),
+    "goniolab/colour": (
+        "sim", "drivers", "goniolab.surfaces", "goniolab.scan", "goniolab.store",
+        "goniolab.session", "goniolab.lab", "goniolab.commands", "goniolab.tui", "textual",
+    ),
     "goniolab/surfaces": (
         "sim", "drivers", "goniolab.scan", "goniolab.store", "goniolab.session",
         "goniolab.lab", "goniolab.commands", "goniolab.tui", "textual",
