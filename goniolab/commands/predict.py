@@ -266,6 +266,9 @@ def _write_out(args: argparse.Namespace, make: Any) -> None:
 
 
 def _cmd_gloss(args: argparse.Namespace) -> int:
+    if len(args.map) > 1 or args.scheduler:
+        return _cmd_gloss_batch(args)
+    args.map = args.map[0]
     from goniolab.optics.gloss_standards import gloss_report
 
     model = _model(args)
@@ -321,6 +324,78 @@ def _cmd_gloss(args: argparse.Namespace) -> int:
             "(no distinct reflected image; DOI = 100 (Rs - R0.3) / Rs, ASTM E430)"
         )
     return 0
+
+
+def _batch_line(row: dict[str, Any]) -> str:
+    e = row["e430"]
+    return (
+        f"{row['map']}: G20 {row['G20']:6.1f}  G60 {row['G60']:6.1f}  G85 {row['G85']:6.1f} GU"
+        f"  haze {row['haze_index']:6.1f}  DOI {e['doi']:5.1f}  D523 {row['d523_angle']} deg"
+    )
+
+
+def _cmd_gloss_batch(args: argparse.Namespace) -> int:
+    """Many maps: one worker process per core (or a dask cluster), rows as maps finish."""
+    from goniolab.batch import GlossOptions, run_dask, run_local
+
+    if args.out:
+        raise UserError("--out writes one map's prediction: give a single MAP")
+    if args.jobs is not None and args.jobs < 1:
+        raise UserError(f"--jobs {args.jobs}: must be >= 1")
+    opts = GlossOptions(
+        n=args.n,
+        step_um=args.step_um,
+        slope_method=args.slope_method,
+        weighting=args.weighting,
+        masking=args.masking,
+    )
+    maps = [str(m) for m in args.map]
+    rows = (
+        run_dask(maps, opts, address=args.scheduler)
+        if args.scheduler
+        else run_local(maps, opts, jobs=args.jobs)
+    )
+    failed = 0
+    with _progress(len(maps)) as advance:
+        for row in rows:
+            if "error" in row:
+                failed += 1
+                print(f"goniolab: error: {row['error']}", file=sys.stderr, flush=True)
+            if args.json:
+                print(json.dumps(row), flush=True)  # JSON Lines: one object per map
+            elif "error" not in row:
+                print(_batch_line(row), flush=True)
+            advance()
+    if failed:
+        print(f"goniolab: {failed} of {len(maps)} maps failed", file=sys.stderr)
+        return 2
+    return 0
+
+
+def _progress(total: int) -> Any:
+    """A rich progress bar on stderr while a terminal watches (nothing otherwise)."""
+    from contextlib import contextmanager
+
+    @contextmanager
+    def bar() -> Any:
+        if not sys.stderr.isatty():
+            yield lambda: None
+            return
+        from rich.console import Console
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
+
+        with Progress(
+            "[progress.description]{task.description}",
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeRemainingColumn(),
+            console=Console(stderr=True),
+            transient=True,
+        ) as progress:
+            task = progress.add_task("gloss", total=total)
+            yield lambda: progress.advance(task)
+
+    return bar()
 
 
 def _projected_solid_angle_sr(detector: Cone, theta_r_deg: float) -> float:
@@ -438,8 +513,11 @@ def _cmd_brdf(args: argparse.Namespace) -> int:
     return 0
 
 
-def _add_common(p: argparse.ArgumentParser) -> None:
-    p.add_argument("map", metavar="MAP", help="height-map file or sample:NAME")
+def _add_common(p: argparse.ArgumentParser, *, many: bool = False) -> None:
+    if many:
+        p.add_argument("map", metavar="MAP", nargs="+", help="height-map files or sample:NAME")
+    else:
+        p.add_argument("map", metavar="MAP", help="height-map file or sample:NAME")
     p.add_argument(
         "--n",
         type=parse_index,
@@ -495,8 +573,24 @@ def register(subparsers: Any) -> None:
     stats = sub.add_parser("stats", help="Ra, Sq, Sdq, h_r of the map")
     _add_common(stats)
     stats.set_defaults(func=_cmd_stats)
-    gloss = sub.add_parser("gloss", help="ISO 2813 gloss, haze, DOI, D523 geometry")
-    _add_common(gloss)
+    gloss = sub.add_parser(
+        "gloss",
+        help="ISO 2813 gloss, haze, DOI, D523 geometry (several maps: in parallel, JSON Lines)",
+    )
+    _add_common(gloss, many=True)
+    gloss.add_argument(
+        "--jobs",
+        type=int,
+        default=None,
+        metavar="N",
+        help="several maps: worker processes (default: one per core)",
+    )
+    gloss.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="run the maps on a dask.distributed cluster (tcp://host:8786; extra goniolab[dask])",
+    )
     gloss.add_argument("--out", metavar="FILE.nc", help="also write the prediction as netCDF")
     gloss.set_defaults(func=_cmd_gloss)
     brdf = sub.add_parser("brdf", help="in-plane BRDF and goniometer luminance")

@@ -20,12 +20,25 @@ Fresnel derivative of :func:`_fresnel_d_scalar`) for the first-order aperture te
 described in :mod:`goniolab.optics.facet`. The numba versions are compiled with
 ``nogil=True`` so the facet model can split the facets over threads; the numpy twins are
 the test reference and the benchmark baseline. All arithmetic is float64.
+
+Facets are passed as three arrays ``(mx, my, mz)`` of unit normals, or, with an empty ``mz``,
+as their slopes ``(p, q, empty)``: the normal ``(-p, -q, 1)/sqrt(1 + p^2 + q^2)`` is then
+formed facet by facet (:func:`_normal`), bit for bit as :attr:`Surface.normals` forms it, so
+the facet model never holds three normal arrays beside the slopes (24 bytes per facet less
+memory and traffic).
+
+Compiled kernels are cached on disk (``cache=True``): numba keeps them in ``__pycache__``
+beside this file, or in the user cache directory (``NUMBA_CACHE_DIR`` to choose) when the
+package directory is read-only; when no directory is writable the kernels are compiled
+in each process instead (:func:`_njit`).
 """
 
 from __future__ import annotations
 
 import cmath
 import math
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -44,6 +57,7 @@ __all__ = [
     "hemisphere_bin_tables",
     "hemisphere_numba",
     "hemisphere_numpy",
+    "normals_numpy",
     "rect_response_numba",
     "rect_response_numpy",
     "reflect_numpy",
@@ -52,9 +66,51 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 
+#: Whether the kernels were compiled with an on-disk cache (False: no writable directory).
+CACHED: bool = True
+
+
+def _njit(**options: Any) -> Callable[[Callable[..., Any]], Any]:
+    """``numba.njit(cache=True, **options)``, without the cache when numba finds no
+    writable cache directory (it raises at decoration then): slower start, same kernels."""
+
+    def wrap(fn: Callable[..., Any]) -> Any:
+        global CACHED
+        try:
+            return njit(cache=True, **options)(fn)
+        except RuntimeError:  # "cannot cache function ...: no locator available"
+            CACHED = False
+            return njit(cache=False, **options)(fn)
+
+    return wrap
+
+
+@_njit(nogil=True, fastmath=False)
+def _normal(
+    mx: FloatArray, my: FloatArray, mz: FloatArray, k: int
+) -> tuple[float, float, float]:  # pragma: no cover - numba
+    """Unit normal of facet k: ``(mx[k], my[k], mz[k])``, or from the slopes ``p = mx[k]``,
+    ``q = my[k]`` when ``mz`` is empty (docs/PHYSICS.md, "From a height map to facets")."""
+    if mz.size == 0:
+        p = mx[k]
+        q = my[k]
+        inv = 1.0 / math.sqrt(1.0 + p * p + q * q)
+        return -p * inv, -q * inv, inv
+    return mx[k], my[k], mz[k]
+
+
+def normals_numpy(
+    mx: FloatArray, my: FloatArray, mz: FloatArray
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Numpy twin of :func:`_normal` for whole arrays (normals, or slopes with an empty mz)."""
+    if mz.size == 0:
+        inv = 1.0 / np.sqrt(1.0 + mx * mx + my * my)
+        return -mx * inv, -my * inv, inv
+    return mx, my, mz
+
 
 # ----------------------------------------------------------------------------- scalar helpers
-@njit(cache=True, nogil=True, fastmath=False)
+@_njit(nogil=True, fastmath=False)
 def _fresnel_scalar(c: float, n_re: float, n_im: float) -> float:  # pragma: no cover - numba
     """Unpolarised Fresnel reflectance (cosine form of Wittmann eq. 9; pbrt FrComplex)."""
     if c < 0.0:
@@ -82,7 +138,7 @@ def _fresnel_scalar(c: float, n_re: float, n_im: float) -> float:  # pragma: no 
     )
 
 
-@njit(cache=True, nogil=True, fastmath=False)
+@_njit(nogil=True, fastmath=False)
 def _fresnel_d_scalar(
     c: float, n_re: float, n_im: float
 ) -> tuple[float, float]:  # pragma: no cover - numba
@@ -135,7 +191,7 @@ def _fresnel_d_scalar(
     return f, df
 
 
-@njit(cache=True, nogil=True, fastmath=False)
+@_njit(nogil=True, fastmath=False)
 def _weight_grad(
     c: float, mz: float, wz: float, n_re: float, n_im: float, seed: bool
 ) -> tuple[float, float, float]:  # pragma: no cover - numba
@@ -155,7 +211,7 @@ def _weight_grad(
     return phi / (mz * wz), (f + c * df) / (mz * wz) - 2.0 * phi / (wz * wz), phi / (mz * wz * wz)
 
 
-@njit(cache=True, nogil=True, fastmath=False)
+@_njit(nogil=True, fastmath=False)
 def _reflect(
     mx: float,
     my: float,
@@ -174,7 +230,7 @@ def _reflect(
     return ox, oy, oz, _weight(c, mz, wz, n_re, n_im, seed)
 
 
-@njit(cache=True, nogil=True, fastmath=False)
+@_njit(nogil=True, fastmath=False)
 def _mirror(
     mx: float, my: float, mz: float, wx: float, wy: float, wz: float
 ) -> tuple[float, float, float, float]:  # pragma: no cover - numba
@@ -188,7 +244,7 @@ def _mirror(
     return 2.0 * c * mx - wx, 2.0 * c * my - wy, oz, c
 
 
-@njit(cache=True, nogil=True, fastmath=False)
+@_njit(nogil=True, fastmath=False)
 def _weight(
     c: float, mz: float, wz: float, n_re: float, n_im: float, seed: bool
 ) -> float:  # pragma: no cover - numba
@@ -197,7 +253,7 @@ def _weight(
     return f if seed else c / (mz * wz) * f
 
 
-@njit(cache=True, nogil=True, fastmath=False)
+@_njit(nogil=True, fastmath=False)
 def _interval_overlap(x: float, s: float, r: float) -> float:  # pragma: no cover - numba
     """Fraction of [x - s/2, x + s/2] inside [-r/2, r/2] (indicator when s == 0)."""
     if s <= 0.0:
@@ -215,7 +271,7 @@ def _interval_overlap(x: float, s: float, r: float) -> float:  # pragma: no cove
     return (hi - lo) / s
 
 
-@njit(cache=True, nogil=True, fastmath=False)
+@_njit(nogil=True, fastmath=False)
 def _table(
     g: float, table: FloatArray, g0: float, g1: float, o_in: float
 ) -> float:  # pragma: no cover
@@ -233,7 +289,7 @@ def _table(
 
 
 # ----------------------------------------------------------------------------- numba kernels
-@njit(cache=True, nogil=True, fastmath=False)
+@_njit(nogil=True, fastmath=False)
 def _diamond(x: float, y: float) -> float:  # pragma: no cover - numba
     """Pseudo-angle in [0, 4), strictly increasing with atan2(y, x) mod 2 pi; 0 at (0, 0)."""
     if x == 0.0 and y == 0.0:
@@ -243,7 +299,7 @@ def _diamond(x: float, y: float) -> float:  # pragma: no cover - numba
     return 2.0 - y / (-x - y) if x < 0.0 else 3.0 + x / (x - y)
 
 
-@njit(cache=True, nogil=True, fastmath=False)
+@_njit(nogil=True, fastmath=False)
 def hemisphere_numba(
     mx: FloatArray,
     my: FloatArray,
@@ -273,7 +329,8 @@ def hemisphere_numba(
     wx, wy, wz = wi[0], wi[1], wi[2]
     total = 0.0
     for k in range(mx.size):
-        ox, oy, oz, w = _reflect(mx[k], my[k], mz[k], wx, wy, wz, n_re, n_im, seed)
+        mxk, myk, mzk = _normal(mx, my, mz, k)
+        ox, oy, oz, w = _reflect(mxk, myk, mzk, wx, wy, wz, n_re, n_im, seed)
         if w == 0.0:
             continue
         total += w
@@ -304,13 +361,13 @@ def hemisphere_numba(
 GRAD_COARSEN: int = 4
 
 
-@njit(cache=True, nogil=True)
+@_njit(nogil=True)
 def coarse_size(n_fine: int) -> int:  # pragma: no cover - numba (also callable from Python)
     """Nodes of the coarse gradient grid covering a fine grid of ``n_fine`` nodes."""
     return -(-(n_fine - 1) // GRAD_COARSEN) + 2
 
 
-@njit(cache=True, nogil=True, fastmath=False)
+@_njit(nogil=True, fastmath=False)
 def deposit_numba(
     mx: FloatArray,
     my: FloatArray,
@@ -347,7 +404,8 @@ def deposit_numba(
     y_hi = nb - 1.0
     inv_c = 1.0 / GRAD_COARSEN
     for k in range(mx.size):
-        ox, oy, oz, c = _mirror(mx[k], my[k], mz[k], wx, wy, wz)
+        mxk, myk, mzk = _normal(mx, my, mz, k)
+        ox, oy, oz, c = _mirror(mxk, myk, mzk, wx, wy, wz)
         if c == 0.0:
             continue
         y = (oy - b0) / hb
@@ -357,10 +415,10 @@ def deposit_numba(
         if x < 0.0 or x >= x_hi:
             continue
         if grad:
-            w, pp, qq = _weight_grad(c, mz[k], wz, n_re, n_im, seed)
+            w, pp, qq = _weight_grad(c, mzk, wz, n_re, n_im, seed)
             rho = math.sqrt(ox * ox + oz * oz)
-            ga = (pp * (ox * mz[k] - oz * mx[k]) + qq * ox) / rho
-            gb = (pp * (rho * rho * my[k] - oy * (ox * mx[k] + oz * mz[k])) - qq * oz * oy) / rho
+            ga = (pp * (ox * mzk - oz * mxk) + qq * ox) / rho
+            gb = (pp * (rho * rho * myk - oy * (ox * mxk + oz * mzk)) - qq * oz * oy) / rho
             xc = x * inv_c
             yc = y * inv_c
             ic = int(xc)
@@ -380,7 +438,7 @@ def deposit_numba(
             ggrid[ic + 1, jc + 1, 0] += ga * c11
             ggrid[ic + 1, jc + 1, 1] += gb * c11
         else:
-            w = _weight(c, mz[k], wz, n_re, n_im, seed)
+            w = _weight(c, mzk, wz, n_re, n_im, seed)
         total += w
         i = int(x)
         j = int(y)
@@ -395,7 +453,7 @@ def deposit_numba(
     return grid, ggrid, total
 
 
-@njit(cache=True, nogil=True, fastmath=False)
+@_njit(nogil=True, fastmath=False)
 def cone_response_numba(
     mx: FloatArray,
     my: FloatArray,
@@ -424,13 +482,14 @@ def cone_response_numba(
     cos_g1 = math.cos(min(g1, math.pi))
     acc = 0.0
     for k in range(mx.size):
-        ox, oy, oz, c = _mirror(mx[k], my[k], mz[k], wx, wy, wz)
+        mxk, myk, mzk = _normal(mx, my, mz, k)
+        ox, oy, oz, c = _mirror(mxk, myk, mzk, wx, wy, wz)
         if c == 0.0:
             continue
         cos_g = ox * dx + oy * dy + oz * dz
         if cos_g < cos_g1:
             continue
-        w, pp, qq = _weight_grad(c, mz[k], wz, n_re, n_im, seed)
+        w, pp, qq = _weight_grad(c, mzk, wz, n_re, n_im, seed)
         ex = ox - dx
         ey = oy - dy
         ez = oz - dz
@@ -445,12 +504,12 @@ def cone_response_numba(
         tz = dz - cos_g * oz
         tn = math.sqrt(tx * tx + ty * ty + tz * tz)
         if tn > 1e-300:
-            grad = (pp * (tx * mx[k] + ty * my[k] + tz * mz[k]) + qq * tz) / tn
+            grad = (pp * (tx * mxk + ty * myk + tz * mzk) + qq * tz) / tn
             acc += grad * _table(g, m1, 0.0, g1, 0.0)
     return acc
 
 
-@njit(cache=True, nogil=True, fastmath=False)
+@_njit(nogil=True, fastmath=False)
 def rect_response_numba(
     mx: FloatArray,
     my: FloatArray,
@@ -477,7 +536,8 @@ def rect_response_numba(
     sa = math.sin(alpha_r)
     acc = 0.0
     for k in range(mx.size):
-        ox, oy, oz, c = _mirror(mx[k], my[k], mz[k], wx, wy, wz)
+        mxk, myk, mzk = _normal(mx, my, mz, k)
+        ox, oy, oz, c = _mirror(mxk, myk, mzk, wx, wy, wz)
         if c == 0.0 or abs(oy) > sin_b:
             continue
         sd = -ox * ca - oz * sa
@@ -488,7 +548,7 @@ def rect_response_numba(
         ob = _interval_overlap(be, s_perp, r_perp)
         if ob == 0.0:
             continue
-        w = _weight(c, mz[k], wz, n_re, n_im, seed)
+        w = _weight(c, mzk, wz, n_re, n_im, seed)
         acc += w * ob * _interval_overlap(math.atan2(sd, cd), s_in, r_in)
     return acc
 
@@ -504,6 +564,7 @@ def reflect_numpy(
     seed: bool,
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """Vectorised twin of the per-facet step: ``(wo_x, wo_y, wo_z, w)``, w = 0 when dropped."""
+    mx, my, mz = normals_numpy(mx, my, mz)
     c = wi[0] * mx + wi[1] * my + wi[2] * mz
     ox = 2.0 * c * mx - wi[0]
     oy = 2.0 * c * my - wi[1]
@@ -547,6 +608,7 @@ def weight_grad_numpy(
 
     All three coefficients are 0 for dropped facets (facing away or reflecting inwards).
     """
+    mx, my, mz = normals_numpy(mx, my, mz)
     c = wi[0] * mx + wi[1] * my + wi[2] * mz
     ox = 2.0 * c * mx - wi[0]
     oy = 2.0 * c * my - wi[1]
@@ -647,6 +709,7 @@ def deposit_numpy(
     grad: bool,
 ) -> tuple[FloatArray, FloatArray, float]:
     """Numpy twin of :func:`deposit_numba`."""
+    mx, my, mz = normals_numpy(mx, my, mz)
     ox, oy, oz, w, pp, qq = weight_grad_numpy(mx, my, mz, wi, n_re, n_im, seed)
     keep = w != 0.0
     ox, oy, oz, w, pp, qq = ox[keep], oy[keep], oz[keep], w[keep], pp[keep], qq[keep]
@@ -707,6 +770,7 @@ def cone_response_numpy(
     m1: FloatArray,
 ) -> float:
     """Numpy twin of :func:`cone_response_numba`."""
+    mx, my, mz = normals_numpy(mx, my, mz)
     ox, oy, oz, w, pp, qq = weight_grad_numpy(mx, my, mz, wi, n_re, n_im, seed)
     half_chord = 0.5 * np.sqrt((ox - d[0]) ** 2 + (oy - d[1]) ** 2 + (oz - d[2]) ** 2)
     g = 2.0 * np.arcsin(np.minimum(half_chord, 1.0))

@@ -70,8 +70,10 @@ import functools
 import itertools
 import math
 import os
-from collections.abc import Callable, Sequence
+import threading
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Any, Literal
@@ -97,6 +99,7 @@ __all__ = [
     "HemisphereBRDF",
     "cap_overlap_fraction",
     "cap_overlap_moments",
+    "limit_threads",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -105,6 +108,7 @@ Backend = Literal["numba", "numpy"]
 
 #: Facets per thread below which the numba kernels run on one thread.
 _MIN_CHUNK = 1 << 16
+
 #: Most facets used to tabulate the Smith Lambda function (deterministic subsample).
 _LAMBDA_MAX_FACETS = 1 << 17
 _LAMBDA_THETA_STEP_DEG = 0.5
@@ -115,6 +119,29 @@ _EXACT_MAX_POINTS = 2
 _CONE_TABLE_SIZE = 4097
 
 _executor: ThreadPoolExecutor | None = None
+#: Empty third facet array: the kernels read ``(p, q)`` slopes instead of unit normals.
+_SLOPES: FloatArray = np.empty(0)
+
+
+_limits = threading.local()
+
+
+@contextmanager
+def limit_threads(n: int) -> Iterator[None]:
+    """Within the block, this thread runs the facet kernels on at most ``n`` threads.
+
+    A batch that spreads maps over worker processes (:mod:`goniolab.batch`) runs each map on
+    one thread: the cores are busy with other maps, and a map's sums then do not depend on
+    how the facets were split.
+    """
+    if n < 1:
+        raise ValueError(f"limit_threads needs n >= 1, got {n}")
+    old = getattr(_limits, "n", None)
+    _limits.n = n
+    try:
+        yield
+    finally:
+        _limits.n = old
 
 
 def _pool() -> ThreadPoolExecutor:
@@ -463,7 +490,9 @@ class FacetModel:
         self._use_kde = slope_bin is None
         self.grid_step_deg = float(grid_step_deg)
         self._seed = weighting == "seed"
-        self._mx, self._my, self._mz = surface.normals
+        # The kernels take the slopes and form each normal on the fly (an empty third array
+        # says so, see goniolab.optics._kernels): no normal arrays beside the slopes.
+        self._mx, self._my, self._mz = surface.p, surface.q, _SLOPES
 
     def __repr__(self) -> str:
         return (
@@ -474,7 +503,8 @@ class FacetModel:
     # ------------------------------------------------------------------ kernel dispatch
     def _chunks(self) -> list[tuple[FloatArray, FloatArray, FloatArray]]:
         n = self._mx.size
-        n_threads = max(1, min(os.cpu_count() or 1, n // _MIN_CHUNK))
+        cpus = getattr(_limits, "n", None) or os.cpu_count() or 1
+        n_threads = max(1, min(cpus, n // _MIN_CHUNK))
         if self.backend == "numpy" or n_threads == 1:
             return [(self._mx, self._my, self._mz)]
         bounds = np.linspace(0, n, n_threads + 1).astype(np.int64)

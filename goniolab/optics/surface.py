@@ -29,7 +29,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from goniolab.optics.heightmap import HeightMap, level_plane
+from goniolab.optics.heightmap import HeightMap, _plane, level_plane
 
 __all__ = [
     "RoughnessStats",
@@ -47,6 +47,58 @@ _METHODS: tuple[str, ...] = ("forward", "central", "plane8")
 
 #: Largest dense slope histogram :func:`slope_histogram` will allocate (cells).
 MAX_HISTOGRAM_CELLS = 50_000_000
+#: Rows per block of the one-pass forward-difference walk (a few hundred kB per array).
+_BLOCK_ROWS = 16
+
+
+def _forward_blocks(
+    hm: HeightMap, level: bool
+) -> tuple[float, float, float, list[tuple[int, int]]] | None:
+    """Plane and row blocks for the one-pass walk, or None when the map needs the general
+    path (missing points, or a single row or column)."""
+    z = hm.z_um
+    ny, nx = z.shape
+    if ny < 2 or nx < 2:
+        return None
+    if level:
+        a, b, c, complete = _plane(hm)
+    else:
+        a = b = c = 0.0
+        complete = math.isfinite(float(np.sum(z)))
+    if not complete:
+        return None  # missing points: the general path
+    blocks = [(r, min(r + _BLOCK_ROWS, ny - 1)) for r in range(0, ny - 1, _BLOCK_ROWS)]
+    return a, b, c, blocks
+
+
+def _forward_facets(hm: HeightMap, level: bool) -> tuple[FloatArray, FloatArray] | None:
+    """Forward-difference slopes of the (levelled) map without a levelled copy.
+
+    Levelling subtracts a plane, so it shifts every forward slope by the plane's own slope:
+    ``p = (z[i, j+1] - z[i, j]) / dx - b`` and ``q = (z[i+1, j] - z[i, j]) / dy - c``
+    (:func:`~goniolab.optics.heightmap.plane_fit`). Walked in blocks of rows, each written once into the facet arrays
+    (facets ``[:-1, :-1]``, row-major, as :meth:`Surface.from_heightmap` orders them).
+    None when the map has missing points (the general path handles them).
+    """
+    plan = _forward_blocks(hm, level)
+    if plan is None:
+        return None
+    _, b, c, blocks = plan
+    z = hm.z_um
+    ny, nx = z.shape
+    dx, dy = float(hm.dx_um), float(hm.dy_um)
+    p = np.empty((ny - 1, nx - 1))
+    q = np.empty((ny - 1, nx - 1))
+    for r0, r1 in blocks:
+        pb, qb = p[r0:r1], q[r0:r1]
+        np.subtract(z[r0:r1, 1:], z[r0:r1, :-1], out=pb)
+        np.divide(pb, dx, out=pb)
+        np.subtract(z[r0 + 1 : r1 + 1, :-1], z[r0:r1, :-1], out=qb)
+        np.divide(qb, dy, out=qb)
+        if level:
+            pb -= b
+            qb -= c
+    return p.reshape(-1), q.reshape(-1)
 
 
 def slopes(hm: HeightMap, method: SlopeMethod = "forward") -> tuple[FloatArray, FloatArray]:
@@ -137,7 +189,9 @@ class Surface:
             )
         if p.size == 0:
             raise ValueError(f"Surface from {self.source}: no valid facets")
-        if not (np.all(np.isfinite(p)) and np.all(np.isfinite(q))):
+        # one reduction each; only a non-finite sum needs the element-wise scan
+        finite = math.isfinite(float(np.sum(p))) and math.isfinite(float(np.sum(q)))
+        if not finite and not (np.all(np.isfinite(p)) and np.all(np.isfinite(q))):
             raise ValueError(f"Surface from {self.source}: slopes must be finite")
         object.__setattr__(self, "p", p)
         object.__setattr__(self, "q", q)
@@ -146,7 +200,22 @@ class Surface:
     def from_heightmap(
         cls, hm: HeightMap, *, slope_method: SlopeMethod = "forward", level: bool = True
     ) -> Surface:
-        """Facets of a height map (levelled first with :func:`level_plane` when ``level``)."""
+        """Facets of a height map (levelled first with :func:`level_plane` when ``level``).
+
+        Forward differences on a map without missing points take one pass and no levelled
+        copy (:func:`_forward_facets`); the other methods and maps with NaN level first.
+        """
+        if slope_method == "forward":
+            fast = _forward_facets(hm, level)
+            if fast is not None:
+                return cls(
+                    p=fast[0],
+                    q=fast[1],
+                    dx_um=float(hm.dx_um),
+                    dy_um=float(hm.dy_um),
+                    source=hm.source,
+                    slope_method=slope_method,
+                )
         if level:
             hm = level_plane(hm)
         p2, q2 = slopes(hm, slope_method)
@@ -273,6 +342,58 @@ class RoughnessStats:
     slope_rms_y: float
 
 
+def _forward_stats(hm: HeightMap, bin_size: float) -> RoughnessStats | None:
+    """:func:`roughness_stats` in one blocked pass (forward slopes, no missing points)."""
+    plan = _forward_blocks(hm, level=True)
+    if plan is None:
+        return None
+    a, b, c, blocks = plan
+    z = hm.z_um
+    ny, nx = z.shape
+    dx, dy = float(hm.dx_um), float(hm.dy_um)
+    x_um = (np.arange(nx, dtype=np.float64) - (nx - 1) / 2.0) * dx
+    y_um = (np.arange(ny, dtype=np.float64) - (ny - 1) / 2.0) * dy
+    row_plane = a + b * x_um
+    half = 0.5 * bin_size
+    s_abs = s_sq = s_pp = s_qq = 0.0
+    n_zero = 0
+    width = nx - 1
+    pb_all = np.empty((_BLOCK_ROWS, width))
+    qb_all = np.empty((_BLOCK_ROWS, width))
+    dev_all = np.empty((_BLOCK_ROWS + 1, nx))
+    for r0, r1 in blocks:
+        # heights of rows r0 .. r1 - 1 (the last row is added after the loop)
+        dev = dev_all[: r1 - r0]
+        np.subtract(z[r0:r1], row_plane, out=dev)
+        dev -= (c * y_um[r0:r1])[:, None]
+        s_abs += float(np.abs(dev).sum())
+        s_sq += float(np.vdot(dev, dev))
+        pb, qb = pb_all[: r1 - r0], qb_all[: r1 - r0]
+        np.subtract(z[r0:r1, 1:], z[r0:r1, :-1], out=pb)
+        np.divide(pb, dx, out=pb)
+        pb -= b
+        np.subtract(z[r0 + 1 : r1 + 1, :-1], z[r0:r1, :-1], out=qb)
+        np.divide(qb, dy, out=qb)
+        qb -= c
+        s_pp += float(np.vdot(pb, pb))
+        s_qq += float(np.vdot(qb, qb))
+        n_zero += int(np.count_nonzero((pb >= -half) & (pb < half) & (qb >= -half) & (qb < half)))
+    last = z[ny - 1] - row_plane - c * y_um[ny - 1]
+    s_abs += float(np.abs(last).sum())
+    s_sq += float(last @ last)
+    n_pts = z.size
+    n_fac = (ny - 1) * width
+    return RoughnessStats(
+        Ra_nm=s_abs / n_pts * 1e3,
+        Sq_nm=math.sqrt(s_sq / n_pts) * 1e3,
+        Sdq=math.sqrt((s_pp + s_qq) / n_fac),
+        h_r=n_zero / n_fac,
+        n_facets=n_fac,
+        slope_rms_x=math.sqrt(s_pp / n_fac),
+        slope_rms_y=math.sqrt(s_qq / n_fac),
+    )
+
+
 def roughness_stats(
     hm: HeightMap, *, slope_method: SlopeMethod = "forward", bin_size: float = 1e-3
 ) -> RoughnessStats:
@@ -290,14 +411,25 @@ def roughness_stats(
     Returns
     -------
     RoughnessStats
+
+    Notes
+    -----
+    With forward slopes on a map without missing points everything comes from one walk over
+    the map in row blocks: the levelled heights ``z - plane`` (their mean is 0, the plane
+    having an intercept) and the slopes of :func:`_forward_facets`, summed block by block
+    without a levelled copy or facet arrays.
     """
+    if not (math.isfinite(bin_size) and bin_size > 0):
+        raise ValueError(f"bin_size must be positive, got {bin_size}")
+    if slope_method == "forward":
+        one_pass = _forward_stats(hm, bin_size)
+        if one_pass is not None:
+            return one_pass
     lev = level_plane(hm)
     z = lev.z_um[np.isfinite(lev.z_um)]
     dev = z - z.mean()
     surf = Surface.from_heightmap(lev, slope_method=slope_method, level=False)
     p, q = surf.p, surf.q
-    if not (math.isfinite(bin_size) and bin_size > 0):
-        raise ValueError(f"bin_size must be positive, got {bin_size}")
     return RoughnessStats(
         Ra_nm=float(np.mean(np.abs(dev))) * 1e3,
         Sq_nm=float(np.sqrt(np.mean(dev * dev))) * 1e3,

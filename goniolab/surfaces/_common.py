@@ -65,8 +65,10 @@ def _make(
     name: str, z_um: ArrayLike, dx_um: float, dy_um: float, meta: dict[str, str]
 ) -> HeightMap:
     z = np.asarray(z_um, dtype=np.float64)
-    if np.isinf(z).any():
+    if not math.isfinite(float(np.sum(z))) and np.isinf(z).any():
         raise _fail(name, "heights overflow to infinity after scaling: implausible z scale")
+    if z.flags.owndata and z.flags.c_contiguous:
+        z.setflags(write=False)  # the reader's fresh array: the HeightMap takes it, no copy
     return HeightMap(z_um=z, dx_um=dx_um, dy_um=dy_um, source=name, meta=meta)
 
 

@@ -59,8 +59,9 @@ def _read_npy(path: Path, opts: _ReadOptions) -> HeightMap:
         tokenize.TokenError,  # numpy tokenises the header dict to repair old files
     ) as exc:
         raise _fail(name, f"not a readable .npy file: {exc}") from None
-    z = np.asarray(arr).astype(np.float64)
-    z[np.isinf(z)] = np.nan
+    z = np.asarray(arr).astype(np.float64, copy=False)  # a float64 file is read once, no copy
+    if not np.isfinite(np.sum(z)):
+        z[np.isinf(z)] = np.nan
     meta: dict[str, str] = {"format": "npy"}
     file_steps: tuple[float, float] | None = None
     side = _sidecar(path)
