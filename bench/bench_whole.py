@@ -46,17 +46,30 @@ GONIOLAB = str(BIN / "goniolab")
 PY = sys.executable
 
 
+TIME = "/usr/bin/time"
+
+
 def run(cmd: list[str], env: dict[str, str]) -> tuple[float, float, float, int]:
-    """(wall s, cpu s, peak RSS MB, exit code) of one process."""
-    t0 = time.perf_counter()
-    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    _, status, ru = os.wait4(proc.pid, 0)
-    wall = time.perf_counter() - t0
-    proc.returncode = os.waitstatus_to_exitcode(status)
-    err = proc.stderr.read().decode() if proc.stderr else ""
-    if proc.returncode != 0:
-        raise RuntimeError(f"{' '.join(cmd)} failed ({proc.returncode}): {err[-500:]}")
-    return wall, ru.ru_utime + ru.ru_stime, ru.ru_maxrss / 1024.0, proc.returncode
+    """(wall s, cpu s of the process and its children, peak RSS MB, exit code).
+
+    The peak RSS comes from GNU time (``%M``) when installed: a child forked from this
+    (numpy-laden) process would otherwise count the parent's pages it shared before exec.
+    """
+    with tempfile.NamedTemporaryFile("r") as rss:
+        wrap = [TIME, "-f", "%M", "-o", rss.name] if os.path.exists(TIME) else []
+        t0 = time.perf_counter()
+        proc = subprocess.Popen(
+            [*wrap, *cmd], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE
+        )
+        _, status, ru = os.wait4(proc.pid, 0)
+        wall = time.perf_counter() - t0
+        proc.returncode = os.waitstatus_to_exitcode(status)
+        err = proc.stderr.read().decode() if proc.stderr else ""
+        if proc.returncode != 0:
+            raise RuntimeError(f"{' '.join(cmd)} failed ({proc.returncode}): {err[-500:]}")
+        text = rss.read().strip().splitlines()
+        peak_kb = float(text[-1]) if wrap and text else float(ru.ru_maxrss)
+    return wall, ru.ru_utime + ru.ru_stime, peak_kb / 1024.0, proc.returncode
 
 
 def timed(cmd: list[str], env: dict[str, str], repeats: int) -> dict[str, float]:
@@ -218,14 +231,16 @@ def main(argv: list[str] | None = None) -> int:
                 maps.append(target)
             cmd = [GONIOLAB, "predict", "gloss", *map(str, maps), "--json"]
             run([*cmd[:5], "--json"], env)  # warm
-            wall_all = run(cmd, env)[0]
-            wall_one = run([*cmd, "--jobs", "1"], env)[0]
+            wall_all, cpu_all, _, _ = run(cmd, env)
+            wall_one, cpu_one, _, _ = run([*cmd, "--jobs", "1"], env)
             out["batch"] = {
                 "maps": args.batch,
                 "size": args.batch_size,
                 "all_cores_s": wall_all,
+                "all_cores_cpu_s": cpu_all,
                 "all_cores_maps_per_s": args.batch / wall_all,
                 "one_job_s": wall_one,
+                "one_job_cpu_s": cpu_one,
                 "one_job_maps_per_s": args.batch / wall_one,
             }
     out["load_after"] = os.getloadavg()
@@ -275,8 +290,9 @@ def print_table(out: dict[str, object]) -> None:
         assert isinstance(bt, dict)
         print(
             f"batch gloss, {bt['maps']} maps of {bt['size']}^2: {bt['all_cores_s']:.1f} s on every "
-            f"core ({bt['all_cores_maps_per_s']:.2f} maps/s), {bt['one_job_s']:.1f} s with "
-            f"--jobs 1 ({bt['one_job_maps_per_s']:.2f} maps/s)"
+            f"core ({bt['all_cores_maps_per_s']:.2f} maps/s, {bt['all_cores_cpu_s']:.1f} s CPU), "
+            f"{bt['one_job_s']:.1f} s with --jobs 1 ({bt['one_job_maps_per_s']:.2f} maps/s, "
+            f"{bt['one_job_cpu_s']:.1f} s CPU)"
         )
 
 
