@@ -214,8 +214,9 @@ def tui_tmux(runs: int) -> list[float] | None:
 
 
 def tui_in_process(runs: int) -> list[float]:
-    from goniolab.tui.app import GonioApp
     from goniolab.tui.lab_backend import LabBackend
+
+    from goniolab.tui.app import GonioApp
 
     async def once(store: Path) -> float:
         t0 = time.perf_counter()

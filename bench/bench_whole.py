@@ -185,8 +185,12 @@ def main(argv: list[str] | None = None) -> int:
         env["NUMBA_CACHE_DIR"] = str(tdir / "numba-cache")
         mp = tdir / f"map{args.size}.npy"
         make_map(mp, args.size)
-        brdf = [GONIOLAB, "predict", "brdf", str(mp), "--theta-i", "45", "--theta-r", "0:70:1"]
-        gloss = [GONIOLAB, "predict", "gloss", str(mp)]
+        # the unmasked facet model, as the baseline computes it (the defaults --model auto
+        # and --masking pick physical optics per geometry and add Smith masking)
+        facet = ["--model", "facet", "--no-masking"]
+        brdf = [GONIOLAB, "predict", "brdf", str(mp), "--theta-i", "45", "--theta-r", "0:70:1",
+                *facet]  # fmt: skip
+        gloss = [GONIOLAB, "predict", "gloss", str(mp), *facet]
         base = [PY, str(ROOT / "bench" / "baseline_numpy.py"), str(mp)]
 
         # first run with an empty numba cache: the kernels compile (JIT), then cached runs
@@ -229,7 +233,7 @@ def main(argv: list[str] | None = None) -> int:
                     target.with_name(target.name + ".json"),
                 )
                 maps.append(target)
-            cmd = [GONIOLAB, "predict", "gloss", *map(str, maps), "--json"]
+            cmd = [GONIOLAB, "predict", "gloss", *map(str, maps), "--json", *facet]
             run([*cmd[:5], "--json"], env)  # warm
             wall_all, cpu_all, _, _ = run(cmd, env)
             wall_one, cpu_one, _, _ = run([*cmd, "--jobs", "1"], env)

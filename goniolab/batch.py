@@ -35,7 +35,9 @@ class GlossOptions:
     step_um: float | None = None
     slope_method: str = "forward"
     weighting: str = "radiometric"
-    masking: bool = False
+    masking: bool = True  # as the CLI's --masking (default on)
+    model: str = "auto"
+    wavelength_nm: float | None = None
 
 
 def _index_json(n: complex) -> float | list[float]:
@@ -58,10 +60,14 @@ def gloss_row(spec: str, options: GlossOptions) -> dict[str, Any]:
                 slope_method=options.slope_method,  # type: ignore[arg-type]
                 weighting=options.weighting,  # type: ignore[arg-type]
                 masking=options.masking,
+                model=options.model,
+                wavelength_nm=options.wavelength_nm,
             )
             rep = gloss_report(model)
     except UserError as exc:
         return {"map": spec, "error": str(exc)}
+    except ValueError as exc:  # a geometry the model cannot answer for this map
+        return {"map": spec, "error": f"{spec}: {exc}"}
     return {
         "map": spec,
         "n": _index_json(options.n),

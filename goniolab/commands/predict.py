@@ -348,6 +348,8 @@ def _cmd_gloss_batch(args: argparse.Namespace) -> int:
         slope_method=args.slope_method,
         weighting=args.weighting,
         masking=args.masking,
+        model=args.model,
+        wavelength_nm=args.wavelength_nm,
     )
     maps = [str(m) for m in args.map]
     rows = (
