@@ -250,6 +250,13 @@ _GLOSS_FIELDS = (
 )
 
 
+#: The columns of a :class:`RunRecord`, in the order :meth:`RunRecord.from_row` reads them.
+_RUN_SELECT = (
+    "SELECT id, kind, plan_json, config_json, sample, model_json, version, status,"
+    " reason, created_at, updated_at, finished_at FROM runs"
+)
+
+
 class StoreError(Exception):
     """The store file cannot be opened, or a run id does not exist (message names both)."""
 
@@ -343,6 +350,24 @@ class RunRecord:
     updated_at: float
     finished_at: float | None
 
+    @classmethod
+    def from_row(cls, row: Sequence[Any]) -> RunRecord:
+        """From the columns of ``_RUN_SELECT``, in that order."""
+        return cls(
+            id=int(row[0]),
+            kind=str(row[1]),
+            plan=json.loads(row[2]),
+            config=json.loads(row[3]),
+            sample=str(row[4]),
+            model=json.loads(row[5]),
+            version=str(row[6]),
+            status=str(row[7]),
+            reason=str(row[8]),
+            created_at=float(row[9]),
+            updated_at=float(row[10]),
+            finished_at=None if row[11] is None else float(row[11]),
+        )
+
     def as_dict(self) -> dict[str, Any]:
         """Return the record as a JSON-serialisable dict."""
         return {
@@ -379,6 +404,31 @@ class PointRow:
     colour: dict[str, float] | None = None
     colour_error: str = ""
 
+    @classmethod
+    def from_row(cls, r: Sequence[Any]) -> PointRow:
+        """From the columns idx, repeat, theta_i_deg, theta_r_deg, measured_theta_i_deg,
+        measured_theta_r_deg, luminance_pct, raw_json, timestamp and, when the store has
+        them, the colour columns (:data:`COLOUR_KEYS` order, then colour_error)."""
+        colour = None
+        error = ""
+        if len(r) > 9:
+            if r[12] is not None:
+                colour = {k: float(v) for k, v in zip(COLOUR_KEYS, r[9:17], strict=True)}
+            error = str(r[17] or "")
+        return cls(
+            index=int(r[0]),
+            repeat=int(r[1]),
+            theta_i_deg=float(r[2]),
+            theta_r_deg=float(r[3]),
+            measured_theta_i_deg=float(r[4]),
+            measured_theta_r_deg=float(r[5]),
+            luminance_pct=float(r[6]),
+            raw=json.loads(r[7]),
+            timestamp=float(r[8]),
+            colour=colour,
+            colour_error=error,
+        )
+
 
 @dataclass(frozen=True, slots=True)
 class PredictedColour:
@@ -400,6 +450,20 @@ class GlossRow:
     predicted_gu: dict[int, float] | None
     raw: str
     timestamp: float
+
+    @classmethod
+    def from_row(cls, r: Sequence[Any]) -> GlossRow:
+        """From the columns seq, g20_gu, g60_gu, g85_gu, temperature_c, predicted_json,
+        raw, timestamp."""
+        pred = None if r[5] is None else {int(k): float(v) for k, v in json.loads(r[5]).items()}
+        return cls(
+            seq=int(r[0]),
+            values_gu={20: r[1], 60: r[2], 85: r[3]},
+            temperature_c=r[4],
+            predicted_gu=pred,
+            raw=str(r[6]),
+            timestamp=float(r[7]),
+        )
 
 
 def default_store_path() -> Path:
@@ -525,6 +589,11 @@ class RunStore:
             return
         self.path = Path(path)
         self.location = str(self.path)
+        self._db = self._open_sqlite(readonly=readonly, create=create)
+
+    def _open_sqlite(self, *, readonly: bool, create: bool) -> sqlite3.Connection:
+        """Open the SQLite file: read-only, or for writing (created when missing and
+        ``create``), after checks that say why a location cannot serve."""
         where = f"store {self.path}"
         if self.path.is_dir():
             raise StoreError(f"{where}: is a directory, not a store file")
@@ -532,8 +601,13 @@ class RunStore:
         if not exists and (readonly or not create):
             raise StoreError(f"{where}: no such file (no run has been recorded there)")
         if readonly:
-            self._db = self._open_readonly(where)
-            return
+            return self._open_readonly(where)
+        self._check_writable(where, exists)
+        return self._open_writable(where)
+
+    def _check_writable(self, where: str, exists: bool) -> None:
+        """Create the store's directory; refuse, saying why, a location SQLite could only
+        answer with "unable to open database file"."""
         blocker = next((d for d in self.path.parents if d.exists()), None)
         if blocker is not None and not blocker.is_dir():
             raise StoreError(f"{where}: {blocker} is a file, not a directory")
@@ -553,20 +627,25 @@ class RunStore:
             )
         if exists and not os.access(self.path, os.W_OK):
             raise StoreError(f"{where}: the file is read-only; choose another --store")
+
+    def _open_writable(self, where: str) -> sqlite3.Connection:
+        """Open (and create) the SQLite store: WAL, ``synchronous=FULL``, the schema."""
         try:
-            self._db = sqlite3.connect(self.path, isolation_level=None, timeout=10.0)
-            self._db.execute("PRAGMA journal_mode=WAL")
-            self._db.execute("PRAGMA synchronous=FULL")
-            self._db.execute("PRAGMA foreign_keys=ON")
-            self._db.executescript(_SCHEMA)
+            db = sqlite3.connect(self.path, isolation_level=None, timeout=10.0)
+            db.execute("PRAGMA journal_mode=WAL")
+            db.execute("PRAGMA synchronous=FULL")
+            db.execute("PRAGMA foreign_keys=ON")
+            db.executescript(_SCHEMA)
+            self._db = db  # _add_missing_columns reads the tables through self._db
             self._add_missing_columns()
-            self._db.execute(
+            db.execute(
                 "INSERT INTO meta(key, value) VALUES ('schema_version', ?)"
                 " ON CONFLICT (key) DO NOTHING",
                 (str(_SCHEMA_VERSION),),
             )
         except (OSError, sqlite3.Error) as exc:
             raise StoreError(f"{where}: cannot open: {_why(exc)}") from exc
+        return db
 
     def _open_postgres(self, *, readonly: bool, create: bool) -> _PgConnection:
         """Connect (libpq reads PGPASSWORD, ~/.pgpass, PGSSLMODE ... itself) and create the
@@ -681,10 +760,21 @@ class RunStore:
         by a connection of its own, released on exit and by the server when the process
         (and so its connection) dies.
         """
+        claim = self._claim_postgres if self.is_postgres else self._claim_file
+        with claim(run_id):
+            yield
+
+    def is_claimed(self, run_id: int) -> bool | None:
+        """Whether a runner (this or another process) is measuring ``run_id`` right now;
+        ``None`` when the store is read-only and it cannot be told. A run whose status
+        says ``running`` but that nobody claims was interrupted (e.g. ``kill -9``)."""
         if self.is_postgres:
-            with self._claim_postgres(run_id):
-                yield
-            return
+            return self._is_claimed_postgres(run_id)
+        return _ClaimFile.is_held(self._lock_path, run_id)
+
+    @contextmanager
+    def _claim_file(self, run_id: int) -> Iterator[None]:
+        """SQLite: the POSIX record lock on byte ``run_id`` of ``<store>-lock``."""
         lock_path = self._lock_path
         try:
             _ClaimFile.acquire(lock_path, run_id)
@@ -697,23 +787,19 @@ class RunStore:
         finally:
             _ClaimFile.release(lock_path, run_id)
 
-    def is_claimed(self, run_id: int) -> bool | None:
-        """Whether a runner (this or another process) is measuring ``run_id`` right now;
-        ``None`` when the store is read-only and it cannot be told. A run whose status
-        says ``running`` but that nobody claims was interrupted (e.g. ``kill -9``)."""
-        if self.is_postgres:
-            if run_id in self._claims:
-                return True
-            with self._tx() as db:
-                free = db.execute(
-                    "SELECT run_id FROM run_claims WHERE run_id = ? FOR UPDATE SKIP LOCKED",
-                    (run_id,),
-                ).fetchone()
-                exists = db.execute(
-                    "SELECT COUNT(*) FROM run_claims WHERE run_id = ?", (run_id,)
-                ).fetchone()[0]
-            return bool(exists) and free is None
-        return _ClaimFile.is_held(self._lock_path, run_id)
+    def _is_claimed_postgres(self, run_id: int) -> bool:
+        """PostgreSQL: the run's ``run_claims`` row is locked by some connection."""
+        if run_id in self._claims:
+            return True
+        with self._tx() as db:
+            free = db.execute(
+                "SELECT run_id FROM run_claims WHERE run_id = ? FOR UPDATE SKIP LOCKED",
+                (run_id,),
+            ).fetchone()
+            exists = db.execute(
+                "SELECT COUNT(*) FROM run_claims WHERE run_id = ?", (run_id,)
+            ).fetchone()[0]
+        return bool(exists) and free is None
 
     @contextmanager
     def _claim_postgres(self, run_id: int) -> Iterator[None]:
@@ -795,43 +881,19 @@ class RunStore:
 
     def get_run(self, run_id: int) -> RunRecord:
         """Return run ``run_id``; :class:`StoreError` naming the file when it does not exist."""
-        row = self._db.execute(
-            "SELECT id, kind, plan_json, config_json, sample, model_json, version, status,"
-            " reason, created_at, updated_at, finished_at FROM runs WHERE id = ?",
-            (run_id,),
-        ).fetchone()
+        row = self._db.execute(f"{_RUN_SELECT} WHERE id = ?", (run_id,)).fetchone()
         if row is None:
             raise StoreError(f"store {self.location}: no run {run_id}")
-        return self._record(row)
+        return RunRecord.from_row(row)
 
     def list_runs(self, limit: int | None = None) -> list[RunRecord]:
         """Return runs, newest first."""
-        sql = (
-            "SELECT id, kind, plan_json, config_json, sample, model_json, version, status,"
-            " reason, created_at, updated_at, finished_at FROM runs ORDER BY id DESC"
-        )
+        sql = f"{_RUN_SELECT} ORDER BY id DESC"
         params: tuple[int, ...] = ()
         if limit is not None:
             sql += " LIMIT ?"
             params = (limit,)
-        return [self._record(r) for r in self._db.execute(sql, params).fetchall()]
-
-    @staticmethod
-    def _record(row: Sequence[Any]) -> RunRecord:
-        return RunRecord(
-            id=int(row[0]),
-            kind=str(row[1]),
-            plan=json.loads(row[2]),
-            config=json.loads(row[3]),
-            sample=str(row[4]),
-            model=json.loads(row[5]),
-            version=str(row[6]),
-            status=str(row[7]),
-            reason=str(row[8]),
-            created_at=float(row[9]),
-            updated_at=float(row[10]),
-            finished_at=None if row[11] is None else float(row[11]),
-        )
+        return [RunRecord.from_row(r) for r in self._db.execute(sql, params).fetchall()]
 
     # ------------------------------------------------------------------ points
     def add_point(
@@ -897,30 +959,7 @@ class RunStore:
             + " FROM points WHERE run_id = ? ORDER BY idx, repeat",
             (run_id,),
         ).fetchall()
-        out = []
-        for r in rows:
-            colour = None
-            error = ""
-            if colour_sql:
-                if r[12] is not None:
-                    colour = {k: float(v) for k, v in zip(COLOUR_KEYS, r[9:17], strict=True)}
-                error = str(r[17] or "")
-            out.append(
-                PointRow(
-                    index=int(r[0]),
-                    repeat=int(r[1]),
-                    theta_i_deg=float(r[2]),
-                    theta_r_deg=float(r[3]),
-                    measured_theta_i_deg=float(r[4]),
-                    measured_theta_r_deg=float(r[5]),
-                    luminance_pct=float(r[6]),
-                    raw=json.loads(r[7]),
-                    timestamp=float(r[8]),
-                    colour=colour,
-                    colour_error=error,
-                )
-            )
-        return out
+        return [PointRow.from_row(r) for r in rows]
 
     def count_points(self, run_id: int) -> int:
         """Return the number of stored readings of ``run_id``."""
@@ -1022,20 +1061,7 @@ class RunStore:
             " FROM gloss_readings WHERE run_id = ? ORDER BY seq",
             (run_id,),
         ).fetchall()
-        out = []
-        for r in rows:
-            pred = None if r[5] is None else {int(k): float(v) for k, v in json.loads(r[5]).items()}
-            out.append(
-                GlossRow(
-                    seq=int(r[0]),
-                    values_gu={20: r[1], 60: r[2], 85: r[3]},
-                    temperature_c=r[4],
-                    predicted_gu=pred,
-                    raw=str(r[6]),
-                    timestamp=float(r[7]),
-                )
-            )
-        return out
+        return [GlossRow.from_row(r) for r in rows]
 
     # ------------------------------------------------------------------ migration
     def table_columns(self, table: str) -> list[str]:
