@@ -1,8 +1,17 @@
-"""Helpers shared by the height-map readers and writers: steps, units, quantisation, limits."""
+"""Helpers shared by the height-map readers and writers: steps, units, quantisation, limits.
+
+Size limits: a reader checks what a header declares against the file's size and against
+:func:`max_map_points` (``GONIOLAB_MAX_MAP_POINTS``, default 8192 x 8192 points) *before*
+allocating anything, and inflates compressed data (:func:`_inflate`) in bounded steps that
+stop as soon as a stream gives more than it claims, so a decompression bomb or a header
+that lies fails with one clear error in milliseconds.
+"""
 
 from __future__ import annotations
 
 import math
+import os
+import zlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -160,3 +169,91 @@ def _cstr(value: bytes) -> str:
 class _ReadOptions:
     step_um: StepArg
     missing_value: float | None
+
+
+# --------------------------------------------------------------------------- size limits
+#: Most points a height map may have unless ``GONIOLAB_MAX_MAP_POINTS`` says otherwise:
+#: 8192 x 8192, 512 MiB as float64 (a map's heights, slopes and facets need a few times that).
+DEFAULT_MAX_MAP_POINTS = 8192 * 8192
+#: Environment variable that sets the most points a height map may have.
+MAX_MAP_POINTS_ENV = "GONIOLAB_MAX_MAP_POINTS"
+#: zlib's largest expansion (deflate's longest match, 258 bytes, in about 2 bits:
+#: 1032:1); a stream that claims more cannot be valid.
+ZLIB_MAX_RATIO = 1032
+#: Bytes decompressed per step when inflating a stream.
+_INFLATE_STEP = 1 << 20
+
+
+def max_map_points() -> int:
+    """The most points a height map may have: ``GONIOLAB_MAX_MAP_POINTS`` or the default.
+
+    Raises
+    ------
+    HeightMapError
+        The environment variable is set but not a positive integer.
+    """
+    raw = os.environ.get(MAX_MAP_POINTS_ENV, "").strip()
+    if not raw:
+        return DEFAULT_MAX_MAP_POINTS
+    try:
+        value = int(raw.replace("_", ""))
+    except ValueError:
+        value = 0
+    if value <= 0:
+        raise HeightMapError(f"{MAX_MAP_POINTS_ENV}={raw!r}: must be a positive integer")
+    return value
+
+
+def _check_points(name: str, nx: int, ny: int, *, what: str = "header declares") -> None:
+    """Refuse a map larger than :func:`max_map_points` before anything is allocated."""
+    limit = max_map_points()
+    if nx * ny > limit:
+        raise _fail(
+            name,
+            f"{what} {nx}x{ny} = {nx * ny} points, more than the limit of {limit} "
+            f"(set {MAX_MAP_POINTS_ENV} to read larger maps)",
+        )
+
+
+def _check_file_size(name: str, size: int, bytes_per_point: int, what: str) -> None:
+    """Refuse a file larger than a map of :func:`max_map_points` points can need
+    (``bytes_per_point`` per point plus 1 MiB of headers), before reading it."""
+    limit = max_map_points()
+    most = limit * bytes_per_point + (1 << 20)
+    if size > most:
+        raise _fail(
+            name,
+            f"{what} of {_mib(size)} is more than a map within the limit of {limit} points "
+            f"needs ({_mib(most)}; set {MAX_MAP_POINTS_ENV} to read larger maps)",
+        )
+
+
+def _inflate(name: str, stream: bytes, raw_len: int, what: str) -> bytes:
+    """Decompress one zlib ``stream`` that must give exactly ``raw_len`` bytes.
+
+    The claim is checked against the stream's size first (:data:`ZLIB_MAX_RATIO`), then the
+    stream is inflated step by step with ``max_length`` and stopped as soon as it gives
+    more than claimed, so a decompression bomb costs at most ``raw_len`` bytes.
+    """
+    if raw_len > ZLIB_MAX_RATIO * len(stream) + 64:
+        raise _fail(
+            name,
+            f"{what} claims {_mib(raw_len)} from {_mib(len(stream))} of zlib data, more than "
+            f"zlib can expand ({ZLIB_MAX_RATIO}:1): corrupt or malicious",
+        )
+    d = zlib.decompressobj()
+    out = bytearray()
+    data = stream
+    try:
+        while True:
+            out += d.decompress(data, min(_INFLATE_STEP, raw_len - len(out) + 1))
+            if len(out) > raw_len:
+                raise _fail(name, f"{what} gives more than the {_mib(raw_len)} it claims")
+            data = d.unconsumed_tail
+            if d.eof or not data:
+                break
+    except zlib.error as exc:
+        raise _fail(name, f"{what} is corrupt: {exc}") from None
+    if len(out) != raw_len:
+        raise _fail(name, f"{what} gave {len(out)} bytes, expected {raw_len}")
+    return bytes(out)

@@ -13,6 +13,8 @@ import numpy as np
 
 from goniolab.optics.heightmap import HeightMap, HeightMapError, _fail
 from goniolab.surfaces._common import (
+    _check_file_size,
+    _check_points,
     _make,
     _ReadOptions,
     _resolve_steps,
@@ -117,6 +119,7 @@ def _gwy_field(name: str, container: Mapping[str, Any], key: str) -> dict[str, A
         raise _fail(name, f"{key}: GwyDataField lacks xres/yres/data")
     if xres <= 0 or yres <= 0:
         raise _fail(name, f"{key}: zero points ({xres}x{yres})")
+    _check_points(name, xres, yres, what=f"{key} declares")
     if data.dtype != np.float64 or data.size != xres * yres:
         raise _fail(name, f"{key}: data has {data.size} values, expected {xres}x{yres}")
     return field_obj
@@ -131,6 +134,8 @@ def _gwy_unit(field_obj: Mapping[str, Any], key: str) -> str:
 
 def _read_gwy(path: Path, opts: _ReadOptions) -> HeightMap:
     name = path.name
+    # a map and its mask, float64 each, plus 1 MiB of metadata (checked before reading)
+    _check_file_size(name, path.stat().st_size, 16, "Gwyddion file")
     buf = path.read_bytes()
     if buf[:4] != b"GWYP":
         raise _fail(name, f"not a Gwyddion .gwy file: first bytes {buf[:4]!r}, expected b'GWYP'")

@@ -12,6 +12,7 @@ import numpy as np
 
 from goniolab.optics.heightmap import HeightMap, HeightMapError, _fail
 from goniolab.surfaces._common import (
+    _check_points,
     _make,
     _ReadOptions,
     _resolve_steps,
@@ -43,6 +44,7 @@ def _read_npy(path: Path, opts: _ReadOptions) -> HeightMap:
                 raise _fail(name, f"heights must be a 2-D array, got shape {shape}")
             if shape[0] * shape[1] == 0:
                 raise _fail(name, f"height map has zero points (shape {shape})")
+            _check_points(name, shape[1], shape[0], what="array header declares")
             have = size - f.tell()
             if shape[0] * shape[1] * dtype.itemsize > have:
                 raise _truncated(name, shape[0], shape[1], dtype.itemsize, have)

@@ -51,6 +51,11 @@ File formats (:func:`load_heightmap`, :func:`save_heightmap`):
     read with a bounded parser of the documented serialisation (``gwyfile``'s parser can
     loop forever on a malformed component).
 
+Size: a map may have at most :func:`goniolab.surfaces._common.max_map_points` points
+(``GONIOLAB_MAX_MAP_POINTS``, default 8192 x 8192); every reader checks what a header
+declares against that limit and against the file's size before reading or inflating the
+data (compressed ``.sur`` streams are inflated in bounded steps).
+
 Heights are returned in micrometres whatever the unit in the file; ``meta['format']`` names
 the format read and integer formats report their z quantisation step as
 ``meta['z_step_um']``.

@@ -13,6 +13,8 @@ import numpy as np
 
 from goniolab.optics.heightmap import HeightMap, HeightMapError, _fail
 from goniolab.surfaces._common import (
+    _check_file_size,
+    _check_points,
     _cstr,
     _decode_text,
     _make,
@@ -38,6 +40,9 @@ _SDF_DTYPES: dict[int, np.dtype[Any]] = {
 _SDF_INVALID: dict[int, int] = {5: -(2**15), 6: -(2**31)}
 _SDF_BIN_HEADER = struct.Struct("<8s10s12s12sHHddddBBB")  # 81 bytes
 _SDF_MAGICS = (b"aISO-1.0", b"aBCR-1.0", b"bISO-1.0", b"bBCR-1.0")
+#: Most bytes a point of a text map may take (digits, sign, exponent, separators),
+#: for the file-size bound read before a text file is read.
+_TEXT_BYTES_PER_POINT = 64
 _SDF_REQUIRED = ("NumPoints", "NumProfiles", "Xscale", "Yscale", "Zscale", "DataType")
 
 
@@ -66,12 +71,22 @@ def _sdf_check(name: str, info: Mapping[str, Any]) -> tuple[int, int, float, flo
 
 def _read_sdf(path: Path, opts: _ReadOptions) -> HeightMap:
     name = path.name
-    raw = path.read_bytes()
-    magic = raw[:8]
-    if magic not in _SDF_MAGICS:
-        raise _fail(name, f"not an SDF file: first bytes {magic!r}, expected aISO-1.0/bISO-1.0")
-    if magic[:1] == b"b":
-        return _read_sdf_binary(name, raw, opts)
+    size = path.stat().st_size
+    with path.open("rb") as f:
+        head = f.read(_SDF_BIN_HEADER.size)
+        magic = head[:8]
+        if magic not in _SDF_MAGICS:
+            raise _fail(name, f"not an SDF file: first bytes {magic!r}, expected aISO-1.0/bISO-1.0")
+        if magic[:1] == b"b":
+            if len(head) == _SDF_BIN_HEADER.size:
+                nx, ny = struct.unpack_from("<HH", head, 42)
+                if nx > 0 and ny > 0:
+                    _check_points(name, nx, ny)  # before the data is read
+                    # read only what the header declares (at most 8 bytes a point)
+                    return _read_sdf_binary(name, head + f.read(nx * ny * 8), opts)
+            return _read_sdf_binary(name, head + f.read(), opts)
+        _check_file_size(name, size, _TEXT_BYTES_PER_POINT, "ASCII SDF file")
+        raw = head + f.read()
     return _read_sdf_ascii(name, raw, opts)
 
 
@@ -99,6 +114,7 @@ def _read_sdf_binary(name: str, raw: bytes, opts: _ReadOptions) -> HeightMap:
     ]
     info = dict(zip(keys, fields, strict=True))
     nx, ny, dx_um, dy_um, zscale_um = _sdf_check(name, info)
+    _check_points(name, nx, ny)
     code = int(info["DataType"])
     dtype = _SDF_DTYPES[code]
     have = len(raw) - _SDF_BIN_HEADER.size
@@ -147,6 +163,7 @@ def _read_sdf_ascii(name: str, raw: bytes, opts: _ReadOptions) -> HeightMap:
         if isinstance(exc, HeightMapError):
             raise
         raise _fail(name, f"bad SDF header value: {exc}") from None
+    _check_points(name, nx, ny)
     start = i + 1
     end = start
     while end < len(lines) and lines[end].strip() != "*":

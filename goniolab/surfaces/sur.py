@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import math
 import struct
-import zlib
 from pathlib import Path
 from typing import Any
 
@@ -13,7 +12,9 @@ import numpy as np
 
 from goniolab.optics.heightmap import HeightMap, _fail
 from goniolab.surfaces._common import (
+    _check_points,
     _cstr,
+    _inflate,
     _make,
     _quantise,
     _ReadOptions,
@@ -104,12 +105,20 @@ def _sur_unpack(raw: bytes) -> dict[str, Any]:
 
 def _read_sur(path: Path, opts: _ReadOptions) -> HeightMap:
     name = path.name
-    raw = path.read_bytes()
-    magic = raw[:12]
-    if magic not in (b"DIGITAL SURF", b"DSCOMPRESSED"):
-        raise _fail(name, f"not a Digital Surf file: first bytes {magic!r}")
-    if len(raw) < _SUR_HEADER_SIZE:
-        raise _fail(name, f"truncated: header needs {_SUR_HEADER_SIZE} bytes, file has {len(raw)}")
+    with path.open("rb") as f:
+        head = f.read(_SUR_HEADER_SIZE)
+        magic = head[:12]
+        if magic not in (b"DIGITAL SURF", b"DSCOMPRESSED"):
+            raise _fail(name, f"not a Digital Surf file: first bytes {magic!r}")
+        if len(head) < _SUR_HEADER_SIZE:
+            raise _fail(
+                name, f"truncated: header needs {_SUR_HEADER_SIZE} bytes, file has {len(head)}"
+            )
+        h = _sur_unpack(head)
+        nx, ny = int(h["xres"]), int(h["yres"])
+        if nx > 0 and ny > 0:
+            _check_points(name, nx, ny)  # before the data is read, let alone inflated
+        raw = head + f.read()
     h = _sur_unpack(raw)
     if h["format"] != 0:
         raise _fail(name, f"Digital Surf format {h['format']} (Macintosh byte order) not supported")
@@ -193,23 +202,18 @@ def _sur_decompress(name: str, raw: bytes, start: int, need: int) -> bytes:
         raise _fail(name, "truncated: compressed SUR stream directory cut short")
     sizes = [struct.unpack_from("<II", raw, pos + 8 * k) for k in range(count)]
     pos += 8 * count
+    total = sum(raw_len for raw_len, _ in sizes)
+    if total != need:
+        raise _fail(
+            name, f"compressed SUR stream directory claims {total} bytes, header implies {need}"
+        )
     out = bytearray()
-    for raw_len, zip_len in sizes:
+    for k, (raw_len, zip_len) in enumerate(sizes, 1):
         chunk = raw[pos : pos + zip_len]
         if len(chunk) < zip_len:
             raise _fail(name, f"truncated: compressed SUR stream needs {zip_len} bytes")
         pos += zip_len
-        try:
-            part = zlib.decompressobj().decompress(chunk, need - len(out) + 1)
-        except zlib.error as exc:
-            raise _fail(name, f"compressed SUR data is corrupt: {exc}") from None
-        if len(part) != raw_len:
-            raise _fail(name, f"compressed SUR stream gave {len(part)} bytes, expected {raw_len}")
-        out += part
-        if len(out) > need:
-            break
-    if len(out) != need:
-        raise _fail(name, f"compressed SUR data has {len(out)} bytes, header implies {need}")
+        out += _inflate(name, chunk, raw_len, f"compressed SUR stream {k} of {count}")
     return bytes(out)
 
 

@@ -12,13 +12,19 @@ import numpy as np
 
 from goniolab.optics.heightmap import HeightMap, _fail
 from goniolab.surfaces._common import (
+    _check_file_size,
+    _check_points,
     _decode_text,
     _make,
     _ReadOptions,
     _resolve_steps,
     _um_per,
+    max_map_points,
 )
 
+#: Most bytes a point of a text map may take (digits, sign, exponent, separators), for the
+#: file-size bound checked before the file is read.
+_TEXT_BYTES_PER_POINT = 64
 _MISSING_TOKENS = frozenset({"", "nan", "-", "bad"})
 _GWY_EXTENT = re.compile(r"^\s*([-+0-9.eE]+)\s*(\S+)\s*$")
 
@@ -66,6 +72,8 @@ def _parse_row(
 
 def _read_text(path: Path, opts: _ReadOptions) -> HeightMap:
     name = path.name
+    _check_file_size(name, path.stat().st_size, _TEXT_BYTES_PER_POINT, "text file")
+    limit = max_map_points()
     text = _decode_text(path.read_bytes())
     header: dict[str, str] = {}
     rows: list[list[float]] = []
@@ -95,6 +103,8 @@ def _read_text(path: Path, opts: _ReadOptions) -> HeightMap:
             raise _fail(name, f"ragged rows: line {lineno} has {len(row)} values, expected {width}")
         width = len(row)
         rows.append(row)
+        if width * len(rows) > limit:
+            _check_points(name, width, len(rows), what=f"the data up to line {lineno} holds")
     if not rows:
         raise _fail(name, "zero points: no data rows")
     z = np.array(rows, dtype=np.float64)
