@@ -95,6 +95,46 @@ def build_model(
     raise ValueError(f"unknown model {model!r}; use one of {', '.join(MODEL_NAMES)}")
 
 
+#: Largest height or slope the models can square without overflowing double precision.
+_MAX_SQUARABLE = 1e150
+
+
+def _check_numeric_range(spec: str, hm: Any) -> None:
+    """Refuse a map whose heights or facet slopes overflow double precision when squared
+    (1e300 um heights made every prediction 0 GU, or Infinity, without a word).
+
+    Cheap: the largest height bounds every slope by ``2 max|z| / min(dx, dy)``; the slopes
+    themselves are computed only when that bound is beyond :data:`_MAX_SQUARABLE`.
+
+    Raises
+    ------
+    UserError
+        Naming the largest height (or slope), the steps and what to check.
+    """
+    import numpy as np
+
+    z = np.asarray(hm.z_um)
+    with np.errstate(invalid="ignore"):
+        finite = np.isfinite(z)
+        z_max = float(np.max(np.abs(z[finite]))) if finite.any() else 0.0
+    what = f"heights up to {z_max:.3g} um"
+    bad = z_max > _MAX_SQUARABLE
+    if not bad and 2.0 * z_max / min(hm.dx_um, hm.dy_um) > _MAX_SQUARABLE:
+        with np.errstate(over="ignore", invalid="ignore"):
+            sx = np.abs(np.diff(z, axis=1)) / hm.dx_um
+            sy = np.abs(np.diff(z, axis=0)) / hm.dy_um
+            slope = max(float(np.nanmax(sx, initial=0.0)), float(np.nanmax(sy, initial=0.0)))
+        bad = not slope <= _MAX_SQUARABLE
+        what = f"facet slopes up to {slope:.3g} ({what} at {hm.dx_um:g} x {hm.dy_um:g} um steps)"
+    if bad:
+        raise UserError(
+            one_line(
+                f"{spec}: {what} overflow double precision: the heights or the lateral step "
+                "are implausible; check the map's z unit and step"
+            )
+        )
+
+
 @functools.lru_cache(maxsize=16)
 def _model(
     key: tuple[str, int, int],
@@ -108,6 +148,7 @@ def _model(
     wavelength_nm: float | None,
 ) -> Any:
     hm = resolve_map(spec, step_um=step_um)
+    _check_numeric_range(spec, hm)
     facet = None
     if model == "auto":
         facet = _model(key, spec, n, step_um, slope_method, weighting, masking, "facet", None)

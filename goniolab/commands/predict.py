@@ -118,6 +118,27 @@ def _model(args: argparse.Namespace) -> Any:
     return model
 
 
+#: The cause named when a prediction (not the map) is not finite.
+_MODEL_OVERFLOW = "the model overflowed double precision for this map; check its z unit and step"
+
+
+def _require_finite(spec: str, out: dict[str, Any], cause: str) -> None:
+    """A non-finite number in a result is an error naming the key and the cause, not
+    ``Infinity`` or ``NaN`` in the output (not valid JSON) with exit 0."""
+
+    def walk(value: Any, key: str) -> None:
+        if isinstance(value, float) and not math.isfinite(value):
+            raise UserError(f"{spec}: {key} = {value} is not finite: {cause}")
+        if isinstance(value, dict):
+            for k, v in value.items():
+                walk(v, f"{key}.{k}" if key else str(k))
+        elif isinstance(value, list | tuple):
+            for i, v in enumerate(value):
+                walk(v, f"{key}[{i}]")
+
+    walk(out, "")
+
+
 def _model_name(model: Any) -> str:
     kind = getattr(model, "kind", None)
     return kind if isinstance(kind, str) and kind in MODEL_NAMES else "facet"
@@ -196,14 +217,24 @@ def _curve_model(
 
 
 def _cmd_stats(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from goniolab.optics.surface import roughness_stats
     from goniolab.surfaces.resolve import resolve_map
 
     hm = resolve_map(args.map, step_um=args.step_um)
     try:
-        st = roughness_stats(hm, slope_method=args.slope_method)
+        with np.errstate(over="ignore", invalid="ignore"):  # overflow is checked below
+            st = roughness_stats(hm, slope_method=args.slope_method)
     except ValueError as exc:
         raise UserError(f"{args.map}: {exc}") from None
+    with np.errstate(invalid="ignore"):
+        z_max = float(np.nanmax(np.abs(hm.z_um))) if np.isfinite(hm.z_um).any() else math.nan
+    overflow = (
+        f"heights up to {z_max:.3g} um (steps {hm.dx_um:g} x {hm.dy_um:g} um) overflow double "
+        "precision; check the map's z unit and step"
+    )
+    _require_finite(args.map, {"Sq_nm": st.Sq_nm, "Sdq": st.Sdq, "Ra_nm": st.Ra_nm}, overflow)
     regime: dict[str, Any] = {}
     try:
         from goniolab.optics.model_choice import choose_model
@@ -226,8 +257,9 @@ def _cmd_stats(args: argparse.Namespace) -> int:
         "n_facets": st.n_facets,
         "regime": regime,
     }
+    _require_finite(args.map, out, overflow)
     if args.json:
-        print(json.dumps(out, indent=2))
+        print(json.dumps(out, indent=2, allow_nan=False))
         return 0
     ny, nx = hm.shape
     print(f"{args.map}: {nx} x {ny} points at {hm.dx_um:g} x {hm.dy_um:g} um")
@@ -276,6 +308,7 @@ def _cmd_gloss(args: argparse.Namespace) -> int:
         rep = gloss_report(model)
     except ValueError as exc:
         raise UserError(f"{args.map}: {exc}") from None
+    _require_finite(args.map, rep.as_dict(), _MODEL_OVERFLOW)
     from goniolab.datasets import gloss_dataset
 
     _write_out(args, lambda attrs: gloss_dataset(rep, attrs=attrs))
@@ -298,7 +331,7 @@ def _cmd_gloss(args: argparse.Namespace) -> int:
     if fallback:
         out["fallback"] = fallback
     if args.json:
-        print(json.dumps(out, indent=2))
+        print(json.dumps(out, indent=2, allow_nan=False))
         return 0
     print(f"{args.map} (n = {args.n.real:g}{f'+{args.n.imag:g}i' if args.n.imag else ''})")
     print(f"  gloss (ISO 2813)   G20 {rep.G20:6.1f}   G60 {rep.G60:6.1f}   G85 {rep.G85:6.1f} GU")
@@ -493,13 +526,14 @@ def _cmd_brdf(args: argparse.Namespace) -> int:
         }
         if fwhm_note:
             out["peak"]["fwhm_note"] = fwhm_note
+    _require_finite(args.map, out, _MODEL_OVERFLOW)
     from goniolab.datasets import brdf_dataset
 
     cones = {} if lum is None else {"source_cone_deg": out["source_deg"],
                                     "detector_cone_deg": out["detector_deg"]}  # fmt: skip
     _write_out(args, lambda attrs: brdf_dataset(ti, tr, brdf, lum, attrs={**attrs, **cones}))
     if args.json:
-        print(json.dumps(out, indent=2))
+        print(json.dumps(out, indent=2, allow_nan=False))
         return 0
     head = f"{'theta_r':>8}  {'BRDF (1/sr)':>12}"
     print(head + (f"  {'luminance %':>12}" if lum is not None else ""))

@@ -1,0 +1,54 @@
+"""``goniolab predict`` on heights too large for double precision: one clear error naming the
+cause, exit 2, never ``Infinity``/``NaN`` in ``--json`` (not valid JSON) or a silent 0 GU
+computed from overflowed slopes (issue 10, defect 7)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from goniolab.cli import main
+
+
+@pytest.fixture
+def huge_map(tmp_path: Path) -> Path:
+    z = np.random.default_rng(0).normal(size=(20, 20)) * 1e300
+    p = tmp_path / "huge.csv"
+    np.savetxt(p, z, delimiter=",", header="dx_um = 1.0", comments="# ")
+    return p
+
+
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["stats"],
+        ["gloss"],
+        ["brdf", "--theta-r", "40:50:5"],
+        ["brdf", "--theta-r", "45", "--point"],
+    ],
+    ids=["stats", "gloss", "brdf", "brdf-point"],
+)
+def test_heights_that_overflow_are_one_clear_error(
+    huge_map: Path, capsys: pytest.CaptureFixture[str], command: list[str]
+) -> None:
+    code = main(["predict", command[0], str(huge_map), *command[1:], "--json"])
+    out, err = capsys.readouterr()
+    assert code == 2
+    assert out == ""  # no half-written JSON
+    assert err.count("\n") == 1 and err.startswith("goniolab: error: ")
+    assert "huge.csv" in err and ("not finite" in err or "overflow" in err)
+    assert "1e+300" in err or "e+30" in err  # names how large the heights/slopes are
+
+
+def test_a_plain_map_still_gives_valid_json(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    z = np.random.default_rng(0).normal(size=(32, 32)) * 0.05
+    p = tmp_path / "ok.csv"
+    np.savetxt(p, z, delimiter=",", header="dx_um = 1.0", comments="# ")
+    assert main(["predict", "stats", str(p), "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out, parse_constant=lambda c: pytest.fail(c))
+    assert np.isfinite(doc["Sq_nm"]) and doc["Sq_nm"] > 0
