@@ -28,17 +28,28 @@ from drivers.timing import Clock
 from sim.faults import Fault, FaultInjector
 from sim.instruments import SPECTRUM_WAVELENGTHS_NM, SimGlossmeter, SimSpectro
 
-__all__ = ["StilPtyDevice", "ZgmPtyDevice"]
+__all__ = ["MAX_LINE_BYTES", "MAX_PENDING_LINES", "StilPtyDevice", "ZgmPtyDevice"]
 
 #: Unread output a pty device keeps before it drops further replies (bytes).
 _PTY_OUTPUT_LIMIT = 64 * 1024
+#: Longest command line a pty device buffers; the rest of a longer line is discarded up to
+#: its terminator (a device's input buffer overflows) and the STIL answers it with an error.
+MAX_LINE_BYTES = 4096
+#: Command lines a pty device queues while it works on one (one at a time, in order);
+#: lines beyond are dropped, as a real device overruns its input buffer.
+MAX_PENDING_LINES = 64
+#: Queued in place of a line that was longer than :data:`MAX_LINE_BYTES`.
+_OVERLONG = b"\x00overlong"
 
 
 class PtyDevice(abc.ABC):
     """A line-oriented device on the master side of a pseudo-terminal.
 
     The slave side (what a driver opens) is put in raw mode and published through a
-    symlink at ``link_path`` (replacing a stale link, never a regular file).
+    symlink at ``link_path`` (replacing a stale link, never a regular file). Command lines
+    are answered one at a time by one worker task, from a queue of at most
+    :data:`MAX_PENDING_LINES`; a line is at most :data:`MAX_LINE_BYTES` long. Garbage,
+    floods and unterminated input therefore cost bounded memory and work.
     """
 
     name = "device"
@@ -58,7 +69,24 @@ class PtyDevice(abc.ABC):
         self._drained.set()
         self._tasks: set[asyncio.Task[None]] = set()
         self._stopped = False
+        self._discarding = False  # inside a line longer than MAX_LINE_BYTES
+        self._lines: asyncio.Queue[bytes] = asyncio.Queue(MAX_PENDING_LINES)
+        self._worker: asyncio.Task[None] | None = None
+        #: Command lines dropped because the queue was full (input overrun), and lines
+        #: discarded for being longer than MAX_LINE_BYTES.
+        self.dropped_lines = 0
+        self.overlong_lines = 0
         self.slave_name = ""
+
+    @property
+    def buffered_bytes(self) -> int:
+        """Bytes received and not yet part of a complete line."""
+        return len(self._buf)
+
+    @property
+    def pending_lines(self) -> int:
+        """Complete command lines waiting for the device (at most MAX_PENDING_LINES)."""
+        return self._lines.qsize()
 
     @property
     def open(self) -> bool:
@@ -88,7 +116,12 @@ class PtyDevice(abc.ABC):
             self._close_fds()
             raise FileExistsError(f"{link}: exists and is not a symlink; not replacing it")
         link.symlink_to(self.slave_name)
-        asyncio.get_running_loop().add_reader(master, self._on_readable)
+        loop = asyncio.get_running_loop()
+        loop.add_reader(master, self._on_readable)
+        if self._worker is None or self._worker.done():
+            self._worker = loop.create_task(self._work(), name=f"{self.name}-pty-worker")
+            self._tasks.add(self._worker)
+            self._worker.add_done_callback(self._tasks.discard)
 
     def _on_readable(self) -> None:
         try:
@@ -100,15 +133,51 @@ class PtyDevice(abc.ABC):
         if not data:
             return
         self._buf += data
-        while self.terminator in self._buf:
-            line, self._buf = self._buf.split(self.terminator, 1)
-            task = asyncio.get_running_loop().create_task(self._handle_line(line))
-            self._tasks.add(task)
-            task.add_done_callback(self._tasks.discard)
+        term = self.terminator
+        while (end := self._buf.find(term)) >= 0:
+            line, self._buf = self._buf[:end], self._buf[end + len(term) :]
+            if self._discarding:  # the end of a line that overflowed the input buffer
+                self._discarding = False
+                line = _OVERLONG
+            self._enqueue(line)
+        if self._discarding or len(self._buf) > MAX_LINE_BYTES:
+            self._discarding = True
+            self._buf = b""
+
+    def _enqueue(self, line: bytes) -> None:
+        try:
+            self._lines.put_nowait(line)
+        except asyncio.QueueFull:
+            self.dropped_lines += 1
+
+    async def _work(self) -> None:
+        """Answer the queued lines one at a time; a failing line is reported, not fatal."""
+        while True:
+            line = await self._lines.get()
+            try:
+                if line == _OVERLONG:
+                    await self._handle_overlong()
+                else:
+                    await self._handle_line(line)
+            except Exception as exc:  # a bug in a handler must not silence the device
+                asyncio.get_running_loop().call_exception_handler(
+                    {"message": f"{self.name} pty: error answering {line[:40]!r}",
+                     "exception": exc}
+                )  # fmt: skip
+            finally:
+                self._lines.task_done()
 
     @abc.abstractmethod
     async def _handle_line(self, line: bytes) -> None:
         """Answer one command line (without its terminator)."""
+
+    async def _handle_overlong(self) -> None:
+        """A line longer than :data:`MAX_LINE_BYTES` ended: counted (and dropped)."""
+        self.overlong_lines += 1
+
+    async def idle(self) -> None:
+        """Return once every queued command line has been answered."""
+        await self._lines.join()
 
     def write(self, data: bytes) -> None:
         """Queue bytes for the driver; flushed as the pty accepts them (no-op once closed).
@@ -158,6 +227,11 @@ class PtyDevice(abc.ABC):
                 loop.remove_writer(self._master)
         self._writer_armed = False
         self._out = b""
+        self._buf = b""
+        self._discarding = False
+        while not self._lines.empty():  # what was queued is lost with the line
+            self._lines.get_nowait()
+            self._lines.task_done()
         self._drained.set()
         self._close_fds()
 
@@ -220,7 +294,9 @@ class StilPtyDevice(PtyDevice):
 
     def _reply(self, lines: list[str], fault: Fault) -> None:
         p = self.profile
-        data = "".join(line + p.reply_terminator for line in lines).encode(p.encoding)
+        data = "".join(line + p.reply_terminator for line in lines).encode(
+            p.encoding, errors="replace"
+        )
         if fault is Fault.GARBLE:
             data = self.spectro.faults.garble(data, keep=p.reply_terminator.encode(p.encoding))
         self.write(data)
@@ -230,7 +306,9 @@ class StilPtyDevice(PtyDevice):
 
     async def _handle_line(self, line: bytes) -> None:
         p = self.profile
-        text = line.decode(p.encoding, errors="replace").strip("\r\n")
+        # garbage bytes are echoed escaped (b"\xff" -> "\\xff") in the error reply, so the
+        # reply is always in the profile's encoding
+        text = line.decode(p.encoding, errors="backslashreplace").strip("\r\n")
         if not text:
             return
         fault = self.faults.decide()
@@ -258,6 +336,15 @@ class StilPtyDevice(PtyDevice):
         else:
             lines = self._error(1, f"unknown command {text[:40]}")
         self._reply(lines, fault)
+
+    async def _handle_overlong(self) -> None:
+        await super()._handle_overlong()
+        self._reply(
+            self._error(
+                1, f"line too long (more than {MAX_LINE_BYTES} bytes without a terminator)"
+            ),
+            Fault.NONE,
+        )
 
     async def _measure_lines(self) -> list[str]:
         from sim.instruments import spectrum_for_luminance
@@ -341,7 +428,10 @@ class ZgmPtyDevice(PtyDevice):
         )
 
     async def _handle_line(self, line: bytes) -> None:
-        text = line.decode("ascii", errors="replace").strip("\r\n ")
+        try:
+            text = line.decode("ascii").strip("\r\n ")
+        except UnicodeDecodeError:
+            return  # not the protocol's alphabet: a real meter ignores the line
         parts = text.split("|")
         if len(parts) < 3 or parts[1].strip() != self.serial_number:
             return
