@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import enum
 import math
+from collections import Counter
 from dataclasses import dataclass
 
 import numpy as np
@@ -114,9 +115,17 @@ class FaultInjector:
         #: Recoverable drops so far, and the lab-clock time the last one ends.
         self.drops = 0
         self.down_until_s = -math.inf
+        #: How many operations met each fault (by :class:`Fault` value).
+        self.injected: Counter[str] = Counter()
 
     def decide(self) -> Fault:
         """Count one operation and return what happens to it."""
+        fault = self._decide()
+        if fault is not Fault.NONE:
+            self.injected[fault.value] += 1
+        return fault
+
+    def _decide(self) -> Fault:
         self.operations += 1
         spec = self.spec
         if self.disconnected or (spec.disconnect_after and self.operations > spec.disconnect_after):

@@ -47,6 +47,7 @@ from typing import Any, TypeVar
 from drivers.base import (
     DeviceError,
     DeviceTimeout,
+    Disconnected,
     Goniometer,
     InterlockError,
     LimitError,
@@ -319,10 +320,14 @@ class ScanRunner:
     misalignment_threshold_deg
         Peak offset above which the summary carries a misalignment hint.
     reading_retries
-        A reading that times out or comes back garbled (:class:`drivers.base.DeviceTimeout`,
-        :class:`drivers.base.ProtocolError`) is taken again up to this many times, each
-        retry reported as a non-fatal :class:`~goniolab.scan.events.InstrumentError`;
-        an alarm, a disconnect or the last failed retry fails the run.
+        A reading that times out, comes back garbled or loses the link
+        (:class:`drivers.base.DeviceTimeout`, :class:`drivers.base.ProtocolError`,
+        :class:`drivers.base.Disconnected`: the port is reopened first) is taken again up
+        to this many times, each retry reported as a non-fatal
+        :class:`~goniolab.scan.events.InstrumentError`; an alarm or the last failed retry
+        fails the run.
+    reconnect_backoff_s
+        Lab-clock wait before reopening a lost spectro link (doubles with each attempt).
     """
 
     def __init__(
@@ -345,6 +350,7 @@ class ScanRunner:
         specimen_hook: SpecimenHook | None = None,
         misalignment_threshold_deg: float = 0.5,
         reading_retries: int = 2,
+        reconnect_backoff_s: float = 0.5,
         point_colour: PointColour | None = None,
     ) -> None:
         if reading_retries < 0:
@@ -366,6 +372,7 @@ class ScanRunner:
         self.specimen_hook = specimen_hook
         self.misalignment_threshold_deg = misalignment_threshold_deg
         self.reading_retries = reading_retries
+        self.reconnect_backoff_s = reconnect_backoff_s
         self.point_colour = point_colour if point_colour is not None else PointColour()
         if plan.mirror_reference and specimen_hook is None:
             raise ValueError("a plan with a mirror reference needs a specimen_hook")
@@ -599,24 +606,49 @@ class ScanRunner:
         return values.as_dict(), ""
 
     async def _read_spectro(self, p: PlanPoint) -> SpectroReading:
-        """One spectro reading, taken again after a transient fault (timeout, garbled reply)
-        up to ``reading_retries`` times; each retry is reported, nothing is stored twice."""
+        """One spectro reading, taken again after a transient fault (timeout, garbled reply,
+        a lost link: then the port is reopened first) up to ``reading_retries`` times; each
+        retry is reported, nothing is stored twice."""
         for attempt in range(self.reading_retries + 1):
             try:
                 return await self.spectro.measure()
-            except (DeviceTimeout, ProtocolError) as exc:
+            except (DeviceTimeout, ProtocolError, Disconnected) as exc:
                 if attempt == self.reading_retries:
                     raise
+                lost = isinstance(exc, Disconnected)
                 self.bus.publish(
                     InstrumentError(
                         run_id=self.run_id,
                         device=exc.device or "spectro",
                         message=f"{exc} (point {p.index}, repeat {p.repeat}: "
-                        f"retry {attempt + 1} of {self.reading_retries})",
+                        f"retry {attempt + 1} of {self.reading_retries}"
+                        f"{', reconnecting' if lost else ''})",
                         fatal=False,
                     )
                 )
+                if lost:
+                    await self._reconnect_spectro(attempt)
         raise AssertionError("unreachable")  # pragma: no cover - the loop returns or raises
+
+    async def _reconnect_spectro(self, attempt: int) -> None:
+        """Close the spectro's link, wait (``reconnect_backoff_s``, doubling with each
+        attempt, on the lab clock), reopen it and set the plan's exposure again. A failed
+        reopen is reported; the next attempt finds the link closed and tries again."""
+        with contextlib.suppress(DeviceError):
+            await self.spectro.close()
+        await self.clock.sleep(min(8.0, self.reconnect_backoff_s * 2**attempt))
+        try:
+            await self.spectro.connect()
+            await self.spectro.set_exposure_us(self.plan.exposure_us)
+        except DeviceError as exc:
+            self.bus.publish(
+                InstrumentError(
+                    run_id=self.run_id,
+                    device=exc.device or "spectro",
+                    message=f"reconnect failed: {exc.message}",
+                    fatal=False,
+                )
+            )
 
     def _mirror_level(self) -> float | None:
         vals = [p.luminance_pct for p in self.store.points(self.run_id) if p.index == MIRROR_INDEX]

@@ -11,7 +11,8 @@ import struct
 import pytest
 
 import goniolab.scan.runner as runner_mod
-from goniolab.scan.events import PointMeasured, RunState
+from drivers.base import Disconnected, SpectroReading
+from goniolab.scan.events import InstrumentError, PointMeasured, RunState
 from goniolab.scan.plans import BrdfPlan, parse_angles
 from goniolab.store import RunStore
 
@@ -88,3 +89,65 @@ async def test_a_failing_summary_does_not_leave_the_run_running(
     assert rec.status == "done"  # every reading is in; only the summary is missing
     assert "summary failed" in rec.reason and "overflow in the peak fit" in rec.reason
     assert store.count_points(runner.run_id) == 3
+
+
+async def test_a_lost_spectro_link_is_reopened_and_the_reading_taken_again(
+    fake_lab: FakeLab, store: RunStore
+) -> None:
+    """The spectro drops off once mid-scan (a loose connector): the runner closes and reopens
+    the port after the backoff (lab clock), sets the plan's exposure again, takes the
+    reading again and stores it once."""
+    spectro = fake_lab.spectro
+    real_measure = spectro.measure
+    calls = {"measure": 0, "close": 0, "connect": 0}
+
+    async def measure() -> SpectroReading:
+        calls["measure"] += 1
+        if calls["measure"] == 3:
+            spectro.exposure_us = 0  # the device forgot its settings
+            raise Disconnected("port '/dev/ttyUSB1' closed", device="spectro")
+        return await real_measure()
+
+    async def close() -> None:
+        calls["close"] += 1
+
+    async def connect() -> None:
+        calls["connect"] += 1
+
+    spectro.measure = measure  # type: ignore[method-assign]
+    spectro.close = close  # type: ignore[method-assign]
+    spectro.connect = connect  # type: ignore[method-assign]
+    plan = BrdfPlan(45.0, parse_angles("40:44:1"), exposure_us=20000)
+    runner, bus = make_runner(fake_lab, store, plan, reconnect_backoff_s=0.25)
+    t0 = fake_lab.clock.now()
+    events = await drive(runner, bus, lambda ev: None)
+    rec = store.get_run(runner.run_id)
+    assert rec.status == "done" and store.count_points(runner.run_id) == 5
+    assert calls == {"measure": 6, "close": 1, "connect": 1}
+    assert spectro.exposure_us == 20000
+    retried = [e for e in events if isinstance(e, InstrumentError)]
+    assert len(retried) == 1 and not retried[0].fatal
+    assert "reconnecting" in retried[0].message and "point 2" in retried[0].message
+    assert fake_lab.clock.now() - t0 >= 0.25
+
+
+async def test_a_spectro_that_stays_away_fails_the_run_after_the_retries(
+    fake_lab: FakeLab, store: RunStore
+) -> None:
+    async def measure() -> SpectroReading:
+        raise Disconnected("port '/dev/ttyUSB1' closed", device="spectro")
+
+    async def connect() -> None:
+        raise Disconnected("cannot open serial port '/dev/ttyUSB1'", device="spectro")
+
+    fake_lab.spectro.measure = measure  # type: ignore[method-assign]
+    fake_lab.spectro.connect = connect  # type: ignore[method-assign]
+    runner, bus = make_runner(fake_lab, store, BrdfPlan(45.0, (44.0, 45.0)))
+    events = await drive(runner, bus, lambda ev: None)
+    rec = store.get_run(runner.run_id)
+    assert rec.status == "failed" and "closed" in rec.reason
+    assert store.count_points(runner.run_id) == 0
+    reconnect_failures = [
+        e for e in events if isinstance(e, InstrumentError) and "reconnect failed" in e.message
+    ]
+    assert len(reconnect_failures) == 2  # reading_retries = 2

@@ -40,6 +40,7 @@ def test_drop_is_drawn_after_timeout_and_garble() -> None:
         for u in draws
     ]  # fmt: skip
     assert [inj.decide() for _ in draws] == expected
+    assert inj.injected == {f.value: expected.count(f) for f in set(expected) - {Fault.NONE}}
 
 
 async def test_in_process_drop_recovers_after_the_set_time() -> None:
