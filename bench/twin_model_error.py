@@ -1,0 +1,86 @@
+"""The realistic twin's model error per sample: prediction vs the twin's noise-free truth.
+
+For every sample of the library: the facet-model prediction from the profilometer map
+(what goniolab predicts) and the twin's truth (sim/truth.py: finer surface, sub-resolution
+roughness, waviness, scalar Kirchhoff) read through the same instruments without noise:
+peak amplitude and FWHM of the in-plane curve at theta_i = 45 deg (theta_r 0..70 deg,
+6 deg cones) and ISO 2813 gloss at 20/60/85 deg. Prints a Markdown table (docs/TWIN.md
+quotes it) and the cost of building each truth.
+
+    .venv/bin/python bench/twin_model_error.py [--samples a,b] [--no-cache]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from goniolab.models import model_for
+from goniolab.optics.apertures import Cone
+from goniolab.optics.metrics import peak_metrics
+from goniolab.surfaces.resolve import resolve_map
+from goniolab.surfaces.samples import sample_info, sample_names
+from sim.truth import TwinSettings, truth_for
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--samples", default="", help="comma-separated names (default: all)")
+    ap.add_argument("--no-cache", action="store_true", help="build every table afresh")
+    ap.add_argument("--step", type=float, default=0.25, help="theta_r step, deg")
+    args = ap.parse_args()
+    names = [n for n in args.samples.split(",") if n] or sample_names()
+    import platformdirs
+
+    cache = None if args.no_cache else str(platformdirs.user_cache_dir("goniolab")) + "/twin"
+    settings = TwinSettings(cache_dir=cache)
+    tr = np.arange(0.0, 70.0 + 1e-9, args.step)
+    cone = Cone(6.0)
+    rows = []
+    for name in names:
+        spec = f"sample:{name}"
+        info = sample_info(name)
+        n = info.n.real
+        model = model_for(spec, n=n)
+        pred = model.luminance_pct(45.0, tr, source=cone, detector=cone)
+        g_pred = model.gloss()
+        t0 = time.perf_counter()
+        optics = truth_for(
+            resolve_map(spec),
+            n=n,
+            body=str(info.params.get("body", "black")),
+            settings=settings,
+            name=spec,
+        )
+        t_truth = time.perf_counter() - t0
+        t1 = time.perf_counter()
+        meas = optics.luminance_pct(45.0, tr, source=cone, detector=cone)
+        g_meas = optics.gloss()
+        t_read = time.perf_counter() - t1
+        optics.save_cache()
+        pp, pm = peak_metrics(tr, pred), peak_metrics(tr, meas)
+        rows.append(
+            (name, pp, pm, g_pred, g_meas, t_truth, optics.build_seconds, optics.ffts, t_read)
+        )
+        print(
+            f"# {name}: truth {t_truth:.1f} s, {optics.ffts} tables {optics.build_seconds:.1f} s, "
+            f"readings {t_read:.1f} s",
+            flush=True,
+        )
+    print()
+    print(
+        "| sample | peak % pred / twin | FWHM deg pred / twin | G20 pred / twin | G60 pred / twin | G85 pred / twin |"
+    )
+    print("|---|---|---|---|---|---|")
+    for name, pp, pm, gp, gm, *_ in rows:
+        fw = lambda v: "-" if not np.isfinite(v) else f"{v:.2f}"  # noqa: E731
+        print(
+            f"| {name} | {pp.amplitude:.3g} / {pm.amplitude:.3g} | {fw(pp.fwhm_deg)} / {fw(pm.fwhm_deg)} | "
+            f"{gp[20]:.1f} / {gm[20]:.1f} | {gp[60]:.1f} / {gm[60]:.1f} | {gp[85]:.1f} / {gm[85]:.1f} |"
+        )
+
+
+if __name__ == "__main__":
+    main()
