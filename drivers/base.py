@@ -148,6 +148,10 @@ class SpectroReading:
         Exposure (integration) time used, in microseconds.
     timestamp
         Unix time of the reading.
+    peak_fraction
+        Counts of the strongest channel over the detector's full scale (1.0 = saturated:
+        the values understate the light), when the instrument reports it; ``None`` if not.
+        Auto-exposure aims at a peak fraction well below 1 and well above the noise.
     """
 
     wavelengths_nm: tuple[float, ...]
@@ -155,6 +159,7 @@ class SpectroReading:
     luminance_pct: float
     exposure_us: int = 0
     timestamp: float = field(default_factory=time.time)
+    peak_fraction: float | None = None
 
 
 @dataclass(frozen=True, slots=True)

@@ -60,6 +60,7 @@ __all__ = [
     "SampleConfig",
     "SimConfig",
     "SpectroConfig",
+    "TwinConfig",
     "configs_dir",
     "load_lab_config",
     "resolve_profile",
@@ -266,6 +267,47 @@ class FaultsConfig(_Strict):
         return v
 
 
+class TwinConfig(_Strict):
+    """``[sim.twin]``: the digital twin's own truth and instruments (sim/truth.py,
+    sim/instruments.py; docs/TWIN.md).
+
+    ``mode = "realistic"`` (default): the simulated instruments measure a hidden true
+    surface (finer than the map, with sub-resolution roughness and spot-scale waviness)
+    by scalar Kirchhoff optics, through a spectro with lamp spectrum, detector response,
+    dark current, shot noise, saturation and stray light, on arms with backlash and zero
+    offsets, with a sample tilt drawn per session, and a drifting glossmeter.
+    ``mode = "ideal"``: the instruments read the prediction's own model with only
+    ``[sim] noise_pct`` noise and the fixed ``[sim]`` misalignments (tests of plumbing).
+    """
+
+    mode: Literal["realistic", "ideal"] = "realistic"
+    # the truth (sim/truth.py)
+    step_um: Annotated[float, Field(ge=0.05, le=1.0)] = 0.25
+    subres_rq_nm: Annotated[float, Field(ge=0.0, le=50.0)] = 4.0
+    subres_corr_um: Annotated[float, Field(gt=0.0, le=5.0)] = 0.3
+    profilometer_noise_nm: Annotated[float, Field(ge=0.0, le=50.0)] = 2.0
+    waviness_slope_rms: Annotated[float, Field(ge=0.0, le=0.02)] = 3e-4
+    body: Literal["black", "white", "grey", "red", "blue"] = "black"
+    cache: bool = True
+    # the spectro (sim/instruments.py, SpectroChain)
+    lamp: Literal["halogen", "led"] = "halogen"
+    full_scale_pct: Annotated[float, Field(gt=0.0, le=100.0)] = 5.0
+    dark_counts_per_s: Annotated[float, Field(ge=0.0, le=1e5)] = 300.0
+    read_noise_counts: Annotated[float, Field(ge=0.0, le=1000.0)] = 5.0
+    stray_pct: Annotated[float, Field(ge=0.0, le=1.0)] = 0.002
+    flicker_pct: Annotated[float, Field(ge=0.0, le=10.0)] = 0.3
+    # the arms and the sample seating, drawn per session (uniform in +/- range)
+    backlash_deg: Annotated[float, Field(ge=0.0, le=1.0)] = 0.02
+    lamp_zero_range_deg: Annotated[float, Field(ge=0.0, le=5.0)] = 0.5
+    detector_zero_range_deg: Annotated[float, Field(ge=0.0, le=5.0)] = 0.5
+    sample_tilt_range_deg: Annotated[float, Field(ge=0.0, le=5.0)] = 0.5
+    # the glossmeter (sim/instruments.py, GlossDrift)
+    gloss_drift_pct_per_h: Annotated[float, Field(ge=-10.0, le=10.0)] = 0.5
+    gloss_temp_coeff_pct_per_c: Annotated[float, Field(ge=-2.0, le=2.0)] = 0.05
+    gloss_warmup_c: Annotated[float, Field(ge=0.0, le=20.0)] = 4.0
+    gloss_noise_gu: Annotated[float, Field(ge=0.0, le=5.0)] = 0.1
+
+
 class SimConfig(_Strict):
     """``[sim]``: seed, noise and misalignments of the simulated lab."""
 
@@ -276,6 +318,7 @@ class SimConfig(_Strict):
     detector_zero_offset_deg: Annotated[float, Field(strict=True, ge=-10.0, le=10.0)] = 0.0
     gloss_autosend_s: NonNegFloat = 0.0
     faults: FaultsConfig = FaultsConfig()
+    twin: TwinConfig = TwinConfig()
 
 
 class ColourConfig(_Strict):

@@ -10,7 +10,10 @@
 
 Modes (``[lab] mode``):
 
-* ``"sim"``: in-process simulated instruments (:mod:`sim.instruments`) reading the model.
+* ``"sim"``: in-process simulated instruments (:mod:`sim.instruments`). With
+  ``[sim.twin] mode = "realistic"`` (the default) they measure the sample's hidden truth
+  (:mod:`sim.truth`, built in a worker thread from the same map the prediction uses) with
+  realistic instruments; with ``"ideal"`` they read the prediction's own model.
 * ``"drivers"``: the real drivers of :mod:`drivers` to the configured endpoints; with
   ``start_sim_servers = true`` the simulated lab is first served on those endpoints
   (:class:`sim.wire.SimLabServer`: Modbus TCP, or RTU over ``socket://``, + ptys), so
@@ -42,8 +45,16 @@ from goniolab.errors import UserError
 from goniolab.optics.apertures import Cone
 from goniolab.optics.models import ReflectanceModel
 from sim.faults import FaultInjector, FaultSpec
-from sim.instruments import MirrorModel, SimAxis, SimGlossmeter, SimSpectro
+from sim.instruments import (
+    GlossDrift,
+    MirrorModel,
+    SimAxis,
+    SimGlossmeter,
+    SimSpectro,
+    SpectroChain,
+)
 from sim.motion import SimMotor
+from sim.truth import FlatSpecimen, TruthOptics, TwinSettings, truth_for
 from sim.wire import ModbusAxisServer, SimLabServer, StilPtyDevice, WireAxis, ZgmPtyDevice
 
 if TYPE_CHECKING:
@@ -55,19 +66,98 @@ __all__ = [
     "SimInstruments",
     "build_sim_instruments",
     "build_sim_server",
+    "draw_session",
     "sample_model",
+    "sample_truth",
+    "twin_settings",
 ]
 
 
 @dataclass
 class SimInstruments:
-    """The simulated instruments of one lab (shared by the in-process and wire modes)."""
+    """The simulated instruments of one lab (shared by the in-process and wire modes).
+
+    ``session`` holds the misalignments of this session (see :func:`draw_session`) and
+    ``truth`` the sample's hidden truth (realistic twin; ``None`` for the ideal one).
+    """
 
     lamp: SimAxis
     detector: SimAxis
     spectro: SimSpectro
     glossmeter: SimGlossmeter
     clock: SimClock
+    session: dict[str, float]
+    truth: TruthOptics | None = None
+
+
+def twin_settings(cfg: LabConfig) -> TwinSettings:
+    """The truth's settings from ``[sim.twin]`` (disk cache under the user cache dir)."""
+    t = cfg.sim.twin
+    cache_dir = None
+    if t.cache:
+        import platformdirs
+
+        cache_dir = str(Path(platformdirs.user_cache_dir("goniolab")) / "twin")
+    return TwinSettings(
+        step_um=t.step_um,
+        subres_rq_nm=t.subres_rq_nm,
+        subres_corr_um=t.subres_corr_um,
+        profilometer_noise_nm=t.profilometer_noise_nm,
+        waviness_slope_rms=t.waviness_slope_rms,
+        seed=cfg.sim.seed,
+        cache_dir=cache_dir,
+    )
+
+
+def _sample_body(spec: str, default: str) -> str:
+    """A library sample's ``body`` key (configs/samples.toml), else ``default``."""
+    if spec.startswith("sample:"):
+        from goniolab.surfaces.samples import sample_info
+
+        body = sample_info(spec.removeprefix("sample:")).params.get("body", default)
+        return str(body)
+    return default
+
+
+def sample_truth(cfg: LabConfig, spec: str | None = None) -> TruthOptics:
+    """The hidden truth behind ``spec`` (default ``[sample] map``) for the realistic twin
+    (blocking: a few seconds the first time, then cached per process).
+
+    Raises
+    ------
+    ConfigError
+        The map cannot be resolved or loaded, or has a body the twin does not know.
+    """
+    from goniolab.surfaces.resolve import resolve_map
+
+    spec = spec or _map_spec(cfg)
+    src = cfg.source or "<config>"
+    try:
+        hm = resolve_map(spec)
+        body = _sample_body(spec, cfg.sim.twin.body)
+        return truth_for(hm, n=cfg.sample.n, body=body, settings=twin_settings(cfg), name=spec)
+    except (UserError, ValueError, OSError) as exc:
+        raise ConfigError(src, "sample.map", f"the twin cannot build the truth: {exc}") from None
+
+
+def draw_session(cfg: LabConfig) -> dict[str, float]:
+    """This session's misalignments: ``[sim]`` values plus, for the realistic twin, a
+    uniform draw in +/- the ``[sim.twin]`` ranges (seeded by ``[sim] seed``)."""
+    s = cfg.sim
+    out = {
+        "sample_tilt_deg": s.sample_tilt_deg,
+        "lamp_zero_offset_deg": s.lamp_zero_offset_deg,
+        "detector_zero_offset_deg": s.detector_zero_offset_deg,
+        "backlash_deg": 0.0,
+    }
+    if s.twin.mode == "realistic":
+        rng = np.random.default_rng([s.seed, 7])
+        t = s.twin
+        out["lamp_zero_offset_deg"] += float(rng.uniform(-1, 1)) * t.lamp_zero_range_deg
+        out["detector_zero_offset_deg"] += float(rng.uniform(-1, 1)) * t.detector_zero_range_deg
+        out["sample_tilt_deg"] += float(rng.uniform(-1, 1)) * t.sample_tilt_range_deg
+        out["backlash_deg"] = t.backlash_deg
+    return out
 
 
 def _map_spec(cfg: LabConfig) -> str:
@@ -119,7 +209,12 @@ def _fault_spec(cfg: LabConfig, device: str) -> FaultSpec:
 
 
 def _sim_axis(
-    name: str, ax: AxisConfig, start_deg: float, clock: SimClock, faults: FaultInjector
+    name: str,
+    ax: AxisConfig,
+    start_deg: float,
+    clock: SimClock,
+    faults: FaultInjector,
+    backlash_deg: float = 0.0,
 ) -> SimAxis:
     motor = SimMotor(
         name,
@@ -129,25 +224,44 @@ def _sim_axis(
         start_deg=start_deg,
         homed=True,  # a powered lab: the arms stand at park, coordinates set
     )
-    return SimAxis(name, motor, clock, stall_tolerance_deg=ax.stall_tolerance_deg, faults=faults)
+    return SimAxis(
+        name,
+        motor,
+        clock,
+        stall_tolerance_deg=ax.stall_tolerance_deg,
+        faults=faults,
+        backlash_deg=backlash_deg,
+    )
 
 
 def build_sim_instruments(
-    cfg: LabConfig, model: ReflectanceModel, clock: SimClock
+    cfg: LabConfig,
+    model: ReflectanceModel,
+    clock: SimClock,
+    truth: TruthOptics | None = None,
 ) -> SimInstruments:
     """Simulated arms, spectro and glossmeter as configured (``[sim]``, seeded).
 
     The arms power up at the park geometry; ``[sim.faults]`` sets the injected faults.
+    With ``[sim.twin] mode = "realistic"`` the instruments measure ``truth`` (built with
+    :func:`sample_truth` when not given) through realistic instruments; with ``"ideal"``
+    they read ``model``.
     """
     seeds = np.random.SeedSequence(cfg.sim.seed).spawn(6)
     rngs = [np.random.default_rng(s) for s in seeds]
     g = cfg.goniometer
+    t = cfg.sim.twin
+    realistic = t.mode == "realistic"
+    if realistic and truth is None:
+        truth = sample_truth(cfg)
+    session = draw_session(cfg)
     lamp = _sim_axis(
         "lamp",
         g.lamp,
         g.park.theta_i_deg,
         clock,
         FaultInjector("lamp", _fault_spec(cfg, "lamp"), rngs[0]),
+        session["backlash_deg"],
     )
     detector = _sim_axis(
         "detector",
@@ -155,6 +269,7 @@ def build_sim_instruments(
         g.park.theta_r_deg,
         clock,
         FaultInjector("detector", _fault_spec(cfg, "detector"), rngs[1]),
+        session["backlash_deg"],
     )
     f = cfg.sim.faults
     for axis, stall, alarm in (
@@ -164,8 +279,21 @@ def build_sim_instruments(
         axis.motor.inject_stall(stall)
         if alarm is not None:
             axis.motor.inject_alarm(alarm, f.alarm_code)
+    chain = (
+        SpectroChain(
+            lamp=t.lamp,
+            full_scale_pct=t.full_scale_pct,
+            dark_counts_per_s=t.dark_counts_per_s,
+            read_noise_counts=t.read_noise_counts,
+            stray_pct=t.stray_pct,
+            flicker_pct=t.flicker_pct,
+        )
+        if realistic
+        else None
+    )
+    specimen: Any = truth if realistic else model
     spectro = SimSpectro(
-        model,
+        specimen,
         lamp,
         detector,
         clock,
@@ -173,21 +301,35 @@ def build_sim_instruments(
         detector_cone_deg=cfg.spectro.detector_cone_deg,
         noise_pct=cfg.sim.noise_pct,
         rng=rngs[2],
-        sample_tilt_deg=cfg.sim.sample_tilt_deg,
-        lamp_zero_offset_deg=cfg.sim.lamp_zero_offset_deg,
-        detector_zero_offset_deg=cfg.sim.detector_zero_offset_deg,
+        sample_tilt_deg=session["sample_tilt_deg"],
+        lamp_zero_offset_deg=session["lamp_zero_offset_deg"],
+        detector_zero_offset_deg=session["detector_zero_offset_deg"],
         exposure_us=cfg.spectro.exposure_us,
         faults=FaultInjector("spectro", _fault_spec(cfg, "spectro"), rngs[3]),
+        chain=chain,
+    )
+    drift = (
+        GlossDrift(
+            drift_pct_per_h=t.gloss_drift_pct_per_h,
+            temp_coeff_pct_per_c=t.gloss_temp_coeff_pct_per_c,
+            warmup_c=t.gloss_warmup_c,
+            noise_gu=t.gloss_noise_gu,
+        )
+        if realistic
+        else None
     )
     glossmeter = SimGlossmeter(
-        model,
+        specimen,
         clock,
         noise_pct=cfg.sim.noise_pct,
         rng=rngs[4],
         autosend_interval_s=cfg.sim.gloss_autosend_s,
         faults=FaultInjector("glossmeter", _fault_spec(cfg, "glossmeter"), rngs[5]),
+        drift=drift,
     )
-    return SimInstruments(lamp, detector, spectro, glossmeter, clock)
+    return SimInstruments(
+        lamp, detector, spectro, glossmeter, clock, session, truth if realistic else None
+    )
 
 
 def _socket_url(url: str) -> tuple[str, int] | None:
@@ -310,6 +452,7 @@ class Lab:
         self._glossmeter: Glossmeter | None = None
         self._closers: list[Callable[[], Any]] = []
         self._sample_under: ReflectanceModel | None = None
+        self._truths: dict[str, TruthOptics] = {}
         self.place_specimen: Callable[[str], Awaitable[None]] | None = None
 
     @classmethod
@@ -387,11 +530,17 @@ class Lab:
         cfg = self.config
         if self._model is None:
             self._model = await asyncio.to_thread(sample_model, cfg)
+        truth = None
+        if (
+            cfg.lab.mode == "sim" or cfg.lab.start_sim_servers
+        ) and cfg.sim.twin.mode == "realistic":
+            truth = await asyncio.to_thread(sample_truth, cfg)  # the twin's hidden truth
+            self._truths[cfg.sample.map] = truth
         if cfg.lab.mode == "sim":
-            self._wire_sims(self._build_sims(self._model))
+            self._wire_sims(self._build_sims(self._model, truth))
         else:
             if cfg.lab.start_sim_servers:
-                await self._serve_sims(self._build_sims(self._model))
+                await self._serve_sims(self._build_sims(self._model, truth))
             self._wire_drivers()
         await self._connect()
 
@@ -406,11 +555,14 @@ class Lab:
         )
 
     # ------------------------------------------------------------------ simulated lab
-    def _build_sims(self, model: ReflectanceModel) -> SimInstruments:
-        """The simulated instruments reading ``model`` on a sim clock (the lab's clock)."""
+    def _build_sims(
+        self, model: ReflectanceModel, truth: TruthOptics | None = None
+    ) -> SimInstruments:
+        """The simulated instruments on a sim clock (the lab's clock), reading ``model``
+        (ideal twin) or ``truth`` (realistic twin)."""
         sim_clock = SimClock(self.time_scale)
         self.clock = sim_clock
-        self.sims = build_sim_instruments(self.config, model, sim_clock)
+        self.sims = build_sim_instruments(self.config, model, sim_clock, truth)
         self.place_specimen = self._place_specimen
         return self.sims
 
@@ -430,30 +582,57 @@ class Lab:
             raise UserError(f"cannot start the simulated lab: {exc}", exit_code=1) from None
         self.server = server
 
-    def put_sample(self, model: ReflectanceModel) -> None:
-        """Simulated lab: the spectro and the glossmeter read ``model`` from now on, as if
-        that sample had been put under the instruments (``place_specimen("sample")`` puts
-        it back after a mirror reference). A real lab measures whatever lies there."""
+    async def prepare_sample(self, spec: str) -> None:
+        """Realistic twin: build the truth of sample ``spec`` (worker thread, cached), so
+        that :meth:`put_sample` can put it under the instruments at once. No-op for the
+        ideal twin and a real lab."""
+        if self.sims is None or self.sims.truth is None or not spec or spec in self._truths:
+            return
+        self._truths[spec] = await asyncio.to_thread(sample_truth, self.config, spec)
+
+    def put_sample(self, model: ReflectanceModel, spec: str = "") -> None:
+        """Simulated lab: the spectro and the glossmeter measure the sample ``spec``
+        (predicted by ``model``) from now on, as if it had been put under the instruments
+        (``place_specimen("sample")`` puts it back after a reference). The realistic twin
+        measures that sample's truth (built by :meth:`prepare_sample`, or here, blocking,
+        if it was not), the ideal one reads ``model``. A real lab measures whatever lies
+        there."""
         if self.sims is None:
             return
         self._sample_under = model
-        if self.sims.spectro.model is not model:
-            self.sims.spectro.model = model
-        if self.sims.glossmeter.model is not model:
-            self.sims.glossmeter.model = model  # forgets the gloss cached for the old sample
+        specimen: Any = model
+        if self.sims.truth is not None:
+            spec = spec or self.config.sample.map
+            truth = self._truths.get(spec)
+            if truth is None:
+                truth = self._truths[spec] = sample_truth(self.config, spec)
+            if self.sims.truth is not truth:
+                self.sims.truth.save_cache()
+            self.sims.truth = truth
+            specimen = truth
+        if self.sims.spectro.model is not specimen:
+            self.sims.spectro.model = specimen
+        if self.sims.glossmeter.model is not specimen:
+            self.sims.glossmeter.model = specimen  # forgets the gloss cached for the old one
 
     async def _place_specimen(self, which: str) -> None:
-        """Simulated lab: put the reference mirror (``"mirror"``) or the sample under the
-        instruments (the spectro then reads :class:`sim.instruments.MirrorModel` or the
-        sample model). Set as ``lab.place_specimen`` only when the lab is simulated."""
+        """Simulated lab: put the reference mirror (``"mirror"``), the ISO 2813 black-glass
+        standard (``"standard"``, n = 1.567, flat) or the sample under the instruments.
+        The ideal twin reads :class:`sim.instruments.MirrorModel` or the sample model; the
+        realistic one a protected-aluminium mirror, the black glass or the sample's truth.
+        Set as ``lab.place_specimen`` only when the lab is simulated."""
         if self.sims is None:
             raise RuntimeError("place_specimen needs the simulated lab")
+        realistic = self.sims.truth is not None
         if which == "mirror":
-            self.sims.spectro.model = MirrorModel()
+            self.sims.spectro.model = FlatSpecimen() if realistic else MirrorModel()
+        elif which == "standard":
+            self.sims.spectro.model = FlatSpecimen(n=1.567, name="black glass")
         elif which == "sample":
-            self.sims.spectro.model = self._sample_under or self.model
+            sample: Any = self.sims.truth if realistic else (self._sample_under or self.model)
+            self.sims.spectro.model = sample
         else:
-            raise ValueError(f"specimen must be 'mirror' or 'sample', got {which!r}")
+            raise ValueError(f"specimen must be 'mirror', 'standard' or 'sample', got {which!r}")
 
     # ------------------------------------------------------------------ real drivers
     def _wire_drivers(self) -> None:
@@ -546,6 +725,8 @@ class Lab:
             closer = self._closers.pop()
             with contextlib.suppress(DeviceError, OSError):
                 await closer()
+        if self.sims is not None and self.sims.truth is not None:
+            await asyncio.to_thread(self.sims.truth.save_cache)
         if self.server is not None:
             await self.server.stop()
             self.server = None

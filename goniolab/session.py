@@ -256,6 +256,7 @@ class ScanSession:
             park_deg=(g.park.theta_i_deg, g.park.theta_r_deg),
         )
         model = await self.models.get(plan.sample)
+        await self.lab.prepare_sample(plan.sample)  # the realistic twin's truth, in a thread
         return PreparedScan(plan, run_id, check, model, Predictor.from_config(model, self.config))
 
     async def prepare_resume(self, run_id: int) -> PreparedScan:
@@ -267,7 +268,7 @@ class ScanSession:
         in the store, and return its runner (call :meth:`run`)."""
         plan, cfg = scan.plan, self.config
         hook = self._specimen_hook() if plan.mirror_reference else None
-        self.lab.put_sample(scan.model)
+        self.lab.put_sample(scan.model, plan.sample)
         run_id = scan.run_id
         if run_id is None:
             run_id = self.store.create_run(

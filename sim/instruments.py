@@ -12,6 +12,17 @@ sec. 5.2-5.3) name as the cause of the scatter on glossy samples -- through the
 configured source and detector cones. Model evaluation is CPU work and runs in a thread
 (:func:`asyncio.to_thread`) so the event loop never stalls.
 
+Two twins (config ``[sim.twin] mode``, :mod:`goniolab.lab`):
+
+* **ideal**: the spectro and glossmeter read the prediction's own model, with a relative
+  noise ``noise_pct``; nothing else (tests of the plumbing compare exactly).
+* **realistic**: they read the sample's hidden truth (:mod:`sim.truth`) through a
+  :class:`SpectroChain` (lamp spectrum x detector response, dark current and shot noise
+  growing with the exposure, read noise, a 16-bit full scale that saturates, a stray-light
+  floor, lamp flicker) and a glossmeter with :class:`GlossDrift` (calibration drift and
+  warm-up temperature); the arms have backlash (:class:`SimAxis`), and zero offsets and a
+  sample tilt drawn per session (:func:`goniolab.lab.build_sim_instruments`).
+
 References
 ----------
 .. [1] B. Wittmann et al., "BRDF and gloss computation of polyurethane coatings from
@@ -25,10 +36,10 @@ References
 from __future__ import annotations
 
 import asyncio
-import functools
 import math
 import time
 from collections.abc import AsyncIterator, Sequence
+from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
@@ -51,21 +62,23 @@ from goniolab.optics.facet import cap_overlap_fraction
 from goniolab.optics.models import ReflectanceModel
 from sim.faults import Fault, FaultInjector
 from sim.motion import MotorFault, SimMotor
+from sim.truth import SPECTRUM_WAVELENGTHS_NM, luminance_weights
 
 __all__ = [
     "GLOSS_OVERFLOW_GU",
     "SPECTRUM_WAVELENGTHS_NM",
+    "GlossDrift",
     "LuminanceModel",
     "MirrorModel",
     "SimAxis",
     "SimGlossmeter",
     "SimSpectro",
+    "SpectroChain",
+    "detector_response",
     "effective_angles",
+    "lamp_spectrum",
     "spectrum_for_luminance",
 ]
-
-#: Wavelength grid of the simulated spectra: 380..780 nm in 10 nm steps.
-SPECTRUM_WAVELENGTHS_NM: tuple[float, ...] = tuple(float(w) for w in range(380, 781, 10))
 
 #: Readings above this are reported as overflow (ZGM1120 range 0..2000 GU).
 GLOSS_OVERFLOW_GU = 2000.0
@@ -155,26 +168,11 @@ def effective_angles(
     return ti, tr
 
 
-@functools.lru_cache(maxsize=1)
 def _y_weights() -> NDArray[np.float64]:
-    """Normalised luminance weights ybar(l) S_D65(l) on :data:`SPECTRUM_WAVELENGTHS_NM`.
-
-    CIE 1964 10 deg observer and illuminant D65 (colour-science tables), as
-    docs/PHYSICS.md, "Colour and the paint layer" prescribes for the colour maths; imported lazily (colour-science is slow to import).
-    """
-    import warnings
-
-    with warnings.catch_warnings():  # "Matplotlib not available" on import
-        warnings.simplefilter("ignore")
-        import colour  # lazy: colour-science is slow to import
-
-    wl = np.asarray(SPECTRUM_WAVELENGTHS_NM)
-    cmfs = colour.MSDS_CMFS["CIE 1964 10 Degree Standard Observer"]
-    ybar = np.interp(wl, cmfs.wavelengths, cmfs.values[:, 1])
-    d65 = colour.SDS_ILLUMINANTS["D65"]
-    s = np.interp(wl, d65.wavelengths, d65.values)
-    w = ybar * s
-    return np.asarray(w / w.sum(), dtype=np.float64)
+    """Normalised luminance weights ybar(l) S_D65(l) (CIE 1964 10 deg observer, D65, as
+    docs/PHYSICS.md, "Colour and the paint layer" prescribes), see
+    :func:`sim.truth.luminance_weights`."""
+    return luminance_weights()
 
 
 def spectrum_for_luminance(luminance_pct: float) -> tuple[float, ...]:
@@ -199,6 +197,121 @@ def spectrum_for_luminance(luminance_pct: float) -> tuple[float, ...]:
     shape = 1.0 + _SPECTRUM_TILT_PER_NM * (wl - 580.0)
     y_shape = float(np.dot(_y_weights(), shape))
     return tuple(float(v) for v in luminance_pct * shape / y_shape)
+
+
+def _planck(wl_nm: NDArray[np.float64], temp_k: float) -> NDArray[np.float64]:
+    """Planck spectral radiance (arbitrary units) at ``wl_nm``."""
+    c2 = 1.4388e7  # hc/k in nm K
+    return np.asarray(wl_nm**-5.0 / np.expm1(c2 / (wl_nm * temp_k)))
+
+
+def lamp_spectrum(kind: str) -> NDArray[np.float64]:
+    """Relative spectral power of the goniometer's lamp on :data:`SPECTRUM_WAVELENGTHS_NM`
+    (max 1): a 3000 K halogen-tungsten lamp (Wittmann et al. 2021, sec. 2.3: 200 W
+    halogen; Planck's law) or a phosphor-converted white LED (blue 450 nm die plus a broad
+    yellow phosphor band)."""
+    wl = np.asarray(SPECTRUM_WAVELENGTHS_NM)
+    if kind == "halogen":
+        s = _planck(wl, 3000.0)
+    elif kind == "led":
+        s = np.exp(-0.5 * ((wl - 450.0) / 10.0) ** 2) + 0.75 * np.exp(
+            -0.5 * ((wl - 565.0) / 55.0) ** 2
+        )
+    else:
+        raise ValueError(f"lamp must be 'halogen' or 'led', got {kind!r}")
+    return np.asarray(s / s.max())
+
+
+def detector_response() -> NDArray[np.float64]:
+    """Relative spectral response of the spectro's silicon array on
+    :data:`SPECTRUM_WAVELENGTHS_NM` (max 1): a front-illuminated CCD, weak in the blue
+    (about 25 % at 400 nm), peaking near 650 nm."""
+    wl = np.asarray(SPECTRUM_WAVELENGTHS_NM)
+    r = 0.15 + 0.85 * np.exp(-0.5 * ((wl - 650.0) / 170.0) ** 2)
+    return np.asarray(r / r.max())
+
+
+@dataclass(frozen=True)
+class SpectroChain:
+    """The spectro's light path and detector, from reflected flux to reported values.
+
+    For a specimen reflecting the fraction ``f(l)`` of the lamp's flux into the detector,
+    channel ``l`` collects ``(100 f(l) + stray_pct) x g(l) x t / 10 ms`` counts, where
+    ``g(l) = full_well x lamp(l) resp(l) / full_scale_pct`` (a reading of
+    ``full_scale_pct`` % fills the strongest channel at 10 ms), plus dark current
+    ``dark_counts_per_s x t``; shot noise is Poisson on the electrons
+    (``electrons_per_count``), plus Gaussian read noise; the lamp flickers by
+    ``flicker_pct`` (1 sigma, common to all channels). The raw counts (with a bias) clip
+    at the 16-bit full well. The instrument subtracts its dark reference (bias + mean dark
+    at that exposure) and divides by its calibration ``g(l) t / 10 ms``: the reported
+    values are in % of a perfect mirror, exact on average below saturation, noisy at low
+    counts, low once a channel saturates.
+    """
+
+    lamp: str = "halogen"
+    full_scale_pct: float = 5.0
+    full_well_counts: float = 65535.0
+    bias_counts: float = 500.0
+    electrons_per_count: float = 2.0
+    read_noise_counts: float = 5.0
+    dark_counts_per_s: float = 300.0
+    stray_pct: float = 0.002
+    flicker_pct: float = 0.3
+
+    def __post_init__(self) -> None:
+        lamp_spectrum(self.lamp)  # validate
+
+    def gain(self) -> NDArray[np.float64]:
+        """Counts per % of mirror at 10 ms, per channel."""
+        resp = lamp_spectrum(self.lamp) * detector_response()
+        resp = resp / resp.max()
+        return np.asarray((self.full_well_counts - self.bias_counts) * resp / self.full_scale_pct)
+
+    def read(
+        self, fraction: NDArray[np.float64], exposure_us: int, rng: np.random.Generator
+    ) -> tuple[NDArray[np.float64], float]:
+        """One exposure: (values in % of a perfect mirror, peak fraction of full scale)."""
+        t_rel = exposure_us / 10_000.0
+        g = self.gain() * t_rel
+        flicker = 1.0 + 0.01 * self.flicker_pct * float(rng.standard_normal())
+        signal = np.clip((100.0 * np.asarray(fraction) + self.stray_pct) * flicker, 0.0, None) * g
+        dark = self.dark_counts_per_s * exposure_us * 1e-6
+        electrons = (signal + dark) * self.electrons_per_count
+        counts = rng.poisson(electrons) / self.electrons_per_count
+        raw = self.bias_counts + counts + self.read_noise_counts * rng.standard_normal(counts.shape)
+        raw = np.clip(np.round(raw), 0.0, self.full_well_counts)
+        peak = float(raw.max() / self.full_well_counts)
+        values = (raw - self.bias_counts - dark) / g
+        return np.asarray(values), peak
+
+
+@dataclass(frozen=True)
+class GlossDrift:
+    """The glossmeter's calibration drift and temperature (ZGM1120-like).
+
+    The instrument's temperature warms from ``ambient_c`` by ``warmup_c`` with time
+    constant ``warmup_tau_s`` after power-on; its gain drifts by ``drift_pct_per_h`` per
+    hour since the last calibration and by ``temp_coeff_pct_per_c`` per degree from the
+    calibration temperature; each value gets ``noise_gu`` (1 sigma) before rounding to
+    0.1 GU. ``calibrate`` (on the black standard) resets the time and temperature terms.
+    """
+
+    drift_pct_per_h: float = 0.5
+    temp_coeff_pct_per_c: float = 0.05
+    ambient_c: float = 23.0
+    warmup_c: float = 4.0
+    warmup_tau_s: float = 900.0
+    noise_gu: float = 0.1
+
+    def temperature_c(self, t_s: float) -> float:
+        """Instrument temperature ``t_s`` seconds after power-on."""
+        return self.ambient_c + self.warmup_c * (1.0 - math.exp(-max(t_s, 0.0) / self.warmup_tau_s))
+
+    def gain(self, t_s: float, calibrated_at_s: float) -> float:
+        """Reading / truth at time ``t_s`` for a calibration at ``calibrated_at_s``."""
+        hours = max(t_s - calibrated_at_s, 0.0) / 3600.0
+        dt_c = self.temperature_c(t_s) - self.temperature_c(calibrated_at_s)
+        return 1.0 + 0.01 * (self.drift_pct_per_h * hours + self.temp_coeff_pct_per_c * dt_c)
 
 
 class _SimLink:
@@ -274,6 +387,12 @@ class SimAxis(_SimLink):
         Largest allowed |command - feedback| once a move has ended; more is a stall.
     faults
         Fault injector for this arm (timeouts, disconnects); ``None`` = no faults.
+    backlash_deg
+        Play in the gears between the motor (whose encoder the controller reports) and the
+        arm: after a move in the + direction the arm stands ``backlash_deg / 2`` behind
+        the motor, after a move in the - direction as far ahead (``SimMotor.last_direction``,
+        also for moves commanded over the wire). Invisible to the feedback; only the
+        optics see it.
     """
 
     def __init__(
@@ -284,6 +403,7 @@ class SimAxis(_SimLink):
         *,
         stall_tolerance_deg: float = 0.5,
         faults: FaultInjector | None = None,
+        backlash_deg: float = 0.0,
     ) -> None:
         self.name = name
         self.motor = motor
@@ -291,6 +411,7 @@ class SimAxis(_SimLink):
         self.limits_deg: tuple[float, float] = motor.soft_limits_deg
         self.stall_tolerance_deg = stall_tolerance_deg
         self.faults = faults or FaultInjector(name)
+        self.backlash_deg = float(backlash_deg)
         self._connected = False
         self._tracker: asyncio.Task[None] | None = None
 
@@ -351,8 +472,10 @@ class SimAxis(_SimLink):
         return self.motor.position_deg(self.clock.now())
 
     def actual_deg(self) -> float:
-        """Where the arm truly is, in degrees from its mechanical zero (physics input)."""
-        return self.motor.physical_deg(self.clock.now()) - self.motor.home_switch_deg
+        """Where the arm truly is, in degrees from its mechanical zero (physics input),
+        backlash included."""
+        motor = self.motor.physical_deg(self.clock.now()) - self.motor.home_switch_deg
+        return motor - 0.5 * self.backlash_deg * self.motor.last_direction
 
     async def move_to(self, target_deg: float) -> None:
         """Start an absolute move; returns once accepted.
@@ -471,6 +594,11 @@ class SimSpectro(_SimLink):
         Fault injector (timeouts, garbled replies, disconnects).
     name
         Device name in errors.
+    chain
+        The realistic twin's light path and detector (:class:`SpectroChain`); the model
+        must then offer ``spectral_fraction`` (:class:`sim.truth.TruthOptics`,
+        :class:`sim.truth.FlatSpecimen`). ``None``: the ideal twin (``luminance_pct`` of
+        the model with ``noise_pct``).
     """
 
     #: Ruby exposure range in microseconds (PROTOCOLS.md).
@@ -493,8 +621,10 @@ class SimSpectro(_SimLink):
         exposure_us: int = 10_000,
         faults: FaultInjector | None = None,
         name: str = "spectro",
+        chain: SpectroChain | None = None,
     ) -> None:
         self.name = name
+        self.chain = chain
         self.model = model
         self.lamp = lamp
         self.detector = detector
@@ -559,17 +689,54 @@ class SimSpectro(_SimLink):
         geometry is the specular one at 45 deg, valid for every model; the noise
         generator is not touched, so seeded readings stay the same.
         """
-        await asyncio.to_thread(self.predict_luminance_pct, 45.0, 45.0)
+        await asyncio.to_thread(self._spectral, 45.0, 45.0)
         await asyncio.to_thread(_y_weights)  # imports colour-science (slow) for the spectra
 
     async def read_luminance_pct(self) -> float:
         """One noisy luminance value at the arms' current actual geometry."""
+        return (await self._expose()).luminance_pct
+
+    def _spectral(self, theta_i_deg: float, theta_r_deg: float) -> NDArray[np.float64]:
+        """Flux fraction per wavelength at an effective geometry (blocking)."""
+        spectral = getattr(self.model, "spectral_fraction", None)
+        if spectral is not None:
+            return np.asarray(
+                spectral(
+                    theta_i_deg, theta_r_deg, source=self.source, detector=self.detector_aperture
+                ),
+                dtype=np.float64,
+            )
+        lum = self.predict_luminance_pct(theta_i_deg, theta_r_deg)
+        return np.asarray(spectrum_for_luminance(lum), dtype=np.float64) / 100.0
+
+    async def _expose(self) -> SpectroReading:
+        """Expose at the current geometry (sampled at the start of the exposure)."""
         ti, tr = self.geometry_deg()
-        await self.clock.sleep(self.exposure_us * 1e-6)
-        clean = await asyncio.to_thread(self.predict_luminance_pct, ti, tr)
-        if self.noise_pct:
-            clean *= 1.0 + 0.01 * self.noise_pct * float(self._rng.standard_normal())
-        return max(clean, 0.0)
+        exposure = self.exposure_us
+        await self.clock.sleep(exposure * 1e-6)
+        if self.chain is None:
+            clean = await asyncio.to_thread(self.predict_luminance_pct, ti, tr)
+            if self.noise_pct:
+                clean *= 1.0 + 0.01 * self.noise_pct * float(self._rng.standard_normal())
+            lum = max(clean, 0.0)
+            return SpectroReading(
+                wavelengths_nm=SPECTRUM_WAVELENGTHS_NM,
+                values=spectrum_for_luminance(lum),
+                luminance_pct=lum,
+                exposure_us=exposure,
+                timestamp=time.time(),
+            )
+        fraction = await asyncio.to_thread(self._spectral, ti, tr)
+        values, peak = self.chain.read(fraction, exposure, self._rng)
+        lum = float(np.dot(_y_weights(), values))
+        return SpectroReading(
+            wavelengths_nm=SPECTRUM_WAVELENGTHS_NM,
+            values=tuple(float(v) for v in values),
+            luminance_pct=lum,
+            exposure_us=exposure,
+            timestamp=time.time(),
+            peak_fraction=peak,
+        )
 
     async def measure(self) -> SpectroReading:
         """Expose and return luminance plus a spectrum consistent with it.
@@ -577,14 +744,7 @@ class SimSpectro(_SimLink):
         The geometry is sampled at the start of the exposure.
         """
         self._op("measure")
-        lum = await self.read_luminance_pct()
-        return SpectroReading(
-            wavelengths_nm=SPECTRUM_WAVELENGTHS_NM,
-            values=spectrum_for_luminance(lum),
-            luminance_pct=lum,
-            exposure_us=self.exposure_us,
-            timestamp=time.time(),
-        )
+        return await self._expose()
 
 
 class SimGlossmeter(_SimLink):
@@ -606,11 +766,15 @@ class SimGlossmeter(_SimLink):
         Interval of pushed readings in :meth:`readings` (an operator pressing the
         button); 0 disables the stream.
     temperature_c
-        Reported instrument temperature.
+        Reported instrument temperature (ideal twin; with ``drift`` it follows
+        :meth:`GlossDrift.temperature_c`).
     faults
         Fault injector.
     name
         Device name in errors.
+    drift
+        The realistic twin's calibration drift and warm-up (:class:`GlossDrift`); with it,
+        ``noise_pct`` is replaced by ``drift.noise_gu``. ``None``: the ideal twin.
     """
 
     def __init__(
@@ -625,8 +789,12 @@ class SimGlossmeter(_SimLink):
         temperature_c: float = 23.0,
         faults: FaultInjector | None = None,
         name: str = "glossmeter",
+        drift: GlossDrift | None = None,
     ) -> None:
         self.name = name
+        self.drift = drift
+        self._powered_at_s = clock.now()
+        self._calibrated_at_s = self._powered_at_s
         self._gloss_cache: dict[int, float] = {}
         self.model = model
         self.clock = clock
@@ -671,9 +839,15 @@ class SimGlossmeter(_SimLink):
         clean = await self.predicted_gu(angles_deg)
         values: dict[int, float | None] = {a: None for a in GLOSS_ANGLES_DEG}
         overflow: list[int] = []
+        gain = 1.0
+        if self.drift is not None:
+            now = self.clock.now() - self._powered_at_s
+            gain = self.drift.gain(now, self._calibrated_at_s - self._powered_at_s)
         for a in angles_deg:
-            v = clean[a]
-            if self.noise_pct:
+            v = clean[a] * gain
+            if self.drift is not None:
+                v += self.drift.noise_gu * float(self._rng.standard_normal())
+            elif self.noise_pct:
                 v *= 1.0 + 0.01 * self.noise_pct * float(self._rng.standard_normal())
             if v > GLOSS_OVERFLOW_GU:
                 overflow.append(a)
@@ -689,10 +863,29 @@ class SimGlossmeter(_SimLink):
         return GlossReading(
             values_gu=values,
             overflow_deg=overflow,
-            temperature_c=self.temperature_c,
+            temperature_c=self.current_temperature_c(),
             timestamp=time.time(),
             raw="",
         )
+
+    def current_temperature_c(self) -> float:
+        """The instrument's temperature now (warming up after power-on with ``drift``)."""
+        if self.drift is None:
+            return self.temperature_c
+        return round(self.drift.temperature_c(self.clock.now() - self._powered_at_s), 1)
+
+    def calibrate_ppm(self) -> int:
+        """Calibrate on the black standard: the drift starts again from here. Returns the
+        deviation found (gain - 1, in ppm), as the ZGM1120's Calibrate (opcode 72) does."""
+        now = self.clock.now()
+        ppm = 0
+        if self.drift is not None:
+            gain = self.drift.gain(
+                now - self._powered_at_s, self._calibrated_at_s - self._powered_at_s
+            )
+            ppm = round((gain - 1.0) * 1e6)
+        self._calibrated_at_s = now
+        return ppm
 
     def readings(self) -> AsyncIterator[GlossReading]:
         """Readings pushed every ``autosend_interval_s`` clock seconds (auto-send)."""

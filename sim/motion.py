@@ -132,6 +132,8 @@ class SimMotor:
         self._alarm: int | None = None
         self._stall_at_physical_deg: float | None = None
         self._alarm_at: tuple[float, int] | None = None  # (physical deg, code), one-shot
+        #: Sense of the last move (+1 / -1): where the gears' backlash sits (SimAxis).
+        self.last_direction = 1.0
 
     # ------------------------------------------------------------------ limits
     @property
@@ -298,6 +300,8 @@ class SimMotor:
         if self._move is not None:
             self._physical_deg = start_phys
         move = MoveProfile(start_phys, target_phys, speed, accel_deg_s2 or self.accel_deg_s2, now_s)
+        if target_phys != start_phys:
+            self.last_direction = 1.0 if target_phys > start_phys else -1.0
         self._move = move
         self._command_deg = command_enc
         self._stop = self._first_stop(move)

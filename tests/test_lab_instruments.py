@@ -11,6 +11,7 @@ from drivers.base import Disconnected
 from goniolab.config import configs_dir, load_lab_config
 from goniolab.lab import INSTRUMENTS, Lab
 from goniolab.optics.analytic import AnalyticModel
+from tests.twin_configs import ideal, ideal_config
 
 MODEL = AnalyticModel("beckmann", alpha=0.1, n=1.55)
 
@@ -23,7 +24,7 @@ def _closed_port() -> int:
 
 def _unreachable_lab_config(tmp_path: Path) -> Path:
     """The wire config with no simulated lab behind it: every endpoint is dead."""
-    text = (configs_dir() / "lab-sim-wire.toml").read_text()
+    text = ideal((configs_dir() / "lab-sim-wire.toml").read_text())
     text = text.replace("start_sim_servers = true", "start_sim_servers = false")
     text = text.replace("port = 5020", f"port = {_closed_port()}")
     text = text.replace("/tmp/goniolab-sim", str(tmp_path / "no-such-dir"))
@@ -33,8 +34,10 @@ def _unreachable_lab_config(tmp_path: Path) -> Path:
     return path
 
 
-async def test_sim_lab_with_only_the_glossmeter_leaves_the_arms_unconnected() -> None:
-    cfg = load_lab_config(configs_dir() / "lab-sim.toml")
+async def test_sim_lab_with_only_the_glossmeter_leaves_the_arms_unconnected(
+    tmp_path: Path,
+) -> None:
+    cfg = load_lab_config(ideal_config(tmp_path))
     async with Lab(cfg, time_scale=0, model=MODEL, instruments=("glossmeter",)) as lab:
         reading = await lab.glossmeter.measure()
         expected = MODEL.gloss((20, 60, 85))[60]

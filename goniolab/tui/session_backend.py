@@ -297,7 +297,9 @@ class SessionBackend:
         if self.gloss_busy:
             raise UserError("a glossmeter reading is already in progress")
         if not self.running and prediction.model is not None:
-            session.lab.put_sample(prediction.model)  # a scan's sample stays under them
+            await session.lab.prepare_sample(sample)  # the realistic twin's truth, in a thread
+            if not self.running:  # a scan's sample stays under them
+                session.lab.put_sample(prediction.model, sample)
         plan = GlossPlan(count=1, angles_deg=GLOSS_ANGLES_DEG, sample=sample)
         run_id = self._gloss_runs.get(sample)
         if run_id is None:

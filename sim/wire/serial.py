@@ -423,7 +423,7 @@ class ZgmPtyDevice(PtyDevice):
                 tid,
                 *fields,
                 str(count),
-                str(round(self.gloss.temperature_c)),
+                str(round(self.gloss.current_temperature_c())),
             ]
         )
 
@@ -462,9 +462,17 @@ class ZgmPtyDevice(PtyDevice):
             return  # AutoSend is not acknowledged: readings follow as they are taken
         elif opcode == "36":
             reply = "|".join(
-                ["36", f" {self.serial_number}", tid, str(round(self.gloss.temperature_c))]
+                [
+                    "36",
+                    f" {self.serial_number}",
+                    tid,
+                    str(round(self.gloss.current_temperature_c())),
+                ]
             )
-        elif opcode in ("28", "48", "52", "64", "72"):
+        elif opcode == "72":  # Calibrate: the deviation found on the standard, in ppm
+            ppm = self.gloss.calibrate_ppm()
+            reply = "|".join([opcode, f" {self.serial_number}", tid, str(ppm)])
+        elif opcode in ("28", "48", "52", "64"):
             reply = "|".join([opcode, f" {self.serial_number}", tid, "0"])
         else:
             return

@@ -15,6 +15,7 @@ from pathlib import Path
 
 from goniolab.config import configs_dir
 from goniolab.optics.analytic import AnalyticModel
+from tests.twin_configs import ideal
 
 MODEL = AnalyticModel("ggx", alpha=0.08, n=1.55)
 
@@ -23,7 +24,7 @@ def lab_toml(
     tmp_path: Path, backend: str, *, faults: str = "", extra: dict[str, str] | None = None
 ) -> Path:
     """The wire config adapted for a test; ``faults`` lines go under ``[sim.faults]``."""
-    text = (configs_dir() / "lab-sim-wire.toml").read_text()
+    text = ideal((configs_dir() / "lab-sim-wire.toml").read_text())
     text = (
         text.replace("port = 5020", "port = 0")
         .replace("/tmp/goniolab-sim", str(tmp_path / "sim"))

@@ -14,12 +14,15 @@ from goniolab.errors import UserError
 from goniolab.lab import Lab
 from goniolab.models import model_for
 from goniolab.optics.apertures import Cone
+from tests.twin_configs import ideal
 
 
 def quiet_sim_config(tmp_path: Path) -> Path:
     p = tmp_path / "lab-sim.toml"
     p.write_text(
-        (configs_dir() / "lab-sim.toml").read_text().replace("noise_pct = 0.5", "noise_pct = 0.0")
+        ideal((configs_dir() / "lab-sim.toml").read_text()).replace(
+            "noise_pct = 0.5", "noise_pct = 0.0"
+        )
     )
     return p
 

@@ -20,6 +20,7 @@ import pytest
 from goniolab.cli import main
 from goniolab.config import configs_dir
 from goniolab.store import RunStore
+from tests.twin_configs import ideal
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -31,9 +32,13 @@ def lab_config(
     sim: dict[str, str] | None = None,
     faults: dict[str, str] | None = None,
     name: str = "lab.toml",
+    twin: str = "ideal",
 ) -> Path:
-    """Copy a shipped lab config with [sim] keys and [sim.faults] entries replaced."""
+    """Copy a shipped lab config with [sim] keys and [sim.faults] entries replaced
+    (the ideal twin unless ``twin="realistic"``)."""
     text = (configs_dir() / base).read_text()
+    if twin == "ideal":
+        text = ideal(text)
     for key, value in (sim or {}).items():
         text, n = re.subn(rf"(?m)^{key}\s*=.*$", f"{key} = {value}", text, count=1)
         assert n == 1, key

@@ -278,10 +278,10 @@ async def test_goniolab_sim_serve_subprocess(tmp_path: Path) -> None:
     import sys
 
     from goniolab.config import configs_dir
+    from tests.twin_configs import ideal
 
     text = (
-        (configs_dir() / "lab-sim-wire.toml")
-        .read_text()
+        ideal((configs_dir() / "lab-sim-wire.toml").read_text())
         .replace("port = 5020", "port = 0")  # the server binds a free port, printed below
         .replace("/tmp/goniolab-sim", str(tmp_path / "sim"))
         .replace('map = "sample:wittmann-3"', 'map = "sample:gaussian-s0.05"')

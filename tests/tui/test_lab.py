@@ -28,6 +28,7 @@ from goniolab.tui.screens import RunsScreen
 from goniolab.tui.session_backend import SessionBackend
 from goniolab.tui.widgets import ComparisonPanel, GlossLog, MetricsTable, StatusPanel
 from tests.tui.tui_scripted import settle, wait_until
+from tests.twin_configs import ideal
 
 REPO = Path(__file__).resolve().parents[2]
 SIZE = (140, 42)
@@ -35,8 +36,9 @@ ALPHA = 0.1  # Beckmann total rms slope of the simulated sample
 
 
 def sim_config(tmp_path: Path, *, faults: str = "") -> Path:
-    """configs/lab-sim.toml with an instant clock, no noise and a temporary store."""
-    text = (REPO / "configs" / "lab-sim.toml").read_text()
+    """configs/lab-sim.toml with the ideal twin, an instant clock, no noise and a temporary
+    store."""
+    text = ideal((REPO / "configs" / "lab-sim.toml").read_text())
     text = re.sub(r"(?m)^time_scale = .*$", "time_scale = 0.0", text)
     text = re.sub(r"(?m)^store = .*$", f'store = "{tmp_path / "runs.sqlite"}"', text)
     text = re.sub(r"(?m)^noise_pct = .*$", "noise_pct = 0.0", text)
