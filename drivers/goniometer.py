@@ -232,6 +232,12 @@ class TwoArmGoniometer:
     home_deg
         Where each arm stands after its home search (the encoder zero: ``(0, 0)``). That
         homing can be planned from the park position is checked at construction.
+    corrections_deg
+        ``(lamp, detector)`` added to the requested angles before the arms are commanded,
+        and subtracted from their feedback: an alignment's result (``[alignment]`` of a
+        lab config, from ``goniolab scan --plan align``), so that the angles of
+        :meth:`move_to` and :meth:`positions_deg` are the ones the sample sees. Limits and
+        the separation interlock apply to the arms' own angles.
     """
 
     def __init__(
@@ -242,6 +248,7 @@ class TwoArmGoniometer:
         min_separation_deg: float,
         park_deg: tuple[float, float] = (45.0, 45.0),
         home_deg: tuple[float, float] = (0.0, 0.0),
+        corrections_deg: tuple[float, float] = (0.0, 0.0),
     ) -> None:
         if not (math.isfinite(min_separation_deg) and min_separation_deg >= 0.0):
             raise ValueError(
@@ -251,6 +258,7 @@ class TwoArmGoniometer:
         self.detector = detector
         self.min_separation_deg = float(min_separation_deg)
         self.park_deg = (float(park_deg[0]), float(park_deg[1]))
+        self.corrections_deg = (float(corrections_deg[0]), float(corrections_deg[1]))
         try:
             self.check_geometry(*self.park_deg)
         except DeviceError as exc:
@@ -266,6 +274,10 @@ class TwoArmGoniometer:
     def _axis(self, name: str) -> Axis:
         return self.lamp if name == "lamp" else self.detector
 
+    def _arms(self, theta_i_deg: float, theta_r_deg: float) -> tuple[float, float]:
+        """The arms' own angles for a requested geometry (corrections applied)."""
+        return theta_i_deg + self.corrections_deg[0], theta_r_deg + self.corrections_deg[1]
+
     def check_geometry(self, theta_i_deg: float, theta_r_deg: float) -> None:
         """Raise unless both arms are within their limits and far enough apart.
 
@@ -276,6 +288,7 @@ class TwoArmGoniometer:
         InterlockError
             ``|theta_i_deg + theta_r_deg| < min_separation_deg``.
         """
+        theta_i_deg, theta_r_deg = self._arms(theta_i_deg, theta_r_deg)
         for axis, value, label in (
             (self.lamp, theta_i_deg, "theta_i"),
             (self.detector, theta_r_deg, "theta_r"),
@@ -306,9 +319,14 @@ class TwoArmGoniometer:
         finally:
             await self.detector.close()
 
-    async def positions_deg(self) -> tuple[float, float]:
-        """``(theta_i_deg, theta_r_deg)`` from the arms' feedback."""
+    async def _arm_positions_deg(self) -> tuple[float, float]:
+        """The arms' own feedback angles (no corrections)."""
         return await self.lamp.position_deg(), await self.detector.position_deg()
+
+    async def positions_deg(self) -> tuple[float, float]:
+        """``(theta_i_deg, theta_r_deg)`` from the arms' feedback (corrections removed)."""
+        lamp, det = await self.lamp.position_deg(), await self.detector.position_deg()
+        return lamp - self.corrections_deg[0], det - self.corrections_deg[1]
 
     async def _run_stage(
         self, names: Sequence[str], target: dict[str, float], timeout_s: float
@@ -333,9 +351,10 @@ class TwoArmGoniometer:
         the error is re-raised.
         """
         self.check_geometry(theta_i_deg, theta_r_deg)
-        start = await self.positions_deg()
-        stages = plan_moves(start, (theta_i_deg, theta_r_deg))
-        target = {"lamp": theta_i_deg, "detector": theta_r_deg}
+        start = await self._arm_positions_deg()
+        arm_i, arm_r = self._arms(theta_i_deg, theta_r_deg)
+        stages = plan_moves(start, (arm_i, arm_r))
+        target = {"lamp": arm_i, "detector": arm_r}
         for stage in stages:
             await self._run_stage(stage, target, timeout_s)
         return await self.positions_deg()
@@ -347,7 +366,7 @@ class TwoArmGoniometer:
             home_deg=self.home_deg,
             limits_deg=(self.lamp.limits_deg, self.detector.limits_deg),
             min_separation_deg=self.min_separation_deg,
-            park_deg=self.park_deg,
+            park_deg=self._arms(*self.park_deg),
         )
 
     async def home(self, timeout_s: float) -> None:
@@ -364,7 +383,7 @@ class TwoArmGoniometer:
             The arms stand too close now, the homes cannot be reached safely with these
             limits (nothing moves), or a step ended closer than allowed (arms stopped).
         """
-        start = await self.positions_deg()
+        start = await self._arm_positions_deg()  # homing works in the arms' own angles
         steps = self.plan_homing(start)
         sigma = 1.0 if start[0] + start[1] > 0 else -1.0
         try:
@@ -375,7 +394,7 @@ class TwoArmGoniometer:
                 else:
                     await axis.move_to(step.target_deg)
                     await axis.wait_in_position(timeout_s)
-                ti, tr = await self.positions_deg()
+                ti, tr = await self._arm_positions_deg()
                 if sigma * (ti + tr) < self.min_separation_deg:
                     what = (
                         f"homing the {step.arm} arm"

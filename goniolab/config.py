@@ -48,6 +48,7 @@ from goniolab.errors import UserError
 __all__ = [
     "INT32_MAX",
     "MIN_SEPARATION_FLOOR_DEG",
+    "AlignmentConfig",
     "AxisConfig",
     "ColourConfig",
     "ConfigError",
@@ -64,6 +65,7 @@ __all__ = [
     "configs_dir",
     "load_lab_config",
     "resolve_profile",
+    "write_alignment",
 ]
 
 
@@ -360,6 +362,29 @@ class ColourConfig(_Strict):
         return v
 
 
+class AlignmentConfig(_Strict):
+    """``[alignment]``: what ``goniolab scan --plan align`` found (it writes this table).
+
+    The sample sees ``theta_i = lamp + lamp_zero_deg + sample_tilt_deg`` and
+    ``theta_r = detector + detector_zero_deg - sample_tilt_deg``; every move is corrected
+    so that it sees the requested angles (:class:`drivers.goniometer.TwoArmGoniometer`
+    ``corrections_deg``). The tilt belongs to the sample's seating: align again after
+    placing another sample.
+    """
+
+    lamp_zero_deg: Annotated[float, Field(ge=-5.0, le=5.0)] = 0.0
+    detector_zero_deg: Annotated[float, Field(ge=-5.0, le=5.0)] = 0.0
+    sample_tilt_deg: Annotated[float, Field(ge=-5.0, le=5.0)] = 0.0
+    run: Annotated[int, Field(ge=0)] = 0
+
+    def corrections_deg(self) -> tuple[float, float]:
+        """``(lamp, detector)`` added to requested angles before the arms move."""
+        return (
+            -(self.lamp_zero_deg + self.sample_tilt_deg),
+            -(self.detector_zero_deg - self.sample_tilt_deg),
+        )
+
+
 class LabConfig(_Strict):
     """A whole lab config file (docs/ARCHITECTURE.md, "Lab config")."""
 
@@ -370,6 +395,7 @@ class LabConfig(_Strict):
     glossmeter: GlossmeterConfig = GlossmeterConfig()
     sim: SimConfig = SimConfig()
     colour: ColourConfig = ColourConfig()
+    alignment: AlignmentConfig = AlignmentConfig()
     #: The file this config came from ("" when built in code).
     source: str = Field(default="", exclude=True)
 
@@ -635,3 +661,43 @@ def _exposure_check(cfg: LabConfig, path: Path, profile: Any) -> None:
             "spectro.exposure_us",
             f"{value} us outside the range {lo}..{hi} us of profile {profile.name!r}",
         )
+
+
+def write_alignment(path: str | Path, values: dict[str, float | int], *, note: str = "") -> None:
+    """Write (or replace) the ``[alignment]`` table of a lab config file.
+
+    The rest of the file, comments included, is kept byte for byte; the table goes at the
+    end (an existing ``[alignment]`` table, up to the next table header, is removed
+    first). The result is validated before the file is replaced (atomically).
+
+    Raises
+    ------
+    ConfigError
+        The file cannot be read or written, or the values are out of range.
+    """
+    import os
+    import re
+
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ConfigError(p, "alignment", f"cannot read the config to write it: {exc}") from None
+    text = re.sub(r"(?ms)^\[alignment\][^\n]*\n(?:(?!^\[).*?\n)*", "", text)
+    if not text.endswith("\n"):
+        text += "\n"
+    lines = [f"[alignment]{'  # ' + note if note else ''}"]
+    for key, value in values.items():
+        lines.append(f"{key} = {value:.4f}" if isinstance(value, float) else f"{key} = {value}")
+    new = text.rstrip("\n") + "\n\n" + "\n".join(lines) + "\n"
+    try:
+        AlignmentConfig.model_validate(values)
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        raise ConfigError(p, "alignment." + _dotted(tuple(first["loc"])), _reason(first)) from None
+    tmp = p.with_name(p.name + f".{os.getpid()}.tmp")
+    try:
+        tmp.write_text(new, encoding="utf-8")
+        os.replace(tmp, p)
+    except OSError as exc:
+        raise ConfigError(p, "alignment", f"cannot write the config: {exc}") from None

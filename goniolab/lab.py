@@ -552,6 +552,7 @@ class Lab:
             detector,
             min_separation_deg=g.min_separation_deg,
             park_deg=(g.park.theta_i_deg, g.park.theta_r_deg),
+            corrections_deg=self.config.alignment.corrections_deg(),
         )
 
     # ------------------------------------------------------------------ simulated lab
@@ -618,12 +619,17 @@ class Lab:
     async def _place_specimen(self, which: str) -> None:
         """Simulated lab: put the reference mirror (``"mirror"``), the ISO 2813 black-glass
         standard (``"standard"``, n = 1.567, flat) or the sample under the instruments.
-        The ideal twin reads :class:`sim.instruments.MirrorModel` or the sample model; the
+        The references lie on the reference seat (no tilt); the sample has this session's
+        tilt. The ideal twin reads :class:`sim.instruments.MirrorModel` or the sample model; the
         realistic one a protected-aluminium mirror, the black glass or the sample's truth.
         Set as ``lab.place_specimen`` only when the lab is simulated."""
         if self.sims is None:
             raise RuntimeError("place_specimen needs the simulated lab")
         realistic = self.sims.truth is not None
+        # references sit on the reference seat (no tilt); the sample has this session's
+        self.sims.spectro.sample_tilt_deg = (
+            self.sims.session["sample_tilt_deg"] if which == "sample" else 0.0
+        )
         if which == "mirror":
             self.sims.spectro.model = FlatSpecimen() if realistic else MirrorModel()
         elif which == "standard":

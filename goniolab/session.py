@@ -21,13 +21,14 @@ errors into their own messages.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 from collections.abc import AsyncIterator, Awaitable, Callable
 from contextlib import asynccontextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from drivers.base import Glossmeter
+from drivers.base import DeviceError, Glossmeter
 from drivers.timing import Clock
 from goniolab import __version__
 from goniolab.config import LabConfig
@@ -35,6 +36,7 @@ from goniolab.errors import UserError
 from goniolab.lab import Lab
 from goniolab.optics.models import ReflectanceModel
 from goniolab.scan.colour import PointColour
+from goniolab.scan.align import AlignPlan, AlignResult
 from goniolab.scan.events import EventBus, RunState
 from goniolab.scan.gloss import GlossLogger, predict_gloss
 from goniolab.scan.plans import BrdfPlan, GlossPlan
@@ -315,6 +317,74 @@ class ScanSession:
                 runner.run_id, RunState.FAILED.value, f"plan refused (no arm moved): {exc}"
             )
             raise
+
+    async def align(
+        self, plan: AlignPlan, *, write_config: str | Path | None = None
+    ) -> tuple[int, AlignResult]:
+        """Run an alignment (:mod:`goniolab.scan.align`): home the arms if needed, measure
+        the black-glass standard and the sample (swapped by the simulated lab, or by the
+        operator), store the readings and the result with a new ``align`` run, write
+        ``[alignment]`` into ``write_config`` when given, and park the arms.
+
+        Raises
+        ------
+        UserError
+            The alignment failed (an instrument fault, no peak found); the run is marked
+            ``failed`` with the reason.
+        """
+        from goniolab.config import write_alignment
+        from goniolab.scan.align import AlignRunner
+
+        cfg = self.config
+        model = await self.models.get(plan.sample)
+        await self.lab.prepare_sample(plan.sample)
+        self.lab.put_sample(model, plan.sample)
+        predictor = Predictor.from_config(model, cfg)
+        run_id = self.store.create_run(
+            kind="align",
+            plan=plan.to_dict(),
+            config=config_snapshot(with_sample(cfg, plan.sample)),
+            sample=plan.sample,
+            model=predictor.describe(),
+            version=__version__,
+        )
+        hook = self.lab.place_specimen or self.operator
+        if hook is None:
+            raise UserError("an alignment needs an operator to place the standard and the sample")
+        runner = AlignRunner(
+            goniometer=self.lab.goniometer,
+            spectro=self.lab.spectro,
+            clock=self.lab.clock,
+            plan=plan,
+            predictor=predictor,
+            place_specimen=hook,
+            store=self.store,
+            run_id=run_id,
+            bus=self.bus,
+            move_timeout_s=cfg.goniometer.move_timeout_s,
+        )
+        try:
+            if not await self.homed():
+                await self.home()
+            result = await runner.run()
+        except (DeviceError, RuntimeError, ValueError) as exc:
+            self.store.set_status(run_id, RunState.FAILED.value, str(exc))
+            raise UserError(f"align run {run_id} failed: {exc}", exit_code=1) from exc
+        finally:
+            with contextlib.suppress(DeviceError):
+                await self.lab.goniometer.park(home_timeout_s(cfg))
+        if write_config is not None:
+            write_alignment(
+                write_config,
+                {
+                    "lamp_zero_deg": round(result.lamp_zero_deg, 4),
+                    "detector_zero_deg": round(result.detector_zero_deg, 4),
+                    "sample_tilt_deg": round(result.sample_tilt_deg, 4),
+                    "run": run_id,
+                },
+                note=f"goniolab scan --plan align, run {run_id}",
+            )
+        return run_id, result
 
     def _specimen_hook(self) -> SpecimenHook:
         if self.lab.place_specimen is not None:  # a simulated lab swaps the specimen itself

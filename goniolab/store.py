@@ -879,6 +879,18 @@ class RunStore:
             if cur.rowcount != 1:
                 raise StoreError(f"store {self.location}: no run {run_id}")
 
+    def update_model(self, run_id: int, extra: Mapping[str, Any]) -> None:
+        """Merge ``extra`` into the run's model parameters (e.g. an alignment's result)."""
+        with self._tx() as db:
+            row = db.execute("SELECT model_json FROM runs WHERE id = ?", (run_id,)).fetchone()
+            if row is None:
+                raise StoreError(f"store {self.path}: no run {run_id}")
+            model = {**json.loads(row[0]), **extra}
+            db.execute(
+                "UPDATE runs SET model_json = ?, updated_at = ? WHERE id = ?",
+                (_dumps(model), time.time(), run_id),
+            )
+
     def get_run(self, run_id: int) -> RunRecord:
         """Return run ``run_id``; :class:`StoreError` naming the file when it does not exist."""
         row = self._db.execute(f"{_RUN_SELECT} WHERE id = ?", (run_id,)).fetchone()

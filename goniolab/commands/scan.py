@@ -5,6 +5,14 @@ Progress (a plain-text bar with the ETA) goes to stderr, the summary to stdout a
 in progress is interrupted (a reading in progress is finished and stored), the arms are
 parked, the run is marked ``aborted`` and the command prints how to resume it. A second
 Ctrl-C cancels at once (the arms are still parked, best effort).
+
+``goniolab scan --plan align`` runs the alignment instead (:mod:`goniolab.scan.align`, via
+:meth:`goniolab.session.ScanSession.align`): the black-glass standard, then the sample, at
+two or more incidences; it prints the arms' zero offsets and the sample's tilt, stores them
+with the run and writes them into the config's ``[alignment]`` table
+(``--no-write-config`` keeps the file as it is), which corrects every later move.
+``--auto-exposure`` adapts the spectro's exposure to each reading
+(:mod:`goniolab.scan.exposure`).
 """
 
 from __future__ import annotations
@@ -82,6 +90,10 @@ def format_summary(summary: dict[str, Any]) -> str:
         lines.append(f"  peak offset: {summary['peak_offset_deg']:+.2f} deg")
     if summary.get("hint"):
         lines.append(f"  hint: {summary['hint']}")
+    check = summary.get("prediction_check")
+    if check:
+        verdict = "FLAGGED: " + "; ".join(check["reasons"]) if check["flagged"] else "consistent"
+        lines.append(f"  prediction check: {verdict}")
     if summary.get("peak_note"):
         lines.append(f"  note: {summary['peak_note']}")
     return "\n".join(lines)
@@ -333,6 +345,59 @@ async def _execute(
     return _exit_code(result.state)
 
 
+async def _align_prompt(which: str) -> None:
+    """Ask the operator to place the black-glass standard (or the sample) and press Enter."""
+    if which != "standard":
+        await _specimen_prompt(which)
+        return
+    what = "the BLACK-GLASS STANDARD (ISO 2813, on the reference seat)"
+    print(f"goniolab: place {what} under the instruments, then press Enter", file=sys.stderr)
+    if not await read_stdin_line():
+        raise UserError(f"no operator confirmation on stdin for placing {what}", exit_code=1)
+
+
+async def _execute_align(
+    *,
+    config_path: str,
+    time_scale: float | None,
+    store: RunStore,
+    plan: Any,
+    json_out: bool,
+    write_config: bool,
+) -> int:
+    from goniolab.session import ScanSession
+
+    cfg = load_lab_config(config_path)
+    async with ScanSession.open(
+        cfg, store, sample=plan.sample, time_scale=time_scale, operator=_align_prompt
+    ) as session:
+        bar = ProgressBar(sys.stderr, session.clock_scale)
+        report = asyncio.create_task(_report(session.bus.subscribe(), bar))
+        try:
+            run_id, result = await session.align(
+                plan, write_config=config_path if write_config else None
+            )
+        finally:
+            session.bus.close()
+            await report
+            bar.close()
+    payload = {"run_id": run_id, "state": "done", "config_written": write_config}
+    payload.update(result.as_dict())
+    if json_out:
+        print(json.dumps(payload, indent=2))
+        return 0
+    c = result.corrections_deg()
+    print(f"run {run_id}: alignment done ({result.readings} readings)")
+    print(f"  lamp arm zero offset:     {result.lamp_zero_deg:+.3f} deg")
+    print(f"  detector arm zero offset: {result.detector_zero_deg:+.3f} deg")
+    print(f"  sample tilt:              {result.sample_tilt_deg:+.3f} deg")
+    print(f"  corrections (lamp, detector): {c[0]:+.3f}, {c[1]:+.3f} deg")
+    print(f"  black-glass fit: {100 * result.standard_rms_rel:.2f} % rms")
+    if write_config:
+        print(f"  written to {config_path} [alignment]")
+    return 0
+
+
 def run_lab(coro: Coroutine[Any, Any, _T]) -> _T:
     """``asyncio.run(coro)``; an instrument that cannot be reached (or fails outside a
     run, which records its own faults) becomes one line naming the device, exit code 1."""
@@ -405,6 +470,28 @@ def _cmd_scan(args: argparse.Namespace) -> int:
         from goniolab.session import check_sample
 
         check_sample(args.sample)
+    if args.plan == "align":
+        from goniolab.scan.align import AlignPlan
+
+        try:
+            align_plan = AlignPlan(
+                theta_i_deg=parse_angles(args.align_theta_i, name="--align-theta-i"),
+                exposure_us=args.exposure_us or cfg.spectro.exposure_us,
+                sample=sample,
+            )
+        except PlanError as exc:
+            raise UserError(f"scan --plan align: {exc}") from exc
+        with _open(args.store, cfg.lab.store) as align_store:
+            return run_lab(
+                _execute_align(
+                    config_path=args.config,
+                    time_scale=args.time_scale,
+                    store=align_store,
+                    plan=align_plan,
+                    json_out=args.json,
+                    write_config=not args.no_write_config,
+                )
+            )
     theta_i, theta_r = args.theta_i, args.theta_r
     if args.plan == "e2194":
         theta_i, theta_r = _e2194_geometry(args, cfg)
@@ -419,6 +506,7 @@ def _cmd_scan(args: argparse.Namespace) -> int:
             else cfg.spectro.exposure_us,
             mirror_reference=args.mirror_reference,
             sample=sample,
+            auto_exposure=args.auto_exposure,
         )
     except PlanError as exc:
         raise UserError(f"scan: {exc}") from exc
@@ -517,9 +605,11 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument(
         "--plan",
-        choices=("sweep", "e2194"),
+        choices=("sweep", "e2194", "align"),
         default="sweep",
-        help="sweep (--theta-r) or e2194: the ASTM E2194/E2539, DIN 6175-2 multi-angle geometry",
+        help="sweep (--theta-r), e2194: the ASTM E2194/E2539, DIN 6175-2 multi-angle geometry, "
+        "or align: find the arms' zero offsets and the sample's tilt (black-glass standard, "
+        "then the sample) and write [alignment]",
     )
     p.add_argument("--repeats", type=int, default=1, help="readings per geometry")
     p.add_argument("--dwell", type=float, default=0.0, help="settling time after a move, s")
@@ -534,6 +624,21 @@ def register(subparsers: Any) -> None:
         choices=("auto", "facet", "kirchhoff", "rayleigh-rice"),
         default=None,
         help="prediction model (default: config [sample] model, itself default auto)",
+    )
+    p.add_argument(
+        "--align-theta-i",
+        default="20,40,60",
+        help="incidence angles of --plan align (two or more; default 20,40,60)",
+    )
+    p.add_argument(
+        "--no-write-config",
+        action="store_true",
+        help="--plan align: store the result with the run only, leave the config file as it is",
+    )
+    p.add_argument(
+        "--auto-exposure",
+        action="store_true",
+        help="adapt the spectro's exposure to each reading (no saturation, no drowning)",
     )
     allow_negative_angles(p)  # "--theta-r -40:-30:5" is a lamp-side range, not an option
     p.set_defaults(func=_cmd_scan)

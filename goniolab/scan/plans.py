@@ -158,6 +158,9 @@ class BrdfPlan:
         Read a mirror at the specular geometry first; its mean sets the 100 % level.
     sample
         Sample spec (``sample:NAME`` or a height-map path) used for the prediction.
+    auto_exposure
+        Adapt the exposure to each reading (:mod:`goniolab.scan.exposure`), starting from
+        ``exposure_us``.
     """
 
     theta_i_deg: float
@@ -167,6 +170,7 @@ class BrdfPlan:
     exposure_us: int = 10000
     mirror_reference: bool = False
     sample: str = ""
+    auto_exposure: bool = False
 
     def __post_init__(self) -> None:
         if not math.isfinite(self.theta_i_deg):
@@ -223,6 +227,7 @@ class BrdfPlan:
             "exposure_us": self.exposure_us,
             "mirror_reference": self.mirror_reference,
             "sample": self.sample,
+            "auto_exposure": self.auto_exposure,
         }
 
     @classmethod
@@ -237,6 +242,7 @@ class BrdfPlan:
                 exposure_us=int(d["exposure_us"]),
                 mirror_reference=bool(d["mirror_reference"]),
                 sample=str(d["sample"]),
+                auto_exposure=bool(d.get("auto_exposure", False)),
             )
         except KeyError as exc:
             raise PlanError(f"stored plan lacks key {exc.args[0]!r}") from exc

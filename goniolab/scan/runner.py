@@ -71,6 +71,7 @@ from goniolab.scan.events import (
     RunState,
     StateChanged,
 )
+from goniolab.scan.exposure import AutoExposure
 from goniolab.scan.plans import MIRROR_INDEX, BrdfPlan, PlanPoint
 from goniolab.scan.predict import Predictor
 from goniolab.scan.summary import summarize_brdf
@@ -390,6 +391,8 @@ class ScanRunner:
         self._total = 0
         self._target: tuple[float, float] | None = None
         self._measured_deg: tuple[float, float] = (math.nan, math.nan)
+        self._auto = AutoExposure()
+        self._exposure_us = plan.exposure_us
 
     # ------------------------------------------------------------------ commands
     @property
@@ -611,6 +614,11 @@ class ScanRunner:
         retry is reported, nothing is stored twice."""
         for attempt in range(self.reading_retries + 1):
             try:
+                if self.plan.auto_exposure:
+                    reading, self._exposure_us = await self._auto.read(
+                        self.spectro, self._exposure_us
+                    )
+                    return reading
                 return await self.spectro.measure()
             except (DeviceTimeout, ProtocolError, Disconnected) as exc:
                 if attempt == self.reading_retries:

@@ -28,7 +28,42 @@ from goniolab.optics.metrics import PeakMetrics, peak_metrics
 from goniolab.scan.plans import MIRROR_INDEX, BrdfPlan
 from goniolab.store import PointRow
 
-__all__ = ["misalignment_hint", "summarize_brdf"]
+__all__ = ["CHECK_LIMITS", "misalignment_hint", "prediction_check", "summarize_brdf"]
+
+#: Limits of :func:`prediction_check`: measured/predicted peak amplitude and FWHM ratios,
+#: and the RMSE of the residuals over the predicted peak amplitude. The realistic twin's
+#: own model error stays inside them for every library sample (docs/TWIN.md: amplitude
+#: ratios 0.71..1.03, FWHM ratios 0.97..1.36); a wrong index or a wrong map leaves them.
+CHECK_LIMITS: dict[str, tuple[float, float]] = {
+    "amplitude_ratio": (0.6, 1.0 / 0.6),
+    "fwhm_ratio": (0.67, 1.5),
+    "nrmse": (0.0, 0.2),
+}
+
+
+def prediction_check(
+    amplitude_ratio: float | None,
+    fwhm_ratio: float | None,
+    nrmse: float | None,
+    limits: dict[str, tuple[float, float]] | None = None,
+) -> dict[str, Any]:
+    """Is the prediction consistent with the measurement? (Wittmann et al. 2021 compare
+    peak amplitude and FWHM, fig. 8.) A metric that cannot be computed is not judged.
+
+    Returns
+    -------
+    dict
+        ``{"flagged": bool, "reasons": [...], "amplitude_ratio", "fwhm_ratio", "nrmse",
+        "limits"}``.
+    """
+    lim = limits or CHECK_LIMITS
+    values = {"amplitude_ratio": amplitude_ratio, "fwhm_ratio": fwhm_ratio, "nrmse": nrmse}
+    reasons = []
+    for key, v in values.items():
+        lo, hi = lim[key]
+        if v is not None and math.isfinite(v) and not lo <= v <= hi:
+            reasons.append(f"{key} {v:.3g} outside [{lo:.3g}, {hi:.3g}]")
+    return {"flagged": bool(reasons), "reasons": reasons, **values, "limits": lim}
 
 
 def misalignment_hint(
@@ -92,9 +127,9 @@ def summarize_brdf(
         JSON-serialisable: counts, per-geometry mean/std/prediction/residual, ``rmse_pct``,
         ``measured_peak``/``predicted_peak`` (:func:`goniolab.optics.metrics.peak_metrics`
         on the repeat means and on the predictions, both over the measured geometries),
-        ``peak_offset_deg``, ``amplitude_ratio`` and ``hint`` (``None`` unless both maxima
-        lie inside the measured range and it contains the specular direction; ``peak_note``
-        then says why).
+        ``peak_offset_deg``, ``amplitude_ratio``, ``hint`` and ``prediction_check``
+        (:func:`prediction_check`; all ``None`` unless both maxima lie inside the measured
+        range and it contains the specular direction; ``peak_note`` then says why).
     """
     by_index: dict[int, list[float]] = {}
     mirror: list[float] = []
@@ -142,6 +177,7 @@ def summarize_brdf(
         "amplitude_ratio": None,
         "hint": None,
         "peak_note": None,
+        "prediction_check": None,
         "geometries": geometries,
     }
     # peak_metrics wants increasing angles: a listed plan may scan in any order.
@@ -189,6 +225,15 @@ def summarize_brdf(
     out["peak_offset_deg"] = float(mp.position_deg - pp.position_deg)
     if pp.amplitude > 0:
         out["amplitude_ratio"] = float(mp.amplitude / pp.amplitude)
+    fwhm_ratio = (
+        float(mp.fwhm_deg / pp.fwhm_deg)
+        if math.isfinite(mp.fwhm_deg) and math.isfinite(pp.fwhm_deg) and pp.fwhm_deg > 0
+        else None
+    )
+    nrmse = (
+        out["rmse_pct"] / pp.amplitude if out["rmse_pct"] is not None and pp.amplitude > 0 else None
+    )
+    out["prediction_check"] = prediction_check(out["amplitude_ratio"], fwhm_ratio, nrmse)
     out["hint"] = misalignment_hint(
         float(mp.position_deg), float(pp.position_deg), misalignment_threshold_deg
     )

@@ -1,0 +1,443 @@
+"""Alignment from the data: both arms' zero offsets and the sample's tilt.
+
+Wittmann et al. (2021, secs. 5.2-5.3) blame the scatter of their glossy samples' peaks on
+"lamp and sensor not perfectly aligned, sample tilted". With the arms at ``(L, D)``
+(their own angles) the sample sees (:func:`sim.instruments.effective_angles`)::
+
+    theta_i = L + dL + tau,        theta_r = D + dD - tau
+
+(``dL``, ``dD``: the arms' zero offsets; ``tau``: the sample's tilt in the plane of
+incidence). A reading depends on ``(theta_i, theta_r)`` only, so one specimen's data fix
+only two combinations, ``dL + tau`` and ``dD - tau``: a tilt cannot be told from equal and
+opposite arm offsets on the sample alone. The plan therefore uses two specimens:
+
+1. **The ISO 2813 black-glass standard** (flat, n = 1.567, seated on the reference
+   surface: by definition ``tau = 0``). At two or more incidences ``L_j`` the detector is
+   swept through the specular peak, coarsely, then finely around the maximum. Its
+   reading is known in closed form: ``k x 100 R(L + dL) x O(|D + dD - L - dL|)``, the
+   Fresnel reflectance of the glass at the true incidence (Fresnel, unpolarised, PHYSICS.md)
+   times the overlap of the source image with the detector cone
+   (:func:`goniolab.optics.facet.cap_overlap_fraction`), with an unknown scale ``k``
+   (lamp, detector calibration) and a stray-light floor. A least-squares fit over all
+   readings gives ``dL - dD`` from where the peaks are and ``dL`` from how their heights
+   change with incidence (R(theta) rises steeply: about 6 %/deg at 60 deg against 0.3 %/deg
+   at 20 deg), hence ``dL`` and ``dD``.
+2. **The sample** at the same incidences: the detector position of the peak (the midpoint
+   of its half-maximum crossings on the fine sweep) minus that of the prediction at the
+   nominal geometry is ``dL - dD + 2 tau`` (a tilt turns the mirror direction by twice
+   itself); with ``dL - dD`` known, each incidence gives ``tau``. They are averaged with
+   weights ``1 / (0.02 + |m_pred - theta_i|)^2``, ``m_pred`` the prediction's own
+   midpoint: where the predicted peak is asymmetric (high incidence, wide lobes) the
+   midpoint depends on the lobe's shape, hence on the model's error.
+
+Each reading uses :class:`goniolab.scan.exposure.AutoExposure`; every target is approached
+from below (the scans' direction), so the gears' backlash is the same as in a scan. The
+alignment is measured in the arms' own frame (corrections of an earlier alignment are
+switched off while it runs) and its result gives the corrections
+(:meth:`AlignResult.corrections_deg`) that ``[alignment]`` applies to every later move
+(:class:`drivers.goniometer.TwoArmGoniometer`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Awaitable, Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from drivers.base import Spectrocolorimeter
+from drivers.goniometer import TwoArmGoniometer
+from drivers.timing import Clock
+from goniolab.optics.apertures import Cone
+from goniolab.optics.facet import cap_overlap_fraction
+from goniolab.optics.fresnel import fresnel
+from goniolab.scan.events import (
+    EventBus,
+    PointMeasured,
+    Progress,
+    RunFinished,
+    RunStarted,
+    RunState,
+    StateChanged,
+)
+from goniolab.scan.exposure import AutoExposure
+from goniolab.scan.plans import PlanError
+from goniolab.scan.predict import Predictor
+from goniolab.store import RunStore
+
+__all__ = [
+    "BLACK_GLASS_N",
+    "AlignPlan",
+    "AlignResult",
+    "AlignRunner",
+    "fit_standard",
+    "half_max_midpoint",
+]
+
+#: Refractive index of the ISO 2813 black-glass standard.
+BLACK_GLASS_N = 1.567
+
+FloatArray = NDArray[np.float64]
+SpecimenHook = Callable[[str], Awaitable[None]]
+
+
+@dataclass(frozen=True, slots=True)
+class AlignPlan:
+    """What the alignment measures (see the module docstring); angles in degrees."""
+
+    theta_i_deg: tuple[float, ...] = (20.0, 40.0, 60.0)
+    coarse_step_deg: float = 1.0
+    coarse_span_deg: float = 5.0
+    fine_step_deg: float = 0.25
+    fine_span_deg: float = 4.5
+    exposure_us: int = 10_000
+    sample: str = ""
+
+    def __post_init__(self) -> None:
+        if len(set(self.theta_i_deg)) < 2:
+            raise PlanError(
+                f"align: needs two or more different incidence angles, got {list(self.theta_i_deg)}"
+            )
+        for name in ("coarse_step_deg", "coarse_span_deg", "fine_step_deg", "fine_span_deg"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise PlanError(f"align: {name} must be > 0, got {v}")
+        if self.fine_step_deg > self.coarse_step_deg:
+            raise PlanError("align: the fine step must not exceed the coarse step")
+        if not 500 <= self.exposure_us <= 250_000:
+            raise PlanError(f"align: exposure_us must be in 500..250000, got {self.exposure_us}")
+
+    def sweeps(self, theta_i_deg: float) -> tuple[FloatArray, float]:
+        """The coarse detector angles around the nominal specular, and the fine span."""
+        n = round(self.coarse_span_deg / self.coarse_step_deg)
+        coarse = theta_i_deg + self.coarse_step_deg * np.arange(-n, n + 1)
+        return np.asarray(coarse, dtype=np.float64), self.fine_span_deg
+
+    def fine(self, centre_deg: float) -> FloatArray:
+        """The fine detector angles around ``centre_deg``."""
+        n = round(self.fine_span_deg / self.fine_step_deg)
+        return np.asarray(centre_deg + self.fine_step_deg * np.arange(-n, n + 1))
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form stored with the run."""
+        return {
+            "kind": "align",
+            "theta_i_deg": list(self.theta_i_deg),
+            "coarse_step_deg": self.coarse_step_deg,
+            "coarse_span_deg": self.coarse_span_deg,
+            "fine_step_deg": self.fine_step_deg,
+            "fine_span_deg": self.fine_span_deg,
+            "exposure_us": self.exposure_us,
+            "sample": self.sample,
+        }
+
+
+@dataclass
+class AlignResult:
+    """The alignment found: ``theta_i = L + lamp_zero + tilt``, ``theta_r = D +
+    detector_zero - tilt`` (degrees), with the per-specimen peaks and the standard's fit."""
+
+    lamp_zero_deg: float
+    detector_zero_deg: float
+    sample_tilt_deg: float
+    standard_rms_rel: float
+    peaks: list[dict[str, Any]] = field(default_factory=list)
+    readings: int = 0
+
+    def corrections_deg(self) -> tuple[float, float]:
+        """Added to requested angles before the arms move (``[alignment]``): the sample
+        then sees the requested geometry."""
+        return (
+            -(self.lamp_zero_deg + self.sample_tilt_deg),
+            -(self.detector_zero_deg - self.sample_tilt_deg),
+        )
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON form (stored with the run, printed by ``scan --plan align --json``)."""
+        c = self.corrections_deg()
+        return {
+            "lamp_zero_deg": self.lamp_zero_deg,
+            "detector_zero_deg": self.detector_zero_deg,
+            "sample_tilt_deg": self.sample_tilt_deg,
+            "lamp_correction_deg": c[0],
+            "detector_correction_deg": c[1],
+            "standard_rms_rel": self.standard_rms_rel,
+            "readings": self.readings,
+            "peaks": self.peaks,
+        }
+
+
+def half_max_midpoint(
+    theta_deg: Sequence[float] | FloatArray, values: Sequence[float] | FloatArray
+) -> float:
+    """Midpoint of the half-maximum crossings around the largest value (linear
+    interpolation); NaN when a crossing lies outside the sweep."""
+    x = np.asarray(theta_deg, dtype=np.float64)
+    y = np.asarray(values, dtype=np.float64)
+    k = int(np.argmax(y))
+    half = 0.5 * float(y[k])
+    left = right = math.nan
+    for j in range(k, 0, -1):
+        if y[j - 1] <= half < y[j]:
+            left = x[j - 1] + (half - y[j - 1]) * (x[j] - x[j - 1]) / (y[j] - y[j - 1])
+            break
+    for j in range(k, x.size - 1):
+        if y[j + 1] <= half < y[j]:
+            right = x[j] + (half - y[j]) * (x[j + 1] - x[j]) / (y[j + 1] - y[j])
+            break
+    return 0.5 * (left + right)
+
+
+def _standard_model(
+    params: FloatArray, lamp: FloatArray, det: FloatArray, source: Cone, detector: Cone
+) -> FloatArray:
+    d_l, d_d, k, floor = params
+    r = fresnel(np.cos(np.radians(lamp + d_l)), BLACK_GLASS_N)
+    gamma = np.radians(np.abs(det + d_d - lamp - d_l))
+    o = cap_overlap_fraction(
+        gamma, math.radians(source.half_angle_deg), math.radians(detector.half_angle_deg)
+    )
+    return np.asarray(k * 100.0 * r * o + floor)
+
+
+def fit_standard(
+    lamp_deg: Sequence[float],
+    det_deg: Sequence[float],
+    values_pct: Sequence[float],
+    *,
+    source: Cone,
+    detector: Cone,
+) -> tuple[float, float, float]:
+    """Fit the black-glass readings: ``(lamp_zero_deg, detector_zero_deg, rms_rel)``.
+
+    Weighted least squares (``scipy.optimize.least_squares``) of the closed-form reading
+    (module docstring) over all readings, 0.3 % relative plus 5e-4 % absolute sigma.
+    """
+    from scipy.optimize import least_squares
+
+    lamp = np.asarray(lamp_deg, dtype=np.float64)
+    det = np.asarray(det_deg, dtype=np.float64)
+    y = np.asarray(values_pct, dtype=np.float64)
+    sigma = 0.003 * np.abs(y) + 5e-4
+    # start: the peaks' shift gives dL - dD; dL = 0
+    shifts = []
+    for t in np.unique(lamp):
+        sel = lamp == t
+        order = np.argsort(det[sel])
+        mid = half_max_midpoint(det[sel][order], y[sel][order])
+        if math.isfinite(mid):
+            shifts.append(mid - t)
+    s0 = float(np.mean(shifts)) if shifts else 0.0
+
+    def resid(p: FloatArray) -> FloatArray:
+        return np.asarray((_standard_model(p, lamp, det, source, detector) - y) / sigma)
+
+    fit = least_squares(
+        resid, x0=np.array([0.0, -s0, 1.0, 0.0]), x_scale=np.array([0.1, 0.1, 0.1, 1e-3])
+    )
+    d_l, d_d = float(fit.x[0]), float(fit.x[1])
+    model = _standard_model(fit.x, lamp, det, source, detector)
+    big = y > 0.1 * y.max()
+    rms = float(np.sqrt(np.mean(((model - y)[big] / y[big]) ** 2)))
+    return d_l, d_d, rms
+
+
+class AlignRunner:
+    """Measure an :class:`AlignPlan` on a lab and compute the :class:`AlignResult`.
+
+    Parameters
+    ----------
+    goniometer, spectro, clock
+        The lab's instruments.
+    plan
+        What to measure.
+    predictor
+        The sample's prediction (its peak position at the nominal geometry).
+    place_specimen
+        Puts ``"standard"`` or ``"sample"`` under the instruments (the simulated lab's
+        ``place_specimen``, or an operator prompt).
+    store, run_id, bus
+        Where readings, events and the result go.
+    move_timeout_s
+        Timeout of one move.
+    """
+
+    def __init__(
+        self,
+        *,
+        goniometer: TwoArmGoniometer,
+        spectro: Spectrocolorimeter,
+        clock: Clock,
+        plan: AlignPlan,
+        predictor: Predictor,
+        place_specimen: SpecimenHook,
+        store: RunStore,
+        run_id: int,
+        bus: EventBus,
+        move_timeout_s: float = 30.0,
+        exposure: AutoExposure | None = None,
+    ) -> None:
+        self.goniometer = goniometer
+        self.spectro = spectro
+        self.clock = clock
+        self.plan = plan
+        self.predictor = predictor
+        self.place_specimen = place_specimen
+        self.store = store
+        self.run_id = run_id
+        self.bus = bus
+        self.move_timeout_s = move_timeout_s
+        self.exposure = exposure or AutoExposure()
+        self._exposure_us = plan.exposure_us
+        self._index = 0
+        self._position: tuple[float, float] | None = None
+        n_coarse = len(plan.sweeps(plan.theta_i_deg[0])[0])
+        n_fine = len(plan.fine(0.0))
+        self._total = 2 * len(plan.theta_i_deg) * (n_coarse + n_fine)
+
+    async def _go(self, ti: float, tr: float) -> None:
+        """Move to (ti, tr), approaching both arms from below (the scans' direction)."""
+        pos = self._position or await self.goniometer.positions_deg()
+        if ti < pos[0] - 1e-9 or tr < pos[1] - 1e-9:
+            pre = (min(ti, pos[0]) - 0.5, min(tr, pos[1]) - 0.5)
+            try:
+                self.goniometer.check_geometry(*pre)
+                await self.goniometer.move_to(pre[0], pre[1], self.move_timeout_s)
+            except Exception:
+                pass
+        await self.goniometer.move_to(ti, tr, self.move_timeout_s)
+        self._position = (ti, tr)
+
+    async def _read(self, specimen: str, phase: str, ti: float, tr: float) -> float:
+        await self._go(ti, tr)
+        reading, self._exposure_us = await self.exposure.read(self.spectro, self._exposure_us)
+        value = float(reading.luminance_pct)
+        ts = time.time()
+        self.store.add_point(
+            self.run_id,
+            index=self._index,
+            repeat=0,
+            theta_i_deg=ti,
+            theta_r_deg=tr,
+            measured_theta_i_deg=ti,
+            measured_theta_r_deg=tr,
+            luminance_pct=value,
+            raw={
+                "specimen": specimen,
+                "phase": phase,
+                "exposure_us": reading.exposure_us,
+                "peak_fraction": reading.peak_fraction,
+                "clock_s": self.clock.now(),
+            },
+            timestamp=ts,
+        )
+        self._index += 1
+        self.bus.publish(
+            PointMeasured(
+                run_id=self.run_id, timestamp=ts, index=self._index - 1, repeat=0,
+                theta_i_deg=ti, theta_r_deg=tr, luminance_pct=value,
+                measured_theta_i_deg=ti, measured_theta_r_deg=tr, predicted_pct=None,
+            )
+        )  # fmt: skip
+        self.bus.publish(
+            Progress(run_id=self.run_id, done=self._index, total=self._total, eta_s=0.0)
+        )
+        return value
+
+    async def _peak_sweeps(self, specimen: str, ti: float) -> tuple[FloatArray, FloatArray]:
+        """Coarse sweep, then fine sweep around the coarse maximum; all (tr, value)."""
+        coarse, _ = self.plan.sweeps(ti)
+        lo, hi = self.goniometer.detector.limits_deg
+        coarse = coarse[(coarse >= lo) & (coarse <= hi)]
+        c_vals = [await self._read(specimen, "coarse", ti, float(t)) for t in coarse]
+        centre = float(coarse[int(np.argmax(c_vals))])
+        fine = self.plan.fine(centre)
+        fine = fine[(fine >= lo) & (fine <= hi)]
+        f_vals = [await self._read(specimen, "fine", ti, float(t)) for t in fine]
+        return np.concatenate([coarse, fine]), np.asarray(c_vals + f_vals)
+
+    async def run(self) -> AlignResult:
+        """Measure and fit; the corrections of an earlier alignment are off meanwhile."""
+        saved = self.goniometer.corrections_deg
+        self.goniometer.corrections_deg = (0.0, 0.0)
+        self.bus.publish(
+            RunStarted(run_id=self.run_id, kind="align", total_points=self._total,
+                       plan=self.plan.to_dict(), sample=self.plan.sample)
+        )  # fmt: skip
+        self.store.set_status(self.run_id, RunState.RUNNING.value)
+        self.bus.publish(StateChanged(run_id=self.run_id, state=RunState.RUNNING, reason=""))
+        try:
+            await self.spectro.set_exposure_us(self._exposure_us)
+            await self.place_specimen("standard")
+            lamp: list[float] = []
+            det: list[float] = []
+            vals: list[float] = []
+            peaks: list[dict[str, Any]] = []
+            for ti in sorted(self.plan.theta_i_deg):
+                tr, v = await self._peak_sweeps("standard", ti)
+                lamp.extend([ti] * tr.size)
+                det.extend(tr.tolist())
+                vals.extend(v.tolist())
+                fine = tr.size - len(self.plan.sweeps(ti)[0])
+                mid = half_max_midpoint(np.sort(tr[-fine:]), v[-fine:][np.argsort(tr[-fine:])])
+                peaks.append({"specimen": "standard", "theta_i_deg": ti, "peak_deg": mid,
+                              "amplitude_pct": float(v.max())})  # fmt: skip
+            d_l, d_d, rms = fit_standard(
+                lamp, det, vals, source=self.predictor.source, detector=self.predictor.detector
+            )
+            await self.place_specimen("sample")
+            self._position = None
+            taus: list[tuple[float, float]] = []
+            for ti in sorted(self.plan.theta_i_deg):
+                tr, v = await self._peak_sweeps("sample", ti)
+                n_fine = tr.size - len(self.plan.sweeps(ti)[0])
+                ft, fv = tr[-n_fine:], v[-n_fine:]
+                order = np.argsort(ft)
+                ft, fv = ft[order], fv[order]
+                mid = half_max_midpoint(ft, fv)
+                pred = await self.predictor.predict(ti, ft.tolist())
+                pmid = half_max_midpoint(ft, pred)
+                delta = mid - pmid
+                tau = 0.5 * (delta - (d_l - d_d))
+                if math.isfinite(tau) and math.isfinite(pmid):
+                    # trust the incidences where the model's own peak is symmetric: there
+                    # the midpoint depends least on the lobe's shape (and its model error)
+                    taus.append((tau, 1.0 / (0.02 + abs(pmid - ti)) ** 2))
+                peaks.append({"specimen": "sample", "theta_i_deg": ti, "peak_deg": mid,
+                              "predicted_peak_deg": pmid, "amplitude_pct": float(fv.max()),
+                              "tilt_deg": tau})  # fmt: skip
+            if not taus:
+                raise RuntimeError("no sample peak was bracketed by the fine sweeps")
+            result = AlignResult(
+                lamp_zero_deg=d_l,
+                detector_zero_deg=d_d,
+                sample_tilt_deg=float(
+                    np.average([t for t, _ in taus], weights=[w for _, w in taus])
+                ),
+                standard_rms_rel=rms,
+                peaks=peaks,
+                readings=self._index,
+            )
+        finally:
+            self.goniometer.corrections_deg = saved
+        self.store.update_model(self.run_id, {"alignment": result.as_dict()})
+        self.store.set_status(self.run_id, RunState.DONE.value)
+        self.bus.publish(StateChanged(run_id=self.run_id, state=RunState.DONE, reason=""))
+        self.bus.publish(
+            RunFinished(
+                run_id=self.run_id, state=RunState.DONE, reason="", summary=result.as_dict()
+            )
+        )
+        return result
+
+
+def corrections_from(alignment: Mapping[str, float]) -> tuple[float, float]:
+    """``(lamp, detector)`` corrections of an ``[alignment]`` table's three estimates."""
+    d_l = float(alignment.get("lamp_zero_deg", 0.0))
+    d_d = float(alignment.get("detector_zero_deg", 0.0))
+    tau = float(alignment.get("sample_tilt_deg", 0.0))
+    return -(d_l + tau), -(d_d - tau)

@@ -1,0 +1,68 @@
+"""Auto-exposure: the spectro's integration time adapts so no reading saturates or drowns.
+
+A spectro reports, with each reading, how full its strongest channel was
+(:attr:`drivers.base.SpectroReading.peak_fraction`: counts over the detector's full scale,
+1.0 = clipped). The reported values are already divided by the exposure, so changing the
+exposure changes only the signal-to-noise ratio and the risk of clipping, not the scale:
+
+* a saturated reading (``peak_fraction >= 0.999``) is taken again at a quarter of the
+  exposure (the clipped counts say only that the light is more than full scale);
+* a reading below ``low`` of full scale (dark current, read and shot noise dominate) is
+  taken again at ``exposure x target / peak_fraction``, and one above ``high`` at the same
+  ratio, within the instrument's exposure range;
+
+at most ``max_tries`` readings; the last one is returned with its exposure. An
+instrument that does not report ``peak_fraction`` keeps its exposure.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from drivers.base import Spectrocolorimeter, SpectroReading
+
+__all__ = ["SATURATED", "AutoExposure"]
+
+#: A peak fraction at or above this is a clipped channel.
+SATURATED = 0.999
+
+
+@dataclass(frozen=True, slots=True)
+class AutoExposure:
+    """Exposure control (see the module docstring); exposures in microseconds."""
+
+    min_us: int = 500
+    max_us: int = 250_000
+    low: float = 0.08
+    high: float = 0.85
+    target: float = 0.5
+    max_tries: int = 5
+
+    def next_exposure_us(self, exposure_us: int, peak_fraction: float | None) -> int | None:
+        """The exposure to try next, or ``None`` when this reading is good (or no better
+        exposure exists)."""
+        if peak_fraction is None:
+            return None
+        if peak_fraction >= SATURATED:
+            new = max(self.min_us, exposure_us // 4)
+        elif peak_fraction < self.low or peak_fraction > self.high:
+            ratio = self.target / max(peak_fraction, 1e-6)
+            new = int(min(self.max_us, max(self.min_us, round(exposure_us * ratio))))
+        else:
+            return None
+        return None if new == exposure_us else new
+
+    async def read(
+        self, spectro: Spectrocolorimeter, exposure_us: int
+    ) -> tuple[SpectroReading, int]:
+        """Read at ``exposure_us``, adapting it (see the module docstring); returns the
+        reading kept and the exposure the next reading should start from."""
+        reading = await spectro.measure()
+        for _ in range(self.max_tries - 1):
+            new = self.next_exposure_us(exposure_us, reading.peak_fraction)
+            if new is None:
+                break
+            exposure_us = new
+            await spectro.set_exposure_us(exposure_us)
+            reading = await spectro.measure()
+        return reading, exposure_us

@@ -1,0 +1,150 @@
+"""Alignment from the data (goniolab/scan/align.py), auto-exposure and [alignment]."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from drivers.base import SpectroReading
+from goniolab.cli import main
+from goniolab.config import ConfigError, configs_dir, load_lab_config, write_alignment
+from goniolab.lab import draw_session
+from goniolab.optics.apertures import Cone
+from goniolab.optics.facet import cap_overlap_fraction
+from goniolab.optics.fresnel import fresnel
+from goniolab.scan.align import AlignPlan, fit_standard, half_max_midpoint
+from goniolab.scan.exposure import AutoExposure
+from goniolab.scan.plans import PlanError
+
+
+def test_black_glass_fit_recovers_both_zero_offsets_from_synthetic_readings() -> None:
+    # the closed form of the module docstring, with 0.3 % noise and a 2 % scale error
+    rng = np.random.default_rng(4)
+    d_l, d_d = 0.37, -0.62
+    lamp, det, vals = [], [], []
+    for ti in (20.0, 40.0, 60.0):
+        for tr in np.arange(ti - 4.5, ti + 4.5001, 0.25):
+            gamma = math.radians(abs(tr + d_d - ti - d_l))
+            o = float(cap_overlap_fraction(np.array([gamma]), math.radians(3), math.radians(3))[0])
+            r = float(fresnel(math.cos(math.radians(ti + d_l)), 1.567))
+            lamp.append(ti)
+            det.append(float(tr))
+            vals.append(1.02 * 100 * r * o * (1 + 0.003 * rng.standard_normal()))
+    got_l, got_d, rms = fit_standard(lamp, det, vals, source=Cone(6.0), detector=Cone(6.0))
+    assert got_l == pytest.approx(d_l, abs=0.02)
+    assert got_d == pytest.approx(d_d, abs=0.02)
+    assert rms < 0.01
+
+
+def test_half_max_midpoint_of_a_symmetric_peak() -> None:
+    x = np.arange(30.0, 50.0, 0.5)
+    assert half_max_midpoint(x, np.exp(-(((x - 41.3) / 2.0) ** 2))) == pytest.approx(41.3, abs=0.02)
+    assert math.isnan(half_max_midpoint(x, np.exp(-(((x - 31.0) / 2.0) ** 2))))
+
+
+def test_align_plan_needs_two_incidences() -> None:
+    with pytest.raises(PlanError, match="two or more"):
+        AlignPlan(theta_i_deg=(45.0, 45.0))
+
+
+class FakeSpectro:
+    """Reports a fixed light level: peak fraction = level x exposure / 10 ms, clipped."""
+
+    def __init__(self, level: float) -> None:
+        self.level = level
+        self.exposure_us = 10_000
+        self.exposures: list[int] = []
+
+    async def set_exposure_us(self, exposure_us: int) -> None:
+        self.exposure_us = exposure_us
+
+    async def measure(self) -> SpectroReading:
+        self.exposures.append(self.exposure_us)
+        pf = min(1.0, self.level * self.exposure_us / 10_000)
+        return SpectroReading((550.0,), (1.0,), 1.0, self.exposure_us, peak_fraction=pf)
+
+
+@pytest.mark.parametrize(("level", "lo", "hi"), [(3.0, 0.08, 0.85), (0.01, 0.08, 0.85)])
+async def test_auto_exposure_leaves_saturation_and_noise(
+    level: float, lo: float, hi: float
+) -> None:
+    spectro = FakeSpectro(level)
+    reading, exposure = await AutoExposure().read(spectro, 10_000)
+    assert reading.peak_fraction is not None and lo <= reading.peak_fraction <= hi
+    assert exposure == spectro.exposure_us and len(spectro.exposures) <= 5
+    assert (exposure < 10_000) if level > 1 else (exposure > 10_000)
+
+
+def test_write_alignment_keeps_the_file_and_replaces_the_table(tmp_path: Path) -> None:
+    path = tmp_path / "lab.toml"
+    original = (configs_dir() / "lab-sim.toml").read_text()
+    path.write_text(original)
+    write_alignment(path, {"lamp_zero_deg": 0.25, "detector_zero_deg": -0.5, "run": 3})
+    write_alignment(path, {"lamp_zero_deg": 0.125, "sample_tilt_deg": 0.5, "run": 4}, note="x")
+    text = path.read_text()
+    assert text.startswith(original.rstrip("\n")) and text.count("[alignment]") == 1
+    cfg = load_lab_config(path)
+    assert (cfg.alignment.lamp_zero_deg, cfg.alignment.sample_tilt_deg) == (0.125, 0.5)
+    assert cfg.alignment.corrections_deg() == (-(0.125 + 0.5), -(0.0 - 0.5))
+    with pytest.raises(ConfigError, match=r"alignment\.lamp_zero_deg"):
+        write_alignment(path, {"lamp_zero_deg": 9.0})
+    assert load_lab_config(path).alignment.lamp_zero_deg == 0.125  # untouched on error
+
+
+def misaligned_config(tmp_path: Path, seed: int) -> Path:
+    text = (configs_dir() / "lab-sim.toml").read_text()
+    text = text.replace("seed = 1", f"seed = {seed}")
+    for key in ("lamp_zero_range_deg", "detector_zero_range_deg", "sample_tilt_range_deg"):
+        text = text.replace(f"# {key} = 0.5", f"{key} = 1.0")
+    text = text.replace('store = ""', f'store = "{tmp_path / "runs.sqlite"}"')
+    path = tmp_path / "lab.toml"
+    path.write_text(text)
+    return path
+
+
+def run_json(args: list[str]) -> dict[str, object]:
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        assert main(args) == 0
+    result: dict[str, object] = json.loads(out.getvalue())
+    return result
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [3, 5])
+def test_align_on_the_twin_recovers_offsets_and_tilt_within_005_deg(
+    tmp_path: Path, seed: int
+) -> None:
+    cfg_path = misaligned_config(tmp_path, seed)
+    truth = draw_session(load_lab_config(cfg_path))
+    assert max(abs(v) for v in truth.values()) > 0.3  # a real misalignment to find
+    got = run_json(
+        ["scan", "--config", str(cfg_path), "--plan", "align", "--time-scale", "0", "--json"]
+    )
+    for key, true_key in (
+        ("lamp_zero_deg", "lamp_zero_offset_deg"),
+        ("detector_zero_deg", "detector_zero_offset_deg"),
+        ("sample_tilt_deg", "sample_tilt_deg"),
+    ):
+        assert got[key] == pytest.approx(truth[true_key], abs=0.05), key
+    alignment = load_lab_config(cfg_path).alignment  # written into the config
+    assert alignment.lamp_zero_deg == pytest.approx(float(got["lamp_zero_deg"]), abs=1e-4)  # type: ignore[arg-type]
+    if seed != 5:
+        return
+    # the loop closes: a scan with the corrections finds the peak where the model puts it
+    scan = run_json(
+        ["scan", "--config", str(cfg_path), "--theta-r", "40:50:0.5", "--time-scale", "0", "--json"]
+    )
+    c = (
+        truth["lamp_zero_offset_deg"]
+        - truth["detector_zero_offset_deg"]
+        + 2 * truth["sample_tilt_deg"]
+    )
+    assert abs(c) > 1.0  # uncorrected, the peak would be off by this much
+    assert abs(float(scan["peak_offset_deg"])) < 0.05  # type: ignore[arg-type]
