@@ -693,8 +693,8 @@ def write_alignment(path: str | Path, values: dict[str, float | int], *, note: s
     try:
         AlignmentConfig.model_validate(values)
     except ValidationError as exc:
-        first = exc.errors()[0]
-        raise ConfigError(p, "alignment." + _dotted(tuple(first["loc"])), _reason(first)) from None
+        key, reason = first_issue(exc)
+        raise ConfigError(p, f"alignment.{key}", reason) from None
     tmp = p.with_name(p.name + f".{os.getpid()}.tmp")
     try:
         tmp.write_text(new, encoding="utf-8")
