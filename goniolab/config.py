@@ -284,30 +284,30 @@ class TwinConfig(_Strict):
 
     mode: Literal["realistic", "ideal"] = "realistic"
     # the truth (sim/truth.py)
-    step_um: Annotated[float, Field(ge=0.05, le=1.0)] = 0.25
-    subres_rq_nm: Annotated[float, Field(ge=0.0, le=50.0)] = 4.0
-    subres_corr_um: Annotated[float, Field(gt=0.0, le=5.0)] = 0.3
-    profilometer_noise_nm: Annotated[float, Field(ge=0.0, le=50.0)] = 2.0
-    waviness_slope_rms: Annotated[float, Field(ge=0.0, le=0.02)] = 3e-4
+    step_um: Annotated[float, Field(strict=True, ge=0.05, le=1.0)] = 0.25
+    subres_rq_nm: Annotated[float, Field(strict=True, ge=0.0, le=50.0)] = 4.0
+    subres_corr_um: Annotated[float, Field(strict=True, gt=0.0, le=5.0)] = 0.3
+    profilometer_noise_nm: Annotated[float, Field(strict=True, ge=0.0, le=50.0)] = 2.0
+    waviness_slope_rms: Annotated[float, Field(strict=True, ge=0.0, le=0.02)] = 3e-4
     body: Literal["black", "white", "grey", "red", "blue"] = "black"
     cache: bool = True
     # the spectro (sim/instruments.py, SpectroChain)
     lamp: Literal["halogen", "led"] = "halogen"
-    full_scale_pct: Annotated[float, Field(gt=0.0, le=100.0)] = 5.0
-    dark_counts_per_s: Annotated[float, Field(ge=0.0, le=1e5)] = 300.0
-    read_noise_counts: Annotated[float, Field(ge=0.0, le=1000.0)] = 5.0
-    stray_pct: Annotated[float, Field(ge=0.0, le=1.0)] = 0.002
-    flicker_pct: Annotated[float, Field(ge=0.0, le=10.0)] = 0.3
+    full_scale_pct: Annotated[float, Field(strict=True, gt=0.0, le=100.0)] = 5.0
+    dark_counts_per_s: Annotated[float, Field(strict=True, ge=0.0, le=1e5)] = 300.0
+    read_noise_counts: Annotated[float, Field(strict=True, ge=0.0, le=1000.0)] = 5.0
+    stray_pct: Annotated[float, Field(strict=True, ge=0.0, le=1.0)] = 0.002
+    flicker_pct: Annotated[float, Field(strict=True, ge=0.0, le=10.0)] = 0.3
     # the arms and the sample seating, drawn per session (uniform in +/- range)
-    backlash_deg: Annotated[float, Field(ge=0.0, le=1.0)] = 0.02
-    lamp_zero_range_deg: Annotated[float, Field(ge=0.0, le=5.0)] = 0.5
-    detector_zero_range_deg: Annotated[float, Field(ge=0.0, le=5.0)] = 0.5
-    sample_tilt_range_deg: Annotated[float, Field(ge=0.0, le=5.0)] = 0.5
+    backlash_deg: Annotated[float, Field(strict=True, ge=0.0, le=1.0)] = 0.02
+    lamp_zero_range_deg: Annotated[float, Field(strict=True, ge=0.0, le=5.0)] = 0.5
+    detector_zero_range_deg: Annotated[float, Field(strict=True, ge=0.0, le=5.0)] = 0.5
+    sample_tilt_range_deg: Annotated[float, Field(strict=True, ge=0.0, le=5.0)] = 0.5
     # the glossmeter (sim/instruments.py, GlossDrift)
-    gloss_drift_pct_per_h: Annotated[float, Field(ge=-10.0, le=10.0)] = 0.5
-    gloss_temp_coeff_pct_per_c: Annotated[float, Field(ge=-2.0, le=2.0)] = 0.05
-    gloss_warmup_c: Annotated[float, Field(ge=0.0, le=20.0)] = 4.0
-    gloss_noise_gu: Annotated[float, Field(ge=0.0, le=5.0)] = 0.1
+    gloss_drift_pct_per_h: Annotated[float, Field(strict=True, ge=-10.0, le=10.0)] = 0.5
+    gloss_temp_coeff_pct_per_c: Annotated[float, Field(strict=True, ge=-2.0, le=2.0)] = 0.05
+    gloss_warmup_c: Annotated[float, Field(strict=True, ge=0.0, le=20.0)] = 4.0
+    gloss_noise_gu: Annotated[float, Field(strict=True, ge=0.0, le=5.0)] = 0.1
 
 
 class SimConfig(_Strict):
@@ -372,10 +372,10 @@ class AlignmentConfig(_Strict):
     placing another sample.
     """
 
-    lamp_zero_deg: Annotated[float, Field(ge=-5.0, le=5.0)] = 0.0
-    detector_zero_deg: Annotated[float, Field(ge=-5.0, le=5.0)] = 0.0
-    sample_tilt_deg: Annotated[float, Field(ge=-5.0, le=5.0)] = 0.0
-    run: Annotated[int, Field(ge=0)] = 0
+    lamp_zero_deg: Annotated[float, Field(strict=True, ge=-5.0, le=5.0)] = 0.0
+    detector_zero_deg: Annotated[float, Field(strict=True, ge=-5.0, le=5.0)] = 0.0
+    sample_tilt_deg: Annotated[float, Field(strict=True, ge=-5.0, le=5.0)] = 0.0
+    run: Annotated[int, Field(strict=True, ge=0)] = 0
 
     def corrections_deg(self) -> tuple[float, float]:
         """``(lamp, detector)`` added to requested angles before the arms move."""
