@@ -83,5 +83,9 @@ def test_the_readme_example_runs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch
     assert (tmp_path / "run.png").read_bytes()[:4] == b"\x89PNG"
     ds = gl.open_run(1, tmp_path / "runs.sqlite").to_xarray()
     assert ds.attrs["status"] == "done" and ds.attrs["stored_readings"] == 12
-    # the simulated lab measures what the model predicts, within its noise and stray light
-    assert float(np.nanmax(np.abs(ds["residual_pct"].values))) < 0.1
+    # the simulated lab is the realistic twin: it measures its own truth, so the residuals
+    # are its model error against the prediction (docs/TWIN.md: wittmann-3's peak is about
+    # 19 % lower than predicted), not noise around zero
+    worst = float(np.nanmax(np.abs(ds["residual_pct"].values)))
+    peak = float(np.nanmax(ds["predicted_pct"].values))
+    assert 0.02 * peak < worst < 0.3 * peak

@@ -21,6 +21,7 @@ from goniolab.scan.events import RunFinished, RunState, StateChanged
 from goniolab.store import RunStore
 from goniolab.tui.session_backend import SessionBackend
 from goniolab.tui.view_model import ScanSetup
+from tests.twin_configs import ideal
 
 #: theta_i 30 deg, detector 20..40 deg in 5 deg steps, 2 repeats: 10 readings.
 CLI_PLAN = ["--theta-i", "30", "--theta-r", "20:40:5", "--repeats", "2"]
@@ -30,8 +31,11 @@ SETUP = dict(
 
 
 def sim_config(tmp_path: Path) -> Path:
-    """configs/lab-sim.toml with an instant clock (noise kept: seeded, so reproducible)."""
-    text = (configs_dir() / "lab-sim.toml").read_text()
+    """configs/lab-sim.toml with the ideal twin and an instant clock (noise kept: seeded, so
+    reproducible). The realistic twin's arms have backlash, so a reading depends on the
+    arms' history (the TUI homes them, the CLI finds them at park): identical rows are a
+    property of the plumbing, checked with the ideal twin."""
+    text = ideal((configs_dir() / "lab-sim.toml").read_text())
     text = re.sub(r"(?m)^time_scale = .*$", "time_scale = 0.0", text)
     path = tmp_path / "lab.toml"
     path.write_text(text)
