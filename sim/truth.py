@@ -26,7 +26,7 @@ with physics the predictor does not share:
   measured".
 
 * **Scalar Kirchhoff (tangent-plane) scattering** on the true tile, not the facet model
-  (PHYSICS.md, "Where the facet model stops"; Beckmann & Spizzichino 1963; the NIST seed's
+  (docs/PHYSICS.md, "Where the facet model stops: physical optics"; Beckmann & Spizzichino 1963; the NIST seed's
   "Kirchhoff" method). For a band of ``q_z = cos ti + cos ts`` the field scattered into the
   direction-cosine offset ``(du, dv)`` from the specular direction is the FFT of the phase
   screen ``exp(i k q_z z(x, y))``; on the periodic tile it is a grating, whose order
@@ -66,7 +66,7 @@ with physics the predictor does not share:
 * **The body**: light entering the clear coat (1 - F(ti)), reflected diffusely by the body
   (spectral reflectance ``R_b(lambda)``), leaving with 1 - F(tr) after internal
   reflections (Saunderson: ``(1 - r_i) R_b / (1 - r_i R_b)``, ``r_i = 0.6`` for n = 1.5,
-  PHYSICS.md "Colour and the paint layer"), Lambertian: ``R_d cos(tr) Omega_d / pi`` of the
+  docs/PHYSICS.md, "Colour and the paint layer"), Lambertian: ``R_d cos(tr) Omega_d / pi`` of the
   flux reaches a detector of solid angle ``Omega_d``.
 
 Cost and caching: a table is one FFT of the tile per (q_z band, wavelength), shared by

@@ -62,7 +62,7 @@ def test_a_flat_truth_reads_the_fresnel_mirror_through_the_cones() -> None:
 
 
 def test_a_flat_truth_has_the_iso2813_gloss_of_physics_md() -> None:
-    # PHYSICS.md, "Truths": a flat n = 1.55 surface reads 95.4 / 97.3 / 99.8 GU
+    # docs/PHYSICS.md, "Truths any implementation must hold": a flat n = 1.55 surface reads 95.4 / 97.3 / 99.8 GU
     optics = TruthOptics(build_truth(periodic_map(np.zeros((64, 64))), n=1.55, settings=BARE))
     optics._body = np.zeros_like(optics._body)
     gloss = optics.gloss()
