@@ -365,6 +365,9 @@ async def _execute_align(
     json_out: bool,
     write_config: bool,
 ) -> int:
+    import asyncio
+
+    from goniolab.config import load_lab_config
     from goniolab.session import ScanSession
 
     cfg = load_lab_config(config_path)
