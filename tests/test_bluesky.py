@@ -28,11 +28,14 @@ def engine() -> Any:
         RE.halt()
 
 
-def test_inplane_scan_documents(engine: Any) -> None:
+def test_inplane_scan_documents(engine: Any, tmp_path: Path) -> None:
     from goniolab.models import model_for
     from goniolab.optics.apertures import Cone
+    from tests.twin_configs import ideal_config
 
-    lab = connect_lab(CONFIG, sample="sample:wittmann-3", time_scale=0)
+    # the ideal twin: the readings travel unchanged into the documents (the realistic one
+    # measures its own truth, docs/TWIN.md)
+    lab = connect_lab(ideal_config(tmp_path), sample="sample:wittmann-3", time_scale=0)
     docs: list[tuple[str, dict[str, Any]]] = []
     engine.subscribe(lambda name, doc: docs.append((name, doc)))
     try:
@@ -64,7 +67,7 @@ def test_inplane_scan_documents(engine: Any) -> None:
     tr = np.array([e["data"]["detector-readback_deg"] for e in events])
     np.testing.assert_allclose(tr, [35, 35, 45, 45, 55, 55], atol=0.05)
     np.testing.assert_allclose([e["data"]["lamp-readback_deg"] for e in events], 45.0, atol=0.05)
-    # the twin measures what the model predicts through the same cones (within its noise)
+    # the ideal twin measures what the model predicts through the same cones (its noise)
     model = model_for("sample:wittmann-3", n=cfg.sample.n)
     pred = model.luminance_pct(
         45.0,
