@@ -35,8 +35,8 @@ from goniolab.config import LabConfig
 from goniolab.errors import UserError
 from goniolab.lab import Lab
 from goniolab.optics.models import ReflectanceModel
-from goniolab.scan.colour import PointColour
 from goniolab.scan.align import AlignPlan, AlignResult
+from goniolab.scan.colour import PointColour
 from goniolab.scan.events import EventBus, RunState
 from goniolab.scan.gloss import GlossLogger, predict_gloss
 from goniolab.scan.plans import BrdfPlan, GlossPlan
