@@ -36,10 +36,9 @@ ALPHA = 0.1  # Beckmann total rms slope of the simulated sample
 
 
 def sim_config(tmp_path: Path, *, faults: str = "") -> Path:
-    """configs/lab-sim.toml with the ideal twin, the facet model (the tests below compare
-    with it), an instant clock, no noise and a temporary store."""
+    """configs/lab-sim.toml with the ideal twin, an instant clock, no noise and a temporary
+    store."""
     text = ideal((REPO / "configs" / "lab-sim.toml").read_text())
-    text = re.sub(r'(?m)^model = "auto"', 'model = "facet"', text)
     text = re.sub(r"(?m)^time_scale = .*$", "time_scale = 0.0", text)
     text = re.sub(r"(?m)^store = .*$", f'store = "{tmp_path / "runs.sqlite"}"', text)
     text = re.sub(r"(?m)^noise_pct = .*$", "noise_pct = 0.0", text)
