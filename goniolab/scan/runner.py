@@ -640,14 +640,15 @@ class ScanRunner:
 
     async def _reconnect_spectro(self, attempt: int) -> None:
         """Close the spectro's link, wait (``reconnect_backoff_s``, doubling with each
-        attempt, on the lab clock), reopen it and set the plan's exposure again. A failed
+        attempt, on the lab clock), reopen it and set the exposure again (the plan's, or the
+        one auto-exposure arrived at). A failed
         reopen is reported; the next attempt finds the link closed and tries again."""
         with contextlib.suppress(DeviceError):
             await self.spectro.close()
         await self.clock.sleep(min(8.0, self.reconnect_backoff_s * 2**attempt))
         try:
             await self.spectro.connect()
-            await self.spectro.set_exposure_us(self.plan.exposure_us)
+            await self.spectro.set_exposure_us(self._exposure_us)  # the plan's, or auto's
         except DeviceError as exc:
             self.bus.publish(
                 InstrumentError(
