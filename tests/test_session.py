@@ -9,6 +9,7 @@ other path's rows, reading for reading, except what is a time stamp or an id.
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import re
 from pathlib import Path
 from typing import Any
@@ -72,12 +73,16 @@ def _rows(store: Path, run_id: int) -> dict[str, Any]:
         run = s.get_run(run_id).as_dict()
         for key in ("id", "created_at", "updated_at", "finished_at"):
             run.pop(key)
-        points = []
-        for p in s.points(run_id):
-            raw = {k: v for k, v in p.raw.items() if k != "clock_s"}
-            points.append((p.index, p.repeat, p.theta_i_deg, p.theta_r_deg,
-                           p.measured_theta_i_deg, p.measured_theta_r_deg, p.luminance_pct, raw))  # fmt: skip
-        return {"run": run, "points": points, "predictions": s.predictions(run_id)}
+        points = [
+            dataclasses.replace(p, timestamp=0.0, raw={**p.raw, "clock_s": None})
+            for p in s.points(run_id)
+        ]
+        return {
+            "run": run,
+            "points": points,
+            "predictions": s.predictions(run_id),
+            "predicted_colours": s.predicted_colours(run_id),
+        }
 
 
 @pytest.mark.slow  # builds the facet model of the configured sample (cached afterwards)
@@ -91,6 +96,7 @@ def test_cli_and_tui_store_identical_rows(
     tui_run = asyncio.run(_tui_scan(cfg, tui_store))
     cli_rows, tui_rows = _rows(cli_store, 1), _rows(tui_store, tui_run)
     assert len(cli_rows["points"]) == 10 and len(cli_rows["predictions"]) == 5
+    assert all(p.colour is not None for p in cli_rows["points"])  # colour columns compared too
     assert cli_rows["run"]["status"] == "done"
     assert cli_rows["run"]["config"]["_source"] == str(cfg.resolve())
     assert tui_rows == cli_rows
