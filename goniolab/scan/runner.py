@@ -853,6 +853,18 @@ class ScanRunner:
         self._set_state(state, reason)
         return reason
 
+    async def _settle(self, task: asyncio.Task[None], what: str) -> None:
+        """Wait for a background prediction; its failure is reported, never fatal: a model
+        failure must not lose the run."""
+        try:
+            await task
+        except Exception as exc:
+            self.bus.publish(
+                InstrumentError(
+                    run_id=self.run_id, device="model", message=f"{what} failed: {exc}", fatal=False
+                )
+            )
+
     async def _finish(
         self,
         state: RunState,
@@ -869,29 +881,9 @@ class ScanRunner:
                     run_id=self.run_id, device="goniometer", message=park_problem, fatal=False
                 )
             )
-        try:
-            await predict_task
-        except Exception as exc:  # a model failure must not lose the run
-            self.bus.publish(
-                InstrumentError(
-                    run_id=self.run_id,
-                    device="model",
-                    message=f"prediction failed: {exc}",
-                    fatal=False,
-                )
-            )
+        await self._settle(predict_task, "prediction")
         if state is RunState.DONE:
-            try:
-                await colour_task
-            except Exception as exc:  # a colour model failure must not lose the run
-                self.bus.publish(
-                    InstrumentError(
-                        run_id=self.run_id,
-                        device="model",
-                        message=f"colour prediction failed: {exc}",
-                        fatal=False,
-                    )
-                )
+            await self._settle(colour_task, "colour prediction")
         else:
             colour_task.cancel()
         try:
