@@ -31,8 +31,9 @@ or numba (``facet``) with it.
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from goniolab._lazy import lazy_exports
 
 # Loaded at once: the function shares its name with its module, and a lazy name would be
 # shadowed by the submodule as soon as anything imports goniolab.optics.fresnel.
@@ -107,18 +108,7 @@ _LAZY: dict[str, str] = {
 }
 
 
-def __getattr__(name: str) -> Any:
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module 'goniolab.optics' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_LAZY))
-
+__getattr__, __dir__ = lazy_exports(__name__, _LAZY)
 
 __all__ = [
     "GONIO_CONE",
