@@ -205,10 +205,17 @@ def diffuse_fresnel_reflectance(n: ArrayLike, *, n_theta: int = 721) -> FloatArr
     return result
 
 
+@functools.lru_cache(maxsize=8)
+def _gauss_legendre(k: int) -> tuple[FloatArray, FloatArray]:
+    """Gauss-Legendre nodes and weights (an eigenvalue problem: computed once per order)."""
+    x, w = np.polynomial.legendre.leggauss(k)
+    return x, w
+
+
 @functools.lru_cache(maxsize=4096)
 def _diffuse_fresnel(n: float, n_theta: int) -> float:
     # Gauss-Legendre in theta over [0, pi/2]
-    x, w = np.polynomial.legendre.leggauss(n_theta // 4 + 16)
+    x, w = _gauss_legendre(n_theta // 4 + 16)
     theta = 0.25 * np.pi * (x + 1.0)
     f = fresnel_unpolarised(np.cos(theta), n)
     return float(0.25 * np.pi * np.sum(w * f * np.sin(2.0 * theta)))

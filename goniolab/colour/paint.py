@@ -59,6 +59,8 @@ from goniolab.colour.dispersion import (
     Constant,
     Dispersion,
     DispersionError,
+    Sellmeier,
+    Tabulated,
     dispersion_from_dict,
 )
 from goniolab.colour.km import internal_diffuse_reflectance, km_reflectance
@@ -75,6 +77,7 @@ __all__ = [
     "Spectrum",
     "beckmann_flake_d",
     "paint_from_dict",
+    "paint_to_dict",
     "refracted_inside",
 ]
 
@@ -489,3 +492,62 @@ def paint_from_dict(
     except PaintError as exc:
         msg = str(exc)
         raise PaintError(msg if msg.startswith(where) else f"{where}: {msg}") from None
+
+
+def _spectrum_value(sp: Spectrum) -> float | dict[str, list[float]]:
+    if len(sp.values) == 1:
+        return sp.values[0]
+    return {"wavelengths_nm": list(sp.wavelengths_nm), "values": list(sp.values)}
+
+
+def _dispersion_value(d: Dispersion, name: str, tables: dict[str, str]) -> Any:
+    if d is ALUMINIUM:
+        return {"kind": "aluminium"}
+    if isinstance(d, Constant):
+        n = complex(d.n)
+        return n.real if n.imag == 0 else {"kind": "constant", "n": n.real, "k": n.imag}
+    if isinstance(d, Cauchy):
+        return {"kind": "cauchy", "A": d.A, "B": d.B, "C": d.C}
+    if isinstance(d, Sellmeier):
+        return {"kind": "sellmeier", "B": list(d.B), "C": list(d.C)}
+    if isinstance(d, Tabulated):
+        rows = ["# wavelength_nm n k"] + [
+            f"{w:g} {n!r} {k!r}"
+            for w, n, k in zip(d.wavelengths_nm, d.n, d.k or (0.0,) * len(d.n), strict=True)
+        ]
+        tables[name] = "\n".join(rows) + "\n"
+        return {"kind": "table", "file": name}
+    raise PaintError(f"cannot write a {type(d).__name__} index as a paint table")
+
+
+def paint_to_dict(paint: Paint, *, stem: str = "paint") -> tuple[dict[str, Any], dict[str, str]]:
+    """The inverse of :func:`paint_from_dict`: the TOML table of ``paint`` and the text of
+    any n,k table it refers to (``{file name: text}``, names ``STEM-coat.nk``,
+    ``STEM-metal.nk``, to be written beside the TOML file)."""
+    tables: dict[str, str] = {}
+    out: dict[str, Any] = {"coat": _dispersion_value(paint.coat, f"{stem}-coat.nk", tables)}
+    if paint.body is not None:
+        b = paint.body
+        out["body"] = {
+            "K": _spectrum_value(b.k_per_um),
+            "S": _spectrum_value(b.s_per_um),
+            "thickness_um": b.thickness_um,
+            "substrate": _spectrum_value(b.substrate),
+        }
+    if paint.metallic is not None:
+        m = paint.metallic
+        out["metallic"] = {
+            "area_fraction": m.area_fraction,
+            "spread_deg": m.spread_deg,
+            "depth_um": m.depth_um,
+            "metal": _dispersion_value(m.metal, f"{stem}-metal.nk", tables),
+        }
+    if paint.pearl is not None:
+        p = paint.pearl
+        out["pearl"] = {
+            "area_fraction": p.area_fraction,
+            "spread_deg": p.spread_deg,
+            "film_nm": p.film_nm,
+            "depth_um": p.depth_um,
+        }
+    return out, tables
