@@ -509,15 +509,18 @@ def test_cone_overlap_matches_source_sampling_off_45_deg(
     (gradient x first moment of the cap-cap lens) what remains is second order. Measured
     against brute-force source sampling (64 x 64 maps, rms slope 0.05 / 0.2, specular
     +-10 deg): normal incidence 0.1 %, ti = 45 0.45 %, ti = 60 0.7 % (asserted 0.3 / 0.7 /
-    1 %); at ti = 85 still 3-9 % (not asserted). The conductor with the seed's Fresnel-only
-    weight exercises the complex Fresnel derivative.
+    1 %). Towards grazing incidence the source is split into sub-cones (facet._source_parts;
+    unsplit, 85 deg read 8-10 % low): 75 deg 0.25 %, 85 deg 0.6 % (asserted 1 and 2 %, the
+    issue's bound at 85). The conductor with the seed's Fresnel-only weight exercises the
+    complex Fresnel derivative.
     """
     surf = Surface.from_heightmap(gaussian_factory(64, slope_rms, seed=3), slope_method="central")
     mx, my, mz = surf.normals
     model = FacetModel(surf, n=n, weighting=weighting)  # type: ignore[arg-type]
     nc = complex(n)
-    for ti, tol in ((0.0, 0.003), (45.0, 0.007), (60.0, 0.01)):
+    for ti, tol in ((0.0, 0.003), (45.0, 0.007), (60.0, 0.01), (75.0, 0.01), (85.0, 0.02)):
         tr = ti + np.array([-10.0, -5.0, 0.0, 5.0, 10.0])
+        tr = tr[tr < 89.0]
         src, w_src = sample_aperture(Cone(6.0), ti, 0.0, n=12)
         dets = np.stack([-np.sin(np.radians(tr)), 0 * tr, np.cos(np.radians(tr))], axis=-1)
         acc = np.zeros(tr.size)
@@ -527,8 +530,8 @@ def test_cone_overlap_matches_source_sampling_off_45_deg(
             acc += w_s * (w @ inside)
         brute = 100 * acc / (w_src.sum() * mx.size)
         np.testing.assert_allclose(model.luminance_pct(ti, tr), brute, rtol=tol)
-        two = [model.reflected_fraction(ti, t, Cone(6.0), Cone(6.0)) for t in tr[[1, 3]]]
-        np.testing.assert_allclose(100 * np.array(two), brute[[1, 3]], rtol=tol)
+        two = [model.reflected_fraction(ti, t, Cone(6.0), Cone(6.0)) for t in tr[[1, 2]]]
+        np.testing.assert_allclose(100 * np.array(two), brute[[1, 2]], rtol=tol)
 
 
 def test_source_reaching_the_horizon_is_rejected(gauss_surface_256: Surface) -> None:
