@@ -113,7 +113,7 @@ def _model(
     slope_method: str,
     weighting: str,
     masking: bool,
-    model: str = "facet",
+    model: str = "auto",
     wavelength_nm: float | None = None,
 ) -> ReflectanceModel:
     from goniolab.models import build_model, model_for
@@ -171,11 +171,12 @@ def predict_brdf(
     step_um: float | None = None,
     slope_method: str = "forward",
     weighting: str = "radiometric",
-    masking: bool = False,
-    model: str = "facet",
+    masking: bool = True,
+    model: str = "auto",
     wavelength_nm: float | None = None,
 ) -> xr.Dataset:
-    """The in-plane curve the facet model predicts (Wittmann et al. 2021; docs/PHYSICS.md).
+    """The in-plane curve a scattering model predicts (facet: Wittmann et al. 2021; wave
+    models and the regime rule: docs/PHYSICS.md).
 
     Parameters
     ----------
@@ -192,8 +193,12 @@ def predict_brdf(
     point
         The BRDF in the exact direction only (no apertures, no ``luminance_pct``).
     model, wavelength_nm
-        ``facet`` (default), ``kirchhoff``, ``rayleigh-rice`` or ``auto``, and the wave
-        models' wavelength (see :func:`goniolab.models.model_for`).
+        ``auto`` (default: the regime rule per geometry), ``facet``, ``kirchhoff`` or
+        ``rayleigh-rice``, and the wave models' wavelength (see
+        :func:`goniolab.models.model_for`).
+    masking
+        Smith masking-shadowing from the measured slopes (default on: it keeps the facet
+        model's albedo at most 1 up to grazing incidence).
 
     Returns
     -------
@@ -261,13 +266,14 @@ def predict_gloss(
     step_um: float | None = None,
     slope_method: str = "forward",
     weighting: str = "radiometric",
-    masking: bool = False,
-    model: str = "facet",
+    masking: bool = True,
+    model: str = "auto",
     wavelength_nm: float | None = None,
 ) -> xr.Dataset:
     """ISO 2813 gloss at 20/60/85 deg and the ASTM D4039/E430 haze and DOI readings.
 
-    ``model`` / ``wavelength_nm`` as in :func:`predict_brdf` (default ``facet``).
+    ``model`` / ``wavelength_nm`` / ``masking`` as in :func:`predict_brdf` (default ``auto``,
+    Smith masking on).
 
     Returns
     -------

@@ -60,8 +60,8 @@ def build_model(
     n: complex | float = 1.55,
     slope_method: SlopeMethod = "forward",
     weighting: Weighting = "radiometric",
-    masking: bool = False,
-    model: str = "facet",
+    masking: bool = True,
+    model: str = "auto",
     wavelength_nm: float | None = None,
     facet: FacetModel | None = None,
 ) -> ReflectanceModel:
@@ -174,8 +174,8 @@ def model_for(
     step_um: float | None = None,
     slope_method: SlopeMethod = "forward",
     weighting: Weighting = "radiometric",
-    masking: bool = False,
-    model: str = "facet",
+    masking: bool = True,
+    model: str = "auto",
     wavelength_nm: float | None = None,
 ) -> ReflectanceModel:
     """The reflectance model of a height map (cached per spec, file version and options).

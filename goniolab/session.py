@@ -119,7 +119,7 @@ class SampleModels:
         n: complex | float,
         known: dict[str, ReflectanceModel] | None = None,
         *,
-        model: str = "facet",
+        model: str = "auto",
         wavelength_nm: float | None = None,
     ):
         self.n = n

@@ -33,9 +33,9 @@ def test_predict_brdf_matches_the_cli_numbers(capsys: pytest.CaptureFixture[str]
     from goniolab.cli import main
 
     ds = gl.predict_brdf("sample:wittmann-3", theta_i_deg=45, theta_r_deg=[40.0, 45.0, 50.0])
-    # the notebook face predicts with the facet model (unmasked); the CLI defaults to auto
+    # the notebook face and the CLI share their defaults (auto, masking on)
     argv = ["predict", "brdf", "sample:wittmann-3", "--theta-r", "40,45,50", "--json"]
-    assert main([*argv, "--model", "facet", "--no-masking"]) == 0
+    assert main(argv) == 0
     doc = json.loads(capsys.readouterr().out)
     np.testing.assert_allclose(ds["luminance_pct"].values, doc["luminance_pct"], rtol=1e-12)
     np.testing.assert_allclose(ds["brdf_sr"].values, doc["brdf_sr"], rtol=1e-12)
