@@ -143,7 +143,14 @@ from pydantic import (
 from pydantic.dataclasses import dataclass as table
 
 from drivers.base import ProfileError
-from drivers.toml_schema import KeyedValueError, TomlFileError, first_issue, plain_reason, read_toml
+from drivers.toml_schema import (
+    KeyedValueError,
+    TomlFileError,
+    first_issue,
+    plain_reason,
+    read_toml,
+    short_repr,
+)
 
 __all__ = [
     "PROFILES_DIR",
@@ -197,9 +204,12 @@ def _known_encoding(value: str) -> str:
     try:
         "".encode(value)
     except LookupError:
-        raise ValueError(f"unknown encoding {value!r}") from None
+        raise ValueError(f"unknown encoding {short_repr(value)}") from None
     return value
 
+
+#: Each field of the direct-data block is a signed 32-bit register pair.
+_INT32_MAX = 2**31 - 1
 
 #: Strict scalars: TOML ``true`` is not a number, ``"0x7E"`` and ``1.0`` are not integers.
 Int = Annotated[int, Strict()]
@@ -278,10 +288,10 @@ class InputBits:
 class DirectDataDefaults:
     """Constant fields of the direct-data block."""
 
-    data_number: Annotated[int, Strict(), Field(ge=0)] = 0
-    operation_type: Annotated[int, Strict(), Field(ge=0)] = 1
+    data_number: Annotated[int, Strict(), Field(ge=0, le=_INT32_MAX)] = 0
+    operation_type: Annotated[int, Strict(), Field(ge=0, le=_INT32_MAX)] = 1
     current: Annotated[int, Strict(), Field(ge=0, le=1000)] = 1000
-    trigger: Int = 1
+    trigger: Annotated[int, Strict(), Field(ge=-_INT32_MAX - 1, le=_INT32_MAX)] = 1
     destination: Annotated[int, Strict(), Field(ge=0, le=1)] = 0
 
 
@@ -428,7 +438,7 @@ def _reply_template(value: str) -> str:
     try:
         template_regex(value)
     except ValueError as exc:
-        raise ValueError(f"bad reply template {value!r}: {exc}") from None
+        raise ValueError(f"bad reply template {short_repr(value)}: {exc}") from None
     return value
 
 
@@ -597,6 +607,39 @@ class _Exposure(_Section):
         return self
 
 
+#: What ``str.format`` raises for a template that does not fit its fields.
+_FORMAT_ERRORS = (KeyError, IndexError, ValueError, AttributeError, TypeError)
+
+#: Values of the kind the simulator (``sim.wire.serial``) and a device put into each STIL
+#: reply: identify, set_exposure, error, and the measure lines.
+_IDENT: dict[str, Any] = {"ident": "STIL RUBY SN 000000"}
+_ERROR: dict[str, Any] = {"code": 2, "message": "exposure out of range"}
+_MEASURE: dict[str, Any] = {
+    **_IDENT,
+    "luminance_pct": 12.3456,
+    "start_nm": 380,
+    "step_nm": 5,
+    "count": 12,
+    "values": ",".join(f"{v:.4f}" for v in range(1, 13)),
+}
+
+
+def _reads_back(template: str, fields: dict[str, Any]) -> str | None:
+    """Why a line written from ``template`` would not be read by it (``None``: it is).
+
+    The simulator writes replies with ``template.format(...)`` and the driver reads them
+    with :func:`template_regex`; a format spec such as ``{luminance_pct:d}`` or
+    ``{count:x}`` passes the parse but breaks one of the two at run time.
+    """
+    try:
+        line = template.format(**fields)
+    except _FORMAT_ERRORS as exc:
+        return f"cannot be written: {exc}"
+    if template_regex(template).match(line) is None:
+        return f"writes {line[:60]!r}, which it does not read back"
+    return None
+
+
 class _Commands(_Section):
     identify: NonEmpty
     set_exposure: NonEmpty
@@ -607,8 +650,8 @@ class _Commands(_Section):
     def _formats(cls, value: str) -> str:
         try:
             value.format(exposure_us=1)
-        except (KeyError, IndexError, ValueError) as exc:
-            raise ValueError(f"bad template {value!r}: {exc}") from None
+        except _FORMAT_ERRORS as exc:  # "{exposure_us.x}" is an AttributeError, "[0]" a TypeError
+            raise ValueError(f"bad template {short_repr(value)}: {exc}") from None
         return value
 
 
@@ -643,6 +686,44 @@ class _StilFile(_File):
     exposure: _Exposure
     commands: _Commands
     replies: _Replies
+
+    @model_validator(mode="after")
+    def _speaks_its_encoding(self) -> _StilFile:
+        """Every line the driver or the simulator writes encodes in ``encoding`` and every
+        reply reads back through its template (else the first reading fails, not the load)."""
+        exposure = {"exposure_us": self.exposure.default_us}
+        c, r = self.commands, self.replies
+        texts = {
+            "command_terminator": self.command_terminator,
+            "reply_terminator": self.reply_terminator,
+            "commands.identify": c.identify,
+            "commands.set_exposure": c.set_exposure.format(**exposure),
+            "commands.measure": c.measure,
+        }
+        replies = {
+            "replies.identify": r.identify,
+            "replies.set_exposure": r.set_exposure,
+            "replies.error": r.error,
+            **{f"replies.measure[{i}]": line for i, line in enumerate(r.measure)},
+        }
+        for key, text in {**texts, **replies}.items():
+            try:
+                text.encode(self.encoding)
+            except UnicodeError:
+                raise KeyedValueError(
+                    key, f"{short_repr(text)} cannot be written in {self.encoding}"
+                ) from None
+        fields: dict[str, dict[str, Any]] = {
+            "commands.set_exposure": exposure,
+            "replies.identify": _IDENT,
+            "replies.set_exposure": exposure,
+            "replies.error": _ERROR,
+        }
+        for key, template in {"commands.set_exposure": c.set_exposure, **replies}.items():
+            why = _reads_back(template, fields.get(key, {**_MEASURE, **exposure}))
+            if why is not None:
+                raise KeyedValueError(key, f"template {short_repr(template)} {why}")
+        return self
 
     def profile(self, path: Path) -> StilProfile:
         return StilProfile(
@@ -690,7 +771,7 @@ class _ZgmFile(_File):
 def _line_pattern(value: str) -> str:
     try:
         pattern = re.compile(value)
-    except re.error as exc:
+    except (re.error, OverflowError, RecursionError) as exc:  # "a{4294967296}": OverflowError
         raise ValueError(f"invalid regex: {exc}") from None
     groups = set(pattern.groupindex)
     if not groups & {"g20", "g60", "g85"}:
@@ -711,6 +792,18 @@ class _LineGlossFile(_File):
     line_terminator: NonEmpty
     encoding: Encoding = "ascii"
     timeout_s: Positive
+
+    @model_validator(mode="after")
+    def _speaks_its_encoding(self) -> _LineGlossFile:
+        for key in ("trigger", "line_terminator"):
+            text = getattr(self, key)
+            try:
+                text.encode(self.encoding)
+            except UnicodeError:
+                raise KeyedValueError(
+                    key, f"{short_repr(text)} cannot be written in {self.encoding}"
+                ) from None
+        return self
 
     def profile(self, path: Path) -> LineGlossProfile:
         return LineGlossProfile(
@@ -775,7 +868,7 @@ def load_profile(name_or_path: str | Path) -> Profile:
     if kind is None:
         raise _error(path, "kind", "missing")
     if not isinstance(kind, str) or kind not in _KINDS:
-        raise _error(path, "kind", f"expected one of {sorted(_KINDS)}, got {kind!r}")
+        raise _error(path, "kind", f"expected one of {sorted(_KINDS)}, got {short_repr(kind)}")
     try:
         schema = _KINDS[kind].model_validate(data)
     except ValidationError as exc:

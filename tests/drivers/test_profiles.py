@@ -205,3 +205,52 @@ def test_bad_line_pattern_and_template(tmp_path: Path) -> None:
         ProfileError, match=r"key 'replies.measure': bad reply template .*unknown field \{lum\}"
     ):
         load_profile(path)
+
+
+@pytest.mark.parametrize(
+    ("profile", "old", "new", "key", "reason"),
+    [
+        # found by tests/drivers/test_profiles_fuzz.py: each loaded, then failed at run time
+        # (AttributeError / TypeError out of the loader, struct.error or UnicodeEncodeError
+        # on the first move or command, a reply the driver cannot read back)
+        ("stil-ruby", '"EXP {exposure_us}"', '"EXP {exposure_us.foo}"', "commands.set_exposure",
+         "has no attribute 'foo'"),
+        ("stil-ruby", '"EXP {exposure_us}"', '"EXP {exposure_us[0]}"', "commands.set_exposure",
+         "not subscriptable"),
+        ("stil-ruby", 'command_terminator = "\\r"', 'command_terminator = "\\u00e9"',
+         "command_terminator", "'é' cannot be written in ascii"),
+        ("stil-ruby", '"Y={luminance_pct:.4f}"', '"Y={luminance_pct:d}"', "replies.measure[0]",
+         "cannot be written: Unknown format code 'd'"),
+        ("stil-ruby", '"Y={luminance_pct:.4f}"', '"Y={luminance_pct:>12}"', "replies.measure[0]",
+         "which it does not read back"),
+        ("stil-ruby", "{count}", "{count:x}", "replies.measure[1]", "does not read back"),
+        ("stil-ruby", 'identify = "{ident}"', 'identify = "{exposure_us}"', "replies.identify",
+         "cannot be written: 'exposure_us'"),
+        ("oriental-az", "data_number = 0", "data_number = 2147483648", "direct_data.data_number",
+         "above the maximum 2147483647"),
+        ("oriental-az", "trigger = 1 ", "trigger = -2147483649 ", "direct_data.trigger",
+         "below the minimum"),
+        ("line-gloss-example", "(?P<g20>\\S+)", "(?P<g20>a{4294967296})", "pattern",
+         "invalid regex: the repetition number is too large"),
+        ("line-gloss-example", 'line_terminator = "\\r\\n"', 'line_terminator = "\\u00b5"',
+         "line_terminator", "cannot be written in ascii"),
+    ],
+)  # fmt: skip
+def test_what_loads_runs(
+    tmp_path: Path, profile: str, old: str, new: str, key: str, reason: str
+) -> None:
+    text = (PROFILES_DIR / f"{profile}.toml").read_text()
+    assert old in text
+    path = write(tmp_path, text.replace(old, new, 1))
+    with pytest.raises(ProfileError) as info:
+        load_profile(path)
+    message = str(info.value)
+    assert message.startswith(f"{path}: key '{key}': "), message
+    assert reason in message and "\n" not in message, message
+
+
+def test_a_long_wrong_kind_is_cut_short(tmp_path: Path) -> None:
+    path = write(tmp_path, AZ_TEXT.replace('kind = "modbus-stepper"', f'kind = "{"(" * 5000}"', 1))
+    with pytest.raises(ProfileError, match=r"key 'kind': expected one of .*\(\(\.\.\.$") as info:
+        load_profile(path)
+    assert len(str(info.value)) < 300

@@ -1,14 +1,17 @@
 """Fuzzing the height-map readers: only HeightMapError may escape, whatever the bytes.
 
 Random byte strings and mutated valid files (byte flips, truncations, insertions) are fed
-to every reader; a reader may return a HeightMap (the mutation kept the file valid) or
-raise HeightMapError naming the file, nothing else, and never hang.
+to every reader, and any JSON to the ``.npy`` sidecar; a reader may return a HeightMap
+(the mutation kept the file valid) or raise one HeightMapError line naming the file,
+nothing else, within hypothesis's deadline per case (a hang or a bomb fails the test).
 """
 
 from __future__ import annotations
 
+import json
 import struct
 import zlib
+from datetime import timedelta
 from pathlib import Path
 
 import numpy as np
@@ -20,8 +23,8 @@ from goniolab.optics.heightmap import HeightMap, HeightMapError
 from goniolab.surfaces import load_heightmap, save_heightmap
 
 FUZZ = settings(
-    max_examples=150,
-    deadline=None,
+    max_examples=120,
+    deadline=timedelta(seconds=3),
     suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
     database=None,
 )
@@ -34,7 +37,9 @@ FORMATS = [
     ("sdf", "sdf", "sdf"),
     ("sdf", "sdf", "sdf-ascii"),
     ("sdf", "sdf", "sdf-int16"),
+    ("sdf", "sdf", "sdf-int32"),
     ("sur", "sur", "sur"),
+    ("sur", "sur", "sur-int16"),
     ("sur", "sur", None),  # DSCOMPRESSED seed
     ("gwy", "gwy", "gwy"),
 ]
@@ -85,7 +90,7 @@ def _feed(tmp: Path, ext: str, fmt: str, data: bytes) -> None:
         try:
             hm = load_heightmap(p, fmt=fmt, step_um=step)
         except HeightMapError as exc:
-            assert str(exc).startswith(f"fuzz.{ext}: "), str(exc)
+            assert str(exc).startswith(f"fuzz.{ext}: ") and "\n" not in str(exc), str(exc)
         else:
             assert hm.z_um.ndim == 2 and hm.z_um.size > 0
             assert np.isfinite(hm.dx_um) and hm.dx_um > 0
@@ -130,5 +135,51 @@ def test_mutated_valid_files(
     @given(st.data())
     def run(data: st.DataObject) -> None:
         _feed(tmp_path, ext, fmt, data.draw(_mutations(seed)))
+
+    run()
+
+
+_json_values = st.recursive(
+    st.one_of(
+        st.none(), st.booleans(), st.integers(-(2**70), 2**70),
+        st.floats(allow_nan=False, allow_infinity=False),
+        st.sampled_from([0, -1, 1e-320, 1e308, 0.5, "nm", "um", "m", "A", "pm", "furlong", "",
+                         "\u00b5m", "0.5"]),
+        st.text(max_size=8),
+    ),
+    lambda inner: st.one_of(st.lists(inner, max_size=3),
+                            st.dictionaries(st.text(max_size=4), inner, max_size=3)),
+    max_leaves=6,
+)  # fmt: skip
+_sidecar_keys = st.sampled_from(["dx_um", "dy_um", "step_um", "z_unit", "z_scale", "meta", "dz"])
+
+
+def test_npy_sidecar(tmp_path: Path, seeds: dict[str, bytes]) -> None:
+    """Any JSON in the ``.npy.json`` sidecar (values, NaN/Infinity tokens, other documents):
+    a map with positive finite steps, or one HeightMapError line naming the sidecar."""
+    (tmp_path / "fuzz.npy").write_bytes(seeds["npy"])
+
+    @FUZZ
+    @given(
+        body=st.one_of(
+            st.dictionaries(_sidecar_keys, _json_values, max_size=4).map(json.dumps),
+            _json_values.map(json.dumps),
+            st.sampled_from(['{"dx_um": NaN}', '{"step_um": Infinity}', '{"dx_um": -Infinity}',
+                             '{"step_um": 1e999}', "[" * 100_000, "{", "", "\ufeff{}"]),
+            st.binary(max_size=64).map(lambda b: b.decode("latin-1")),
+        ),
+        step=st.sampled_from([None, 0.5]),
+    )  # fmt: skip
+    def run(body: str, step: float | None) -> None:
+        (tmp_path / "fuzz.npy.json").write_text(body, encoding="utf-8")
+        try:
+            hm = load_heightmap(tmp_path / "fuzz.npy", step_um=step)
+        except HeightMapError as exc:
+            message = str(exc)
+            assert message.startswith(("fuzz.npy: ", "fuzz.npy.json: ")), message
+            assert "\n" not in message and len(message) < 600, message
+        else:
+            assert hm.z_um.shape == (4, 5)
+            assert np.isfinite(hm.dx_um) and hm.dx_um > 0 and np.isfinite(hm.dy_um) and hm.dy_um > 0
 
     run()
