@@ -105,3 +105,51 @@ def test_an_old_store_gains_the_colour_columns_and_keeps_its_rows(tmp_path: Path
                     measured_theta_i_deg=45, measured_theta_r_deg=50, luminance_pct=2.0,
                     raw={}, timestamp=2.0, colour=dict.fromkeys("XYZLabC", 1.0) | {"h_deg": 9.0})  # fmt: skip
         assert s.points(rid)[1].colour == dict.fromkeys("XYZLabC", 1.0) | {"h_deg": 9.0}
+
+
+def _spoil(r: SpectroReading, how: str) -> SpectroReading:
+    wl, v = list(r.wavelengths_nm), list(r.values)
+    if how == "length":
+        v = v[:-1]
+    elif how == "negative":
+        v[5] = -0.25
+    elif how == "nan":
+        v[3] = float("nan")
+    elif how == "short":
+        wl, v = wl[2:-4], v[2:-4]
+    return SpectroReading(tuple(wl), tuple(v), r.luminance_pct, r.exposure_us)
+
+
+@pytest.mark.parametrize(
+    ("how", "needle"),
+    [
+        ("length", "40 values for 41 wavelengths"),
+        ("negative", "value at 430 nm is negative (-0.25)"),
+        ("nan", "value at 410 nm is nan"),
+        ("short", "wavelengths 400-740 nm do not cover 380-780 nm"),
+    ],
+)
+async def test_a_bad_spectrum_is_named_and_nothing_is_lost(
+    fake_lab: FakeLab, store: RunStore, how: str, needle: str
+) -> None:
+    real = fake_lab.spectro.measure
+    calls = 0
+
+    async def measure() -> SpectroReading:  # the second geometry's readings are spoilt
+        nonlocal calls
+        calls += 1
+        r = await real()
+        return _spoil(r, how) if calls == 2 else r
+
+    fake_lab.spectro.measure = measure  # type: ignore[method-assign]
+    runner, bus = make_runner(fake_lab, store, BrdfPlan(45.0, (20.0, 30.0, 40.0)))
+    events = await drive(runner, bus, lambda ev: None)
+    pts = store.points(runner.run_id)
+    assert [p.theta_r_deg for p in pts] == [20.0, 30.0, 40.0]  # every reading stored
+    good, bad, after = pts
+    assert good.colour is not None and after.colour is not None and bad.colour is None
+    assert bad.colour_error.startswith("spectrum: ") and needle in bad.colour_error
+    assert bad.luminance_pct > 0 and bad.raw  # the reading and its spectrum are kept
+    errs = [e for e in events if isinstance(e, InstrumentError)]
+    assert len(errs) == 1 and not errs[0].fatal and needle in errs[0].message
+    assert store.get_run(runner.run_id).status == "done"
