@@ -35,7 +35,7 @@ from goniolab.config import LabConfig
 from goniolab.errors import UserError
 from goniolab.lab import Lab
 from goniolab.optics.models import ReflectanceModel
-from goniolab.scan.align import AlignPlan, AlignResult
+from goniolab.scan.align import AlignAborted, AlignPlan, AlignResult, AlignRunner
 from goniolab.scan.colour import PointColour
 from goniolab.scan.events import EventBus, RunState
 from goniolab.scan.gloss import GlossLogger, predict_gloss
@@ -319,21 +319,27 @@ class ScanSession:
             raise
 
     async def align(
-        self, plan: AlignPlan, *, write_config: str | Path | None = None
+        self,
+        plan: AlignPlan,
+        *,
+        write_config: str | Path | None = None,
+        started: Callable[[AlignRunner], None] | None = None,
     ) -> tuple[int, AlignResult]:
         """Run an alignment (:mod:`goniolab.scan.align`): home the arms if needed, measure
         the black-glass standard and the sample (swapped by the simulated lab, or by the
         operator), store the readings and the result with a new ``align`` run, write
-        ``[alignment]`` into ``write_config`` when given, and park the arms.
+        ``[alignment]`` into ``write_config`` when given, and park the arms. The lab's
+        goniometer then corrects every move with the result (later scans of this session
+        see the requested angles). ``started`` gets the runner before its first reading
+        (the TUI keeps it to abort).
 
         Raises
         ------
         UserError
-            The alignment failed (an instrument fault, no peak found); the run is marked
-            ``failed`` with the reason.
+            The alignment failed (an instrument fault, no peak found; the run is marked
+            ``failed`` with the reason) or was aborted (marked ``aborted``).
         """
         from goniolab.config import write_alignment
-        from goniolab.scan.align import AlignRunner
 
         cfg = self.config
         model = await self.models.get(plan.sample)
@@ -363,10 +369,14 @@ class ScanSession:
             bus=self.bus,
             move_timeout_s=cfg.goniometer.move_timeout_s,
         )
+        if started is not None:
+            started(runner)
         try:
             if not await self.homed():
                 await self.home()
             result = await runner.run()
+        except AlignAborted as exc:
+            raise UserError(f"align run {run_id} {exc}", exit_code=1) from exc
         except (DeviceError, RuntimeError, ValueError) as exc:
             self.store.set_status(run_id, RunState.FAILED.value, str(exc))
             raise UserError(f"align run {run_id} failed: {exc}", exit_code=1) from exc
@@ -384,6 +394,7 @@ class ScanSession:
                 },
                 note=f"goniolab scan --plan align, run {run_id}",
             )
+        self.lab.goniometer.corrections_deg = result.corrections_deg()
         return run_id, result
 
     def _specimen_hook(self) -> SpecimenHook:

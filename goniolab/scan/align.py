@@ -71,6 +71,7 @@ from goniolab.store import RunStore
 
 __all__ = [
     "BLACK_GLASS_N",
+    "AlignAborted",
     "AlignPlan",
     "AlignResult",
     "AlignRunner",
@@ -83,6 +84,10 @@ BLACK_GLASS_N = 1.567
 
 FloatArray = NDArray[np.float64]
 SpecimenHook = Callable[[str], Awaitable[None]]
+
+
+class AlignAborted(RuntimeError):
+    """The alignment was aborted (:meth:`AlignRunner.abort`) before its result."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -295,9 +300,20 @@ class AlignRunner:
         self._exposure_us = plan.exposure_us
         self._index = 0
         self._position: tuple[float, float] | None = None
+        self._abort = False
         n_coarse = len(plan.sweeps(plan.theta_i_deg[0])[0])
         n_fine = len(plan.fine(0.0))
         self._total = 2 * len(plan.theta_i_deg) * (n_coarse + n_fine)
+
+    @property
+    def aborted(self) -> bool:
+        """:meth:`abort` was called."""
+        return self._abort
+
+    def abort(self) -> None:
+        """Stop before the next reading: :meth:`run` stores the run as aborted (its
+        readings kept, no result) and raises :class:`AlignAborted`."""
+        self._abort = True
 
     async def _go(self, ti: float, tr: float) -> None:
         """Move to (ti, tr), approaching both arms from below (the scans' direction)."""
@@ -313,6 +329,8 @@ class AlignRunner:
         self._position = (ti, tr)
 
     async def _read(self, specimen: str, phase: str, ti: float, tr: float) -> float:
+        if self._abort:
+            raise AlignAborted(f"aborted after {self._index} readings")
         await self._go(ti, tr)
         reading, self._exposure_us = await self.exposure.read(self.spectro, self._exposure_us)
         value = float(reading.luminance_pct)
@@ -348,8 +366,14 @@ class AlignRunner:
         )
         return value
 
-    async def _peak_sweeps(self, specimen: str, ti: float) -> tuple[FloatArray, FloatArray]:
-        """Coarse sweep, then fine sweep around the coarse maximum; all (tr, value)."""
+    async def _peak_sweeps(
+        self, specimen: str, ti: float
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Coarse sweep, then fine sweep around the coarse maximum, extended a fine step at
+        a time (up to the coarse span) on a side whose half-maximum crossing it misses.
+
+        Returns the coarse angles and values, then the fine ones sorted by angle.
+        """
         coarse, _ = self.plan.sweeps(ti)
         lo, hi = self.goniometer.detector.limits_deg
         coarse = coarse[(coarse >= lo) & (coarse <= hi)]
@@ -357,8 +381,30 @@ class AlignRunner:
         centre = float(coarse[int(np.argmax(c_vals))])
         fine = self.plan.fine(centre)
         fine = fine[(fine >= lo) & (fine <= hi)]
-        f_vals = [await self._read(specimen, "fine", ti, float(t)) for t in fine]
-        return np.concatenate([coarse, fine]), np.asarray(c_vals + f_vals)
+        readings = {float(t): await self._read(specimen, "fine", ti, float(t)) for t in fine}
+        step = self.plan.fine_step_deg
+        for _ in range(round(self.plan.coarse_span_deg / step)):
+            xs = sorted(readings)
+            ys = [readings[x] for x in xs]
+            k = int(np.argmax(ys))
+            half = 0.5 * ys[k]
+            more = []
+            if min(ys[: k + 1]) > half and xs[0] - step >= lo:
+                more.append(round(xs[0] - step, 9))
+            if min(ys[k:]) > half and xs[-1] + step <= hi:
+                more.append(round(xs[-1] + step, 9))
+            if not more:
+                break
+            self._total += len(more)
+            for t in more:
+                readings[t] = await self._read(specimen, "fine", ti, t)
+        xs = sorted(readings)
+        return (
+            coarse,
+            np.asarray(c_vals),
+            np.asarray(xs, dtype=np.float64),
+            np.asarray([readings[x] for x in xs]),
+        )
 
     async def run(self) -> AlignResult:
         """Measure and fit; the corrections of an earlier alignment are off meanwhile."""
@@ -378,29 +424,30 @@ class AlignRunner:
             vals: list[float] = []
             peaks: list[dict[str, Any]] = []
             for ti in sorted(self.plan.theta_i_deg):
-                tr, v = await self._peak_sweeps("standard", ti)
-                lamp.extend([ti] * tr.size)
-                det.extend(tr.tolist())
-                vals.extend(v.tolist())
-                fine = tr.size - len(self.plan.sweeps(ti)[0])
-                mid = half_max_midpoint(np.sort(tr[-fine:]), v[-fine:][np.argsort(tr[-fine:])])
-                peaks.append({"specimen": "standard", "theta_i_deg": ti, "peak_deg": mid,
-                              "amplitude_pct": float(v.max())})  # fmt: skip
+                ct, cv, ft, fv = await self._peak_sweeps("standard", ti)
+                lamp.extend([ti] * (ct.size + ft.size))
+                det.extend(ct.tolist() + ft.tolist())
+                vals.extend(cv.tolist() + fv.tolist())
+                peaks.append({"specimen": "standard", "theta_i_deg": ti,
+                              "peak_deg": half_max_midpoint(ft, fv),
+                              "amplitude_pct": float(max(cv.max(), fv.max()))})  # fmt: skip
             d_l, d_d, rms = fit_standard(
                 lamp, det, vals, source=self.predictor.source, detector=self.predictor.detector
             )
             await self.place_specimen("sample")
             self._position = None
             taus: list[tuple[float, float]] = []
+            step = self.plan.fine_step_deg
             for ti in sorted(self.plan.theta_i_deg):
-                tr, v = await self._peak_sweeps("sample", ti)
-                n_fine = tr.size - len(self.plan.sweeps(ti)[0])
-                ft, fv = tr[-n_fine:], v[-n_fine:]
-                order = np.argsort(ft)
-                ft, fv = ft[order], fv[order]
+                _, _, ft, fv = await self._peak_sweeps("sample", ti)
                 mid = half_max_midpoint(ft, fv)
-                pred = await self.predictor.predict(ti, ft.tolist())
-                pmid = half_max_midpoint(ft, pred)
+                # the prediction at the nominal geometry, on the same grid phase as the
+                # fine sweep (same interpolation bias), centred on the nominal specular:
+                # the measured sweep is centred on the shifted peak and may not hold the
+                # predicted one's crossings
+                n = round((self.plan.fine_span_deg + self.plan.coarse_span_deg) / step)
+                pt = np.asarray(ti + step * np.arange(-n, n + 1), dtype=np.float64)
+                pmid = half_max_midpoint(pt, await self.predictor.predict(ti, pt.tolist()))
                 delta = mid - pmid
                 tau = 0.5 * (delta - (d_l - d_d))
                 if math.isfinite(tau) and math.isfinite(pmid):
@@ -422,6 +469,15 @@ class AlignRunner:
                 peaks=peaks,
                 readings=self._index,
             )
+        except AlignAborted as exc:
+            self.store.set_status(self.run_id, RunState.ABORTED.value, str(exc))
+            self.bus.publish(
+                StateChanged(run_id=self.run_id, state=RunState.ABORTED, reason=str(exc))
+            )
+            self.bus.publish(
+                RunFinished(run_id=self.run_id, state=RunState.ABORTED, reason=str(exc), summary={})
+            )
+            raise
         finally:
             self.goniometer.corrections_deg = saved
         self.store.update_model(self.run_id, {"alignment": result.as_dict()})

@@ -43,7 +43,21 @@ from goniolab.tui.screens import RunsScreen
 from goniolab.tui.view_model import ArmState, Backend, ScanSetup
 from goniolab.tui.widgets import ComparisonPanel, GlossLog, ScanForm, StatusPanel
 
-__all__ = ["GonioApp"]
+__all__ = ["GonioApp", "alignment_note"]
+
+
+def alignment_note(run_id: int, summary: dict[str, object]) -> str:
+    """The notification of a finished alignment: what it found, and that it is applied."""
+
+    def deg(key: str) -> str:
+        value = summary.get(key)
+        return f"{value:+.3f} deg" if isinstance(value, int | float) else "?"
+
+    return (
+        f"run {run_id}: lamp zero {deg('lamp_zero_deg')}, detector zero "
+        f"{deg('detector_zero_deg')}, sample tilt {deg('sample_tilt_deg')}; "
+        "written to [alignment], later moves corrected"
+    )
 
 
 class GonioApp(App[int]):
@@ -73,6 +87,7 @@ class GonioApp(App[int]):
         Binding("s", "start_scan", "Start"),
         Binding("space", "toggle_pause", "Pause/Resume", key_display="space", priority=True),
         Binding("x", "abort_scan", "Abort"),
+        Binding("a", "align", "Align"),
         Binding("g", "read_gloss", "Gloss"),
         Binding("h", "home", "Home"),
         Binding("l", "toggle_log", "Residual/log"),
@@ -105,6 +120,7 @@ class GonioApp(App[int]):
         self.comparison = Comparison()
         self.run_state = RunState.IDLE
         self.run_id = 0
+        self.run_kind = "brdf"  # of run_id: "brdf" or "align"
         self.progress: tuple[int, int, float] = (0, 0, math.nan)
         self.events_seen = 0
         self.ready = asyncio.Event()
@@ -230,6 +246,20 @@ class GonioApp(App[int]):
             self._starting = False
             self._pause_on_start = False
 
+    @work(exclusive=True, group="start")
+    async def _align(self) -> None:
+        try:
+            sample = self.query_one(ScanForm).read_sample()
+            await self.backend.align(sample)
+            self.notify("aligning: black-glass standard, then the sample (x aborts)", title="Align")
+        except UserError as exc:
+            self.notify(str(exc), title="Align", severity="error", timeout=8)
+        except (DeviceError, OSError) as exc:
+            self.show_banner(f"alignment could not start: {exc}")
+            self.notify(str(exc), title="Align", severity="error", timeout=8)
+        finally:
+            self._starting = False
+
     @work(group="gloss")
     async def _read_gloss(self) -> None:
         try:
@@ -300,9 +330,15 @@ class GonioApp(App[int]):
         self.events_seen += 1
         panel = self.query_one(StatusPanel)
         if isinstance(ev, RunStarted):
+            if ev.kind == "align":  # its readings are not a curve of the form's sweep
+                self.run_id, self.run_kind = ev.run_id, ev.kind
+                self.progress = (0, ev.total_points, math.nan)
+                self.hide_banner()
+                self.show_run_line()
+                return
             if ev.kind != "brdf":
                 return
-            self.run_id = ev.run_id
+            self.run_id, self.run_kind = ev.run_id, ev.kind
             self.comparison.clear(run_id=ev.run_id, sample=ev.sample)
             self.progress = (0, ev.total_points, math.nan)
             self.hide_banner()
@@ -314,6 +350,8 @@ class GonioApp(App[int]):
         elif isinstance(ev, ArmsMoved):
             panel.show_angles(ev.theta_i_deg, ev.theta_r_deg, ev.moving)
         elif isinstance(ev, PointMeasured):
+            if self.run_kind == "align" and ev.run_id == self.run_id:
+                return
             self.comparison.add_measured(ev)
             self.schedule_redraw()
         elif isinstance(ev, PointPredicted):
@@ -352,13 +390,17 @@ class GonioApp(App[int]):
             elif ev.state is RunState.FAILED:
                 severity = "error"
                 self.show_banner(text)
-            self.notify(text, title="Scan", severity=severity)
+            if self.run_kind == "align" and ev.state is RunState.DONE:
+                text = alignment_note(ev.run_id, ev.summary)
+            self.notify(text, title="Align" if self.run_kind == "align" else "Scan",
+                        severity=severity, timeout=15 if self.run_kind == "align" else 5)  # fmt: skip
         self.show_run_line()
 
     def show_run_line(self) -> None:
         """The one-line run status under the arm table."""
         done, total, eta_s = self.progress
-        text = f"run {self.run_id}: {self.run_state.value}" if self.run_id else "run: idle"
+        kind = " (align)" if self.run_kind == "align" else ""
+        text = f"run {self.run_id}{kind}: {self.run_state.value}" if self.run_id else "run: idle"
         if total:
             text += f"  {done}/{total}"
             if math.isfinite(eta_s) and self.run_state is RunState.RUNNING:
@@ -416,9 +458,27 @@ class GonioApp(App[int]):
         self._starts += 1
         self._start()
 
+    def action_align(self) -> None:
+        """Align the arms and the sample from the data (key ``a``; ``scan --plan align``):
+        the black-glass standard, then the form's sample; the result is written into the
+        config's ``[alignment]`` and corrects every later move."""
+        if not self.ready.is_set():
+            self.notify("the lab is not ready (not homed)", title="Align", severity="warning")
+            return
+        if self.backend.running or self._starting:
+            self.notify("a run is already in progress", title="Align", severity="warning")
+            return
+        self._starting = True
+        self._starts += 1
+        self._align()
+
     def action_toggle_pause(self) -> None:
         """Pause a running scan or resume a paused one (key ``space``)."""
-        if self._starting:
+        if self.backend.running and self.run_kind == "align":
+            self.notify(
+                "an alignment cannot pause (x aborts it)", title="Align", severity="warning"
+            )
+        elif self._starting:
             self._pause_on_start = not self._pause_on_start
             what = "will pause before the first reading" if self._pause_on_start else "will run"
             self.notify(f"the scan {what}", title="Scan")

@@ -13,6 +13,11 @@ SCAN_COMMANDS: tuple[tuple[str, str, str], ...] = (
     ("Start scan", "start_scan", "Start a scan with the setup form's values (key s)"),
     ("Pause / resume scan", "toggle_pause", "Pause after the current point, or resume (space)"),
     ("Abort scan", "abort_scan", "Stop after the current point; run marked aborted (x)"),
+    (
+        "Align arms and sample",
+        "align",
+        "Arm zero offsets and sample tilt from the data, into [alignment] (a)",
+    ),
     ("Read glossmeter", "read_gloss", "One 20/60/85 reading beside the prediction (g)"),
     ("Home the arms", "home", "Reset the arms' alarms and home them again (h)"),
     ("Toggle residual / log view", "toggle_log", "Side plot: residuals or log10 curves (l)"),

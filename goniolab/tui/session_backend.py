@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+from collections.abc import Callable
 from contextlib import AsyncExitStack
 from pathlib import Path
 from typing import Any
@@ -21,6 +22,7 @@ from drivers.base import GLOSS_ANGLES_DEG, DeviceError
 from goniolab.config import LabConfig, load_lab_config
 from goniolab.errors import UserError
 from goniolab.optics.models import ReflectanceModel
+from goniolab.scan.align import AlignPlan, AlignRunner
 from goniolab.scan.events import (
     ColourPredicted,
     EventBus,
@@ -92,6 +94,7 @@ class SessionBackend:
         self.gloss: GlossSession | None = None
         self._stack = AsyncExitStack()
         self._runner: ScanRunner | None = None
+        self._align_runner: AlignRunner | None = None
         self._task: asyncio.Task[None] | None = None
         self._gloss_task: asyncio.Task[None] | None = None
         self._gloss_runs: dict[str, int] = {}
@@ -142,8 +145,8 @@ class SessionBackend:
     async def close(self) -> None:
         """Abort a running scan (the runner parks the arms), then release everything."""
         self._closed = True
-        if self._runner is not None and self.running:
-            self._runner.abort()
+        if self.running:
+            self.abort()
         for task in (self._task, self._gloss_task):
             if task is not None and not task.done():
                 if task is self._gloss_task:
@@ -239,6 +242,53 @@ class SessionBackend:
         )
         return runner.run_id
 
+    async def align(self, sample: str) -> int:
+        """Start ``scan --plan align`` for ``sample`` in a task (the CLI's default plan,
+        :class:`~goniolab.scan.align.AlignPlan`); ``[alignment]`` is written into the
+        config file and the arms correct every later move. Return the run id once the
+        run is stored."""
+        session = self._require_open()
+        if self.running:
+            raise UserError("a run is already in progress")
+        spec = _sample_spec(sample) if sample else self.sample
+        check_sample(spec, option="align: sample", given=sample)
+        plan = AlignPlan(sample=spec, exposure_us=self.config.spectro.exposure_us)
+        loop = asyncio.get_running_loop()
+        started: asyncio.Future[int] = loop.create_future()
+
+        def on_start(runner: AlignRunner) -> None:
+            self._align_runner = runner
+            started.set_result(runner.run_id)
+
+        self._scan_sample = spec
+        self._task = task = loop.create_task(self._align(session, plan, on_start), name="tui-align")
+        waiters: set[asyncio.Future[Any]] = {started, task}
+        await asyncio.wait(waiters, return_when=asyncio.FIRST_COMPLETED)
+        if started.done():
+            return started.result()
+        task.result()  # the error that stopped it before the run was stored
+        raise UserError("the alignment ended before it started", exit_code=1)
+
+    async def _align(
+        self, session: ScanSession, plan: AlignPlan, on_start: Callable[[AlignRunner], None]
+    ) -> None:
+        """Run the alignment; a failure after the run was stored becomes events."""
+        try:
+            await session.align(plan, write_config=self.config_path, started=on_start)
+        except (UserError, DeviceError, StoreError, OSError) as exc:
+            runner = self._align_runner
+            if runner is None or runner.plan is not plan:
+                raise  # not started: start() reports it
+            if runner.aborted:
+                return  # the runner published its RunFinished(aborted)
+            reason = str(exc)
+            self.bus.publish(
+                InstrumentError(run_id=runner.run_id, device="lab", message=reason, fatal=True)
+            )
+            self.bus.publish(
+                RunFinished(run_id=runner.run_id, state=RunState.FAILED, reason=reason, summary={})
+            )
+
     async def _run(self, session: ScanSession, runner: ScanRunner) -> None:
         """Run to the end; a refused plan or an unexpected error becomes events, not a crash."""
         run_id = runner.run_id
@@ -270,6 +320,8 @@ class SessionBackend:
             self._runner.resume()
 
     def abort(self) -> None:
+        if self._align_runner is not None and self.running:
+            self._align_runner.abort()
         if self._runner is not None:
             self._runner.abort()
 

@@ -183,6 +183,13 @@ class Backend(Protocol):
         """Start a scan in the background; return its run id. Raises UserError on bad setup."""
         ...
 
+    async def align(self, sample: str) -> int:
+        """Start an alignment (``scan --plan align``: black-glass standard, then
+        ``sample``) in the background; return its run id. Its result is published with
+        the run's ``RunFinished``, written into the config's ``[alignment]`` and applied to
+        later moves. Raises UserError when a run is in progress or the setup is bad."""
+        ...
+
     def pause(self) -> None:
         """Ask the runner to pause after the current point."""
         ...
@@ -192,7 +199,8 @@ class Backend(Protocol):
         ...
 
     def abort(self) -> None:
-        """Ask the runner to stop after the current point (run marked aborted)."""
+        """Ask the runner (scan or alignment) to stop after the current point (run marked
+        aborted)."""
         ...
 
     async def arm_states(self) -> tuple[ArmState, ArmState]:

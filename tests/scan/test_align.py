@@ -117,13 +117,18 @@ def run_json(args: list[str]) -> dict[str, object]:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("seed", [3, 5])
+@pytest.mark.parametrize("seed", [225, 5])
 def test_align_on_the_twin_recovers_offsets_and_tilt_within_005_deg(
     tmp_path: Path, seed: int
 ) -> None:
+    # seed 225 draws all three near the +/-1 deg edge (-0.79, -0.97, -0.90 deg: the sample's
+    # peak is 1.6 deg off, beyond the fine sweep's half-maximum crossings of the
+    # prediction); seed 5 a large tilt (0.92 deg) and closes the loop with a scan;
+    # bench/bench_align.py runs 20 sessions
     cfg_path = misaligned_config(tmp_path, seed)
     truth = draw_session(load_lab_config(cfg_path))
-    assert max(abs(v) for v in truth.values()) > 0.3  # a real misalignment to find
+    keys = ("lamp_zero_offset_deg", "detector_zero_offset_deg", "sample_tilt_deg")
+    assert min(abs(truth[k]) for k in keys) > (0.75 if seed == 225 else 0.02)
     got = run_json(
         ["scan", "--config", str(cfg_path), "--plan", "align", "--time-scale", "0", "--json"]
     )

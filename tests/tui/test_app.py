@@ -356,3 +356,32 @@ async def test_single_key_commands_work_while_a_form_field_has_focus() -> None:
         await backend.release(1)
         await wait_until(pilot, lambda: app.run_state is RunState.ABORTED)
         assert field.value == "35.5"
+
+
+async def test_a_aligns_reports_the_result_and_keeps_its_readings_off_the_curve() -> None:
+    backend = ScriptedBackend()
+    app = GonioApp(backend, poll_hz=0)
+    async with app.run_test(size=SIZE) as pilot:
+        await wait_until(pilot, app.ready.is_set)
+        await pilot.press("a")
+        await wait_until(pilot, lambda: app.run_state is RunState.RUNNING)
+        assert backend.setups[-1].sample == "sample:wittmann-3"  # the form's sample
+        await pilot.press("space")
+        assert notes(app)[-1] == "Align: an alignment cannot pause (x aborts it)"
+        await pilot.press("s")
+        assert notes(app)[-1] == "Scan: a scan is already running"
+        await backend.release(3)
+        await wait_until(pilot, lambda: app.run_state is RunState.DONE)
+        assert app.comparison.n_readings == 0  # the sweeps of the standard are no BRDF curve
+        assert notes(app)[-1] == (
+            "Align: run 1: lamp zero +0.125 deg, detector zero -0.250 deg, sample tilt "
+            "+0.500 deg; written to [alignment], later moves corrected"
+        )
+        run_line = str(app.query_one(StatusPanel).query_one("#run-state", Static).render())
+        assert "run 1 (align): done  3/3" in run_line
+        # a scan afterwards is a BRDF run again: its points are the curve
+        await pilot.press("s")
+        await wait_until(pilot, lambda: app.run_kind == "brdf" and app.run_id == 2)
+        await backend.release(100)
+        await wait_until(pilot, lambda: app.run_state is RunState.DONE)
+        assert app.comparison.n_readings == 33

@@ -398,3 +398,49 @@ async def test_colour_columns_swatch_and_colour_plot(tmp_path: Path) -> None:
         np.testing.assert_allclose(ds.y, c.measured_lab[:, 0])
         await pilot.press("c")
         assert panel.plot_mode == "a*b*" and "measured b*" in panel.main_plot._labels
+
+
+@pytest.mark.slow
+async def test_a_aligns_the_sim_lab_writes_alignment_and_corrects_the_arms(
+    tmp_path: Path,
+) -> None:
+    # the ideal twin with known misalignments ([sim] offsets) and a narrow Beckmann sample
+    # (FWHM ~5 deg: the align sweeps bracket it); abort first, then align to the end
+    path = sim_config(tmp_path)
+    text = path.read_text()
+    for key, value in (
+        ("sample_tilt_deg", 0.3),
+        ("lamp_zero_offset_deg", -0.4),
+        ("detector_zero_offset_deg", 0.2),
+    ):
+        text = re.sub(rf"(?m)^{key} = .*$", f"{key} = {value}", text)
+    path.write_text(text)
+    backend = SessionBackend(path, model=AnalyticModel("beckmann", alpha=0.02))
+    app = GonioApp(backend, poll_hz=0)
+    async with app.run_test(size=SIZE) as pilot:
+        await wait_until(pilot, app.ready.is_set)
+        await pilot.press("a")
+        await wait_until(pilot, lambda: app.progress[0] >= 3, max_turns=100_000)
+        await pilot.press("x")
+        await wait_until(pilot, lambda: app.run_state is RunState.ABORTED, max_turns=100_000)
+        assert "[alignment]" not in path.read_text()
+        await wait_until(pilot, lambda: not backend.running)
+        await pilot.press("a")
+        await wait_until(
+            pilot,
+            lambda: app.run_id == 2 and app.run_state is RunState.DONE and not backend.running,
+            max_turns=100_000,
+        )
+        assert app.comparison.n_readings == 0
+        assert any("run 2: lamp zero -0.4" in n.message for n in app._notifications)
+        got = load_lab_config(path).alignment
+        assert got.run == 2
+        assert got.lamp_zero_deg == pytest.approx(-0.4, abs=0.02)
+        assert got.detector_zero_deg == pytest.approx(0.2, abs=0.02)
+        assert got.sample_tilt_deg == pytest.approx(0.3, abs=0.02)
+        assert backend.session is not None
+        assert backend.session.lab.goniometer.corrections_deg == pytest.approx(
+            got.corrections_deg(), abs=1e-4
+        )
+    with RunStore(tmp_path / "runs.sqlite") as store:
+        assert [store.get_run(r).status for r in (1, 2)] == ["aborted", "done"]

@@ -12,6 +12,7 @@ from __future__ import annotations
 import asyncio
 import math
 from collections.abc import Callable
+from typing import ClassVar
 
 from textual.pilot import Pilot
 
@@ -131,6 +132,47 @@ class ScriptedBackend:
         self._abort = False
         self._task = asyncio.get_running_loop().create_task(self._run(run_id, setup))
         return run_id
+
+    #: What the scripted alignment "finds" (its RunFinished summary).
+    ALIGNMENT: ClassVar[dict[str, float]] = {
+        "lamp_zero_deg": 0.125,
+        "detector_zero_deg": -0.25,
+        "sample_tilt_deg": 0.5,
+    }
+
+    async def align(self, sample: str) -> int:
+        """A scripted alignment: 3 readings (gated like a scan's points), then ALIGNMENT."""
+        if self.running:
+            raise UserError("a run is already in progress")
+        self.setups.append(ScanSetup(sample, 20.0, 15.0, 25.0, 5.0, 1))
+        run_id = len(self.setups)
+        self._abort = False
+        self._task = asyncio.get_running_loop().create_task(self._align(run_id))
+        return run_id
+
+    async def _align(self, run_id: int) -> None:
+        pub = self.bus.publish
+        pub(RunStarted(run_id=run_id, kind="align", total_points=3, plan={}, sample=""))
+        pub(StateChanged(run_id=run_id, state=RunState.RUNNING))
+        for index, tr in enumerate((15.0, 20.0, 25.0)):
+            if self.gated:
+                async with self._gate:
+                    await self._gate.wait_for(lambda: self._allowed > 0)
+                    self._allowed -= 1
+            if self._abort:
+                pub(RunFinished(run_id=run_id, state=RunState.ABORTED, reason="", summary={}))
+                return
+            pub(
+                PointMeasured(
+                    run_id=run_id, index=index, repeat=0, theta_i_deg=20.0, theta_r_deg=tr,
+                    luminance_pct=gaussian_pct(tr), measured_theta_i_deg=20.0,
+                    measured_theta_r_deg=tr,
+                )
+            )  # fmt: skip
+            pub(Progress(run_id=run_id, done=index + 1, total=3, eta_s=0.0))
+        pub(
+            RunFinished(run_id=run_id, state=RunState.DONE, reason="", summary=dict(self.ALIGNMENT))
+        )
 
     async def release(self, n: int) -> None:
         """Let ``n`` more points run."""

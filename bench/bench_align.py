@@ -1,0 +1,83 @@
+"""Recovery of ``scan --plan align`` on the realistic twin over many sessions.
+
+Each seed draws both arms' zero offsets and the sample tilt uniformly in +/-1 deg
+(``[sim.twin] *_range_deg = 1.0``, 0.02 deg backlash); the plan runs at --time-scale 0 and
+its estimates are compared with the drawn truth (``goniolab.lab.draw_session``).
+
+    .venv/bin/python bench/bench_align.py [--seeds 0:20] [--sample sample:wittmann-3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import json
+import resource
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+KEYS = (
+    ("lamp_zero_deg", "lamp_zero_offset_deg"),
+    ("detector_zero_deg", "detector_zero_offset_deg"),
+    ("sample_tilt_deg", "sample_tilt_deg"),
+)
+
+
+def _cpu() -> float:
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+
+def config_text(seed: int, sample: str, store: Path) -> str:
+    """configs/lab-sim.toml with ``seed``, ``sample`` and all three ranges at 1 deg."""
+    from goniolab.config import configs_dir
+
+    text = (configs_dir() / "lab-sim.toml").read_text().replace("seed = 1", f"seed = {seed}")
+    text = text.replace('map = "sample:wittmann-3"', f'map = "{sample}"')
+    for key in ("lamp_zero_range_deg", "detector_zero_range_deg", "sample_tilt_range_deg"):
+        text = text.replace(f"# {key} = 0.5", f"{key} = 1.0")
+    return text.replace('store = ""', f'store = "{store}"')
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", default="0:20", help="first:stop (stop excluded)")
+    ap.add_argument("--sample", default="sample:wittmann-3")
+    args = ap.parse_args()
+    from goniolab.cli import main as cli
+    from goniolab.config import load_lab_config
+    from goniolab.lab import draw_session
+
+    first, stop = (int(v) for v in args.seeds.split(":"))
+    errors = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for seed in range(first, stop):
+            cfg = Path(tmp) / f"lab{seed}.toml"
+            cfg.write_text(config_text(seed, args.sample, Path(tmp) / f"runs{seed}.sqlite"))
+            truth = draw_session(load_lab_config(cfg))
+            out, c0 = io.StringIO(), _cpu()
+            with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
+                code = cli(["scan", "--config", str(cfg), "--plan", "align", "--time-scale",
+                            "0", "--json"])  # fmt: skip
+            if code != 0:
+                print(f"seed {seed}: align failed (exit {code})")
+                continue
+            got = json.loads(out.getvalue())
+            err = [got[k] - truth[t] for k, t in KEYS]
+            errors.append(err)
+            print(
+                f"seed {seed:3d}: true " + " ".join(f"{truth[t]:+.3f}" for _, t in KEYS)
+                + "  error " + " ".join(f"{e:+.4f}" for e in err)
+                + f"  ({got['readings']} readings, {_cpu() - c0:.1f} s CPU)",
+                flush=True,
+            )  # fmt: skip
+    e = np.abs(np.asarray(errors))
+    print(f"{len(errors)} sessions; largest |error| lamp zero / detector zero / tilt: "
+          + " / ".join(f"{v:.4f}" for v in e.max(axis=0)) + " deg")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
