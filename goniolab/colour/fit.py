@@ -17,8 +17,10 @@ Free parameters (any subset; :func:`default_parameters` picks those the paint ha
   n(lambda) is shifted by the same amount (Cauchy A, a constant, a table's n).
 
 The residuals are the differences predicted - measured of L*, a*, b* at every geometry
-(``m = 3 x geometries``, in dE*ab units), minimised by ``scipy.optimize.least_squares``
-(trust-region reflective, bounds). Uncertainties are the usual linearised ones:
+(``m = 3 x geometries``, in dE*ab units; or, with ``metric="de2000"``, the same differences
+through each measured colour's local CIEDE2000 metric), minimised by
+``scipy.optimize.least_squares`` (trust-region reflective, bounds). Uncertainties are the
+usual linearised ones:
 
 .. math:: \\mathrm{Cov}(x) = s^2 (J^T J)^{-1}, \\qquad s^2 = \\frac{\\sum r^2}{m - p}
 
@@ -42,7 +44,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -63,6 +65,7 @@ __all__ = [
     "ColourFit",
     "FitError",
     "FittedParameter",
+    "de2000_metric",
     "default_parameters",
     "fit_paint",
     "paint_with",
@@ -101,6 +104,37 @@ PARAMETERS: dict[str, _Spec] = {
 
 class FitError(ValueError):
     """The data or the request cannot give a fit (the message says what is wrong)."""
+
+
+Metric = Literal["lab", "de2000"]
+
+
+def de2000_metric(lab: ArrayLike, step: float = 1e-3) -> FloatArray:
+    """Per colour, the 3 x 3 matrix R with ``|R d|^2 = dE2000(lab, lab + d)^2`` for small d.
+
+    CIEDE2000 (CIE 142-2001; Sharma et al. 2005) is, for small differences, a quadratic
+    form ``d^T G d`` in (dL*, da*, db*) at the colour (its S_L, S_C, S_H and R_T are then
+    those of the colour itself); G is read off ``colour.delta_E`` by central second
+    differences of dE^2 (exact for a quadratic form) and R is its Cholesky factor.
+    """
+    from goniolab.colour.spectra import delta_e
+
+    base = np.atleast_2d(np.asarray(lab, dtype=np.float64))
+    n = base.shape[0]
+    eye = np.eye(3) * step
+
+    def de2(d: FloatArray) -> FloatArray:
+        out: FloatArray = delta_e(base, base + d, "CIE 2000") ** 2
+        return out
+
+    g = np.empty((n, 3, 3))
+    for i in range(3):
+        g[:, i, i] = de2(eye[i]) / step**2
+        for j in range(i + 1, 3):
+            both = (de2(eye[i] + eye[j]) - de2(eye[i] - eye[j])) / (4.0 * step**2)
+            g[:, i, j] = g[:, j, i] = both
+    out = np.asarray(np.linalg.cholesky(g).transpose(0, 2, 1), dtype=np.float64)
+    return out  # R = L^T: R^T R = G
 
 
 # ------------------------------------------------------------------ paint <-> parameters
@@ -362,6 +396,7 @@ def fit_paint(
     parameters: Sequence[str] | None = None,
     settings: ColourSettings | None = None,
     scale: Scale = "diffuser",
+    metric: Metric = "lab",
     max_evaluations: int = 400,
 ) -> ColourFit:
     """Fit the paint of ``predictor`` to measured L*a*b* at in-plane geometries.
@@ -379,6 +414,11 @@ def fit_paint(
     settings, scale
         Illuminant/observer/method and the reflectance-factor scale the data were
         computed with.
+    metric
+        ``"lab"``: residuals are the L*, a*, b* differences (dE*ab; every component weighs
+        the same, which is what the uncertainties assume); ``"de2000"``: the differences
+        through the local CIEDE2000 metric of each measured colour (:func:`de2000_metric`),
+        so that the sum of squares is the sum of dE2000^2 for small differences.
 
     Raises
     ------
@@ -469,9 +509,19 @@ def fit_paint(
         except PaintError as exc:
             raise FitError(str(exc)) from None
 
+    if metric == "lab":
+        chol = np.broadcast_to(np.eye(3), (tr.size, 3, 3))
+    elif metric == "de2000":
+        chol = de2000_metric(lab_m)
+    else:
+        raise FitError(f"unknown fit metric {metric!r} (lab or de2000)")
+
+    def weighted(lab: FloatArray) -> FloatArray:
+        out: FloatArray = np.einsum("gij,gj->gi", chol, lab - lab_m).ravel()
+        return out
+
     def residuals(x: FloatArray) -> FloatArray:
-        r: FloatArray = (model.lab(paint_of(x)) - lab_m).ravel()
-        return r
+        return weighted(model.lab(paint_of(x)))
 
     start_lab = model.lab(paint_of(x0))
     res = least_squares(
@@ -487,7 +537,7 @@ def fit_paint(
     )
     x = res.x
     fitted_lab = model.lab(paint_of(x))
-    r = fitted_lab.ravel() - lab_m.ravel()
+    r = weighted(fitted_lab)
     dof = m - p
     s2 = float(r @ r) / dof
     active = np.asarray(res.active_mask) != 0

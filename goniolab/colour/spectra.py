@@ -172,16 +172,24 @@ def standard_grid_nm(step_nm: float = 10.0) -> FloatArray:
 
 
 def check_spectrum(
-    wavelengths_nm: ArrayLike, values: ArrayLike, *, what: str = "spectrum"
+    wavelengths_nm: ArrayLike,
+    values: ArrayLike,
+    *,
+    what: str = "spectrum",
+    noise_floor: float = 0.0,
 ) -> tuple[FloatArray, FloatArray]:
     """Validate a measured spectrum; return it as float arrays.
+
+    ``noise_floor``: a value down to ``-noise_floor`` is detector noise around zero (what a
+    dark-subtracted reading of a dark sample shows) and is returned as 0; anything lower is
+    refused as negative.
 
     Raises
     ------
     ColourError
         Naming the problem: not 1-D, lengths differ, fewer than 3 wavelengths, a NaN or
-        infinite value or wavelength, a negative value, wavelengths not ascending and evenly
-        spaced, or a grid that does not cover 380-780 nm.
+        infinite value or wavelength, a negative value (below the noise floor), wavelengths
+        not ascending and evenly spaced, or a grid that does not cover 380-780 nm.
     """
     try:
         wl = np.asarray(wavelengths_nm, dtype=np.float64)
@@ -202,10 +210,12 @@ def check_spectrum(
     if np.any(bad):
         k = int(np.argmax(bad))
         raise ColourError(f"{what}: value at {wl[k]:g} nm is {r[k]} (NaN or infinite)")
-    neg = r < 0
+    neg = r < -abs(noise_floor)
     if np.any(neg):
         k = int(np.argmax(neg))
-        raise ColourError(f"{what}: value at {wl[k]:g} nm is negative ({r[k]:g})")
+        floor = f", below the noise floor -{abs(noise_floor):g}" if noise_floor else ""
+        raise ColourError(f"{what}: value at {wl[k]:g} nm is negative ({r[k]:g}{floor})")
+    r = np.maximum(r, 0.0)
     steps = np.diff(wl)
     if np.any(steps <= 0):
         raise ColourError(f"{what}: wavelengths must be ascending")

@@ -162,6 +162,7 @@ def _cmd_fit_colour(args: argparse.Namespace) -> int:
             parameters=names,
             settings=settings,
             scale=scale,  # type: ignore[arg-type]
+            metric=args.metric,
         )
     except (FitError, ColourError, ValueError) as exc:
         if isinstance(exc, UserError):
@@ -195,6 +196,7 @@ def _cmd_fit_colour(args: argparse.Namespace) -> int:
         "illuminant": settings.illuminant,
         "observer": settings.observer,
         "scale": scale,
+        "metric": args.metric,
         "surface": None if predictor.surface is None else predictor.surface.name,
         "parameters": [p.as_dict() for p in fit.parameters],
         "correlation": corr,
@@ -202,7 +204,7 @@ def _cmd_fit_colour(args: argparse.Namespace) -> int:
         "skipped_aspecular_deg": [float(r["aspecular_deg"]) for r in skipped],
         "mean_dE2000": fit.mean_dE2000,
         "start_mean_dE2000": fit.start_mean_dE2000,
-        "residual_rms_lab": fit.residual_rms,
+        "residual_rms": fit.residual_rms,
         "dof": fit.dof,
         "evaluations": fit.evaluations,
         "paint": fit.paint.describe(),
@@ -214,7 +216,7 @@ def _cmd_fit_colour(args: argparse.Namespace) -> int:
     print(
         f"run {rec.id} on {rec.sample or '-'}: paint fitted to {len(used)} geometries "
         f"({settings.illuminant}, {settings.observer}, {scale} scale; surface "
-        f"{doc['surface'] or 'none'})"
+        f"{doc['surface'] or 'none'}; minimising {'dE2000' if args.metric == 'de2000' else 'dE*ab'})"
     )
     for r in skipped:
         print(
@@ -241,7 +243,8 @@ def _cmd_fit_colour(args: argparse.Namespace) -> int:
         )
     print(
         f"  mean dE2000 {fit.mean_dE2000:.2f} (start {fit.start_mean_dE2000:.2f}); "
-        f"rms L*a*b* residual {fit.residual_rms:.3f}, {fit.dof} degrees of freedom"
+        f"rms residual {fit.residual_rms:.3f} ({'dE2000' if args.metric == 'de2000' else 'dE*ab'}"
+        f" per component), {fit.dof} degrees of freedom"
     )
     if saved:
         print(f"  fitted paint written to {saved}")
@@ -318,6 +321,13 @@ def register(subparsers: Any) -> None:
         default=10.0,
         metavar="DEG",
         help="leave out geometries closer than this to specular (default 10 deg)",
+    )
+    p.add_argument(
+        "--metric",
+        choices=("lab", "de2000"),
+        default="lab",
+        help="minimise dE*ab (lab, default: equal weights, calibrated uncertainties) or the "
+        "local dE2000 metric of each measured colour",
     )
     p.add_argument("--step-nm", type=float, default=10.0, help="wavelength step (default 10)")
     p.add_argument("--save", metavar="FILE.toml", help="write the fitted paint (--paint format)")

@@ -5,7 +5,8 @@ the lab's ``[colour]`` settings (:mod:`goniolab.colour.spectra`): the spectrum (
 instrument's reference, rescaled by the run's mirror level like the luminance) becomes a
 reflectance factor through the detector cone (:func:`goniolab.colour.spectral.reflectance_factor_scale`)
 and is integrated with the illuminant and observer (ASTM E308). A bad spectrum (wrong
-length, NaN, negative, a grid short of 380-780 nm) raises
+length, NaN, negative beyond the noise floor :data:`NOISE_FLOOR_PCT`, a grid short of
+380-780 nm) raises
 :class:`goniolab.colour.spectra.ColourError` naming the problem; the runner then stores the
 reading without colour and says why (nothing is lost).
 """
@@ -24,7 +25,12 @@ from goniolab.colour.spectral import Scale, reflectance_factor_scale
 from goniolab.config import LabConfig
 from goniolab.store import PointRow, PredictedColour
 
-__all__ = ["PointColour", "colour_rows", "compare_rows", "flop_of_rows"]
+__all__ = ["NOISE_FLOOR_PCT", "PointColour", "colour_rows", "compare_rows", "flop_of_rows"]
+
+#: Spectral values down to -0.05 % of the instrument's reference are detector noise around
+#: zero after dark subtraction (a dark sample's blue end, where lamp and silicon are weak) and
+#: are read as 0; a lower value makes the spectrum unusable (named, the reading kept).
+NOISE_FLOOR_PCT = 0.05
 
 
 @dataclass(frozen=True, slots=True)
@@ -67,7 +73,9 @@ class PointColour:
         """The colour of one reading (blocking: the first call imports colour-science)."""
         from goniolab.colour.spectra import check_spectrum
 
-        wl, v = check_spectrum(wavelengths_nm, values_pct, what="spectrum")
+        wl, v = check_spectrum(
+            wavelengths_nm, values_pct, what="spectrum", noise_floor=NOISE_FLOOR_PCT
+        )
         return spectrum_to_colour(
             wl, self.factors(v, theta_r_deg, mirror_pct), self.settings, what="spectrum"
         )

@@ -232,3 +232,29 @@ def test_fit_colour_command_bad_input(tmp_path: Path, capsys: pytest.CaptureFixt
     flat = _store_with_run(tmp_path / "f.sqlite", lab, TR, "sample:flat")
     assert main(["fit", "colour", "1", "--store", str(flat), "--no-surface"]) == 2
     assert "has no paint" in capsys.readouterr().err
+
+
+def test_de2000_metric_is_colour_sciences_de2000_for_small_differences() -> None:
+    from goniolab.colour.fit import de2000_metric
+
+    rng = np.random.default_rng(5)
+    lab = np.array([[36.8, 45.6, 25.5], [50.0, 0.0, 0.0], [40.0, 0.2, -0.3], [60.0, -20.0, -40.0]])
+    r = de2000_metric(lab)
+    for _ in range(5):
+        d = rng.normal(0.0, 0.05, lab.shape)
+        mine = np.linalg.norm(np.einsum("gij,gj->gi", r, d), axis=-1)
+        assert mine == pytest.approx(delta_e(lab, lab + d, "CIE 2000"), rel=0.01)
+
+
+def test_the_de2000_fit_lowers_the_de2000_of_a_model_error() -> None:
+    # data the model cannot match (another hue): minimising dE2000 gives a smaller sum of
+    # dE2000^2 than minimising dE*ab, and no larger than the start
+    paint0 = paint_for("sample:solid-red")
+    lab = _truth_lab(paint0, {"body.ks_scale": 1.4}) + np.array([0.5, -2.0, 3.0])
+    sp = SpectralPredictor(None, paint0, wavelengths_nm=WL)
+    by_lab = fit_paint(sp, 45.0, TR, lab)
+    by_de = fit_paint(sp, 45.0, TR, lab, metric="de2000")
+    assert np.sum(by_de.dE2000**2) < np.sum(by_lab.dE2000**2)
+    assert np.sum(by_de.dE2000**2) < np.sum(by_de.start_dE2000**2)
+    with pytest.raises(FitError, match="unknown fit metric 'cmc'"):
+        fit_paint(sp, 45.0, TR, lab, metric="cmc")  # type: ignore[arg-type]

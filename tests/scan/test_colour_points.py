@@ -6,6 +6,7 @@ import math
 import sqlite3
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from drivers.base import SpectroReading
@@ -124,7 +125,7 @@ def _spoil(r: SpectroReading, how: str) -> SpectroReading:
     ("how", "needle"),
     [
         ("length", "40 values for 41 wavelengths"),
-        ("negative", "value at 430 nm is negative (-0.25)"),
+        ("negative", "value at 430 nm is negative (-0.25, below the noise floor -0.05)"),
         ("nan", "value at 410 nm is nan"),
         ("short", "wavelengths 400-740 nm do not cover 380-780 nm"),
     ],
@@ -153,3 +154,28 @@ async def test_a_bad_spectrum_is_named_and_nothing_is_lost(
     errs = [e for e in events if isinstance(e, InstrumentError)]
     assert len(errs) == 1 and not errs[0].fatal and needle in errs[0].message
     assert store.get_run(runner.run_id).status == "done"
+
+
+async def test_noise_around_zero_is_not_a_negative_spectrum(
+    fake_lab: FakeLab, store: RunStore
+) -> None:
+    # a dark sample's dark-subtracted spectrum dips a little below 0 in the blue: that is
+    # noise (read as 0), not a broken spectrum
+    real = fake_lab.spectro.measure
+
+    async def noisy() -> SpectroReading:
+        r = await real()
+        v = list(r.values)
+        v[0], v[1], v[2] = -0.02, -0.049, 0.01
+        return SpectroReading(r.wavelengths_nm, tuple(v), r.luminance_pct, r.exposure_us)
+
+    fake_lab.spectro.measure = noisy  # type: ignore[method-assign]
+    pc = PointColour(ColourSettings(), "mirror", 6.0)
+    runner, bus = make_runner(fake_lab, store, BrdfPlan(45.0, (30.0,)), point_colour=pc)
+    events = await drive(runner, bus, lambda ev: None)
+    (p,) = store.points(runner.run_id)
+    assert p.colour is not None and p.colour_error == ""
+    assert not [e for e in events if isinstance(e, InstrumentError)]
+    v = np.array(p.raw["values"])
+    clipped = pc.measured(p.raw["wavelengths_nm"], np.maximum(v, 0.0), 30.0)
+    assert p.colour["L"] == pytest.approx(clipped.L) and p.colour["b"] == pytest.approx(clipped.b)
