@@ -77,6 +77,34 @@ def test_scan_model_option_overrides_the_config(
     np.testing.assert_allclose(preds, _expected("facet"), rtol=1e-9)
 
 
+def test_resume_goes_on_with_the_model_the_run_started_with(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A run started with ``--model facet`` on a Kirchhoff config, interrupted before its
+    last geometries were predicted, is resumed with the facet model, not the config's."""
+    import sqlite3
+
+    config = _config(tmp_path, "kirchhoff")
+    params, _ = _scan(tmp_path, config, "--model", "facet")
+    assert params["model_name"] == "facet"
+    store = tmp_path / "runs.sqlite"
+    db = sqlite3.connect(store)  # as a crash after the first reading would leave it
+    with db:
+        db.execute("DELETE FROM points WHERE run_id = 1 AND idx >= 1")
+        db.execute("DELETE FROM predictions WHERE run_id = 1 AND idx >= 1")
+        db.execute("UPDATE runs SET status = 'aborted', finished_at = NULL WHERE id = 1")
+    db.close()
+    args = ["scan", "resume", "1", "--store", str(store), "--time-scale", "0", "--json"]
+    assert main(args) == 0
+    capsys.readouterr()
+    with RunStore(store, readonly=True) as s:
+        assert s.get_run(1).status == "done"
+        preds = [v for _, v in sorted(s.predictions(1).items())]
+    # (2 geometries are computed exactly, 3 on the model's grid: they agree to ~1e-5)
+    np.testing.assert_allclose(preds, _expected("facet"), rtol=1e-4)
+    assert not np.allclose(preds[1:], _expected("kirchhoff")[1:], rtol=0.05)
+
+
 def test_bad_model_in_the_config_is_one_error_naming_file_and_key(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

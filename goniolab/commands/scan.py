@@ -563,6 +563,11 @@ def _cmd_resume(args: argparse.Namespace) -> int:
         from goniolab.session import resume_target
 
         config_path = resume_target(rec, args.config, store.count_points(rec.id))
+        # the run goes on with the model it started with (a `scan --model` override included),
+        # so the predictions still to compute are that model's, not the config's
+        from goniolab.models import MODEL_NAMES
+
+        started_with = rec.model.get("model_name")
         print(
             f"goniolab: resuming run {rec.id}: {store.count_points(rec.id)} readings stored",
             file=sys.stderr,
@@ -575,6 +580,7 @@ def _cmd_resume(args: argparse.Namespace) -> int:
                 plan=None,
                 run_id=rec.id,
                 json_out=args.json,
+                model=started_with if started_with in MODEL_NAMES else None,
             )
         )
 
