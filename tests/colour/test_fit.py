@@ -258,3 +258,29 @@ def test_the_de2000_fit_lowers_the_de2000_of_a_model_error() -> None:
     assert np.sum(by_de.dE2000**2) < np.sum(by_de.start_dE2000**2)
     with pytest.raises(FitError, match="unknown fit metric 'cmc'"):
         fit_paint(sp, 45.0, TR, lab, metric="cmc")  # type: ignore[arg-type]
+
+
+def test_fit_with_a_glossy_coat_surface_in_the_model() -> None:
+    # a rough coat (Beckmann, alpha 0.1: its gloss reaches the 15 deg aspecular reading):
+    # the surface term, tabulated over n once, matches the predictor's own evaluation, and
+    # the fit of n through it recovers the truth made with the predictor itself
+    from goniolab.colour.fit import _SurfaceInN
+    from goniolab.colour.spectral import SurfaceFactory
+    from goniolab.optics.analytic import AnalyticModel
+
+    rough = SurfaceFactory(lambda n, wl: AnalyticModel("beckmann", alpha=0.1, n=n), name="b")
+    paint0 = paint_for("sample:solid-red")
+    truth = {"body.ks_scale": 1.3, "coat.n": 1.56}
+    painted = paint_with(paint0, parameter_values(paint0, list(truth)), truth)
+    sp_true = SpectralPredictor(rough, painted, wavelengths_nm=WL)
+    table = _SurfaceInN(sp_true, 45.0, TR, 1.35, 1.85)
+    direct = sp_true.surface_fraction(45.0, TR)
+    # the gloss is larger than the paint at -15 and 15 deg aspecular
+    assert np.all(direct[:2].mean(axis=1) > sp_true.paint_fraction(45.0, TR)[:2].mean(axis=1))
+    assert table.at(painted.coat_n(WL)) == pytest.approx(direct, rel=2e-3, abs=1e-9)
+    model = _Model(sp_true, 45.0, TR, ColourSettings().validated(), "diffuser", direct, None)
+    lab = model.lab(painted) + np.random.default_rng(11).normal(0.0, 0.2, (TR.size, 3))
+    fit = fit_paint(SpectralPredictor(rough, paint0, wavelengths_nm=WL), 45.0, TR, lab)
+    for name, v in truth.items():
+        assert abs(fit.value(name) - v) < 4.0 * fit.sigma(name), (name, fit.value(name))
+    assert fit.mean_dE2000 < 0.5
