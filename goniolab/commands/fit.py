@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import re
 import sys
 from pathlib import Path
 from typing import Any
@@ -288,7 +289,9 @@ def register(subparsers: Any) -> None:
     p = sub.add_parser(
         "colour",
         help="fit K/S, flake area/spread and the coat index to a run's L*a*b* per angle",
-        description=(__doc__ or "").split("\n\n")[1].replace("``", "'"),
+        description=re.sub(r":\w+:`([^`]+)`", r"\1", (__doc__ or "").split("\n\n")[1]).replace(
+            "``", "'"
+        ),
     )
     p.add_argument("run", type=int, metavar="RUN")
     p.add_argument(

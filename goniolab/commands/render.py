@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import re
 import sys
 import time
 from pathlib import Path
@@ -130,7 +131,7 @@ def register(subparsers: Any) -> None:
     p = subparsers.add_parser(
         "render",
         help="draw a curved panel or sphere of the predicted paint to PNG (sRGB)",
-        description=(__doc__ or "").split("\n\n")[1].replace("\n", " ") if __doc__ else None,
+        description=re.sub(r":\w+:`([^`]+)`", r"\1", (__doc__ or "").split("\n\n")[1]),
     )
     p.add_argument("map", metavar="MAP", help="height-map file or sample:NAME")
     p.add_argument("--out", "-o", required=True, help="output PNG file")
