@@ -214,13 +214,12 @@ def tui_tmux(runs: int) -> list[float] | None:
 
 
 def tui_in_process(runs: int) -> list[float]:
-    from goniolab.tui.lab_backend import LabBackend
-
     from goniolab.tui.app import GonioApp
+    from goniolab.tui.session_backend import SessionBackend
 
     async def once(store: Path) -> float:
         t0 = time.perf_counter()
-        backend = LabBackend(str(ROOT / "configs" / "lab-sim.toml"), store_path=str(store))
+        backend = SessionBackend(str(ROOT / "configs" / "lab-sim.toml"), store_path=str(store))
         app = GonioApp(backend)
         async with app.run_test(size=(120, 40)) as pilot:
             await pilot.pause()
