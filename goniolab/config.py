@@ -351,9 +351,12 @@ class ColourConfig(_Strict):
     @field_validator("illuminant")
     @classmethod
     def _known_illuminant(cls, v: str) -> str:
-        # only a non-default value gets here (pydantic skips defaults): colour-science's
-        # import is paid only by configs that name an illuminant
-        from goniolab.colour.spectra import ColourError, ColourSettings
+        # only a non-default value gets here (pydantic skips defaults); the usual names are
+        # known without importing colour-science (seconds), the rest are checked by it
+        from goniolab.colour.spectra import COMMON_ILLUMINANTS, ColourError, ColourSettings
+
+        if v in COMMON_ILLUMINANTS:
+            return v
 
         try:
             ColourSettings(illuminant=v).validated()

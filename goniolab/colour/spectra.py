@@ -72,6 +72,19 @@ DELTA_E_METHODS: tuple[str, ...] = ("CIE 1976", "CIE 1994", "CIE 2000")
 
 Method = Literal["ASTM E308", "Integration"]
 
+#: Illuminants colour-science 0.4 has spectra and white points of for both observers: a
+#: config naming one of them is valid without importing colour-science (1.5-10 s, as it
+#: imports its plotting package); other names are checked against colour-science itself.
+#: tests/colour/test_spectra.py keeps this list a subset of colour-science's tables.
+COMMON_ILLUMINANTS: frozenset[str] = frozenset(
+    {"A", "B", "C", "D50", "D55", "D60", "D65", "D75", "E", "ID50", "ID65"}
+    | {f"FL{k}" for k in range(1, 13)}
+    | {f"FL3.{k}" for k in range(1, 16)}
+    | {f"HP{k}" for k in range(1, 6)}
+    | {f"LED-B{k}" for k in range(1, 6)}
+    | {"LED-BH1", "LED-RGB1", "LED-V1", "LED-V2"}
+)
+
 
 class ColourError(ValueError):
     """A spectrum or a colour setting is unusable; the message names what is wrong."""

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -83,3 +85,36 @@ def test_unknown_illuminant_and_observer() -> None:
         ColourSettings("D66").validated()
     with pytest.raises(ColourError, match="unknown observer '5'"):
         ColourSettings("D65", "5").validated()
+
+
+def test_the_illuminants_known_without_colour_science_are_in_its_tables() -> None:
+    import colour
+
+    from goniolab.colour.spectra import COMMON_ILLUMINANTS
+
+    for observer in ("CIE 1931 2 Degree Standard Observer", "CIE 1964 10 Degree Standard Observer"):
+        missing = COMMON_ILLUMINANTS - set(colour.CCS_ILLUMINANTS[observer])
+        assert not missing, (observer, missing)
+    assert not COMMON_ILLUMINANTS - set(colour.SDS_ILLUMINANTS)
+
+
+def test_a_config_naming_a_usual_illuminant_loads_without_colour_science(tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    from goniolab.config import configs_dir
+
+    text = (configs_dir() / "lab-sim.toml").read_text()
+    assert "[colour]" not in text  # the default D65 is validated too
+    path = tmp_path / "lab.toml"
+    path.write_text(text + '\n[colour]\nilluminant = "FL11"\n')
+    for config, illuminant in ((configs_dir() / "lab-sim.toml", "D65"), (path, "FL11")):
+        code = (
+            "import sys; from goniolab.config import load_lab_config; "
+            f"c = load_lab_config({str(config)!r}); "
+            "print(c.colour.illuminant, 'colour' in sys.modules)"
+        )
+        out = subprocess.run(
+            [sys.executable, "-c", code], capture_output=True, text=True, check=True
+        )
+        assert out.stdout.split() == [illuminant, "False"]
