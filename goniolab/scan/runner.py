@@ -327,8 +327,13 @@ class ScanRunner:
         to this many times, each retry reported as a non-fatal
         :class:`~goniolab.scan.events.InstrumentError`; an alarm or the last failed retry
         fails the run.
+    move_retries
+        A move that times out, gets a garbled frame or loses an arm's link is made again
+        (from where the stopped arms stand, links reopened first after a loss) up to this
+        many times, each retry reported as a non-fatal ``InstrumentError``.
     reconnect_backoff_s
-        Lab-clock wait before reopening a lost spectro link (doubles with each attempt).
+        Lab-clock wait before reopening a lost spectro or arm link (doubles with each
+        attempt).
     """
 
     def __init__(
@@ -351,11 +356,14 @@ class ScanRunner:
         specimen_hook: SpecimenHook | None = None,
         misalignment_threshold_deg: float = 0.5,
         reading_retries: int = 2,
+        move_retries: int = 2,
         reconnect_backoff_s: float = 0.5,
         point_colour: PointColour | None = None,
     ) -> None:
         if reading_retries < 0:
             raise ValueError(f"reading_retries must be >= 0, got {reading_retries}")
+        if move_retries < 0:
+            raise ValueError(f"move_retries must be >= 0, got {move_retries}")
         self.goniometer = goniometer
         self.spectro = spectro
         self.clock = clock
@@ -373,6 +381,7 @@ class ScanRunner:
         self.specimen_hook = specimen_hook
         self.misalignment_threshold_deg = misalignment_threshold_deg
         self.reading_retries = reading_retries
+        self.move_retries = move_retries
         self.reconnect_backoff_s = reconnect_backoff_s
         self.point_colour = point_colour if point_colour is not None else PointColour()
         if plan.mirror_reference and specimen_hook is None:
@@ -457,16 +466,25 @@ class ScanRunner:
         return work.result()
 
     async def _move(self, target: tuple[float, float]) -> None:
+        """Move to ``target``; a move that meets a transient fault (an arm's timeout or
+        garbled frame, or a lost link: then the arms' connections are reopened first) is
+        made again from where the arms stopped, up to ``move_retries`` times (see
+        :meth:`_retry`). The goniometer stops both arms on any error and plans every move
+        from the positions it reads, so a retry keeps the interlock."""
         self.bus.publish(
             ArmsMoved(run_id=self.run_id, theta_i_deg=target[0], theta_r_deg=target[1], moving=True)
         )
-        try:
-            measured = await self._abortable(
-                self.goniometer.move_to(target[0], target[1], self.move_timeout_s), "during a move"
-            )
-        except _Aborted:
-            self._target = None  # somewhere between two geometries; _park stops the arms
-            raise
+        self._target = None  # somewhere between two geometries until the move is done
+        measured = await self._retry(
+            f"moving to theta_i={target[0]:g}, theta_r={target[1]:g} deg",
+            lambda: self._abortable(
+                self.goniometer.move_to(target[0], target[1], self.move_timeout_s),
+                "during a move",
+            ),
+            self._reconnect_arms,
+            self.move_retries,
+            "goniometer",
+        )
         self._measured_deg = (float(measured[0]), float(measured[1]))
         self._target = target
         self.bus.publish(
@@ -485,7 +503,7 @@ class ScanRunner:
             return True
         if self._verify_position:
             self._verify_position = False
-            ti, tr = await self.goniometer.positions_deg()
+            ti, tr = await self._arm_positions("checking the arm positions")
             if (
                 abs(ti - target[0]) > self.position_tolerance_deg
                 or abs(tr - target[1]) > self.position_tolerance_deg
@@ -495,10 +513,24 @@ class ScanRunner:
             self._measured_deg = (float(ti), float(tr))
         return False
 
-    async def _ensure_homed(self) -> None:
+    async def _arm_positions(self, what: str) -> tuple[float, float]:
+        """Both arms' positions, read again after a transient fault (see :meth:`_retry`)."""
+        return await self._retry(
+            what, self.goniometer.positions_deg, self._reconnect_arms, self.move_retries,
+            "goniometer",
+        )  # fmt: skip
+
+    async def _arms_homed(self) -> bool:
         lamp = await self.goniometer.lamp.status()
         det = await self.goniometer.detector.status()
-        if not (lamp.homed and det.homed):
+        return lamp.homed and det.homed
+
+    async def _ensure_homed(self) -> None:
+        homed = await self._retry(
+            "reading the arms' status", self._arms_homed, self._reconnect_arms,
+            self.move_retries, "goniometer",
+        )  # fmt: skip
+        if not homed:
             await self.goniometer.home(self.home_timeout_s)
 
     async def _park(self) -> str:
@@ -612,31 +644,69 @@ class ScanRunner:
         """One spectro reading, taken again after a transient fault (timeout, garbled reply,
         a lost link: then the port is reopened first) up to ``reading_retries`` times; each
         retry is reported, nothing is stored twice."""
-        for attempt in range(self.reading_retries + 1):
+
+        async def read() -> SpectroReading:
+            if self.plan.auto_exposure:
+                reading, self._exposure_us = await self._auto.read(self.spectro, self._exposure_us)
+                return reading
+            return await self.spectro.measure()
+
+        return await self._retry(
+            f"point {p.index}, repeat {p.repeat}", read, self._reconnect_spectro,
+            self.reading_retries, "spectro",
+        )  # fmt: skip
+
+    async def _retry(
+        self,
+        what: str,
+        op: Callable[[], Awaitable[_T]],
+        reconnect: Callable[[int], Awaitable[None]],
+        retries: int,
+        device: str,
+    ) -> _T:
+        """``await op()``, again after a transient fault (:class:`DeviceTimeout`,
+        :class:`ProtocolError`, :class:`Disconnected`: then ``reconnect(attempt)`` first) up
+        to ``retries`` times, each retry published as a non-fatal :class:`InstrumentError`
+        saying ``what`` was being done; the last failure propagates (and fails the run)."""
+        for attempt in range(retries + 1):
             try:
-                if self.plan.auto_exposure:
-                    reading, self._exposure_us = await self._auto.read(
-                        self.spectro, self._exposure_us
-                    )
-                    return reading
-                return await self.spectro.measure()
+                return await op()
             except (DeviceTimeout, ProtocolError, Disconnected) as exc:
-                if attempt == self.reading_retries:
+                if attempt == retries:
                     raise
                 lost = isinstance(exc, Disconnected)
                 self.bus.publish(
                     InstrumentError(
                         run_id=self.run_id,
-                        device=exc.device or "spectro",
-                        message=f"{exc} (point {p.index}, repeat {p.repeat}: "
-                        f"retry {attempt + 1} of {self.reading_retries}"
+                        device=exc.device or device,
+                        message=f"{exc} ({what}: retry {attempt + 1} of {retries}"
                         f"{', reconnecting' if lost else ''})",
                         fatal=False,
                     )
                 )
                 if lost:
-                    await self._reconnect_spectro(attempt)
+                    await reconnect(attempt)
         raise AssertionError("unreachable")  # pragma: no cover - the loop returns or raises
+
+    async def _reconnect_arms(self, attempt: int) -> None:
+        """Reopen both arms' links after a lost one (on the wire they share a server, a
+        dropped link may take both) after ``reconnect_backoff_s`` (doubling) of lab clock;
+        a failed reopen is reported and the next attempt finds the link closed."""
+        await self.clock.sleep(min(8.0, self.reconnect_backoff_s * 2**attempt))
+        for axis in (self.goniometer.lamp, self.goniometer.detector):
+            with contextlib.suppress(DeviceError):
+                await axis.close()
+            try:
+                await axis.connect()
+            except DeviceError as exc:
+                self.bus.publish(
+                    InstrumentError(
+                        run_id=self.run_id,
+                        device=exc.device or "goniometer",
+                        message=f"reconnect failed: {exc.message}",
+                        fatal=False,
+                    )
+                )
 
     async def _reconnect_spectro(self, attempt: int) -> None:
         """Close the spectro's link, wait (``reconnect_backoff_s``, doubling with each
@@ -733,7 +803,7 @@ class ScanRunner:
 
     async def _dry_run(self, todo: Sequence[PlanPoint]) -> _Eta:
         """:func:`dry_run` of ``todo`` from where the arms stand (raises PlanRefused)."""
-        start_deg = await self.goniometer.positions_deg()
+        start_deg = await self._arm_positions("reading the arm positions")
         check = dry_run(
             todo,
             self.goniometer,
@@ -754,7 +824,13 @@ class ScanRunner:
             except _Aborted:
                 self._homing_interrupted = True
                 raise
-            await self.spectro.set_exposure_us(self.plan.exposure_us)
+            await self._retry(
+                "setting the exposure",
+                lambda: self.spectro.set_exposure_us(self.plan.exposure_us),
+                self._reconnect_spectro,
+                self.reading_retries,
+                "spectro",
+            )
             self._mirror_pct = self._mirror_level()
             eta.start(self.clock.now())
             for k, p in enumerate(todo):

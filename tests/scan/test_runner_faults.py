@@ -11,7 +11,7 @@ import struct
 import pytest
 
 import goniolab.scan.runner as runner_mod
-from drivers.base import Disconnected, SpectroReading
+from drivers.base import DeviceTimeout, Disconnected, ProtocolError, SpectroReading
 from goniolab.scan.events import InstrumentError, PointMeasured, RunState
 from goniolab.scan.plans import BrdfPlan, parse_angles
 from goniolab.store import RunStore
@@ -151,3 +151,93 @@ async def test_a_spectro_that_stays_away_fails_the_run_after_the_retries(
         e for e in events if isinstance(e, InstrumentError) and "reconnect failed" in e.message
     ]
     assert len(reconnect_failures) == 2  # reading_retries = 2
+
+
+async def test_a_garbled_frame_during_a_move_makes_the_move_again(
+    fake_lab: FakeLab, store: RunStore
+) -> None:
+    """A garbled Modbus reply while the arms move (the soak's first failure: a 500-point scan
+    failed at point 241 on one garbled frame) stops the arms; the move is made again from
+    where they stand and the run goes on, the retry reported."""
+    gonio = fake_lab.goniometer
+    real_move = gonio.move_to
+    calls = {"move": 0}
+
+    async def move_to(ti: float, tr: float, timeout_s: float) -> tuple[float, float]:
+        calls["move"] += 1
+        if calls["move"] == 3:
+            raise ProtocolError("garbled reply to read feedback position", device="detector")
+        return await real_move(ti, tr, timeout_s)
+
+    gonio.move_to = move_to  # type: ignore[method-assign]
+    runner, bus = make_runner(fake_lab, store, BrdfPlan(45.0, parse_angles("40:44:1")))
+    events = await drive(runner, bus, lambda ev: None)
+    rec = store.get_run(runner.run_id)
+    assert rec.status == "done" and store.count_points(runner.run_id) == 5
+    retried = [e for e in events if isinstance(e, InstrumentError)]
+    assert len(retried) == 1 and not retried[0].fatal and retried[0].device == "detector"
+    assert "moving to theta_i=45, theta_r=42 deg: retry 1 of 2" in retried[0].message
+    assert [m[1] for m in gonio.moves].count(42.0) == 1  # the failed attempt never moved
+
+
+async def test_a_lost_arm_link_is_reopened_and_the_move_made_again(
+    fake_lab: FakeLab, store: RunStore
+) -> None:
+    gonio = fake_lab.goniometer
+    real_move = gonio.move_to
+    calls = {"move": 0, "close": 0, "connect": 0}
+
+    async def move_to(ti: float, tr: float, timeout_s: float) -> tuple[float, float]:
+        calls["move"] += 1
+        if calls["move"] == 2:
+            raise Disconnected("connection to 127.0.0.1:5020 lost", device="lamp")
+        return await real_move(ti, tr, timeout_s)
+
+    async def close() -> None:
+        calls["close"] += 1
+
+    async def connect() -> None:
+        calls["connect"] += 1
+
+    gonio.move_to = move_to  # type: ignore[method-assign]
+    for axis in (gonio.lamp, gonio.detector):
+        axis.close = close  # type: ignore[method-assign]
+        axis.connect = connect  # type: ignore[method-assign]
+    runner, bus = make_runner(fake_lab, store, BrdfPlan(45.0, parse_angles("40:42:1")))
+    t0 = fake_lab.clock.now()
+    events = await drive(runner, bus, lambda ev: None)
+    assert store.get_run(runner.run_id).status == "done"
+    assert store.count_points(runner.run_id) == 3
+    assert (calls["close"], calls["connect"]) == (2, 2)  # both arms: they share the server
+    retried = [e for e in events if isinstance(e, InstrumentError)]
+    assert len(retried) == 1 and "reconnecting" in retried[0].message
+    assert fake_lab.clock.now() - t0 >= 0.5  # reconnect_backoff_s on the lab clock
+
+
+async def test_a_timeout_setting_the_exposure_is_retried_and_a_lasting_one_fails(
+    fake_lab: FakeLab, store: RunStore
+) -> None:
+    spectro = fake_lab.spectro
+    real_set = spectro.set_exposure_us
+    calls = {"set": 0}
+    fail_first = {"n": 1}
+
+    async def set_exposure_us(exposure_us: int) -> None:
+        calls["set"] += 1
+        if calls["set"] <= fail_first["n"]:
+            raise DeviceTimeout("no answer to EXP", device="spectro")
+        await real_set(exposure_us)
+
+    spectro.set_exposure_us = set_exposure_us  # type: ignore[method-assign]
+    runner, bus = make_runner(fake_lab, store, BrdfPlan(45.0, (44.0, 45.0)))
+    events = await drive(runner, bus, lambda ev: None)
+    assert store.get_run(runner.run_id).status == "done"
+    retried = [e for e in events if isinstance(e, InstrumentError)]
+    assert len(retried) == 1 and "setting the exposure: retry 1 of 2" in retried[0].message
+
+    calls["set"], fail_first["n"] = 0, 3  # the first try and both retries time out
+    runner, bus = make_runner(fake_lab, store, BrdfPlan(45.0, (44.0, 45.0)))
+    await drive(runner, bus, lambda ev: None)
+    rec = store.get_run(runner.run_id)
+    assert rec.status == "failed" and "no answer to EXP" in rec.reason
+    assert store.count_points(runner.run_id) == 0
