@@ -38,8 +38,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from goniolab.optics.heightmap import HeightMap
-from goniolab.surfaces import save_heightmap
+from goniolab.optics.heightmap import HeightMap  # noqa: E402 -- after the sys.path line
+from goniolab.surfaces import save_heightmap  # noqa: E402
 
 
 def smooth_map(n: int, sq_um: float = 0.05, l_um: float = 2.0, step_um: float = 0.5) -> HeightMap:
