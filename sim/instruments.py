@@ -57,8 +57,7 @@ from drivers.base import (
     StallError,
 )
 from drivers.timing import Clock
-from goniolab.optics.apertures import Aperture, Cone
-from goniolab.optics.facet import cap_overlap_fraction
+from goniolab.optics.apertures import Aperture, Cone, cap_overlap_fraction
 from goniolab.optics.models import ReflectanceModel
 from sim.faults import Fault, FaultInjector
 from sim.motion import MotorFault, SimMotor

@@ -550,7 +550,7 @@ def _cone_lut(src_half_deg: float, det_half_deg: float) -> tuple[float, FloatArr
     """Cap overlap (:func:`goniolab.optics.facet.cap_overlap_fraction`) against the squared
     chord ``|wo - d|^2 = 4 sin^2(gamma/2)`` between an image centre and the detector axis,
     on a uniform grid ``[0, x_max]`` of 8192 intervals with a trailing 0 beyond."""
-    from goniolab.optics.facet import cap_overlap_fraction
+    from goniolab.optics.apertures import cap_overlap_fraction
 
     a_s, a_d = math.radians(src_half_deg), math.radians(det_half_deg)
     g_max = min(a_s + a_d, math.pi / 2)
@@ -885,7 +885,7 @@ class FlatSpecimen:
         detector: Aperture = Cone(6.0),  # noqa: B008
     ) -> FloatArray:
         """Flux fraction per wavelength reaching a Cone detector."""
-        from goniolab.optics.facet import cap_overlap_fraction
+        from goniolab.optics.apertures import cap_overlap_fraction
 
         if not (isinstance(source, Cone) and isinstance(detector, Cone)):
             raise TypeError("flat specimens are read through Cone apertures")

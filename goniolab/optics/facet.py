@@ -93,6 +93,7 @@ from goniolab.optics.apertures import (
     Aperture,
     Cone,
     Rect,
+    cap_overlap_fraction,
     sample_aperture,
 )
 from goniolab.optics.fresnel import fresnel, fresnel_dielectric
@@ -180,70 +181,6 @@ class HemisphereBRDF:
     phi_edges_deg: FloatArray
     f_sr: FloatArray
     albedo: float
-
-
-def cap_overlap_fraction(gamma_rad: ArrayLike, a_s_rad: float, a_d_rad: float) -> FloatArray:
-    """Fraction of a spherical cap of half angle ``a_s`` inside a cap of half angle ``a_d``.
-
-    Parameters
-    ----------
-    gamma_rad : array_like
-        Angular separation of the cap centres (radians).
-    a_s_rad, a_d_rad : float
-        Half angles of the source and detector caps (radians, < pi/2).
-
-    Returns
-    -------
-    ndarray
-        ``area(cap_s ∩ cap_d) / area(cap_s)``, cap area ``2 pi (1 - cos a)``. The lens area
-        is Tovchigrechko & Vakser's spherical formula; for caps below 1e-3 rad it is the
-        planar circle-circle lens (relative error < 1e-6, and free of the cancellation the
-        spherical form suffers there). A point source (a_s = 0) gives the indicator of
-        ``gamma < a_d``; a point detector (a_d = 0) collects nothing (0).
-    """
-    g = np.abs(np.asarray(gamma_rad, dtype=np.float64))
-    a, b = float(a_s_rad), float(a_d_rad)
-    if a < 0 or b < 0:
-        raise ValueError("cap half angles must be >= 0")
-    if b == 0.0:
-        return np.zeros_like(g)
-    if a == 0.0:
-        return np.where(g < b, 1.0, np.where(g == b, 0.5, 0.0))
-    area_s = 4.0 * math.pi * math.sin(0.5 * a) ** 2
-    area_d = 4.0 * math.pi * math.sin(0.5 * b) ** 2
-    full = min(area_s, area_d) / area_s
-    out = np.where(g <= abs(a - b), full, 0.0)
-    lens = (g > abs(a - b)) & (g < a + b)
-    if np.any(lens):
-        gl = g[lens]
-        if max(a, b) < 1e-3:
-            c1 = np.clip((gl * gl + a * a - b * b) / (2.0 * gl * a), -1.0, 1.0)
-            c2 = np.clip((gl * gl + b * b - a * a) / (2.0 * gl * b), -1.0, 1.0)
-            tri = (-gl + a + b) * (gl + a - b) * (gl - a + b) * (gl + a + b)
-            area = (
-                (
-                    a * a * np.arccos(c1)
-                    + b * b * np.arccos(c2)
-                    - 0.5 * np.sqrt(np.maximum(tri, 0.0))
-                )
-                / (math.pi * a * a)
-                * area_s
-            )
-        else:
-            # Numerators as 1 - cos = 2 sin^2(./2) sums, free of cancellation for small caps:
-            # cos u - cos v cos w = 2 (hv + hw - hu - 2 hv hw), h. = sin^2(./2).
-            ha, hb = math.sin(0.5 * a) ** 2, math.sin(0.5 * b) ** 2
-            hg = np.sin(0.5 * gl) ** 2
-            sa, sb, sg = math.sin(a), math.sin(b), np.sin(gl)
-            x = np.clip(2.0 * (ha + hb - hg - 2.0 * ha * hb) / (sa * sb), -1.0, 1.0)
-            y = np.clip(2.0 * (hg + ha - hb - 2.0 * hg * ha) / (sg * sa), -1.0, 1.0)
-            z = np.clip(2.0 * (hg + hb - ha - 2.0 * hg * hb) / (sg * sb), -1.0, 1.0)
-            acy, acz = np.arccos(y), np.arccos(z)
-            # 2 [pi - acos x - cos a acos y - cos b acos z], the spherical excess split off
-            area = 2.0 * ((math.pi - np.arccos(x) - acy - acz) + 2.0 * ha * acy + 2.0 * hb * acz)
-        out[lens] = np.clip(area / area_s, 0.0, full)
-    result: FloatArray = out
-    return result
 
 
 def cap_overlap_moments(

@@ -52,8 +52,7 @@ from numpy.typing import NDArray
 from drivers.base import Spectrocolorimeter
 from drivers.goniometer import TwoArmGoniometer
 from drivers.timing import Clock
-from goniolab.optics.apertures import Cone
-from goniolab.optics.facet import cap_overlap_fraction
+from goniolab.optics.apertures import Cone, cap_overlap_fraction
 from goniolab.optics.fresnel import fresnel
 from goniolab.scan.events import (
     EventBus,
