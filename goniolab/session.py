@@ -261,6 +261,35 @@ class ScanSession:
         await self.lab.prepare_sample(plan.sample)  # the realistic twin's truth, in a thread
         return PreparedScan(plan, run_id, check, model, Predictor.from_config(model, self.config))
 
+    async def adaptive_plan(self, plan: BrdfPlan) -> BrdfPlan:
+        """``plan`` with its detector angles placed where the predicted curve bends
+        (:func:`goniolab.scan.adaptive.adaptive_angles`): as many angles, from the
+        smallest to the largest of ``plan.theta_r_deg``, ``sampling = "adaptive"``.
+
+        Raises
+        ------
+        UserError
+            The range cannot hold that many angles 0.05 deg apart, or the prediction is
+            not finite on it.
+        """
+        import dataclasses
+
+        from goniolab.scan.adaptive import adaptive_angles
+
+        model = await self.models.get(plan.sample)
+        predictor = Predictor.from_config(model, self.config)
+        ti = plan.theta_i_deg
+
+        def predict(theta_r_deg: Any) -> Any:
+            return predictor.predict_sync(ti, [float(t) for t in theta_r_deg])
+
+        lo, hi = min(plan.theta_r_deg), max(plan.theta_r_deg)
+        try:
+            angles = await asyncio.to_thread(adaptive_angles, lo, hi, plan.n_geometries, predict)
+        except ValueError as exc:
+            raise UserError(f"--adaptive: {exc}") from None
+        return dataclasses.replace(plan, theta_r_deg=angles, sampling="adaptive")
+
     async def prepare_resume(self, run_id: int) -> PreparedScan:
         """:meth:`prepare` for the stored plan of ``run_id``."""
         return await self.prepare(BrdfPlan.from_dict(self.store.get_run(run_id).plan), run_id)

@@ -12,7 +12,8 @@ two or more incidences; it prints the arms' zero offsets and the sample's tilt, 
 with the run and writes them into the config's ``[alignment]`` table
 (``--no-write-config`` keeps the file as it is), which corrects every later move.
 ``--auto-exposure`` adapts the spectro's exposure to each reading
-(:mod:`goniolab.scan.exposure`).
+(:mod:`goniolab.scan.exposure`). ``--adaptive`` places the ``--theta-r`` angles where the
+predicted curve bends (:mod:`goniolab.scan.adaptive`): as many readings, the same sweep.
 """
 
 from __future__ import annotations
@@ -247,6 +248,7 @@ async def _execute(
     run_id: int | None,
     json_out: bool,
     model: str | None = None,
+    adaptive: bool = False,
 ) -> int:
     import asyncio
     import signal
@@ -267,6 +269,15 @@ async def _execute(
     async with ScanSession.open(
         cfg, store, sample=plan.sample, time_scale=time_scale, operator=_specimen_prompt
     ) as session:
+        if adaptive and run_id is None:
+            plan = await session.adaptive_plan(plan)
+            steps = [b - a for a, b in zip(plan.theta_r_deg, plan.theta_r_deg[1:], strict=False)]
+            print(
+                f"goniolab: adaptive sampling: {plan.n_geometries} angles "
+                f"{plan.theta_r_deg[0]:g}..{plan.theta_r_deg[-1]:g} deg, "
+                f"{min(steps):.2f} to {max(steps):.2f} deg apart",
+                file=sys.stderr,
+            )
         # refuse an unsafe plan before any motion, and before a new run is even recorded
         # (the runner checks again); a resumed run checks only the readings still to take
         try:
@@ -497,6 +508,10 @@ def _cmd_scan(args: argparse.Namespace) -> int:
             )
     theta_i, theta_r = args.theta_i, args.theta_r
     if args.plan == "e2194":
+        if args.adaptive:
+            raise UserError(
+                "scan --plan e2194 measures the standard's fixed angles; drop --adaptive"
+            )
         theta_i, theta_r = _e2194_geometry(args, cfg)
     try:
         plan = BrdfPlan(
@@ -524,6 +539,7 @@ def _cmd_scan(args: argparse.Namespace) -> int:
                 run_id=None,
                 json_out=args.json,
                 model=args.model,
+                adaptive=args.adaptive,
             )
         )
 
@@ -643,6 +659,12 @@ def register(subparsers: Any) -> None:
         "--no-write-config",
         action="store_true",
         help="--plan align: store the result with the run only, leave the config file as it is",
+    )
+    p.add_argument(
+        "--adaptive",
+        action="store_true",
+        help="place the --theta-r angles where the predicted curve bends (as many angles, "
+        "same start and stop, same run time; dense at the specular peak, sparse on the flanks)",
     )
     p.add_argument(
         "--auto-exposure",

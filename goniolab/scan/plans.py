@@ -24,6 +24,7 @@ __all__ = [
     "MAX_ANGLES",
     "MAX_READINGS",
     "MIRROR_INDEX",
+    "SAMPLINGS",
     "BrdfPlan",
     "GlossPlan",
     "GlossStats",
@@ -38,6 +39,9 @@ __all__ = [
 MAX_ANGLES = 10_000
 #: Most readings (angles x repeats) one plan may hold.
 MAX_READINGS = 100_000
+
+#: How a plan's detector angles were chosen (:attr:`BrdfPlan.sampling`).
+SAMPLINGS = ("uniform", "adaptive")
 
 #: Plan index of the mirror reference reading (stored like any point, before index 0).
 MIRROR_INDEX = -1
@@ -161,6 +165,9 @@ class BrdfPlan:
     auto_exposure
         Adapt the exposure to each reading (:mod:`goniolab.scan.exposure`), starting from
         ``exposure_us``.
+    sampling
+        How ``theta_r_deg`` was chosen: ``"uniform"`` (as given) or ``"adaptive"`` (placed
+        where the predicted curve bends, :mod:`goniolab.scan.adaptive`); a record only.
     """
 
     theta_i_deg: float
@@ -171,8 +178,13 @@ class BrdfPlan:
     mirror_reference: bool = False
     sample: str = ""
     auto_exposure: bool = False
+    sampling: str = "uniform"
 
     def __post_init__(self) -> None:
+        if self.sampling not in SAMPLINGS:
+            raise PlanError(
+                f"sampling must be one of {', '.join(SAMPLINGS)}, got {self.sampling!r}"
+            )
         if not math.isfinite(self.theta_i_deg):
             raise PlanError(f"theta_i_deg must be finite, got {self.theta_i_deg}")
         if not self.theta_r_deg:
@@ -228,6 +240,7 @@ class BrdfPlan:
             "mirror_reference": self.mirror_reference,
             "sample": self.sample,
             "auto_exposure": self.auto_exposure,
+            "sampling": self.sampling,
         }
 
     @classmethod
@@ -243,6 +256,7 @@ class BrdfPlan:
                 mirror_reference=bool(d["mirror_reference"]),
                 sample=str(d["sample"]),
                 auto_exposure=bool(d.get("auto_exposure", False)),
+                sampling=str(d.get("sampling", "uniform")),
             )
         except KeyError as exc:
             raise PlanError(f"stored plan lacks key {exc.args[0]!r}") from exc
