@@ -2,12 +2,22 @@
 
 :class:`ModbusAxisServer`: one Modbus TCP server (pymodbus 3.16 ``ModbusTcpServer`` with
 :class:`pymodbus.simulator.SimDevice` devices), or a Modbus RTU one framed over a TCP socket
-(``ModbusSerialServer`` on ``socket://host:port``), with one unit id per arm, implementing a
-``direct-data`` stepper profile (Oriental Motor AZ register map, manual HM-60262E, see
-``configs/profiles/oriental-az.toml``). Writing the 18-register direct-data block with
-trigger = 1 starts a move of the simulated arm; the status, alarm, feedback and command
-registers are refreshed from the arm on every request; rising edges of ZHOME / STOP /
-ALM-RST in the latched input-command word act.
+(``ModbusSerialServer`` on ``socket://host:port``), with one unit id per arm, implementing either stepper profile style of
+:mod:`drivers.profiles`:
+
+* ``direct-data`` (Oriental Motor AZ register map, manual HM-60262E,
+  ``configs/profiles/oriental-az.toml``): writing the 18-register direct-data block with
+  trigger = 1 starts a move of the simulated arm; rising edges of ZHOME / STOP / ALM-RST in
+  the latched input-command word act.
+* ``command-opcode`` (Applied Motion MDX+ eSCL register map,
+  ``configs/profiles/applied-motion-mdx.toml``): accel, decel, velocity (one register
+  each, 1/6 rps/s and 1/240 rps) and the int32 target position are latched; an opcode
+  written to the command register acts: absolute (FP) or relative (FL) move with them,
+  enable (ME), disable (MD: stops, later moves ignored), stop (SK), seek home (SH),
+  alarm reset (AR). The status code's ``ready`` bit is the enable state.
+
+The status, alarm, feedback (and command) registers are refreshed from the arm on every
+request.
 
 Injected faults (:mod:`sim.faults`): a timed-out request gets no answer (not executed, no
 reply sent); a garbled one a corrupted MBAP header (TCP) or a wrong CRC (RTU), which a
@@ -76,23 +86,32 @@ class WireAxis:
     steps_per_deg: float
     unit_id: int
     _input_word: int = field(default=0, repr=False)
+    #: command-opcode drives: enabled (ME) -- a disabled drive ignores moves.
+    enabled: bool = field(default=False, repr=False)
 
     def __post_init__(self) -> None:
-        if self.profile.move_style != "direct-data":
+        if self.profile.move_style not in ("direct-data", "command-opcode"):
             raise ValueError(
                 f"{self.profile.path}: the wire simulator implements move_style "
-                f"'direct-data' only, got {self.profile.move_style!r}"
+                f"'direct-data' and 'command-opcode', got {self.profile.move_style!r}"
             )
         regs = self.profile.registers
-        for name in (
-            "output_status",
-            "alarm_code",
-            "feedback_position",
-            "input_command",
-            "direct_data",
-        ):
+        sizes = {
+            "output_status": 2,
+            "alarm_code": 2,
+            "feedback_position": 2,
+            "command_position": 2,
+            "input_command": 2,
+            "direct_data": 18,
+            "command": 1,
+            "accel": 1,
+            "decel": 1,
+            "velocity": 1,
+            "target_position": 2,
+        }
+        for name, size in sizes.items():
             addr = getattr(regs, name)
-            if addr is not None and addr + (18 if name == "direct_data" else 2) > _REGISTER_SPACE:
+            if addr is not None and addr + size > _REGISTER_SPACE:
                 raise ValueError(
                     f"{self.profile.path}: registers.{name} 0x{addr:04X} beyond the simulated space"
                 )
@@ -102,12 +121,14 @@ class WireAxis:
         """The 32-bit output status word from the arm's state (bits from the profile)."""
         st = self.axis.snapshot()
         sb = self.profile.status_bits
+        opcode_style = self.profile.move_style == "command-opcode"
         bits: list[tuple[int | None, bool]] = [
             (sb.in_position, st.in_position),
             (sb.moving, st.moving),
             (sb.alarm, st.alarm_code is not None),
-            (sb.ready, st.ready),
-            (sb.busy, st.moving),
+            # AMP: "ready" is the drive's enable state; "busy" is initialising (never here)
+            (sb.ready, st.ready and (self.enabled or not opcode_style)),
+            (sb.busy, st.moving and not opcode_style),
             (
                 sb.home_end,
                 st.homed and not st.moving and abs(st.position_deg) < 0.5 / self.steps_per_deg,
@@ -166,6 +187,8 @@ class WireAxis:
                 with contextlib.suppress(MotorFault):  # alarm active: the AZ ignores ZHOME
                     motor.start_home(now)
                     self.axis.ensure_tracker()
+        if regs.command is not None and regs.command in written:
+            self._opcode(image, start_address, image[regs.command - start_address])
         dd = self.profile.direct_data
         if regs.direct_data is not None and dd is not None:
             trigger_addr = regs.direct_data + 14
@@ -175,6 +198,38 @@ class WireAxis:
                 _, op_type, position, speed, accel, _decel, _current, trigger, _dest = fields
                 if trigger == dd.trigger:
                     self._start_move(op_type, position, speed, accel)
+
+    def _opcode(self, image: list[int], start_address: int, opcode: int) -> None:
+        """Act on an opcode written to the command register (command-opcode drives)."""
+        ops, regs = self.profile.opcodes, self.profile.registers
+        if ops is None:
+            return
+        now = self.axis.clock.now()
+        motor = self.axis.motor
+        if opcode == ops.enable:
+            self.enabled = True
+        elif opcode == ops.disable:
+            self.enabled = False
+            motor.stop(now)
+        elif opcode == ops.stop:
+            motor.stop(now)
+        elif opcode == ops.alarm_reset:
+            motor.reset_alarm(now)
+        elif opcode == ops.home and self.enabled:
+            with contextlib.suppress(MotorFault):  # alarm active: the drive ignores it
+                motor.start_home(now)
+                self.axis.ensure_tracker()
+        elif opcode in (ops.absolute_move, ops.relative_move) and self.enabled:
+            assert regs.target_position is not None and regs.velocity is not None
+            assert regs.accel is not None
+            off = regs.target_position - start_address
+            target = _join32(image[off], image[off + 1])
+            self._start_move(
+                1 if opcode == ops.absolute_move else 2,
+                target,
+                image[regs.velocity - start_address],
+                image[regs.accel - start_address],
+            )
 
     def _start_move(
         self, op_type: int, position_steps: int, speed_counts: int, accel_counts: int
@@ -215,6 +270,9 @@ class ModbusAxisServer:
         Modbus RTU framing (unit id, PDU, CRC-16) over a TCP socket (pymodbus
         ``ModbusSerialServer`` on ``socket://host:port``), which a master reaches as the
         serial URL ``socket://host:port`` -- an RTU line without a serial cable.
+    serial_port, baudrate
+        RTU on a serial device instead (e.g. one end of a pty pair that ``socat`` made;
+        the master opens the other end): ``host``/``port`` are then unused.
 
     Notes
     -----
@@ -232,6 +290,8 @@ class ModbusAxisServer:
         host: str = "127.0.0.1",
         port: int = 5020,
         transport: Literal["tcp", "rtu"] = "tcp",
+        serial_port: str = "",
+        baudrate: int = 9600,
     ) -> None:
         ids = [a.unit_id for a in axes]
         if len(set(ids)) != len(ids):
@@ -243,12 +303,19 @@ class ModbusAxisServer:
         self.requested_port = port
         self.port = port
         self.transport = transport
+        self.serial_port = serial_port
+        self.baudrate = baudrate
+        if serial_port and transport != "rtu":
+            raise ValueError("a serial_port needs transport 'rtu'")
         self._server: ModbusTcpServer | ModbusSerialServer | None = None
         self._pending: dict[int, list[Fault]] = {unit: [] for unit in self.axes}
 
     @property
     def url(self) -> str:
-        """Where a master connects: ``host:port`` (TCP) or ``socket://host:port`` (RTU)."""
+        """Where a master connects: ``host:port`` (TCP), ``socket://host:port`` (RTU) or
+        the serial device (RTU on a serial line)."""
+        if self.serial_port:
+            return self.serial_port
         where = f"{self.host}:{self.port}"
         return where if self.transport == "tcp" else f"socket://{where}"
 
@@ -331,12 +398,15 @@ class ModbusAxisServer:
             server = ModbusSerialServer(
                 devices,
                 framer=FramerType.RTU,
-                port=f"socket://{self.host}:{self.requested_port}",
+                port=self.serial_port or f"socket://{self.host}:{self.requested_port}",
+                baudrate=self.baudrate,
                 trace_packet=self._trace_packet,
             )
         try:
             await server.serve_forever(background=True)
         except (RuntimeError, OSError) as exc:
+            if self.serial_port:
+                raise OSError(errno.EIO, f"cannot open {self.serial_port}: {exc}") from None
             raise OSError(
                 errno.EADDRINUSE,
                 f"cannot listen on {self.host}:{self.requested_port} (in use?): {exc}",
