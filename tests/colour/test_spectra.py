@@ -118,3 +118,25 @@ def test_a_config_naming_a_usual_illuminant_loads_without_colour_science(tmp_pat
             [sys.executable, "-c", code], capture_output=True, text=True, check=True
         )
         assert out.stdout.split() == [illuminant, "False"]
+
+
+def test_lab_and_lch_match_colour_science() -> None:
+    """xyz_to_colour writes CIE 15 eqs. 8.1-8.4 out; colour-science is the independent truth
+    (both branches of f(t): dark colours below (6/29)^3 of the white too)."""
+    import colour
+
+    from goniolab.colour.spectra import xyz_to_colour
+
+    rng = np.random.default_rng(5)
+    xyz = np.concatenate([rng.uniform(0.0, 120.0, (200, 3)), rng.uniform(0.0, 0.5, (50, 3))])
+    for settings in (ColourSettings(), ColourSettings("A", "2"), ColourSettings("FL11")):
+        s = settings.validated()
+        white = colour.CCS_ILLUMINANTS[s.observer][s.illuminant]
+        lab = colour.XYZ_to_Lab(xyz / 100.0, white)
+        lch = colour.Lab_to_LCHab(lab)
+        got = xyz_to_colour(xyz, settings)
+        np.testing.assert_allclose(got[:, :3], xyz, rtol=0, atol=0)
+        np.testing.assert_allclose(got[:, 3:6], lab, rtol=1e-10, atol=1e-10)
+        np.testing.assert_allclose(got[:, 6], lch[:, 1], rtol=1e-10, atol=1e-10)
+        dh = (got[:, 7] - lch[:, 2] + 180.0) % 360.0 - 180.0
+        np.testing.assert_allclose(dh[lch[:, 1] > 1e-6], 0.0, atol=1e-8)
