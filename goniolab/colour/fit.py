@@ -461,7 +461,7 @@ def fit_paint(
         if name.endswith("area_fraction"):
             other = "pearl" if name.startswith("metallic") else "metallic"
             if f"{other}.area_fraction" in names:
-                hi[k] = 0.999 - 1e-9  # both free: the sum is guarded in _paint below
+                hi[k] = 1.0  # both free: paint_of rescales a sum above 1
             else:
                 fl = getattr(paint0, other)
                 hi[k] = min(hi[k], 1.0 - (fl.area_fraction if fl is not None else 0.0))

@@ -47,6 +47,8 @@ def _cmd_render(args: argparse.Namespace) -> int:
     if not (math.isfinite(args.lamp_deg) and 0.0 <= args.lamp_deg <= 60.0):
         raise UserError(f"--lamp-deg {args.lamp_deg:g}: must be in [0, 60] deg")
     t0 = time.perf_counter()
+    if sys.stderr.isatty() and not args.json:  # the imports and the table take seconds
+        print(f"rendering {args.map} ({args.size}x{args.size}) ...", file=sys.stderr, flush=True)
     from goniolab.colour.dispersion import DispersionError
     from goniolab.colour.paint import PaintError
     from goniolab.colour.render import render, tabulate_brdf
