@@ -94,6 +94,7 @@ import threading
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -195,6 +196,35 @@ def luminance_weights(
     s = np.interp(wl, sd.wavelengths, sd.values)
     w = ybar * s
     return np.asarray(w / w.sum(), dtype=np.float64)
+
+
+class _SpectralFraction(Protocol):
+    def spectral_fraction(
+        self, theta_i_deg: float, theta_r_deg: float, *, source: Aperture, detector: Aperture
+    ) -> FloatArray: ...
+
+
+def _luminance_pct(
+    optics: _SpectralFraction,
+    theta_i_deg: float,
+    theta_r_deg: object,
+    source: Aperture,
+    detector: Aperture,
+) -> FloatArray:
+    """100 x the luminance-weighted (:func:`luminance_weights`) spectral fraction reaching the
+    detector, per signed ``theta_r_deg``: the noise-free reading of either specimen."""
+    tr = np.asarray(theta_r_deg, dtype=np.float64)
+    w = luminance_weights()
+    out = [
+        100.0
+        * float(
+            np.dot(
+                w, optics.spectral_fraction(theta_i_deg, float(t), source=source, detector=detector)
+            )
+        )
+        for t in tr.flat
+    ]
+    return np.asarray(out, dtype=np.float64).reshape(tr.shape)
 
 
 @dataclass(frozen=True)
@@ -812,23 +842,7 @@ class TruthOptics:
         detector: Aperture = Cone(6.0),  # noqa: B008
     ) -> FloatArray:
         """Noise-free luminance reading (10 deg observer, D65) in % of a perfect mirror."""
-        tr = np.asarray(theta_r_deg, dtype=np.float64)
-        w = luminance_weights()
-        out = np.array(
-            [
-                100.0
-                * float(
-                    np.dot(
-                        w,
-                        self.spectral_fraction(
-                            theta_i_deg, float(t), source=source, detector=detector
-                        ),
-                    )
-                )
-                for t in tr.flat
-            ]
-        )
-        return out.reshape(tr.shape)
+        return _luminance_pct(self, theta_i_deg, theta_r_deg, source, detector)
 
     def gloss(self, angles_deg: Sequence[int] = (20, 60, 85)) -> dict[int, float]:
         """ISO 2813 gloss of the truth: flux through the standard's rectangles over that of
@@ -908,19 +922,7 @@ class FlatSpecimen:
         detector: Aperture = Cone(6.0),  # noqa: B008
     ) -> FloatArray:
         """Noise-free luminance in % of a perfect mirror."""
-        tr = np.asarray(theta_r_deg, dtype=np.float64)
-        w = luminance_weights()
-        out = [
-            100.0
-            * float(
-                np.dot(
-                    w,
-                    self.spectral_fraction(theta_i_deg, float(t), source=source, detector=detector),
-                )
-            )
-            for t in tr.flat
-        ]
-        return np.asarray(out).reshape(tr.shape)
+        return _luminance_pct(self, theta_i_deg, theta_r_deg, source, detector)
 
 
 _TRUTHS: dict[tuple[object, ...], TruthOptics] = {}
