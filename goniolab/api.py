@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 import numpy as np
 
 from goniolab.errors import UserError
+from goniolab.scan.plans import DEFAULT_REPEATS
 from goniolab.store import RunRecord, RunStore, StoreError, resolve_store_path
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
@@ -453,7 +454,7 @@ def run_scan(
     sample: str | None = None,
     theta_i_deg: float = 45.0,
     theta_r_deg: str | Sequence[float] = "0:70:1",
-    repeats: int = 1,
+    repeats: int = DEFAULT_REPEATS,
     dwell_s: float = 0.0,
     exposure_us: int | None = None,
     store: str | Path | None = None,

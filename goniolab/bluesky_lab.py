@@ -42,6 +42,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from goniolab.errors import UserError
+from goniolab.scan.plans import DEFAULT_REPEATS
 
 try:
     from bluesky import plan_stubs as bps
@@ -305,7 +306,7 @@ def inplane_scan(
     *,
     theta_i_deg: float,
     theta_r_deg: Sequence[float],
-    repeats: int = 1,
+    repeats: int = DEFAULT_REPEATS,
     md: dict[str, Any] | None = None,
 ) -> Generator[Any, Any, str]:
     """The in-plane BRDF scan as a bluesky plan.

@@ -636,7 +636,14 @@ def register(subparsers: Any) -> None:
         "or align: find the arms' zero offsets and the sample's tilt (black-glass standard, "
         "then the sample) and write [alignment]",
     )
-    p.add_argument("--repeats", type=int, default=1, help="readings per geometry")
+    from goniolab.scan.plans import DEFAULT_REPEATS  # light: stdlib and drivers.base
+
+    p.add_argument(
+        "--repeats",
+        type=int,
+        default=DEFAULT_REPEATS,
+        help=f"readings per geometry (default {DEFAULT_REPEATS}, as in the TUI)",
+    )
     p.add_argument("--dwell", type=float, default=0.0, help="settling time after a move, s")
     p.add_argument("--exposure-us", type=int, default=None, help="exposure, us (default: config)")
     p.add_argument(

@@ -21,6 +21,7 @@ from typing import Any
 from drivers.base import GLOSS_ANGLES_DEG
 
 __all__ = [
+    "DEFAULT_REPEATS",
     "MAX_ANGLES",
     "MAX_READINGS",
     "MIRROR_INDEX",
@@ -42,6 +43,10 @@ MAX_READINGS = 100_000
 
 #: How a plan's detector angles were chosen (:attr:`BrdfPlan.sampling`).
 SAMPLINGS = ("uniform", "adaptive")
+
+#: Readings per geometry when none is asked for: the one default of the CLI (``scan
+#: --repeats``), the TUI's setup form, :func:`goniolab.api.run_scan` and the bluesky plan.
+DEFAULT_REPEATS = 1
 
 #: Plan index of the mirror reference reading (stored like any point, before index 0).
 MIRROR_INDEX = -1
@@ -172,7 +177,7 @@ class BrdfPlan:
 
     theta_i_deg: float
     theta_r_deg: tuple[float, ...]
-    repeats: int = 1
+    repeats: int = DEFAULT_REPEATS
     dwell_s: float = 0.0
     exposure_us: int = 10000
     mirror_reference: bool = False

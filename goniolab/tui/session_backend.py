@@ -33,7 +33,7 @@ from goniolab.scan.events import (
     RunFinished,
     RunState,
 )
-from goniolab.scan.plans import BrdfPlan, GlossPlan, PlanError
+from goniolab.scan.plans import DEFAULT_REPEATS, BrdfPlan, GlossPlan, PlanError
 from goniolab.scan.predict import Predictor
 from goniolab.scan.runner import PlanRefused, ScanRunner
 from goniolab.session import GlossSession, ScanSession, check_sample
@@ -44,10 +44,10 @@ from goniolab.tui.view_model import ArmState, RunSummary, ScanSetup, StoredRun
 __all__ = ["SessionBackend"]
 
 #: The default scan of the form: the seed's in-plane sweep, theta_i = 45 deg, detector
-#: 0..70 deg in 1 deg steps (Wittmann et al. 2021, sec. 2.3 and 4.2; the seed repeats 5 times).
+#: 0..70 deg in 1 deg steps (Wittmann et al. 2021, sec. 2.3 and 4.2; the seed repeats 5 times),
+#: repeats as everywhere else (:data:`goniolab.scan.plans.DEFAULT_REPEATS`).
 DEFAULT_THETA_I_DEG = 45.0
 DEFAULT_THETA_R_DEG = (0.0, 70.0, 1.0)
-DEFAULT_REPEATS = 3
 
 
 class SessionBackend:

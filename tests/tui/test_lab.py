@@ -22,6 +22,7 @@ from goniolab.models import model_for
 from goniolab.optics.analytic import AnalyticModel
 from goniolab.optics.apertures import Cone
 from goniolab.scan.events import RunState
+from goniolab.scan.plans import DEFAULT_REPEATS
 from goniolab.store import RunStore
 from goniolab.tui.app import GonioApp
 from goniolab.tui.screens import RunsScreen
@@ -222,7 +223,8 @@ async def test_arm_alarm_fails_the_run_and_shows_in_the_status_panel(tmp_path: P
         )
         await pilot.press("s")
         await wait_until(pilot, lambda: app.run_state is RunState.FAILED)
-        assert app.comparison.n_readings == 3 * 3  # 40, 45, 50 deg measured before the alarm
+        # 40, 45, 50 deg measured before the alarm, the form's default repeats each
+        assert app.comparison.n_readings == 3 * DEFAULT_REPEATS
         await app.poll_once()
         arms = app.query_one(StatusPanel).query_one("#arms", DataTable)
         assert str(arms.get_cell("detector", "alarm")) == "0x30"
