@@ -141,6 +141,21 @@ def test_export_json_flag_reports_the_file(
     assert doc == {"run_id": 1, "format": "parquet", "output": str(out.resolve())}
 
 
+def test_export_json_flag_without_output_prints_the_run_as_json(
+    store_file: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``runs export RUN --json`` answers in JSON like every other command (it printed CSV)."""
+    assert _export(store_file, 1, "--format", "json") == 0
+    expected = json.loads(capsys.readouterr().out)
+    assert _export(store_file, 1, "--json") == 0
+    assert json.loads(capsys.readouterr().out) == expected
+    assert _export(store_file, 1, "--json", "--format", "csv") == 2
+    err = capsys.readouterr().err
+    assert (
+        err.startswith("goniolab: error: runs export --json --format csv") and err.count("\n") == 1
+    )
+
+
 def test_predict_brdf_out_netcdf_round_trip(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -106,3 +106,81 @@ def test_help_explains_slope_method(capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit):
         main(["predict", "gloss", "--help"])
     assert "squares plane through 3 x 3 points" in " ".join(capsys.readouterr().out.split())
+
+
+def test_predict_gloss_prints_a_table_with_units(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["predict", "gloss", "sample:wittmann-3", "--model", "facet", "--json"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert main(["predict", "gloss", "sample:wittmann-3", "--model", "facet"]) == 0
+    lines = capsys.readouterr().out.splitlines()[1:]
+    g60 = next(line for line in lines if line.strip().startswith("G60"))
+    assert f"{rep['G60']:.1f}  GU" in g60 and "facet model" in g60
+    text = "\n".join(lines)
+    assert "haze index HI (ASTM D4039)" in text and "GU, G60 - G20" in text
+    assert f"{rep['e430']['doi']:.1f}  of 100, 100 (Rs - R0.3) / Rs" in text
+    assert f"{rep['d523_angle']}  deg (20 if G60 > 70, 85 if G60 < 10)" in text
+    # every line with a number says what it is and in which unit
+    numbered = [line for line in lines if not line.rstrip().endswith(":")]
+    assert len(numbered) == 11
+    assert all("GU" in line or "deg (" in line or "of 100" in line for line in numbered)
+
+
+def test_a_negative_doi_is_printed_with_a_note(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """DOI = 100 (Rs - R0.3) / Rs is negative when the 0.3 deg off-specular reading exceeds
+    the specular one (a surface with no distinct image): printed, never without a note."""
+    import dataclasses
+
+    import goniolab.optics.gloss_standards as gs
+
+    real = gs.gloss_report
+
+    def negative_doi(model: object) -> gs.GlossReport:
+        rep = real(model)  # type: ignore[arg-type]
+        return dataclasses.replace(rep, e430=dataclasses.replace(rep.e430, doi=-12.5))
+
+    monkeypatch.setattr(gs, "gloss_report", negative_doi)
+    assert main(["predict", "gloss", "sample:wittmann-3", "--model", "facet"]) == 0
+    out = capsys.readouterr().out
+    assert "-12.5  of 100" in out
+    assert "note: DOI < 0: the 0.3 deg off-specular reading exceeds the specular one" in out
+
+
+@pytest.mark.slow
+def test_scan_takes_a_negative_theta_r_range(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``scan --theta-r -20:20:1`` (no ``=``): 41 geometries, stored, first -20 deg."""
+    from goniolab.store import RunStore
+    from tests.twin_configs import ideal_config
+
+    cfg = ideal_config(tmp_path)
+    text = cfg.read_text()
+    assert "limits_deg = [0.0, 70.0]" in text
+    cfg.write_text(text.replace("limits_deg = [0.0, 70.0]", "limits_deg = [-70.0, 70.0]"))
+    store = tmp_path / "runs.sqlite"
+    argv = ["scan", "--config", str(cfg), "--store", str(store), "--theta-i", "60",
+            "--theta-r", "-20:20:1", "--time-scale", "0", "--json"]  # fmt: skip
+    assert main(argv) == 0, capsys.readouterr().err
+    with RunStore(store) as s:
+        (run,) = s.list_runs()
+        angles = [p.theta_r_deg for p in s.points(run.id)]
+    assert len(angles) == 41 and angles[0] == -20.0 and angles[-1] == 20.0
+
+
+def test_cli_tui_api_and_bluesky_default_repeats_agree() -> None:
+    """One default: goniolab.scan.plans.DEFAULT_REPEATS (the TUI said 3, the CLI 1)."""
+    import inspect
+
+    from goniolab import api
+    from goniolab.cli import build_parser
+    from goniolab.scan.plans import DEFAULT_REPEATS, BrdfPlan
+    from goniolab.tui.session_backend import SessionBackend
+
+    cfg = Path(__file__).resolve().parents[1] / "configs" / "lab-sim.toml"
+    assert SessionBackend(str(cfg)).default_setup().repeats == DEFAULT_REPEATS
+    scan = build_parser().parse_args(["scan", "--config", str(cfg)])
+    assert scan.repeats == DEFAULT_REPEATS
+    assert inspect.signature(api.run_scan).parameters["repeats"].default == DEFAULT_REPEATS
+    assert BrdfPlan(45.0, (40.0,)).repeats == DEFAULT_REPEATS == 1

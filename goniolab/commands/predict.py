@@ -334,29 +334,47 @@ def _cmd_gloss(args: argparse.Namespace) -> int:
         print(json.dumps(out, indent=2, allow_nan=False))
         return 0
     print(f"{args.map} (n = {args.n.real:g}{f'+{args.n.imag:g}i' if args.n.imag else ''})")
-    print(f"  gloss (ISO 2813)   G20 {rep.G20:6.1f}   G60 {rep.G60:6.1f}   G85 {rep.G85:6.1f} GU")
-    print(
-        "  model              "
-        + "   ".join(f"{k} {v}" for k, v in names.items() if isinstance(v, str))
-    )
+    print(_gloss_table(rep, names))
     for k, why in fallback.items():
         print(f"  {k}: facet model used: {why}")
-    print(f"  D523 geometry      {rep.d523_recommended_angle} deg")
-    print(f"  haze index (D4039) {rep.haze_index:6.1f}")
-    print(
-        f"  E430 method B      gloss 20 {e.gloss_20:6.1f}   haze 18.1 {e.haze_18_1:6.2f}   "
-        f"haze 21.9 {e.haze_21_9:6.2f}"
-    )
-    print(
-        f"  E430 method A      Rs 30 {e.gloss_30:6.1f}   narrow haze {e.haze_narrow:6.2f}   "
-        f"wide haze {e.haze_wide:6.2f}   DOI {e.doi:6.1f}"
-    )
     if e.doi < 0:
         print(
             "  note: DOI < 0: the 0.3 deg off-specular reading exceeds the specular one "
             "(no distinct reflected image; DOI = 100 (Rs - R0.3) / Rs, ASTM E430)"
         )
+    if rep.haze_index < 0:
+        print("  note: haze index < 0: G20 above G60 (a mirror-like coat: no measurable haze)")
     return 0
+
+
+def _gloss_table(rep: Any, names: dict[str, Any]) -> str:
+    """``predict gloss`` as a table: what each number is, its value and its unit."""
+    e = rep.e430
+    gu = "GU (ISO 2813 black glass = 100)"
+    rows: list[tuple[str, str, str]] = [
+        (f"G{t}  specular gloss at {t} deg", f"{g:.1f}", f"{gu if t == 20 else 'GU'}, "
+         f"{names.get(f'G{t}', '')} model")
+        for t, g in ((20, rep.G20), (60, rep.G60), (85, rep.G85))
+    ]  # fmt: skip
+    rows += [
+        ("geometry to report (ASTM D523)", f"{rep.d523_recommended_angle}",
+         "deg (20 if G60 > 70, 85 if G60 < 10)"),
+        ("haze index HI (ASTM D4039)", f"{rep.haze_index:.1f}", "GU, G60 - G20"),
+        ("ASTM E430 method B, 20 deg:", "", ""),
+        ("  specular gloss", f"{e.gloss_20:.1f}", "GU"),
+        ("  haze at 18.1 deg / 21.9 deg", f"{e.haze_18_1:.2f} / {e.haze_21_9:.2f}", "GU"),
+        ("ASTM E430 method A, 30 deg:", "", ""),
+        ("  specular reading Rs", f"{e.gloss_30:.1f}", "GU"),
+        ("  narrow-angle haze (28, 32 deg)", f"{e.haze_narrow:.2f}", "GU"),
+        ("  wide-angle haze (25, 35 deg)", f"{e.haze_wide:.2f}", "GU"),
+        ("  distinctness of image DOI", f"{e.doi:.1f}",
+         "of 100, 100 (Rs - R0.3) / Rs (100: a perfect image)"),
+    ]  # fmt: skip
+    wl = max(len(r[0]) for r in rows)
+    wv = max(len(r[1]) for r in rows)
+    return "\n".join(
+        f"  {label:<{wl}}  {value:>{wv}}  {unit}".rstrip() for label, value, unit in rows
+    )
 
 
 def _batch_line(row: dict[str, Any]) -> str:

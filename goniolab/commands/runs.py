@@ -286,6 +286,14 @@ def _cmd_export(args: argparse.Namespace) -> int:
     from goniolab.export import FORMATS, export_run, format_for_path
 
     fmt = args.format
+    if args.json and not args.output:
+        # like every command's --json: the answer on stdout as JSON, i.e. the JSON export
+        if fmt not in (None, "json"):
+            raise UserError(
+                f"runs export --json --format {fmt}: --json prints the run as JSON on stdout; "
+                f"give -o FILE to write {fmt} (then --json reports what was written)"
+            )
+        fmt = "json"
     if fmt is None:
         fmt = (format_for_path(args.output) if args.output else None) or "csv"
     if fmt in ("netcdf", "parquet") and not args.output:
@@ -398,7 +406,10 @@ def register(subparsers: Any) -> None:
     )
     pe.add_argument("-o", "--output", help="write to FILE instead of stdout")
     pe.add_argument(
-        "--json", action="store_true", help="with -o: print what was written as JSON on stdout"
+        "--json",
+        action="store_true",
+        help="without -o: the run as JSON on stdout (--format json); with -o: print what "
+        "was written as JSON on stdout",
     )
     pe.set_defaults(func=_cmd_export)
 
