@@ -432,10 +432,11 @@ class GonioApp(App[int]):
         self._redraw_pending = False
         self._last_redraw_s = time.monotonic()
         try:
-            panel = self.query_one("#live", ComparisonPanel)
-        except NoMatches:  # a timer firing while the app shuts down
+            self.query_one("#live", ComparisonPanel).show(self.comparison)
+        except NoMatches:
+            # a timer firing while the app shuts down: the panel, or already only some of
+            # its children (the colour swatch), are gone
             return
-        panel.show(self.comparison)
 
     def show_banner(self, text: str) -> None:
         banner = self.query_one("#banner", Static)
