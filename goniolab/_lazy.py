@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import importlib
 import sys
+import types
 from collections.abc import Callable
 from typing import Any
 
@@ -43,3 +44,40 @@ def lazy_exports(
         return sorted(set(vars(sys.modules[package])) | set(table))
 
     return __getattr__, __dir__
+
+
+class _DeferredSubmodule(types.ModuleType):
+    """Stands in ``sys.modules`` for a submodule until an attribute of it is used; then the
+    real submodule is imported, replaces the stand-in, and answers."""
+
+    def __getattr__(self, name: str) -> Any:
+        if name.startswith("__"):
+            raise AttributeError(name)
+        full = self.__name__
+        if sys.modules.get(full) is self:
+            del sys.modules[full]
+        real = importlib.import_module(full)
+        parent, _, child = full.rpartition(".")
+        setattr(sys.modules[parent], child, real)
+        return getattr(real, name)
+
+
+def import_colour() -> Any:
+    """colour-science, imported without its plotting package until that is used.
+
+    ``import colour`` (0.4) imports ``colour.plotting`` whenever matplotlib is installed --
+    matplotlib, pyplot and the plotting datasets: 2.5-3.5 s of the 3.7 s the import
+    costs (``python -X importtime``), paid by every scan that computes a colour. The
+    plotting package is put in ``sys.modules`` as a stand-in that imports the real one on
+    its first attribute access, so ``colour.plotting.plot_...`` still works. Its optional-
+    dependency notices ("Matplotlib not available" and similar) are silenced.
+    """
+    module = sys.modules.get("colour")
+    if module is not None:
+        return module
+    import warnings
+
+    sys.modules.setdefault("colour.plotting", _DeferredSubmodule("colour.plotting"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return importlib.import_module("colour")

@@ -87,7 +87,9 @@ def lab_of_spectrum(wavelengths_nm: ArrayLike, values_pct: ArrayLike) -> tuple[f
         return (float(c.L), float(c.a), float(c.b))
     import warnings
 
-    import colour
+    from goniolab._lazy import import_colour
+
+    colour = import_colour()
 
     if wl.size < 2 or wl[0] > 380.0 or wl[-1] < 780.0 or np.ptp(np.diff(wl)) > 1e-6:
         return (math.nan, math.nan, math.nan)

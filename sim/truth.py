@@ -183,11 +183,9 @@ def luminance_weights(
     observer and D65 (PHYSICS.md), the glossmeter the 2 deg V(lambda) and illuminant C
     (ISO 2813). colour-science is imported here, lazily (it is slow to import).
     """
-    import warnings
+    from goniolab._lazy import import_colour
 
-    with warnings.catch_warnings():  # "Matplotlib not available" on import
-        warnings.simplefilter("ignore")
-        import colour
+    colour = import_colour()
 
     wl = np.asarray(SPECTRUM_WAVELENGTHS_NM)
     cmfs = colour.MSDS_CMFS[observer]

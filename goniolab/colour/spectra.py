@@ -91,11 +91,11 @@ class ColourError(ValueError):
 
 
 def colour_module() -> Any:
-    """colour-science, imported on first use with its optional-dependency notices silenced."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # "Matplotlib not available" and similar notices
-        import colour
-    return colour
+    """colour-science, imported on first use with its optional-dependency notices silenced
+    and its plotting package deferred (:func:`goniolab._lazy.import_colour`)."""
+    from goniolab._lazy import import_colour
+
+    return import_colour()
 
 
 @dataclass(frozen=True, slots=True)

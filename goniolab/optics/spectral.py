@@ -20,7 +20,6 @@ References
 from __future__ import annotations
 
 import functools
-import warnings
 
 import numpy as np
 from numpy.typing import NDArray
@@ -55,10 +54,10 @@ def _weights(lams: tuple[float, ...]) -> tuple[NDArray[np.float64], NDArray[np.f
         c = np.asarray(CIE_C_AT_WAVELENGTHS)
         v = np.asarray(CIE_V_AT_WAVELENGTHS)
     else:  # another grid: colour-science's tables (a slow first import)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            import colour
-            from colour.colorimetry import SDS_LEFS_PHOTOPIC
+        from goniolab._lazy import import_colour
+
+        colour = import_colour()
+        from colour.colorimetry import SDS_LEFS_PHOTOPIC
 
         c = np.asarray(colour.SDS_ILLUMINANTS["C"][lam], dtype=np.float64)
         v = np.asarray(SDS_LEFS_PHOTOPIC["CIE 1924 Photopic Standard Observer"][lam])
