@@ -530,18 +530,27 @@ class ScanRunner:
             "reading the arms' status", self._arms_homed, self._reconnect_arms,
             self.move_retries, "goniometer",
         )  # fmt: skip
-        if not homed:
-            await self.goniometer.home(self.home_timeout_s)
+        if not homed:  # the goniometer plans homing from where the arms stand: a retry is safe
+            await self._retry(
+                "homing", lambda: self.goniometer.home(self.home_timeout_s),
+                self._reconnect_arms, self.move_retries, "goniometer",
+            )  # fmt: skip
 
     async def _park(self) -> str:
-        """Stop and park the arms, best effort; returns "" or what went wrong.
+        """Stop and park the arms, best effort (each step retried after a transient fault,
+        :meth:`_retry`); returns "" or what went wrong.
 
         After an interrupted homing the arms are only stopped: their positions are not
         referenced, so no move is made.
         """
         problems: list[str] = []
+        # a timeout, a garbled frame or a lost link (reopened first) is tried again, as in
+        # a move: a link that dropped just before the end must not leave the arms unparked
         try:
-            await self.goniometer.stop()
+            await self._retry(
+                "stopping the arms", self.goniometer.stop, self._reconnect_arms,
+                self.move_retries, "goniometer",
+            )  # fmt: skip
         except Exception as exc:  # best effort: any failure is reported, never raised
             problems.append(f"stopping the arms failed: {_describe(exc)}")
         if self._homing_interrupted:
@@ -549,7 +558,10 @@ class ScanRunner:
             problems.append("homing interrupted: arms stopped, not parked; home them before use")
             return "; ".join(problems)
         try:
-            await self.goniometer.park(self.home_timeout_s)
+            await self._retry(
+                "parking the arms", lambda: self.goniometer.park(self.home_timeout_s),
+                self._reconnect_arms, self.move_retries, "goniometer",
+            )  # fmt: skip
         except Exception as exc:  # a bug or a dead link must not leave the run 'running'
             problems.append(
                 f"parking failed: {_describe(exc)}; arms not parked: check them before use"

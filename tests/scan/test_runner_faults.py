@@ -241,3 +241,30 @@ async def test_a_timeout_setting_the_exposure_is_retried_and_a_lasting_one_fails
     rec = store.get_run(runner.run_id)
     assert rec.status == "failed" and "no answer to EXP" in rec.reason
     assert store.count_points(runner.run_id) == 0
+
+
+async def test_a_link_lost_while_parking_is_reopened_and_the_arms_parked(
+    fake_lab: FakeLab, store: RunStore
+) -> None:
+    """The last reading is stored, then the arms' link drops as they park: the link is
+    reopened and the park made again, so the run ends ``done`` with nothing to check."""
+    gonio = fake_lab.goniometer
+    real_park = gonio.park
+    calls = {"park": 0}
+
+    async def park(timeout_s: float) -> None:
+        calls["park"] += 1
+        if calls["park"] == 1:
+            raise Disconnected("connection to 127.0.0.1:5020 lost", device="detector")
+        await real_park(timeout_s)
+
+    gonio.park = park  # type: ignore[method-assign]
+    runner, bus = make_runner(fake_lab, store, BrdfPlan(45.0, (44.0, 45.0)))
+    events = await drive(runner, bus, lambda ev: None)
+    rec = store.get_run(runner.run_id)
+    assert (rec.status, rec.reason) == ("done", "")
+    assert calls["park"] == 2
+    retried = [e for e in events if isinstance(e, InstrumentError)]
+    assert (
+        len(retried) == 1 and "parking the arms: retry 1 of 2, reconnecting" in retried[0].message
+    )
