@@ -2,7 +2,7 @@
 
 Run:  .venv/bin/python bench/soak_wire.py [--readings 1000] [--points 500] [--seed 1]
       [--timeout-rate 0.01] [--garble-rate 0.01] [--disconnect-rate 0.005]
-      [--arm-drops] [--json]
+      [--no-arm-drops] [--json]
 
 The real drivers talk to the simulated lab over Modbus TCP and two ptys (``mode =
 "drivers"``, ``start_sim_servers = true``, lab clock at scale 0 so moves and exposures take
@@ -10,9 +10,8 @@ no wall time). Once the lab is open (opening is not retried: a user sees one lin
 starts again) every device gets random faults (:class:`sim.faults.FaultSpec`): replies
 that never come (the drivers' timeout, 1 s here, is real time), garbled frames, and links
 that drop and come back ``recover_after_s`` (0.5 s of lab clock) later (the pty is
-unpublished and re-published). The arms get timeouts and garbled frames; their link drops
-only with ``--arm-drops`` (the Modbus server closes the connection and refuses the unit
-until it is back): a move is retried after one, other arm accesses are not yet. Then:
+unpublished and re-published; the Modbus server closes the arms' connection and drops the
+unit's requests until it is back; ``--no-arm-drops``: the arms' link never drops). Then:
 
 1. ``gloss log``: ``--readings`` glossmeter readings requested one by one
    (:class:`goniolab.session.GlossSession`, which reconnects after a lost link);
@@ -102,7 +101,7 @@ async def soak(
     timeout_rate: float = 0.01,
     garble_rate: float = 0.01,
     disconnect_rate: float = 0.005,
-    arm_drops: bool = False,
+    arm_drops: bool = True,
     timeout_s: float = 1.0,
     workdir: Path,
 ) -> dict[str, Any]:
@@ -237,10 +236,9 @@ def main() -> int:
     ap.add_argument("--garble-rate", type=float, default=0.01)
     ap.add_argument("--disconnect-rate", type=float, default=0.005)
     ap.add_argument(
-        "--arm-drops",
+        "--no-arm-drops",
         action="store_true",
-        help="drop the arms' Modbus link too (a move is retried after one, but a status "
-        "read or the park is not yet: expect a failed run)",
+        help="the arms get timeouts and garbled frames only (their link never drops)",
     )
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
@@ -254,7 +252,7 @@ def main() -> int:
                 timeout_rate=args.timeout_rate,
                 garble_rate=args.garble_rate,
                 disconnect_rate=args.disconnect_rate,
-                arm_drops=args.arm_drops,
+                arm_drops=not args.no_arm_drops,
                 workdir=Path(tmp),
             )
         )

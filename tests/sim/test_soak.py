@@ -1,8 +1,8 @@
 """A short soak (issue 10): bench/soak_wire.py at a few dozen readings with high fault rates.
 
 The real drivers talk to the simulated lab over Modbus TCP and ptys while every device
-gets timeouts and garbled frames, and the serial devices links that drop and come back
-(readings, moves, the arms' status and the exposure are retried, a lost link reopened);
+gets timeouts, garbled frames and links that drop and come back (readings, moves, homing,
+the park, the arms' status and the exposure are retried, a lost link reopened);
 nothing may be lost, no run left ``running``, and every kind of fault must actually have
 been met (or the test would prove nothing). The figures of the full soak (1,000 gloss
 readings, a 500-point scan) are in the README; speed is the bench's, never asserted here.
