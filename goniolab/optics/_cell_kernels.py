@@ -9,6 +9,10 @@ rectangle), so a detector collects ``sum P O`` with ``O`` the fraction of that i
 it: the cap-overlap table for cones, the product of the in-plane and out-of-plane interval
 overlaps for rectangles (Mihalik & Durikovic eqs. 15-17).
 
+:func:`kirchhoff_band_numba` sums the Taylor terms of the Kirchhoff model's phase screen
+(:mod:`goniolab.optics.kirchhoff`) per cell by Horner's scheme, the coherent part removed,
+and adds ``|U|^2`` to the cell.
+
 Each kernel exists in numba (``cache=True, nogil=True``) and as a numpy twin (the test
 reference and bench baseline). Cells outside each detector's reach are skipped by their
 sorted ``wox``/``woy`` coordinates.
@@ -27,6 +31,8 @@ from goniolab.optics._kernels import interval_overlap_numpy, table_numpy
 __all__ = [
     "cone_cells_numba",
     "cone_cells_numpy",
+    "kirchhoff_band_numba",
+    "kirchhoff_band_numpy",
     "rect_cells_numba",
     "rect_cells_numpy",
 ]
@@ -216,3 +222,85 @@ def rect_cells_numpy(
         ov = interval_overlap_numpy(al - ar, s_in, r_in) * ob
         out[k] = float(np.sum(np.where(ok, p * ov, 0.0)))
     return out
+
+
+@njit(cache=True, nogil=True, fastmath=False)
+def kirchhoff_band_numba(
+    spec: NDArray[np.complex64],
+    dc: NDArray[np.complex128],
+    rows: NDArray[np.int64],
+    cols: NDArray[np.int64],
+    vz: FloatArray,
+    ok: NDArray[np.bool_],
+    lo: float,
+    hi: float,
+    hi_inclusive: bool,
+    vc: float,
+    h_max: float,
+    w_rows: NDArray[np.complex128],
+    w_cols: NDArray[np.complex128],
+    acc: FloatArray,
+) -> None:  # pragma: no cover - numba
+    """Add ``|U_d|^2`` of one Taylor band to ``acc`` (in place) for the cells it owns.
+
+    ``spec[n]`` is the transform of the n-th Taylor term ``W e^(-i v_c h) (h/h_max)^n``
+    on a region of the FFT grid (the box's cell ``(i, j)`` at ``spec[:, rows[i], cols[j]]``),
+    ``dc[n]`` its value at zero frequency. A cell with ``ok`` and ``lo <= vz < hi``
+    (``<= hi`` when ``hi_inclusive``) gets, with ``d = (vz - v_c) h_max``,
+    ``U = sum_n (spec[n] - dc[n] w_rows[i] w_cols[j]) (-i d)^n / n!`` (Horner's scheme;
+    the ``dc`` part is the coherent beam times the window's normalised transform).
+    """
+    n_terms = spec.shape[0]
+    for i in range(vz.shape[0]):
+        r = rows[i]
+        wr = w_rows[i]
+        for j in range(vz.shape[1]):
+            if not ok[i, j]:
+                continue
+            v = vz[i, j]
+            if v < lo or v > hi or (v == hi and not hi_inclusive):
+                continue
+            step = -1j * ((v - vc) * h_max)
+            c = cols[j]
+            f = complex(spec[n_terms - 1, r, c])
+            e = dc[n_terms - 1]
+            for n in range(n_terms - 2, -1, -1):
+                s = step / (n + 1)
+                f = complex(spec[n, r, c]) + f * s
+                e = dc[n] + e * s
+            u = f - e * (wr * w_cols[j])
+            acc[i, j] += u.real * u.real + u.imag * u.imag
+
+
+def kirchhoff_band_numpy(
+    spec: NDArray[np.complex64],
+    dc: NDArray[np.complex128],
+    rows: NDArray[np.int64],
+    cols: NDArray[np.int64],
+    vz: FloatArray,
+    ok: NDArray[np.bool_],
+    lo: float,
+    hi: float,
+    hi_inclusive: bool,
+    vc: float,
+    h_max: float,
+    w_rows: NDArray[np.complex128],
+    w_cols: NDArray[np.complex128],
+    acc: FloatArray,
+) -> None:
+    """Numpy twin of :func:`kirchhoff_band_numba`."""
+    own = ok & (vz >= lo) & ((vz <= hi) if hi_inclusive else (vz < hi))
+    ii, jj = np.nonzero(own)
+    if ii.size == 0:
+        return
+    step = -1j * ((vz[ii, jj] - vc) * h_max)
+    n_terms = spec.shape[0]
+    r, c = rows[ii], cols[jj]
+    f = spec[n_terms - 1, r, c].astype(np.complex128)
+    e = np.full(ii.size, dc[n_terms - 1], dtype=np.complex128)
+    for n in range(n_terms - 2, -1, -1):
+        s = step / (n + 1)
+        f = spec[n, r, c] + f * s
+        e = dc[n] + e * s
+    u = f - e * (w_rows[ii] * w_cols[jj])
+    acc[ii, jj] += u.real * u.real + u.imag * u.imag

@@ -31,7 +31,9 @@ The screen depends on ``v_z = k (cos ti + cos to)``, different for every directi
 expanded about band centres ``v_c``:
 ``exp(-i v_z h) = exp(-i v_c h) sum_n (-i (v_z - v_c) h)^n / n!``; one FFT per term and band
 serves every cell (and every wavelength: ``(v_x, v_y, v_z)`` fix the cell's value, lambda
-only moves which directions the cells are). The bands and orders are chosen so that
+only moves which directions the cells are). Each FFT forms only the outputs the
+requested cells read (the first pass over the whole tile along one axis, the second only
+on the rows or columns kept), and a band's terms are summed per cell by Horner's scheme. The bands and orders are chosen so that
 ``(|v_z - v_c| h_max)^(N+1)/(N+1)! <= tol`` (default 1e-4, a bound on the per-pixel phase
 factor) at the fewest FFTs (:func:`band_plan`). Heights are float32 and tiles of at most
 ``tile`` points (:mod:`goniolab.optics.psd`), so memory is bounded: one tile's few
@@ -66,7 +68,9 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
+from numpy.typing import NDArray
 
+from goniolab.optics import _cell_kernels as CK
 from goniolab.optics.fresnel import fresnel
 from goniolab.optics.physical import FloatArray, PhysicalOpticsModel, _Box, _check_theta_i
 
@@ -113,6 +117,33 @@ def band_plan(
     ]
 
 
+def _pruned_fft2(
+    term: NDArray[np.complex64],
+    ky: NDArray[np.int64],
+    kx: NDArray[np.int64],
+    y_first: bool,
+    out: NDArray[np.complex64],
+) -> complex:
+    """2-D FFT of ``term`` at rows ``ky`` and columns ``kx`` only, into ``out``; returns the
+    zero-frequency value (summed in complex128).
+
+    ``term`` is laid out ``(x, y)`` when ``y_first`` (the transposed tile), else ``(y, x)``:
+    the first pass runs over the whole tile along its contiguous last axis, keeps the
+    outputs the region needs, and the second pass transforms only those. Same values as
+    ``fft2(...)[ky][:, kx]`` (to float32 rounding) at a fraction of the work when the
+    region is narrow.
+    """
+    import scipy.fft
+
+    a = scipy.fft.fft(term, axis=1, workers=-1)
+    dc = complex(np.sum(a[:, 0], dtype=np.complex128))
+    first, second = (ky, kx) if y_first else (kx, ky)
+    a = scipy.fft.fft(np.take(a, first, axis=1), axis=0, workers=-1, overwrite_x=True)
+    a = np.take(a, second, axis=0)
+    out[...] = a.T if y_first else a
+    return dc
+
+
 class KirchhoffModel(PhysicalOpticsModel):
     """Scalar Kirchhoff model of a height map (module docstring; parameters as
     :class:`~goniolab.optics.physical.PhysicalOpticsModel`).
@@ -128,96 +159,136 @@ class KirchhoffModel(PhysicalOpticsModel):
     taylor_tol: float = DEFAULT_TAYLOR_TOL
 
     def _raw_power(
-        self, theta_i_deg: float, lams_um: Sequence[float], boxes: Sequence[_Box]
+        self,
+        theta_i_deg: float,
+        lams_um: Sequence[float],
+        boxes: Sequence[_Box],
+        geo: Sequence[tuple[FloatArray, NDArray[np.bool_]]],
     ) -> tuple[list[FloatArray], list[float]]:
         """Diffuse ``sum_tiles |U_d|^2 / (n_tiles N sum W^2)`` per cell (0 for evanescent
         cells) and the coherent factor ``mean_tiles |sum W e^(-i v_z h)|^2 / (sum W)^2`` at
-        the specular cell (0 when the box does not hold it), per wavelength.
+        the specular cell (0 when the box does not hold it), per wavelength; ``geo`` holds
+        each box's ``(z, ok)`` (:meth:`_geometry`).
 
         ``U_d`` is the field minus the tile's mean field times the window's transform: the
         coherent beam is a delta in the specular direction (the lit spot is far larger than
         the map), kept out of the cells it would smear over.
-        """
-        import scipy.fft
 
+        Only the FFT outputs the boxes read are formed: each Taylor term is transformed
+        along the axis needing fewer outputs first (over the whole tile, contiguous), those
+        outputs kept, then along the other axis (``_pruned_fft2``); a band's terms are then
+        summed per cell by Horner's scheme in one pass per wavelength
+        (:func:`goniolab.optics._cell_kernels.kirchhoff_band_numba`).
+        """
         sh = self._shared
         t = sh.tiled
         cz_i = math.cos(math.radians(theta_i_deg))
-        geo = []
+        vzs = [(2.0 * math.pi / lam) * (cz_i + z) for lam, (z, _) in zip(lams_um, geo, strict=True)]
         v_all_lo, v_all_hi = math.inf, -math.inf
-        for lam, box in zip(lams_um, boxes, strict=True):
-            _, _, z, ok = self._geometry(theta_i_deg, lam, box)
-            vz = (2.0 * math.pi / lam) * (cz_i + z)
+        for vz, (_, ok) in zip(vzs, geo, strict=True):
             if np.any(ok):
                 v_all_lo = min(v_all_lo, float(vz[ok].min()))
                 v_all_hi = max(v_all_hi, float(vz[ok].max()))
-            geo.append((ok, vz))
-        shapes = [(b.iy.size, b.ix.size) for b in boxes]
-        acc = [np.zeros(s) for s in shapes]
+        acc = [np.zeros((b.iy1 - b.iy0 + 1, b.ix1 - b.ix0 + 1)) for b in boxes]
         coh_acc = [0.0 for _ in boxes]
         if not math.isfinite(v_all_lo):
             return acc, coh_acc
         h_max = sh.h_max_um
         plan = band_plan(v_all_lo, v_all_hi, h_max, self.taylor_tol)
         total = t.n_tiles * sum(order + 1 for *_, order in plan)
-        done = 0
-        # per band and wavelength: the cells it owns and their scaled offsets (v_z - v_c) h_max
-        owned: list[list[tuple[np.ndarray, np.ndarray] | None]] = []
-        for b, (lo, hi, vc, _order) in enumerate(plan):
-            row: list[tuple[np.ndarray, np.ndarray] | None] = []
-            last = b == len(plan) - 1
-            for ok, vz in geo:
-                sel = ok & (vz >= lo) & ((vz <= hi) if last else (vz < hi))
-                row.append((sel, (vz - vc) * h_max) if np.any(sel) else None)
-            owned.append(row)
-        gathers = [np.ix_(b.iy % t.ny_t, b.ix % t.nx_t) for b in boxes]
-        # the window's own transform, normalised at DC: the coherent field's shape per cell
-        w_hat = scipy.fft.fft2(t.wy[:, None] * t.wx[None, :], workers=-1)
-        w_shape = [w_hat[g] / w_hat[0, 0] for g in gathers]
-        sum_w = float(np.sum(t.wy, dtype=np.float64) * np.sum(t.wx, dtype=np.float64))
-        spec_idx = [
+        last = len(plan) - 1
+        # the bands that own some cell at some wavelength (the others cost no FFT)
+        active = [
+            b
+            for b, (lo, hi, _vc, _o) in enumerate(plan)
+            if any(
+                np.any(ok & (vz >= lo) & ((vz <= hi) if b == last else (vz < hi)))
+                for vz, (_, ok) in zip(vzs, geo, strict=True)
+            )
+        ]
+        # the region of the FFT grid the boxes read (signed indices, contiguous)
+        y0, y1 = min(b.iy0 for b in boxes), max(b.iy1 for b in boxes)
+        x0, x1 = min(b.ix0 for b in boxes), max(b.ix1 for b in boxes)
+        ky = np.arange(y0, y1 + 1, dtype=np.int64) % t.ny_t
+        kx = np.arange(x0, x1 + 1, dtype=np.int64) % t.nx_t
+        # the window's own transform (separable), normalised at DC: the coherent field's
+        # shape per cell
+        wy_hat = np.fft.fft(t.wy.astype(np.float64))
+        wx_hat = np.fft.fft(t.wx.astype(np.float64))
+        wy_shape, wx_shape = wy_hat[ky] / wy_hat[0], wx_hat[kx] / wx_hat[0]
+        per_box = [(b.iy - y0, b.ix - x0, wy_shape[b.iy - y0], wx_shape[b.ix - x0]) for b in boxes]
+        spec_at = [
             (-b.iy0, -b.ix0) if (b.ix0 <= 0 <= b.ix1 and b.iy0 <= 0 <= b.iy1) else None
             for b in boxes
         ]
+        sum_w = float(np.sum(t.wy, dtype=np.float64) * np.sum(t.wx, dtype=np.float64))
+        kernel = CK.kirchhoff_band_numba if self.backend == "numba" else CK.kirchhoff_band_numpy
+        y_first = ky.size <= kx.size
+        done = 0
         for k in range(t.n_tiles):
             h, w = t.tile(k)
-            u = (h / np.float32(h_max)).astype(np.float32) if h_max > 0 else h
-            fields = [np.zeros(s, dtype=np.complex128) for s in shapes]
+            if y_first:  # the first (full) pass runs along the contiguous axis
+                h, w = np.ascontiguousarray(h.T), np.ascontiguousarray(w.T)
+            u = h / np.float32(h_max) if h_max > 0 else h
             coh = [0j for _ in boxes]
-            for (_lo, _hi, vc, order), row in zip(plan, owned, strict=True):
-                if all(r is None for r in row):
+            for b, (lo, hi, vc, order) in enumerate(plan):
+                if b not in active:
                     done += order + 1
                     continue
-                # W exp(-i v_c h) in complex64 from float32 cos/sin (a complex128 exp of
-                # the whole tile was a third of this loop's time)
+                # W exp(-i v_c h) in complex64 from float32 cos/sin
                 phase = np.float32(vc) * h
                 term = np.empty(h.shape, dtype=np.complex64)
-                term.real = w * np.cos(phase)
-                term.imag = -w * np.sin(phase)
+                np.multiply(w, np.cos(phase), out=term.real)
+                np.multiply(w, np.sin(phase), out=term.imag)
+                np.negative(term.imag, out=term.imag)
                 del phase
-                coefs = [None if r is None else r[0].astype(np.complex128) for r in row]
+                spec = np.empty((order + 1, ky.size, kx.size), dtype=np.complex64)
+                dc = np.empty(order + 1, dtype=np.complex128)
                 for n_term in range(order + 1):
-                    spec = scipy.fft.fft2(term, workers=-1)
-                    for li, r in enumerate(row):
-                        c = coefs[li]
-                        if r is None or c is None:
-                            continue
-                        if n_term > 0:
-                            c *= (-1j * r[1]) / n_term
-                        # diffuse field: minus the coherent part (the tile's mean field x W)
-                        fields[li] += (spec[gathers[li]] - spec[0, 0] * w_shape[li]) * c
-                        if spec_idx[li] is not None:
-                            coh[li] += complex(spec[0, 0]) * complex(c[spec_idx[li]])
+                    dc[n_term] = _pruned_fft2(term, ky, kx, y_first, spec[n_term])
                     if n_term < order:
                         term *= u
                     done += 1
                     if self.progress is not None:
                         self.progress(done, total, "kirchhoff FFT")
+                del term
+                for li, ((rows, cols, w_r, w_c), vz, (_, ok)) in enumerate(
+                    zip(per_box, vzs, geo, strict=True)
+                ):
+                    kernel(
+                        spec,
+                        dc,
+                        rows,
+                        cols,
+                        vz,
+                        ok,
+                        lo,
+                        hi,
+                        b == last,
+                        vc,
+                        h_max,
+                        w_r,
+                        w_c,
+                        acc[li],
+                    )
+                    s = spec_at[li]
+                    if (
+                        s is not None
+                        and ok[s]
+                        and lo <= vz[s]
+                        and (vz[s] < hi or (b == last and vz[s] <= hi))
+                    ):
+                        step = -1j * (float(vz[s]) - vc) * h_max
+                        e, c = 0j, 1.0 + 0j
+                        for n_term in range(order + 1):
+                            if n_term:
+                                c *= step / n_term
+                            e += complex(dc[n_term]) * c
+                        coh[li] += e
             for li in range(len(boxes)):
-                acc[li] += np.abs(fields[li]) ** 2
                 coh_acc[li] += abs(coh[li]) ** 2 / sum_w**2
         norm = t.n_tiles * t.ny_t * t.nx_t * t.sum_w2
-        diffuse = [np.where(g[0], a / norm, 0.0) for a, g in zip(acc, geo, strict=True)]
+        diffuse = [np.where(g[1], a / norm, 0.0) for a, g in zip(acc, geo, strict=True)]
         return diffuse, [c / t.n_tiles for c in coh_acc]
 
     def _cell_powers(
@@ -229,13 +300,18 @@ class KirchhoffModel(PhysicalOpticsModel):
             tuple(round(v, 12) for v in lams_um),
             tuple((b.ix0, b.ix1, b.iy0, b.iy1) for b in boxes),
         )
-        raw, coh = self._shared.cached(key, lambda: self._raw_power(theta_i_deg, lams_um, boxes))
+        geo = [
+            self._geometry(theta_i_deg, lam, box) for lam, box in zip(lams_um, boxes, strict=True)
+        ]
+        raw, coh = self._shared.cached(
+            key,
+            lambda: self._raw_power(theta_i_deg, lams_um, boxes, [(g[2], g[3]) for g in geo]),
+        )
         t = math.radians(theta_i_deg)
         ci = math.cos(t)
         out = []
         r_spec = float(fresnel(ci, self.n))
-        for lam, box, r, c in zip(lams_um, boxes, raw, coh, strict=True):
-            x, y, z, ok = self._geometry(theta_i_deg, lam, box)
+        for box, r, c, (x, y, z, ok) in zip(boxes, raw, coh, geo, strict=True):
             s2 = (x + math.sin(t)) ** 2 + y * y + (z + ci) ** 2
             co = np.where(ok, z, 1.0)
             g2 = np.where(ok, s2 * s2 / (4.0 * ci * co * (ci + co) ** 2), 0.0)

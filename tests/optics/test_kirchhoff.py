@@ -24,6 +24,7 @@ from goniolab.optics.facet import FacetModel
 from goniolab.optics.fresnel import fresnel, fresnel_dielectric
 from goniolab.optics.heightmap import HeightMap
 from goniolab.optics.kirchhoff import KirchhoffModel, band_plan
+from goniolab.optics.physical import _Box
 from goniolab.optics.psd import TiledMap, psd2, schwartz_taper
 from goniolab.optics.rayleigh_rice import RayleighRiceModel, rr_q_factor
 from goniolab.optics.surface import Surface
@@ -201,3 +202,52 @@ def test_window_psd_and_band_plan() -> None:
             x = 0.5 * (b_hi - b_lo) * h
             assert x ** (order + 1) / math.factorial(order + 1) <= 1e-4
             assert b_lo <= c <= b_hi
+
+
+@pytest.mark.parametrize("backend", ["numba", "numpy"])
+def test_cell_fields_match_a_direct_sum_over_the_map(backend: str) -> None:
+    # the FFT scheme (Taylor bands of the phase screen, FFTs pruned to the cells a box
+    # reads, Horner sums, coherent part removed) against the direct sum
+    # U = sum W exp(-i (v_x x + v_y y + v_z h)) in complex128, tile by tile
+    hm = gaussian_acf_map(96, 0.3, 1.0, 0.25, seed=9)
+    hm = HeightMap(z_um=hm.z_um[:64, :72], dx_um=0.25, dy_um=0.25)
+    model = KirchhoffModel(hm, n=1.5, tile=32, backend=backend)  # 2 x 3 tiles of 32 x 24
+    t = model._shared.tiled
+    assert (t.n_tiles, t.ny_t, t.nx_t) == (6, 32, 24)
+    ti, lams = 30.0, [0.45, 0.65]
+    boxes = [_Box(-6, 8, -5, 5), _Box(3, 11, -15, -2)]  # the second misses specular
+    geo = [model._geometry(ti, lam, b) for lam, b in zip(lams, boxes, strict=True)]
+    raw, coh = model._raw_power(ti, lams, boxes, [(g[2], g[3]) for g in geo])
+    vz_all = np.concatenate(
+        [
+            ((2 * math.pi / lam) * (math.cos(math.radians(ti)) + g[2]))[g[3]]
+            for lam, g in zip(lams, geo, strict=True)
+        ]
+    )
+    assert len(band_plan(vz_all.min(), vz_all.max(), model._shared.h_max_um)) > 1
+    yy = np.arange(t.ny_t)[:, None] * t.dy_um
+    xx = np.arange(t.nx_t)[None, :] * t.dx_um
+    wy_hat = lambda m: np.sum(t.wy * np.exp(-2j * math.pi * m * np.arange(t.ny_t) / t.ny_t))  # noqa: E731
+    wx_hat = lambda m: np.sum(t.wx * np.exp(-2j * math.pi * m * np.arange(t.nx_t) / t.nx_t))  # noqa: E731
+    for lam, box, g, got, got_coh in zip(lams, boxes, geo, raw, coh, strict=True):
+        _, _, z, ok = g
+        want = np.zeros_like(got)
+        want_coh = 0.0
+        for k in range(t.n_tiles):
+            h, w = (a.astype(np.float64) for a in t.tile(k))
+            for i, my in enumerate(range(box.iy0, box.iy1 + 1)):
+                for j, mx in enumerate(range(box.ix0, box.ix1 + 1)):
+                    if not ok[i, j]:
+                        continue
+                    vz = (2 * math.pi / lam) * (math.cos(math.radians(ti)) + z[i, j])
+                    vx = 2 * math.pi * mx / (t.nx_t * t.dx_um)
+                    vy = 2 * math.pi * my / (t.ny_t * t.dy_um)
+                    u = np.sum(w * np.exp(-1j * (vx * xx + vy * yy + vz * h)))
+                    mean = np.sum(w * np.exp(-1j * vz * h))
+                    shape = wy_hat(my) * wx_hat(mx) / (wy_hat(0) * wx_hat(0))
+                    want[i, j] += abs(u - mean * shape) ** 2
+                    if my == 0 and mx == 0:
+                        want_coh += abs(mean) ** 2 / np.sum(w) ** 2
+        want /= t.n_tiles * t.ny_t * t.nx_t * t.sum_w2
+        np.testing.assert_allclose(got, want, rtol=2e-5, atol=1e-6 * want.max())
+        assert got_coh == pytest.approx(want_coh / t.n_tiles, rel=1e-5, abs=1e-12)
