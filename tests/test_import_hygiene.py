@@ -11,9 +11,10 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 
-#: what every package imports on its way in: the ``goniolab`` package itself and its
-#: stdlib-only lazy re-export helper (goniolab/_lazy.py, PEP 562)
-PACKAGE_ROOT = ("goniolab", "goniolab._lazy")
+#: what every package imports on its way in: the ``goniolab`` package itself, its
+#: stdlib-only lazy re-export helper (goniolab/_lazy.py, PEP 562) and the version constant
+#: (goniolab/_version.py, one string)
+PACKAGE_ROOT = ("goniolab", "goniolab._lazy", "goniolab._version")
 
 _PROBE = """
 import importlib, json, pkgutil, sys
