@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 from collections.abc import Callable
 from contextlib import AsyncExitStack
 from pathlib import Path
@@ -68,6 +69,9 @@ class SessionBackend:
     model
         Reflectance model of the configured sample, instead of building it from
         ``[sample] map`` (passed to :class:`~goniolab.lab.Lab`; tests use a cheap one).
+    align_plan
+        The sweeps of the ``a`` key's alignment (default: ``scan --plan align``'s); its
+        sample and exposure are the form's and the config's.
     """
 
     def __init__(
@@ -78,8 +82,10 @@ class SessionBackend:
         sample: str | None = None,
         store_path: str | None = None,
         model: ReflectanceModel | None = None,
+        align_plan: AlignPlan | None = None,
     ) -> None:
         self._lab_model = model
+        self._align_plan = align_plan or AlignPlan()
         self.config_path = Path(config_path)
         self.config: LabConfig = load_lab_config(self.config_path)
         self.time_scale = time_scale
@@ -252,7 +258,9 @@ class SessionBackend:
             raise UserError("a run is already in progress")
         spec = _sample_spec(sample) if sample else self.sample
         check_sample(spec, option="align: sample", given=sample)
-        plan = AlignPlan(sample=spec, exposure_us=self.config.spectro.exposure_us)
+        plan = dataclasses.replace(
+            self._align_plan, sample=spec, exposure_us=self.config.spectro.exposure_us
+        )
         loop = asyncio.get_running_loop()
         started: asyncio.Future[int] = loop.create_future()
 

@@ -21,6 +21,7 @@ from goniolab.config import load_lab_config
 from goniolab.models import model_for
 from goniolab.optics.analytic import AnalyticModel
 from goniolab.optics.apertures import Cone
+from goniolab.scan.align import AlignPlan
 from goniolab.scan.events import RunState
 from goniolab.scan.plans import DEFAULT_REPEATS
 from goniolab.store import RunStore
@@ -417,7 +418,9 @@ async def test_a_aligns_the_sim_lab_writes_alignment_and_corrects_the_arms(
     ):
         text = re.sub(rf"(?m)^{key} = .*$", f"{key} = {value}", text)
     path.write_text(text)
-    backend = SessionBackend(path, model=AnalyticModel("beckmann", alpha=0.02))
+    plan = AlignPlan(theta_i_deg=(20.0, 60.0), coarse_span_deg=4.0, fine_step_deg=0.5,
+                     fine_span_deg=4.0)  # 104 readings instead of 288: fewer events  # fmt: skip
+    backend = SessionBackend(path, model=AnalyticModel("beckmann", alpha=0.02), align_plan=plan)
     app = GonioApp(backend, poll_hz=0)
     async with app.run_test(size=SIZE) as pilot:
         await wait_until(pilot, app.ready.is_set)
