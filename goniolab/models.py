@@ -14,6 +14,7 @@ regime rule of :mod:`goniolab.optics.model_choice`).
 from __future__ import annotations
 
 import functools
+import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -114,9 +115,14 @@ def _check_numeric_range(spec: str, hm: Any) -> None:
     import numpy as np
 
     z = np.asarray(hm.z_um)
-    with np.errstate(invalid="ignore"):
-        finite = np.isfinite(z)
-        z_max = float(np.max(np.abs(z[finite]))) if finite.any() else 0.0
+    # fmax/fmin skip NaN and make no copy of the map (np.abs(z[finite]) made two)
+    top, bottom = float(np.fmax.reduce(z, axis=None)), float(np.fmin.reduce(z, axis=None))
+    if math.isfinite(top) and math.isfinite(bottom):
+        z_max = max(abs(top), abs(bottom))
+    else:  # all NaN, or an infinity: the finite points only (copies; a rare map)
+        with np.errstate(invalid="ignore"):
+            finite = np.isfinite(z)
+            z_max = float(np.max(np.abs(z[finite]))) if finite.any() else 0.0
     what = f"heights up to {z_max:.3g} um"
     bad = z_max > _MAX_SQUARABLE
     if not bad and 2.0 * z_max / min(hm.dx_um, hm.dy_um) > _MAX_SQUARABLE:

@@ -36,8 +36,11 @@ requested cells read (the first pass over the whole tile along one axis, the sec
 on the rows or columns kept), and a band's terms are summed per cell by Horner's scheme. The bands and orders are chosen so that
 ``(|v_z - v_c| h_max)^(N+1)/(N+1)! <= tol`` (default 1e-4, a bound on the per-pixel phase
 factor) at the fewest FFTs (:func:`band_plan`). Heights are float32 and tiles of at most
-``tile`` points (:mod:`goniolab.optics.psd`), so memory is bounded: one tile's few
-complex64 arrays (about 60 MB for 1024 x 1024) whatever the map size.
+``tile`` points (:mod:`goniolab.optics.psd`), levelled from the map block by block, so the
+transforms' memory is bounded by the tile whatever the map size: a traced peak of about 8
+float32 tiles (32 MB for 1024 x 1024; ``tests/optics/test_kirchhoff.py`` checks it does
+not grow with the map). What grows with the map is the map itself (float64, not copied)
+and, when a geometry falls back to it, the facet model's float64 slopes (twice the map).
 
 Coherent and diffuse parts: the coherent specular reflectance is
 ``R(ti) |sum W exp(-i v_z h)|^2 / (sum W)^2`` (:meth:`KirchhoffModel.specular_reflectance`),
@@ -228,7 +231,7 @@ class KirchhoffModel(PhysicalOpticsModel):
         for k in range(t.n_tiles):
             h, w = t.tile(k)
             if y_first:  # the first (full) pass runs along the contiguous axis
-                h, w = np.ascontiguousarray(h.T), np.ascontiguousarray(w.T)
+                h, w = np.ascontiguousarray(h.T), t.window_transposed
             u = h / np.float32(h_max) if h_max > 0 else h
             coh = [0j for _ in boxes]
             for b, (lo, hi, vc, order) in enumerate(plan):
@@ -237,11 +240,13 @@ class KirchhoffModel(PhysicalOpticsModel):
                     continue
                 # W exp(-i v_c h) in complex64 from float32 cos/sin
                 phase = np.float32(vc) * h
+                cos = np.cos(phase)
+                np.sin(phase, out=phase)
                 term = np.empty(h.shape, dtype=np.complex64)
-                np.multiply(w, np.cos(phase), out=term.real)
-                np.multiply(w, np.sin(phase), out=term.imag)
+                np.multiply(w, cos, out=term.real)
+                np.multiply(w, phase, out=term.imag)
                 np.negative(term.imag, out=term.imag)
-                del phase
+                del phase, cos
                 spec = np.empty((order + 1, ky.size, kx.size), dtype=np.complex64)
                 dc = np.empty(order + 1, dtype=np.complex128)
                 for n_term in range(order + 1):

@@ -104,6 +104,8 @@ POINT_BRDF_BOX_DEG: float = 1.0
 MAX_THETA_I_DEG: float = 89.0
 #: Facets used for the Smith masking table (strided subsample of the map's slopes).
 _MASKING_FACETS: int = 1 << 17
+#: Rows of the levelled map per block when the roughness statistics are summed.
+_STATS_ROWS: int = 256
 #: Cached cell-power maps per shared map.
 _CACHE_SIZE: int = 24
 
@@ -158,24 +160,27 @@ class _Shared:
     @cached_property
     def masking_model(self) -> FacetModel:
         """A facet model of a strided subsample of the map's forward slopes (for Smith G2)."""
-        z = self.tiled.z_um
-        ny, nx = z.shape
+        t = self.tiled
+        ny, nx = t.shape
         stride = max(1, math.ceil(math.sqrt(ny * nx / _MASKING_FACETS)))
+        mx, my = (nx - 1) // stride, (ny - 1) // stride
+        rows = slice(None, None, stride)
         p = (
-            z[::stride, 1::stride][:, : (nx - 1) // stride]
-            - z[::stride, 0 : nx - 1 : stride][:, : (nx - 1) // stride]
-        ) / self.tiled.dx_um
+            t.levelled(rows, slice(1, None, stride))[:, :mx]
+            - t.levelled(rows, slice(0, nx - 1, stride))[:, :mx]
+        ) / t.dx_um
+        cols = slice(None, None, stride)
         q = (
-            z[1::stride, ::stride][: (ny - 1) // stride]
-            - z[0 : ny - 1 : stride, ::stride][: (ny - 1) // stride]
-        ) / self.tiled.dy_um
+            t.levelled(slice(1, None, stride), cols)[:my]
+            - t.levelled(slice(0, ny - 1, stride), cols)[:my]
+        ) / t.dy_um
         m = min(p.shape[0], q.shape[0]), min(p.shape[1], q.shape[1])
         surf = Surface(
             p=p[: m[0], : m[1]].ravel().astype(np.float64),
             q=q[: m[0], : m[1]].ravel().astype(np.float64),
-            dx_um=self.tiled.dx_um,
-            dy_um=self.tiled.dy_um,
-            source=self.tiled.source,
+            dx_um=t.dx_um,
+            dy_um=t.dy_um,
+            source=t.source,
         )
         return FacetModel(surf, masking=True, backend="numpy")
 
@@ -195,11 +200,22 @@ class _Shared:
     @cached_property
     def stats(self) -> MapStats:
         t = self.tiled
-        z = t.z_um.astype(np.float64)
-        sq = float(np.sqrt(np.mean((z - z.mean()) ** 2)))
-        p = np.diff(z, axis=1) / t.dx_um
-        q = np.diff(z, axis=0) / t.dy_um
-        sdq = float(np.sqrt(np.mean(p * p) + np.mean(q * q)))
+        ny, nx = t.shape
+        # sums over blocks of rows of the levelled map (float64): no copy of the whole map
+        blocks = [(r0, min(r0 + _STATS_ROWS, ny)) for r0 in range(0, ny, _STATS_ROWS)]
+        s1 = sp = sq2 = 0.0
+        for r0, r1 in blocks:  # one more row for the y differences
+            z = t.levelled(slice(r0, min(r1 + 1, ny)), slice(None)).astype(np.float64)
+            s1 += float(np.sum(z[: r1 - r0]))
+            sp += float(np.sum((np.diff(z[: r1 - r0], axis=1) / t.dx_um) ** 2))
+            sq2 += float(np.sum((np.diff(z, axis=0) / t.dy_um) ** 2))
+        mean = s1 / (ny * nx)
+        s2 = 0.0
+        for r0, r1 in blocks:
+            z = t.levelled(slice(r0, r1), slice(None)).astype(np.float64)
+            s2 += float(np.sum((z - mean) ** 2))
+        sq = math.sqrt(s2 / (ny * nx))
+        sdq = math.sqrt(sp / (ny * (nx - 1)) + sq2 / ((ny - 1) * nx))
         # isotropic ACF along x and y from the first tile's periodogram (1/e crossing)
         h, w = t.tile(0)
         spec = np.abs(np.fft.rfft2((h * w).astype(np.float64))) ** 2

@@ -35,11 +35,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
 
-from goniolab.optics.heightmap import HeightMap, fill_missing, level_plane
+from goniolab.optics.heightmap import HeightMap, fill_missing, level_plane, plane_fit
 
 __all__ = [
     "DEFAULT_TAPER",
@@ -97,12 +98,17 @@ def tile_starts(n: int, tile: int) -> tuple[list[int], int]:
 class TiledMap:
     """A levelled, gap-filled height map cut into equal windowed tiles (float32).
 
+    The levelled heights are formed on demand, block by block (:meth:`levelled`,
+    :meth:`tile`), from the map's own float64 array and its best plane: a map without
+    missing points is not copied. A map with gaps is filled (nearest valid point) and
+    levelled once into a float32 copy (half the float64 map's size).
+
     Attributes
     ----------
-    z_um : ndarray
-        The levelled map (float32, NaN filled by the nearest valid point).
     dx_um, dy_um : float
         Steps.
+    shape : tuple of int
+        ``(ny, nx)`` of the map.
     ys, xs : list of int
         Tile start rows and columns; ``ny_t``, ``nx_t`` the tile shape.
     wy, wx : ndarray
@@ -115,9 +121,9 @@ class TiledMap:
         Number of missing points that were filled.
     """
 
-    z_um: NDArray[np.float32]
     dx_um: float
     dy_um: float
+    shape: tuple[int, int]
     ys: list[int]
     xs: list[int]
     ny_t: int
@@ -127,6 +133,10 @@ class TiledMap:
     sum_w2: float
     source: str
     filled: int
+    #: float64 heights with ``plane`` (a, b, c) still to subtract, or float32 levelled heights
+    #: (``plane`` None)
+    _src: NDArray[np.float64] | NDArray[np.float32]
+    _plane: tuple[float, float, float] | None
 
     @classmethod
     def from_heightmap(
@@ -140,19 +150,22 @@ class TiledMap:
                 "(at least 16 x 16)"
             )
         filled = int(hm.z_um.size - hm.n_valid)
+        src: NDArray[np.float64] | NDArray[np.float32]
+        plane: tuple[float, float, float] | None
         if filled:
             hm = fill_missing(hm, "nearest")
-        lev = level_plane(hm)
-        z = np.asarray(lev.z_um, dtype=np.float32)
+            src, plane = np.asarray(level_plane(hm).z_um, dtype=np.float32), None
+        else:
+            src, plane = np.asarray(hm.z_um, dtype=np.float64), plane_fit(hm)
         ys, nyt = tile_starts(ny, tile)
         xs, nxt = tile_starts(nx, tile)
         wy = schwartz_taper(nyt, taper).astype(np.float32)
         wx = schwartz_taper(nxt, taper).astype(np.float32)
         sum_w2 = float(np.sum(wy.astype(np.float64) ** 2) * np.sum(wx.astype(np.float64) ** 2))
         return cls(
-            z_um=z,
             dx_um=float(hm.dx_um),
             dy_um=float(hm.dy_um),
+            shape=(ny, nx),
             ys=ys,
             xs=xs,
             ny_t=nyt,
@@ -162,20 +175,56 @@ class TiledMap:
             sum_w2=sum_w2,
             source=hm.source,
             filled=filled,
+            _src=src,
+            _plane=plane,
         )
+
+    def levelled(self, rows: slice, cols: slice) -> NDArray[np.float32]:
+        """The levelled heights ``z[rows, cols]`` (float32, a new array): the same values as
+        :func:`~goniolab.optics.heightmap.level_plane` of the whole map cast to float32."""
+        if self._plane is None:
+            return np.array(self._src[rows, cols], dtype=np.float32)
+        a, b, c = self._plane
+        ny, nx = self.shape
+        x_um = (np.arange(nx, dtype=np.float64)[cols] - (nx - 1) / 2.0) * self.dx_um
+        y_um = (np.arange(ny, dtype=np.float64)[rows] - (ny - 1) / 2.0) * self.dy_um
+        out = np.subtract(self._src[rows, cols], a + b * x_um)
+        out -= (c * y_um)[:, None]
+        return out.astype(np.float32)
+
+    @property
+    def z_um(self) -> NDArray[np.float32]:
+        """The whole levelled map (float32; a new array of half the float64 map's size)."""
+        return self.levelled(slice(None), slice(None))
+
+    @cached_property
+    def window(self) -> NDArray[np.float32]:
+        """The tile window ``wy[:, None] * wx[None, :]`` (float32, formed once)."""
+        w: NDArray[np.float32] = self.wy[:, None] * self.wx[None, :]
+        w.setflags(write=False)
+        return w
+
+    @cached_property
+    def window_transposed(self) -> NDArray[np.float32]:
+        """``window.T`` as a contiguous read-only array (for transforms along y first)."""
+        w: NDArray[np.float32] = np.ascontiguousarray(self.window.T)
+        w.setflags(write=False)
+        return w
 
     @property
     def n_tiles(self) -> int:
         return len(self.ys) * len(self.xs)
 
     def tile(self, k: int) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
-        """Heights of tile ``k`` (window-weighted mean removed) and its window (float32)."""
+        """Heights of tile ``k`` (window-weighted mean removed) and its window (float32;
+        the window is shared, read-only)."""
         iy, ix = divmod(k, len(self.xs))
         y0, x0 = self.ys[iy], self.xs[ix]
-        h = self.z_um[y0 : y0 + self.ny_t, x0 : x0 + self.nx_t]
-        w = self.wy[:, None] * self.wx[None, :]
+        h = self.levelled(slice(y0, y0 + self.ny_t), slice(x0, x0 + self.nx_t))
+        w = self.window
         mean = float(np.sum(w * h, dtype=np.float64) / np.sum(w, dtype=np.float64))
-        return (h - np.float32(mean)).astype(np.float32), w
+        h -= np.float32(mean)
+        return h, w
 
 
 @dataclass(frozen=True, eq=False)

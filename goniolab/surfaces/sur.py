@@ -118,7 +118,8 @@ def _read_sur(path: Path, opts: _ReadOptions) -> HeightMap:
         nx, ny = int(h["xres"]), int(h["yres"])
         if nx > 0 and ny > 0:
             _check_points(name, nx, ny)  # before the data is read, let alone inflated
-        raw = head + f.read()
+        f.seek(0)
+        raw = f.read()  # one buffer, not head + rest (a copy of the file)
     h = _sur_unpack(raw)
     if h["format"] != 0:
         raise _fail(name, f"Digital Surf format {h['format']} (Macintosh byte order) not supported")
@@ -153,12 +154,14 @@ def _read_sur(path: Path, opts: _ReadOptions) -> HeightMap:
     if magic == b"DSCOMPRESSED":
         body = _sur_decompress(name, raw, start, need)
     else:
-        body = raw[start : start + need]
+        body = memoryview(raw)[start : start + need]  # no copy of the data
         if len(body) < need:
             raise _truncated(name, ny, nx, item, len(raw) - start)
     ints = np.frombuffer(body, dtype="<i2" if item == 2 else "<i4", count=nx * ny)
     ints = ints.reshape(ny, nx)
-    z = ints.astype(np.float64) * (float(h["dz"]) * z_um_per) + float(h["z_offset"]) * z_um_per
+    z = ints.astype(np.float64)  # scaled in place: one float64 array, no temporaries
+    z *= float(h["dz"]) * z_um_per
+    z += float(h["z_offset"]) * z_um_per
     if h["special_points"] == 1:
         z[ints == int(h["zmin"]) - 2] = np.nan
     # Inversion codes as in Gwyddion surffile.c: 1 = invert z, 2 = flip (mirror x) and

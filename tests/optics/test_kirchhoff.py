@@ -22,7 +22,7 @@ import pytest
 from goniolab.optics.apertures import Cone, integrate_brdf
 from goniolab.optics.facet import FacetModel
 from goniolab.optics.fresnel import fresnel, fresnel_dielectric
-from goniolab.optics.heightmap import HeightMap
+from goniolab.optics.heightmap import HeightMap, fill_missing, level_plane
 from goniolab.optics.kirchhoff import KirchhoffModel, band_plan
 from goniolab.optics.physical import _Box
 from goniolab.optics.psd import TiledMap, psd2, schwartz_taper
@@ -251,3 +251,58 @@ def test_cell_fields_match_a_direct_sum_over_the_map(backend: str) -> None:
         want /= t.n_tiles * t.ny_t * t.nx_t * t.sum_w2
         np.testing.assert_allclose(got, want, rtol=2e-5, atol=1e-6 * want.max())
         assert got_coh == pytest.approx(want_coh / t.n_tiles, rel=1e-5, abs=1e-12)
+
+
+def test_tiles_are_levelled_on_demand_without_copying_the_map() -> None:
+    # the tiles hold no copy of a complete map: they level blocks of it on demand, to the
+    # same float32 values as level_plane of the whole map; a map with gaps is filled first
+    rng = np.random.default_rng(10)
+    z = gaussian_acf_map(300, 0.05, 2.0, 0.5, seed=10).z_um[:, :280]
+    z = z + 0.3 + 0.002 * np.arange(280)[None, :] - 0.001 * np.arange(300)[:, None]
+    gappy = np.where(rng.random(z.shape) < 0.01, np.nan, z)
+    for zz in (z, gappy):
+        hm = HeightMap(z_um=zz, dx_um=0.5, dy_um=0.4)
+        t = TiledMap.from_heightmap(hm, tile=128)
+        filled = fill_missing(hm, "nearest") if np.isnan(zz).any() else hm
+        want = np.asarray(level_plane(filled).z_um, dtype=np.float32)
+        np.testing.assert_array_equal(t.z_um, want)
+        np.testing.assert_array_equal(
+            t.levelled(slice(7, 200, 3), slice(1, None, 5)), want[7:200:3, 1::5]
+        )
+        assert t.filled == int(np.isnan(zz).sum())
+        k = t.n_tiles - 1
+        h, w = t.tile(k)
+        y0, x0 = t.ys[-1], t.xs[-1]
+        block = want[y0 : y0 + t.ny_t, x0 : x0 + t.nx_t]
+        mean = np.sum(w * block, dtype=np.float64) / np.sum(w, dtype=np.float64)
+        np.testing.assert_array_equal(h, block - np.float32(mean))
+    # roughness statistics summed block by block equal the whole-map formulas
+    hm = HeightMap(z_um=z, dx_um=0.5, dy_um=0.4)
+    st = KirchhoffModel(hm, tile=128).stats
+    lev = np.asarray(level_plane(hm).z_um, dtype=np.float32).astype(np.float64)
+    p, q = np.diff(lev, axis=1) / 0.5, np.diff(lev, axis=0) / 0.4
+    assert st.sq_um == pytest.approx(float(np.std(lev)), rel=1e-12)
+    assert st.sdq == pytest.approx(float(np.sqrt(np.mean(p * p) + np.mean(q * q))), rel=1e-12)
+
+
+def test_kirchhoff_memory_is_bounded_by_the_tile_not_the_map() -> None:
+    # issue 15 item 5: the transforms work tile by tile in float32; the arrays they allocate
+    # (traced peak during a gloss reading) do not grow with the map
+    import tracemalloc
+
+    peaks = []
+    for n in (512, 1024):
+        model = KirchhoffModel(gaussian_acf_map(n, 0.05, 2.0, 0.5, seed=11), tile=256)
+        assert model._shared.tiled.n_tiles == (n // 256) ** 2
+        assert model.gloss_fallbacks((60,)) == {}
+        model.gloss((60,))  # warm: kernels, masking table, h_max
+        model._shared.cache.clear()
+        tracemalloc.start()
+        try:
+            model.gloss((60,))
+            peaks.append(tracemalloc.get_traced_memory()[1])
+        finally:
+            tracemalloc.stop()
+    tile_f32 = 256 * 256 * 4
+    assert max(peaks) < 12 * tile_f32  # a few float32/complex64 tiles
+    assert peaks[1] < 1.1 * peaks[0]  # four times the map, the same memory
