@@ -151,6 +151,7 @@ def _read_sur(path: Path, opts: _ReadOptions) -> HeightMap:
         )
     comment = raw[_SUR_HEADER_SIZE : _SUR_HEADER_SIZE + h["comment_size"]].decode("latin-1")
     need = nx * ny * item
+    body: bytes | memoryview
     if magic == b"DSCOMPRESSED":
         body = _sur_decompress(name, raw, start, need)
     else:
