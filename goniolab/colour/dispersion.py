@@ -251,8 +251,12 @@ def dispersion_from_dict(
     DispersionError
         ``where: reason``.
     """
-    if isinstance(spec, int | float | complex):
+    if isinstance(spec, int | float | complex) and not isinstance(spec, bool):
         return Constant(complex(spec))
+    if not isinstance(spec, Mapping):
+        raise DispersionError(
+            f"{where}: expected a number or a table with a kind, got {repr(spec)[:60]}"
+        )
     kind = str(spec.get("kind", ""))
     try:
         if kind == "constant":

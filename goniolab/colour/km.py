@@ -92,16 +92,21 @@ def km_reflectance(
     rg = np.asarray(r_substrate, dtype=np.float64)
     if np.any(x < 0) or np.any(~np.isfinite(x)):
         raise ValueError("thickness must be finite and >= 0")
-    a = 1.0 + k_a / s_a
-    b = np.sqrt(a * a - 1.0)
-    bsx = b * s_a * x
-    # b coth(b S X), with its limit 1/(S X) when b -> 0 (a non-absorbing layer)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        bcoth = np.where(bsx > 1e-8, b / np.tanh(np.maximum(bsx, 1e-300)), 1.0 / (s_a * x))
-    thick = ~np.isfinite(bcoth) | (x == 0)
-    bcoth = np.where(thick, 1.0, bcoth)
-    r = (1.0 - rg * (a - bcoth)) / (a - rg + bcoth)
-    out: FloatArray = np.where(x == 0, rg + 0.0 * a, r)
+    # R = (1 - Rg (a - b coth(bSX))) / (a - Rg + b coth(bSX)), a = 1 + K/S, b = sqrt(a^2 - 1),
+    # with numerator and denominator multiplied by S: A = aS = S + K, B = bS =
+    # sqrt(K (K + 2S)), C = bS coth(bSX) = B coth(BX). The same number, without forming K/S:
+    # a scattering S of 1e-256 made (K/S)^2 overflow and R negative; S -> 0 now tends to
+    # the clear absorber's Rg exp(-2KX).
+    A = s_a + k_a
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        B = np.sqrt(k_a * (k_a + 2.0 * s_a))
+        bx = B * x
+        # B coth(BX), with its limit 1/X when B -> 0 (a non-absorbing layer)
+        C = np.where(bx > 1e-8, B / np.tanh(np.maximum(bx, 1e-300)), 1.0 / x)
+        r = (s_a - rg * (A - C)) / (A - rg * s_a + C)
+        # K so large that B overflows: the opaque layer's R_inf = a - b = S / (A + B) -> 0
+        r = np.where(np.isfinite(C), r, s_a / (A + B))
+    out: FloatArray = np.where(x == 0, rg + 0.0 * A, r)
     return out
 
 

@@ -241,6 +241,11 @@ def refracted_inside(w: ArrayLike, n: ArrayLike) -> FloatArray:
     return out
 
 
+#: Largest clear-coat index accepted (as ``[sample] n``: real coatings are 1.3-2.5).
+COAT_INDEX_MAX = 4.0
+_VISIBLE_NM = np.linspace(380.0, 780.0, 41)
+
+
 @dataclass(frozen=True, slots=True)
 class Paint:
     """A paint system: clear coat index, pigment body, optional metallic and pearl flakes.
@@ -266,6 +271,20 @@ class Paint:
         )
         if a > 1.0:
             raise PaintError("flake area fractions add up to more than 1")
+        # a clear coat is a dielectric of a real coating's index over the visible range
+        # (a coat of n = 1.2e16 loaded and gave an infinite flake lobe)
+        try:
+            n = self.coat.index(_VISIBLE_NM)
+        except DispersionError as exc:
+            raise PaintError(f"coat: {exc}") from None
+        if not (np.all(np.isfinite(n)) and np.all(n.imag == 0)):
+            raise PaintError("coat: the clear coat needs a real, finite index")
+        lo, hi = float(np.min(n.real)), float(np.max(n.real))
+        if lo <= 1.0 or hi > COAT_INDEX_MAX:
+            raise PaintError(
+                f"coat: index {lo:.4g}..{hi:.4g} over 380-780 nm is outside "
+                f"(1, {COAT_INDEX_MAX:g}] (a clear coat's refractive index)"
+            )
 
     def coat_n(self, wl: ArrayLike) -> FloatArray:
         """Real coat index per wavelength (a dielectric coat is required)."""
@@ -424,7 +443,15 @@ def _number(table: Mapping[str, Any], key: str, where: str, default: float | Non
     return float(v)
 
 
-def _known(table: Mapping[str, Any], keys: set[str], where: str) -> None:
+def _short(value: Any, limit: int = 60) -> str:
+    """``repr(value)`` cut to ``limit`` characters (an error stays one short line)."""
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _known(table: Any, keys: set[str], where: str) -> None:
+    if not isinstance(table, Mapping):
+        raise PaintError(f"{where}: expected a table, got {_short(table)}")
     extra = sorted(set(table) - keys)
     if extra:
         raise PaintError(f"{where}: unknown key {extra[0]!r} (known: {', '.join(sorted(keys))})")

@@ -31,8 +31,12 @@ def load_paint_file(path: str) -> Any:
         raise UserError(f"{p}: cannot read: {exc.strerror}") from None
     except tomllib.TOMLDecodeError as exc:
         raise UserError(f"{p}: not valid TOML: {exc}") from None
+    except RecursionError:  # tomllib recurses once per nested array / inline table
+        raise UserError(f"{p}: arrays or tables nested too deeply to be a paint") from None
     tables: dict[str, str] = {}
-    for section in (data.get("coat"), (data.get("metallic") or {}).get("metal")):
+    metallic = data.get("metallic")
+    metal = metallic.get("metal") if isinstance(metallic, dict) else None
+    for section in (data.get("coat"), metal):
         if isinstance(section, dict) and section.get("kind") == "table" and "file" in section:
             f = p.parent / str(section["file"])
             try:
