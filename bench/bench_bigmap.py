@@ -41,6 +41,8 @@ sys.path.insert(0, str(ROOT))
 from goniolab.optics.heightmap import HeightMap  # noqa: E402 -- after the sys.path line
 from goniolab.surfaces import save_heightmap  # noqa: E402
 
+GLOSS_KEYS = ("G20", "G60", "G85")
+
 
 def smooth_map(n: int, sq_um: float = 0.05, l_um: float = 2.0, step_um: float = 0.5) -> HeightMap:
     """Periodic Gaussian surface, ACF Sq^2 exp(-r^2/l^2) (float32 FFT to keep this script small)."""
@@ -107,7 +109,11 @@ def main(argv: list[str] | None = None) -> int:
         "peak_rss_mb": round(rss / 2**20, 1),
         "peak_rss_over_map": round(rss / 2**20 / map_mb, 2),
         "progress_shown": "kirchhoff FFT" in text,
-        "gloss": json.loads(gloss.group(0)).get("gloss_gu") if gloss and code == 0 else None,
+        "gloss": (
+            {k: round(v, 3) for k, v in json.loads(gloss.group(0)).items() if k in GLOSS_KEYS}
+            if gloss and code == 0
+            else None
+        ),
         "load_average_1min": os.getloadavg()[0],
     }
     if args.json:

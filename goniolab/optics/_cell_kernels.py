@@ -90,8 +90,24 @@ def cone_cells_numba(
     g1: float,
     o_in: float,
 ) -> FloatArray:  # pragma: no cover - numba
-    """``out[k] = sum_cells P O(angle(wo, dirs[k]))`` (cap-overlap table on [g0, g1])."""
-    reach = 2.0 * math.sin(0.5 * min(g1, math.pi)) + 1e-12
+    """``out[k] = sum_cells P O(angle(wo, dirs[k]))`` (cap-overlap table on [g0, g1]).
+
+    The cells' ``wo_z`` are formed once; per direction and row only the columns within the
+    cap's chord are visited, and a cell whose chord to the direction is beyond the cap's
+    (so ``angle >= g1``, ``O = 0``) is dropped before the square root and arcsine: the same
+    sum, term for term, as :func:`cone_cells_numpy`.
+    """
+    s_half = math.sin(0.5 * min(g1, math.pi))
+    reach = 2.0 * s_half + 1e-12
+    cut2 = 4.0 * s_half * s_half * (1.0 + 1e-9) + 1e-15  # chord^2 beyond: angle >= g1
+    ny, nx = p.shape
+    zz = np.empty((ny, nx))
+    for i in range(ny):
+        yy = woy[i]
+        for j in range(nx):
+            xx = wox[j]
+            z2 = 1.0 - xx * xx - yy * yy
+            zz[i, j] = math.sqrt(z2) if z2 > 0.0 else -1.0
     out = np.zeros(dirs.shape[0])
     for k in range(dirs.shape[0]):
         dx, dy, dz = dirs[k, 0], dirs[k, 1], dirs[k, 2]
@@ -102,16 +118,23 @@ def cone_cells_numba(
         acc = 0.0
         for i in range(i0, i1):
             yy = woy[i]
-            for j in range(j0, j1):
+            dyy = (yy - dy) ** 2
+            if dyy >= cut2:
+                continue
+            half = math.sqrt(cut2 - dyy) + 1e-12
+            ja = max(j0, np.searchsorted(wox, dx - half))
+            jb = min(j1, np.searchsorted(wox, dx + half, side="right"))
+            for j in range(ja, jb):
                 v = p[i, j]
                 if v == 0.0:
                     continue
-                xx = wox[j]
-                z2 = 1.0 - xx * xx - yy * yy
-                if z2 <= 0.0:
+                z = zz[i, j]
+                if z < 0.0:
                     continue
-                zz = math.sqrt(z2)
-                ch = 0.5 * math.sqrt((xx - dx) ** 2 + (yy - dy) ** 2 + (zz - dz) ** 2)
+                c2 = (wox[j] - dx) ** 2 + dyy + (z - dz) ** 2
+                if c2 >= cut2:
+                    continue
+                ch = 0.5 * math.sqrt(c2)
                 g = 2.0 * math.asin(min(ch, 1.0))
                 if g >= g1:
                     continue
