@@ -543,7 +543,10 @@ class PhysicalOpticsModel:
         theta_r_deg: FloatArray,
         source: Aperture,
         receptor: Aperture,
+        g2: FloatArray | None = None,
     ) -> FloatArray:
+        """Aperture sums of the cell powers ``p`` at each detector angle, times the Smith G2
+        of the detector's direction (``g2`` when given: it does not depend on lambda)."""
         wox, woy = self._wo_axes(theta_i_deg, lam_um, box)
         tr = np.radians(theta_r_deg)
         if isinstance(source, Cone) and isinstance(receptor, Cone):
@@ -566,8 +569,10 @@ class PhysicalOpticsModel:
                 math.radians(source.perp_deg),
                 math.radians(receptor.perp_deg),
             )
-        d = np.stack([-np.sin(tr), np.zeros_like(tr), np.cos(tr)], axis=-1)
-        result: FloatArray = np.asarray(out, dtype=np.float64) * self._g2(theta_i_deg, d)
+        if g2 is None:
+            d = np.stack([-np.sin(tr), np.zeros_like(tr), np.cos(tr)], axis=-1)
+            g2 = self._g2(theta_i_deg, d)
+        result: FloatArray = np.asarray(out, dtype=np.float64) * g2
         return result
 
     def _fractions(
@@ -590,8 +595,11 @@ class PhysicalOpticsModel:
         lams_um = [lam * 1e-3 for lam in lams_nm]
         powers = self._cell_powers(theta_i_deg, lams_um, boxes)
         out = np.empty((len(lams_nm), theta_r_deg.size))
+        g2 = self._g2(theta_i_deg, np.stack([-np.sin(tr), np.zeros_like(tr), np.cos(tr)], axis=-1))
         for k, (lam, box, p) in enumerate(zip(lams_um, boxes, powers, strict=True)):
-            out[k] = self._sum_apertures(theta_i_deg, lam, box, p, theta_r_deg, source, receptor)
+            out[k] = self._sum_apertures(
+                theta_i_deg, lam, box, p, theta_r_deg, source, receptor, g2
+            )
         return out
 
     def _check_apertures(self, theta_i_deg: float, source: Aperture, receptor: Aperture) -> None:
