@@ -12,7 +12,7 @@ and reports:
   1024 x 1024 (:mod:`goniolab.optics.psd`), so the FFT work adds a bounded few tens of MB
   whatever the map size; what grows with the map is the map itself and the facet model the
   regime rule and the fallbacks read;
-- the wall time, and whether the terminal saw the progress display (shown for work over
+- the wall and CPU time, and whether the terminal saw the progress display (shown for work over
   about 2 s);
 - the gloss triplet.
 """
@@ -56,9 +56,10 @@ def smooth_map(n: int, sq_um: float = 0.05, l_um: float = 2.0, step_um: float = 
     return HeightMap(z_um=z, dx_um=step_um, dy_um=step_um, source=f"bench-big-{n}")
 
 
-def run_in_pty(argv: list[str]) -> tuple[int, str, float, int]:
+def run_in_pty(argv: list[str]) -> tuple[int, str, float, int, float]:
     """Run ``argv`` with stdin/stderr on a pty (stdout piped); return exit code, everything
-    the terminal showed plus stdout, wall time and the child's peak RSS in bytes."""
+    the terminal showed plus stdout, wall time, the child's peak RSS in bytes and its CPU
+    time (user + system, s)."""
     master, slave = pty.openpty()
     t0 = time.perf_counter()
     proc = subprocess.Popen(argv, stdin=slave, stdout=subprocess.PIPE, stderr=slave, cwd=ROOT)
@@ -80,8 +81,10 @@ def run_in_pty(argv: list[str]) -> tuple[int, str, float, int]:
     out = proc.stdout.read()
     wall = time.perf_counter() - t0
     os.close(master)
-    rss = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * 1024
-    return proc.returncode, seen.decode(errors="replace") + out.decode(), wall, rss
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    rss = usage.ru_maxrss * 1024
+    cpu = usage.ru_utime + usage.ru_stime
+    return proc.returncode, seen.decode(errors="replace") + out.decode(), wall, rss, cpu
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -96,7 +99,7 @@ def main(argv: list[str] | None = None) -> int:
         save_heightmap(smooth_map(args.size), path)
         goniolab = Path(sys.executable).with_name("goniolab")
         cmd = [str(goniolab), "predict", "gloss", str(path), "--model", "kirchhoff", "--json"]
-        code, text, wall, rss = run_in_pty(cmd)
+        code, text, wall, rss, cpu = run_in_pty(cmd)
         file_mb = path.stat().st_size / 2**20
     map_mb = args.size**2 * 8 / 2**20
     gloss = re.search(r"\{.*\}", text, re.S)
@@ -106,6 +109,7 @@ def main(argv: list[str] | None = None) -> int:
         "map_float64_mb": round(map_mb, 1),
         "exit": code,
         "wall_s": round(wall, 1),
+        "cpu_s": round(cpu, 1),
         "peak_rss_mb": round(rss / 2**20, 1),
         "peak_rss_over_map": round(rss / 2**20 / map_mb, 2),
         "progress_shown": "kirchhoff FFT" in text,

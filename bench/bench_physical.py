@@ -13,8 +13,9 @@ runs; medians against the issue-15 targets:
 - Kirchhoff ISO 2813 gloss triplet weighted over 16 wavelengths, C x V(lambda) (<= 1 s);
 - the same two for Rayleigh-Rice (one PSD, shared by every geometry and wavelength).
 
-The "numpy" column runs the aperture sums with the plain-numpy twins (FFTs are scipy's in
-both); the physical-optics FFT work is the same in both columns.
+The "numpy" column runs the per-cell sums (aperture sums, and Kirchhoff's Horner sums of the
+Taylor terms) with the plain-numpy twins (FFTs are scipy's in both); the physical-optics FFT
+work is the same in both columns.
 """
 
 from __future__ import annotations
