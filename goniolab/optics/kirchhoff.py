@@ -238,7 +238,9 @@ class KirchhoffModel(PhysicalOpticsModel):
             coh = [0j for _ in boxes]
             for b, (lo, hi, vc, order) in enumerate(plan):
                 if b not in active:
-                    done += order + 1
+                    done += order + 1  # reported too: the display must reach 100 %
+                    if self.progress is not None:
+                        self.progress(done, total, "kirchhoff FFT")
                     continue
                 # W exp(-i v_c h) in complex64 from float32 cos/sin
                 phase = np.float32(vc) * h

@@ -306,3 +306,24 @@ def test_kirchhoff_memory_is_bounded_by_the_tile_not_the_map() -> None:
     tile_f32 = 256 * 256 * 4
     assert max(peaks) < 12 * tile_f32  # a few float32/complex64 tiles
     assert peaks[1] < 1.1 * peaks[0]  # four times the map, the same memory
+
+
+def test_progress_reaches_the_total_for_every_transform() -> None:
+    # the terminal display (predict's _Progress) ends its line only when done == total
+    calls: list[tuple[int, int, str]] = []
+    hm = gaussian_acf_map(256, 0.3, 2.0, 0.25, seed=12)
+    model = KirchhoffModel(hm, tile=128, progress=lambda d, t, w: calls.append((d, t, w)))
+    for ti in (20.0, 40.0):
+        assert model.coverage(ti, ti, Cone(6), Cone(6)) is None
+        model.luminance_pct(ti, np.array([ti - 5.0, ti, ti + 5.0]))
+    assert calls and {w for *_, w in calls} == {"kirchhoff FFT"}
+    runs: list[list[tuple[int, int]]] = []
+    for d, t, _ in calls:
+        if not runs or runs[-1][-1][0] >= runs[-1][-1][1]:
+            runs.append([])
+        runs[-1].append((d, t))
+    assert len(runs) == 2  # one transform per curve
+    for run in runs:
+        done = [d for d, _ in run]
+        assert done == sorted(done) and done[-1] == run[0][1]
+        assert run[0][1] % model._shared.tiled.n_tiles == 0
