@@ -138,6 +138,13 @@ class SampleConfig(_Strict):
         Annotated[float, Field(strict=True, ge=100.0, le=20000.0, allow_inf_nan=False)] | None
     ) = None
 
+    @field_validator("map")
+    @classmethod
+    def _names_a_map(cls, v: str) -> str:
+        if not v.strip():
+            raise ValueError("empty: name a height-map file or sample:NAME")
+        return v
+
 
 class ParkConfig(_Strict):
     """Park geometry (degrees)."""

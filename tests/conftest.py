@@ -1,11 +1,19 @@
 """Shared test set-up: the log file of every in-process ``goniolab`` call goes to a
-per-test directory, never to the user's log dir."""
+per-test directory, never to the user's log dir; hypothesis draws the same examples on
+every run (``derandomize``), so ``make test`` passes or fails the same way each time. To
+search further: ``HYPOTHESIS_PROFILE=explore .venv/bin/python -m pytest tests/...``."""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
+from hypothesis import settings
+
+settings.register_profile("goniolab", derandomize=True, database=None)
+settings.register_profile("explore", max_examples=1000)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "goniolab"))
 
 
 @pytest.fixture(autouse=True)

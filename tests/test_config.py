@@ -74,6 +74,10 @@ def write(tmp_path: Path, text: str) -> Path:
         ),
         ("[sample]\nn = 0.5\n", "x.toml: sample.n: Input should be greater than 1"),
         (
+            '[sample]\nmap = " "\n',
+            "x.toml: sample.map: empty: name a height-map file or sample:NAME",
+        ),
+        (
             "[goniometer.detector]\nport = 70000\n",
             "x.toml: goniometer.detector.port: Input should be less than or equal to 65535",
         ),
