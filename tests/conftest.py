@@ -21,3 +21,13 @@ def _log_dir(tmp_path_factory: pytest.TempPathFactory, monkeypatch: pytest.Monke
     path = tmp_path_factory.mktemp("log")
     monkeypatch.setenv("GONIOLAB_LOG_DIR", str(path))
     return path
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Under xdist, the controller fills the shared numba and twin caches once before the
+    workers start (tests/_warm.py); a worker or a plain run does not."""
+    if hasattr(config, "workerinput") or not config.getoption("numprocesses", default=None):
+        return
+    from tests._warm import warm_caches
+
+    warm_caches()

@@ -155,6 +155,7 @@ def _wait(what: str, cond: Any, timeout_s: float = 120.0) -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(300)  # a subprocess scan at real time, then a resume
 def test_kill_9_mid_scan_then_resume(url: str, tmp_path: Path) -> None:
     env = _env(tmp_path)
     args = _scan_args(url, "--theta-r", "20:70:1", "--time-scale", "1", "--dwell", "0.1")

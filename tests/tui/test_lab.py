@@ -404,6 +404,7 @@ async def test_colour_columns_swatch_and_colour_plot(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(300)  # 104 twin readings, and a cold twin cache on a fresh machine
 async def test_a_aligns_the_sim_lab_writes_alignment_and_corrects_the_arms(
     tmp_path: Path,
 ) -> None:
