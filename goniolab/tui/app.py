@@ -9,6 +9,7 @@ every device call runs in a worker, every instrument error becomes a notificatio
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import math
 import time
 from typing import ClassVar
@@ -154,8 +155,18 @@ class GonioApp(App[int]):
     def on_mount(self) -> None:
         self.sub_title = self.backend.title
         self.query_one("#gloss-log", GlossLog).border_title = "glossmeter log"
+        self._watch_hangup()
         self.consume_events()
         self.startup()
+
+    def _watch_hangup(self) -> None:
+        """Quit as ``q`` does (abort a scan, park, release the lab) when the terminal goes
+        away (SIGHUP: the window closed, the ssh link or the tmux session ended); without
+        it the app kept running with no terminal, polling the arms, until killed."""
+        import signal
+
+        with contextlib.suppress(NotImplementedError, RuntimeError, ValueError, AttributeError):
+            asyncio.get_running_loop().add_signal_handler(signal.SIGHUP, self._quit)
 
     # ------------------------------------------------------------------ workers
     @work(exclusive=True, group="startup")
@@ -571,4 +582,8 @@ class GonioApp(App[int]):
 
     async def on_unmount(self) -> None:
         """Also release the lab when the app ends another way (ctrl+c, a test's end)."""
+        import signal
+
+        with contextlib.suppress(NotImplementedError, RuntimeError, ValueError, AttributeError):
+            asyncio.get_running_loop().remove_signal_handler(signal.SIGHUP)
         await self.close_backend()
