@@ -14,7 +14,9 @@ status 141 (128 + SIGPIPE, as a C tool killed by SIGPIPE reports it).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
+import io
 import os
 import pkgutil
 import re
@@ -167,8 +169,23 @@ def _start_log(args: argparse.Namespace, argv: Sequence[str] | None) -> None:
             _log().info("%s: %s", name, value)
 
 
+def _stack_dump_on_sigusr1() -> None:
+    """``kill -USR1 <pid>`` prints every thread's stack to stderr and the process goes on.
+
+    For a scan or a TUI that seems stuck: where it waits shows without stopping it.
+    """
+    import faulthandler
+    import signal
+
+    if hasattr(signal, "SIGUSR1") and sys.stderr is not None:
+        # no file descriptor behind stderr (an embedding host): nothing to dump into
+        with contextlib.suppress(ValueError, io.UnsupportedOperation):
+            faulthandler.register(signal.SIGUSR1, file=sys.stderr, all_threads=True)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``goniolab`` console script; returns the process exit code."""
+    _stack_dump_on_sigusr1()
     try:
         parser = build_parser()
         args = parser.parse_args(argv)

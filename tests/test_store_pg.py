@@ -159,12 +159,21 @@ def _wait(what: str, cond: Any, timeout_s: float = 120.0) -> None:
 def test_kill_9_mid_scan_then_resume(url: str, tmp_path: Path) -> None:
     env = _env(tmp_path)
     args = _scan_args(url, "--theta-r", "20:70:1", "--time-scale", "1", "--dwell", "0.1")
-    proc = subprocess.Popen([GONIOLAB, *args], stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL, env=env, cwd=ROOT)  # fmt: skip
+    err_path = tmp_path / "scan.stderr"
+    with err_path.open("wb") as err:
+        proc = subprocess.Popen([GONIOLAB, *args], stdout=subprocess.DEVNULL, stderr=err,
+                                env=env, cwd=ROOT)  # fmt: skip
     with RunStore(url) as s:
         try:
             _wait("the scan's run", lambda: bool(s.list_runs()))
             _wait("three readings", lambda: s.count_points(1) >= 3)
+        except AssertionError as exc:
+            # where the scan waits: its thread stacks (SIGUSR1) and its log
+            proc.send_signal(signal.SIGUSR1)
+            time.sleep(2.0)
+            logs = "".join(p.read_text() for p in sorted(tmp_path.glob("goniolab.log*")))
+            raise AssertionError(f"{exc}\n--- stderr:\n{err_path.read_text()}\n"
+                                 f"--- log:\n{logs[-6000:]}") from None  # fmt: skip
         finally:
             proc.send_signal(signal.SIGKILL)
             proc.wait(timeout=60)
