@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import importlib
 import sys
+import threading
 import types
 from collections.abc import Callable
 from typing import Any
@@ -73,11 +74,30 @@ def import_colour() -> Any:
     dependency notices ("Matplotlib not available" and similar) are silenced.
     """
     module = sys.modules.get("colour")
-    if module is not None:
+    if module is not None and not _initializing(module):
         return module
-    import warnings
+    with _COLOUR_IMPORT:
+        # A scan imports colour first in a worker thread (the twin's spectrum, the model's
+        # colour) while others start. ``sys.modules`` holds the module from the first line
+        # of its import: another thread must wait for the import, not take the half-built
+        # module (that was an AttributeError on ``colour.MSDS_CMFS`` that ended scans).
+        module = sys.modules.get("colour")
+        if module is not None and not _initializing(module):
+            return module
+        import warnings
 
-    sys.modules.setdefault("colour.plotting", _DeferredSubmodule("colour.plotting"))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        return importlib.import_module("colour")
+        sys.modules.setdefault("colour.plotting", _DeferredSubmodule("colour.plotting"))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            # waits on the module's import lock when another thread imports it directly
+            return importlib.import_module("colour")
+
+
+#: Serialises :func:`import_colour`: one thread imports, the others wait for the result.
+_COLOUR_IMPORT = threading.Lock()
+
+
+def _initializing(module: types.ModuleType) -> bool:
+    """Whether ``module`` is still being executed by an import (``sys.modules`` has it
+    from the start; :mod:`importlib` marks the spec until the import ends)."""
+    return bool(getattr(getattr(module, "__spec__", None), "_initializing", False))

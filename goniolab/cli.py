@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import importlib
-import io
 import os
 import pkgutil
 import re
@@ -172,15 +171,32 @@ def _start_log(args: argparse.Namespace, argv: Sequence[str] | None) -> None:
 def _stack_dump_on_sigusr1() -> None:
     """``kill -USR1 <pid>`` prints every thread's stack to stderr and the process goes on.
 
-    For a scan or a TUI that seems stuck: where it waits shows without stopping it.
+    For a scan or a TUI that seems stuck: where it waits shows without stopping it. A
+    Python-level handler (run by the main thread between bytecodes, also when it waits in
+    ``select`` or on a lock) reading :func:`sys._current_frames`; :mod:`faulthandler`'s
+    all-thread dump reads other threads' frames from a signal handler and can crash the
+    process it was asked to inspect.
     """
-    import faulthandler
     import signal
 
-    if hasattr(signal, "SIGUSR1") and sys.stderr is not None:
-        # no file descriptor behind stderr (an embedding host): nothing to dump into
-        with contextlib.suppress(ValueError, io.UnsupportedOperation):
-            faulthandler.register(signal.SIGUSR1, file=sys.stderr, all_threads=True)
+    if not hasattr(signal, "SIGUSR1"):  # Windows
+        return
+
+    def dump(signum: int, frame: Any) -> None:
+        import threading
+        import traceback
+
+        names = {t.ident: t.name for t in threading.enumerate()}
+        parts = [f"goniolab: stacks of pid {os.getpid()} (SIGUSR1)\n"]
+        for ident, top in sys._current_frames().items():
+            parts.append(f"\nThread {names.get(ident, '?')} ({ident}), most recent call last:\n")
+            parts.extend(traceback.format_stack(top))
+        with contextlib.suppress(OSError, ValueError):  # stderr closed: nothing to show
+            sys.stderr.write("".join(parts))
+            sys.stderr.flush()
+
+    with contextlib.suppress(ValueError):  # not the main thread (an embedding host)
+        signal.signal(signal.SIGUSR1, dump)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
