@@ -403,11 +403,6 @@ async def test_colour_columns_swatch_and_colour_plot(tmp_path: Path) -> None:
         assert panel.plot_mode == "a*b*" and "measured b*" in panel.main_plot._labels
 
 
-@pytest.mark.skip(
-    reason="hangs intermittently in the full suite on a fresh clone (3 of 4 CI runs on "
-    "2026-11-23; passes alone and in tests/tui); under investigation. The align plan is "
-    "tested in tests/scan/test_align.py, the a key in the scripted TUI tests"
-)
 @pytest.mark.slow
 @pytest.mark.timeout(300)  # 104 twin readings, and a cold twin cache on a fresh machine
 async def test_a_aligns_the_sim_lab_writes_alignment_and_corrects_the_arms(
