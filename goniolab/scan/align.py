@@ -49,7 +49,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from drivers.base import Spectrocolorimeter
+from drivers.base import DeviceError, Spectrocolorimeter
 from drivers.goniometer import TwoArmGoniometer
 from drivers.timing import Clock
 from goniolab.optics.apertures import Cone, cap_overlap_fraction
@@ -300,6 +300,8 @@ class AlignRunner:
         self._index = 0
         self._position: tuple[float, float] | None = None
         self._abort = False
+        #: :meth:`run` has published the run's end (done, aborted or failed)
+        self.finished = False
         n_coarse = len(plan.sweeps(plan.theta_i_deg[0])[0])
         n_fine = len(plan.fine(0.0))
         self._total = 2 * len(plan.theta_i_deg) * (n_coarse + n_fine)
@@ -473,8 +475,22 @@ class AlignRunner:
             self.bus.publish(
                 StateChanged(run_id=self.run_id, state=RunState.ABORTED, reason=str(exc))
             )
+            self.finished = True
             self.bus.publish(
                 RunFinished(run_id=self.run_id, state=RunState.ABORTED, reason=str(exc), summary={})
+            )
+            raise
+        except Exception as exc:
+            # an instrument fault or a defect: the run is recorded as failed with the reason
+            # and the failure published (a UI waiting for the run's end sees it), then raised
+            reason = str(exc) if isinstance(exc, DeviceError) else (
+                f"internal error: {type(exc).__name__}: {exc}"
+            )  # fmt: skip
+            self.store.set_status(self.run_id, RunState.FAILED.value, reason)
+            self.finished = True
+            self.bus.publish(StateChanged(run_id=self.run_id, state=RunState.FAILED, reason=reason))
+            self.bus.publish(
+                RunFinished(run_id=self.run_id, state=RunState.FAILED, reason=reason, summary={})
             )
             raise
         finally:
@@ -482,6 +498,7 @@ class AlignRunner:
         self.store.update_model(self.run_id, {"alignment": result.as_dict()})
         self.store.set_status(self.run_id, RunState.DONE.value)
         self.bus.publish(StateChanged(run_id=self.run_id, state=RunState.DONE, reason=""))
+        self.finished = True
         self.bus.publish(
             RunFinished(
                 run_id=self.run_id, state=RunState.DONE, reason="", summary=result.as_dict()

@@ -14,6 +14,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import dataclasses
+import logging
 from collections.abc import Callable
 from contextlib import AsyncExitStack
 from pathlib import Path
@@ -43,6 +44,8 @@ from goniolab.surfaces.samples import sample_names
 from goniolab.tui.view_model import ArmState, RunSummary, ScanSetup, StoredRun
 
 __all__ = ["SessionBackend"]
+
+_LOG = logging.getLogger(__name__)
 
 #: The default scan of the form: the seed's in-plane sweep, theta_i = 45 deg, detector
 #: 0..70 deg in 1 deg steps (Wittmann et al. 2021, sec. 2.3 and 4.2; the seed repeats 5 times),
@@ -293,8 +296,32 @@ class SessionBackend:
             self.bus.publish(
                 InstrumentError(run_id=runner.run_id, device="lab", message=reason, fatal=True)
             )
+            if not runner.finished:
+                self.bus.publish(
+                    RunFinished(
+                        run_id=runner.run_id, state=RunState.FAILED, reason=reason, summary={}
+                    )
+                )
+        except Exception as exc:
+            runner = self._align_runner
+            if runner is None or runner.plan is not plan:
+                raise
+            self._internal_error(runner.run_id, "alignment", exc, finished=runner.finished)
+
+    def _internal_error(self, run_id: int, what: str, exc: Exception, *, finished: bool) -> None:
+        """An error no part of the lab expected (a defect): the run ends as failed on screen
+        with the error named and the traceback in the log; the readings taken stay in the
+        store. Before, the task died unseen and the run looked frozen. ``finished``: the
+        runner has already published the run's end (it records the failure itself)."""
+        _LOG.error("%s of run %d stopped by an internal error", what, run_id, exc_info=exc)
+        reason = (
+            f"internal error: {type(exc).__name__}: {exc} (the traceback is in the log; "
+            "the readings taken are kept)"
+        )
+        self.bus.publish(InstrumentError(run_id=run_id, device="lab", message=reason, fatal=True))
+        if not finished:
             self.bus.publish(
-                RunFinished(run_id=runner.run_id, state=RunState.FAILED, reason=reason, summary={})
+                RunFinished(run_id=run_id, state=RunState.FAILED, reason=reason, summary={})
             )
 
     async def _run(self, session: ScanSession, runner: ScanRunner) -> None:
@@ -318,6 +345,9 @@ class SessionBackend:
             self.bus.publish(
                 RunFinished(run_id=run_id, state=RunState.FAILED, reason=reason, summary={})
             )
+        except Exception as exc:
+            done = runner.state in (RunState.DONE, RunState.FAILED, RunState.ABORTED)
+            self._internal_error(run_id, "scan", exc, finished=done)
 
     def pause(self) -> None:
         if self._runner is not None:

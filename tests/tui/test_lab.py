@@ -450,3 +450,75 @@ async def test_a_aligns_the_sim_lab_writes_alignment_and_corrects_the_arms(
         )
     with RunStore(tmp_path / "runs.sqlite") as store:
         assert [store.get_run(r).status for r in (1, 2)] == ["aborted", "done"]
+
+
+async def test_an_internal_error_fails_the_run_on_screen_and_keeps_the_readings(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # A defect (an exception no part of the lab expects, here from the third reading on)
+    # ends the run as failed with the error named; the app runs on, and the two readings
+    # taken are in the store (a failed run resumes).
+    from sim.instruments import SimSpectro
+
+    real = SimSpectro.measure
+    calls = 0
+
+    async def measure(self: SimSpectro) -> Any:
+        nonlocal calls
+        calls += 1
+        if calls > 2:
+            raise ZeroDivisionError("a defect")
+        return await real(self)
+
+    monkeypatch.setattr(SimSpectro, "measure", measure)
+    app = make_app(tmp_path)
+    async with app.run_test(size=SIZE) as pilot:
+        await wait_until(pilot, app.ready.is_set)
+        await set_form(pilot, app, repeats="1")
+        await pilot.press("s")
+        await wait_until(pilot, lambda: app.run_state is RunState.FAILED, max_turns=20_000)
+        messages = [n.message for n in app._notifications]
+        assert any("internal error: ZeroDivisionError: a defect" in m for m in messages)
+        assert app.is_running
+    with RunStore(tmp_path / "runs.sqlite") as store:
+        assert len(store.points(app.run_id)) == 2
+        run = store.get_run(app.run_id)
+        assert run.status == "failed" and "ZeroDivisionError: a defect" in run.reason
+
+
+async def test_an_internal_error_fails_the_alignment_on_screen(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # the same defect in an alignment: it used to kill the task unseen, the run stayed
+    # "running" on screen and in the store (the full suite's align test waited forever)
+    from sim.instruments import SimSpectro
+
+    real = SimSpectro.measure
+    calls = 0
+
+    async def measure(self: SimSpectro) -> Any:
+        nonlocal calls
+        calls += 1
+        if calls > 2:
+            raise ZeroDivisionError("a defect")
+        return await real(self)
+
+    monkeypatch.setattr(SimSpectro, "measure", measure)
+    plan = AlignPlan(theta_i_deg=(20.0, 60.0), coarse_span_deg=4.0, fine_step_deg=0.5,
+                     fine_span_deg=4.0)  # fmt: skip
+    path = sim_config(tmp_path)
+    backend = SessionBackend(path, model=AnalyticModel("beckmann", alpha=0.02), align_plan=plan)
+    app = GonioApp(backend, poll_hz=0)
+    async with app.run_test(size=SIZE) as pilot:
+        await wait_until(pilot, app.ready.is_set)
+        await pilot.press("a")
+        await wait_until(pilot, lambda: app.run_state is RunState.FAILED, max_turns=20_000)
+        await wait_until(pilot, lambda: not backend.running)
+        messages = [n.message for n in app._notifications]
+        assert any("internal error: ZeroDivisionError: a defect" in m for m in messages)
+        assert "[alignment]" not in path.read_text()
+    with RunStore(tmp_path / "runs.sqlite") as store:
+        run = store.get_run(1)
+        assert (
+            run.status == "failed" and run.reason == "internal error: ZeroDivisionError: a defect"
+        )
