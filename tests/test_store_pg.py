@@ -154,6 +154,12 @@ def _wait(what: str, cond: Any, timeout_s: float = 120.0) -> None:
         time.sleep(0.1)
 
 
+def _alive(proc: subprocess.Popen[bytes]) -> bool:
+    if proc.poll() is not None:
+        raise AssertionError(f"the scan ended early, exit status {proc.returncode}")
+    return True
+
+
 @pytest.mark.slow
 @pytest.mark.timeout(300)  # a subprocess scan at real time, then a resume
 def test_kill_9_mid_scan_then_resume(url: str, tmp_path: Path) -> None:
@@ -165,8 +171,8 @@ def test_kill_9_mid_scan_then_resume(url: str, tmp_path: Path) -> None:
                                 env=env, cwd=ROOT)  # fmt: skip
     with RunStore(url) as s:
         try:
-            _wait("the scan's run", lambda: bool(s.list_runs()))
-            _wait("three readings", lambda: s.count_points(1) >= 3)
+            _wait("the scan's run", lambda: _alive(proc) and bool(s.list_runs()))
+            _wait("three readings", lambda: _alive(proc) and s.count_points(1) >= 3)
         except AssertionError as exc:
             # where the scan waits: its thread stacks (SIGUSR1) and its log
             proc.send_signal(signal.SIGUSR1)
