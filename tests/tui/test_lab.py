@@ -29,7 +29,7 @@ from goniolab.tui.app import GonioApp
 from goniolab.tui.screens import RunsScreen
 from goniolab.tui.session_backend import SessionBackend
 from goniolab.tui.widgets import ComparisonPanel, GlossLog, MetricsTable, StatusPanel
-from tests.tui.tui_scripted import settle, wait_until
+from tests.tui.tui_scripted import dump_tasks_later, settle, wait_until
 from tests.twin_configs import ideal
 
 REPO = Path(__file__).resolve().parents[2]
@@ -423,6 +423,13 @@ async def test_a_aligns_the_sim_lab_writes_alignment_and_corrects_the_arms(
                      fine_span_deg=4.0)  # 104 readings instead of 288: fewer events  # fmt: skip
     backend = SessionBackend(path, model=AnalyticModel("beckmann", alpha=0.02), align_plan=plan)
     app = GonioApp(backend, poll_hz=0)
+    watchdog = dump_tasks_later(
+        240.0,
+        lambda: (
+            f"run {app.run_id} {app.run_state} progress {app.progress} "
+            f"running {backend.running} notes {[n.message for n in app._notifications]}"
+        ),
+    )
     async with app.run_test(size=SIZE) as pilot:
         await wait_until(pilot, app.ready.is_set)
         await pilot.press("a")
@@ -448,6 +455,7 @@ async def test_a_aligns_the_sim_lab_writes_alignment_and_corrects_the_arms(
         assert backend.session.lab.goniometer.corrections_deg == pytest.approx(
             got.corrections_deg(), abs=1e-4
         )
+    watchdog.cancel()
     with RunStore(tmp_path / "runs.sqlite") as store:
         assert [store.get_run(r).status for r in (1, 2)] == ["aborted", "done"]
 
