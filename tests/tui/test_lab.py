@@ -7,6 +7,7 @@ predicted agree to rounding, point by point.
 
 from __future__ import annotations
 
+import asyncio
 import math
 import re
 from pathlib import Path
@@ -29,7 +30,7 @@ from goniolab.tui.app import GonioApp
 from goniolab.tui.screens import RunsScreen
 from goniolab.tui.session_backend import SessionBackend
 from goniolab.tui.widgets import ComparisonPanel, GlossLog, MetricsTable, StatusPanel
-from tests.tui.tui_scripted import dump_tasks_later, settle, wait_until
+from tests.tui.tui_scripted import settle, wait_until
 from tests.twin_configs import ideal
 
 REPO = Path(__file__).resolve().parents[2]
@@ -406,7 +407,7 @@ async def test_colour_columns_swatch_and_colour_plot(tmp_path: Path) -> None:
 @pytest.mark.slow
 @pytest.mark.timeout(300)  # 104 twin readings, and a cold twin cache on a fresh machine
 async def test_a_aligns_the_sim_lab_writes_alignment_and_corrects_the_arms(
-    tmp_path: Path,
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     # the ideal twin with known misalignments ([sim] offsets) and a narrow Beckmann sample
     # (FWHM ~5 deg: the align sweeps bracket it); abort first, then align to the end
@@ -421,21 +422,43 @@ async def test_a_aligns_the_sim_lab_writes_alignment_and_corrects_the_arms(
     path.write_text(text)
     plan = AlignPlan(theta_i_deg=(20.0, 60.0), coarse_span_deg=4.0, fine_step_deg=0.5,
                      fine_span_deg=4.0)  # 104 readings instead of 288: fewer events  # fmt: skip
+    # The first alignment is held at its fourth spectro reading until x is pressed: the
+    # twin at time scale 0 can otherwise finish all 104 readings between two turns of a
+    # loaded test loop, and x then finds no run to abort (the hang of the full suite).
+    from sim.instruments import SimSpectro
+
+    real = SimSpectro.measure
+    held, release = asyncio.Event(), asyncio.Event()
+    calls = 0
+
+    async def measure(self: SimSpectro) -> Any:
+        nonlocal calls
+        calls += 1
+        if calls == 4:
+            held.set()
+            await release.wait()
+        return await real(self)
+
+    monkeypatch.setattr(SimSpectro, "measure", measure)
     backend = SessionBackend(path, model=AnalyticModel("beckmann", alpha=0.02), align_plan=plan)
     app = GonioApp(backend, poll_hz=0)
-    watchdog = dump_tasks_later(
-        240.0,
-        lambda: (
-            f"run {app.run_id} {app.run_state} progress {app.progress} "
-            f"running {backend.running} notes {[n.message for n in app._notifications]}"
-        ),
-    )
+    # every toast shown (one may expire before a loaded loop looks)
+    shown: list[str] = []
+    notify = app.notify
+
+    def record(message: str, **kwargs: Any) -> None:
+        shown.append(message)
+        notify(message, **kwargs)
+
+    monkeypatch.setattr(app, "notify", record)
     async with app.run_test(size=SIZE) as pilot:
         await wait_until(pilot, app.ready.is_set)
         await pilot.press("a")
-        await wait_until(pilot, lambda: app.progress[0] >= 3, max_turns=100_000)
+        await wait_until(pilot, held.is_set, max_turns=100_000)
         await pilot.press("x")
+        release.set()
         await wait_until(pilot, lambda: app.run_state is RunState.ABORTED, max_turns=100_000)
+        assert 3 <= app.progress[0] < 104
         assert "[alignment]" not in path.read_text()
         await wait_until(pilot, lambda: not backend.running)
         await pilot.press("a")
@@ -445,7 +468,7 @@ async def test_a_aligns_the_sim_lab_writes_alignment_and_corrects_the_arms(
             max_turns=100_000,
         )
         assert app.comparison.n_readings == 0
-        assert any("run 2: lamp zero -0.4" in n.message for n in app._notifications)
+        assert any("run 2: lamp zero -0.4" in m for m in shown)
         got = load_lab_config(path).alignment
         assert got.run == 2
         assert got.lamp_zero_deg == pytest.approx(-0.4, abs=0.02)
@@ -455,7 +478,6 @@ async def test_a_aligns_the_sim_lab_writes_alignment_and_corrects_the_arms(
         assert backend.session.lab.goniometer.corrections_deg == pytest.approx(
             got.corrections_deg(), abs=1e-4
         )
-    watchdog.cancel()
     with RunStore(tmp_path / "runs.sqlite") as store:
         assert [store.get_run(r).status for r in (1, 2)] == ["aborted", "done"]
 

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import asyncio
 import math
-import sys
 from collections.abc import Callable
 from typing import ClassVar
 
@@ -340,16 +339,3 @@ async def settle(pilot: Pilot[int], app: GonioApp) -> None:
     await wait_until(pilot, lambda: not app.redraw_pending)
     for _ in range(3):
         await pilot.pause()
-
-
-def dump_tasks_later(delay_s: float, state: Callable[[], str]) -> asyncio.TimerHandle:
-    """After ``delay_s``, print ``state()`` and every asyncio task's stack to stdout (the
-    test report shows it when the test then times out): where a hanging test waits."""
-
-    def dump() -> None:
-        print(f"=== after {delay_s} s: {state()}")
-        for task in asyncio.all_tasks():
-            print(f"--- {task.get_name()}: {task!r:.300}")
-            task.print_stack(limit=40, file=sys.stdout)
-
-    return asyncio.get_running_loop().call_later(delay_s, dump)
