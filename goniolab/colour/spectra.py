@@ -224,40 +224,53 @@ def check_spectrum(
         raise ColourError(
             f"{what}: {r.size} values for {wl.size} wavelengths (the lengths must match)"
         )
-    if wl.size < 3:
-        raise ColourError(f"{what}: {wl.size} wavelengths, need at least 3")
-    if not np.all(np.isfinite(wl)):
-        raise ColourError(f"{what}: a wavelength is NaN or infinite")
-    bad = ~np.isfinite(r)
-    if np.any(bad):
+    _check_grid(wl.tobytes(), what)  # one instrument's grid: checked once
+    r_min = float(r.min())
+    if not math.isfinite(r_min) or not math.isfinite(float(r.max())):
+        bad = ~np.isfinite(r)
         k = int(np.argmax(bad))
         raise ColourError(f"{what}: value at {wl[k]:g} nm is {r[k]} (NaN or infinite)")
-    neg = r < -abs(noise_floor)
-    if np.any(neg):
-        k = int(np.argmax(neg))
+    if r_min < -abs(noise_floor):
+        k = int(np.argmax(r < -abs(noise_floor)))
         floor = f", below the noise floor -{abs(noise_floor):g}" if noise_floor else ""
         raise ColourError(f"{what}: value at {wl[k]:g} nm is negative ({r[k]:g}{floor})")
-    r = np.maximum(r, 0.0)
-    steps = np.diff(wl)
-    if np.any(steps <= 0):
-        raise ColourError(f"{what}: wavelengths must be ascending")
-    if np.ptp(steps) > 1e-6 * max(1.0, float(steps.mean())):
-        raise ColourError(f"{what}: wavelengths must be evenly spaced")
-    lo, hi = VISIBLE_NM
-    if wl[0] > lo + 1e-9 or wl[-1] < hi - 1e-9:
-        raise ColourError(
-            f"{what}: wavelengths {wl[0]:g}-{wl[-1]:g} nm do not cover {lo:g}-{hi:g} nm"
-        )
+    if r_min < 0.0:
+        r = np.maximum(r, 0.0)
     return wl, r
 
 
 @functools.lru_cache(maxsize=32)
-def _weights(wl: tuple[float, ...], settings: ColourSettings) -> FloatArray:
+def _check_grid_cached(wl_bytes: bytes) -> str:
+    """The problem with a wavelength grid ('' when it is fine), cached per grid."""
+    wl = np.frombuffer(wl_bytes, dtype=np.float64)
+    if wl.size < 3:
+        return f"{wl.size} wavelengths, need at least 3"
+    if not np.all(np.isfinite(wl)):
+        return "a wavelength is NaN or infinite"
+    steps = np.diff(wl)
+    if np.any(steps <= 0):
+        return "wavelengths must be ascending"
+    if np.ptp(steps) > 1e-6 * max(1.0, float(steps.mean())):
+        return "wavelengths must be evenly spaced"
+    lo, hi = VISIBLE_NM
+    if wl[0] > lo + 1e-9 or wl[-1] < hi - 1e-9:
+        return f"wavelengths {wl[0]:g}-{wl[-1]:g} nm do not cover {lo:g}-{hi:g} nm"
+    return ""
+
+
+def _check_grid(wl_bytes: bytes, what: str) -> None:
+    problem = _check_grid_cached(wl_bytes)
+    if problem:
+        raise ColourError(f"{what}: {problem}")
+
+
+@functools.lru_cache(maxsize=32)
+def _weights(wl_bytes: bytes, settings: ColourSettings) -> FloatArray:
     colour = colour_module()
     s = settings.validated()
     cmfs = colour.MSDS_CMFS[s.observer]
     illuminant = colour.SDS_ILLUMINANTS[s.illuminant]
-    wl_arr = np.asarray(wl)
+    wl_arr = np.frombuffer(wl_bytes, dtype=np.float64).copy()
     out = np.empty((3, wl_arr.size))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # colour warns when it interpolates/extrapolates
@@ -277,8 +290,7 @@ def xyz_weights(wavelengths_nm: ArrayLike, settings: ColourSettings | None = Non
     ASTM E308 tables included, is linear in R), cached per grid and settings.
     """
     s = (settings or ColourSettings()).validated()
-    wl = tuple(float(w) for w in np.asarray(wavelengths_nm, dtype=float).ravel())
-    return _weights(wl, s)
+    return _weights(np.asarray(wavelengths_nm, dtype=np.float64).ravel().tobytes(), s)
 
 
 def spectra_to_xyz(

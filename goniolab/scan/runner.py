@@ -92,6 +92,16 @@ SpecimenHook = Callable[[str], Awaitable[None]]
 
 _T = TypeVar("_T")
 
+#: A reading's colour computed in less than this (once colour-science is loaded, ~0.1 ms)
+#: is computed on the event loop next time; longer ones go to a worker thread.
+_INLINE_COLOUR_S = 1e-3
+
+
+def _timed(fn: Callable[..., _T], *args: Any) -> tuple[_T, float]:
+    """``fn(*args)`` and the seconds it took (run in a worker thread)."""
+    t0 = time.perf_counter()
+    return fn(*args), time.perf_counter() - t0
+
 
 def _describe(exc: BaseException) -> str:
     """``Type: message`` of an unexpected error (``struct.error: argument out of range``),
@@ -384,6 +394,8 @@ class ScanRunner:
         self.move_retries = move_retries
         self.reconnect_backoff_s = reconnect_backoff_s
         self.point_colour = point_colour if point_colour is not None else PointColour()
+        #: the last colour took under _INLINE_COLOUR_S: compute the next on the loop
+        self._colour_inline = False
         if plan.mirror_reference and specimen_hook is None:
             raise ValueError("a plan with a mirror reference needs a specimen_hook")
         self._state = RunState.IDLE
@@ -631,14 +643,19 @@ class ScanRunner:
         from goniolab.colour.spectra import ColourError
 
         mirror = None if p.index == MIRROR_INDEX or not self.plan.mirror_reference else mirror_pct
+        args = (reading.wavelengths_nm, reading.values, p.theta_r_deg, mirror)
         try:
-            values = await asyncio.to_thread(
-                self.point_colour.measured,
-                reading.wavelengths_nm,
-                reading.values,
-                p.theta_r_deg,
-                mirror,
-            )
+            if self._colour_inline:
+                # a few hundred multiply-adds once colour-science is loaded: a worker
+                # thread's hand-off would cost more than the work (issue 13: the sequencer's
+                # overhead per reading); a spectrum that takes longer sends it back
+                t0 = time.perf_counter()
+                values = self.point_colour.measured(*args)
+                self._colour_inline = time.perf_counter() - t0 < _INLINE_COLOUR_S
+            else:
+                measured = self.point_colour.measured
+                values, took_s = await asyncio.to_thread(lambda: _timed(measured, *args))
+                self._colour_inline = took_s < _INLINE_COLOUR_S
         except (ColourError, ValueError) as exc:
             self.bus.publish(
                 InstrumentError(
