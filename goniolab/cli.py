@@ -191,9 +191,15 @@ def _stack_dump_on_sigusr1() -> None:
         for ident, top in sys._current_frames().items():
             parts.append(f"\nThread {names.get(ident, '?')} ({ident}), most recent call last:\n")
             parts.extend(traceback.format_stack(top))
-        with contextlib.suppress(OSError, ValueError):  # stderr closed: nothing to show
-            sys.stderr.write("".join(parts))
-            sys.stderr.flush()
+        text = "".join(parts)
+        # the process's own stderr (the TUI captures sys.stderr while it runs), and the log
+        err = sys.__stderr__
+        if err is not None:
+            with contextlib.suppress(OSError, ValueError):  # closed: nothing to show there
+                err.write(text)
+                err.flush()
+        if "logging" in sys.modules:
+            sys.modules["logging"].getLogger("goniolab").warning("%s", text)
 
     with contextlib.suppress(ValueError):  # not the main thread (an embedding host)
         signal.signal(signal.SIGUSR1, dump)

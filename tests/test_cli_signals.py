@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import signal
 import subprocess
 import sys
@@ -23,7 +24,8 @@ def test_sigusr1_prints_every_threads_stack_and_the_scan_goes_on(tmp_path: Path)
            str(ROOT / "configs" / "lab-sim.toml"), "--store", str(store), "--theta-i", "45",
            "--theta-r", "40:50:5", "--time-scale", "1"]  # fmt: skip
     with err_path.open("wb") as err:
-        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=err, cwd=tmp_path)
+        env = {**os.environ, "GONIOLAB_LOG_DIR": str(tmp_path / "log")}
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=err, cwd=tmp_path, env=env)
     try:
         end = time.monotonic() + 90
         while "in store" not in err_path.read_text():  # the run exists: the loop is running
@@ -39,6 +41,8 @@ def test_sigusr1_prints_every_threads_stack_and_the_scan_goes_on(tmp_path: Path)
     assert "(SIGUSR1)" in text and "Thread MainThread" in text
     main = text.split("Thread MainThread", 1)[1].split("\nThread ", 1)[0]
     assert "asyncio/base_events.py" in main and "run_until_complete" in main
+    log = "".join(p.read_text() for p in (tmp_path / "log").glob("goniolab.log*"))
+    assert "(SIGUSR1)" in log and "Thread MainThread" in log  # and in the log file
     with RunStore(store, readonly=True) as s:  # and the scan finished every reading
         assert s.get_run(1).status == "done"
         assert s.done_keys(1) == {(k, 0) for k in range(3)}
