@@ -85,8 +85,8 @@ class HeightMap:
             isinstance(given, np.ndarray)
             and given.dtype == np.float64
             and not given.flags.writeable
-            and given.flags.owndata
             and given.flags.c_contiguous
+            and (given.flags.owndata or _read_only_whole_view(given))
         ):
             z = given  # handed over: nobody holds a writeable view of it
         else:
@@ -281,3 +281,15 @@ def fill_missing(hm: HeightMap, method: Literal["nearest", "mean"] = "nearest") 
     else:
         raise _fail(hm.source, f"unknown fill method {method!r} (use 'nearest' or 'mean')")
     return hm.replace(z_um=filled)
+
+
+def _read_only_whole_view(a: np.ndarray) -> bool:
+    """``a`` views all of a read-only array that owns its memory (what ``np.load`` returns,
+    a reshaped 1-D read, once a reader has made both read-only): nothing can write to it."""
+    base = a.base
+    return (
+        isinstance(base, np.ndarray)
+        and base.flags.owndata
+        and not base.flags.writeable
+        and base.nbytes == a.nbytes
+    )

@@ -76,8 +76,13 @@ def _make(
     z = np.asarray(z_um, dtype=np.float64)
     if not math.isfinite(float(np.sum(z))) and np.isinf(z).any():
         raise _fail(name, "heights overflow to infinity after scaling: implausible z scale")
-    if z.flags.owndata and z.flags.c_contiguous:
-        z.setflags(write=False)  # the reader's fresh array: the HeightMap takes it, no copy
+    if z.flags.c_contiguous:
+        base = z.base
+        if z.flags.owndata:
+            z.setflags(write=False)  # the reader's fresh array: the HeightMap takes it, no copy
+        elif isinstance(base, np.ndarray) and base.flags.owndata and base.nbytes == z.nbytes:
+            base.setflags(write=False)  # np.load's reshaped read: the same, through its base
+            z.setflags(write=False)
     return HeightMap(z_um=z, dx_um=dx_um, dy_um=dy_um, source=name, meta=meta)
 
 

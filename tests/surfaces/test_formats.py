@@ -133,6 +133,33 @@ def test_npy_round_trip_with_sidecar(tmp_path: Path) -> None:
     assert back.source == "scan.npy"
 
 
+def test_npy_is_read_without_a_copy(tmp_path: Path) -> None:
+    """A float64 .npy is the map: no copy of it and no full-size temporary (the units check
+    reads a sample of rows), and it is read-only through the array and its base (np.load
+    returns a reshaped view of its read)."""
+    import tracemalloc
+
+    rng = np.random.default_rng(4)
+    z = rng.normal(0.0, 0.2, (512, 512))
+    path = tmp_path / "m.npy"
+    np.save(path, z)
+    (tmp_path / "m.npy.json").write_text('{"step_um": 0.5}')
+    load_heightmap(path)  # imports, caches
+    tracemalloc.start()
+    try:
+        hm = load_heightmap(path)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < 1.15 * z.nbytes  # was 3.25 x: a copy and five temporaries
+    np.testing.assert_array_equal(hm.z_um, z)
+    assert not hm.z_um.flags.writeable
+    with pytest.raises(ValueError, match="read-only"):
+        hm.z_um[0, 0] = 1.0
+    base = hm.z_um.base
+    assert base is None or not base.flags.writeable
+
+
 def test_npy_without_sidecar_needs_step(tmp_path: Path) -> None:
     p = tmp_path / "bare.npy"
     np.save(p, np.arange(12, dtype=np.int32).reshape(3, 4))
