@@ -61,6 +61,27 @@ def alignment_note(run_id: int, summary: dict[str, object]) -> str:
     )
 
 
+#: After a hangup, once the lab is released, the process ends within this many seconds even
+#: if textual's shutdown does not: restoring a terminal that is gone can block it for good
+#: (its output thread's queue, after the SIGCONT the kernel sends with the SIGHUP).
+HANGUP_EXIT_S = 5.0
+
+
+def _exit_soon(delay_s: float) -> None:
+    """End the process ``delay_s`` from now unless it has ended by itself (logs flushed)."""
+    import logging
+    import os
+    import threading
+
+    def end() -> None:
+        logging.shutdown()
+        os._exit(0)
+
+    timer = threading.Timer(delay_s, end)
+    timer.daemon = True
+    timer.start()
+
+
 class GonioApp(App[int]):
     """Scan setup, instrument status, live comparison plots, metrics and gloss log.
 
@@ -127,6 +148,7 @@ class GonioApp(App[int]):
         self.ready = asyncio.Event()
         self._redraw_pending = False
         self._last_redraw_s = -math.inf
+        self._hung_up = False  # SIGHUP: the terminal is gone
         self._lab_released = False
         self._starting = False
         self._opening = False  # backend.open() or home() in progress
@@ -166,7 +188,13 @@ class GonioApp(App[int]):
         import signal
 
         with contextlib.suppress(NotImplementedError, RuntimeError, ValueError, AttributeError):
-            asyncio.get_running_loop().add_signal_handler(signal.SIGHUP, self._quit)
+            asyncio.get_running_loop().add_signal_handler(signal.SIGHUP, self._on_hangup)
+
+    def _on_hangup(self) -> None:
+        self._hung_up = True
+        if self._lab_released:  # already closing (the app saw the terminal go first)
+            _exit_soon(HANGUP_EXIT_S)
+        self._quit()
 
     # ------------------------------------------------------------------ workers
     @work(exclusive=True, group="startup")
@@ -565,6 +593,8 @@ class GonioApp(App[int]):
             await self.backend.close()
         except (DeviceError, OSError) as exc:
             self.log.error(f"closing the lab: {exc}")
+        if self._hung_up:
+            _exit_soon(HANGUP_EXIT_S)
 
     async def action_quit(self) -> None:
         """Abort any scan, release the instruments and leave (key ``q``).

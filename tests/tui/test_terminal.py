@@ -99,3 +99,47 @@ def test_goniolab_tui_runs_in_tmux(tmp_path: Path) -> None:
     finally:
         os.close(fd)
         subprocess.run(["tmux", "-L", sock, "kill-server"], capture_output=True, timeout=30)
+
+
+def _running(pid: int) -> bool:
+    """The process exists and has not ended (a zombie waiting for its reaper has ended)."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return stat.rsplit(")", 1)[1].split()[0] not in ("Z", "X")
+
+
+def test_the_tui_ends_when_its_terminal_goes_away_just_after_the_first_frame(
+    tmp_path: Path,
+) -> None:
+    # tmux kill-server right after the first frame: SIGHUP (and SIGCONT) while textual is
+    # still starting. The app used to hang for good in textual's shutdown (its output
+    # thread's queue, restoring a terminal that is gone) and kept the lab open; every TUI a
+    # benchmark launched this way stayed behind. Now it releases the lab and ends.
+    sock = f"goniolab-hup-{os.getpid()}"
+    cmd = [sys.executable, "-m", "goniolab.cli", "tui", "--config",
+           str(REPO / "configs" / "lab-sim.toml"), "--store", str(tmp_path / "runs.sqlite")]  # fmt: skip
+    subprocess.run(["tmux", "-L", sock, "new-session", "-d", "-x", "120", "-y", "40", "-s", "b",
+                    shlex.join(cmd)], check=True, timeout=30)  # fmt: skip
+    try:
+        pid = int(
+            subprocess.run(["tmux", "-L", sock, "display", "-p", "-t", "b", "#{pane_pid}"],
+                           check=True, capture_output=True, text=True, timeout=30).stdout
+        )  # fmt: skip
+        deadline = time.monotonic() + WAIT_S
+        while "goniolab" not in subprocess.run(
+            ["tmux", "-L", sock, "capture-pane", "-p", "-t", "b"], capture_output=True,
+            text=True, timeout=30, check=False,
+        ).stdout:  # fmt: skip
+            assert time.monotonic() < deadline, "the TUI never showed its first frame"
+            time.sleep(0.01)
+    finally:
+        subprocess.run(["tmux", "-L", sock, "kill-server"], check=False, timeout=30)
+    end = time.monotonic() + 30.0
+    while _running(pid) and time.monotonic() < end:
+        time.sleep(0.1)
+    still = _running(pid)
+    if still:
+        os.kill(pid, 9)
+    assert not still, "goniolab tui kept running after its terminal went away"
