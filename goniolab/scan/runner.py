@@ -98,7 +98,7 @@ _INLINE_COLOUR_S = 1e-3
 
 
 def _timed(fn: Callable[..., _T], *args: Any) -> tuple[_T, float]:
-    """``fn(*args)`` and the seconds it took (run in a worker thread)."""
+    """``fn(*args)`` and the seconds it took."""
     t0 = time.perf_counter()
     return fn(*args), time.perf_counter() - t0
 
@@ -644,18 +644,16 @@ class ScanRunner:
 
         mirror = None if p.index == MIRROR_INDEX or not self.plan.mirror_reference else mirror_pct
         args = (reading.wavelengths_nm, reading.values, p.theta_r_deg, mirror)
+        measured = self.point_colour.measured
         try:
             if self._colour_inline:
                 # a few hundred multiply-adds once colour-science is loaded: a worker
                 # thread's hand-off would cost more than the work (issue 13: the sequencer's
                 # overhead per reading); a spectrum that takes longer sends it back
-                t0 = time.perf_counter()
-                values = self.point_colour.measured(*args)
-                self._colour_inline = time.perf_counter() - t0 < _INLINE_COLOUR_S
+                values, took_s = _timed(measured, *args)
             else:
-                measured = self.point_colour.measured
                 values, took_s = await asyncio.to_thread(lambda: _timed(measured, *args))
-                self._colour_inline = took_s < _INLINE_COLOUR_S
+            self._colour_inline = took_s < _INLINE_COLOUR_S
         except (ColourError, ValueError) as exc:
             self.bus.publish(
                 InstrumentError(
