@@ -13,7 +13,10 @@ import enum
 import time
 from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from drivers.base import DeviceError
 
 __all__ = [
     "ArmsMoved",
@@ -131,6 +134,17 @@ class InstrumentError(Event):
     device: str
     message: str
     fatal: bool
+
+    @classmethod
+    def reconnect_failed(cls, run_id: int, exc: DeviceError, device: str) -> InstrumentError:
+        """A link that could not be reopened (non-fatal: the next attempt tries again);
+        ``device`` names it when the error does not."""
+        return cls(
+            run_id=run_id,
+            device=exc.device or device,
+            message=f"reconnect failed: {exc.message}",
+            fatal=False,
+        )
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

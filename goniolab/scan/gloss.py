@@ -224,12 +224,7 @@ class GlossLogger:
                     break
                 except DeviceError as exc2:
                     self.bus.publish(
-                        InstrumentError(
-                            run_id=self.run_id,
-                            device=exc2.device or "glossmeter",
-                            message=f"reconnect failed: {exc2.message}",
-                            fatal=False,
-                        )
+                        InstrumentError.reconnect_failed(self.run_id, exc2, "glossmeter")
                     )
                     continue
                 if stream is not None:

@@ -726,14 +726,7 @@ class ScanRunner:
             try:
                 await axis.connect()
             except DeviceError as exc:
-                self.bus.publish(
-                    InstrumentError(
-                        run_id=self.run_id,
-                        device=exc.device or "goniometer",
-                        message=f"reconnect failed: {exc.message}",
-                        fatal=False,
-                    )
-                )
+                self.bus.publish(InstrumentError.reconnect_failed(self.run_id, exc, "goniometer"))
 
     async def _reconnect_spectro(self, attempt: int) -> None:
         """Close the spectro's link, wait (``reconnect_backoff_s``, doubling with each
@@ -747,14 +740,7 @@ class ScanRunner:
             await self.spectro.connect()
             await self.spectro.set_exposure_us(self._exposure_us)  # the plan's, or auto's
         except DeviceError as exc:
-            self.bus.publish(
-                InstrumentError(
-                    run_id=self.run_id,
-                    device=exc.device or "spectro",
-                    message=f"reconnect failed: {exc.message}",
-                    fatal=False,
-                )
-            )
+            self.bus.publish(InstrumentError.reconnect_failed(self.run_id, exc, "spectro"))
 
     def _mirror_level(self) -> float | None:
         vals = [p.luminance_pct for p in self.store.points(self.run_id) if p.index == MIRROR_INDEX]
