@@ -286,43 +286,34 @@ class SessionBackend:
         """Run the alignment; a failure after the run was stored becomes events."""
         try:
             await session.align(plan, write_config=self.config_path, started=on_start)
-        except (UserError, DeviceError, StoreError, OSError) as exc:
-            runner = self._align_runner
-            if runner is None or runner.plan is not plan:
-                raise  # not started: start() reports it
-            if runner.aborted:
-                return  # the runner published its RunFinished(aborted)
-            reason = str(exc)
-            self.bus.publish(
-                InstrumentError(run_id=runner.run_id, device="lab", message=reason, fatal=True)
-            )
-            if not runner.finished:
-                self.bus.publish(
-                    RunFinished(
-                        run_id=runner.run_id, state=RunState.FAILED, reason=reason, summary={}
-                    )
-                )
         except Exception as exc:
             runner = self._align_runner
             if runner is None or runner.plan is not plan:
-                raise
-            self._internal_error(runner.run_id, "alignment", exc, finished=runner.finished)
+                raise  # not started: start() reports it
+            if not isinstance(exc, UserError | DeviceError | StoreError | OSError):
+                self._internal_error(runner.run_id, "alignment", exc, finished=runner.finished)
+            elif not runner.aborted:  # aborted: the runner published its RunFinished(aborted)
+                self._fail(runner.run_id, "lab", str(exc), finished=runner.finished)
+
+    def _fail(self, run_id: int, device: str, reason: str, *, finished: bool = False) -> None:
+        """The run failed: the fatal error on screen, and the run's end unless its runner
+        has published it (``finished``: it records the failure itself)."""
+        self.bus.publish(InstrumentError(run_id=run_id, device=device, message=reason, fatal=True))
+        if not finished:
+            self.bus.publish(
+                RunFinished(run_id=run_id, state=RunState.FAILED, reason=reason, summary={})
+            )
 
     def _internal_error(self, run_id: int, what: str, exc: Exception, *, finished: bool) -> None:
         """An error no part of the lab expected (a defect): the run ends as failed on screen
         with the error named and the traceback in the log; the readings taken stay in the
-        store. Before, the task died unseen and the run looked frozen. ``finished``: the
-        runner has already published the run's end (it records the failure itself)."""
+        store. Before, the task died unseen and the run looked frozen."""
         _LOG.error("%s of run %d stopped by an internal error", what, run_id, exc_info=exc)
         reason = (
             f"internal error: {type(exc).__name__}: {exc} (the traceback is in the log; "
             "the readings taken are kept)"
         )
-        self.bus.publish(InstrumentError(run_id=run_id, device="lab", message=reason, fatal=True))
-        if not finished:
-            self.bus.publish(
-                RunFinished(run_id=run_id, state=RunState.FAILED, reason=reason, summary={})
-            )
+        self._fail(run_id, "lab", reason, finished=finished)
 
     async def _run(self, session: ScanSession, runner: ScanRunner) -> None:
         """Run to the end; a refused plan or an unexpected error becomes events, not a crash."""
@@ -330,21 +321,9 @@ class SessionBackend:
         try:
             await session.run(runner)
         except PlanRefused as exc:
-            reason = f"plan refused (no arm moved): {exc}"
-            self.bus.publish(
-                InstrumentError(run_id=run_id, device="goniometer", message=reason, fatal=True)
-            )
-            self.bus.publish(
-                RunFinished(run_id=run_id, state=RunState.FAILED, reason=reason, summary={})
-            )
+            self._fail(run_id, "goniometer", f"plan refused (no arm moved): {exc}")
         except (DeviceError, StoreError, OSError) as exc:
-            reason = str(exc)
-            self.bus.publish(
-                InstrumentError(run_id=run_id, device="lab", message=reason, fatal=True)
-            )
-            self.bus.publish(
-                RunFinished(run_id=run_id, state=RunState.FAILED, reason=reason, summary={})
-            )
+            self._fail(run_id, "lab", str(exc))
         except Exception as exc:
             done = runner.state in (RunState.DONE, RunState.FAILED, RunState.ABORTED)
             self._internal_error(run_id, "scan", exc, finished=done)
