@@ -86,7 +86,7 @@ class HeightMap:
             and given.dtype == np.float64
             and not given.flags.writeable
             and given.flags.c_contiguous
-            and (given.flags.owndata or _read_only_whole_view(given))
+            and (given.flags.owndata or _read_only_base(given))
         ):
             z = given  # handed over: nobody holds a writeable view of it
         else:
@@ -283,13 +283,17 @@ def fill_missing(hm: HeightMap, method: Literal["nearest", "mean"] = "nearest") 
     return hm.replace(z_um=filled)
 
 
-def _read_only_whole_view(a: np.ndarray) -> bool:
-    """``a`` views all of a read-only array that owns its memory (what ``np.load`` returns,
-    a reshaped 1-D read, once a reader has made both read-only): nothing can write to it."""
+def owning_base(a: np.ndarray) -> np.ndarray | None:
+    """The array owning the memory ``a`` views whole (``np.load`` returns a reshaped view
+    of its 1-D read), else None."""
     base = a.base
-    return (
-        isinstance(base, np.ndarray)
-        and base.flags.owndata
-        and not base.flags.writeable
-        and base.nbytes == a.nbytes
-    )
+    if isinstance(base, np.ndarray) and base.flags.owndata and base.nbytes == a.nbytes:
+        return base
+    return None
+
+
+def _read_only_base(a: np.ndarray) -> bool:
+    """``a`` views all of a read-only array that owns its memory (a reader made both
+    read-only): nothing can write to it."""
+    base = owning_base(a)
+    return base is not None and not base.flags.writeable

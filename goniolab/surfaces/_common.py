@@ -17,7 +17,14 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from goniolab.optics.heightmap import FloatArray, HeightMap, HeightMapError, StepArg, _fail
+from goniolab.optics.heightmap import (
+    FloatArray,
+    HeightMap,
+    HeightMapError,
+    StepArg,
+    _fail,
+    owning_base,
+)
 
 
 def _steps_from_arg(name: str, step_um: StepArg) -> tuple[float, float] | None:
@@ -77,12 +84,11 @@ def _make(
     if not math.isfinite(float(np.sum(z))) and np.isinf(z).any():
         raise _fail(name, "heights overflow to infinity after scaling: implausible z scale")
     if z.flags.c_contiguous:
-        base = z.base
-        if z.flags.owndata:
-            z.setflags(write=False)  # the reader's fresh array: the HeightMap takes it, no copy
-        elif isinstance(base, np.ndarray) and base.flags.owndata and base.nbytes == z.nbytes:
+        base = None if z.flags.owndata else owning_base(z)
+        if base is not None:
             base.setflags(write=False)  # np.load's reshaped read: the same, through its base
-            z.setflags(write=False)
+        if z.flags.owndata or base is not None:
+            z.setflags(write=False)  # the reader's fresh array: the HeightMap takes it, no copy
     return HeightMap(z_um=z, dx_um=dx_um, dy_um=dy_um, source=name, meta=meta)
 
 
