@@ -10,6 +10,7 @@ from __future__ import annotations
 import asyncio
 import math
 import re
+from collections.abc import Awaitable, Callable
 from pathlib import Path
 from typing import Any
 
@@ -404,13 +405,51 @@ async def test_colour_columns_swatch_and_colour_plot(tmp_path: Path) -> None:
         assert panel.plot_mode == "a*b*" and "measured b*" in panel.main_plot._labels
 
 
+#: The align tests' plan: 104 readings instead of the default 288 (fewer events).
+ALIGN_PLAN = AlignPlan(
+    theta_i_deg=(20.0, 60.0), coarse_span_deg=4.0, fine_step_deg=0.5, fine_span_deg=4.0
+)
+
+
+def align_app(path: Path) -> tuple[SessionBackend, GonioApp]:
+    """The TUI on the sim lab of ``path`` with a narrow Beckmann sample (FWHM ~5 deg: the
+    align sweeps bracket it) and :data:`ALIGN_PLAN`."""
+    backend = SessionBackend(
+        path, model=AnalyticModel("beckmann", alpha=0.02), align_plan=ALIGN_PLAN
+    )
+    return backend, GonioApp(backend, poll_hz=0)
+
+
+def hook_spectro(monkeypatch: pytest.MonkeyPatch, before: Callable[[int], Awaitable[None]]) -> None:
+    """Every simulated spectro reading first awaits ``before(k)`` (k = 1, 2, ...: it may
+    hold the reading or raise), then reads."""
+    from sim.instruments import SimSpectro
+
+    real = SimSpectro.measure
+    calls = 0
+
+    async def measure(self: SimSpectro) -> Any:
+        nonlocal calls
+        calls += 1
+        await before(calls)
+        return await real(self)
+
+    monkeypatch.setattr(SimSpectro, "measure", measure)
+
+
+async def defect_from_the_third(k: int) -> None:
+    """An exception no part of the lab expects, from the third reading on."""
+    if k > 2:
+        raise ZeroDivisionError("a defect")
+
+
 @pytest.mark.slow
 @pytest.mark.timeout(300)  # 104 twin readings, and a cold twin cache on a fresh machine
 async def test_a_aligns_the_sim_lab_writes_alignment_and_corrects_the_arms(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     # the ideal twin with known misalignments ([sim] offsets) and a narrow Beckmann sample
-    # (FWHM ~5 deg: the align sweeps bracket it); abort first, then align to the end
+    # (align_app); abort first, then align to the end
     path = sim_config(tmp_path)
     text = path.read_text()
     for key, value in (
@@ -420,28 +459,18 @@ async def test_a_aligns_the_sim_lab_writes_alignment_and_corrects_the_arms(
     ):
         text = re.sub(rf"(?m)^{key} = .*$", f"{key} = {value}", text)
     path.write_text(text)
-    plan = AlignPlan(theta_i_deg=(20.0, 60.0), coarse_span_deg=4.0, fine_step_deg=0.5,
-                     fine_span_deg=4.0)  # 104 readings instead of 288: fewer events  # fmt: skip
     # The first alignment is held at its fourth spectro reading until x is pressed: the
     # twin at time scale 0 can otherwise finish all 104 readings between two turns of a
     # loaded test loop, and x then finds no run to abort (the hang of the full suite).
-    from sim.instruments import SimSpectro
-
-    real = SimSpectro.measure
     held, release = asyncio.Event(), asyncio.Event()
-    calls = 0
 
-    async def measure(self: SimSpectro) -> Any:
-        nonlocal calls
-        calls += 1
-        if calls == 4:
+    async def hold_the_fourth(k: int) -> None:
+        if k == 4:
             held.set()
             await release.wait()
-        return await real(self)
 
-    monkeypatch.setattr(SimSpectro, "measure", measure)
-    backend = SessionBackend(path, model=AnalyticModel("beckmann", alpha=0.02), align_plan=plan)
-    app = GonioApp(backend, poll_hz=0)
+    hook_spectro(monkeypatch, hold_the_fourth)
+    backend, app = align_app(path)
     # every toast shown (one may expire before a loaded loop looks)
     shown: list[str] = []
     notify = app.notify
@@ -488,19 +517,7 @@ async def test_an_internal_error_fails_the_run_on_screen_and_keeps_the_readings(
     # A defect (an exception no part of the lab expects, here from the third reading on)
     # ends the run as failed with the error named; the app runs on, and the two readings
     # taken are in the store (a failed run resumes).
-    from sim.instruments import SimSpectro
-
-    real = SimSpectro.measure
-    calls = 0
-
-    async def measure(self: SimSpectro) -> Any:
-        nonlocal calls
-        calls += 1
-        if calls > 2:
-            raise ZeroDivisionError("a defect")
-        return await real(self)
-
-    monkeypatch.setattr(SimSpectro, "measure", measure)
+    hook_spectro(monkeypatch, defect_from_the_third)
     app = make_app(tmp_path)
     async with app.run_test(size=SIZE) as pilot:
         await wait_until(pilot, app.ready.is_set)
@@ -521,24 +538,9 @@ async def test_an_internal_error_fails_the_alignment_on_screen(
 ) -> None:
     # the same defect in an alignment: it used to kill the task unseen, the run stayed
     # "running" on screen and in the store (the full suite's align test waited forever)
-    from sim.instruments import SimSpectro
-
-    real = SimSpectro.measure
-    calls = 0
-
-    async def measure(self: SimSpectro) -> Any:
-        nonlocal calls
-        calls += 1
-        if calls > 2:
-            raise ZeroDivisionError("a defect")
-        return await real(self)
-
-    monkeypatch.setattr(SimSpectro, "measure", measure)
-    plan = AlignPlan(theta_i_deg=(20.0, 60.0), coarse_span_deg=4.0, fine_step_deg=0.5,
-                     fine_span_deg=4.0)  # fmt: skip
+    hook_spectro(monkeypatch, defect_from_the_third)
     path = sim_config(tmp_path)
-    backend = SessionBackend(path, model=AnalyticModel("beckmann", alpha=0.02), align_plan=plan)
-    app = GonioApp(backend, poll_hz=0)
+    backend, app = align_app(path)
     async with app.run_test(size=SIZE) as pilot:
         await wait_until(pilot, app.ready.is_set)
         await pilot.press("a")
