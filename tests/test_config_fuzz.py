@@ -7,12 +7,11 @@ from __future__ import annotations
 
 import math
 import string
-from datetime import timedelta
 from pathlib import Path
 from typing import Any
 
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import given
 from hypothesis import strategies as st
 from pydantic import BaseModel
 
@@ -39,14 +38,10 @@ from goniolab.config import (
     load_lab_config,
 )
 from goniolab.lab import build_sim_instruments, draw_session, sample_truth, twin_settings
+from tests._fuzz import fuzz_settings, toml_value
 from tests.sim.lobe import LobeModel
 
-FUZZ = settings(
-    max_examples=25,
-    deadline=timedelta(seconds=3),
-    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
-    database=None,
-)
+FUZZ = fuzz_settings(25)
 
 SECTIONS: dict[str, type[BaseModel]] = {
     "lab": LabSection,
@@ -77,29 +72,9 @@ def _scalar_keys(model: type[BaseModel]) -> list[str]:
 
 
 # ----------------------------------------------------------------- a small TOML writer
-def _toml(value: Any) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int):
-        return str(value)
-    if isinstance(value, float):
-        if math.isnan(value):
-            return "nan"
-        if math.isinf(value):
-            return "inf" if value > 0 else "-inf"
-        return repr(value)
-    if isinstance(value, str):
-        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
-    if isinstance(value, list):
-        return "[" + ", ".join(_toml(v) for v in value) + "]"
-    if isinstance(value, dict):
-        return "{" + ", ".join(f"{k} = {_toml(v)}" for k, v in value.items()) + "}"
-    raise TypeError(value)
-
-
 def _document(tables: dict[str, dict[str, Any]]) -> str:
     return "".join(
-        f"[{name}]\n" + "".join(f"{k} = {_toml(v)}\n" for k, v in body.items())
+        f"[{name}]\n" + "".join(f"{k} = {toml_value(v)}\n" for k, v in body.items())
         for name, body in tables.items()
     )
 

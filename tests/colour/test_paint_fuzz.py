@@ -9,13 +9,12 @@ from __future__ import annotations
 import copy
 import math
 import tomllib
-from datetime import timedelta
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import given
 from hypothesis import strategies as st
 
 from goniolab.colour.dispersion import DispersionError
@@ -23,45 +22,13 @@ from goniolab.colour.paint import PaintError
 from goniolab.commands._colour import load_paint_file
 from goniolab.config import configs_dir
 from goniolab.errors import UserError
+from tests._fuzz import DELETE, fuzz_settings, leaves, set_path, toml_document
 
-FUZZ = settings(
-    max_examples=60,
-    deadline=timedelta(seconds=3),
-    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
-    database=None,
-)
+FUZZ = fuzz_settings(60)
 
 SAMPLES = tomllib.loads((configs_dir() / "samples.toml").read_text(encoding="utf-8"))["samples"]
 PAINTS = {name: t["paint"] for name, t in SAMPLES.items() if "paint" in t}
 WAVELENGTHS_NM = np.array([380.0, 550.0, 780.0])
-_DELETE = object()
-
-
-def _toml(value: Any) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int):
-        return str(value)
-    if isinstance(value, float):
-        if math.isnan(value):
-            return "nan"
-        return repr(value) if math.isfinite(value) else ("inf" if value > 0 else "-inf")
-    if isinstance(value, str):
-        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
-    if isinstance(value, list):
-        return "[" + ", ".join(_toml(v) for v in value) + "]"
-    if isinstance(value, dict):
-        return "{" + ", ".join(f'"{k}" = {_toml(v)}' for k, v in value.items()) + "}"
-    raise TypeError(value)
-
-
-def _leaves(data: dict[str, Any], prefix: tuple[str, ...] = ()) -> list[tuple[str, ...]]:
-    out: list[tuple[str, ...]] = []
-    for key, value in data.items():
-        out.append((*prefix, key))
-        if isinstance(value, dict):
-            out.extend(_leaves(value, (*prefix, key)))
-    return out
 
 
 _numbers = st.one_of(
@@ -70,7 +37,7 @@ _numbers = st.one_of(
                      89.9999, 180.0, 1e6, 1e300, 2**63 - 1]),
 )  # fmt: skip
 _values = st.one_of(
-    st.just(_DELETE),
+    st.just(DELETE),
     st.booleans(),
     _numbers,
     st.sampled_from(["", "table", "cauchy", "sellmeier", "aluminium", "x", "nope.csv"]),
@@ -82,19 +49,6 @@ _values = st.one_of(
                     st.one_of(_numbers, st.sampled_from(["cauchy", "table", "sellmeier"])),
                     max_size=3),
 )  # fmt: skip
-
-
-def _set(doc: dict[str, Any], path: tuple[str, ...], value: Any) -> None:
-    node = doc
-    for part in path[:-1]:
-        child = node.get(part)
-        if not isinstance(child, dict):
-            child = node[part] = {}
-        node = child
-    if value is _DELETE:
-        node.pop(path[-1], None)
-    else:
-        node[path[-1]] = value
 
 
 def _evaluate(paint: Any) -> None:
@@ -117,16 +71,16 @@ def _evaluate(paint: Any) -> None:
 @pytest.mark.parametrize("name", sorted(PAINTS))
 def test_any_value_in_any_key_of_a_paint(tmp_path: Path, name: str) -> None:
     original = PAINTS[name]
-    leaves = [*_leaves(original), ("typo",), ("body", "typo")]
+    paths = [*leaves(original), ("typo",), ("body", "typo")]
 
     @FUZZ
     @given(st.data())
     def run(data: st.DataObject) -> None:
         doc = copy.deepcopy(original)
         for _ in range(data.draw(st.integers(1, 3), label="changes")):
-            _set(doc, data.draw(st.sampled_from(leaves), label="key"), data.draw(_values))
+            set_path(doc, data.draw(st.sampled_from(paths), label="key"), data.draw(_values))
         path = tmp_path / "paint.toml"
-        path.write_text("".join(f'"{k}" = {_toml(v)}\n' for k, v in doc.items()))
+        path.write_text(toml_document(doc))
         try:
             paint = load_paint_file(str(path))
         except UserError as exc:

@@ -11,12 +11,11 @@ from __future__ import annotations
 import contextlib
 import math
 import tomllib
-from datetime import timedelta
 from pathlib import Path
 from typing import Any
 
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import given
 from hypothesis import strategies as st
 
 from drivers.base import DeviceFault, ProfileError, ProtocolError
@@ -30,70 +29,12 @@ from drivers.profiles import (
     load_profile,
 )
 from drivers.stil import match_reply, parse_measure_reply
+from tests._fuzz import DELETE, fuzz_settings, leaves, set_path, toml_document
 
-FUZZ = settings(
-    max_examples=100,
-    deadline=timedelta(seconds=3),
-    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
-    database=None,
-)
+FUZZ = fuzz_settings(100)
 
 BUILTIN = sorted(p.stem for p in PROFILES_DIR.glob("*.toml"))
 
-
-def _toml(value: Any) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int):
-        return str(value)
-    if isinstance(value, float):
-        if math.isnan(value):
-            return "nan"
-        if math.isinf(value):
-            return "inf" if value > 0 else "-inf"
-        return repr(value)
-    if isinstance(value, str):
-        escaped = "".join(
-            c if c.isprintable() and c not in '"\\' else f"\\u{ord(c):04x}"
-            for c in value
-            if not 0xD800 <= ord(c) <= 0xDFFF
-        )
-        return f'"{escaped}"'
-    if isinstance(value, list):
-        return "[" + ", ".join(_toml(v) for v in value) + "]"
-    if isinstance(value, dict):
-        return "{" + ", ".join(f'"{k}" = {_toml(v)}' for k, v in value.items()) + "}"
-    raise TypeError(value)
-
-
-def _document(data: dict[str, Any]) -> str:
-    return "".join(f'"{k}" = {_toml(v)}\n' for k, v in data.items())
-
-
-def _leaves(data: dict[str, Any], prefix: tuple[str, ...] = ()) -> list[tuple[str, ...]]:
-    out: list[tuple[str, ...]] = []
-    for key, value in data.items():
-        path = (*prefix, key)
-        out.append(path)
-        if isinstance(value, dict):
-            out.extend(_leaves(value, path))
-    return out
-
-
-def _set(data: dict[str, Any], path: tuple[str, ...], value: Any) -> None:
-    node = data
-    for part in path[:-1]:
-        child = node.get(part)
-        if not isinstance(child, dict):
-            child = node[part] = {}
-        node = child
-    if value is _DELETE:
-        node.pop(path[-1], None)
-    else:
-        node[path[-1]] = value
-
-
-_DELETE = object()
 
 _numbers = st.one_of(
     st.integers(-(2**63), 2**63 - 1),
@@ -120,7 +61,7 @@ _hostile_texts = st.sampled_from(
     ]
 )  # fmt: skip
 _values = st.one_of(
-    st.just(_DELETE),
+    st.just(DELETE),
     st.booleans(),
     _numbers,
     _hostile_texts,
@@ -188,21 +129,21 @@ def _assert_works(profile: Any) -> None:
 @pytest.mark.parametrize("name", BUILTIN)
 def test_any_value_in_any_key_of_a_profile(tmp_path: Path, name: str) -> None:
     original = tomllib.loads((PROFILES_DIR / f"{name}.toml").read_text(encoding="utf-8"))
-    leaves = _leaves(original)
-    tables = [p for p in leaves if isinstance(_get(original, p), dict)]
+    paths = leaves(original)
+    tables = [p for p in paths if isinstance(_get(original, p), dict)]
 
     @FUZZ
     @given(st.data())
     def run(data: st.DataObject) -> None:
-        doc = tomllib.loads(_document(original))  # a deep copy
+        doc = tomllib.loads(toml_document(original, escape_controls=True))  # a deep copy
         for _ in range(data.draw(st.integers(1, 3), label="changes")):
-            path = data.draw(st.sampled_from(leaves), label="key")
+            path = data.draw(st.sampled_from(paths), label="key")
             if tables and data.draw(st.integers(0, 9), label="new key?") == 0:
                 path = (*data.draw(st.sampled_from(tables)), "typo")
-            old = _get(original, path) if path in leaves else None
-            _set(doc, path, data.draw(_value_like(old), label="/".join(path)))
+            old = _get(original, path) if path in paths else None
+            set_path(doc, path, data.draw(_value_like(old), label="/".join(path)))
         path = tmp_path / f"{name}.toml"
-        path.write_text(_document(doc), encoding="utf-8")
+        path.write_text(toml_document(doc, escape_controls=True), encoding="utf-8")
         try:
             profile = load_profile(path)
         except ProfileError as exc:
