@@ -18,8 +18,9 @@ bin, deposit or integrate ``w`` in different ways; the cone kernels also use the
 gradient of ``w`` across the mirror image of the source (:func:`_weight_grad`, with the
 Fresnel derivative of :func:`_fresnel_d_scalar`) for the first-order aperture term
 described in :mod:`goniolab.optics.facet`. The numba versions are compiled with
-``nogil=True`` so the facet model can split the facets over threads; the numpy twins are
-the test reference and the benchmark baseline. All arithmetic is float64.
+``nogil=True`` so the facet model can split the facets over threads; their numpy twins
+(:mod:`goniolab.optics._kernels_numpy`, re-exported here) are the test reference and the
+facet model's numba-free ``"lean"`` backend. All arithmetic is float64.
 
 Facets are passed as three arrays ``(mx, my, mz)`` of unit normals, or, with an empty ``mz``,
 as their slopes ``(p, q, empty)``: the normal ``(-p, -q, 1)/sqrt(1 + p^2 + q^2)`` is then
@@ -44,7 +45,21 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from goniolab.optics.fresnel import fresnel
+from goniolab.optics._kernels_numpy import (
+    GRAD_COARSEN,
+    cone_response_numpy,
+    deposit_numpy,
+    diamond_numpy,
+    fresnel_d_numpy,
+    hemisphere_bin_tables,
+    hemisphere_numpy,
+    interval_overlap_numpy,
+    normals_numpy,
+    rect_response_numpy,
+    reflect_numpy,
+    table_numpy,
+    weight_grad_numpy,
+)
 
 __all__ = [
     "GRAD_COARSEN",
@@ -53,14 +68,17 @@ __all__ = [
     "cone_response_numpy",
     "deposit_numba",
     "deposit_numpy",
+    "diamond_numpy",
     "fresnel_d_numpy",
     "hemisphere_bin_tables",
     "hemisphere_numba",
     "hemisphere_numpy",
+    "interval_overlap_numpy",
     "normals_numpy",
     "rect_response_numba",
     "rect_response_numpy",
     "reflect_numpy",
+    "table_numpy",
     "weight_grad_numpy",
 ]
 
@@ -97,16 +115,6 @@ def _normal(
         inv = 1.0 / math.sqrt(1.0 + p * p + q * q)
         return -p * inv, -q * inv, inv
     return mx[k], my[k], mz[k]
-
-
-def normals_numpy(
-    mx: FloatArray, my: FloatArray, mz: FloatArray
-) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Numpy twin of :func:`_normal` for whole arrays (normals, or slopes with an empty mz)."""
-    if mz.size == 0:
-        inv = 1.0 / np.sqrt(1.0 + mx * mx + my * my)
-        return -mx * inv, -my * inv, inv
-    return mx, my, mz
 
 
 # ----------------------------------------------------------------------------- scalar helpers
@@ -355,12 +363,6 @@ def hemisphere_numba(
     return hist, total
 
 
-#: The gradient channels of the deposit live on a grid this many times coarser per axis
-#: (same origin): they carry a smooth first-order correction, and the fine grid's three
-#: channels would not stay in cache.
-GRAD_COARSEN: int = 4
-
-
 @_njit(nogil=True)
 def coarse_size(n_fine: int) -> int:  # pragma: no cover - numba (also callable from Python)
     """Nodes of the coarse gradient grid covering a fine grid of ``n_fine`` nodes."""
@@ -551,270 +553,3 @@ def rect_response_numba(
         w = _weight(c, mzk, wz, n_re, n_im, seed)
         acc += w * ob * _interval_overlap(math.atan2(sd, cd), s_in, r_in)
     return acc
-
-
-# ----------------------------------------------------------------------------- numpy twins
-def reflect_numpy(
-    mx: FloatArray,
-    my: FloatArray,
-    mz: FloatArray,
-    wi: FloatArray,
-    n_re: float,
-    n_im: float,
-    seed: bool,
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Vectorised twin of the per-facet step: ``(wo_x, wo_y, wo_z, w)``, w = 0 when dropped."""
-    mx, my, mz = normals_numpy(mx, my, mz)
-    c = wi[0] * mx + wi[1] * my + wi[2] * mz
-    ox = 2.0 * c * mx - wi[0]
-    oy = 2.0 * c * my - wi[1]
-    oz = 2.0 * c * mz - wi[2]
-    keep = (c > 0.0) & (oz > 0.0)
-    f = fresnel(np.clip(c, 0.0, 1.0), complex(n_re, n_im))
-    w = f if seed else c / (mz * wi[2]) * f
-    return ox, oy, oz, np.where(keep, w, 0.0)
-
-
-def fresnel_d_numpy(c: FloatArray, n_re: float, n_im: float) -> tuple[FloatArray, FloatArray]:
-    """Numpy twin of :func:`_fresnel_d_scalar`: ``(F, dF/dc)`` for ``c`` clipped to [0, 1]."""
-    cc = np.clip(c, 0.0, 1.0).astype(np.complex128)
-    eta = complex(n_re, n_im)
-    tir = (n_im == 0.0) & ((1.0 - cc.real**2) / (n_re * n_re) >= 1.0)
-    ct = np.sqrt(1.0 - (1.0 - cc * cc) / (eta * eta))
-    ct = np.where(tir, 1.0, ct)
-    dct = cc / (eta * eta * ct)
-    den_s = cc + eta * ct
-    den_p = eta * cc + ct
-    r_s = (cc - eta * ct) / den_s
-    r_p = (eta * cc - ct) / den_p
-    num = 2.0 * eta * (ct - cc * dct)
-    d_s = num / (den_s * den_s)
-    d_p = num / (den_p * den_p)
-    f = 0.5 * (np.abs(r_s) ** 2 + np.abs(r_p) ** 2)
-    df = (np.conj(r_s) * d_s + np.conj(r_p) * d_p).real
-    return np.where(tir, 1.0, f), np.where(tir, 0.0, df)
-
-
-def weight_grad_numpy(
-    mx: FloatArray,
-    my: FloatArray,
-    mz: FloatArray,
-    wi: FloatArray,
-    n_re: float,
-    n_im: float,
-    seed: bool,
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Numpy twin of the per-facet step with :func:`_weight_grad`: ``(ox, oy, oz, w, P, Q)``.
-
-    All three coefficients are 0 for dropped facets (facing away or reflecting inwards).
-    """
-    mx, my, mz = normals_numpy(mx, my, mz)
-    c = wi[0] * mx + wi[1] * my + wi[2] * mz
-    ox = 2.0 * c * mx - wi[0]
-    oy = 2.0 * c * my - wi[1]
-    oz = 2.0 * c * mz - wi[2]
-    keep = (c > 0.0) & (oz > 0.0)
-    f, df = fresnel_d_numpy(c, n_re, n_im)
-    wz = wi[2]
-    if seed:
-        w, pp, qq = f, df, np.zeros_like(f)
-    else:
-        phi = c * f
-        w = phi / (mz * wz)
-        pp = (f + c * df) / (mz * wz) - 2.0 * phi / (wz * wz)
-        qq = phi / (mz * wz * wz)
-    zero = np.zeros_like(c)
-    return ox, oy, oz, np.where(keep, w, zero), np.where(keep, pp, zero), np.where(keep, qq, zero)
-
-
-def diamond_numpy(x: FloatArray, y: FloatArray) -> FloatArray:
-    """Numpy twin of the pseudo-angle ``D(x, y)`` in [0, 4)."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        d = np.where(
-            y >= 0.0,
-            np.where(x >= 0.0, y / (x + y), 1.0 - x / (y - x)),
-            np.where(x < 0.0, 2.0 - y / (-x - y), 3.0 + x / (x - y)),
-        )
-    out: FloatArray = np.where((x == 0.0) & (y == 0.0), 0.0, d)
-    return out
-
-
-def hemisphere_bin_tables(
-    bin_rad: float, n_theta: int, n_phi: int, n_guess: int = 4096
-) -> tuple[FloatArray, NDArray[np.int64], FloatArray, NDArray[np.int64]]:
-    """Edge tables and first-guess tables for :func:`hemisphere_numba` / its twin."""
-    cos_edges = np.cos(bin_rad * np.arange(n_theta + 1))
-    phi_e = bin_rad * np.arange(n_phi + 1)
-    diamond_edges = diamond_numpy(np.cos(phi_e), np.sin(phi_e))
-    diamond_edges[0], diamond_edges[-1] = 0.0, 4.0
-    theta_guess = _theta_bins(np.arange(n_guess) / n_guess, cos_edges)
-    phi_guess = _phi_bins(4.0 * np.arange(n_guess) / n_guess, diamond_edges)
-    return cos_edges, theta_guess, diamond_edges, phi_guess
-
-
-def _theta_bins(oz: FloatArray, cos_edges: FloatArray) -> NDArray[np.int64]:
-    """k with cos_edges[k+1] < oz <= cos_edges[k] (clipped to the valid bins)."""
-    n_theta = cos_edges.size - 1
-    asc = cos_edges[::-1]
-    k = (asc.size - np.searchsorted(asc, oz, side="left")) - 1
-    out: NDArray[np.int64] = np.clip(k, 0, n_theta - 1).astype(np.int64)
-    return out
-
-
-def _phi_bins(d: FloatArray, diamond_edges: FloatArray) -> NDArray[np.int64]:
-    """k with diamond_edges[k] <= d < diamond_edges[k+1] (clipped to the valid bins)."""
-    k = np.searchsorted(diamond_edges, d, side="right") - 1
-    out: NDArray[np.int64] = np.clip(k, 0, diamond_edges.size - 2).astype(np.int64)
-    return out
-
-
-def hemisphere_numpy(
-    mx: FloatArray,
-    my: FloatArray,
-    mz: FloatArray,
-    wi: FloatArray,
-    n_re: float,
-    n_im: float,
-    seed: bool,
-    cos_edges: FloatArray,
-    theta_guess: NDArray[np.int64],
-    diamond_edges: FloatArray,
-    phi_guess: NDArray[np.int64],
-) -> tuple[FloatArray, float]:
-    """Numpy twin of :func:`hemisphere_numba` (same bin rule; the guess tables are unused)."""
-    ox, oy, oz, w = reflect_numpy(mx, my, mz, wi, n_re, n_im, seed)
-    keep = w != 0.0
-    ox, oy, oz, w = ox[keep], oy[keep], oz[keep], w[keep]
-    n_theta, n_phi = cos_edges.size - 1, diamond_edges.size - 1
-    it = _theta_bins(oz, cos_edges)
-    ip = _phi_bins(diamond_numpy(ox, oy), diamond_edges)
-    hist = np.bincount(it * n_phi + ip, weights=w, minlength=n_theta * n_phi).astype(np.float64)
-    return hist.reshape(n_theta, n_phi), float(w.sum())
-
-
-def deposit_numpy(
-    mx: FloatArray,
-    my: FloatArray,
-    mz: FloatArray,
-    wi: FloatArray,
-    n_re: float,
-    n_im: float,
-    seed: bool,
-    a0: float,
-    ha: float,
-    na: int,
-    b0: float,
-    hb: float,
-    nb: int,
-    grad: bool,
-) -> tuple[FloatArray, FloatArray, float]:
-    """Numpy twin of :func:`deposit_numba`."""
-    mx, my, mz = normals_numpy(mx, my, mz)
-    ox, oy, oz, w, pp, qq = weight_grad_numpy(mx, my, mz, wi, n_re, n_im, seed)
-    keep = w != 0.0
-    ox, oy, oz, w, pp, qq = ox[keep], oy[keep], oz[keep], w[keep], pp[keep], qq[keep]
-    x = (np.arctan2(-ox, oz) - a0) / ha
-    y = (oy - b0) / hb
-    sel = (x >= 0.0) & (x < na - 1.0) & (y >= 0.0) & (y < nb - 1.0)
-    x, y, w = x[sel], y[sel], w[sel]
-
-    def cic(xs: FloatArray, ys: FloatArray, val: FloatArray, n0: int, n1: int) -> FloatArray:
-        i = xs.astype(np.int64)
-        j = ys.astype(np.int64)
-        fx, fy = xs - i, ys - j
-        out = np.zeros(n0 * n1)
-        for di, wa in ((0, 1.0 - fx), (1, fx)):
-            for dj, wb in ((0, 1.0 - fy), (1, fy)):
-                out += np.bincount(
-                    (i + di) * n1 + (j + dj), weights=val * wa * wb, minlength=n0 * n1
-                )
-        return out.reshape(n0, n1)
-
-    nac, nbc = coarse_size(na), coarse_size(nb)
-    ggrid = np.zeros((nac, nbc, 2))
-    if grad:
-        ox, oy, oz, pp, qq = ox[sel], oy[sel], oz[sel], pp[sel], qq[sel]
-        mxs, mys, mzs = mx[keep][sel], my[keep][sel], mz[keep][sel]
-        rho = np.sqrt(ox * ox + oz * oz)
-        ga = (pp * (ox * mzs - oz * mxs) + qq * ox) / rho
-        gb = (pp * (rho * rho * mys - oy * (ox * mxs + oz * mzs)) - qq * oz * oy) / rho
-        xc, yc = x / GRAD_COARSEN, y / GRAD_COARSEN
-        ggrid[..., 0] = cic(xc, yc, ga, nac, nbc)
-        ggrid[..., 1] = cic(xc, yc, gb, nac, nbc)
-    return cic(x, y, w, na, nb), ggrid, float(w.sum())
-
-
-def table_numpy(g: FloatArray, table: FloatArray, g0: float, g1: float, o_in: float) -> FloatArray:
-    """Numpy twin of the O(gamma) table lookup."""
-    if g1 > g0:
-        t = (np.clip(g, g0, g1) - g0) / (g1 - g0) * (table.size - 1)
-        inner = np.interp(t, np.arange(table.size, dtype=np.float64), table)
-    else:
-        inner = np.zeros_like(g)
-    return np.where(g <= g0, o_in, np.where(g >= g1, 0.0, inner))
-
-
-def cone_response_numpy(
-    mx: FloatArray,
-    my: FloatArray,
-    mz: FloatArray,
-    wi: FloatArray,
-    n_re: float,
-    n_im: float,
-    seed: bool,
-    d: FloatArray,
-    table: FloatArray,
-    g0: float,
-    g1: float,
-    o_in: float,
-    m1: FloatArray,
-) -> float:
-    """Numpy twin of :func:`cone_response_numba`."""
-    mx, my, mz = normals_numpy(mx, my, mz)
-    ox, oy, oz, w, pp, qq = weight_grad_numpy(mx, my, mz, wi, n_re, n_im, seed)
-    half_chord = 0.5 * np.sqrt((ox - d[0]) ** 2 + (oy - d[1]) ** 2 + (oz - d[2]) ** 2)
-    g = 2.0 * np.arcsin(np.minimum(half_chord, 1.0))
-    cos_g = ox * d[0] + oy * d[1] + oz * d[2]
-    tx, ty, tz = d[0] - cos_g * ox, d[1] - cos_g * oy, d[2] - cos_g * oz
-    tn = np.sqrt(tx * tx + ty * ty + tz * tz)
-    ok = tn > 1e-300
-    tn = np.where(ok, tn, 1.0)
-    grad = np.where(ok, (pp * (tx * mx + ty * my + tz * mz) + qq * tz) / tn, 0.0)
-    o_val = table_numpy(g, table, g0, g1, o_in)
-    m1_val = table_numpy(g, m1, 0.0, g1, 0.0)
-    return float(np.sum(w * o_val + grad * m1_val))
-
-
-def interval_overlap_numpy(x: FloatArray, s: float, r: float) -> FloatArray:
-    """Numpy twin of the 1-D interval overlap fraction."""
-    if s <= 0.0:
-        ax = np.abs(x)
-        return np.where(ax < 0.5 * r, 1.0, np.where(ax == 0.5 * r, 0.5, 0.0))
-    lo = np.maximum(x - 0.5 * s, -0.5 * r)
-    hi = np.minimum(x + 0.5 * s, 0.5 * r)
-    out: FloatArray = np.maximum(hi - lo, 0.0) / s
-    return out
-
-
-def rect_response_numpy(
-    mx: FloatArray,
-    my: FloatArray,
-    mz: FloatArray,
-    wi: FloatArray,
-    n_re: float,
-    n_im: float,
-    seed: bool,
-    alpha_r: float,
-    s_in: float,
-    r_in: float,
-    s_perp: float,
-    r_perp: float,
-) -> float:
-    """Numpy twin of :func:`rect_response_numba`."""
-    ox, oy, oz, w = reflect_numpy(mx, my, mz, wi, n_re, n_im, seed)
-    be = np.arcsin(np.clip(oy, -1.0, 1.0))
-    al = np.arctan2(-ox, oz)
-    ov = interval_overlap_numpy(be, s_perp, r_perp) * interval_overlap_numpy(
-        al - alpha_r, s_in, r_in
-    )
-    return float(np.sum(w * ov))
