@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from goniolab.errors import UserError
-from goniolab.optics.facet import FacetModel, Weighting
+from goniolab.optics.facet import Backend, FacetModel, Weighting
 from goniolab.optics.heightmap import HeightMap
 from goniolab.optics.models import ReflectanceModel
 from goniolab.optics.surface import SlopeMethod, Surface
@@ -65,13 +65,15 @@ def build_model(
     model: str = "auto",
     wavelength_nm: float | None = None,
     facet: FacetModel | None = None,
+    backend: Backend = "numba",
 ) -> ReflectanceModel:
     """The ``model`` (one of :data:`MODEL_NAMES`) of a loaded height map, not cached
     (:func:`model_for` caches by spec). ``facet``: the facet model ``auto`` falls back on,
-    if already built. Raises ``ValueError`` for a map with no usable facets."""
+    if already built; ``backend``: that of the facet model (:class:`FacetModel`).
+    Raises ``ValueError`` for a map with no usable facets."""
     if model == "facet" or (model == "auto" and facet is None):
         surface = Surface.from_heightmap(hm, slope_method=slope_method)
-        facet = FacetModel(surface, n=n, weighting=weighting, masking=masking)
+        facet = FacetModel(surface, n=n, weighting=weighting, masking=masking, backend=backend)
         if model == "facet":
             return facet
     opts: dict[str, Any] = {
@@ -152,12 +154,15 @@ def _model(
     masking: bool,
     model: str,
     wavelength_nm: float | None,
+    backend: Backend,
 ) -> Any:
     hm = resolve_map(spec, step_um=step_um)
     _check_numeric_range(spec, hm)
     facet = None
     if model == "auto":
-        facet = _model(key, spec, n, step_um, slope_method, weighting, masking, "facet", None)
+        facet = _model(
+            key, spec, n, step_um, slope_method, weighting, masking, "facet", None, backend
+        )
     try:
         return build_model(
             hm,
@@ -168,6 +173,7 @@ def _model(
             model=model,
             wavelength_nm=wavelength_nm,
             facet=facet,
+            backend=backend,
         )
     except ValueError as exc:
         raise UserError(one_line(f"{spec}: {exc}")) from None
@@ -183,6 +189,7 @@ def model_for(
     masking: bool = True,
     model: str = "auto",
     wavelength_nm: float | None = None,
+    backend: Backend = "numba",
 ) -> ReflectanceModel:
     """The reflectance model of a height map (cached per spec, file version and options).
 
@@ -201,6 +208,10 @@ def model_for(
         For the wave-optics models: the wavelength of every response, gloss included.
         ``None``: BRDF and goniometer responses at 550 nm, gloss weighted over wavelength by
         CIE illuminant C x V(lambda) as ISO 2813 does.
+    backend
+        Of the facet model: ``"numba"`` (compiled kernels, for a process that predicts
+        often: the lab, the TUI) or ``"lean"`` (no numba, for a one-shot command), see
+        :class:`FacetModel`.
 
     Raises
     ------
@@ -215,7 +226,16 @@ def model_for(
     key = _spec_key(spec)
     wl = None if wavelength_nm is None else float(wavelength_nm)
     out: ReflectanceModel = _model(
-        key, str(spec), complex(n), step_um, slope_method, weighting, bool(masking), model, wl
+        key,
+        str(spec),
+        complex(n),
+        step_um,
+        slope_method,
+        weighting,
+        bool(masking),
+        model,
+        wl,
+        backend,
     )
     return out
 

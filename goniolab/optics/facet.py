@@ -74,7 +74,7 @@ import itertools
 import math
 import os
 import threading
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -84,7 +84,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from goniolab.optics import _kernels as K
+from goniolab.optics import _kernels_numpy as KN
 from goniolab.optics.apertures import (
     GONIO_CONE,
     ISO2813_BLACK_GLASS_N,
@@ -109,7 +109,7 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 Weighting = Literal["radiometric", "seed"]
-Backend = Literal["numba", "numpy"]
+Backend = Literal["numba", "numpy", "lean"]
 
 #: Facets per thread below which the numba kernels run on one thread.
 _MIN_CHUNK = 1 << 16
@@ -122,6 +122,19 @@ _LAMBDA_PHI_STEP_DEG = 5.0
 _EXACT_MAX_POINTS = 2
 #: Nodes of the tabulated cap-overlap fraction O(gamma).
 _CONE_TABLE_SIZE = 4097
+#: Rectangles narrower than this (deg, in plane) are read facet by facet in the ``"lean"``
+#: backend: the slope cells' 0.06 deg steps of mirror direction are too coarse for the
+#: ASTM E430 slits (0.05-0.4 deg; 1-50 % off), while the ISO 2813 readings stay within
+#: 0.2 % of the facets' (Gaussian maps of rms slope 0.001-0.3).
+LEAN_EXACT_BELOW_DEG = 0.5
+#: Nodes of the tabulated first moment M1(gamma), each by 3 x 16 Gauss-Legendre nodes: within
+#: 3.5e-4 of its peak of 4097 x 3 x 48 (cones 0.2-3 deg), in a term that is itself a 1-2 %
+#: correction, at a tenth of the cost (80 ms per cone pair, more than the lean curve).
+_M1_TABLE_SIZE = 1025
+#: Slope bin of the histogram whose occupied cells stand for the facets in the ``"lean"``
+#: backend's deposits and cone responses (a facet moves by up to half a bin in each slope,
+#: its mirror direction by about 0.06 deg, against cones of degrees).
+LEAN_SLOPE_BIN = 1e-3
 
 _executor: ThreadPoolExecutor | None = None
 #: Empty third facet array: the kernels read ``(p, q)`` slopes instead of unit normals.
@@ -129,6 +142,14 @@ _SLOPES: FloatArray = np.empty(0)
 
 
 _limits = threading.local()
+
+
+def _numba_kernels() -> Any:
+    """The compiled kernels (:mod:`goniolab.optics._kernels`), imported on first use: numba
+    costs a process about 1 s to import and set up, which the ``"lean"`` backend avoids."""
+    from goniolab.optics import _kernels
+
+    return _kernels
 
 
 @contextmanager
@@ -243,7 +264,7 @@ def _cone_table(a_s: float, a_d: float) -> tuple[FloatArray, float, float, float
         return np.zeros(2), a_d, a_d, 1.0, np.zeros(2)
     o_in = float(cap_overlap_fraction(np.array([0.0]), a_s, a_d)[0])
     table = cap_overlap_fraction(np.linspace(g0, g1, _CONE_TABLE_SIZE), a_s, a_d)
-    _, m1 = cap_overlap_moments(np.linspace(0.0, g1, _CONE_TABLE_SIZE), a_s, a_d)
+    _, m1 = cap_overlap_moments(np.linspace(0.0, g1, _M1_TABLE_SIZE), a_s, a_d, n_nodes=16)
     for arr in (table, m1):
         arr.setflags(write=False)
     return table, g0, g1, o_in, m1
@@ -420,8 +441,15 @@ class FacetModel:
         Smith form, with the empirical slope distribution). For the aperture responses G2 is applied per
         direction (hemisphere bin, luminance grid node, or the receptor centre for
         :meth:`reflected_fraction`), not per facet.
-    backend : {"numba", "numpy"}
-        Fused numba kernels (threads over the facets) or their numpy twins.
+    backend : {"numba", "numpy", "lean"}
+        Fused numba kernels (threads over the facets), their numpy twins, or ``"lean"``:
+        the numpy twins without numba (whose import and set-up cost a process about 1 s,
+        more than a command's work on a 2048^2 map) over fewer facets: deposits and cone
+        responses over the occupied cells of the slope histogram of bin
+        :data:`LEAN_SLOPE_BIN` weighted by their counts (:attr:`_slope_cells`), and so
+        are rectangle responses, except those of slits narrower than
+        :data:`LEAN_EXACT_BELOW_DEG`, read exactly over the facets that can reach the
+        receptor (:meth:`_facets_near`).
     slope_bin : float or None
         How :meth:`brdf_point` / :meth:`brdf` estimate the slope density P22.
         ``None`` (default): a Gaussian kernel density of the facet slopes with Scott's rule
@@ -459,8 +487,8 @@ class FacetModel:
             raise ValueError(f"refractive index must have n > 0 and k >= 0, got {n!r}")
         if weighting not in ("radiometric", "seed"):
             raise ValueError(f"weighting must be 'radiometric' or 'seed', got {weighting!r}")
-        if backend not in ("numba", "numpy"):
-            raise ValueError(f"backend must be 'numba' or 'numpy', got {backend!r}")
+        if backend not in ("numba", "numpy", "lean"):
+            raise ValueError(f"backend must be 'numba', 'numpy' or 'lean', got {backend!r}")
         if slope_bin is not None and not (math.isfinite(slope_bin) and slope_bin > 0):
             raise ValueError(f"slope_bin must be positive, got {slope_bin}")
         if not (math.isfinite(grid_step_deg) and 0 < grid_step_deg <= 0.5):
@@ -489,7 +517,7 @@ class FacetModel:
         n = self._mx.size
         cpus = getattr(_limits, "n", None) or os.cpu_count() or 1
         n_threads = max(1, min(cpus, n // _MIN_CHUNK))
-        if self.backend == "numpy" or n_threads == 1:
+        if self.backend != "numba" or n_threads == 1:
             return [(self._mx, self._my, self._mz)]
         bounds = np.linspace(0, n, n_threads + 1).astype(np.int64)
         return [
@@ -498,20 +526,108 @@ class FacetModel:
 
     def _run(
         self,
-        numba_fn: Callable[..., Any],
-        numpy_fn: Callable[..., Any],
+        kernel: str,
         wi: FloatArray,
         *args: Any,
+        near: tuple[float, float, float] | None = None,
     ) -> list[Any]:
-        """Run a kernel over the facets (threaded chunks for numba), one result per chunk."""
-        chunks = self._chunks()
+        """Run a kernel (``"deposit"``, ``"cone_response"``, ...) over the facets, one
+        result per chunk: its numba version in threaded chunks, or its numpy twin.
+
+        The ``"lean"`` backend runs the numpy twin over the occupied cells of the slope
+        histogram, each weighted by its count (:attr:`_slope_cells`), or, when ``near``
+        ``= (alpha_rad, reach_a, reach_b)`` is given, exactly over the facets that can
+        send light that close to the in-plane angle alpha (:meth:`_facets_near`).
+        """
         common = (wi, self.n.real, self.n.imag, self._seed, *args)
+        numpy_fn = getattr(KN, kernel + "_numpy")
+        if self.backend == "lean":
+            if near is not None:
+                p, q = self._facets_near(wi, *near)
+                return [numpy_fn(p, q, _SLOPES, *common)]
+            cp, cq, counts = self._slope_cells
+            return [numpy_fn(cp, cq, _SLOPES, *common, counts=counts)]
+        chunks = self._chunks()
         if self.backend == "numpy":
             return [numpy_fn(*c, *common) for c in chunks]
+        numba_fn = getattr(_numba_kernels(), kernel + "_numba")
         if len(chunks) == 1:
             return [numba_fn(*chunks[0], *common)]
         futures = [_pool().submit(numba_fn, *c, *common) for c in chunks]
         return [f.result() for f in futures]
+
+    @cached_property
+    def _slope_cells(self) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """The occupied cells of the slope histogram of bin :data:`LEAN_SLOPE_BIN`:
+        ``(p, q, count)`` of each cell's centre, for the ``"lean"`` backend.
+
+        Every facet is moved to its cell's centre, at most half a bin in each slope: its
+        mirror direction by up to about 0.06 deg, and the readings, which average
+        over many facets spread over apertures of degrees, by a fraction of that (the
+        tests hold the lean readings to the per-facet kernels).
+        """
+        b = LEAN_SLOPE_BIN
+        p, q = self.surface.p, self.surface.q
+        p0 = math.floor(float(p.min()) / b + 0.5)
+        q0 = math.floor(float(q.min()) / b + 0.5)
+        n_q = math.floor(float(q.max()) / b + 0.5) - q0 + 1
+        n_p = math.floor(float(p.max()) / b + 0.5) - p0 + 1
+        # the cell index (ip - p0) n_q + (iq - q0), ip = floor(p/b + 1/2), in place in
+        # float64 (exact: far below 2**53) and cast once
+        kf = np.multiply(p, 1.0 / b)
+        kf += 0.5 - p0
+        np.floor(kf, out=kf)
+        kf *= n_q
+        kq = np.multiply(q, 1.0 / b)
+        kq += 0.5 - q0
+        np.floor(kq, out=kq)
+        kf += kq
+        del kq
+        key = kf.astype(np.intp)
+        del kf
+        np.clip(key, 0, n_p * n_q - 1, out=key)  # rounding at the last cell's edge
+        counts = np.bincount(key, minlength=n_p * n_q)
+        del key
+        cells = np.flatnonzero(counts)
+        cp = ((cells // n_q + p0) * b).astype(np.float64)
+        cq = ((cells % n_q + q0) * b).astype(np.float64)
+        return cp, cq, counts[cells].astype(np.float64)
+
+    def _facets_near(
+        self, wi: FloatArray, alpha_rad: float, reach_a: float, reach_b: float
+    ) -> tuple[FloatArray, FloatArray]:
+        """Slopes ``(p, q)`` of a superset of the facets whose mirror direction of ``wi``
+        lies within ``reach_a`` in plane of the in-plane angle ``alpha_rad`` and within
+        ``reach_b`` out of plane (the directions a rectangle response can reach).
+
+        A facet reflects wi into o when its normal is along ``wi + o``, i.e. its slopes
+        are ``p = -(wi + o)_x/(wi + o)_z``, ``q = -(wi + o)_y/(wi + o)_z``. This map of the
+        directions onto the slopes is continuous and one-to-one, so the slopes of the
+        facets that can reach the rectangle of directions lie within the bounding box of
+        the image of its edge (sampled on 64 points a side, the box widened by 1 % of its
+        size). All facets when a corner of the rectangle leaves the hemisphere.
+        """
+        p, q = self.surface.p, self.surface.q
+        t = np.linspace(-1.0, 1.0, 65)
+        one = np.ones_like(t)
+        al = alpha_rad + reach_a * np.concatenate([t, one, -t, -one])
+        be = reach_b * np.concatenate([-one, t, one, -t])
+        if np.any(np.abs(al) >= 0.5 * math.pi) or reach_b >= 0.5 * math.pi:
+            return p, q
+        hx = wi[0] - np.sin(al) * np.cos(be)
+        hy = wi[1] + np.sin(be)
+        hz = wi[2] + np.cos(al) * np.cos(be)
+        if np.any(hz <= 1e-9):
+            return p, q
+        rp, rq = -hx / hz, -hy / hz
+        wp = 0.01 * float(rp.max() - rp.min()) + 1e-12
+        wq = 0.01 * float(rq.max() - rq.min()) + 1e-12
+        inside = p >= float(rp.min()) - wp
+        inside &= p <= float(rp.max()) + wp
+        inside &= q >= float(rq.min()) - wq
+        inside &= q <= float(rq.max()) + wq
+        idx = np.flatnonzero(inside)
+        return p[idx], q[idx]
 
     # ------------------------------------------------------------------ slope density P22
     @cached_property
@@ -743,8 +859,8 @@ class FacetModel:
             raise ValueError(f"bin_deg must divide 90, got {bin_deg}")
         n_phi = 4 * n_theta
         wi = _unit_wi(ti)
-        tables = K.hemisphere_bin_tables(math.radians(bin_deg), n_theta, n_phi)
-        parts = self._run(K.hemisphere_numba, K.hemisphere_numpy, wi, *tables)
+        tables = KN.hemisphere_bin_tables(math.radians(bin_deg), n_theta, n_phi)
+        parts = self._run("hemisphere", wi, *tables)
         hist = np.sum([h for h, _ in parts], axis=0)
         total = float(sum(t for _, t in parts))
         th_e = np.linspace(0.0, 90.0, n_theta + 1)
@@ -846,23 +962,28 @@ class FacetModel:
                 table, g0, g1, o_in, m1 = _cone_table(
                     math.radians(sub.half_angle_deg), math.radians(receptor.half_angle_deg)
                 )
-                parts = self._run(
-                    K.cone_response_numba, K.cone_response_numpy, wi_s, d, table, g0, g1, o_in, m1
-                )
+                parts = self._run("cone_response", wi_s, d, table, g0, g1, o_in, m1)
                 g2 = float(self._g2_at(wi_s, d[None, :])[0])
                 total += share * float(sum(parts)) * g2
             return total / self.surface.n_facets
         else:
             assert isinstance(source, Rect) and isinstance(receptor, Rect)
+            near = None
+            if min(source.in_plane_deg, receptor.in_plane_deg) < LEAN_EXACT_BELOW_DEG:
+                near = (
+                    tr,
+                    math.radians(0.5 * (source.in_plane_deg + receptor.in_plane_deg)),
+                    math.radians(0.5 * (source.perp_deg + receptor.perp_deg)),
+                )
             parts = self._run(
-                K.rect_response_numba,
-                K.rect_response_numpy,
+                "rect_response",
                 wi,
                 tr,
                 math.radians(source.in_plane_deg),
                 math.radians(receptor.in_plane_deg),
                 math.radians(source.perp_deg),
                 math.radians(receptor.perp_deg),
+                near=near,
             )
         frac = float(sum(parts)) / self.surface.n_facets
         return frac * float(self._g2_at(wi, d[None, :])[0])
@@ -875,11 +996,11 @@ class FacetModel:
             a_s = math.radians(source.half_angle_deg)
             a_d = math.radians(detector.half_angle_deg)
             table, g0, g1, o_in, _ = _cone_table(a_s, a_d)
-            return K.table_numpy(_node_gamma(d_alpha, beta), table, g0, g1, o_in)
+            return KN.table_numpy(_node_gamma(d_alpha, beta), table, g0, g1, o_in)
         assert isinstance(source, Rect) and isinstance(detector, Rect)
-        return K.interval_overlap_numpy(
+        return KN.interval_overlap_numpy(
             d_alpha, math.radians(source.in_plane_deg), math.radians(detector.in_plane_deg)
-        ) * K.interval_overlap_numpy(
+        ) * KN.interval_overlap_numpy(
             beta, math.radians(source.perp_deg), math.radians(detector.perp_deg)
         )
 
@@ -897,7 +1018,7 @@ class FacetModel:
         a_d = math.radians(detector.half_angle_deg)
         _, _, g1, _, m1 = _cone_table(a_s, a_d)
         g = _node_gamma(d_alpha, beta)
-        m1_val = K.table_numpy(g, m1, 0.0, g1, 0.0)
+        m1_val = KN.table_numpy(g, m1, 0.0, g1, 0.0)
         sin_g = np.sin(g)
         ok = sin_g > 1e-12
         scale = np.where(ok, m1_val / np.where(ok, sin_g, 1.0), 0.0)
@@ -991,8 +1112,7 @@ class FacetModel:
         na, nb = i_hi - i_lo + 1, 2 * v + 1
         a0 = i_lo * h
         parts = self._run(
-            K.deposit_numba,
-            K.deposit_numpy,
+            "deposit",
             wi,
             math.radians(a0),
             math.radians(h),
@@ -1005,7 +1125,7 @@ class FacetModel:
         grid = np.sum([p[0] for p in parts], axis=0)
         ggrid = np.sum([p[1] for p in parts], axis=0)
         beta_nodes = np.arcsin(np.clip(hv * np.arange(-v, v + 1), -1.0, 1.0))
-        cf = K.GRAD_COARSEN
+        cf = KN.GRAD_COARSEN
         beta_coarse = np.arcsin(np.clip(hv * (cf * np.arange(ggrid.shape[1]) - v), -1.0, 1.0))
         if self.masking:
             grid = grid * self._g2_nodes(wi, a0 + h * np.arange(na), beta_nodes)

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from goniolab.optics import _kernels as K
+from goniolab.optics import _kernels_numpy as KN
 from goniolab.optics.apertures import (
     ISO2813_RECEPTOR,
     ISO2813_SOURCE,
@@ -272,8 +273,8 @@ def test_hemisphere_bins_equal_acos_atan2_bins() -> None:
     th = np.arccos(v[:, 2]) / h
     ph = (np.arctan2(v[:, 1], v[:, 0]) % (2 * np.pi)) / h
     ok = (np.abs(th - np.round(th)) > 1e-7) & (np.abs(ph - np.round(ph)) > 1e-7)
-    it = K._theta_bins(v[ok, 2], cos_e)
-    ip = K._phi_bins(K.diamond_numpy(v[ok, 0], v[ok, 1]), dia_e)
+    it = KN._theta_bins(v[ok, 2], cos_e)
+    ip = KN._phi_bins(K.diamond_numpy(v[ok, 0], v[ok, 1]), dia_e)
     np.testing.assert_array_equal(it, np.floor(th[ok]).astype(int))
     np.testing.assert_array_equal(ip, np.floor(ph[ok]).astype(int))
 
@@ -466,9 +467,10 @@ def test_cone_overlap_equals_explicit_source_quadrature(
     np.testing.assert_allclose(lum, exact, rtol=2e-3)
 
 
+@pytest.mark.parametrize("backend", ["numba", "lean"])
 @pytest.mark.parametrize("slope_rms", [0.03, 0.1])
 def test_gloss_equals_explicit_source_and_receptor_quadrature(
-    gaussian_factory: Callable[..., HeightMap], slope_rms: float
+    gaussian_factory: Callable[..., HeightMap], slope_rms: float, backend: str
 ) -> None:
     """ISO 2813 gloss by the translated-rectangle overlap vs Mihalik eq. 15 done by brute force.
 
@@ -477,11 +479,12 @@ def test_gloss_equals_explicit_source_and_receptor_quadrature(
     direction and counts what :func:`aperture_contains` puts inside the receptor rectangle
     (in-plane x perpendicular as in apertures.py). The facet model neglects the variation of
     the weight across the source, which at 85 deg is +-6 % over the 0.75 deg in-plane
-    extent: measured 0.04-0.2 % here, asserted 0.3 %.
+    extent: measured 0.04-0.2 % here, asserted 0.3 %. The same for the numba-free "lean"
+    backend, which reads these rectangles from the slope histogram's cells.
     """
     surf = Surface.from_heightmap(gaussian_factory(64, slope_rms, seed=3), slope_method="central")
     mx, my, mz = surf.normals
-    model = FacetModel(surf)
+    model = FacetModel(surf, backend=backend)  # type: ignore[arg-type]
     got = model.gloss((60, 85))
     for t in (60, 85):
         src, w_src = sample_aperture(ISO2813_SOURCE, float(t), 0.0, n=12)
@@ -494,12 +497,17 @@ def test_gloss_equals_explicit_source_and_receptor_quadrature(
         assert got[t] == pytest.approx(brute, rel=3e-3)
 
 
+@pytest.mark.parametrize("backend", ["numba", "lean"])
 @pytest.mark.parametrize(
     ("slope_rms", "n", "weighting"),
     [(0.05, 1.55, "radiometric"), (0.2, 1.55, "radiometric"), (0.2, 0.27 + 3.41j, "seed")],
 )
 def test_cone_overlap_matches_source_sampling_off_45_deg(
-    gaussian_factory: Callable[..., HeightMap], slope_rms: float, n: complex, weighting: str
+    gaussian_factory: Callable[..., HeightMap],
+    slope_rms: float,
+    n: complex,
+    weighting: str,
+    backend: str,
 ) -> None:
     """The stated accuracy of the isometry trick for the 6 deg cones (FacetModel docstring).
 
@@ -512,13 +520,16 @@ def test_cone_overlap_matches_source_sampling_off_45_deg(
     1 %). Towards grazing incidence the source is split into sub-cones (facet._source_parts;
     unsplit, 85 deg read 8-10 % low): 75 deg 0.25 %, 85 deg 0.6 % (asserted 1 and 2 %, the
     issue's bound at 85). The conductor with the seed's Fresnel-only weight exercises the
-    complex Fresnel derivative.
+    complex Fresnel derivative. The numba-free "lean" backend moves each facet to the centre
+    of its slope histogram cell (half a 1e-3 bin at most), which on 4096 facets of rms slope
+    0.2 leaves up to 0.36 % more (measured at normal incidence): its bounds are 0.2 % wider.
     """
     surf = Surface.from_heightmap(gaussian_factory(64, slope_rms, seed=3), slope_method="central")
     mx, my, mz = surf.normals
-    model = FacetModel(surf, n=n, weighting=weighting)  # type: ignore[arg-type]
+    model = FacetModel(surf, n=n, weighting=weighting, backend=backend)  # type: ignore[arg-type]
     nc = complex(n)
-    for ti, tol in ((0.0, 0.003), (45.0, 0.007), (60.0, 0.01), (75.0, 0.01), (85.0, 0.02)):
+    for ti, tol0 in ((0.0, 0.003), (45.0, 0.007), (60.0, 0.01), (75.0, 0.01), (85.0, 0.02)):
+        tol = tol0 + (0.002 if backend == "lean" else 0.0)
         tr = ti + np.array([-10.0, -5.0, 0.0, 5.0, 10.0])
         tr = tr[tr < 89.0]
         src, w_src = sample_aperture(Cone(6.0), ti, 0.0, n=12)
