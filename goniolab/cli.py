@@ -70,8 +70,29 @@ class _Parser(argparse.ArgumentParser):
         raise UserError(f"{self.prog}: {message} (see {self.prog} --help)")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """Build the top-level parser with every sub-command found in ``goniolab.commands``."""
+#: Top-level options that take a value (the token after them is not the command).
+_VALUE_OPTIONS = frozenset({"--log-level"})
+
+
+def _command_in(argv: Sequence[str]) -> str | None:
+    """The sub-command named in ``argv`` (its first positional token), if any."""
+    skip = False
+    for tok in argv:
+        if skip:
+            skip = False
+        elif tok in _VALUE_OPTIONS:
+            skip = True
+        elif tok == "--":
+            return None
+        elif not tok.startswith("-"):
+            return tok
+    return None
+
+
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """Build the top-level parser with every sub-command found in ``goniolab.commands``, or
+    with ``only`` that one when it names a command (a command's run imports only its own
+    module: ``predict`` need not import the scan plans, the fit, the TUI's entry...)."""
     import goniolab.commands as commands_pkg
 
     parser = _Parser(
@@ -93,10 +114,15 @@ def build_parser() -> argparse.ArgumentParser:
         help="what goes into the log file (default INFO; the file: goniolab --version)",
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for info in sorted(pkgutil.iter_modules(commands_pkg.__path__), key=lambda m: m.name):
-        if info.name.startswith("_"):
-            continue
-        module = importlib.import_module(f"goniolab.commands.{info.name}")
+    names = sorted(
+        info.name
+        for info in pkgutil.iter_modules(commands_pkg.__path__)
+        if not info.name.startswith("_")
+    )
+    if only in names:
+        names = [only]
+    for name in names:
+        module = importlib.import_module(f"goniolab.commands.{name}")
         module.register(sub)
     return parser
 
@@ -209,7 +235,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``goniolab`` console script; returns the process exit code."""
     _stack_dump_on_sigusr1()
     try:
-        parser = build_parser()
+        parser = build_parser(_command_in(sys.argv[1:] if argv is None else argv))
         args = parser.parse_args(argv)
         if not getattr(args, "func", None):
             parser.print_help()

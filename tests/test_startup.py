@@ -8,6 +8,9 @@ import json
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
+
+import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -99,3 +102,63 @@ def test_optics_package_loads_its_names_on_first_use() -> None:
         "        assert getattr(pkg, name) is getattr(__import__(mod, fromlist=['x']), name), name\n"
     )
     subprocess.run([sys.executable, "-c", code], cwd=ROOT, check=True, timeout=120)
+
+
+def test_facet_predictions_run_without_numba_or_scipy(tmp_path: Path) -> None:
+    """``predict brdf|gloss --model facet`` (one command, one process) use the facet model's
+    numba-free "lean" backend: numba's import and set-up cost ~1 s, more than the work."""
+    import numpy as np
+
+    z = np.random.default_rng(1).normal(0.0, 0.02, (128, 128))
+    np.save(tmp_path / "m.npy", z)
+    (tmp_path / "m.npy.json").write_text('{"step_um": 1.0}')
+    mp = str(tmp_path / "m.npy")
+    mods = loaded(
+        "import contextlib, io, json\n"
+        "from goniolab.cli import main\n"
+        "for cmd in (['brdf', '--theta-i', '45', '--theta-r', '0:70:1'], ['gloss']):\n"
+        "    buf = io.StringIO()\n"
+        "    with contextlib.redirect_stdout(buf):\n"
+        f"        assert main(['predict', cmd[0], {mp!r}, *cmd[1:], '--model', 'facet', '--json']) == 0\n"
+        "    out = json.loads(buf.getvalue())\n"
+        "    assert out['model'] in ('facet', {'G20': 'facet', 'G60': 'facet', 'G85': 'facet'}), out\n"
+    )
+    assert "goniolab.optics.facet" in mods  # the probe really predicted
+    assert [m for m in heavy_in(mods) if m.split(".")[0] in ("numba", "scipy")] == []
+
+
+@pytest.mark.parametrize(
+    ("argv", "command"),
+    [
+        (["predict", "brdf", "m.npy"], "predict"),
+        (["--debug", "scan", "--config", "x.toml"], "scan"),
+        (["--log-level", "DEBUG", "samples"], "samples"),
+        (["--log-level=DEBUG", "samples"], "samples"),
+        (["--help"], None),
+        (["--", "predict"], None),
+        ([], None),
+    ],
+)
+def test_the_command_is_found_past_the_top_level_options(
+    argv: list[str], command: str | None
+) -> None:
+    from goniolab.cli import _command_in
+
+    assert _command_in(argv) == command
+
+
+def test_a_command_run_registers_only_its_own_parser_and_a_typo_lists_them_all(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    from goniolab.cli import build_parser, main
+
+    def choices(p: Any) -> set[str]:
+        return set(p._subparsers._group_actions[0].choices)
+
+    assert choices(build_parser("predict")) == {"predict"}
+    assert {"predict", "scan", "samples", "tui", "runs"} <= choices(build_parser("nosuch"))
+    assert main(["predict", "stats", "sample:wittmann-3", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["map"] == "sample:wittmann-3"
+    assert main(["predcit", "stats"]) == 2
+    err = capsys.readouterr().err
+    assert "invalid choice: 'predcit'" in err and "'predict'" in err and "'scan'" in err

@@ -92,6 +92,21 @@ class _Progress:
         )
 
 
+def _is_a(obj: Any, module: str, name: str) -> bool:
+    """``isinstance(obj, module.name)`` without importing ``module``: no instance of a class
+    exists before its module is loaded (the physical-optics modules import numba)."""
+    mod = sys.modules.get(module)
+    return mod is not None and isinstance(obj, getattr(mod, name))
+
+
+def _is_physical(obj: Any) -> bool:
+    return _is_a(obj, "goniolab.optics.physical", "PhysicalOpticsModel")
+
+
+def _is_auto(obj: Any) -> bool:
+    return _is_a(obj, "goniolab.optics.model_choice", "AutoModel")
+
+
 def _model(args: argparse.Namespace) -> Any:
     from goniolab.models import model_for
 
@@ -108,12 +123,18 @@ def _model(args: argparse.Namespace) -> Any:
         masking=args.masking,
         model=args.model,
         wavelength_nm=args.wavelength_nm,
+        # one command, one process: the facet model without numba's ~1 s of import and
+        # set-up (the physical-optics models compile theirs)
+        backend="lean" if args.model == "facet" else "numba",
     )
-    from goniolab.optics.physical import PhysicalOpticsModel
-
     progress = _Progress()
-    for m in (model, getattr(model, "kirchhoff", None), getattr(model, "rayleigh_rice", None)):
-        if isinstance(m, PhysicalOpticsModel):
+    parts: tuple[Any, ...] = (
+        model,
+        getattr(model, "kirchhoff", None),
+        getattr(model, "rayleigh_rice", None),
+    )
+    for m in parts:
+        if _is_physical(m):
             m.progress = progress
     return model
 
@@ -147,10 +168,8 @@ def _model_name(model: Any) -> str:
 def _gloss_models(model: Any) -> tuple[dict[str, Any], dict[str, Any]]:
     """``"model"`` per geometry (G20/G60/G85) and the facet fallbacks, for --json."""
     from goniolab.optics import gloss_standards as gs
-    from goniolab.optics.model_choice import AutoModel
-    from goniolab.optics.physical import PhysicalOpticsModel
 
-    if isinstance(model, AutoModel):
+    if _is_auto(model):
         ex = model.explain_gloss()
         names: dict[str, Any] = {f"G{k}": v["model"] for k, v in ex.items()}
         fb = {f"G{k}": v["fallback_facet"] for k, v in ex.items() if "fallback_facet" in v}
@@ -159,7 +178,7 @@ def _gloss_models(model: Any) -> tuple[dict[str, Any], dict[str, Any]]:
         name = _model_name(model)
         names = {f"G{t}": name for t in (20, 60, 85)}
         fb = {}
-        if isinstance(model, PhysicalOpticsModel):
+        if _is_physical(model):
             fb = {f"G{k}": v for k, v in model.gloss_fallbacks().items()}
     # ASTM E430 readings: narrow slits a small map may not resolve
     e430 = [
@@ -186,8 +205,8 @@ def _gloss_models(model: Any) -> tuple[dict[str, Any], dict[str, Any]]:
         ),
     ]
     for label, t, off, src, rec in e430:
-        target = model.model_at(t) if isinstance(model, AutoModel) else model
-        if isinstance(target, PhysicalOpticsModel):
+        target = model.model_at(t) if _is_auto(model) else model
+        if _is_physical(target):
             why = target.coverage(t, t + off, src, rec)
             if why is not None:
                 fb[label] = why
@@ -198,17 +217,14 @@ def _curve_model(
     model: Any, ti: float, tr: NDArray[np.float64], src: Cone, det: Cone
 ) -> tuple[Any, dict[str, str]]:
     """``"model"`` of a curve at theta_i and its per-angle facet fallbacks."""
-    from goniolab.optics.model_choice import AutoModel
-    from goniolab.optics.physical import PhysicalOpticsModel
-
     target = model
     name: Any = _model_name(model)
-    if isinstance(model, AutoModel):
+    if _is_auto(model):
         ch = model.choice(ti)
         name = {"auto": ch.model, "g": ch.g, "reason": ch.reason}
         target = model.model_at(ti)
     fb: dict[str, str] = {}
-    if isinstance(target, PhysicalOpticsModel) and det.full_angle_deg > 0:
+    if _is_physical(target) and det.full_angle_deg > 0:
         for t in tr:
             why = target.coverage(ti, float(t), src, det)
             if why is not None:
@@ -452,7 +468,15 @@ def _progress(total: int) -> Any:
 
 
 def _projected_solid_angle_sr(detector: Cone, theta_r_deg: float) -> float:
-    """int cos(theta) dOmega over the detector cone (above the horizon), in sr."""
+    """int cos(theta) dOmega over the detector cone (above the horizon), in sr.
+
+    A cap of half angle a wholly above the horizon has ``int w dOmega = pi sin^2(a) c``
+    (c its axis), so ``pi sin^2(a) cos(theta_r)``; a cap that crosses the horizon is
+    integrated numerically over its part above it.
+    """
+    a_deg = 0.5 * detector.full_angle_deg
+    if abs(theta_r_deg) + a_deg < 90.0:
+        return math.pi * math.sin(math.radians(a_deg)) ** 2 * math.cos(math.radians(theta_r_deg))
     import numpy as np
 
     from goniolab.optics.apertures import inplane_centre, sample_aperture

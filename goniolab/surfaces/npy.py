@@ -145,14 +145,17 @@ NM_SUSPECT_SQ_UM = 50.0
 
 #: Most row pairs the nanometre check reads (spread over the map; all of a smaller map).
 _NM_CHECK_ROWS = 256
+#: The nanometre check's blocks of rows hold at most 1/_NM_CHECK_BLOCKS of the map.
+_NM_CHECK_BLOCKS = 64
 
 
 def _warn_if_nm(hm: HeightMap) -> None:
     """Warn when heights read as micrometres look like nanometres (Sq and rms slope both
     implausibly large). Sq and Sdq (forward differences) come from up to
-    :data:`_NM_CHECK_ROWS` pairs of adjacent rows spread over the map, one row at a time, so
-    the check adds no full-size temporaries to the read (it made five, and set the peak
-    memory of a 2048^2 read-to-curve at 3.25 x the map)."""
+    :data:`_NM_CHECK_ROWS` pairs of adjacent rows spread over the map, in blocks of at most
+    1/:data:`_NM_CHECK_BLOCKS` of the map, so the check adds no full-size temporaries to the
+    read (it made five, and set the peak memory of a 2048^2 read-to-curve at 3.25 x the
+    map) and few numpy calls (row by row it took 60 ms of a 2048^2 read)."""
     z = np.asarray(hm.z_um, dtype=np.float64)
     ny, nx = z.shape
     if ny < 2 or nx < 2:
@@ -160,16 +163,18 @@ def _warn_if_nm(hm: HeightMap) -> None:
     rows = np.unique(np.linspace(0, ny - 2, min(ny - 1, _NM_CHECK_ROWS)).astype(np.intp))
     n = n_g = 0
     s1 = s2 = g2 = 0.0
-    for i in rows:  # row by row: temporaries of one row only
-        top, below = z[i], z[i + 1]
-        ok = np.isfinite(top)
-        n += int(ok.sum())
-        s1 += float(top[ok].sum())
-        s2 += float(np.dot(top[ok], top[ok]))
-        g = (np.diff(top) / hm.dx_um) ** 2 + ((below - top)[:-1] / hm.dy_um) ** 2
-        good = np.isfinite(g)
-        n_g += int(good.sum())
-        g2 += float(g[good].sum())
+    per_block = max(1, ny // _NM_CHECK_BLOCKS)
+    for k in range(0, rows.size, per_block):  # temporaries of a block of rows only
+        block = rows[k : k + per_block]
+        top, below = z[block], z[block + 1]
+        vals = top[np.isfinite(top)]
+        n += vals.size
+        s1 += float(vals.sum())
+        s2 += float(np.dot(vals, vals))
+        g = (np.diff(top, axis=1) / hm.dx_um) ** 2 + ((below - top)[:, :-1] / hm.dy_um) ** 2
+        good = g[np.isfinite(g)]
+        n_g += good.size
+        g2 += float(good.sum())
     if n == 0:
         return
     mean = s1 / n
