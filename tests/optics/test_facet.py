@@ -8,6 +8,7 @@ from collections.abc import Callable
 
 import numpy as np
 import pytest
+from numpy.typing import NDArray
 
 from goniolab.optics import _kernels as K
 from goniolab.optics import _kernels_numpy as KN
@@ -545,18 +546,79 @@ def test_cone_overlap_matches_source_sampling_off_45_deg(
         np.testing.assert_allclose(100 * np.array(two), brute[[1, 2]], rtol=tol)
 
 
-def test_source_reaching_the_horizon_is_rejected(gauss_surface_256: Surface) -> None:
-    """theta_i + source half width >= 90 deg lights the surface from below: a clear error,
-    not a reading (the first-order weight expansion turns negative there: -60 % at 89.9)."""
+def test_source_reaching_the_horizon_needs_masking(gauss_surface_256: Surface) -> None:
+    """theta_i + source half width >= 90 deg: without masking the weight of a source
+    direction diverges at the horizon (brute force: 450-550 % of a mirror at 89 deg), so
+    the unmasked model refuses with a clear error; a rectangle is never clipped."""
     m = FacetModel(gauss_surface_256)
-    with pytest.raises(ValueError, match=r"cone of half width 3 deg at theta_i_deg = 87.*horizon"):
+    with pytest.raises(ValueError, match=r"cone of half width 3 deg at theta_i_deg = 87.*masking"):
         m.luminance_pct(87.0, [80.0, 85.0, 88.0])
     with pytest.raises(ValueError, match="horizon"):
         m.reflected_fraction(88.0, 85.0, Cone(6.0), Cone(6.0))
+    masked = FacetModel(gauss_surface_256, masking=True)
     with pytest.raises(ValueError, match=r"rectangle of half width 0\.375"):
-        m.luminance_pct(89.7, [85.0], source=ISO2813_SOURCE, detector=ISO2813_RECEPTOR[85])
+        masked.luminance_pct(89.7, [85.0], source=ISO2813_SOURCE, detector=ISO2813_RECEPTOR[85])
     lum = m.luminance_pct(86.9, [80.0, 85.0, 88.0])  # just inside: positive readings
     assert np.all(lum > 0)
+    assert np.all(masked.luminance_pct(89.0, [80.0, 85.0, 88.0]) > 0)
+
+
+def _masked_brute_force(
+    model: FacetModel, ti: float, tr: NDArray[np.float64], rings: int
+) -> NDArray[np.float64]:
+    """Mihalik eq. 15 with masking by brute force: the 6 deg source cone sampled on its
+    part above the horizon (the rest misses the sample), every facet reflected with its
+    weight and the height-correlated Smith G2 of that source direction and its own mirror
+    direction, counted inside the 6 deg receptor; over the whole cone's solid angle."""
+    surf = model.surface
+    src, w_src = sample_aperture(Cone(6.0), ti, 0.0, n=rings)
+    dets = np.stack([-np.sin(np.radians(tr)), 0 * tr, np.cos(np.radians(tr))], axis=-1)
+    acc = np.zeros(tr.size)
+    for wi, w_s in zip(src, w_src, strict=True):
+        if wi[2] <= 0.0:
+            continue
+        ox, oy, oz, w = K.reflect_numpy(surf.p, surf.q, np.empty(0), wi, 1.55, 0.0, False)
+        wo = np.stack([ox, oy, oz], axis=-1)
+        g2 = model.masking_g2(wi[None, :], wo)
+        inside = wo @ dets.T >= math.cos(math.radians(3.0))
+        acc += w_s * ((w * g2) @ inside)
+    out: NDArray[np.float64] = 100 * acc / (w_src.sum() * surf.n_facets)
+    return out
+
+
+@pytest.mark.parametrize("slope_rms", [0.05, 0.2])
+def test_masked_cones_up_to_89_deg_match_brute_force(
+    gaussian_factory: Callable[..., HeightMap], slope_rms: float
+) -> None:
+    """Grazing goniometer cones with masking (the default of the CLI and the lab): the source
+    is split into 169 sub-cones and clipped at the horizon from theta_i + 3 >= 90, and G2 is
+    taken where the light leaves. Against brute force with per-facet G2 (64 x 64 maps, 4681
+    source directions, specular -10..+2 deg): measured within 0.31 % at 85, 87, 88 and 89
+    deg, 0.74 % at 86 (the last unclipped angle); asserted 1 % with 721 directions (issue 15
+    asks 2 % at 85; G2 at the receptor's centre read 2.6 % high there)."""
+    surf = Surface.from_heightmap(gaussian_factory(64, slope_rms, seed=3), slope_method="central")
+    model = FacetModel(surf, masking=True)
+    for ti in (85.0, 87.0, 89.0):
+        tr = ti + np.array([-10.0, -5.0, -2.0, 0.0])
+        brute = _masked_brute_force(model, ti, tr, rings=16)
+        np.testing.assert_allclose(model.luminance_pct(ti, tr), brute, rtol=0.01)
+        one = 100 * model.reflected_fraction(ti, ti, Cone(6.0), Cone(6.0))
+        assert one == pytest.approx(brute[-1], rel=0.01)
+
+
+def test_a_mirror_at_89_deg_reads_the_part_of_the_beam_above_the_horizon() -> None:
+    """Flat mirror, equal 6 deg cones at 89 deg: every source direction above the horizon
+    is mirrored into the receptor, so the reading is ``100 int F(cos theta) dOmega`` over
+    the part of the source cone above the horizon, over the whole cone's solid angle (a fine
+    quadrature of that cap). The sub-caps of the split blur the receptor's rim: asserted
+    1.5 %."""
+    mirror = FacetModel(Surface(p=np.zeros(100), q=np.zeros(100)), masking=True)
+    src, w = sample_aperture(Cone(6.0), 89.0, 0.0, n=200)
+    up = src[:, 2] > 0
+    want = 100 * float(np.sum(fresnel_dielectric(src[up, 2], 1.55) * w[up])) / float(w.sum())
+    assert 0.0 < want < 100 * 0.6  # less than 60 % of the beam reaches the sample
+    got = float(mirror.luminance_pct(89.0, [89.0])[0])
+    assert got == pytest.approx(want, rel=0.015)
 
 
 def test_rect_luminance_grid_matches_exact_per_facet_rect(gauss_surface_256: Surface) -> None:
