@@ -74,7 +74,12 @@ from goniolab.optics.apertures import (
     Rect,
     solid_angle_sr,
 )
-from goniolab.optics.facet import FacetModel, _cone_table
+from goniolab.optics.facet import (
+    FacetModel,
+    _clipped_source_parts,
+    _cone_table,
+    _reaches_horizon,
+)
 from goniolab.optics.fresnel import fresnel, fresnel_dielectric
 from goniolab.optics.heightmap import HeightMap
 from goniolab.optics.psd import DEFAULT_TAPER, DEFAULT_TILE, TiledMap
@@ -549,6 +554,12 @@ class PhysicalOpticsModel:
         of the detector's direction (``g2`` when given: it does not depend on lambda)."""
         wox, woy = self._wo_axes(theta_i_deg, lam_um, box)
         tr = np.radians(theta_r_deg)
+        if (
+            isinstance(source, Cone)
+            and isinstance(receptor, Cone)
+            and _reaches_horizon(theta_i_deg, source)
+        ):
+            return self._clipped_cone_sums(theta_i_deg, wox, woy, p, tr, source, receptor)
         if isinstance(source, Cone) and isinstance(receptor, Cone):
             table, g0, g1, o_in, _ = _cone_table(
                 math.radians(source.half_angle_deg), math.radians(receptor.half_angle_deg)
@@ -575,6 +586,50 @@ class PhysicalOpticsModel:
         result: FloatArray = np.asarray(out, dtype=np.float64) * g2
         return result
 
+    def _clipped_cone_sums(
+        self,
+        theta_i_deg: float,
+        wox: FloatArray,
+        woy: FloatArray,
+        p: FloatArray,
+        tr: FloatArray,
+        source: Cone,
+        receptor: Cone,
+    ) -> FloatArray:
+        """Cone sums for a source cone that reaches the horizon: its part above the horizon.
+
+        The source is split as in the facet model (:func:`_clipped_source_parts`: sub-cones
+        of the part above the horizon, shares over the whole cone). As everywhere in these
+        models the scattered pattern is that of the nominal incidence, carried over the
+        source (zeroth order in the source direction): a sub-cone centred at polar angle
+        ``theta_i + delta`` and azimuth ``phi`` turns the pattern about z by phi and shifts
+        it by delta in plane, so it reads the nominal pattern through the receptor turned
+        back, ``R_y(-delta) R_z(-phi) d``, with the sub-cone's own cap-overlap table and the
+        Smith G2 of its own direction.
+        """
+        a_d = math.radians(receptor.half_angle_deg)
+        d = np.stack([-np.sin(tr), np.zeros_like(tr), np.cos(tr)], axis=-1)
+        fn = CK.cone_cells_numba if self.backend == "numba" else CK.cone_cells_numpy
+        out = np.zeros(tr.size)
+        ti = math.radians(theta_i_deg)
+        for c, sub, share in _clipped_source_parts(theta_i_deg, source):
+            delta = math.acos(min(1.0, float(c[2]))) - ti
+            phi = math.atan2(float(c[1]), float(c[0]))
+            cp, sp = math.cos(phi), math.sin(phi)
+            # R_z(-phi) d, then R_y(-delta): alpha = atan2(-x, z) decreases by delta
+            x1, y1 = cp * d[:, 0] + sp * d[:, 1], -sp * d[:, 0] + cp * d[:, 1]
+            cd, sd = math.cos(delta), math.sin(delta)
+            dirs = np.stack([cd * x1 + sd * d[:, 2], y1, -sd * x1 + cd * d[:, 2]], axis=-1)
+            table, g0, g1, o_in, _ = _cone_table(math.radians(sub.half_angle_deg), a_d)
+            part = fn(wox, woy, p, np.ascontiguousarray(dirs), table, g0, g1, o_in)
+            g2 = (
+                self._shared.masking_model.masking_g2(np.broadcast_to(c, d.shape), d)
+                if self.masking
+                else 1.0
+            )
+            out += share * np.asarray(part, dtype=np.float64) * g2
+        return out
+
     def _fractions(
         self,
         theta_i_deg: float,
@@ -585,6 +640,10 @@ class PhysicalOpticsModel:
     ) -> FloatArray:
         """Flux fractions ``(n_lambda, n_points)``; every point must be covered."""
         ra, rb = self._reach(source, receptor)
+        if isinstance(source, Cone) and _reaches_horizon(theta_i_deg, source):
+            # the turned-back receptors of the clipped source's sub-cones reach one source
+            # half angle further
+            ra = rb = ra + math.radians(source.half_angle_deg)
         tr = np.radians(theta_r_deg)
         boxes: list[_Box] = []
         for lam_nm in lams_nm:
@@ -604,11 +663,11 @@ class PhysicalOpticsModel:
 
     def _check_apertures(self, theta_i_deg: float, source: Aperture, receptor: Aperture) -> None:
         self._reach(source, receptor)
-        half = source.half_angle_deg if isinstance(source, Cone) else 0.5 * source.in_plane_deg
-        if theta_i_deg + half >= 90.0:
+        if isinstance(source, Rect) and _reaches_horizon(theta_i_deg, source):
             raise ValueError(
-                f"source of half width {half:g} deg at theta_i_deg = {theta_i_deg:g} reaches "
-                "the horizon (theta_i + half width >= 90 deg)"
+                f"source rectangle of half width {0.5 * source.in_plane_deg:g} deg at "
+                f"theta_i_deg = {theta_i_deg:g} reaches the horizon (theta_i + half width "
+                ">= 90 deg): only cones are clipped there"
             )
         if solid_angle_sr(receptor) == 0.0:
             raise ValueError(

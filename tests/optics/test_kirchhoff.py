@@ -19,7 +19,7 @@ import math
 import numpy as np
 import pytest
 
-from goniolab.optics.apertures import Cone, integrate_brdf
+from goniolab.optics.apertures import Cone, Rect, integrate_brdf
 from goniolab.optics.facet import FacetModel
 from goniolab.optics.fresnel import fresnel, fresnel_dielectric
 from goniolab.optics.heightmap import HeightMap, fill_missing, level_plane
@@ -327,3 +327,27 @@ def test_progress_reaches_the_total_for_every_transform() -> None:
         done = [d for d, _ in run]
         assert done == sorted(done) and done[-1] == run[0][1]
         assert run[0][1] % model._shared.tiled.n_tiles == 0
+
+
+@pytest.mark.parametrize("cls", [KirchhoffModel, RayleighRiceModel])
+def test_a_flat_map_at_89_deg_reads_the_beam_above_the_horizon(cls: type) -> None:
+    """theta_i = 89 deg with the 6 deg goniometer cones: the source reaches 92 deg, and the
+    part below the horizon misses the sample. A flat map reflects the coherent beam only, so
+    with equal cones the reading is ``100 F(89) Omega_up / Omega``: the part of the source
+    cone above the horizon (a fine quadrature of the cap), at the nominal incidence's
+    Fresnel factor (these models carry the nominal pattern over the source). A 2 mm field
+    resolves the receptor at grazing incidence (no facet fallback)."""
+    from goniolab.optics.apertures import sample_aperture
+
+    flat = HeightMap(z_um=np.zeros((1024, 1024)), dx_um=2.0, dy_um=2.0, source="flat")
+    model = cls(flat, n=1.55)
+    assert model.coverage(89.0, 89.0, Cone(6.0), Cone(6.0)) is None
+    src, w = sample_aperture(Cone(6.0), 89.0, 0.0, n=200)
+    up = float(w[src[:, 2] > 0].sum() / w.sum())
+    want = 100.0 * float(fresnel_dielectric(math.cos(math.radians(89.0)), 1.55)) * up
+    assert 0.65 < up < 0.75  # the horizon is 1 deg above the cone's 3 deg rim
+    got = model.luminance_pct(89.0, np.array([87.0, 89.0]))
+    assert got[1] == pytest.approx(want, rel=0.015)
+    assert 0.0 < got[0] < got[1]  # the receptor at 87 deg sees only part of the image
+    with pytest.raises(ValueError, match=r"rectangle.*horizon"):  # only cones are clipped
+        model.luminance_pct(89.0, np.array([89.0]), source=Rect(4.0, 4.0), detector=Rect(6.0, 6.0))

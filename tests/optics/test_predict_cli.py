@@ -128,7 +128,18 @@ def test_point_brdf_curve_reports_its_peak(capsys: pytest.CaptureFixture[str]) -
     assert "peak" not in two
 
 
-def test_source_cone_reaching_the_horizon_exits_2(capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["predict", "brdf", "sample:flat", "--theta-i", "88", "--theta-r", "80,85"]) == 2
+def test_source_cone_reaching_the_horizon_is_clipped_or_refused_without_masking(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """The 6 deg source at 88 deg reaches 91: with masking (the default) its part below the
+    horizon is clipped and the command answers; the unmasked facet model refuses, saying why."""
+    for model in ("facet", "auto"):
+        doc = _run_json(
+            capsys, "predict", "brdf", "sample:wittmann-3", "--theta-i", "88", "--theta-r=80,85",
+            "--model", model,
+        )  # fmt: skip
+        assert all(v > 0 for v in doc["luminance_pct"])
+    argv = ["predict", "brdf", "sample:wittmann-3", "--theta-i", "88", "--theta-r", "80,85"]
+    assert main([*argv, "--model", "facet", "--no-masking"]) == 2
     err = capsys.readouterr().err
-    assert "--theta-i 88" in err and "horizon" in err
+    assert "--theta-i 88" in err and "horizon" in err and "masking" in err
