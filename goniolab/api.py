@@ -209,7 +209,7 @@ def predict_brdf(
         point BRDF with ``point=True``); coords ``theta_i_deg`` and ``aspecular_deg``.
     """
     from goniolab.datasets import brdf_dataset
-    from goniolab.optics.apertures import Cone, inplane_centre, sample_aperture
+    from goniolab.optics.apertures import Cone, projected_solid_angle_sr
     from goniolab.scan.predict import model_name
 
     ti = float(theta_i_deg)
@@ -250,11 +250,7 @@ def predict_brdf(
         lum = np.asarray(refl.luminance_pct(ti, tr, source=src, detector=det), dtype=np.float64)
     except ValueError as exc:
         raise UserError(f"theta_i_deg {ti:g} / source_deg: {exc}") from None
-    omega = []
-    for t in tr:
-        dirs, w = sample_aperture(det, *inplane_centre(float(t)), n=32)
-        omega.append(float(np.sum(np.clip(dirs[:, 2], 0.0, None) * w)))
-    om = np.asarray(omega)
+    om = np.array([projected_solid_angle_sr(det, float(t)) for t in tr])
     brdf = np.where(om > 0, lum / 100.0 / np.where(om > 0, om, 1.0), 0.0)
     attrs.update(source_cone_deg=src.full_angle_deg, detector_cone_deg=det.full_angle_deg)
     return brdf_dataset(ti, tr, brdf, lum, attrs=attrs)

@@ -201,16 +201,3 @@ def test_stats_say_the_regime_per_geometry(capsys: pytest.CaptureFixture[str]) -
     st = _run_json(capsys, "predict", "stats", "sample:wittmann-8")
     assert st["regime"]["20"]["model"] == "facet"
     assert st["regime"]["20"]["g"] > 20
-
-
-@pytest.mark.parametrize("theta_r_deg", [0.0, 30.0, -45.0, 85.0, 86.9, 88.0])
-def test_projected_solid_angle_of_the_detector_cone(theta_r_deg: float) -> None:
-    """``pi sin^2(a) cos(theta_r)`` for a cap above the horizon (the closed form of the
-    integral of w over a cap), the quadrature of its part above the horizon beyond."""
-    from goniolab.commands.predict import _projected_solid_angle_sr
-    from goniolab.optics.apertures import Cone, inplane_centre, sample_aperture
-
-    t, p = inplane_centre(theta_r_deg)
-    dirs, w = sample_aperture(Cone(6.0), t, p, n=64)
-    want = float(np.sum(np.clip(dirs[:, 2], 0.0, None) * w))
-    assert _projected_solid_angle_sr(Cone(6.0), theta_r_deg) == pytest.approx(want, rel=1e-4)

@@ -467,25 +467,6 @@ def _progress(total: int) -> Any:
     return bar()
 
 
-def _projected_solid_angle_sr(detector: Cone, theta_r_deg: float) -> float:
-    """int cos(theta) dOmega over the detector cone (above the horizon), in sr.
-
-    A cap of half angle a wholly above the horizon has ``int w dOmega = pi sin^2(a) c``
-    (c its axis), so ``pi sin^2(a) cos(theta_r)``; a cap that crosses the horizon is
-    integrated numerically over its part above it.
-    """
-    a_deg = 0.5 * detector.full_angle_deg
-    if abs(theta_r_deg) + a_deg < 90.0:
-        return math.pi * math.sin(math.radians(a_deg)) ** 2 * math.cos(math.radians(theta_r_deg))
-    import numpy as np
-
-    from goniolab.optics.apertures import inplane_centre, sample_aperture
-
-    t, p = inplane_centre(theta_r_deg)
-    dirs, w = sample_aperture(detector, t, p, n=32)
-    return float(np.sum(np.clip(dirs[:, 2], 0.0, None) * w))
-
-
 def _peak(tr: NDArray[np.float64], values: NDArray[np.float64]) -> PeakMetrics | None:
     """Peak metrics of the curve when the angles are >= 3 and strictly increasing."""
     import numpy as np
@@ -544,7 +525,9 @@ def _cmd_brdf(args: argparse.Namespace) -> int:
             )
         except ValueError as exc:
             raise UserError(f"--theta-i {ti:g} / --source-deg: {exc}") from None
-        omega = np.array([_projected_solid_angle_sr(det, float(t)) for t in tr])
+        from goniolab.optics.apertures import projected_solid_angle_sr
+
+        omega = np.array([projected_solid_angle_sr(det, float(t)) for t in tr])
         brdf = np.where(omega > 0, lum / 100.0 / np.where(omega > 0, omega, 1.0), 0.0)
         out["source_deg"] = src.full_angle_deg
         out["detector_deg"] = det.full_angle_deg

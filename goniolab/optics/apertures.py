@@ -43,6 +43,7 @@ __all__ = [
     "inplane_centre",
     "integrate_brdf",
     "lobe_subdivisions",
+    "projected_solid_angle_sr",
     "sample_aperture",
     "solid_angle_sr",
 ]
@@ -276,6 +277,22 @@ def solid_angle_sr(aperture: Aperture) -> float:
         return float(2.0 * np.pi * (1.0 - np.cos(np.radians(aperture.half_angle_deg))))
     a, b = np.radians(0.5 * aperture.in_plane_deg), np.radians(0.5 * aperture.perp_deg)
     return float(2.0 * a * 2.0 * np.sin(b))
+
+
+def projected_solid_angle_sr(detector: Cone, theta_r_deg: float) -> float:
+    """``int cos(theta) dOmega`` over a detector cone centred on the signed in-plane angle
+    ``theta_r_deg``, counting only its part above the horizon, in sr.
+
+    A cap of half angle a wholly above the horizon has ``int w dOmega = pi sin^2(a) c`` (c its
+    axis: the vector area of a spherical cap), so ``pi sin^2(a) cos(theta_r)``; a cap that
+    crosses the horizon is integrated over its part above it (32 rings of
+    :func:`sample_aperture`).
+    """
+    a_deg = detector.half_angle_deg
+    if abs(theta_r_deg) + a_deg < 90.0:
+        return math.pi * math.sin(math.radians(a_deg)) ** 2 * math.cos(math.radians(theta_r_deg))
+    dirs, w = sample_aperture(detector, *inplane_centre(theta_r_deg), n=32)
+    return float(np.sum(np.clip(dirs[:, 2], 0.0, None) * w))
 
 
 def aperture_contains(

@@ -17,6 +17,7 @@ from goniolab.optics.apertures import (
     direction,
     inplane_centre,
     integrate_brdf,
+    projected_solid_angle_sr,
     sample_aperture,
     solid_angle_sr,
 )
@@ -121,3 +122,13 @@ def test_point_source_and_receptor_give_brdf_cosine() -> None:
 def test_bad_subdivision_count_is_rejected() -> None:
     with pytest.raises(ValueError, match="subdivisions"):
         sample_aperture(Cone(6.0), 0.0, 0.0, n=0)
+
+
+@pytest.mark.parametrize("theta_r_deg", [0.0, 30.0, -45.0, 85.0, 86.9, 88.0])
+def test_projected_solid_angle_of_the_detector_cone(theta_r_deg: float) -> None:
+    """``pi sin^2(a) cos(theta_r)`` for a cap above the horizon (the closed form of the
+    integral of w over a cap), the quadrature of its part above the horizon beyond."""
+    t, p = inplane_centre(theta_r_deg)
+    dirs, w = sample_aperture(Cone(6.0), t, p, n=64)
+    want = float(np.sum(np.clip(dirs[:, 2], 0.0, None) * w))
+    assert projected_solid_angle_sr(Cone(6.0), theta_r_deg) == pytest.approx(want, rel=1e-4)
