@@ -231,9 +231,30 @@ def _stack_dump_on_sigusr1() -> None:
         signal.signal(signal.SIGUSR1, dump)
 
 
+#: BLAS thread pools capped at one thread unless the user sets them (see :func:`_one_blas_thread`).
+_BLAS_THREAD_VARS = ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def _one_blas_thread() -> None:
+    """Cap numpy's BLAS at one thread, unless the environment already chooses.
+
+    goniolab's array work is element-wise, FFTs and small matrix products (plane fits,
+    aperture frames): BLAS threads gain nothing there, but after any product OpenBLAS's
+    workers spin, and a ``predict`` process burned twice its wall time in CPU (batch
+    workers competed with each other's spinning threads: two workers were no faster than
+    one). Set before numpy is imported (the CLI imports it lazily); worker processes
+    inherit it. numba's own threads are not affected.
+    """
+    if "numpy" in sys.modules:
+        return
+    for var in _BLAS_THREAD_VARS:
+        os.environ.setdefault(var, "1")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``goniolab`` console script; returns the process exit code."""
     _stack_dump_on_sigusr1()
+    _one_blas_thread()
     try:
         parser = build_parser(_command_in(sys.argv[1:] if argv is None else argv))
         args = parser.parse_args(argv)

@@ -5,6 +5,7 @@ looks at ``sys.modules``; no timing is asserted (bench/bench_startup.py measures
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -162,3 +163,24 @@ def test_a_command_run_registers_only_its_own_parser_and_a_typo_lists_them_all(
     assert main(["predcit", "stats"]) == 2
     err = capsys.readouterr().err
     assert "invalid choice: 'predcit'" in err and "'predict'" in err and "'scan'" in err
+
+
+def test_the_cli_caps_blas_at_one_thread_unless_the_user_chose() -> None:
+    """OpenBLAS's spinning workers doubled a predict's CPU time for no speed-up: the CLI sets
+    OPENBLAS_NUM_THREADS=1 before numpy loads, and leaves a user's own setting alone."""
+    probe = (
+        "import os, sys\n"
+        "from goniolab.cli import _one_blas_thread\n"
+        "_one_blas_thread()\n"
+        "print(os.environ['OPENBLAS_NUM_THREADS'], os.environ['MKL_NUM_THREADS'])\n"
+    )
+    env = {k: v for k, v in os.environ.items() if not k.endswith("_NUM_THREADS")}
+    run = subprocess.run(
+        [sys.executable, "-c", probe], cwd=ROOT, env=env, capture_output=True, text=True, check=True
+    )
+    assert run.stdout.split() == ["1", "1"]
+    env["OPENBLAS_NUM_THREADS"] = "2"
+    run = subprocess.run(
+        [sys.executable, "-c", probe], cwd=ROOT, env=env, capture_output=True, text=True, check=True
+    )
+    assert run.stdout.split() == ["2", "1"]
