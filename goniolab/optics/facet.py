@@ -139,6 +139,8 @@ _M1_TABLE_SIZE = 1025
 #: backend's deposits and cone responses (a facet moves by up to half a bin in each slope,
 #: its mirror direction by about 0.06 deg, against cones of degrees).
 LEAN_SLOPE_BIN = 1e-3
+#: Facets per block when the slope cells are counted.
+_CELL_BLOCK = 1 << 18
 
 _executor: ThreadPoolExecutor | None = None
 #: Empty third facet array: the kernels read ``(p, q)`` slopes instead of unit normals.
@@ -632,22 +634,23 @@ class FacetModel:
         q0 = math.floor(float(q.min()) / b + 0.5)
         n_q = math.floor(float(q.max()) / b + 0.5) - q0 + 1
         n_p = math.floor(float(p.max()) / b + 0.5) - p0 + 1
-        # the cell index (ip - p0) n_q + (iq - q0), ip = floor(p/b + 1/2), in place in
-        # float64 (exact: far below 2**53) and cast once
-        kf = np.multiply(p, 1.0 / b)
-        kf += 0.5 - p0
-        np.floor(kf, out=kf)
-        kf *= n_q
-        kq = np.multiply(q, 1.0 / b)
-        kq += 0.5 - q0
-        np.floor(kq, out=kq)
-        kf += kq
-        del kq
-        key = kf.astype(np.intp)
-        del kf
-        np.clip(key, 0, n_p * n_q - 1, out=key)  # rounding at the last cell's edge
-        counts = np.bincount(key, minlength=n_p * n_q)
-        del key
+        # the cell index (ip - p0) n_q + (iq - q0), ip = floor(p/b + 1/2), in float64 (exact:
+        # far below 2**53), block by block: the temporaries stay a block's, not the map's
+        counts = np.zeros(n_p * n_q, dtype=np.int64)
+        size = p.size
+        for lo in range(0, size, _CELL_BLOCK):
+            hi = min(lo + _CELL_BLOCK, size)
+            kf = np.multiply(p[lo:hi], 1.0 / b)
+            kf += 0.5 - p0
+            np.floor(kf, out=kf)
+            kf *= n_q
+            kq = np.multiply(q[lo:hi], 1.0 / b)
+            kq += 0.5 - q0
+            np.floor(kq, out=kq)
+            kf += kq
+            key = kf.astype(np.intp)
+            np.clip(key, 0, n_p * n_q - 1, out=key)  # rounding at the last cell's edge
+            counts += np.bincount(key, minlength=n_p * n_q)
         cells = np.flatnonzero(counts)
         cp = ((cells // n_q + p0) * b).astype(np.float64)
         cq = ((cells % n_q + q0) * b).astype(np.float64)
