@@ -13,8 +13,10 @@ that levelling has work to do) made in a temporary directory:
 - ``goniolab predict brdf MAP --theta-i 45 --theta-r 0:70:1`` (71 points, 6 deg cones) and
   ``goniolab predict gloss MAP`` beside ``bench/baseline_numpy.py MAP brdf|gloss`` (the same
   curve and readings written in plain numpy), target ratio <= 0.5;
-- the numba cache: the first run with an empty ``NUMBA_CACHE_DIR`` (compiles the kernels)
-  beside the cached runs;
+- ``--model facet`` runs the facet model's numba-free "lean" backend (one command, one
+  process: numba's import and set-up cost ~1 s); the defaults (``--model auto``, masking)
+  use the compiled kernels of the physical-optics models and the facet model: their first
+  run with an empty ``NUMBA_CACHE_DIR`` (compiles the kernels) beside the cached runs;
 - the memory-bandwidth limit: the bytes the pipeline must touch (read the file into memory,
   two plane sums, the slopes written once, one read of the slopes per facet pass) over the
   measured ``numpy.copyto`` bandwidth (bytes read + written per second);
@@ -119,9 +121,10 @@ def bytes_touched(n: int, facet_passes: int) -> float:
     return load + plane + slopes + passes
 
 
-def in_process(path: Path, repeats: int) -> dict[str, float]:
+def in_process(path: Path, repeats: int, backend: str) -> dict[str, float]:
     """Medians of the steps inside one process (kernels cached and warm), and the peak of
-    the array memory (tracemalloc: numpy's buffers) of one read-to-curve run."""
+    the array memory (tracemalloc: numpy's buffers) of one read-to-curve run, with the
+    facet model's ``backend`` (unmasked, as the baseline)."""
     import tracemalloc
 
     sys.path.insert(0, str(ROOT))
@@ -137,7 +140,9 @@ def in_process(path: Path, repeats: int) -> dict[str, float]:
         hm = load_heightmap(path)
         surface = Surface.from_heightmap(hm)
         del hm
-        FacetModel(surface).luminance_pct(45.0, tr, source=Cone(6.0), detector=Cone(6.0))
+        FacetModel(surface, backend=backend).luminance_pct(  # type: ignore[arg-type]
+            45.0, tr, source=Cone(6.0), detector=Cone(6.0)
+        )
 
     curve()  # warm
     tracemalloc.start()
@@ -151,7 +156,7 @@ def in_process(path: Path, repeats: int) -> dict[str, float]:
         t1 = time.perf_counter()
         surface = Surface.from_heightmap(hm)
         t2 = time.perf_counter()
-        model = FacetModel(surface)
+        model = FacetModel(surface, backend=backend)  # type: ignore[arg-type]
         model.luminance_pct(45.0, tr, source=Cone(6.0), detector=Cone(6.0))
         t3 = time.perf_counter()
         gloss_report(model)
@@ -193,11 +198,14 @@ def main(argv: list[str] | None = None) -> int:
         gloss = [GONIOLAB, "predict", "gloss", str(mp), *facet]
         base = [PY, str(ROOT / "bench" / "baseline_numpy.py"), str(mp)]
 
-        # first run with an empty numba cache: the kernels compile (JIT), then cached runs
-        first = run([*brdf, "--json"], env)
-        out["jit_first_run_brdf_s"] = first[0]
-        first_g = run([*gloss, "--json"], env)
-        out["jit_first_run_gloss_s"] = first_g[0]
+        # the defaults (auto, masking) compile the kernels on their first run with an empty
+        # numba cache (JIT); later runs load them from the cache
+        auto_brdf = [GONIOLAB, "predict", "brdf", str(mp), "--theta-i", "45", "--theta-r",
+                     "0:70:1"]  # fmt: skip
+        auto_gloss = [GONIOLAB, "predict", "gloss", str(mp)]
+        out["jit_first_run_brdf_s"] = run([*auto_brdf, "--json"], env)[0]
+        out["jit_first_run_gloss_s"] = run([*auto_gloss, "--json"], env)[0]
+        run([*brdf, "--json"], env)  # bytecode caches of the facet path
 
         rows: dict[str, dict[str, float]] = {}
         rows["python -c pass"] = timed([PY, "-c", "pass"], env, args.repeats)
@@ -209,6 +217,8 @@ def main(argv: list[str] | None = None) -> int:
         rows["numpy baseline brdf"] = timed([*base, "brdf"], env, args.repeats)
         rows["goniolab predict gloss"] = timed(gloss, env, args.repeats)
         rows["numpy baseline gloss"] = timed([*base, "gloss"], env, args.repeats)
+        rows["predict brdf (auto, masking)"] = timed(auto_brdf, env, args.repeats)
+        rows["predict gloss (auto, masking)"] = timed(auto_gloss, env, args.repeats)
         out["rows"] = rows
 
         bw = copy_bandwidth_gbs()
@@ -217,7 +227,8 @@ def main(argv: list[str] | None = None) -> int:
         out["limit_gloss_s"] = bytes_touched(args.size, 4) / (bw * 1e9)
         out["map_float64_mb"] = 8 * args.size**2 / 2**20
         os.environ["NUMBA_CACHE_DIR"] = env["NUMBA_CACHE_DIR"]
-        out["in_process"] = in_process(mp, args.repeats)
+        out["in_process"] = in_process(mp, args.repeats, "lean")
+        out["in_process_numba"] = in_process(mp, args.repeats, "numba")
 
         if args.batch:
             bdir = tdir / "batch"
@@ -277,18 +288,20 @@ def print_table(out: dict[str, object]) -> None:
             f"limit {out[f'limit_{what}_s'] * 1e3:.0f} ms at {out['copy_bandwidth_gbs']:.1f} GB/s"
         )
     print(
-        f"numba kernels: first run with an empty cache {out['jit_first_run_brdf_s']:.2f} s "
-        f"(brdf), {out['jit_first_run_gloss_s']:.2f} s (gloss); cached: the table above"
+        f"numba kernels (the defaults, auto + masking): first run with an empty cache "
+        f"{out['jit_first_run_brdf_s']:.2f} s (brdf), {out['jit_first_run_gloss_s']:.2f} s "
+        "(gloss); cached: the table above"
     )
-    ip = out["in_process"]
-    assert isinstance(ip, dict)
-    print(
-        f"in process (cached kernels): read {ip['read_s'] * 1e3:.0f} ms, level + slopes "
-        f"{ip['level+slopes_s'] * 1e3:.0f} ms, 71-point curve {ip['curve_s'] * 1e3:.0f} ms, "
-        f"gloss report {ip['gloss_s'] * 1e3:.0f} ms; array memory peak read-to-curve "
-        f"{ip['array_peak_mb']:.0f} MB (budget 3 x {out['map_float64_mb']:.0f} MB = "
-        f"{3 * out['map_float64_mb']:.0f} MB)"  # type: ignore[operator]
-    )
+    for key, label in (("in_process", "lean backend"), ("in_process_numba", "numba, cached")):
+        ip = out[key]
+        assert isinstance(ip, dict)
+        print(
+            f"in process, {label}: read {ip['read_s'] * 1e3:.0f} ms, level + slopes "
+            f"{ip['level+slopes_s'] * 1e3:.0f} ms, 71-point curve {ip['curve_s'] * 1e3:.0f} ms, "
+            f"gloss report {ip['gloss_s'] * 1e3:.0f} ms; array memory peak read-to-curve "
+            f"{ip['array_peak_mb']:.0f} MB (budget 3 x {out['map_float64_mb']:.0f} MB = "
+            f"{3 * out['map_float64_mb']:.0f} MB)"  # type: ignore[operator]
+        )
     if "batch" in out:
         bt = out["batch"]
         assert isinstance(bt, dict)
