@@ -60,11 +60,18 @@ def _cmd_tui(args: argparse.Namespace) -> int:
     if not args.gloss_every >= 0:
         raise UserError(f"--gloss-every must be >= 0 s, got {args.gloss_every}")
     from goniolab.tui.app import GonioApp
-    from goniolab.tui.session_backend import SessionBackend
 
-    backend = SessionBackend(
-        args.config, time_scale=args.time_scale, sample=args.sample, store_path=args.store
-    )
+    def backend() -> Any:
+        # built by the app after its first frame: the lab's modules (pydantic, numpy, the
+        # simulator) and the config's validation are most of a second
+        from goniolab.tui.session_backend import SessionBackend
+
+        return SessionBackend(
+            args.config, time_scale=args.time_scale, sample=args.sample, store_path=args.store
+        )
+
     app = GonioApp(backend, autostart=args.autostart, gloss_every_s=args.gloss_every)
     code = app.run()
+    if app.boot_error is not None:  # a bad config, file, sample...: one clear error, exit 2
+        raise app.boot_error
     return 0 if code is None else int(code)

@@ -12,6 +12,7 @@ import asyncio
 import contextlib
 import math
 import time
+from collections.abc import Callable
 from typing import ClassVar
 
 from textual import work
@@ -82,13 +83,34 @@ def _exit_soon(delay_s: float) -> None:
     timer.start()
 
 
+#: Actions that need the lab (refused by :meth:`GonioApp.check_action` while it opens).
+_LAB_ACTIONS = frozenset(
+    {
+        "start_scan",
+        "toggle_pause",
+        "abort_scan",
+        "align",
+        "read_gloss",
+        "home",
+        "toggle_log",
+        "cycle_plot",
+        "browse_runs",
+        "blur",
+    }
+)
+
+
 class GonioApp(App[int]):
     """Scan setup, instrument status, live comparison plots, metrics and gloss log.
 
     Parameters
     ----------
     backend
-        The lab (real, simulated, or scripted in tests).
+        The lab (real, simulated, or scripted in tests), or a function that builds it. The
+        function (the CLI's: it imports the lab's modules and reads the config, about 0.4 s)
+        runs in a thread after the first frame, which shows the title and "opening the
+        lab..." until the lab's widgets replace it; an error it raises (a bad config)
+        ends the app, kept in :attr:`boot_error` for the caller to report.
     autostart
         Start a scan with the form's values as soon as the goniometer is homed.
     poll_hz
@@ -128,14 +150,21 @@ class GonioApp(App[int]):
 
     def __init__(
         self,
-        backend: Backend,
+        backend: Backend | Callable[[], Backend],
         *,
         autostart: bool = False,
         poll_hz: float = 4.0,
         gloss_every_s: float = 0.0,
     ) -> None:
         super().__init__()
-        self.backend = backend
+        self._backend: Backend | None = None
+        self._factory: Callable[[], Backend] | None = None
+        if callable(backend) and not hasattr(backend, "bus"):
+            self._factory = backend
+        else:
+            self._backend = backend  # type: ignore[assignment]
+        #: What building the backend raised (the app then exits with code 2).
+        self.boot_error: BaseException | None = None
         self.autostart = autostart
         self.poll_hz = poll_hz
         self.gloss_every_s = gloss_every_s
@@ -156,30 +185,82 @@ class GonioApp(App[int]):
         self._error_toast_s: dict[str, float] = {}  # device -> time of its last error toast
         self._pause_on_start = False
         self._starts = 0  # scans started: a prediction preview older than a start is dropped
-        self._queue = backend.bus.subscribe()
+        self._queue: asyncio.Queue[Event | None] | None = None
+        if self._backend is not None:
+            self._queue = self._backend.bus.subscribe()
+
+    @property
+    def backend(self) -> Backend:
+        """The lab; only actions allowed while it opens (:meth:`check_action`) run before."""
+        if self._backend is None:
+            raise RuntimeError("the lab is still opening")
+        return self._backend
 
     # ------------------------------------------------------------------ layout
     def compose(self) -> ComposeResult:
         yield Header()
-        yield Static("", id="banner")
-        with Horizontal(id="top"):
-            with Vertical(id="left"):
-                yield ScanForm(
-                    self.backend.sample_names(),
-                    self.backend.default_setup(),
-                    sample_note=self.backend.sample_note,
-                )
-                yield StatusPanel()
-            yield ComparisonPanel(id="live")
-        yield GlossLog(id="gloss-log")
+        if self._backend is None:
+            yield Static("opening the lab...", id="boot")
+        else:
+            yield from self._layout()
         yield Footer()
 
+    def _layout(self) -> list[Static | Horizontal | GlossLog]:
+        """The lab's widgets between the header and the footer."""
+        form = ScanForm(
+            self.backend.sample_names(),
+            self.backend.default_setup(),
+            sample_note=self.backend.sample_note,
+        )
+        left = Vertical(form, StatusPanel(), id="left")
+        return [
+            Static("", id="banner"),
+            Horizontal(left, ComparisonPanel(id="live"), id="top"),
+            GlossLog(id="gloss-log"),
+        ]
+
     def on_mount(self) -> None:
+        self._watch_hangup()
+        if self._backend is None:
+            self.sub_title = "opening the lab..."
+            self.call_after_refresh(self._build_backend)
+            return
+        self._lab_mounted()
+
+    def _lab_mounted(self) -> None:
         self.sub_title = self.backend.title
         self.query_one("#gloss-log", GlossLog).border_title = "glossmeter log"
-        self._watch_hangup()
         self.consume_events()
         self.startup()
+
+    @work(thread=True, exclusive=True, group="boot")
+    def _build_backend(self) -> None:
+        """Build the lab's backend off the event loop, after the first frame (its modules
+        and the config's validation take ~0.4 s), then show the lab's widgets."""
+        assert self._factory is not None
+        try:
+            backend = self._factory()
+        except BaseException as exc:  # a bad config: the caller reports it, exit code 2
+            self.call_from_thread(self._boot_failed, exc)
+            return
+        self.call_from_thread(self._attach_lab, backend)  # type: ignore[arg-type]  # awaited
+
+    def _boot_failed(self, exc: BaseException) -> None:
+        self.boot_error = exc
+        self.exit(2, return_code=2)
+
+    async def _attach_lab(self, backend: Backend) -> None:
+        if self._lab_released:  # quit while the lab was opening
+            return
+        self._backend = backend
+        self._queue = backend.bus.subscribe()
+        await self.mount_all(self._layout(), before=self.query_one(Footer))
+        await self.query_one("#boot", Static).remove()
+        self._lab_mounted()
+
+    def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
+        """While the lab opens only quitting (and textual's own actions) can run."""
+        return not (self._backend is None and action in _LAB_ACTIONS)
 
     def _watch_hangup(self) -> None:
         """Quit as ``q`` does (abort a scan, park, release the lab) when the terminal goes
@@ -259,6 +340,7 @@ class GonioApp(App[int]):
     @work(exclusive=True, group="events")
     async def consume_events(self) -> None:
         """Apply every bus event to the views (runs on the app's event loop)."""
+        assert self._queue is not None
         while (ev := await self._queue.get()) is not None:
             try:
                 self.apply_event(ev)
@@ -585,6 +667,10 @@ class GonioApp(App[int]):
         if self._lab_released:
             return
         self._lab_released = True
+        if self._backend is None:  # still opening: nothing to release
+            if self._hung_up:
+                _exit_soon(HANGUP_EXIT_S)
+            return
         # Stop polling first: a status read on an instrument being closed may never answer.
         self.workers.cancel_group(self, "poll")
         try:
@@ -601,7 +687,7 @@ class GonioApp(App[int]):
 
         The closing (the runner parks the arms) runs in a worker so the screen stays live.
         """
-        if self.backend.running:
+        if self._backend is not None and self._backend.running:
             self.notify("aborting the scan and parking the arms...", title="Quit")
         self._quit()
 

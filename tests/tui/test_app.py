@@ -12,7 +12,7 @@ from textual_plot import PlotWidget
 from goniolab.scan.events import InstrumentError, RunState
 from goniolab.tui.app import GonioApp
 from goniolab.tui.screens import RunsScreen
-from goniolab.tui.widgets import ComparisonPanel, GlossLog, MetricsTable, StatusPanel
+from goniolab.tui.widgets import ComparisonPanel, GlossLog, MetricsTable, ScanForm, StatusPanel
 from tests.tui.tui_scripted import (
     AMP_PCT,
     PEAK_DEG,
@@ -385,3 +385,66 @@ async def test_a_aligns_reports_the_result_and_keeps_its_readings_off_the_curve(
         await backend.release(100)
         await wait_until(pilot, lambda: app.run_state is RunState.DONE)
         assert app.comparison.n_readings == 33
+
+
+async def test_the_first_frame_comes_before_the_lab_then_the_lab_replaces_it() -> None:
+    """Given a function that builds the backend (the CLI's: its modules and the config take
+    ~0.4 s), the app paints its title and "opening the lab..." first and builds the lab in
+    a thread; lab keys do nothing meanwhile; then the lab's widgets replace the notice."""
+    import threading
+
+    backend = ScriptedBackend()
+    gate = threading.Event()
+    calls: list[str] = []
+
+    def build() -> ScriptedBackend:
+        calls.append(threading.current_thread().name)
+        assert gate.wait(30)
+        return backend
+
+    app = GonioApp(build, poll_hz=0)
+    async with app.run_test(size=SIZE) as pilot:
+        await wait_until(pilot, lambda: bool(calls))
+        assert calls[0] != threading.main_thread().name  # off the event loop
+        assert "opening the lab" in str(app.query_one("#boot", Static).render())
+        assert app.title == "goniolab" and not app.query(ScanForm)
+        await pilot.press("s")  # refused while the lab opens: no error, nothing started
+        assert backend.setups == [] and app.run_state is RunState.IDLE
+        gate.set()
+        await wait_until(pilot, app.ready.is_set)
+        assert not app.query("#boot") and app.query(ScanForm)
+        assert app.sub_title == backend.title
+        await pilot.press("s")
+        await wait_until(pilot, lambda: app.run_state is RunState.RUNNING)
+
+
+async def test_a_lab_that_cannot_be_built_ends_the_app_with_its_error() -> None:
+    from goniolab.errors import UserError
+
+    def build() -> ScriptedBackend:
+        raise UserError("lab.toml: lab.name: field required")
+
+    app = GonioApp(build, poll_hz=0)
+    async with app.run_test(size=SIZE) as pilot:
+        await wait_until(pilot, lambda: app.boot_error is not None)
+        await pilot.pause()
+    assert app.return_code == 2
+    assert str(app.boot_error) == "lab.toml: lab.name: field required"
+
+
+async def test_quitting_while_the_lab_opens_leaves_cleanly() -> None:
+    import threading
+
+    gate = threading.Event()
+
+    def build() -> ScriptedBackend:
+        gate.wait(30)
+        return ScriptedBackend()
+
+    app = GonioApp(build, poll_hz=0)
+    async with app.run_test(size=SIZE) as pilot:
+        await pilot.pause()
+        await pilot.press("q")
+        await pilot.pause()
+        gate.set()
+    assert app.return_code == 0

@@ -1,4 +1,5 @@
-"""``goniolab tui`` reports bad input as one line naming the file/option, before any UI."""
+"""``goniolab tui`` reports bad input as one line naming the file/option (after the first
+frame has been taken down, when the config is only read once the app shows)."""
 
 from __future__ import annotations
 
