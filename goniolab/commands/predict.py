@@ -37,7 +37,6 @@ if TYPE_CHECKING:  # numpy and the optics load when a command runs, not at --hel
     import numpy as np
     from numpy.typing import NDArray
 
-    from goniolab.optics.apertures import Cone
     from goniolab.optics.metrics import PeakMetrics
 
 #: ``--model`` choices (goniolab.models.MODEL_NAMES; literal here: no optics import at --help).
@@ -165,71 +164,79 @@ def _model_name(model: Any) -> str:
     return kind if isinstance(kind, str) and kind in MODEL_NAMES else "facet"
 
 
-def _gloss_models(model: Any) -> tuple[dict[str, Any], dict[str, Any]]:
-    """``"model"`` per geometry (G20/G60/G85) and the facet fallbacks, for --json."""
+def _gloss_models(model: Any) -> tuple[dict[str, Any], dict[str, Any], list[str]]:
+    """Per reading, the model that computed it (G20/G60/G85 and the ASTM E430 readings),
+    the facet hand-overs and the notes (``"G85: ..."``), for --json, netCDF and stderr."""
     from goniolab.optics import gloss_standards as gs
+    from goniolab.optics.provenance import gloss_provenance_of, provenance_of
 
+    names: dict[str, Any] = {}
+    fb: dict[str, Any] = {}
+    warnings: list[str] = []
+    rule = model.choice if _is_auto(model) else None
+
+    def record(label: str, prov: Any, theta_i: float) -> None:
+        names[label] = prov.model
+        warnings.extend(f"{label}: {note}" for note in prov.notes)
+        chosen = rule(theta_i).model if rule is not None else _model_name(model)
+        if prov.model == "facet" and chosen != "facet":
+            fb[label] = prov.notes[-1] if prov.notes else "facet model"
+
+    for t, prov in gloss_provenance_of(model).items():
+        record(f"G{t}", prov, t)
     if _is_auto(model):
-        ex = model.explain_gloss()
-        names: dict[str, Any] = {f"G{k}": v["model"] for k, v in ex.items()}
-        fb = {f"G{k}": v["fallback_facet"] for k, v in ex.items() if "fallback_facet" in v}
-        names["rule"] = {f"G{k}": {"g": v["g"], "reason": v["reason"]} for k, v in ex.items()}
-    else:
-        name = _model_name(model)
-        names = {f"G{t}": name for t in (20, 60, 85)}
-        fb = {}
-        if _is_physical(model):
-            fb = {f"G{k}": v for k, v in model.gloss_fallbacks().items()}
-    # ASTM E430 readings: narrow slits a small map may not resolve
+        ex = {t: model.choice(t) for t in (20, 60, 85)}
+        names["rule"] = {f"G{t}": {"model": c.model, "g": c.g, "reason": c.reason}
+                         for t, c in ex.items()}  # fmt: skip
     e430 = [
-        (
-            "E430 B haze",
-            gs.E430_B_ANGLE_DEG,
-            gs.E430_B_HAZE_OFFSET_DEG,
-            gs.E430_B_SOURCE,
-            gs.E430_B_HAZE_RECEPTOR,
-        ),
-        (
-            "E430 A Rs/DOI",
-            gs.E430_A_ANGLE_DEG,
-            gs.E430_A_DOI_OFFSET_DEG,
-            gs.E430_A_SOURCE,
-            gs.E430_A_SPECULAR_RECEPTOR,
-        ),
-        (
-            "E430 A wide haze",
-            gs.E430_A_ANGLE_DEG,
-            gs.E430_A_WIDE_HAZE_OFFSET_DEG,
-            gs.E430_A_SOURCE,
-            gs.E430_A_HAZE_RECEPTOR,
-        ),
-    ]
-    for label, t, off, src, rec in e430:
-        target = model.model_at(t) if _is_auto(model) else model
-        if _is_physical(target):
-            why = target.coverage(t, t + off, src, rec)
-            if why is not None:
-                fb[label] = why
-    return names, fb
+        ("E430 B gloss", gs.E430_B_ANGLE_DEG, 0.0, gs.E430_B_SOURCE, gs.E430_B_SPECULAR_RECEPTOR),
+        ("E430 B haze", gs.E430_B_ANGLE_DEG, gs.E430_B_HAZE_OFFSET_DEG, gs.E430_B_SOURCE,
+         gs.E430_B_HAZE_RECEPTOR),
+        ("E430 A Rs/DOI", gs.E430_A_ANGLE_DEG, gs.E430_A_DOI_OFFSET_DEG, gs.E430_A_SOURCE,
+         gs.E430_A_SPECULAR_RECEPTOR),
+        ("E430 A narrow haze", gs.E430_A_ANGLE_DEG, gs.E430_A_NARROW_HAZE_OFFSET_DEG,
+         gs.E430_A_SOURCE, gs.E430_A_HAZE_RECEPTOR),
+        ("E430 A wide haze", gs.E430_A_ANGLE_DEG, gs.E430_A_WIDE_HAZE_OFFSET_DEG,
+         gs.E430_A_SOURCE, gs.E430_A_HAZE_RECEPTOR),
+    ]  # fmt: skip
+    for label, ti, off, src, rec in e430:
+        record(label, provenance_of(model, ti, ti + off, src, rec), ti)
+    return names, fb, warnings
 
 
-def _curve_model(
-    model: Any, ti: float, tr: NDArray[np.float64], src: Cone, det: Cone
-) -> tuple[Any, dict[str, str]]:
-    """``"model"`` of a curve at theta_i and its per-angle facet fallbacks."""
-    target = model
+def _warn(warnings: list[str]) -> None:
+    """The notes of a prediction on stderr, one line each (the same text as --json's)."""
+    for w in dict.fromkeys(warnings):
+        print(f"goniolab: warning: {w}", file=sys.stderr)
+
+
+def _curve_models(
+    model: Any, ti: float, tr: NDArray[np.float64], src: Any, det: Any
+) -> tuple[Any, list[str], dict[str, str], list[str]]:
+    """For a curve at theta_i: ``"model"`` (auto: the rule's choice, g and reason), the
+    model that computed each angle, the facet hand-overs and the notes (each note once,
+    with the angles it concerns)."""
+    from goniolab.optics.provenance import model_label, provenance_of
+
     name: Any = _model_name(model)
     if _is_auto(model):
         ch = model.choice(ti)
         name = {"auto": ch.model, "g": ch.g, "reason": ch.reason}
-        target = model.model_at(ti)
+    chosen = name["auto"] if isinstance(name, dict) else name
+    per: list[str] = []
     fb: dict[str, str] = {}
-    if _is_physical(target) and det.full_angle_deg > 0:
-        for t in tr:
-            why = target.coverage(ti, float(t), src, det)
-            if why is not None:
-                fb[f"{float(t):g}"] = why
-    return name, fb
+    by_note: dict[str, list[str]] = {}
+    if not (_is_auto(model) or _is_physical(model)):
+        return name, [model_label(model)] * tr.size, fb, []
+    for t in tr:
+        prov = provenance_of(model, ti, float(t), src, det)
+        per.append(prov.model)
+        for note in prov.notes:
+            by_note.setdefault(note, []).append(f"{float(t):g}")
+        if prov.model == "facet" and chosen != "facet":
+            fb[f"{float(t):g}"] = prov.notes[-1] if prov.notes else "facet model"
+    warnings = [f"theta_r {', '.join(a)} deg: {note}" for note, a in by_note.items()]
+    return name, per, fb, warnings
 
 
 def _cmd_stats(args: argparse.Namespace) -> int:
@@ -327,8 +334,11 @@ def _cmd_gloss(args: argparse.Namespace) -> int:
     _require_finite(args.map, rep.as_dict(), _MODEL_OVERFLOW)
     from goniolab.datasets import gloss_dataset
 
-    _write_out(args, lambda attrs: gloss_dataset(rep, attrs=attrs))
-    names, fallback = _gloss_models(model)
+    names, fallback, warnings = _gloss_models(model)
+    computed_by = {k: v for k, v in names.items() if isinstance(v, str)}
+    prov_attrs = {"computed_by": json.dumps(computed_by), "warnings": json.dumps(warnings)}
+    _write_out(args, lambda attrs: gloss_dataset(rep, attrs={**attrs, **prov_attrs}))
+    _warn(warnings)
     e = rep.e430
     out: dict[str, Any] = {
         "map": str(args.map),
@@ -346,13 +356,13 @@ def _cmd_gloss(args: argparse.Namespace) -> int:
     }
     if fallback:
         out["fallback"] = fallback
+    if warnings:
+        out["warnings"] = warnings
     if args.json:
         print(json.dumps(out, indent=2, allow_nan=False))
         return 0
     print(f"{args.map} (n = {args.n.real:g}{f'+{args.n.imag:g}i' if args.n.imag else ''})")
     print(_gloss_table(rep, names))
-    for k, why in fallback.items():
-        print(f"  {k}: facet model used: {why}")
     if e.doi < 0:
         print(
             "  note: DOI < 0: the 0.3 deg off-specular reading exceeds the specular one "
@@ -501,7 +511,11 @@ def _cmd_brdf(args: argparse.Namespace) -> int:
         out["wavelength_nm"] = args.wavelength_nm
     out["theta_r_deg"] = tr.tolist()
     if args.point:
-        out["model"], fb = _curve_model(model, ti, tr, Cone(1.0), Cone(0.0))
+        from goniolab.optics.apertures import Rect
+        from goniolab.optics.physical import POINT_BRDF_BOX_DEG
+
+        box = Rect(POINT_BRDF_BOX_DEG, POINT_BRDF_BOX_DEG)
+        out["model"], per, fb, warnings = _curve_models(model, ti, tr, Rect(0.0, 0.0), box)
         try:
             brdf = np.asarray(model.brdf_inplane(ti, tr), dtype=np.float64)
         except ValueError as exc:
@@ -516,9 +530,7 @@ def _cmd_brdf(args: argparse.Namespace) -> int:
             raise UserError(f"--source-deg/--detector-deg: {exc}") from None
         if det.full_angle_deg == 0.0:
             raise UserError("--detector-deg 0 has no solid angle: use --point for the BRDF")
-        out["model"], fb = _curve_model(model, ti, tr, src, det)
-        if fb:
-            out["fallback"] = fb
+        out["model"], per, fb, warnings = _curve_models(model, ti, tr, src, det)
         try:
             lum = np.asarray(
                 model.luminance_pct(ti, tr, source=src, detector=det), dtype=np.float64
@@ -533,6 +545,12 @@ def _cmd_brdf(args: argparse.Namespace) -> int:
         out["detector_deg"] = det.full_angle_deg
         out["brdf_sr"] = brdf.tolist()
         out["luminance_pct"] = lum.tolist()
+    out["models"] = per  # the model that computed each angle
+    if fb:
+        out["fallback"] = fb
+    if warnings:
+        out["warnings"] = warnings
+    _warn(warnings)
     curve = brdf if lum is None else lum
     peak = _peak(tr, curve)
     fwhm_note = ""
@@ -554,19 +572,21 @@ def _cmd_brdf(args: argparse.Namespace) -> int:
     _require_finite(args.map, out, _MODEL_OVERFLOW)
     from goniolab.datasets import brdf_dataset
 
-    cones = {} if lum is None else {"source_cone_deg": out["source_deg"],
+    cones: dict[str, Any] = {} if lum is None else {"source_cone_deg": out["source_deg"],
                                     "detector_cone_deg": out["detector_deg"]}  # fmt: skip
+    cones["computed_by"] = json.dumps(per)
+    cones["warnings"] = json.dumps(warnings)
     _write_out(args, lambda attrs: brdf_dataset(ti, tr, brdf, lum, attrs={**attrs, **cones}))
     if args.json:
         print(json.dumps(out, indent=2, allow_nan=False))
         return 0
     head = f"{'theta_r':>8}  {'BRDF (1/sr)':>12}"
-    print(head + (f"  {'luminance %':>12}" if lum is not None else ""))
+    print(head + (f"  {'luminance %':>12}" if lum is not None else "") + "  model")
     for k, t in enumerate(tr):
         line = f"{t:8.2f}  {brdf[k]:12.5g}"
         if lum is not None:
             line += f"  {lum[k]:12.5g}"
-        print(line)
+        print(f"{line}  {per[k]}")
     if peak is not None:
         unit = "1/sr" if lum is None else "%"
         width = fwhm_note or f"{peak.fwhm_deg:.3g} deg"

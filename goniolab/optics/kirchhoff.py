@@ -71,13 +71,24 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from goniolab.optics import _cell_kernels as CK
 from goniolab.optics.fresnel import fresnel
-from goniolab.optics.physical import FloatArray, PhysicalOpticsModel, _Box, _check_theta_i
+from goniolab.optics.physical import (
+    ENERGY_CHECK_FROM_DEG,
+    MAX_PHASE_STEP_RAD,
+    RR_VALID_G,
+    RR_VALID_SDQ,
+    FloatArray,
+    PhysicalOpticsModel,
+    _Box,
+    _check_theta_i,
+)
+from goniolab.optics.psd import _pruned_fft2
 
 __all__ = ["DEFAULT_TAYLOR_TOL", "KirchhoffModel", "band_plan"]
 
@@ -122,33 +133,6 @@ def band_plan(
     ]
 
 
-def _pruned_fft2(
-    term: NDArray[np.complex64],
-    ky: NDArray[np.int64],
-    kx: NDArray[np.int64],
-    y_first: bool,
-    out: NDArray[np.complex64],
-) -> complex:
-    """2-D FFT of ``term`` at rows ``ky`` and columns ``kx`` only, into ``out``; returns the
-    zero-frequency value (summed in complex128).
-
-    ``term`` is laid out ``(x, y)`` when ``y_first`` (the transposed tile), else ``(y, x)``:
-    the first pass runs over the whole tile along its contiguous last axis, keeps the
-    outputs the region needs, and the second pass transforms only those. Same values as
-    ``fft2(...)[ky][:, kx]`` (to float32 rounding) at a fraction of the work when the
-    region is narrow.
-    """
-    import scipy.fft
-
-    a = scipy.fft.fft(term, axis=1, workers=-1)
-    dc = complex(np.sum(a[:, 0], dtype=np.complex128))
-    first, second = (ky, kx) if y_first else (kx, ky)
-    a = scipy.fft.fft(np.take(a, first, axis=1), axis=0, workers=-1, overwrite_x=True)
-    a = np.take(a, second, axis=0)
-    out[...] = a.T if y_first else a
-    return dc
-
-
 class KirchhoffModel(PhysicalOpticsModel):
     """Scalar Kirchhoff model of a height map (module docstring; parameters as
     :class:`~goniolab.optics.physical.PhysicalOpticsModel`).
@@ -169,19 +153,22 @@ class KirchhoffModel(PhysicalOpticsModel):
         lams_um: Sequence[float],
         boxes: Sequence[_Box],
         geo: Sequence[tuple[FloatArray, NDArray[np.bool_]]],
+        os: tuple[int, int] = (1, 1),
     ) -> tuple[list[FloatArray], list[float]]:
-        """Diffuse ``sum_tiles |U_d|^2 / (n_tiles N sum W^2)`` per cell (0 for evanescent
-        cells) and the coherent factor ``mean_tiles |sum W e^(-i v_z h)|^2 / (sum W)^2`` at
-        the specular cell (0 when the box does not hold it), per wavelength; ``geo`` holds
-        each box's ``(z, ok)`` (:meth:`_geometry`).
+        """Diffuse ``sum_tiles |U_d|^2 / (n_tiles N sum W^2 os_x os_y)`` per cell (0 for
+        evanescent cells) and the coherent factor ``mean_tiles |sum W e^(-i v_z h)|^2 /
+        (sum W)^2`` at the specular ``v_z = 2 k cos ti``, per wavelength; ``geo`` holds each
+        box's ``(z, ok)`` (:meth:`_geometry`), ``os`` the zero padding of the grid.
 
         ``U_d`` is the field minus the tile's mean field times the window's transform: the
         coherent beam is a delta in the specular direction (the lit spot is far larger than
-        the map), kept out of the cells it would smear over.
+        the map), kept out of the cells it would smear over and summed analytically
+        (:meth:`PhysicalOpticsModel._coherent_sums`).
 
-        Only the FFT outputs the boxes read are formed: each Taylor term is transformed
+        Only the transform outputs the boxes read are formed: each Taylor term is transformed
         along the axis needing fewer outputs first (over the whole tile, contiguous), those
-        outputs kept, then along the other axis (``_pruned_fft2``); a band's terms are then
+        outputs kept, then along the other axis (``_pruned_fft2``; zero-padded to ``os``
+        times the tile when the receptor needs a finer grid); a band's terms are then
         summed per cell by Horner's scheme in one pass per wavelength
         (:func:`goniolab.optics._cell_kernels.kirchhoff_band_numba`).
         """
@@ -189,46 +176,46 @@ class KirchhoffModel(PhysicalOpticsModel):
         t = sh.tiled
         cz_i = math.cos(math.radians(theta_i_deg))
         vzs = [(2.0 * math.pi / lam) * (cz_i + z) for lam, (z, _) in zip(lams_um, geo, strict=True)]
-        v_all_lo, v_all_hi = math.inf, -math.inf
+        v_spec = [(2.0 * math.pi / lam) * 2.0 * cz_i for lam in lams_um]
+        v_all_lo, v_all_hi = min(v_spec), max(v_spec)
         for vz, (_, ok) in zip(vzs, geo, strict=True):
             if np.any(ok):
                 v_all_lo = min(v_all_lo, float(vz[ok].min()))
                 v_all_hi = max(v_all_hi, float(vz[ok].max()))
         acc = [np.zeros((b.iy1 - b.iy0 + 1, b.ix1 - b.ix0 + 1)) for b in boxes]
         coh_acc = [0.0 for _ in boxes]
-        if not math.isfinite(v_all_lo):
-            return acc, coh_acc
         h_max = sh.h_max_um
         plan = band_plan(v_all_lo, v_all_hi, h_max, self.taylor_tol)
         total = t.n_tiles * sum(order + 1 for *_, order in plan)
         last = len(plan) - 1
-        # the bands that own some cell at some wavelength (the others cost no FFT)
+
+        def owns(b: int, v: Any) -> Any:
+            lo, hi = plan[b][0], plan[b][1]
+            return (v >= lo) & ((v <= hi) if b == last else (v < hi))
+
+        # the bands that own some cell or specular direction (the others cost no FFT)
         active = [
             b
-            for b, (lo, hi, _vc, _o) in enumerate(plan)
-            if any(
-                np.any(ok & (vz >= lo) & ((vz <= hi) if b == last else (vz < hi)))
-                for vz, (_, ok) in zip(vzs, geo, strict=True)
-            )
+            for b in range(len(plan))
+            if any(np.any(ok & owns(b, vz)) for vz, (_, ok) in zip(vzs, geo, strict=True))
+            or any(bool(owns(b, v)) for v in v_spec)
         ]
-        # the region of the FFT grid the boxes read (signed indices, contiguous)
+        # the region of the (padded) grid the boxes read (signed indices, contiguous)
+        ly, lx = os[1] * t.ny_t, os[0] * t.nx_t
         y0, y1 = min(b.iy0 for b in boxes), max(b.iy1 for b in boxes)
         x0, x1 = min(b.ix0 for b in boxes), max(b.ix1 for b in boxes)
-        ky = np.arange(y0, y1 + 1, dtype=np.int64) % t.ny_t
-        kx = np.arange(x0, x1 + 1, dtype=np.int64) % t.nx_t
+        ky = np.arange(y0, y1 + 1, dtype=np.int64) % ly
+        kx = np.arange(x0, x1 + 1, dtype=np.int64) % lx
         # the window's own transform (separable), normalised at DC: the coherent field's
         # shape per cell
-        wy_hat = np.fft.fft(t.wy.astype(np.float64))
-        wx_hat = np.fft.fft(t.wx.astype(np.float64))
+        wy_hat = np.fft.fft(t.wy.astype(np.float64), n=ly)
+        wx_hat = np.fft.fft(t.wx.astype(np.float64), n=lx)
         wy_shape, wx_shape = wy_hat[ky] / wy_hat[0], wx_hat[kx] / wx_hat[0]
         per_box = [(b.iy - y0, b.ix - x0, wy_shape[b.iy - y0], wx_shape[b.ix - x0]) for b in boxes]
-        spec_at = [
-            (-b.iy0, -b.ix0) if (b.ix0 <= 0 <= b.ix1 and b.iy0 <= 0 <= b.iy1) else None
-            for b in boxes
-        ]
         sum_w = float(np.sum(t.wy, dtype=np.float64) * np.sum(t.wx, dtype=np.float64))
         kernel = CK.kirchhoff_band_numba if self.backend == "numba" else CK.kirchhoff_band_numpy
         y_first = ky.size <= kx.size
+        lengths = None if os == (1, 1) else (ly, lx)
         done = 0
         for k in range(t.n_tiles):
             h, w = t.tile(k)
@@ -254,7 +241,7 @@ class KirchhoffModel(PhysicalOpticsModel):
                 spec = np.empty((order + 1, ky.size, kx.size), dtype=np.complex64)
                 dc = np.empty(order + 1, dtype=np.complex128)
                 for n_term in range(order + 1):
-                    dc[n_term] = _pruned_fft2(term, ky, kx, y_first, spec[n_term])
+                    dc[n_term] = _pruned_fft2(term, ky, kx, y_first, spec[n_term], lengths)
                     if n_term < order:
                         term *= u
                     done += 1
@@ -280,14 +267,8 @@ class KirchhoffModel(PhysicalOpticsModel):
                         w_c,
                         acc[li],
                     )
-                    s = spec_at[li]
-                    if (
-                        s is not None
-                        and ok[s]
-                        and lo <= vz[s]
-                        and (vz[s] < hi or (b == last and vz[s] <= hi))
-                    ):
-                        step = -1j * (float(vz[s]) - vc) * h_max
+                    if owns(b, v_spec[li]):
+                        step = -1j * (v_spec[li] - vc) * h_max
                         e, c = 0j, 1.0 + 0j
                         for n_term in range(order + 1):
                             if n_term:
@@ -296,39 +277,146 @@ class KirchhoffModel(PhysicalOpticsModel):
                         coh[li] += e
             for li in range(len(boxes)):
                 coh_acc[li] += abs(coh[li]) ** 2 / sum_w**2
-        norm = t.n_tiles * t.ny_t * t.nx_t * t.sum_w2
+        norm = t.n_tiles * t.ny_t * t.nx_t * t.sum_w2 * os[0] * os[1]
         diffuse = [np.where(g[1], a / norm, 0.0) for a, g in zip(acc, geo, strict=True)]
         return diffuse, [c / t.n_tiles for c in coh_acc]
 
     def _cell_powers(
-        self, theta_i_deg: float, lams_um: Sequence[float], boxes: Sequence[_Box]
-    ) -> list[FloatArray]:
+        self,
+        theta_i_deg: float,
+        lams_um: Sequence[float],
+        boxes: Sequence[_Box],
+        os: tuple[int, int] = (1, 1),
+    ) -> tuple[list[FloatArray], list[float]]:
         key = (
             "kirchhoff",
             round(theta_i_deg, 9),
             tuple(round(v, 12) for v in lams_um),
             tuple((b.ix0, b.ix1, b.iy0, b.iy1) for b in boxes),
+            os,
         )
         geo = [
-            self._geometry(theta_i_deg, lam, box) for lam, box in zip(lams_um, boxes, strict=True)
+            self._geometry(theta_i_deg, lam, box, os)
+            for lam, box in zip(lams_um, boxes, strict=True)
         ]
         raw, coh = self._shared.cached(
             key,
-            lambda: self._raw_power(theta_i_deg, lams_um, boxes, [(g[2], g[3]) for g in geo]),
+            lambda: self._raw_power(theta_i_deg, lams_um, boxes, [(g[2], g[3]) for g in geo], os),
         )
+        scales = self._energy_scales(theta_i_deg, lams_um)
+        out = []
+        for r, (x, y, z, ok), s in zip(raw, geo, scales, strict=True):
+            geom = self._obliquity(theta_i_deg, x, y, z, ok)
+            out.append(s * r * geom * self._fresnel_geom(theta_i_deg, x, y, z, ok))
+        return out, list(coh)
+
+    @staticmethod
+    def _obliquity(
+        theta_i_deg: float, x: FloatArray, y: FloatArray, z: FloatArray, ok: NDArray[np.bool_]
+    ) -> FloatArray:
+        """``|G|^2 = |wi + wo|^4 / (4 cos ti cos to (cos ti + cos to)^2)`` per cell."""
         t = math.radians(theta_i_deg)
         ci = math.cos(t)
-        out = []
-        r_spec = float(fresnel(ci, self.n))
-        for box, r, c, (x, y, z, ok) in zip(boxes, raw, coh, geo, strict=True):
-            s2 = (x + math.sin(t)) ** 2 + y * y + (z + ci) ** 2
-            co = np.where(ok, z, 1.0)
-            g2 = np.where(ok, s2 * s2 / (4.0 * ci * co * (ci + co) ** 2), 0.0)
-            p = r * g2 * self._fresnel_geom(theta_i_deg, x, y, z, ok)
-            if box.ix0 <= 0 <= box.ix1 and box.iy0 <= 0 <= box.iy1:
-                p[-box.iy0, -box.ix0] += r_spec * c
-            out.append(p)
+        s2 = (x + math.sin(t)) ** 2 + y * y + (z + ci) ** 2
+        co = np.where(ok, z, 1.0)
+        out: FloatArray = np.where(ok, s2 * s2 / (4.0 * ci * co * (ci + co) ** 2), 0.0)
         return out
+
+    def _energy_scales(self, theta_i_deg: float, lams_um: Sequence[float]) -> list[float]:
+        """Scalar energy conservation of the diffuse part, from
+        :data:`~goniolab.optics.physical.ENERGY_CHECK_FROM_DEG` on.
+
+        With a perfect reflector (``R = 1``) the scalar Kirchhoff diffuse flux over the
+        hemisphere, ``D_1 = sum_cells |G|^2 |U_d|^2 / norm`` (with the diffuse shadowing),
+        cannot exceed what the coherent beam leaves, ``1 - C``. Beckmann's obliquity factor
+        ``|G|^2`` grows as ``1 / cos ti`` out of the plane of incidence towards grazing, and
+        unchecked the model's albedo reached 1.1-1.7 times Fresnel at 85-89 deg on smooth
+        metals; the diffuse cells are scaled by ``min(1, (1 - C) / D_1)``, computed over the
+        whole Nyquist window once per incidence and wavelength set (cached; for more than
+        three wavelengths at the shortest, median and longest, interpolated in
+        ``1/lambda^2``)."""
+        if theta_i_deg < ENERGY_CHECK_FROM_DEG:
+            return [1.0 for _ in lams_um]
+        if len(lams_um) > 3:
+            # the scale is smooth in lambda (g ~ 1/lambda^2): three wavelengths, linear
+            # interpolation in 1/lambda^2 between them
+            lo, hi = min(lams_um), max(lams_um)
+            mid = float(np.median(lams_um))
+            nodes = sorted({lo, mid, hi})
+            at = self._energy_scales(theta_i_deg, nodes)
+            x = [1.0 / v**2 for v in nodes][::-1]
+            return [float(np.interp(1.0 / v**2, x, at[::-1])) for v in lams_um]
+        key = ("kirchhoff-energy", round(theta_i_deg, 9), tuple(round(v, 12) for v in lams_um))
+
+        def make() -> list[float]:
+            nx0, nx1, ny0, ny1 = self._nyquist()
+            box = _Box(nx0, nx1, ny0, ny1)
+            geo = [self._geometry(theta_i_deg, lam, box) for lam in lams_um]
+            raw, coh = self._raw_power(
+                theta_i_deg, lams_um, [box] * len(lams_um), [(g[2], g[3]) for g in geo]
+            )
+            t = math.radians(theta_i_deg)
+            wi = np.array([math.sin(t), 0.0, math.cos(t)])
+            out = []
+            for r, c, (x, y, z, ok), lam in zip(raw, coh, geo, lams_um, strict=True):
+                contrib = r * self._obliquity(theta_i_deg, x, y, z, ok)
+                # the shadowing of the cells that carry the flux (>= 1e-6 of the largest);
+                # the others count unshadowed (an upper bound on D_1)
+                big = contrib > 1e-6 * float(contrib.max(initial=0.0))
+                if self.masking and np.any(big):
+                    wo = np.stack([x[big], y[big], z[big]], axis=-1)
+                    w = self._diffuse_g2(np.broadcast_to(wi, wo.shape), wo, lam)
+                    contrib[big] *= w
+                d1 = float(np.sum(contrib))
+                out.append(min(1.0, max(0.0, 1.0 - c) / d1) if d1 > 0.0 else 1.0)
+            return out
+
+        scales: list[float] = self._shared.cached(key, make)
+        return scales
+
+    # ------------------------------------------------------------------ shadowing, validity
+    def _diffuse_g2(self, wi: FloatArray, wo: FloatArray, lam_um: float) -> FloatArray | float:
+        """Smith's G2 of the map's slopes, weighed in as the geometric limit needs it:
+        ``G2^(1 - exp(-g_d))`` with ``g_d = (k Sq (cos ti + cos to))^2`` the Rayleigh factor
+        of the direction. Where the roughness is small against the wavelength (g_d -> 0)
+        light does not see the slopes as shadowing facets and nothing is removed (as in
+        Rayleigh-Rice, which ``auto`` uses there); where it is large (the facet limit,
+        ``g_d`` >> 1) this is the facet model's G2. With ``masking=False``: 1."""
+        if not self.masking:
+            return 1.0
+        sq = self._shared.stats.sq_um
+        k = 2.0 * math.pi / lam_um
+        gd = (k * sq * (wi[..., 2] + np.clip(wo[..., 2], 0.0, None))) ** 2
+        g2 = self._shared.masking_model.masking_g2(wi, wo)
+        out: FloatArray = np.power(np.clip(g2, 1e-300, 1.0), -np.expm1(-gd))
+        return out
+
+    @property
+    def _g2_per_source(self) -> bool:
+        return self.masking
+
+    def _validity(self, theta_i_deg: float, lam_nm: float) -> str | None:
+        """Outside validity when the map does not sample the phase screen: neighbouring
+        points differ in phase by more than :data:`MAX_PHASE_STEP_RAD` rms."""
+        st = self._shared.stats
+        lam = lam_nm * 1e-3
+        phase = (
+            (4.0 * math.pi * math.cos(math.radians(theta_i_deg)) / lam)
+            * (st.sdq / math.sqrt(2.0))
+            * st.step_um
+        )
+        if phase > MAX_PHASE_STEP_RAD:
+            return (
+                f"needs the phase screen sampled: the map step {st.step_um:g} um gives "
+                f"{phase:.2g} rad rms per point at {lam_nm:g} nm (> {MAX_PHASE_STEP_RAD:g})"
+            )
+        return None
+
+    def _alternative(self, theta_i_deg: float, lam_nm: float, g: float) -> str:
+        st = self._shared.stats
+        if g <= RR_VALID_G and st.sdq <= RR_VALID_SDQ:
+            return "rayleigh-rice"
+        return "facet"
 
     def coherent_factor(self, theta_i_deg: float) -> float:
         """``|sum W exp(-i v_z h)|^2 / (sum W)^2`` at specular, averaged over the tiles."""

@@ -17,14 +17,18 @@ For incidence ``theta`` at wavelength ``lambda`` and a map of rms height ``Sq``,
    widens the geometric lobe by ~``1/g <= 5 %`` (Kirchhoff -> facet, tested).
 3. ``kirchhoff`` otherwise, provided the map samples the phase screen: neighbouring
    points must differ in phase by well under pi, ``(4 pi cos theta / lambda) (Sdq/sqrt 2)
-   dx <= 1.2`` rad rms (3 sigma near pi; the facet-limit test runs at 0.9); a coarser map falls back to ``facet`` (stated).
+   dx <= 1.2`` rad rms (3 sigma near pi; the facet-limit test runs at 0.9); on a coarser
+   map ``rayleigh-rice`` while ``g < 1`` and ``Sdq <= 0.3`` (the facet model has no
+   coherent beam), else ``facet`` (stated).
 
 Because ``g`` scales with ``cos^2 theta``, one coating can need three models: for a Gaussian
 map of Sq 177 nm, l 5 um at 550 nm, ``g`` is 14.4 at 20 deg (Kirchhoff), 4.1 at 60 deg
 (Kirchhoff) and 0.12 at 85 deg (Rayleigh-Rice), where the facet model reads a G85 of a
-third of the physical one. Within the chosen wave model, directions the map cannot resolve
-(beyond ``lambda / (2 dx)`` of specular, or a field too small for the aperture) are read
-from the facet model, and :meth:`AutoModel.explain` says so.
+third of the physical one. Within the chosen wave model, a field too small for the
+aperture is sampled finer (zero padding) and the coherent beam is summed analytically;
+directions beyond ``lambda / (2 dx)`` of specular are read from the facet model only when
+``g >= 1`` (:mod:`goniolab.optics.physical`); every reading names the model that computed
+it (:meth:`AutoModel.provenance`).
 
 :class:`AutoModel` implements ``ReflectanceModel``; the models it delegates to share the
 map. It keeps the facet model's masking on by default (Smith G2 from the measured
@@ -54,18 +58,23 @@ from numpy.typing import ArrayLike, NDArray
 from goniolab.optics.apertures import (
     GONIO_CONE,
     ISO2813_RECEPTOR,
+    ISO2813_SOURCE,
     Aperture,
 )
 from goniolab.optics.facet import FacetModel
 from goniolab.optics.heightmap import HeightMap
 from goniolab.optics.kirchhoff import KirchhoffModel
 from goniolab.optics.physical import (
+    FACET_MIN_HANDOVER_G,
+    MAX_PHASE_STEP_RAD,
+    RR_VALID_SDQ,
     GlossWeighting,
     MapStats,
     PhysicalOpticsModel,
     Progress,
     _Shared,
 )
+from goniolab.optics.provenance import Provenance
 from goniolab.optics.psd import DEFAULT_TAPER, DEFAULT_TILE
 from goniolab.optics.rayleigh_rice import RayleighRiceModel
 
@@ -90,8 +99,6 @@ RR_MAX_G: float = 0.15
 RR_MAX_SDQ: float = 0.15
 #: Facet model from this g on.
 FACET_MIN_G: float = 20.0
-#: Largest rms phase step between neighbouring map points for the Kirchhoff screen (rad).
-MAX_PHASE_STEP_RAD: float = 1.2
 
 FloatArray = NDArray[np.float64]
 
@@ -134,13 +141,14 @@ def choose_model(stats: MapStats, theta_deg: float, wavelength_nm: float) -> Cho
         * stats.step_um
     )
     if phase > MAX_PHASE_STEP_RAD:
-        return Choice(
-            "facet",
-            g,
+        unsampled = (
             f"g = {g:.3g} needs Kirchhoff, but the map step {stats.step_um:g} um samples the "
-            f"phase screen at {phase:.2g} rad rms per point (> {MAX_PHASE_STEP_RAD:g}): "
-            "facet model used",
+            f"phase screen at {phase:.2g} rad rms per point (> {MAX_PHASE_STEP_RAD:g})"
         )
+        if g < FACET_MIN_HANDOVER_G and stats.sdq <= RR_VALID_SDQ:
+            # no hand-over to the facet model while the coherent beam carries > exp(-1)
+            return Choice("rayleigh-rice", g, f"{unsampled}: Rayleigh-Rice used (g < 1)")
+        return Choice("facet", g, f"{unsampled}: facet model used")
     return Choice("kirchhoff", g, f"{RR_MAX_G:g} < g = {g:.3g} < {FACET_MIN_G:g}")
 
 
@@ -217,30 +225,89 @@ class AutoModel:
         """The choice at theta_i and the detector angles that fall back to the facet model."""
         ch = self.choice(theta_i_deg)
         out: dict[str, Any] = ch.as_dict()
-        m = self.model_at(theta_i_deg)
-        if isinstance(m, PhysicalOpticsModel):
-            fb = {}
-            for t in theta_r_deg:
-                why = m.coverage(theta_i_deg, float(t), source, receptor)
-                if why is not None:
-                    fb[f"{float(t):g}"] = why
-            if fb:
-                out["fallback_facet"] = fb
+        fb, models, notes = {}, {}, {}
+        for t in theta_r_deg:
+            p = self.provenance(theta_i_deg, float(t), source, receptor)
+            models[f"{float(t):g}"] = p.model
+            if p.notes:
+                notes[f"{float(t):g}"] = list(p.notes)
+            if p.model == "facet" and ch.model != "facet":
+                fb[f"{float(t):g}"] = p.notes[-1] if p.notes else "facet model"
+        if models:
+            out["models"] = models
+        if notes:
+            out["warnings"] = notes
+        if fb:
+            out["fallback_facet"] = fb
         return out
 
     def explain_gloss(self, angles_deg: Sequence[int] = (20, 60, 85)) -> dict[str, Any]:
-        """Per ISO geometry: the model used, g, the reason, and any facet fallback."""
+        """Per ISO geometry: the model that computed it (``model``), the rule's choice
+        (``rule``), g, the reason, the notes (``warnings``) and any facet hand-over."""
         out: dict[str, Any] = {}
+        prov = self.gloss_provenance(angles_deg)
         for t in angles_deg:
             ch = self.choice(t)
             d = ch.as_dict()
-            m = self.model_at(t)
-            if isinstance(m, PhysicalOpticsModel):
-                fb = m.gloss_fallbacks((int(t),))
-                if fb:
-                    d["fallback_facet"] = fb[int(t)]
+            p = prov[int(t)]
+            d["rule"], d["model"] = ch.model, p.model
+            if p.notes:
+                d["warnings"] = list(p.notes)
+            if p.model == "facet" and ch.model != "facet":
+                d["fallback_facet"] = p.notes[-1] if p.notes else "facet model"
             out[str(int(t))] = d
         return out
+
+    def provenance(
+        self,
+        theta_i_deg: float,
+        theta_r_deg: float,
+        source: Aperture,
+        receptor: Aperture,
+        *,
+        wavelengths_nm: Sequence[float] | None = None,
+    ) -> Provenance:
+        """The model that computes this geometry (the rule's choice, then that model's own
+        hand-overs) and the notes."""
+        m = self.model_at(theta_i_deg)
+        if isinstance(m, PhysicalOpticsModel):
+            return m.provenance(
+                theta_i_deg, theta_r_deg, source, receptor, wavelengths_nm=wavelengths_nm
+            )
+        ch = self.choice(theta_i_deg)
+        notes: tuple[str, ...] = ()
+        if ch.g < FACET_MIN_HANDOVER_G:
+            notes = (f"facet model at g = {ch.g:.3g} < 1: no coherent beam ({ch.reason})",)
+        return Provenance("facet", notes)
+
+    def gloss_provenance(self, angles_deg: Sequence[int] = (20, 60, 85)) -> dict[int, Provenance]:
+        """:meth:`provenance` of each ISO 2813 geometry over the gloss wavelengths."""
+        out: dict[int, Provenance] = {}
+        for t in angles_deg:
+            m = self.model_at(int(t))
+            if isinstance(m, PhysicalOpticsModel):
+                out[int(t)] = m.gloss_provenance((int(t),))[int(t)]
+            else:
+                out[int(t)] = self.provenance(
+                    int(t), int(t), ISO2813_SOURCE, ISO2813_RECEPTOR[int(t)]
+                )
+        return out
+
+    def curve_provenance(
+        self, theta_i_deg: float, theta_r_deg: ArrayLike, source: Aperture, receptor: Aperture
+    ) -> list[Provenance]:
+        """:meth:`provenance` of every angle of a curve."""
+        flat = np.asarray(theta_r_deg, dtype=np.float64).ravel()
+        return [self.provenance(theta_i_deg, float(t), source, receptor) for t in flat]
+
+    def albedo_tis(self, theta_i_deg: float) -> tuple[float, float, Provenance]:
+        """Directional albedo, TIS and provenance of the model the rule picks at theta_i
+        (:meth:`PhysicalOpticsModel.albedo_tis`; the facet model: its hemisphere sum)."""
+        m = self.model_at(theta_i_deg)
+        if isinstance(m, PhysicalOpticsModel):
+            return m.albedo_tis(theta_i_deg)
+        a = float(m.brdf_hemisphere(theta_i_deg).albedo)
+        return a, a, self.provenance(theta_i_deg, theta_i_deg, GONIO_CONE, GONIO_CONE)
 
     # ------------------------------------------------------------------ ReflectanceModel
     def brdf_point(self, theta_i_deg: float, theta_r_deg: float, phi_r_deg: float = 180.0) -> float:

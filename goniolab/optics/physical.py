@@ -14,24 +14,36 @@ of the surface sends light to ``sin ts - sin t_spec = lambda f``). Their BRDF in
 ``P / cell area`` (a BRDF is the flux density per unit of direction-cosine area,
 ``dOmega cos ts = d alpha d beta``).
 
-Everything an instrument reads is a sum of ``P`` over cells (:mod:`._cell_kernels`):
-goniometer cones and ISO 2813 / E430 rectangles with the source aperture (its mirror image
-around each cell's direction, as in :mod:`goniolab.optics.facet`), the gloss of
-:func:`goniolab.optics.gloss_standards.gloss_report`, haze and DOI. With ``masking`` (the
-default) the result is multiplied by the height-correlated Smith term
-``G2 = 1/(1 + Lambda(wi) + Lambda(wo))`` of the map's slopes at the receptor centre (Heitz
-2014), as the facet model does; it only matters at grazing angles on rough maps.
+Everything an instrument reads is the coherent specular beam plus a sum of the diffuse
+``P`` over cells (:mod:`._cell_kernels`): goniometer cones and ISO 2813 / E430 rectangles
+with the source aperture (its mirror image around each cell's direction, as in
+:mod:`goniolab.optics.facet`), the gloss of
+:func:`goniolab.optics.gloss_standards.gloss_report`, haze and DOI.
 
-What a map cannot say (module :func:`PhysicalOpticsModel.coverage`):
+No silent fallback (issue 20):
 
-- directions further from specular than ``|sin ts - sin t_spec| <= lambda / (2 step)``
-  (the Nyquist frequency of the map) have no cell: an aperture whose reach (receptor plus
-  source image) leaves that window is evaluated with the **facet model** of the same map;
-- a field too small to resolve the aperture (fewer than :data:`MIN_CELLS_ACROSS` cells
-  across the receptor's narrowest side) likewise falls back to the facet model.
-
-The fallback is stated: ``coverage()`` returns the reason (``None`` when the map resolves
-the geometry), and the CLI reports it in ``--json`` output under ``"fallback"``.
+- **the coherent beam is analytic** (:meth:`PhysicalOpticsModel._coherent_sums`): every
+  source direction sends ``R(theta_s) C(theta_s)`` (its own Fresnel reflectance and
+  coherent factor) to its mirror direction, and the receptor collects the part of the
+  source's mirror image inside it, whatever the FFT cell size;
+- **the diffuse part at a resolution that fits the aperture**: the tile's transform is
+  zero-padded (the windowed patch's far field sampled on a finer grid of directions)
+  until the receptor spans :data:`CELLS_ACROSS` cells (:meth:`_oversampling`), so a 50 um
+  AFM map reads the ISO 85 deg receptor as well as a 2 mm profilometer map;
+- **validity, stated**: Rayleigh-Rice outside ``g <= RR_VALID_G``, ``Sdq <= RR_VALID_SDQ``
+  hands the geometry to the Kirchhoff model of the same map; Kirchhoff on a map that does
+  not sample its phase screen to Rayleigh-Rice (g small) or the facet model; an aperture
+  reaching beyond the map's Nyquist window ``|sin ts - sin t_spec| <= lambda / (2 step)``
+  is read by the facet model only from ``g >= FACET_MIN_HANDOVER_G`` (below, the wave
+  model answers with the light the map resolves). Every reading has a
+  :class:`~goniolab.optics.provenance.Provenance` (:meth:`provenance`,
+  :meth:`gloss_provenance`): the model that computed it and the notes;
+- **shadowing only where geometric optics holds**: none on the coherent beam nor in
+  Rayleigh-Rice; the Kirchhoff diffuse part takes the Smith G2 of the map's slopes
+  (Heitz 2014) to the power ``1 - exp(-g_d)`` (:meth:`KirchhoffModel._diffuse_g2`);
+- **energy**: Rayleigh-Rice's diffuse part carries ``exp(-g)``, and from
+  :data:`ENERGY_CHECK_FROM_DEG` both models hold the hemisphere's diffuse flux to what the
+  coherent beam leaves (:meth:`_energy_scales`; docs/PHYSICS.md, "Energy").
 
 Wavelength and index per call (for the colour and spectral code): a model is built for
 ``(height map, n, wavelength_nm)``. ``model.with_optics(n=..., wavelength_nm=...)`` returns
@@ -52,6 +64,7 @@ References
 
 from __future__ import annotations
 
+import itertools
 import math
 import threading
 from collections import OrderedDict
@@ -81,19 +94,28 @@ from goniolab.optics.facet import (
     _cone_table,
     _reaches_horizon,
 )
-from goniolab.optics.fresnel import fresnel, fresnel_dielectric
+from goniolab.optics.fresnel import fresnel
 from goniolab.optics.heightmap import HeightMap
+from goniolab.optics.provenance import Provenance
 from goniolab.optics.psd import DEFAULT_TAPER, DEFAULT_TILE, TiledMap
 from goniolab.optics.surface import Surface
 
 __all__ = [
+    "CELLS_ACROSS",
+    "ENERGY_CHECK_FROM_DEG",
+    "FACET_MIN_HANDOVER_G",
+    "MAX_PADDED_POINTS",
+    "MAX_PHASE_STEP_RAD",
     "MAX_THETA_I_DEG",
-    "MIN_CELLS_ACROSS",
     "POINT_BRDF_BOX_DEG",
+    "RR_VALID_G",
+    "RR_VALID_SDQ",
     "GlossWeighting",
     "MapStats",
     "PhysicalOpticsModel",
     "Progress",
+    "Provenance",
+    "box_projected_solid_angle_sr",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -102,8 +124,26 @@ Backend = Literal["numba", "numpy"]
 #: ``progress(done, total, what)``: called while long work runs.
 Progress = Callable[[int, int, str], None]
 
-#: Fewest FFT cells across the receptor's narrowest side for the map to resolve it.
-MIN_CELLS_ACROSS: int = 4
+#: Cells across the receptor's narrowest side the diffuse sums aim for: the tile's transform
+#: is zero-padded (sampled on a finer grid of directions) until the receptor spans them.
+CELLS_ACROSS: int = 6
+#: Most points of a zero-padded transform axis (bounds the padding of tiny receptors).
+MAX_PADDED_POINTS: int = 1 << 15
+#: Below this Rayleigh factor g no geometry is handed to the facet model: its coherent beam
+#: ``exp(-g)`` is more than a third of the reflected light, which the facet model lacks.
+FACET_MIN_HANDOVER_G: float = 1.0
+#: Rayleigh-Rice answers up to this g (first-order perturbation with the Debye-Waller
+#: factor: its second-order terms are ~ g/2 of the diffuse part) ...
+RR_VALID_G: float = 0.3
+#: ... and this rms gradient (small slopes); beyond, the Kirchhoff model of the map answers.
+RR_VALID_SDQ: float = 0.3
+#: Largest rms phase step between neighbouring map points for the Kirchhoff screen (rad).
+MAX_PHASE_STEP_RAD: float = 1.2
+#: From this incidence on, the diffuse part of the wave models is held to energy
+#: conservation over the whole hemisphere (:meth:`PhysicalOpticsModel._energy_scales`):
+#: Beckmann's obliquity factor grows without bound towards grazing incidence, and the
+#: first-order Rayleigh-Rice Q factor may exceed the Fresnel reflectance there.
+ENERGY_CHECK_FROM_DEG: float = 70.0
 #: Full width of the square receptor the point BRDF is averaged over (deg).
 POINT_BRDF_BOX_DEG: float = 1.0
 #: Largest incidence angle accepted (deg).
@@ -141,6 +181,8 @@ class _Shared:
         self.cache: OrderedDict[tuple[Any, ...], Any] = OrderedDict()
         self.lock = threading.Lock()
         self._facets: dict[tuple[complex, bool], FacetModel] = {}
+        #: the other wave models of the same map, by (kind, n, wavelength, weighting, masking)
+        self.siblings: dict[tuple[Any, ...], Any] = {}
 
     def cached(self, key: tuple[Any, ...], make: Callable[[], Any]) -> Any:
         with self.lock:
@@ -394,37 +436,76 @@ class PhysicalOpticsModel:
 
     # ------------------------------------------------------------------ cells (subclasses)
     def _cell_powers(
-        self, theta_i_deg: float, lams_um: Sequence[float], boxes: Sequence[_Box]
-    ) -> list[FloatArray]:
-        """Flux fraction per cell (rows iy, columns ix of each box), one array per wavelength."""
+        self,
+        theta_i_deg: float,
+        lams_um: Sequence[float],
+        boxes: Sequence[_Box],
+        os: tuple[int, int] = (1, 1),
+    ) -> tuple[list[FloatArray], list[float]]:
+        """Diffuse flux fraction per cell (rows iy, columns ix of each box, on the grid
+        refined ``os`` times by zero padding), one array per wavelength, and the coherent
+        factor ``C`` of the specular beam (``R(ti) C`` is its reflectance) per wavelength."""
         raise NotImplementedError
 
     def specular_reflectance(self, theta_i_deg: float) -> float:
         """Reflectance of the coherent specular beam at ``wavelength_nm``."""
         raise NotImplementedError
 
-    # ------------------------------------------------------------------ geometry helpers
-    def _cell_size(self, lam_um: float) -> tuple[float, float]:
-        t = self._shared.tiled
-        return lam_um / (t.nx_t * t.dx_um), lam_um / (t.ny_t * t.dy_um)
+    def _diffuse_g2(self, wi: FloatArray, wo: FloatArray, lam_um: float) -> FloatArray | float:
+        """Shadowing applied to the diffuse cells seen from ``wo`` (rows of unit vectors)
+        lit from ``wi``: none here (the coherent beam and Rayleigh-Rice take none);
+        :class:`~goniolab.optics.kirchhoff.KirchhoffModel` weighs in Smith's G2 as the
+        geometric limit needs it."""
+        return 1.0
 
-    def _nyquist(self) -> tuple[int, int, int, int]:
+    @property
+    def _g2_per_source(self) -> bool:
+        """Whether the diffuse sums carry a shadowing term that varies across the source."""
+        return False
+
+    def _energy_scales(self, theta_i_deg: float, lams_um: Sequence[float]) -> list[float]:
+        """Factors (<= 1) applied to the diffuse cells so that the hemisphere's total stays
+        within energy conservation, per wavelength (1 below :data:`ENERGY_CHECK_FROM_DEG`);
+        the subclasses state their bound."""
+        return [1.0 for _ in lams_um]
+
+    def _energy_note(self, theta_i_deg: float, lams_nm: Sequence[float]) -> str | None:
+        if theta_i_deg < ENERGY_CHECK_FROM_DEG:
+            return None
+        scales = self._energy_scales(theta_i_deg, [lam * 1e-3 for lam in lams_nm])
+        low = min(scales)
+        if low >= 0.99:
+            return None
+        return (
+            f"{self.kind}: diffuse light scaled by {low:.3g} to conserve energy over the "
+            f"hemisphere at theta_i = {theta_i_deg:g} deg (docs/PHYSICS.md, energy)"
+        )
+
+    # ------------------------------------------------------------------ geometry helpers
+    def _cell_size(self, lam_um: float, os: tuple[int, int] = (1, 1)) -> tuple[float, float]:
         t = self._shared.tiled
-        return -(t.nx_t // 2), (t.nx_t - 1) // 2, -(t.ny_t // 2), (t.ny_t - 1) // 2
+        return lam_um / (os[0] * t.nx_t * t.dx_um), lam_um / (os[1] * t.ny_t * t.dy_um)
+
+    def _nyquist(self, os: tuple[int, int] = (1, 1)) -> tuple[int, int, int, int]:
+        t = self._shared.tiled
+        nx, ny = os[0] * t.nx_t, os[1] * t.ny_t
+        # the map's own band: |f| <= 1/(2 step), whatever the padding
+        hx, hy = (os[0] * t.nx_t) // 2, (os[1] * t.ny_t) // 2
+        return -hx, min(hx, nx - hx - 1), -hy, min(hy, ny - hy - 1)
 
     def _wo_axes(
-        self, theta_i_deg: float, lam_um: float, box: _Box
+        self, theta_i_deg: float, lam_um: float, box: _Box, os: tuple[int, int] = (1, 1)
     ) -> tuple[FloatArray, FloatArray]:
-        cx, cy = self._cell_size(lam_um)
+        cx, cy = self._cell_size(lam_um, os)
         wox = box.ix.astype(np.float64) * cx - math.sin(math.radians(theta_i_deg))
         woy = box.iy.astype(np.float64) * cy
         return wox, woy
 
     def _geometry(
-        self, theta_i_deg: float, lam_um: float, box: _Box
+        self, theta_i_deg: float, lam_um: float, box: _Box, os: tuple[int, int] = (1, 1)
     ) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]:
         """``wo`` components (2-D) of the cells of ``box`` and the mask of real directions."""
-        wox, woy = self._wo_axes(theta_i_deg, lam_um, box)
+        wox, woy = self._wo_axes(theta_i_deg, lam_um, box, os)
         x = np.broadcast_to(wox[None, :], (woy.size, wox.size))
         y = np.broadcast_to(woy[:, None], (woy.size, wox.size))
         z2 = 1.0 - x * x - y * y
@@ -459,7 +540,13 @@ class PhysicalOpticsModel:
         )
 
     def _box_for(
-        self, theta_i_deg: float, lam_um: float, alpha_lo: float, alpha_hi: float, half_b: float
+        self,
+        theta_i_deg: float,
+        lam_um: float,
+        alpha_lo: float,
+        alpha_hi: float,
+        half_b: float,
+        os: tuple[int, int] = (1, 1),
     ) -> tuple[_Box, bool]:
         """Cells covering in-plane angles [alpha_lo, alpha_hi] x out-of-plane [-half_b, half_b]
         (rad); ``inside`` is False when part of that region is beyond the map's Nyquist window."""
@@ -469,12 +556,13 @@ class PhysicalOpticsModel:
         x_lo, x_hi = min(s_hi, s_hi * cb), max(s_lo, s_lo * cb)
         y_hi = math.sin(min(half_b, 1.5))
         sx = math.sin(math.radians(theta_i_deg))
-        cx, cy = self._cell_size(lam_um)
+        cx, cy = self._cell_size(lam_um, os)
         ix0 = math.floor((x_lo + sx) / cx) - 1
         ix1 = math.ceil((x_hi + sx) / cx) + 1
         iy1 = math.ceil(y_hi / cy) + 1
-        nx0, nx1, ny0, ny1 = self._nyquist()
-        inside = ix0 >= nx0 and ix1 <= nx1 and -iy1 >= ny0 and iy1 <= ny1
+        nx0, nx1, ny0, ny1 = self._nyquist(os)
+        # one cell of slack at the edges (the box has one more cell than its reach needs)
+        inside = ix0 + 1 >= nx0 and ix1 - 1 <= nx1 and -iy1 + 1 >= ny0 and iy1 - 1 <= ny1
         box = _Box(max(ix0, nx0), min(ix1, nx1), max(-iy1, ny0), min(iy1, ny1))
         return box, inside
 
@@ -485,6 +573,161 @@ class PhysicalOpticsModel:
 
         return iso2813_weights()
 
+    def _oversampling(
+        self, lam_um: float, receptor: Aperture, theta_r_deg: FloatArray
+    ) -> tuple[tuple[int, int], str | None]:
+        """Zero-padding factors ``(os_x, os_y)`` giving at least :data:`CELLS_ACROSS` cells
+        ``lambda / (os field)`` across the receptor's narrowest side at every angle, and a
+        note when :data:`MAX_PADDED_POINTS` caps them (fewer cells: a coarser sum)."""
+        t = self._shared.tiled
+        if isinstance(receptor, Cone):
+            w_in = w_perp = math.radians(receptor.full_angle_deg)
+        else:
+            w_in, w_perp = math.radians(receptor.in_plane_deg), math.radians(receptor.perp_deg)
+        tmax = float(np.max(np.abs(theta_r_deg))) if np.size(theta_r_deg) else 0.0
+        # the in-plane width in direction cosines shrinks as cos(theta_r) (rim: half a width)
+        edge = min(math.radians(tmax) + 0.5 * w_in, 0.5 * math.pi)
+        w_x = max(w_in * math.cos(edge), 1e-12)
+        cx, cy = self._cell_size(lam_um)
+        want_x = max(1, math.ceil(CELLS_ACROSS * cx / w_x)) if w_in > 0 else 1
+        want_y = max(1, math.ceil(CELLS_ACROSS * cy / w_perp)) if w_perp > 0 else 1
+        cap_x = max(1, MAX_PADDED_POINTS // t.nx_t)
+        cap_y = max(1, MAX_PADDED_POINTS // t.ny_t)
+        os = (min(want_x, cap_x), min(want_y, cap_y))
+        note = None
+        if os != (want_x, want_y):
+            across = min(
+                w_x / (cx / os[0]) if w_in > 0 else math.inf,
+                w_perp / (cy / os[1]) if w_perp > 0 else math.inf,
+            )
+            note = (
+                f"field of {t.nx_t * t.dx_um:g} x {t.ny_t * t.dy_um:g} um: the diffuse sum "
+                f"resolves {across:.2g} cells across the receptor at {lam_um * 1e3:g} nm "
+                f"(zero padding capped at {MAX_PADDED_POINTS} points; {CELLS_ACROSS} wanted)"
+            )
+        return os, note
+
+    def rayleigh_factor(self, theta_i_deg: float, lam_nm: float | None = None) -> float:
+        """``g = (4 pi Sq cos ti / lambda)^2`` of the map at ``lam_nm`` (default
+        ``wavelength_nm``)."""
+        lam = (self.wavelength_nm if lam_nm is None else float(lam_nm)) * 1e-3
+        c = math.cos(math.radians(theta_i_deg))
+        return (4.0 * math.pi * self._shared.stats.sq_um * c / lam) ** 2
+
+    def _validity(self, theta_i_deg: float, lam_nm: float) -> str | None:
+        """Why this model is outside its validity at the geometry (None when inside)."""
+        return None
+
+    def _route(
+        self,
+        theta_i_deg: float,
+        theta_r_deg: float,
+        source: Aperture,
+        receptor: Aperture,
+        lams_nm: Sequence[float],
+    ) -> tuple[str, list[str]]:
+        """Which model answers one geometry and the notes the user must see.
+
+        ``"self"``; ``"kirchhoff"`` (Rayleigh-Rice outside its validity, or
+        :meth:`_validity`); ``"rayleigh-rice"`` (Kirchhoff whose phase screen the map does
+        not sample, while g is small); ``"facet"`` only where no wave model of this map can
+        answer and ``g >= FACET_MIN_HANDOVER_G`` (the coherent beam is then below
+        ``exp(-1)``): an aperture reaching beyond the map's Nyquist window, or a phase screen
+        the map does not sample. Below that g the wave model answers what the map resolves
+        and the note says what is missing.
+        """
+        notes: list[str] = []
+        lam_lo = min(lams_nm)
+        g = self.rayleigh_factor(theta_i_deg, lam_lo)
+        why = self._validity(theta_i_deg, lam_lo)
+        if why is not None:
+            alt = self._alternative(theta_i_deg, lam_lo, g)
+            notes.append(f"{self.kind} {why}: {alt} used")
+            return alt, notes
+        ra, rb = self._reach(source, receptor)
+        tr = math.radians(float(theta_r_deg))
+        t = self._shared.tiled
+        step = max(t.dx_um, t.dy_um)
+        for lam_nm in lams_nm:
+            lam = lam_nm * 1e-3
+            _, inside = self._box_for(theta_i_deg, lam, tr - ra, tr + ra, rb)
+            if inside:
+                continue
+            what = (
+                f"the map resolves directions within |sin ts - sin t_spec| <= lambda/(2 step) "
+                f"= {lam / (2 * step):.3g} of specular at {lam_nm:g} nm (step {step:g} um); "
+                "this aperture reaches further"
+            )
+            if g >= FACET_MIN_HANDOVER_G:
+                notes.append(f"{what}: facet model used (g = {g:.3g})")
+                return "facet", notes
+            notes.append(
+                f"{what}: {self.kind} answers with the diffuse light the map resolves "
+                f"(g = {g:.3g} < {FACET_MIN_HANDOVER_G:g}: the facet model would miss the "
+                "coherent beam)"
+            )
+            break
+        return "self", notes
+
+    def _alternative(self, theta_i_deg: float, lam_nm: float, g: float) -> str:
+        return "facet"
+
+    def _sibling(self, kind: str) -> PhysicalOpticsModel:
+        """The other wave model of the same map, index, wavelength and options."""
+        key = (kind, self.n, self.wavelength_nm, self.gloss_weighting, self.masking)
+        with self._shared.lock:
+            found = self._shared.siblings.get(key)
+        if found is not None:
+            return found
+        if kind == "kirchhoff":
+            from goniolab.optics.kirchhoff import KirchhoffModel
+
+            cls: type[PhysicalOpticsModel] = KirchhoffModel
+        else:
+            from goniolab.optics.rayleigh_rice import RayleighRiceModel
+
+            cls = RayleighRiceModel
+        out = cls(
+            n=self.n,
+            wavelength_nm=self.wavelength_nm,
+            gloss_weighting=self.gloss_weighting,
+            masking=self.masking,
+            backend=self.backend,
+            progress=self.progress,
+            shared=self._shared,
+        )
+        with self._shared.lock:
+            self._shared.siblings[key] = out
+        return out
+
+    def provenance(
+        self,
+        theta_i_deg: float,
+        theta_r_deg: float,
+        source: Aperture,
+        receptor: Aperture,
+        *,
+        wavelengths_nm: Sequence[float] | None = None,
+    ) -> Provenance:
+        """The model that computes this geometry's number and the notes that go with it."""
+        lams = [self.wavelength_nm] if wavelengths_nm is None else list(wavelengths_nm)
+        who, notes = self._route(theta_i_deg, theta_r_deg, source, receptor, lams)
+        if who == "facet":
+            return Provenance("facet", tuple(notes))
+        if who != "self":
+            sub = self._sibling(who).provenance(
+                theta_i_deg, theta_r_deg, source, receptor, wavelengths_nm=wavelengths_nm
+            )
+            return Provenance(sub.model, tuple(notes) + sub.notes)
+        if solid_angle_sr(receptor) > 0.0 or isinstance(receptor, Rect):
+            _, cap = self._oversampling(max(lams) * 1e-3, receptor, np.array([theta_r_deg]))
+            if cap is not None:
+                notes.append(cap)
+        energy = self._energy_note(theta_i_deg, lams)
+        if energy is not None:
+            notes.append(energy)
+        return Provenance(self.kind, tuple(notes))
+
     def coverage(
         self,
         theta_i_deg: float,
@@ -494,50 +737,14 @@ class PhysicalOpticsModel:
         *,
         wavelengths_nm: Sequence[float] | None = None,
     ) -> str | None:
-        """Why the map cannot resolve this geometry (the facet model is used), or None.
-
-        Checks, at each wavelength (default ``wavelength_nm``): the receptor's reach lies
-        inside the map's Nyquist window ``|sin ts - sin t_spec| <= lambda / (2 step)``, and
-        the FFT cell ``lambda / field`` is at most 1/:data:`MIN_CELLS_ACROSS` of the
-        receptor's narrowest side.
-        """
-        lams = [self.wavelength_nm] if wavelengths_nm is None else list(wavelengths_nm)
-        ra, rb = self._reach(source, receptor)
-        tr = math.radians(float(theta_r_deg))
-        if isinstance(receptor, Cone):
-            w_in = w_perp = math.radians(receptor.full_angle_deg)
-        else:
-            w_in, w_perp = math.radians(receptor.in_plane_deg), math.radians(receptor.perp_deg)
-        for lam_nm in lams:
-            lam = lam_nm * 1e-3
-            _, inside = self._box_for(theta_i_deg, lam, tr - ra, tr + ra, rb)
-            if not inside:
-                t = self._shared.tiled
-                step = max(t.dx_um, t.dy_um)
-                return (
-                    f"the map resolves directions within |sin ts - sin t_spec| <= "
-                    f"lambda/(2 step) = {lam / (2 * step):.3g} of specular at {lam_nm:g} nm "
-                    f"(step {step:g} um); this aperture reaches further"
-                )
-            cx, cy = self._cell_size(lam)
-            across_in = w_in * math.cos(tr) / cx if cx > 0 else math.inf
-            across_perp = w_perp / cy if cy > 0 else math.inf
-            if min(across_in, across_perp) < MIN_CELLS_ACROSS:
-                t = self._shared.tiled
-                return (
-                    f"field of {t.nx_t * t.dx_um:g} x {t.ny_t * t.dy_um:g} um resolves "
-                    f"{min(across_in, across_perp):.2g} cells across the receptor at "
-                    f"{lam_nm:g} nm (needs {MIN_CELLS_ACROSS})"
-                )
-        return None
-
-    # ------------------------------------------------------------------ masking
-    def _g2(self, theta_i_deg: float, wo: FloatArray) -> FloatArray:
-        if not self.masking:
-            return np.ones(wo.shape[:-1])
-        t = math.radians(theta_i_deg)
-        wi = np.array([math.sin(t), 0.0, math.cos(t)])
-        return self._shared.masking_model.masking_g2(wi, wo)
+        """Why this geometry is read from the facet model (None when a wave model answers):
+        the first note of :meth:`provenance` when its model is ``facet``."""
+        p = self.provenance(
+            theta_i_deg, theta_r_deg, source, receptor, wavelengths_nm=wavelengths_nm
+        )
+        if p.model != "facet":
+            return None
+        return p.notes[-1] if p.notes else "facet model"
 
     # ------------------------------------------------------------------ aperture sums
     def _sum_apertures(
@@ -549,18 +756,21 @@ class PhysicalOpticsModel:
         theta_r_deg: FloatArray,
         source: Aperture,
         receptor: Aperture,
-        g2: FloatArray | None = None,
+        os: tuple[int, int] = (1, 1),
+        shadow: bool = True,
     ) -> FloatArray:
-        """Aperture sums of the cell powers ``p`` at each detector angle, times the Smith G2
-        of the detector's direction (``g2`` when given: it does not depend on lambda)."""
-        wox, woy = self._wo_axes(theta_i_deg, lam_um, box)
+        """Aperture sums of the diffuse cell powers ``p`` at each detector angle (times the
+        diffuse shadowing :meth:`_diffuse_g2` of the detector's direction when ``shadow``)."""
+        wox, woy = self._wo_axes(theta_i_deg, lam_um, box, os)
         tr = np.radians(theta_r_deg)
         if (
             isinstance(source, Cone)
             and isinstance(receptor, Cone)
             and self._split_source(theta_i_deg, source)
         ):
-            return self._clipped_cone_sums(theta_i_deg, wox, woy, p, tr, source, receptor)
+            return self._clipped_cone_sums(
+                theta_i_deg, lam_um, wox, woy, p, tr, source, receptor, shadow
+            )
         if isinstance(source, Cone) and isinstance(receptor, Cone):
             table, g0, g1, o_in, _ = _cone_table(
                 math.radians(source.half_angle_deg), math.radians(receptor.half_angle_deg)
@@ -581,46 +791,51 @@ class PhysicalOpticsModel:
                 math.radians(source.perp_deg),
                 math.radians(receptor.perp_deg),
             )
-        if g2 is None:
+        result: FloatArray = np.asarray(out, dtype=np.float64)
+        if shadow:
+            ti = math.radians(theta_i_deg)
+            wi = np.array([math.sin(ti), 0.0, math.cos(ti)])
             d = np.stack([-np.sin(tr), np.zeros_like(tr), np.cos(tr)], axis=-1)
-            g2 = self._g2(theta_i_deg, d)
-        result: FloatArray = np.asarray(out, dtype=np.float64) * g2
+            result = result * self._diffuse_g2(np.broadcast_to(wi, d.shape), d, lam_um)
         return result
 
     def _split_source(self, theta_i_deg: float, source: Aperture) -> bool:
         """Whether a source cone is summed over sub-cones (:meth:`_clipped_cone_sums`): when it
-        reaches the horizon, and with masking from where the facet model splits it too
-        (:data:`goniolab.optics.facet.SPLIT_SOURCE_RINGS`), so that G2 is that of each source
-        direction (at grazing incidence it varies several-fold across a 6 deg cone; taken at
-        the nominal incidence it made the reading jump by 8 % where the clipping starts)."""
+        reaches the horizon, and, when the diffuse sums carry Smith's G2, from where the facet
+        model splits it too (:data:`goniolab.optics.facet.SPLIT_SOURCE_RINGS`), so that G2 is
+        that of each source direction (at grazing incidence it varies several-fold across a
+        6 deg cone)."""
         if not isinstance(source, Cone) or source.half_angle_deg == 0.0:
             return False
         if _reaches_horizon(theta_i_deg, source):
             return True
         edge = min(e for e, _ in SPLIT_SOURCE_RINGS)
-        return self.masking and theta_i_deg + source.half_angle_deg >= edge
+        return self._g2_per_source and theta_i_deg + source.half_angle_deg >= edge
 
     def _clipped_cone_sums(
         self,
         theta_i_deg: float,
+        lam_um: float,
         wox: FloatArray,
         woy: FloatArray,
         p: FloatArray,
         tr: FloatArray,
         source: Cone,
         receptor: Cone,
+        shadow: bool = True,
     ) -> FloatArray:
-        """Cone sums over the source's sub-cones (:meth:`_split_source`), clipped at the
-        horizon when the cone reaches it.
+        """Diffuse cone sums over the source's sub-cones (:meth:`_split_source`), clipped at
+        the horizon when the cone reaches it.
 
         The source is split as in the facet model (:func:`_clipped_source_parts`: sub-cones
-        of the part above the horizon, shares over the whole cone). As everywhere in these
-        models the scattered pattern is that of the nominal incidence, carried over the
-        source (zeroth order in the source direction): a sub-cone centred at polar angle
-        ``theta_i + delta`` and azimuth ``phi`` turns the pattern about z by phi and shifts
-        it by delta in plane, so it reads the nominal pattern through the receptor turned
-        back, ``R_y(-delta) R_z(-phi) d``, with the sub-cone's own cap-overlap table and the
-        Smith G2 of its own direction.
+        of the part above the horizon, shares over the whole cone). The scattered diffuse
+        pattern is that of the nominal incidence, carried over the source (zeroth order in
+        the source direction): a sub-cone centred at polar angle ``theta_i + delta`` and
+        azimuth ``phi`` turns the pattern about z by phi and shifts it by delta in plane, so
+        it reads the nominal pattern through the receptor turned back,
+        ``R_y(-delta) R_z(-phi) d``, with the sub-cone's own cap-overlap table and the
+        shadowing of its own direction. (The coherent beam is summed exactly per source
+        direction, :meth:`_coherent_sums`.)
         """
         a_d = math.radians(receptor.half_angle_deg)
         d = np.stack([-np.sin(tr), np.zeros_like(tr), np.cos(tr)], axis=-1)
@@ -637,14 +852,134 @@ class PhysicalOpticsModel:
             dirs = np.stack([cd * x1 + sd * d[:, 2], y1, -sd * x1 + cd * d[:, 2]], axis=-1)
             table, g0, g1, o_in, _ = _cone_table(math.radians(sub.half_angle_deg), a_d)
             part = fn(wox, woy, p, np.ascontiguousarray(dirs), table, g0, g1, o_in)
-            g2 = (
-                self._shared.masking_model.masking_g2(np.broadcast_to(c, d.shape), d)
-                if self.masking
-                else 1.0
-            )
+            g2 = self._diffuse_g2(np.broadcast_to(c, d.shape), d, lam_um) if shadow else 1.0
             out += share * np.asarray(part, dtype=np.float64) * g2
         return out
 
+    # ------------------------------------------------------------------ the coherent beam
+    def _coherent_reflectance(
+        self, cos_s: FloatArray, theta_i_deg: float, c_nominal: float, n: complex | None = None
+    ) -> FloatArray:
+        """``R(theta_s) C(theta_s)`` of the coherent beam for source directions of cosine
+        ``cos_s``: Fresnel per direction and the coherent factor carried from the nominal
+        incidence as for Gaussian heights, ``C(theta_s) = C(ti)^((cos ts / cos ti)^2)``
+        (``exp(-g)`` with ``g ~ cos^2``)."""
+        ci = math.cos(math.radians(theta_i_deg))
+        cs = np.clip(np.asarray(cos_s, dtype=np.float64), 0.0, 1.0)
+        if c_nominal <= 0.0:
+            return np.zeros_like(cs)
+        c = np.exp(math.log(min(c_nominal, 1.0)) * (cs / ci) ** 2)
+        out: FloatArray = np.where(cs > 0.0, fresnel(cs, self.n if n is None else n) * c, 0.0)
+        return out
+
+    def _coherent_sums(
+        self,
+        theta_i_deg: float,
+        c_nominal: float,
+        theta_r_deg: FloatArray,
+        source: Aperture,
+        receptor: Aperture,
+        n: complex | None = None,
+    ) -> FloatArray:
+        """Flux fraction of the coherent specular beam reaching the receptor at each angle
+        (of a surface of index ``n``, default the model's).
+
+        Analytic, whatever the FFT cell: every source direction ``s`` sends
+        ``R(s) C(s)`` (:meth:`_coherent_reflectance`) to its mirror direction, which the
+        receptor collects when it lies inside it, so the reading is the integral over the
+        source of that product, normalised by the source's solid angle (Mihalik eq. 15).
+        Cones: the source's mirror cap in polar coordinates about its centre, Gauss-Legendre
+        in the polar angle (split where the circle meets the receptor's rim) and, on each
+        circle, over the arc inside the receptor (spherical law of cosines); source
+        directions below the horizon send nothing. Rectangles: the product of the in-plane
+        and out-of-plane intervals, Gauss-Legendre over their intersection with the mirror
+        image, as the rectangle sums measure them (:mod:`._cell_kernels`).
+        """
+        tr = np.radians(np.asarray(theta_r_deg, dtype=np.float64))
+        ti = math.radians(theta_i_deg)
+        out = np.zeros(tr.size)
+        if isinstance(source, Rect) and isinstance(receptor, Rect):
+            a_s, b_s = math.radians(source.in_plane_deg), math.radians(source.perp_deg)
+            a_r, b_r = math.radians(receptor.in_plane_deg), math.radians(receptor.perp_deg)
+            xb, wb = np.polynomial.legendre.leggauss(8)
+            xa, wa = np.polynomial.legendre.leggauss(12)
+            # out of plane: the mirror image of beta is -beta, inside when |beta| <= b_r / 2
+            if b_s == 0.0:
+                bb, wbb, norm_b = np.zeros(1), np.ones(1), 1.0
+            else:
+                hb = 0.5 * min(b_s, b_r)
+                bb, wbb = hb * xb, hb * wb * np.cos(hb * xb)
+                norm_b = 2.0 * math.sin(0.5 * b_s)
+            for k, a_c in enumerate(tr):
+                # in plane: source offset a, mirror at ti + a, inside when |ti + a - tr| <= a_r/2
+                if a_s == 0.0:
+                    if abs(ti - a_c) > 0.5 * a_r + 1e-15:
+                        continue
+                    aa, waa, norm_a = np.zeros(1), np.ones(1), 1.0
+                else:
+                    lo = max(-0.5 * a_s, a_c - ti - 0.5 * a_r)
+                    hi = min(0.5 * a_s, a_c - ti + 0.5 * a_r)
+                    if hi <= lo:
+                        continue
+                    aa, waa = 0.5 * (hi + lo) + 0.5 * (hi - lo) * xa, 0.5 * (hi - lo) * wa
+                    norm_a = a_s
+                cos_s = np.cos(ti + aa)[:, None] * np.cos(bb)[None, :]
+                f = self._coherent_reflectance(cos_s, theta_i_deg, c_nominal, n)
+                out[k] = float(waa @ f @ wbb) / (norm_a * norm_b)
+            return out
+        assert isinstance(source, Cone) and isinstance(receptor, Cone)
+        a_s, a_d = math.radians(source.half_angle_deg), math.radians(receptor.half_angle_deg)
+        m0 = np.array([-math.sin(ti), 0.0, math.cos(ti)])  # the specular direction
+        e1 = np.array([-math.cos(ti), 0.0, -math.sin(ti)])  # in plane, towards larger theta
+        e2 = np.array([0.0, 1.0, 0.0])
+        d = np.stack([-np.sin(tr), np.zeros_like(tr), np.cos(tr)], axis=-1)
+        cg = np.clip(d @ m0, -1.0, 1.0)
+        gam = np.arccos(cg)
+        psi = np.arctan2(d @ e2, d @ e1)
+        if a_s == 0.0:
+            r0 = float(self._coherent_reflectance(np.array([m0[2]]), theta_i_deg, c_nominal, n)[0])
+            return np.where(gam < a_d, r0, np.where(gam == a_d, 0.5 * r0, 0.0))
+        xu, wu = np.polynomial.legendre.leggauss(12)
+        xv, wv = np.polynomial.legendre.leggauss(16)
+        omega_s = 2.0 * math.pi * (1.0 - math.cos(a_s))
+        # the horizon cuts circles of polar radius u > pi/2 - ti about the mirror centre:
+        # z = cos u cos ti - sin u sin ti cos v > 0 leaves |v| > acos(cos u cos ti / (sin u sin ti))
+        u_h = 0.5 * math.pi - ti
+        for k in range(tr.size):
+            g = float(gam[k])
+            if g >= a_s + a_d:
+                continue
+            kinks = (abs(g - a_d), g + a_d, u_h)
+            cuts = sorted({0.0, a_s, *(c for c in kinks if 0.0 < c < a_s)})
+            acc = 0.0
+            for u0, u1 in itertools.pairwise(cuts):
+                u = 0.5 * (u0 + u1) + 0.5 * (u1 - u0) * xu
+                wuu = 0.5 * (u1 - u0) * wu * np.sin(u)
+                su, cu = np.sin(u), np.cos(u)
+                if g < 1e-12:
+                    half = np.where(u < a_d, math.pi, 0.0)
+                else:
+                    cc = (math.cos(a_d) - cu * math.cos(g)) / (su * math.sin(g))
+                    half = np.arccos(np.clip(cc, -1.0, 1.0))
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    hh = np.where(
+                        su * math.sin(ti) > 0, cu * math.cos(ti) / (su * math.sin(ti)), 2.0
+                    )
+                a_h = np.arccos(np.clip(hh, -1.0, 1.0))
+                lo, hi = float(psi[k]) - half, float(psi[k]) + half
+                for i_lo, i_hi in (
+                    (np.maximum(lo, a_h - 2.0 * math.pi), np.minimum(hi, -a_h)),
+                    (np.maximum(lo, a_h), np.minimum(hi, 2.0 * math.pi - a_h)),
+                ):
+                    hw = 0.5 * np.maximum(i_hi - i_lo, 0.0)
+                    v = (0.5 * (i_lo + i_hi))[:, None] + hw[:, None] * xv[None, :]
+                    z = cu[:, None] * m0[2] + su[:, None] * (np.cos(v) * e1[2])
+                    f = self._coherent_reflectance(np.where(z > 0, z, 0.0), theta_i_deg, c_nominal)
+                    acc += float(np.sum(wuu[:, None] * (hw[:, None] * wv[None, :]) * f))
+            out[k] = acc / omega_s
+        return out
+
+    # ------------------------------------------------------------------ fractions
     def _fractions(
         self,
         theta_i_deg: float,
@@ -653,28 +988,75 @@ class PhysicalOpticsModel:
         receptor: Aperture,
         lams_nm: Sequence[float],
     ) -> FloatArray:
-        """Flux fractions ``(n_lambda, n_points)``; every point must be covered."""
+        """Flux fractions ``(n_lambda, n_points)``: the coherent beam (analytic) plus the
+        diffuse cells the map resolves, on a grid refined by zero padding until the
+        receptor spans :data:`CELLS_ACROSS` cells."""
         ra, rb = self._reach(source, receptor)
         if isinstance(source, Cone) and self._split_source(theta_i_deg, source):
             # the turned-back receptors of the source's sub-cones reach one source half
             # angle further
             ra = rb = ra + math.radians(source.half_angle_deg)
         tr = np.radians(theta_r_deg)
+        os, _ = self._oversampling(max(lams_nm) * 1e-3, receptor, theta_r_deg)
         boxes: list[_Box] = []
         for lam_nm in lams_nm:
             box, _ = self._box_for(
-                theta_i_deg, lam_nm * 1e-3, float(tr.min()) - ra, float(tr.max()) + ra, rb
+                theta_i_deg, lam_nm * 1e-3, float(tr.min()) - ra, float(tr.max()) + ra, rb, os
             )
             boxes.append(box)
         lams_um = [lam * 1e-3 for lam in lams_nm]
-        powers = self._cell_powers(theta_i_deg, lams_um, boxes)
+        powers, coh = self._cell_powers(theta_i_deg, lams_um, boxes, os)
         out = np.empty((len(lams_nm), theta_r_deg.size))
-        g2 = self._g2(theta_i_deg, np.stack([-np.sin(tr), np.zeros_like(tr), np.cos(tr)], axis=-1))
-        for k, (lam, box, p) in enumerate(zip(lams_um, boxes, powers, strict=True)):
+        for k, (lam, box, p, c) in enumerate(zip(lams_um, boxes, powers, coh, strict=True)):
             out[k] = self._sum_apertures(
-                theta_i_deg, lam, box, p, theta_r_deg, source, receptor, g2
-            )
+                theta_i_deg, lam, box, p, theta_r_deg, source, receptor, os
+            ) + self._coherent_sums(theta_i_deg, c, theta_r_deg, source, receptor)
         return out
+
+    def _evaluate(
+        self,
+        theta_i_deg: float,
+        theta_r_deg: FloatArray,
+        source: Aperture,
+        receptor: Aperture,
+        lams_nm: Sequence[float],
+    ) -> tuple[FloatArray, list[str]]:
+        """Flux fractions ``(n_lambda, n_points)`` and, per point, the model that computed
+        it (:meth:`_route`: this model, the other wave model, or the facet model)."""
+        routes = [
+            self._route(theta_i_deg, float(t), source, receptor, lams_nm)[0] for t in theta_r_deg
+        ]
+        out = np.empty((len(lams_nm), theta_r_deg.size))
+        names = [self.kind] * theta_r_deg.size
+        for who in sorted(set(routes)):
+            idx = np.array([k for k, r in enumerate(routes) if r == who], dtype=np.int64)
+            sel = theta_r_deg[idx]
+            if who == "self":
+                out[:, idx] = self._fractions(theta_i_deg, sel, source, receptor, lams_nm)
+                continue
+            if who == "facet":
+                fm = self.facet_model
+                if isinstance(source, Cone) and isinstance(receptor, Cone):
+                    vals = fm.luminance_pct(theta_i_deg, sel, source=source, detector=receptor)
+                    vals = np.asarray(vals, dtype=np.float64) / 100.0
+                else:
+                    vals = np.array(
+                        [
+                            fm.reflected_fraction(theta_i_deg, float(t), source, receptor)
+                            for t in sel
+                        ]
+                    )
+                out[:, idx] = vals[None, :]
+                for k in idx:
+                    names[int(k)] = "facet"
+                continue
+            sub, sub_names = self._sibling(who)._evaluate(
+                theta_i_deg, sel, source, receptor, lams_nm
+            )
+            out[:, idx] = sub
+            for k, name in zip(idx, sub_names, strict=True):
+                names[int(k)] = name
+        return out, names
 
     def _check_apertures(self, theta_i_deg: float, source: Aperture, receptor: Aperture) -> None:
         self._reach(source, receptor)
@@ -693,20 +1075,15 @@ class PhysicalOpticsModel:
     def reflected_fraction(
         self, theta_i_deg: float, theta_r_deg: float, source: Aperture, receptor: Aperture
     ) -> float:
-        """Fraction of the flux from ``source`` (centred on theta_i) reaching ``receptor``.
-
-        The facet model of the same map answers when :meth:`coverage` gives a reason.
-        """
+        """Fraction of the flux from ``source`` (centred on theta_i) reaching ``receptor``
+        (:meth:`provenance` names the model that computes it)."""
         ti = _check_theta_i(theta_i_deg)
         tr = float(theta_r_deg)
         if not (math.isfinite(tr) and -90.0 < tr < 90.0):
             raise ValueError(f"theta_r_deg must be in (-90, 90) deg, got {theta_r_deg!r}")
         self._check_apertures(ti, source, receptor)
-        if self.coverage(ti, tr, source, receptor) is not None:
-            return self.facet_model.reflected_fraction(ti, tr, source, receptor)
-        return float(
-            self._fractions(ti, np.array([tr]), source, receptor, [self.wavelength_nm])[0, 0]
-        )
+        vals, _ = self._evaluate(ti, np.array([tr]), source, receptor, [self.wavelength_nm])
+        return float(vals[0, 0])
 
     def luminance_pct(
         self,
@@ -718,8 +1095,7 @@ class PhysicalOpticsModel:
     ) -> FloatArray:
         """Goniometer reading in % of a mirror at the signed detector angles.
 
-        One cell-power map serves every angle the map resolves; the others come from the
-        facet model (:meth:`coverage` says which and why).
+        One cell-power map serves every angle; :meth:`provenance` names the model of each.
         """
         ti = _check_theta_i(theta_i_deg)
         tr = np.asarray(theta_r_deg, dtype=np.float64)
@@ -727,47 +1103,80 @@ class PhysicalOpticsModel:
             raise ValueError("theta_r_deg must be in (-90, 90) deg")
         self._check_apertures(ti, source, detector)
         flat = tr.ravel()
-        out = np.empty(flat.size)
         if flat.size == 0:
-            return out.reshape(tr.shape)
-        covered = np.array([self.coverage(ti, float(t), source, detector) is None for t in flat])
-        if np.any(covered):
-            out[covered] = self._fractions(
-                ti, flat[covered], source, detector, [self.wavelength_nm]
-            )[0]
-        if np.any(~covered):
-            out[~covered] = (
-                self.facet_model.luminance_pct(ti, flat[~covered], source=source, detector=detector)
-                / 100.0
-            )
-        result: FloatArray = 100.0 * out.reshape(tr.shape)
+            return np.empty(tr.shape)
+        vals, _ = self._evaluate(ti, flat, source, detector, [self.wavelength_nm])
+        result: FloatArray = 100.0 * vals[0].reshape(tr.shape)
         return result
 
     def brdf_inplane(self, theta_i_deg: float, theta_r_deg: ArrayLike) -> FloatArray:
         """In-plane BRDF (sr^-1), averaged over a :data:`POINT_BRDF_BOX_DEG` square receptor.
 
-        A single map's wave-optics BRDF is speckle at the resolution ``lambda / field``; the
-        average over the 1 deg x 1 deg receptor (a point source) is the BRDF an instrument
-        with that aperture sees. The coherent specular beam is spread over the box when it
-        falls inside it.
+        A single map's wave-optics BRDF is speckle at the resolution ``lambda / field``; its
+        average over the 1 deg x 1 deg box (a point source) is the BRDF an instrument with
+        that aperture sees. The diffuse part is the mean cell BRDF ``P / (cell area)`` over
+        the cells inside the box (sum of their powers over the sum of their areas in
+        direction cosines, ``dOmega cos ts``), on a grid refined by zero padding until the
+        box spans :data:`CELLS_ACROSS` cells at every angle; the coherent beam, when the box
+        holds it, is spread over the box's exact projected solid angle
+        (:func:`box_projected_solid_angle_sr`).
         """
         ti = _check_theta_i(theta_i_deg)
         tr = np.asarray(theta_r_deg, dtype=np.float64)
         if np.any(~np.isfinite(tr)) or np.any(np.abs(tr) >= 90.0):
             raise ValueError("theta_r_deg must be in (-90, 90) deg")
-        src, box = Rect(0.0, 0.0), Rect(POINT_BRDF_BOX_DEG, POINT_BRDF_BOX_DEG)
         flat = tr.ravel()
-        frac = np.empty(flat.size)
-        covered = np.array([self.coverage(ti, float(t), src, box) is None for t in flat])
-        if np.any(covered):
-            frac[covered] = self._fractions(ti, flat[covered], src, box, [self.wavelength_nm])[0]
-        omega = solid_angle_sr(box)
-        proj = omega * np.cos(np.radians(flat))
-        out = np.where(proj > 0, frac / np.where(proj > 0, proj, 1.0), 0.0)
-        if np.any(~covered):
-            out[~covered] = self.facet_model.brdf_inplane(ti, flat[~covered])
+        out, _ = self._brdf_inplane(ti, flat)
         result: FloatArray = out.reshape(tr.shape)
         return result
+
+    def _brdf_inplane(self, ti: float, flat: FloatArray) -> tuple[FloatArray, list[str]]:
+        src, box = Rect(0.0, 0.0), Rect(POINT_BRDF_BOX_DEG, POINT_BRDF_BOX_DEG)
+        lams = [self.wavelength_nm]
+        routes = [self._route(ti, float(t), src, box, lams)[0] for t in flat]
+        out = np.zeros(flat.size)
+        names = [self.kind] * flat.size
+        for who in sorted(set(routes)):
+            idx = np.array([k for k, r in enumerate(routes) if r == who], dtype=np.int64)
+            sel = flat[idx]
+            if who == "facet":
+                out[idx] = self.facet_model.brdf_inplane(ti, sel)
+                for k in idx:
+                    names[int(k)] = "facet"
+            elif who == "self":
+                out[idx] = self._box_brdf(ti, sel, src, box)
+            else:
+                vals, sub = self._sibling(who)._brdf_inplane(ti, sel)
+                out[idx] = vals
+                for k, name in zip(idx, sub, strict=True):
+                    names[int(k)] = name
+        return out, names
+
+    def _box_brdf(self, ti: float, tr_deg: FloatArray, src: Rect, box: Rect) -> FloatArray:
+        lam = self.wavelength_nm * 1e-3
+        ra, rb = self._reach(src, box)
+        tr = np.radians(tr_deg)
+        os, _ = self._oversampling(lam, box, tr_deg)
+        out = np.zeros(tr_deg.size)
+        # one block of cells per stretch of angles (a wide curve near grazing needs a fine
+        # grid only where the box is narrow: the padding is set per angle group)
+        for k0 in range(0, tr_deg.size, 16):
+            sel = slice(k0, min(k0 + 16, tr_deg.size))
+            ts = tr_deg[sel]
+            os, _ = self._oversampling(lam, box, ts)
+            rs = tr[sel]
+            b, _ = self._box_for(ti, lam, float(rs.min()) - ra, float(rs.max()) + ra, rb, os)
+            powers, coh = self._cell_powers(ti, [lam], [b], os)
+            _, _, _, ok = self._geometry(ti, lam, b, os)
+            cx, cy = self._cell_size(lam, os)
+            area = np.where(ok, cx * cy, 0.0)
+            flux = self._sum_apertures(ti, lam, b, powers[0], ts, src, box, os)
+            cells = self._sum_apertures(ti, lam, b, area, ts, src, box, os, shadow=False)
+            diffuse = np.where(cells > 0, flux / np.where(cells > 0, cells, 1.0), 0.0)
+            beam = self._coherent_sums(ti, coh[0], ts, src, box)
+            proj = np.array([box_projected_solid_angle_sr(box, float(t)) for t in ts])
+            out[sel] = diffuse + np.where(proj > 0, beam / np.where(proj > 0, proj, 1.0), 0.0)
+        return out
 
     def brdf_point(self, theta_i_deg: float, theta_r_deg: float, phi_r_deg: float = 180.0) -> float:
         """In-plane BRDF (sr^-1) via :meth:`brdf_inplane`; out-of-plane directions use the
@@ -779,12 +1188,23 @@ class PhysicalOpticsModel:
             return float(self.brdf_inplane(theta_i_deg, np.array([signed]))[0])
         return self.facet_model.brdf_point(theta_i_deg, theta_r_deg, phi_r_deg)
 
+    def curve_provenance(
+        self, theta_i_deg: float, theta_r_deg: ArrayLike, source: Aperture, receptor: Aperture
+    ) -> list[Provenance]:
+        """:meth:`provenance` of every angle of a curve (a point source and
+        ``Rect(POINT_BRDF_BOX_DEG, POINT_BRDF_BOX_DEG)`` for :meth:`brdf_inplane`)."""
+        flat = np.asarray(theta_r_deg, dtype=np.float64).ravel()
+        return [self.provenance(theta_i_deg, float(t), source, receptor) for t in flat]
+
     def gloss(self, angles_deg: Sequence[int] = (20, 60, 85)) -> dict[int, float]:
         """ISO 2813 gloss in GU, weighted over wavelength by C x V(lambda) (or one wavelength).
 
-        ``G = 100 sum_l w_l Phi_l / sum_l w_l F(1.567, t)`` with ``Phi_l`` the flux fraction
-        from the ISO source into the ISO receptor at wavelength l. Geometries the map cannot
-        resolve at some wavelength are read from the facet model (:meth:`gloss_fallbacks`).
+        ``G = 100 sum_l w_l Phi_l / Phi_std`` with ``Phi_l`` the flux fraction from the ISO
+        source into the ISO receptor at wavelength l and ``Phi_std`` that of the polished
+        black glass (n = 1.567) through the same apertures, as the instrument is calibrated:
+        every source direction with its own Fresnel reflectance (within 3e-5 of the nominal
+        ``F(1.567, t)``), so that the standard reads 100 exactly. :meth:`gloss_provenance`
+        names the model of each geometry.
         """
         lams, w = self._lams_for_gloss()
         out: dict[int, float] = {}
@@ -795,38 +1215,92 @@ class PhysicalOpticsModel:
                     f"no ISO 2813 geometry at {t} deg; known: {sorted(ISO2813_RECEPTOR)}"
                 )
             rec = ISO2813_RECEPTOR[key]
-            ref = float(fresnel_dielectric(math.cos(math.radians(key)), ISO2813_BLACK_GLASS_N))
-            if (
-                self.coverage(key, key, ISO2813_SOURCE, rec, wavelengths_nm=lams.tolist())
-                is not None
-            ):
+            who, _ = self._route(key, key, ISO2813_SOURCE, rec, lams.tolist())
+            if who == "facet":
                 out[key] = self.facet_model.gloss((key,))[key]
                 continue
+            if who != "self":
+                out[key] = self._sibling(who).gloss((key,))[key]
+                continue
             frac = self._fractions(key, np.array([float(key)]), ISO2813_SOURCE, rec, list(lams))
+            ref = self._coherent_sums(
+                key, 1.0, np.array([float(key)]), ISO2813_SOURCE, rec, ISO2813_BLACK_GLASS_N
+            )[0]
             out[key] = 100.0 * float(np.sum(w * frac[:, 0]) / np.sum(w)) / ref
         return out
 
+    def gloss_provenance(self, angles_deg: Sequence[int] = (20, 60, 85)) -> dict[int, Provenance]:
+        """Per ISO 2813 geometry: the model that computes it and the notes."""
+        lams, _ = self._lams_for_gloss()
+        return {
+            int(t): self.provenance(
+                int(t), int(t), ISO2813_SOURCE, ISO2813_RECEPTOR[int(t)],
+                wavelengths_nm=lams.tolist(),
+            )
+            for t in angles_deg
+        }  # fmt: skip
+
     def gloss_fallbacks(self, angles_deg: Sequence[int] = (20, 60, 85)) -> dict[int, str]:
         """Geometries whose gloss comes from the facet model, with the reason."""
-        lams, _ = self._lams_for_gloss()
         out: dict[int, str] = {}
-        for t in angles_deg:
-            rec = ISO2813_RECEPTOR[int(t)]
-            why = self.coverage(int(t), int(t), ISO2813_SOURCE, rec, wavelengths_nm=lams.tolist())
-            if why is not None:
-                out[int(t)] = why
+        for t, p in self.gloss_provenance(angles_deg).items():
+            if p.model == "facet":
+                out[t] = p.notes[-1] if p.notes else "facet model"
         return out
 
-    def albedo(self, theta_i_deg: float) -> float:
-        """Directional albedo: the scattered fraction summed over every cell the map resolves
-        (with G2 per cell when masking); an upper bound check, ``<= 1``."""
+    def albedo_tis(self, theta_i_deg: float) -> tuple[float, float, Provenance]:
+        """Directional-hemispherical reflectance, total integrated scatter (ISO 13696
+        sense: the diffusely scattered flux over the incident flux) and the model that
+        computed them, at ``wavelength_nm`` for a collimated beam.
+
+        The coherent beam ``R(ti) C`` plus the diffuse cells over the whole Nyquist window
+        of the map, each with its shadowing (:meth:`_diffuse_g2`) and the energy scale
+        (:meth:`_energy_scales`); light the map cannot resolve (beyond ``lambda / (2
+        step)``) is not counted. Outside this model's validity the model it hands over to
+        answers (:meth:`_route`); the facet model's albedo is its hemisphere sum, all of it
+        diffuse.
+        """
         ti = _check_theta_i(theta_i_deg)
+        why = self._validity(ti, self.wavelength_nm)
+        if why is not None:
+            g = self.rayleigh_factor(ti)
+            alt = self._alternative(ti, self.wavelength_nm, g)
+            note = f"{self.kind} {why}: {alt} used"
+            if alt == "facet":
+                a = float(self.facet_model.brdf_hemisphere(ti).albedo)
+                return a, a, Provenance("facet", (note,))
+            a, tis, sub = self._sibling(alt).albedo_tis(ti)
+            return a, tis, Provenance(sub.model, (note, *sub.notes))
         nx0, nx1, ny0, ny1 = self._nyquist()
         box = _Box(nx0, nx1, ny0, ny1)
         lam = self.wavelength_nm * 1e-3
-        p = self._cell_powers(ti, [lam], [box])[0]
-        if self.masking:
-            x, y, z, ok = self._geometry(ti, lam, box)
-            g2 = self._g2(ti, np.stack([x, y, np.where(ok, z, 1.0)], axis=-1))
-            p = p * np.where(ok, g2, 0.0)
-        return float(np.sum(p))
+        powers, coh = self._cell_powers(ti, [lam], [box])
+        p = powers[0]
+        x, y, z, ok = self._geometry(ti, lam, box)
+        t = math.radians(ti)
+        wo = np.stack([x, y, np.where(ok, z, 1.0)], axis=-1).reshape(-1, 3)
+        wi = np.broadcast_to(np.array([math.sin(t), 0.0, math.cos(t)]), wo.shape)
+        g2 = self._diffuse_g2(wi, wo, lam)
+        shadow = g2 if isinstance(g2, float) else np.asarray(g2).reshape(p.shape)
+        tis = float(np.sum(np.where(ok, p * shadow, 0.0)))
+        beam = float(fresnel(math.cos(t), self.n)) * coh[0]
+        energy = self._energy_note(ti, [self.wavelength_nm])
+        return beam + tis, tis, Provenance(self.kind, () if energy is None else (energy,))
+
+    def albedo(self, theta_i_deg: float) -> float:
+        """Directional albedo (:meth:`albedo_tis`)."""
+        return self.albedo_tis(theta_i_deg)[0]
+
+
+def box_projected_solid_angle_sr(box: Rect, theta_r_deg: float) -> float:
+    """``int cos(theta) dOmega`` over a rectangle ``box`` centred on the signed in-plane
+    angle ``theta_r_deg`` (its part above the horizon), in sr.
+
+    In the aperture frame (:func:`goniolab.optics.apertures.sample_aperture`) a direction
+    of in-plane offset ``a`` and out-of-plane angle ``b`` has ``cos theta = cos(tr + a)
+    cos b`` and ``dOmega = cos b da db``, so the integral is
+    ``[sin(min(|tr| + A/2, pi/2)) - sin(|tr| - A/2)] (B/2 + sin(B)/2)``.
+    """
+    t = abs(math.radians(theta_r_deg))
+    ha, b = 0.5 * math.radians(box.in_plane_deg), math.radians(box.perp_deg)
+    return (math.sin(min(t + ha, 0.5 * math.pi)) - math.sin(t - ha)) * (0.5 * b + 0.5 * math.sin(b))

@@ -46,8 +46,16 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from goniolab.optics.fresnel import fresnel
-from goniolab.optics.physical import FloatArray, PhysicalOpticsModel, _Box, _check_theta_i
-from goniolab.optics.psd import PSD2, psd2
+from goniolab.optics.physical import (
+    ENERGY_CHECK_FROM_DEG,
+    RR_VALID_G,
+    RR_VALID_SDQ,
+    FloatArray,
+    PhysicalOpticsModel,
+    _Box,
+    _check_theta_i,
+)
+from goniolab.optics.psd import PSD2, psd2, psd_region
 
 __all__ = ["RayleighRiceModel", "rr_q_factor"]
 
@@ -106,26 +114,102 @@ class RayleighRiceModel(PhysicalOpticsModel):
         return (4.0 * math.pi * self.psd.sq_um * math.cos(math.radians(theta_i_deg)) / lam_um) ** 2
 
     def _cell_powers(
-        self, theta_i_deg: float, lams_um: Sequence[float], boxes: Sequence[_Box]
-    ) -> list[FloatArray]:
-        psd = self.psd
+        self,
+        theta_i_deg: float,
+        lams_um: Sequence[float],
+        boxes: Sequence[_Box],
+        os: tuple[int, int] = (1, 1),
+    ) -> tuple[list[FloatArray], list[float]]:
+        """Diffuse flux per cell, ``exp(-g)`` times the first-order BRDF times the cell's
+        area (module docstring: energy), and the coherent factor ``exp(-g)``, per wavelength.
+
+        On the tile's own grid the cached PSD serves every geometry; on a zero-padded grid
+        (a receptor narrower than a few cells) the periodogram is formed on the box's
+        cells only (:func:`goniolab.optics.psd.psd_region`)."""
         t = self._shared.tiled
         ti = math.radians(theta_i_deg)
         ci = math.cos(ti)
-        df2 = psd.df_x * psd.df_y
-        r_spec = float(fresnel(ci, self.n))
-        out = []
-        for lam, box in zip(lams_um, boxes, strict=True):
-            x, y, z, ok = self._geometry(theta_i_deg, lam, box)
+        df2 = 1.0 / (os[0] * t.nx_t * t.dx_um * os[1] * t.ny_t * t.dy_um)
+        out, coh = [], []
+        scales = self._energy_scales(theta_i_deg, lams_um)
+        for lam, box, scale in zip(lams_um, boxes, scales, strict=True):
+            x, y, z, ok = self._geometry(theta_i_deg, lam, box, os)
             st = np.sqrt(x * x + y * y)
             ts_deg = np.degrees(np.arctan2(st, np.where(ok, z, 0.0)))
             # azimuth from the forward direction: phi_ours - 180 deg
             phi_deg = np.where(st > 0, np.degrees(np.arctan2(-y, -x)), 0.0)
             q = rr_q_factor(theta_i_deg, ts_deg, phi_deg, self.n)
-            pv = psd.psd_um4[np.ix_(box.iy % t.ny_t, box.ix % t.nx_t)]
+            pv = self._psd_cells(box, os)
+            dw = math.exp(-self._g_at(theta_i_deg, lam))
             p = 16.0 * math.pi**2 * ci * np.where(ok, z, 0.0) * q * pv * df2 / lam**2
-            p = np.where(ok, p, 0.0)
-            if box.ix0 <= 0 <= box.ix1 and box.iy0 <= 0 <= box.iy1:
-                p[-box.iy0, -box.ix0] += r_spec * math.exp(-self._g_at(theta_i_deg, lam))
-            out.append(p)
+            out.append(np.where(ok, scale * dw * p, 0.0))
+            coh.append(dw)
+        return out, coh
+
+    def _energy_scales(self, theta_i_deg: float, lams_um: Sequence[float]) -> list[float]:
+        """From :data:`~goniolab.optics.physical.ENERGY_CHECK_FROM_DEG` on, the diffuse
+        flux over the hemisphere, ``exp(-g) D`` (D the first-order total), is held to what
+        the coherent beam leaves of the Fresnel reflectance, ``R(ti) (1 - exp(-g))``: the
+        factor is ``min(1, R (1 - exp(-g)) / (exp(-g) D))``. (Below that angle
+        ``exp(-g) D <= R (1 - exp(-g))`` holds by itself: ``g exp(-g) <= 1 - exp(-g)`` and Q
+        stays near R.) D is summed over every second cell of the tile's grid in each axis
+        when the tile is larger than 256 points (the periodogram is smooth at that scale)."""
+        if theta_i_deg < ENERGY_CHECK_FROM_DEG:
+            return [1.0 for _ in lams_um]
+        key = ("rr-energy", round(theta_i_deg, 9), tuple(round(v, 12) for v in lams_um))
+
+        def make() -> list[float]:
+            t = self._shared.tiled
+            ci = math.cos(math.radians(theta_i_deg))
+            stride = 2 if max(t.nx_t, t.ny_t) > 256 else 1
+            nx0, nx1, ny0, ny1 = self._nyquist()
+            box = _Box(nx0, nx1, ny0, ny1)
+            ix, iy = box.ix[::stride], box.iy[::stride]
+            pv = self.psd.psd_um4[np.ix_(iy % t.ny_t, ix % t.nx_t)] * stride * stride
+            df2 = 1.0 / (t.nx_t * t.dx_um * t.ny_t * t.dy_um)
+            r_spec = float(fresnel(ci, self.n))
+            out = []
+            for lam in lams_um:
+                cx, cy = self._cell_size(lam)
+                x = ix.astype(np.float64)[None, :] * cx - math.sin(math.radians(theta_i_deg))
+                y = iy.astype(np.float64)[:, None] * cy
+                z2 = 1.0 - x * x - y * y
+                ok = z2 > 1e-12
+                z = np.sqrt(np.where(ok, z2, 0.0))
+                st = np.sqrt(x * x + y * y)
+                ts_deg = np.degrees(np.arctan2(st, z))
+                phi_deg = np.where(st > 0, np.degrees(np.arctan2(-y, -x)), 0.0)
+                q = rr_q_factor(theta_i_deg, ts_deg, phi_deg, self.n)
+                d = float(np.sum(np.where(ok, 16.0 * math.pi**2 * ci * z * q * pv, 0.0)))
+                d *= df2 / lam**2
+                dw = math.exp(-self._g_at(theta_i_deg, lam))
+                room = r_spec * (1.0 - dw)
+                out.append(min(1.0, room / (dw * d)) if d > 0.0 else 1.0)
+            return out
+
+        scales: list[float] = self._shared.cached(key, make)
+        return scales
+
+    def _psd_cells(self, box: _Box, os: tuple[int, int]) -> FloatArray:
+        t = self._shared.tiled
+        ly, lx = os[1] * t.ny_t, os[0] * t.nx_t
+        if os == (1, 1):
+            return self.psd.psd_um4[np.ix_(box.iy % ly, box.ix % lx)]
+        key = ("psd-region", (box.ix0, box.ix1, box.iy0, box.iy1), os)
+        out: FloatArray = self._shared.cached(
+            key, lambda: psd_region(t, box.iy % ly, box.ix % lx, os)
+        )
         return out
+
+    def _validity(self, theta_i_deg: float, lam_nm: float) -> str | None:
+        """First-order perturbation needs ``g <= RR_VALID_G`` and ``Sdq <= RR_VALID_SDQ``."""
+        g = self.rayleigh_factor(theta_i_deg, lam_nm)  # the map's Sq, as the auto rule
+        sdq = self._shared.stats.sdq
+        if g > RR_VALID_G:
+            return f"is outside its validity: g = {g:.3g} > {RR_VALID_G:g} at {lam_nm:g} nm"
+        if sdq > RR_VALID_SDQ:
+            return f"is outside its validity: Sdq = {sdq:.3g} > {RR_VALID_SDQ:g}"
+        return None
+
+    def _alternative(self, theta_i_deg: float, lam_nm: float, g: float) -> str:
+        return "kirchhoff"
