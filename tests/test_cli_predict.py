@@ -208,3 +208,58 @@ def test_stats_say_the_regime_per_geometry(capsys: pytest.CaptureFixture[str]) -
     st = _run_json(capsys, "predict", "stats", "sample:wittmann-8")
     assert st["regime"]["20"]["model"] == "facet"
     assert st["regime"]["20"]["g"] > 20
+
+
+# --------------------------------------------------------------------- issue 20: albedo
+@pytest.mark.parametrize("n", ["1.55", "0.27+3.41j"])
+def test_albedo_of_a_flat_map_is_its_fresnel_reflectance(
+    capsys: pytest.CaptureFixture[str], n: str
+) -> None:
+    """The flat-mirror limit: all light in the coherent beam, albedo = F(theta_i) (Born &
+    Wolf for the conductor), TIS = 0, one model per angle."""
+    out = _run_json(
+        capsys, "predict", "albedo", "sample:flat", "--n", n, "--theta-i", "0,30,60,85,89"
+    )
+    assert set(out) >= {"theta_i_deg", "albedo", "tis", "model", "fresnel"}
+    assert out["theta_i_deg"] == [0.0, 30.0, 60.0, 85.0, 89.0]
+    idx = complex(n.replace("i", "j"))
+    for t, a, tis, m in zip(
+        out["theta_i_deg"], out["albedo"], out["tis"], out["model"], strict=True
+    ):
+        c = math.cos(math.radians(t))
+        want = (
+            float(fresnel_dielectric(c, idx.real))
+            if idx.imag == 0
+            else float(fresnel_conductor(c, idx))
+        )
+        assert a == pytest.approx(want, rel=1e-9)
+        assert tis == 0.0 and m == "rayleigh-rice"
+
+
+def test_albedo_of_a_rough_coat_and_its_table(capsys: pytest.CaptureFixture[str]) -> None:
+    """A coat: albedo <= Fresnel (+1 %), TIS = albedo - coherent beam > 0, and the text
+    table names the model of each row; angles beyond 89 deg are refused."""
+    out = _run_json(capsys, "predict", "albedo", "sample:wittmann-1", "--theta-i", "0:80:40")
+    assert out["theta_i_deg"] == [0.0, 40.0, 80.0]
+    for a, tis, f in zip(out["albedo"], out["tis"], out["fresnel"], strict=True):
+        assert 0.0 < tis < a <= 1.01 * f
+    assert main(["predict", "albedo", "sample:wittmann-1", "--theta-i", "0,60"]) == 0
+    text = capsys.readouterr().out
+    assert "TIS" in text and "kirchhoff" in text
+    assert main(["predict", "albedo", "sample:flat", "--theta-i", "95"]) == 2
+    assert "[0, 89]" in capsys.readouterr().err
+
+
+def test_a_model_outside_its_validity_hands_over_and_says_so(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """Rayleigh-Rice forced on wittmann-1 (g = 0.9 at 20 deg): G20 is computed by Kirchhoff,
+    the JSON names it, and stderr carries the same warning (it read 376 GU silently)."""
+    code = main(["predict", "gloss", "sample:wittmann-1", "--model", "rayleigh-rice", "--json"])
+    captured = capsys.readouterr()
+    assert code == 0
+    out = json.loads(captured.out)
+    assert out["model"]["G20"] == "kirchhoff" and out["model"]["G85"] == "rayleigh-rice"
+    assert any(w.startswith("G20: rayleigh-rice is outside its validity") for w in out["warnings"])
+    assert "goniolab: warning: G20: rayleigh-rice is outside its validity" in captured.err
+    assert 70.0 < out["G20"] < 95.0

@@ -1,4 +1,4 @@
-"""``goniolab predict stats|gloss|brdf MAP``: roughness, gloss and BRDF predicted from a map.
+"""``goniolab predict stats|gloss|brdf|albedo MAP``: roughness, gloss and BRDF predicted from a map.
 
 MAP is a height-map file or ``sample:NAME`` (:func:`goniolab.surfaces.resolve_map`). The facet
 model (Wittmann et al. 2021; docs/PHYSICS.md) gives
@@ -9,8 +9,14 @@ model (Wittmann et al. 2021; docs/PHYSICS.md) gives
 - every command takes ``--model auto|facet|kirchhoff|rayleigh-rice`` (default ``auto``: per
   geometry, the regime rule of :mod:`goniolab.optics.model_choice`) and ``--wavelength-nm``
   (default: gloss weighted over wavelength by CIE C x V(lambda) as ISO 2813 does, BRDFs at
-  550 nm); ``--json`` names the model used per geometry under ``"model"`` and any geometry
-  the map cannot resolve (read from the facet model) under ``"fallback"``;
+  550 nm); ``--json`` names the model that computed each reading under ``"model"`` (gloss)
+  or ``"models"`` (one per angle of a curve), any hand-over to the facet model under
+  ``"fallback"`` and every note (validity limits, light the map cannot resolve, energy
+  scales) under ``"warnings"``, also printed on stderr (``goniolab: warning: ...``);
+- ``albedo``: the directional-hemispherical reflectance (coherent beam plus diffuse light)
+  and the total integrated scatter (ISO 13696: diffuse flux over incident flux) at each
+  ``--theta-i`` for a collimated beam, with the Fresnel reflectance of the flat surface
+  beside them and the model that computed each row;
 - ``brdf``: the in-plane curve at ``--theta-i`` over ``--theta-r``: the goniometer reading
   (``luminance_pct``, % of a mirror, source and detector cones) and the aperture-averaged
   BRDF ``luminance / 100 / (projected solid angle of the detector)``, or with ``--point`` the
@@ -594,6 +600,68 @@ def _cmd_brdf(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_albedo(args: argparse.Namespace) -> int:
+    """Directional-hemispherical reflectance and TIS per incidence (issue 20)."""
+    from goniolab.optics.fresnel import fresnel
+    from goniolab.optics.provenance import Provenance
+    from goniolab.scan.plans import PlanError, parse_angles
+
+    try:
+        angles = [float(a) for a in parse_angles(args.theta_i, name="--theta-i")]
+    except PlanError as exc:
+        raise UserError(str(exc)) from None
+    bad = [a for a in angles if not (math.isfinite(a) and 0.0 <= a <= 89.0)]
+    if bad or not angles:
+        raise UserError(f"--theta-i {args.theta_i!r}: angles must be in [0, 89] deg")
+    model = _model(args)
+    lam = 550.0 if args.wavelength_nm is None else float(args.wavelength_nm)
+    albedo: list[float] = []
+    tis: list[float] = []
+    names: list[str] = []
+    warnings: list[str] = []
+    for ti in angles:
+        try:
+            if hasattr(model, "albedo_tis"):
+                a, t, prov = model.albedo_tis(ti)
+            else:  # the facet model: all of its light is diffuse
+                a = float(model.brdf_hemisphere(ti).albedo)
+                t, prov = a, Provenance(_model_name(model))
+        except ValueError as exc:
+            raise UserError(f"--theta-i {ti:g}: {exc}") from None
+        albedo.append(float(a))
+        tis.append(float(t))
+        names.append(prov.model)
+        warnings.extend(f"theta_i {ti:g} deg: {note}" for note in prov.notes)
+    fres = [float(fresnel(math.cos(math.radians(t)), args.n)) for t in angles]
+    out: dict[str, Any] = {
+        "map": str(args.map),
+        "n": _index_json(args.n),
+        "wavelength_nm": lam,
+        "theta_i_deg": angles,
+        "albedo": albedo,
+        "tis": tis,
+        "fresnel": fres,
+        "model": names,
+    }
+    if warnings:
+        out["warnings"] = warnings
+    _require_finite(args.map, out, _MODEL_OVERFLOW)
+    _warn(warnings)
+    if args.json:
+        print(json.dumps(out, indent=2, allow_nan=False))
+        return 0
+    print(f"{args.map} (n = {args.n.real:g}{f'+{args.n.imag:g}i' if args.n.imag else ''}, "
+          f"{lam:g} nm, collimated beam)")  # fmt: skip
+    print(f"{'theta_i':>8}  {'albedo':>9}  {'TIS':>9}  {'Fresnel R':>9}  model")
+    for ti, a, t, f, name in zip(angles, albedo, tis, fres, names, strict=True):
+        print(f"{ti:8.2f}  {a:9.5f}  {t:9.5f}  {f:9.5f}  {name}")
+    print(
+        "albedo: directional-hemispherical reflectance (coherent beam + diffuse light the map "
+        "resolves); TIS: the diffuse part over the incident flux (ISO 13696)"
+    )
+    return 0
+
+
 def _add_common(p: argparse.ArgumentParser, *, many: bool = False) -> None:
     if many:
         p.add_argument("map", metavar="MAP", nargs="+", help="height-map files or sample:NAME")
@@ -689,6 +757,17 @@ def register(subparsers: Any) -> None:
     brdf.add_argument("--out", metavar="FILE.nc", help="also write the curve as netCDF")
     allow_negative_angles(brdf)  # "--theta-r -20:20:1" is a range, not an option
     brdf.set_defaults(func=_cmd_brdf)
+    albedo = sub.add_parser(
+        "albedo",
+        help="directional-hemispherical reflectance and total integrated scatter per theta_i",
+    )
+    _add_common(albedo)
+    albedo.add_argument(
+        "--theta-i",
+        default="0,30,60,85",
+        help="lamp angles, deg: a comma list or start:stop:step (default 0,30,60,85; <= 89)",
+    )
+    albedo.set_defaults(func=_cmd_albedo)
     from goniolab.commands._colour import register_predict_colour
 
     register_predict_colour(sub, _add_common)
