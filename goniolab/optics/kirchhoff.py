@@ -50,11 +50,13 @@ which is ``R exp(-(4 pi Sq cos ti / lambda)^2)`` for Gaussian heights (the Debye
 TIS relation); the diffuse part is the rest of ``P``.
 
 Limits: PHYSICS.md's Gaussian-ACF series is the test truth for the diffuse part; the map
-resolves directions within ``lambda/(2 step)`` of specular in direction cosines and
-angles down to ``lambda / field`` (:meth:`PhysicalOpticsModel.coverage`). The phase screen
-is only meaningful when neighbouring pixels differ in phase by less than pi,
-``v_z * slope * step < pi``: rough maps at fine wavelengths need a finer step (the facet
-model is then the right model anyway; :mod:`goniolab.optics.model_choice`).
+resolves directions within ``lambda/(2 step)`` of specular in direction cosines, and a
+receptor narrower than a few cells ``lambda / field`` is read on a zero-padded grid
+(PHYSICS.md, "No silent fallback"). The phase screen is only meaningful when neighbouring
+pixels differ in phase by less than pi, ``v_z * slope * step < pi``: a map that does not
+sample it hands the geometry over, stated (:meth:`KirchhoffModel._validity`). The diffuse
+part carries Smith's G2 as the geometric limit needs it and, from 70 deg, scalar energy
+conservation over the hemisphere (PHYSICS.md, "Energy").
 
 References
 ----------

@@ -21,11 +21,14 @@ forward, specular direction):
 In the specular direction ``q_ss = -r_s`` and ``q_pp = -r_p`` (Fresnel amplitudes), so
 ``Q -> R(ti)``. The PSD is the map's (:func:`goniolab.optics.psd.psd2`, Schwartz-windowed
 tiles), on the same direction-cosine cells as the Kirchhoff model
-(:mod:`goniolab.optics.physical`); a cell's flux fraction is ``f`` times its area
-``lambda^2 df_x df_y``. The specular term is the coherent beam
-``R(ti) exp(-(4 pi Sq cos ti / lambda)^2)`` (Debye-Waller), put in the specular cell. The
-PSD does not depend on the wavelength or the angles: one FFT per tile serves every
-geometry and wavelength.
+(:mod:`goniolab.optics.physical`); a cell's flux fraction is ``exp(-g) f`` times its area
+``lambda^2 df_x df_y`` (energy: PHYSICS.md, "Energy"; zero-padded cells when the receptor
+needs a finer grid, :func:`goniolab.optics.psd.psd_region`). The coherent beam
+``R exp(-(4 pi Sq cos t / lambda)^2)`` (Debye-Waller) is summed analytically over the source
+(:meth:`~goniolab.optics.physical.PhysicalOpticsModel._coherent_sums`). The PSD does not
+depend on the wavelength or the angles: one FFT per tile serves every geometry and
+wavelength. Outside ``g <= RR_VALID_G``, ``Sdq <= RR_VALID_SDQ`` the Kirchhoff model of the
+same map answers, and the reading's provenance says so.
 
 References
 ----------
