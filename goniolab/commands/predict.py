@@ -170,44 +170,31 @@ def _model_name(model: Any) -> str:
     return kind if isinstance(kind, str) and kind in MODEL_NAMES else "facet"
 
 
-def _gloss_models(model: Any) -> tuple[dict[str, Any], dict[str, Any], list[str]]:
-    """Per reading, the model that computed it (G20/G60/G85 and the ASTM E430 readings),
-    the facet hand-overs and the notes (``"G85: ..."``), for --json, netCDF and stderr."""
+def _gloss_models(model: Any, rep: Any) -> tuple[dict[str, Any], dict[str, Any], list[str]]:
+    """Per reading, the model that computed it (``GlossReport.models``: G20/G60/G85 and
+    ``e430.<field>``), the facet hand-overs and the notes, for --json, netCDF and stderr;
+    with ``auto`` the rule's choice per geometry under ``"rule"``."""
     from goniolab.optics import gloss_standards as gs
-    from goniolab.optics.provenance import gloss_provenance_of, provenance_of
 
-    names: dict[str, Any] = {}
+    names: dict[str, Any] = dict(rep.models)
     fb: dict[str, Any] = {}
-    warnings: list[str] = []
-    rule = model.choice if _is_auto(model) else None
-
-    def record(label: str, prov: Any, theta_i: float) -> None:
-        names[label] = prov.model
-        warnings.extend(f"{label}: {note}" for note in prov.notes)
-        chosen = rule(theta_i).model if rule is not None else _model_name(model)
-        if prov.model == "facet" and chosen != "facet":
-            fb[label] = prov.notes[-1] if prov.notes else "facet model"
-
-    for t, prov in gloss_provenance_of(model).items():
-        record(f"G{t}", prov, t)
     if _is_auto(model):
-        ex = {t: model.choice(t) for t in (20, 60, 85)}
+        rule = {t: model.choice(t) for t in (20, 60, 85)}
         names["rule"] = {f"G{t}": {"model": c.model, "g": c.g, "reason": c.reason}
-                         for t, c in ex.items()}  # fmt: skip
-    e430 = [
-        ("E430 B gloss", gs.E430_B_ANGLE_DEG, 0.0, gs.E430_B_SOURCE, gs.E430_B_SPECULAR_RECEPTOR),
-        ("E430 B haze", gs.E430_B_ANGLE_DEG, gs.E430_B_HAZE_OFFSET_DEG, gs.E430_B_SOURCE,
-         gs.E430_B_HAZE_RECEPTOR),
-        ("E430 A Rs/DOI", gs.E430_A_ANGLE_DEG, gs.E430_A_DOI_OFFSET_DEG, gs.E430_A_SOURCE,
-         gs.E430_A_SPECULAR_RECEPTOR),
-        ("E430 A narrow haze", gs.E430_A_ANGLE_DEG, gs.E430_A_NARROW_HAZE_OFFSET_DEG,
-         gs.E430_A_SOURCE, gs.E430_A_HAZE_RECEPTOR),
-        ("E430 A wide haze", gs.E430_A_ANGLE_DEG, gs.E430_A_WIDE_HAZE_OFFSET_DEG,
-         gs.E430_A_SOURCE, gs.E430_A_HAZE_RECEPTOR),
-    ]  # fmt: skip
-    for label, ti, off, src, rec in e430:
-        record(label, provenance_of(model, ti, ti + off, src, rec), ti)
-    return names, fb, warnings
+                         for t, c in rule.items()}  # fmt: skip
+        chosen = {f"G{t}": c.model for t, c in rule.items()}
+        method_b = ("e430.gloss_20", "e430.haze_18_1", "e430.haze_21_9", "e430.haze_b")
+        for key in rep.models:
+            if key.startswith("e430."):
+                t_e = gs.E430_B_ANGLE_DEG if key in method_b else gs.E430_A_ANGLE_DEG
+                chosen[key] = model.choice(t_e).model
+    else:
+        chosen = dict.fromkeys(rep.models, _model_name(model))
+    for key, name in rep.models.items():
+        if name == "facet" and chosen.get(key) != "facet":
+            why = [w for w in rep.warnings if w.startswith(f"{key}: ")]
+            fb[key] = why[-1].split(": ", 1)[1] if why else "facet model"
+    return names, fb, list(rep.warnings)
 
 
 def _warn(warnings: list[str]) -> None:
@@ -340,7 +327,7 @@ def _cmd_gloss(args: argparse.Namespace) -> int:
     _require_finite(args.map, rep.as_dict(), _MODEL_OVERFLOW)
     from goniolab.datasets import gloss_dataset
 
-    names, fallback, warnings = _gloss_models(model)
+    names, fallback, warnings = _gloss_models(model, rep)
     computed_by = {k: v for k, v in names.items() if isinstance(v, str)}
     prov_attrs = {"computed_by": json.dumps(computed_by), "warnings": json.dumps(warnings)}
     _write_out(args, lambda attrs: gloss_dataset(rep, attrs={**attrs, **prov_attrs}))

@@ -32,7 +32,7 @@ References
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from goniolab.optics.apertures import ISO2813_BLACK_GLASS_N, ISO2813_SOURCE, Rect
@@ -59,6 +59,7 @@ __all__ = [
     "d523_recommended_angle",
     "e430_report",
     "gloss_report",
+    "report_provenance",
 ]
 
 #: ASTM D523: use 20 deg above this G60 (high gloss) ...
@@ -124,6 +125,13 @@ class GlossReport:
     haze_index: float
     e430: E430Report
     d523_recommended_angle: int
+    #: the model that computed each reading (``"G20"``, ..., ``"e430.gloss_30"``, ...):
+    #: ``facet``, ``kirchhoff``, ``rayleigh-rice``, ``analytic-<kind>``
+    #: (:func:`goniolab.optics.provenance.provenance_of`)
+    models: dict[str, str] = field(default_factory=dict)
+    #: the notes of those readings (validity limits, hand-overs, light the map cannot
+    #: resolve), ``"G85: ..."``
+    warnings: tuple[str, ...] = ()
 
     def as_dict(self) -> dict[str, Any]:
         """Plain nested dict (JSON-ready)."""
@@ -193,6 +201,7 @@ def gloss_report(model: ReflectanceModel) -> GlossReport:
         ``d523_recommended_angle`` in degrees.
     """
     g = model.gloss((20, 60, 85))
+    models, warnings = report_provenance(model)
     return GlossReport(
         G20=g[20],
         G60=g[60],
@@ -200,4 +209,47 @@ def gloss_report(model: ReflectanceModel) -> GlossReport:
         haze_index=g[60] - g[20],
         e430=e430_report(model),
         d523_recommended_angle=d523_recommended_angle(g[60]),
+        models=models,
+        warnings=warnings,
     )
+
+
+def report_provenance(model: ReflectanceModel) -> tuple[dict[str, str], tuple[str, ...]]:
+    """The model that computes each reading of :func:`gloss_report` and the notes
+    (:func:`goniolab.optics.provenance.provenance_of`): keys ``G20``, ``G60``, ``G85`` and
+    the :class:`E430Report` fields as ``e430.<field>`` (haze and DOI: the off-specular
+    receptor's; a mean, the worse of its two)."""
+    from goniolab.optics.provenance import gloss_provenance_of, provenance_of
+
+    models: dict[str, str] = {}
+    notes: dict[str, None] = {}
+    for t, p in gloss_provenance_of(model).items():
+        models[f"G{t}"] = p.model
+        notes.update(dict.fromkeys(f"G{t}: {n}" for n in p.notes))
+    tb, ta = E430_B_ANGLE_DEG, E430_A_ANGLE_DEG
+    readings: dict[str, list[tuple[float, float, Rect, Rect]]] = {
+        "gloss_20": [(tb, tb, E430_B_SOURCE, E430_B_SPECULAR_RECEPTOR)],
+        "haze_18_1": [(tb, tb - E430_B_HAZE_OFFSET_DEG, E430_B_SOURCE, E430_B_HAZE_RECEPTOR)],
+        "haze_21_9": [(tb, tb + E430_B_HAZE_OFFSET_DEG, E430_B_SOURCE, E430_B_HAZE_RECEPTOR)],
+        "gloss_30": [(ta, ta, E430_A_SOURCE, E430_A_SPECULAR_RECEPTOR)],
+        "haze_narrow": [
+            (ta, ta + s * E430_A_NARROW_HAZE_OFFSET_DEG, E430_A_SOURCE, E430_A_HAZE_RECEPTOR)
+            for s in (-1.0, 1.0)
+        ],
+        "haze_wide": [
+            (ta, ta + s * E430_A_WIDE_HAZE_OFFSET_DEG, E430_A_SOURCE, E430_A_HAZE_RECEPTOR)
+            for s in (-1.0, 1.0)
+        ],
+        "doi": [
+            (ta, ta, E430_A_SOURCE, E430_A_SPECULAR_RECEPTOR),
+            (ta, ta + E430_A_DOI_OFFSET_DEG, E430_A_SOURCE, E430_A_SPECULAR_RECEPTOR),
+        ],
+    }
+    readings["haze_b"] = readings["haze_18_1"] + readings["haze_21_9"]
+    for name, geoms in readings.items():
+        provs = [provenance_of(model, *geo) for geo in geoms]
+        names = sorted({p.model for p in provs})
+        models[f"e430.{name}"] = names[0] if len(names) == 1 else " + ".join(names)
+        for p in provs:
+            notes.update(dict.fromkeys(f"e430.{name}: {n}" for n in p.notes))
+    return models, tuple(notes)

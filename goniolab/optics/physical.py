@@ -573,6 +573,12 @@ class PhysicalOpticsModel:
 
         return iso2813_weights()
 
+    def _lams_for_checks(self) -> list[float]:
+        """The gloss wavelengths the validity checks look at: those carrying at least 1 % of
+        the peak ISO 2813 weight (440-680 nm; 400 and 420 nm weigh 0.02 and 0.4 %)."""
+        lams, w = self._lams_for_gloss()
+        return [float(v) for v, wi in zip(lams, w, strict=True) if wi >= 0.01 * float(w.max())]
+
     def _oversampling(
         self, lam_um: float, receptor: Aperture, theta_r_deg: FloatArray
     ) -> tuple[tuple[int, int], str | None]:
@@ -1215,7 +1221,7 @@ class PhysicalOpticsModel:
                     f"no ISO 2813 geometry at {t} deg; known: {sorted(ISO2813_RECEPTOR)}"
                 )
             rec = ISO2813_RECEPTOR[key]
-            who, _ = self._route(key, key, ISO2813_SOURCE, rec, lams.tolist())
+            who, _ = self._route(key, key, ISO2813_SOURCE, rec, self._lams_for_checks())
             if who == "facet":
                 out[key] = self.facet_model.gloss((key,))[key]
                 continue
@@ -1230,12 +1236,13 @@ class PhysicalOpticsModel:
         return out
 
     def gloss_provenance(self, angles_deg: Sequence[int] = (20, 60, 85)) -> dict[int, Provenance]:
-        """Per ISO 2813 geometry: the model that computes it and the notes."""
-        lams, _ = self._lams_for_gloss()
+        """Per ISO 2813 geometry: the model that computes it and the notes (validity
+        checked over the wavelengths that carry the reading, :meth:`_lams_for_checks`)."""
+        lams = self._lams_for_checks()
         return {
             int(t): self.provenance(
                 int(t), int(t), ISO2813_SOURCE, ISO2813_RECEPTOR[int(t)],
-                wavelengths_nm=lams.tolist(),
+                wavelengths_nm=lams,
             )
             for t in angles_deg
         }  # fmt: skip

@@ -272,3 +272,20 @@ def test_no_facet_hand_over_while_g_is_small_on_an_afm_field() -> None:
     assert p.model != "facet"
     rep = gs.gloss_report(model)
     assert rep.e430.doi > 90.0  # a smooth coat reflects a sharp image (the facet model: -3.7)
+
+
+def test_gloss_report_names_the_model_of_every_reading() -> None:
+    """``GlossReport.models`` / ``.warnings`` for the scan, TUI and store layers: Rayleigh-Rice
+    forced on a coat it cannot describe at 20 deg (g ~ 3) hands G20 and the E430 readings
+    to Kirchhoff, says so per reading, and keeps G85 (g ~ 0.02) for itself."""
+    from goniolab.optics.gloss_standards import gloss_report
+
+    model = RayleighRiceModel(coat(256, 0.08, 2.0), n=1.55)
+    rep = gloss_report(model)
+    keys = {"G20", "G60", "G85", "e430.gloss_20", "e430.haze_b", "e430.gloss_30", "e430.doi"}
+    assert keys <= set(rep.models)
+    assert rep.models["G20"] == "kirchhoff" and rep.models["G85"] == "rayleigh-rice"
+    assert rep.models["e430.doi"] == "kirchhoff"
+    assert any(w.startswith("G20: rayleigh-rice is outside its validity") for w in rep.warnings)
+    assert not any(w.startswith("G85") for w in rep.warnings)
+    assert rep.as_dict()["models"] == rep.models
