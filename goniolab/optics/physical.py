@@ -1185,14 +1185,57 @@ class PhysicalOpticsModel:
         return out
 
     def brdf_point(self, theta_i_deg: float, theta_r_deg: float, phi_r_deg: float = 180.0) -> float:
-        """In-plane BRDF (sr^-1) via :meth:`brdf_inplane`; out-of-plane directions use the
-        facet model (the box average is defined in the plane of incidence)."""
+        """BRDF (sr^-1) towards ``(theta_r, phi_r)``: in the plane of incidence the
+        :meth:`brdf_inplane` box average; out of it, the same average over a cone of the
+        box's solid angle (1.128 deg) centred on the direction: the mean cell BRDF of the
+        cells inside it, plus the coherent beam over the cone's projected solid angle when
+        the cone holds the specular direction."""
+        ti = _check_theta_i(theta_i_deg)
         phi = float(phi_r_deg) % 360.0
         tr = float(theta_r_deg)
+        if not (math.isfinite(tr) and 0.0 <= tr < 90.0):
+            raise ValueError(f"theta_r_deg must be in [0, 90) deg, got {theta_r_deg!r}")
         if phi in (0.0, 180.0):
             signed = tr if phi == 180.0 else -tr
-            return float(self.brdf_inplane(theta_i_deg, np.array([signed]))[0])
-        return self.facet_model.brdf_point(theta_i_deg, theta_r_deg, phi_r_deg)
+            return float(self.brdf_inplane(ti, np.array([signed]))[0])
+        box = Rect(POINT_BRDF_BOX_DEG, POINT_BRDF_BOX_DEG)
+        cone = Cone(2.0 * math.degrees(math.acos(1.0 - solid_angle_sr(box) / (2.0 * math.pi))))
+        t, p = math.radians(tr), math.radians(phi)
+        wo = np.array([math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t)])
+        lam = self.wavelength_nm * 1e-3
+        a_d = math.radians(cone.half_angle_deg)
+        os, _ = self._oversampling(lam, cone, np.array([tr]))
+        cx, cy = self._cell_size(lam, os)
+        sx = math.sin(math.radians(ti))
+        reach = 2.0 * math.sin(0.5 * a_d) + 1e-9
+        nx0, nx1, ny0, ny1 = self._nyquist(os)
+        ix0 = math.floor((wo[0] - reach + sx) / cx) - 1
+        ix1 = math.ceil((wo[0] + reach + sx) / cx) + 1
+        iy0 = math.floor((wo[1] - reach) / cy) - 1
+        iy1 = math.ceil((wo[1] + reach) / cy) + 1
+        inside = ix0 >= nx0 and ix1 <= nx1 and iy0 >= ny0 and iy1 <= ny1
+        g = self.rayleigh_factor(ti)
+        if not inside and g >= FACET_MIN_HANDOVER_G:
+            return self.facet_model.brdf_point(ti, tr, phi)
+        b = _Box(max(ix0, nx0), min(ix1, nx1), max(iy0, ny0), min(iy1, ny1))
+        if b.ix1 < b.ix0 or b.iy1 < b.iy0:
+            return 0.0
+        powers, coh = self._cell_powers(ti, [lam], [b], os)
+        _, _, _, ok = self._geometry(ti, lam, b, os)
+        wox, woy = self._wo_axes(ti, lam, b, os)
+        table, g0, g1, o_in, _ = _cone_table(0.0, a_d)
+        fn = CK.cone_cells_numba if self.backend == "numba" else CK.cone_cells_numpy
+        d = np.ascontiguousarray(wo[None, :])
+        flux = float(fn(wox, woy, powers[0], d, table, g0, g1, o_in)[0])
+        cells = float(fn(wox, woy, np.where(ok, cx * cy, 0.0), d, table, g0, g1, o_in)[0])
+        wi = np.array([[sx, 0.0, math.cos(math.radians(ti))]])
+        flux *= float(np.asarray(self._diffuse_g2(wi, d, lam)).ravel()[0])
+        out = flux / cells if cells > 0.0 else 0.0
+        m0 = np.array([-sx, 0.0, math.cos(math.radians(ti))])
+        if float(np.clip(m0 @ wo, -1.0, 1.0)) >= math.cos(a_d):
+            beam = float(fresnel(m0[2], self.n)) * coh[0]
+            out += beam / (math.pi * math.sin(a_d) ** 2 * wo[2])
+        return out
 
     def curve_provenance(
         self, theta_i_deg: float, theta_r_deg: ArrayLike, source: Aperture, receptor: Aperture

@@ -289,3 +289,18 @@ def test_gloss_report_names_the_model_of_every_reading() -> None:
     assert any(w.startswith("G20: rayleigh-rice is outside its validity") for w in rep.warnings)
     assert not any(w.startswith("G85") for w in rep.warnings)
     assert rep.as_dict()["models"] == rep.models
+
+
+def test_out_of_plane_point_brdf_is_the_wave_models_own() -> None:
+    """Out of the plane of incidence brdf_point averaged the facet model's BRDF without a
+    word; now a cone of the box's solid angle over the wave model's cells, against the
+    Beckmann series (one realisation on a 1 mm field: 30 %)."""
+    sq, l_um, ti = 0.05, 2.0, 60.0
+    model = KirchhoffModel(coat(1000, sq, l_um), n=1.55)
+    series = beckmann_series(sq, l_um, 1.55)
+    wi = np.array([[math.sin(math.radians(ti)), 0.0, math.cos(math.radians(ti))]])
+    for tr, phi in ((60.0, 170.0), (65.0, 175.0), (58.0, 185.0)):
+        t, p = math.radians(tr), math.radians(phi)
+        wo = np.array([[math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t)]])
+        want = float(series(wi, wo)[0])  # type: ignore[operator]
+        assert model.brdf_point(ti, tr, phi) == pytest.approx(want, rel=0.3)
