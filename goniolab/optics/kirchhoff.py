@@ -81,7 +81,6 @@ from numpy.typing import NDArray
 from goniolab.optics import _cell_kernels as CK
 from goniolab.optics.fresnel import fresnel
 from goniolab.optics.physical import (
-    ENERGY_CHECK_FROM_DEG,
     MAX_PHASE_STEP_RAD,
     RR_VALID_G,
     RR_VALID_SDQ,
@@ -324,7 +323,7 @@ class KirchhoffModel(PhysicalOpticsModel):
         out: FloatArray = np.where(ok, s2 * s2 / (4.0 * ci * co * (ci + co) ** 2), 0.0)
         return out
 
-    def _energy_scales(self, theta_i_deg: float, lams_um: Sequence[float]) -> list[float]:
+    def _energy_scales_at(self, theta_i_deg: float, lams_um: Sequence[float]) -> list[float]:
         """Scalar energy conservation of the diffuse part, from
         :data:`~goniolab.optics.physical.ENERGY_CHECK_FROM_DEG` on.
 
@@ -334,47 +333,29 @@ class KirchhoffModel(PhysicalOpticsModel):
         ``|G|^2`` grows as ``1 / cos ti`` out of the plane of incidence towards grazing, and
         unchecked the model's albedo reached 1.1-1.7 times Fresnel at 85-89 deg on smooth
         metals; the diffuse cells are scaled by ``min(1, (1 - C) / D_1)``, computed over the
-        whole Nyquist window once per incidence and wavelength set (cached; for more than
-        three wavelengths at the shortest, median and longest, interpolated in
-        ``1/lambda^2``)."""
-        if theta_i_deg < ENERGY_CHECK_FROM_DEG:
-            return [1.0 for _ in lams_um]
-        if len(lams_um) > 3:
-            # the scale is smooth in lambda (g ~ 1/lambda^2): three wavelengths, linear
-            # interpolation in 1/lambda^2 between them
-            lo, hi = min(lams_um), max(lams_um)
-            mid = float(np.median(lams_um))
-            nodes = sorted({lo, mid, hi})
-            at = self._energy_scales(theta_i_deg, nodes)
-            x = [1.0 / v**2 for v in nodes][::-1]
-            return [float(np.interp(1.0 / v**2, x, at[::-1])) for v in lams_um]
-        key = ("kirchhoff-energy", round(theta_i_deg, 9), tuple(round(v, 12) for v in lams_um))
-
-        def make() -> list[float]:
-            nx0, nx1, ny0, ny1 = self._nyquist()
-            box = _Box(nx0, nx1, ny0, ny1)
-            geo = [self._geometry(theta_i_deg, lam, box) for lam in lams_um]
-            raw, coh = self._raw_power(
-                theta_i_deg, lams_um, [box] * len(lams_um), [(g[2], g[3]) for g in geo]
-            )
-            t = math.radians(theta_i_deg)
-            wi = np.array([math.sin(t), 0.0, math.cos(t)])
-            out = []
-            for r, c, (x, y, z, ok), lam in zip(raw, coh, geo, lams_um, strict=True):
-                contrib = r * self._obliquity(theta_i_deg, x, y, z, ok)
-                # the shadowing of the cells that carry the flux (>= 1e-6 of the largest);
-                # the others count unshadowed (an upper bound on D_1)
-                big = contrib > 1e-6 * float(contrib.max(initial=0.0))
-                if self.masking and np.any(big):
-                    wo = np.stack([x[big], y[big], z[big]], axis=-1)
-                    w = self._diffuse_g2(np.broadcast_to(wi, wo.shape), wo, lam)
-                    contrib[big] *= w
-                d1 = float(np.sum(contrib))
-                out.append(min(1.0, max(0.0, 1.0 - c) / d1) if d1 > 0.0 else 1.0)
-            return out
-
-        scales: list[float] = self._shared.cached(key, make)
-        return scales
+        whole Nyquist window once per incidence and wavelength set (cached,
+        :meth:`PhysicalOpticsModel._energy_scales`)."""
+        nx0, nx1, ny0, ny1 = self._nyquist()
+        box = _Box(nx0, nx1, ny0, ny1)
+        geo = [self._geometry(theta_i_deg, lam, box) for lam in lams_um]
+        raw, coh = self._raw_power(
+            theta_i_deg, lams_um, [box] * len(lams_um), [(g[2], g[3]) for g in geo]
+        )
+        t = math.radians(theta_i_deg)
+        wi = np.array([math.sin(t), 0.0, math.cos(t)])
+        out = []
+        for r, c, (x, y, z, ok), lam in zip(raw, coh, geo, lams_um, strict=True):
+            contrib = r * self._obliquity(theta_i_deg, x, y, z, ok)
+            # the shadowing of the cells that carry the flux (>= 1e-6 of the largest);
+            # the others count unshadowed (an upper bound on D_1)
+            big = contrib > 1e-6 * float(contrib.max(initial=0.0))
+            if self.masking and np.any(big):
+                wo = np.stack([x[big], y[big], z[big]], axis=-1)
+                w = self._diffuse_g2(np.broadcast_to(wi, wo.shape), wo, lam)
+                contrib[big] *= w
+            d1 = float(np.sum(contrib))
+            out.append(min(1.0, max(0.0, 1.0 - c) / d1) if d1 > 0.0 else 1.0)
+        return out
 
     # ------------------------------------------------------------------ shadowing, validity
     def _diffuse_g2(self, wi: FloatArray, wo: FloatArray, lam_um: float) -> FloatArray | float:

@@ -465,8 +465,24 @@ class PhysicalOpticsModel:
 
     def _energy_scales(self, theta_i_deg: float, lams_um: Sequence[float]) -> list[float]:
         """Factors (<= 1) applied to the diffuse cells so that the hemisphere's total stays
-        within energy conservation, per wavelength (1 below :data:`ENERGY_CHECK_FROM_DEG`);
-        the subclasses state their bound."""
+        within energy conservation, per wavelength (1 below :data:`ENERGY_CHECK_FROM_DEG`;
+        the subclasses' :meth:`_energy_scales_at` state their bound). For more than three
+        wavelengths the factor is computed at the shortest, median and longest and
+        interpolated linearly in ``1/lambda^2`` (it is smooth in lambda: g ~ 1/lambda^2)."""
+        if theta_i_deg < ENERGY_CHECK_FROM_DEG:
+            return [1.0 for _ in lams_um]
+        if len(lams_um) > 3:
+            nodes = sorted({min(lams_um), float(np.median(lams_um)), max(lams_um)})
+            at = self._energy_scales(theta_i_deg, nodes)
+            x = [1.0 / v**2 for v in nodes][::-1]
+            return [float(np.interp(1.0 / v**2, x, at[::-1])) for v in lams_um]
+        key = (self.kind, "energy", round(theta_i_deg, 9), tuple(round(v, 12) for v in lams_um))
+        scales: list[float] = self._shared.cached(
+            key, lambda: self._energy_scales_at(theta_i_deg, lams_um)
+        )
+        return scales
+
+    def _energy_scales_at(self, theta_i_deg: float, lams_um: Sequence[float]) -> list[float]:
         return [1.0 for _ in lams_um]
 
     def _energy_note(self, theta_i_deg: float, lams_nm: Sequence[float]) -> str | None:

@@ -50,7 +50,6 @@ from numpy.typing import ArrayLike
 
 from goniolab.optics.fresnel import fresnel
 from goniolab.optics.physical import (
-    ENERGY_CHECK_FROM_DEG,
     RR_VALID_G,
     RR_VALID_SDQ,
     FloatArray,
@@ -149,7 +148,7 @@ class RayleighRiceModel(PhysicalOpticsModel):
             coh.append(dw)
         return out, coh
 
-    def _energy_scales(self, theta_i_deg: float, lams_um: Sequence[float]) -> list[float]:
+    def _energy_scales_at(self, theta_i_deg: float, lams_um: Sequence[float]) -> list[float]:
         """From :data:`~goniolab.optics.physical.ENERGY_CHECK_FROM_DEG` on, the diffuse
         flux over the hemisphere, ``exp(-g) D`` (D the first-order total), is held to what
         the coherent beam leaves of the Fresnel reflectance, ``R(ti) (1 - exp(-g))``: the
@@ -157,41 +156,33 @@ class RayleighRiceModel(PhysicalOpticsModel):
         ``exp(-g) D <= R (1 - exp(-g))`` holds by itself: ``g exp(-g) <= 1 - exp(-g)`` and Q
         stays near R.) D is summed over every second cell of the tile's grid in each axis
         when the tile is larger than 256 points (the periodogram is smooth at that scale)."""
-        if theta_i_deg < ENERGY_CHECK_FROM_DEG:
-            return [1.0 for _ in lams_um]
-        key = ("rr-energy", round(theta_i_deg, 9), tuple(round(v, 12) for v in lams_um))
-
-        def make() -> list[float]:
-            t = self._shared.tiled
-            ci = math.cos(math.radians(theta_i_deg))
-            stride = 2 if max(t.nx_t, t.ny_t) > 256 else 1
-            nx0, nx1, ny0, ny1 = self._nyquist()
-            box = _Box(nx0, nx1, ny0, ny1)
-            ix, iy = box.ix[::stride], box.iy[::stride]
-            pv = self.psd.psd_um4[np.ix_(iy % t.ny_t, ix % t.nx_t)] * stride * stride
-            df2 = 1.0 / (t.nx_t * t.dx_um * t.ny_t * t.dy_um)
-            r_spec = float(fresnel(ci, self.n))
-            out = []
-            for lam in lams_um:
-                cx, cy = self._cell_size(lam)
-                x = ix.astype(np.float64)[None, :] * cx - math.sin(math.radians(theta_i_deg))
-                y = iy.astype(np.float64)[:, None] * cy
-                z2 = 1.0 - x * x - y * y
-                ok = z2 > 1e-12
-                z = np.sqrt(np.where(ok, z2, 0.0))
-                st = np.sqrt(x * x + y * y)
-                ts_deg = np.degrees(np.arctan2(st, z))
-                phi_deg = np.where(st > 0, np.degrees(np.arctan2(-y, -x)), 0.0)
-                q = rr_q_factor(theta_i_deg, ts_deg, phi_deg, self.n)
-                d = float(np.sum(np.where(ok, 16.0 * math.pi**2 * ci * z * q * pv, 0.0)))
-                d *= df2 / lam**2
-                dw = math.exp(-self._g_at(theta_i_deg, lam))
-                room = r_spec * (1.0 - dw)
-                out.append(min(1.0, room / (dw * d)) if d > 0.0 else 1.0)
-            return out
-
-        scales: list[float] = self._shared.cached(key, make)
-        return scales
+        t = self._shared.tiled
+        ci = math.cos(math.radians(theta_i_deg))
+        stride = 2 if max(t.nx_t, t.ny_t) > 256 else 1
+        nx0, nx1, ny0, ny1 = self._nyquist()
+        box = _Box(nx0, nx1, ny0, ny1)
+        ix, iy = box.ix[::stride], box.iy[::stride]
+        pv = self.psd.psd_um4[np.ix_(iy % t.ny_t, ix % t.nx_t)] * stride * stride
+        df2 = 1.0 / (t.nx_t * t.dx_um * t.ny_t * t.dy_um)
+        r_spec = float(fresnel(ci, self.n))
+        out = []
+        for lam in lams_um:
+            cx, cy = self._cell_size(lam)
+            x = ix.astype(np.float64)[None, :] * cx - math.sin(math.radians(theta_i_deg))
+            y = iy.astype(np.float64)[:, None] * cy
+            z2 = 1.0 - x * x - y * y
+            ok = z2 > 1e-12
+            z = np.sqrt(np.where(ok, z2, 0.0))
+            st = np.sqrt(x * x + y * y)
+            ts_deg = np.degrees(np.arctan2(st, z))
+            phi_deg = np.where(st > 0, np.degrees(np.arctan2(-y, -x)), 0.0)
+            q = rr_q_factor(theta_i_deg, ts_deg, phi_deg, self.n)
+            d = float(np.sum(np.where(ok, 16.0 * math.pi**2 * ci * z * q * pv, 0.0)))
+            d *= df2 / lam**2
+            dw = math.exp(-self._g_at(theta_i_deg, lam))
+            room = r_spec * (1.0 - dw)
+            out.append(min(1.0, room / (dw * d)) if d > 0.0 else 1.0)
+        return out
 
     def _psd_cells(self, box: _Box, os: tuple[int, int]) -> FloatArray:
         t = self._shared.tiled

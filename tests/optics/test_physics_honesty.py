@@ -304,3 +304,15 @@ def test_out_of_plane_point_brdf_is_the_wave_models_own() -> None:
         wo = np.array([[math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t)]])
         want = float(series(wi, wo)[0])  # type: ignore[operator]
         assert model.brdf_point(ti, tr, phi) == pytest.approx(want, rel=0.3)
+
+
+def test_g85_does_not_jump_with_the_map_step() -> None:
+    """Issue 20: a 256 um field at 0.44 um steps fell back to the facet model at 85 deg,
+    at 0.46 um it did not: G85 moved by 68 GU. Both now read the scalar Kirchhoff theory
+    of the coat (Sq 50 nm, l 2 um) within 0.3 GU, with ``auto``'s own model."""
+    want = scalar_kirchhoff_gloss(0.05, 2.0, 85)
+    for step in (0.44, 0.46):
+        hm = gaussian_map(round(256 / step), 0.05, 2.0, step, seed=7)
+        auto = build_model(hm, n=1.55, model="auto", wavelength_nm=550.0)
+        assert auto.gloss((85,))[85] == pytest.approx(want, abs=0.3)
+        assert auto.gloss_provenance((85,))[85].model != "facet"  # type: ignore[attr-defined]
