@@ -263,3 +263,29 @@ def test_a_model_outside_its_validity_hands_over_and_says_so(
     assert any(w.startswith("G20: rayleigh-rice is outside its validity") for w in out["warnings"])
     assert "goniolab: warning: G20: rayleigh-rice is outside its validity" in captured.err
     assert 70.0 < out["G20"] < 95.0
+
+
+def test_netcdf_attrs_name_the_model_of_every_number(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--out``: the stored prediction carries what --json says (``computed_by``,
+    ``warnings``), so a file read later still says which model made each number."""
+    import xarray as xr
+
+    out = tmp_path / "gloss.nc"
+    argv = ["predict", "gloss", "sample:wittmann-1", "--model", "rayleigh-rice"]
+    assert main([*argv, "--json", "--out", str(out)]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    with xr.open_dataset(out, engine="h5netcdf") as ds:
+        attrs = dict(ds.attrs)
+    computed = json.loads(attrs["computed_by"])
+    assert computed["G20"] == doc["model"]["G20"] == "kirchhoff"
+    assert json.loads(attrs["warnings"]) == doc["warnings"]
+    curve = tmp_path / "curve.nc"
+    argv = ["predict", "brdf", "sample:wittmann-1", "--theta-r", "0,45"]
+    assert main([*argv, "--json", "--out", str(curve)]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    with xr.open_dataset(curve, engine="h5netcdf") as ds:
+        attrs = dict(ds.attrs)
+    assert json.loads(attrs["computed_by"]) == doc["models"] == ["kirchhoff", "kirchhoff"]
+    assert json.loads(attrs["warnings"]) == doc["warnings"]
