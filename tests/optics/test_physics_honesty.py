@@ -316,3 +316,23 @@ def test_g85_does_not_jump_with_the_map_step() -> None:
         auto = build_model(hm, n=1.55, model="auto", wavelength_nm=550.0)
         assert auto.gloss((85,))[85] == pytest.approx(want, abs=0.3)
         assert auto.gloss_provenance((85,))[85].model != "facet"  # type: ignore[attr-defined]
+
+
+def test_readings_are_continuous_across_the_rayleigh_rice_kirchhoff_switch() -> None:
+    """Where ``auto`` switches from Rayleigh-Rice to Kirchhoff (g = 0.15) the two models
+    agree, shadowing included (with masking on, as by default): no G2 on the coherent beam
+    nor in Rayleigh-Rice, and Kirchhoff's G2^(1 - exp(-g_d)) is ~1 there. Sq 30 nm, l 2 um,
+    g = 0.15 at 55.6 deg: the 6 deg curve within 1 % where the coherent beam reads, the
+    diffuse flanks within 12 % (Kirchhoff's series holds the second-order term, ~g/2 of a
+    wider lobe, Rayleigh-Rice not; and their obliquity factors differ)."""
+    from goniolab.optics.model_choice import RR_MAX_G, rayleigh_g
+
+    hm = coat(1000, 0.03, 2.0)
+    ti = math.degrees(math.acos(math.sqrt(RR_MAX_G) * LAM_UM / (4 * math.pi * 0.03)))
+    assert rayleigh_g(0.03, ti, 550.0) == pytest.approx(RR_MAX_G)
+    tr = np.arange(ti - 8.0, ti + 8.5, 2.0)
+    k = KirchhoffModel(hm, n=1.55, masking=True).luminance_pct(ti, tr)
+    r = RayleighRiceModel(hm, n=1.55, masking=True).luminance_pct(ti, tr)
+    near = np.abs(tr - ti) <= 4.0
+    np.testing.assert_allclose(k[near], r[near], rtol=0.01)
+    np.testing.assert_allclose(k[~near], r[~near], rtol=0.12)
