@@ -155,8 +155,9 @@ def test_model_and_wavelength_options_and_the_model_in_json(
     assert rep["wavelength_nm"] == "ISO 2813 C x V"
     facet = _run_json(capsys, "predict", "gloss", "sample:wittmann-1", "--model", "facet")
     # every reading names its model: the gloss geometries and the ASTM E430 readings
-    assert set(facet["model"]) >= {"G20", "G60", "G85", "e430.gloss_20", "e430.doi"}
-    assert set(facet["model"].values()) == {"facet"}
+    assert facet["model"] == {"G20": "facet", "G60": "facet", "G85": "facet"}
+    assert set(facet["e430_model"]) >= {"gloss_20", "haze_b", "gloss_30", "doi"}
+    assert set(facet["e430_model"].values()) == {"facet"}
     red = _run_json(
         capsys,
         "predict",

@@ -329,6 +329,9 @@ def _cmd_gloss(args: argparse.Namespace) -> int:
 
     names, fallback, warnings = _gloss_models(model, rep)
     computed_by = {k: v for k, v in names.items() if isinstance(v, str)}
+    e430_names = {
+        k.removeprefix("e430."): names.pop(k) for k in list(names) if k.startswith("e430.")
+    }
     prov_attrs = {"computed_by": json.dumps(computed_by), "warnings": json.dumps(warnings)}
     _write_out(args, lambda attrs: gloss_dataset(rep, attrs={**attrs, **prov_attrs}))
     _warn(warnings)
@@ -345,6 +348,7 @@ def _cmd_gloss(args: argparse.Namespace) -> int:
         "G85": rep.G85,
         "haze_index": rep.haze_index,
         "e430": rep.as_dict()["e430"],
+        "e430_model": e430_names,
         "d523_angle": rep.d523_recommended_angle,
     }
     if fallback:
@@ -355,7 +359,7 @@ def _cmd_gloss(args: argparse.Namespace) -> int:
         print(json.dumps(out, indent=2, allow_nan=False))
         return 0
     print(f"{args.map} (n = {args.n.real:g}{f'+{args.n.imag:g}i' if args.n.imag else ''})")
-    print(_gloss_table(rep, names))
+    print(_gloss_table(rep, names, e430_names))
     if e.doi < 0:
         print(
             "  note: DOI < 0: the 0.3 deg off-specular reading exceeds the specular one "
@@ -366,9 +370,18 @@ def _cmd_gloss(args: argparse.Namespace) -> int:
     return 0
 
 
-def _gloss_table(rep: Any, names: dict[str, Any]) -> str:
-    """``predict gloss`` as a table: what each number is, its value and its unit."""
+def _gloss_table(rep: Any, names: dict[str, Any], e430: dict[str, str] | None = None) -> str:
+    """``predict gloss`` as a table: what each number is, its value and its unit (and the
+    model that computed it)."""
     e = rep.e430
+    e430 = e430 or {}
+
+    def by(*keys: str) -> str:
+        found = sorted({e430[k] for k in keys if k in e430})
+        return f" ({' + '.join(found)} model)" if found else ""
+
+    head_b = f"ASTM E430 method B, 20 deg{by('gloss_20', 'haze_18_1', 'haze_21_9')}:"
+    head_a = f"ASTM E430 method A, 30 deg{by('gloss_30', 'haze_narrow', 'haze_wide', 'doi')}:"
     gu = "GU (ISO 2813 black glass = 100)"
     rows: list[tuple[str, str, str]] = [
         (f"G{t}  specular gloss at {t} deg", f"{g:.1f}", f"{gu if t == 20 else 'GU'}, "
@@ -379,10 +392,10 @@ def _gloss_table(rep: Any, names: dict[str, Any]) -> str:
         ("geometry to report (ASTM D523)", f"{rep.d523_recommended_angle}",
          "deg (20 if G60 > 70, 85 if G60 < 10)"),
         ("haze index HI (ASTM D4039)", f"{rep.haze_index:.1f}", "GU, G60 - G20"),
-        ("ASTM E430 method B, 20 deg:", "", ""),
+        (head_b, "", ""),
         ("  specular gloss", f"{e.gloss_20:.1f}", "GU"),
         ("  haze at 18.1 deg / 21.9 deg", f"{e.haze_18_1:.2f} / {e.haze_21_9:.2f}", "GU"),
-        ("ASTM E430 method A, 30 deg:", "", ""),
+        (head_a, "", ""),
         ("  specular reading Rs", f"{e.gloss_30:.1f}", "GU"),
         ("  narrow-angle haze (28, 32 deg)", f"{e.haze_narrow:.2f}", "GU"),
         ("  wide-angle haze (25, 35 deg)", f"{e.haze_wide:.2f}", "GU"),
