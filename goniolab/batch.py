@@ -79,6 +79,10 @@ def gloss_row(spec: str, options: GlossOptions) -> dict[str, Any]:
         "haze_index": rep.haze_index,
         "e430": asdict(rep.e430),
         "d523_angle": rep.d523_recommended_angle,
+        # the model that computed each number and the notes (issue 20), as predict gloss
+        "model": {k: v for k, v in rep.models.items() if not k.startswith("e430.")},
+        "e430_model": {k[5:]: v for k, v in rep.models.items() if k.startswith("e430.")},
+        "warnings": list(rep.warnings),
     }
 
 

@@ -290,3 +290,16 @@ def test_netcdf_attrs_name_the_model_of_every_number(
         attrs = dict(ds.attrs)
     assert json.loads(attrs["computed_by"]) == doc["models"] == ["kirchhoff", "kirchhoff"]
     assert json.loads(attrs["warnings"]) == doc["warnings"]
+
+
+def test_batch_rows_name_the_model_of_every_number(capsys: pytest.CaptureFixture[str]) -> None:
+    """Several maps (JSON Lines, worker processes): each row carries the same ``model``,
+    ``e430_model`` and ``warnings`` as the single-map command."""
+    argv = ["predict", "gloss", "sample:flat", "sample:wittmann-1", "--model", "rayleigh-rice"]
+    assert main([*argv, "--json", "--jobs", "1"]) == 0
+    rows = {r["map"]: r for r in map(json.loads, capsys.readouterr().out.splitlines())}
+    assert rows["sample:flat"]["model"] == dict.fromkeys(("G20", "G60", "G85"), "rayleigh-rice")
+    assert rows["sample:flat"]["warnings"] == []
+    rough = rows["sample:wittmann-1"]
+    assert rough["model"]["G20"] == "kirchhoff" and rough["e430_model"]["doi"] == "kirchhoff"
+    assert any(w.startswith("G20: rayleigh-rice is outside") for w in rough["warnings"])
