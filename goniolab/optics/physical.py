@@ -1178,7 +1178,6 @@ class PhysicalOpticsModel:
         lam = self.wavelength_nm * 1e-3
         ra, rb = self._reach(src, box)
         tr = np.radians(tr_deg)
-        os, _ = self._oversampling(lam, box, tr_deg)
         out = np.zeros(tr_deg.size)
         # one block of cells per stretch of angles (a wide curve near grazing needs a fine
         # grid only where the box is narrow: the padding is set per angle group)
