@@ -81,8 +81,8 @@ from numpy.typing import NDArray
 from goniolab.optics import _cell_kernels as CK
 from goniolab.optics.fresnel import fresnel
 from goniolab.optics.physical import (
+    FACET_MIN_HANDOVER_G,
     MAX_PHASE_STEP_RAD,
-    RR_VALID_G,
     RR_VALID_SDQ,
     FloatArray,
     PhysicalOpticsModel,
@@ -396,8 +396,11 @@ class KirchhoffModel(PhysicalOpticsModel):
         return None
 
     def _alternative(self, theta_i_deg: float, lam_nm: float, g: float) -> str:
+        """Rayleigh-Rice while ``g < 1`` and the slopes are small (beyond its own
+        ``RR_VALID_G`` it says so and answers all the same: the facet model would miss the
+        coherent beam); else the facet model."""
         st = self._shared.stats
-        if g <= RR_VALID_G and st.sdq <= RR_VALID_SDQ:
+        if g < FACET_MIN_HANDOVER_G and st.sdq <= RR_VALID_SDQ:
             return "rayleigh-rice"
         return "facet"
 

@@ -664,8 +664,10 @@ class PhysicalOpticsModel:
         why = self._validity(theta_i_deg, lam_lo)
         if why is not None:
             alt = self._alternative(theta_i_deg, lam_lo, g)
-            notes.append(f"{self.kind} {why}: {alt} used")
-            return alt, notes
+            if alt != "self":
+                notes.append(f"{self.kind} {why}: {alt} used")
+                return alt, notes
+            notes.append(f"{self.kind} {why}: {self._why_self}")
         ra, rb = self._reach(source, receptor)
         tr = math.radians(float(theta_r_deg))
         t = self._shared.tiled
@@ -692,7 +694,12 @@ class PhysicalOpticsModel:
         return "self", notes
 
     def _alternative(self, theta_i_deg: float, lam_nm: float, g: float) -> str:
+        """The model that answers outside this model's validity: another model's kind,
+        ``"facet"``, or ``"self"`` when none does better (:attr:`_why_self` says why)."""
         return "facet"
+
+    #: the note's ending when this model answers outside its validity (no better model)
+    _why_self: str = "used all the same (no model of this map does better)"
 
     def _sibling(self, kind: str) -> PhysicalOpticsModel:
         """The other wave model of the same map, index, wavelength and options."""
@@ -1327,9 +1334,9 @@ class PhysicalOpticsModel:
         """
         ti = _check_theta_i(theta_i_deg)
         why = self._validity(ti, self.wavelength_nm)
-        if why is not None:
-            g = self.rayleigh_factor(ti)
-            alt = self._alternative(ti, self.wavelength_nm, g)
+        g = self.rayleigh_factor(ti)
+        alt = "self" if why is None else self._alternative(ti, self.wavelength_nm, g)
+        if alt != "self":
             note = f"{self.kind} {why}: {alt} used"
             if alt == "facet":
                 a = float(self.facet_model.brdf_hemisphere(ti).albedo)
@@ -1349,8 +1356,11 @@ class PhysicalOpticsModel:
         shadow = g2 if isinstance(g2, float) else np.asarray(g2).reshape(p.shape)
         tis = float(np.sum(np.where(ok, p * shadow, 0.0)))
         beam = float(fresnel(math.cos(t), self.n)) * coh[0]
+        notes = [] if why is None else [f"{self.kind} {why}: {self._why_self}"]
         energy = self._energy_note(ti, [self.wavelength_nm])
-        return beam + tis, tis, Provenance(self.kind, () if energy is None else (energy,))
+        if energy is not None:
+            notes.append(energy)
+        return beam + tis, tis, Provenance(self.kind, tuple(notes))
 
     def albedo(self, theta_i_deg: float) -> float:
         """Directional albedo (:meth:`albedo_tis`)."""

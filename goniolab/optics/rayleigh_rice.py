@@ -50,6 +50,7 @@ from numpy.typing import ArrayLike
 
 from goniolab.optics.fresnel import fresnel
 from goniolab.optics.physical import (
+    FACET_MIN_HANDOVER_G,
     RR_VALID_G,
     RR_VALID_SDQ,
     FloatArray,
@@ -206,4 +207,13 @@ class RayleighRiceModel(PhysicalOpticsModel):
         return None
 
     def _alternative(self, theta_i_deg: float, lam_nm: float, g: float) -> str:
-        return "kirchhoff"
+        """Kirchhoff where it samples its phase screen; else, while g < 1, this model all
+        the same (the facet model would miss the coherent beam); else the facet model."""
+        if self._sibling("kirchhoff")._validity(theta_i_deg, lam_nm) is None:
+            return "kirchhoff"
+        return "self" if g < FACET_MIN_HANDOVER_G else "facet"
+
+    _why_self = (
+        "used all the same: the map does not sample Kirchhoff's phase screen and the "
+        "facet model would miss the coherent beam (g < 1)"
+    )

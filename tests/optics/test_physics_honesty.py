@@ -363,3 +363,23 @@ def test_zero_padded_pruned_transform_is_the_direct_sum(
     want = ey @ term.astype(np.complex128) @ ex
     np.testing.assert_allclose(out, want, rtol=1e-4, atol=1e-4 * np.abs(want).max())
     assert dc == pytest.approx(complex(np.sum(term, dtype=np.complex128)), rel=1e-6)
+
+
+def test_no_model_ping_pong_and_no_facet_below_g_1() -> None:
+    """White-noise heights, Sq 45 nm at 0.5 um steps (Sdq 0.18): at 30 deg, 550 nm,
+    g = 0.79 is beyond Rayleigh-Rice's 0.3 and the map does not sample Kirchhoff's phase
+    screen (1.26 rad rms per point). Neither hands over to the facet model (no coherent
+    beam) nor back and forth: Rayleigh-Rice answers, and both notes say why."""
+    from goniolab.optics.model_choice import choose_model
+
+    rng = np.random.default_rng(9)
+    z = rng.normal(size=(256, 256))
+    hm = HeightMap(z_um=0.045 * z / z.std(), dx_um=0.5, dy_um=0.5, source="white")
+    for cls in (KirchhoffModel, RayleighRiceModel):
+        model = cls(hm, n=1.55, wavelength_nm=550.0)
+        assert 0.3 < model.rayleigh_factor(30.0) < 1.0
+        p = model.provenance(30.0, 30.0, Cone(6.0), Cone(6.0))
+        assert p.model == "rayleigh-rice", p
+        assert any("used all the same" in n for n in p.notes)
+        assert model.luminance_pct(30.0, [30.0])[0] > 0.0
+    assert choose_model(KirchhoffModel(hm).stats, 30.0, 550.0).model == "rayleigh-rice"
