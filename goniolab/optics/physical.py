@@ -579,7 +579,12 @@ class PhysicalOpticsModel:
         nx0, nx1, ny0, ny1 = self._nyquist(os)
         # one cell of slack at the edges (the box has one more cell than its reach needs)
         inside = ix0 + 1 >= nx0 and ix1 - 1 <= nx1 and -iy1 + 1 >= ny0 and iy1 - 1 <= ny1
-        box = _Box(max(ix0, nx0), min(ix1, nx1), max(-iy1, ny0), min(iy1, ny1))
+        # clipped to the window; a region wholly beyond it keeps the window's edge cell
+        # (which no aperture of the region reaches: its sums are 0, as they must be)
+        bx0, bx1 = min(max(ix0, nx0), nx1), max(min(ix1, nx1), nx0)
+        if bx0 > bx1:
+            bx0 = bx1 = nx1 if ix0 > nx1 else nx0
+        box = _Box(bx0, bx1, max(-iy1, ny0), min(iy1, ny1))
         return box, inside
 
     def _lams_for_gloss(self) -> tuple[FloatArray, FloatArray]:

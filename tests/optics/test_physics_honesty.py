@@ -383,3 +383,17 @@ def test_no_model_ping_pong_and_no_facet_below_g_1() -> None:
         assert any("used all the same" in n for n in p.notes)
         assert model.luminance_pct(30.0, [30.0])[0] > 0.0
     assert choose_model(KirchhoffModel(hm).stats, 30.0, 550.0).model == "rayleigh-rice"
+
+
+def test_apertures_wholly_beyond_the_nyquist_window_read_zero_and_say_so() -> None:
+    """g < 1 and every angle of the call beyond lambda / (2 step) of specular (1 um steps,
+    ti 45, theta_r 0 and 5 deg): the wave model answers 0 (the map holds no such
+    frequencies) with the note, for the goniometer cones and the --point box alike."""
+    hm = gaussian_map(256, 0.05, 2.0, 1.0, seed=4)
+    for cls in (KirchhoffModel, RayleighRiceModel):
+        model = cls(hm, n=1.55)
+        assert model.rayleigh_factor(45.0) < 1.0
+        assert list(model.luminance_pct(45.0, [0.0, 5.0])) == [0.0, 0.0]
+        assert list(model.brdf_inplane(45.0, [0.0, 5.0])) == [0.0, 0.0]
+        p = model.provenance(45.0, 0.0, Cone(6.0), Cone(6.0))
+        assert p.model in ("kirchhoff", "rayleigh-rice") and "lambda/(2 step)" in p.notes[-1]
