@@ -268,17 +268,24 @@ def psd2(tiled: TiledMap) -> PSD2:
     return PSD2(fx=fx, fy=fy, psd_um4=psd, sq_um=sq)
 
 
+#: Largest zero-padded complex64 copy of a tile the padded FFT may make (bytes).
+_MAX_PADDED_BYTES: int = 64 << 20
+
+
 def _dft_last(a: NDArray[np.complex64], idx: NDArray[np.int64], length: int) -> NDArray[Any]:
     """DFT of length ``length`` (``a`` zero-padded) along the last axis, at outputs ``idx``.
 
     Unpadded: an FFT, then the outputs kept. Padded: a matrix product with the ``idx`` rows
     of the DFT matrix when they are few (cost ``n K`` per row against ``L log L`` for the
-    padded FFT, and no padded copy of the tile), else the padded FFT.
+    padded FFT, and no padded copy of the tile) or when the padded copy would exceed
+    :data:`_MAX_PADDED_BYTES`, else the padded FFT.
     """
     import scipy.fft
 
     n = a.shape[-1]
-    if length == n or idx.size >= (length // n) * max(1.0, math.log2(length)):
+    rows = a.size // max(n, 1)
+    few = idx.size < (length // n) * max(1.0, math.log2(length))
+    if length == n or (not few and rows * length * 8 <= _MAX_PADDED_BYTES):
         out: NDArray[Any] = np.take(scipy.fft.fft(a, n=length, axis=-1, workers=-1), idx, axis=-1)
         return out
     e = np.exp((-2j * math.pi / length) * np.outer(np.arange(n), idx)).astype(np.complex64)
