@@ -215,7 +215,9 @@ class Goniometer(Protocol):
     """The two-arm in-plane goniometer: lamp arm (theta_i) and detector arm (theta_r).
 
     theta_r is signed: > 0 on the specular side, < 0 on the lamp side. Every move is
-    checked against both arms' limits and the minimum arm separation *before* any motion.
+    checked against both arms' limits and the minimum arm separation *before* any motion,
+    and every motion holds the goniometer for its whole travel: two moves never overlap, so
+    a move of one arm (``move_arm``) is checked against where the other one really stands.
     """
 
     lamp: Axis
@@ -228,6 +230,9 @@ class Goniometer(Protocol):
     async def home(self, timeout_s: float) -> None: ...
     async def move_to(
         self, theta_i_deg: float, theta_r_deg: float, timeout_s: float
+    ) -> tuple[float, float]: ...
+    async def move_arm(
+        self, arm: str, target_deg: float, timeout_s: float
     ) -> tuple[float, float]: ...
     async def positions_deg(self) -> tuple[float, float]: ...
     async def park(self, timeout_s: float) -> None: ...

@@ -8,6 +8,11 @@ describes: real controllers, the wire sim, or the in-process twin):
   :meth:`drivers.goniometer.TwoArmGoniometer.move_to`, so the arm limits and the two-arm
   separation interlock refuse an unsafe target (the status fails, nothing moves);
   ``readback_deg`` is the hinted reading, the limits are configuration signals.
+- :class:`Goniometer` -- both arms as one ``Movable``: ``set((theta_i, theta_r))`` moves to a
+  geometry in the safe order of :meth:`~drivers.goniometer.TwoArmGoniometer.move_to`. Every
+  move of either device holds the goniometer for its whole travel, so ``bps.mv(lamp, a,
+  detector, b)`` runs the two moves one after the other, each checked against the other
+  arm's real position.
 - :class:`Spectro` -- the spectro-colorimeter as a triggerable detector: ``luminance_pct``
   (hinted), the ``spectrum_pct`` array and CIE ``L_star``, ``a_star``, ``b_star``
   (D65, CIE 1964 10 deg, ASTM E308); ``wavelengths_nm`` and ``exposure_us`` are configuration.
@@ -60,7 +65,15 @@ except ImportError as _exc:  # pragma: no cover - depends on the installed extra
         f"the bluesky devices need the extra: pip install 'goniolab[bluesky]' ({_exc})"
     ) from None
 
-__all__ = ["Glossmeter", "GonioArm", "LabDevices", "Spectro", "connect_lab", "inplane_scan"]
+__all__ = [
+    "Glossmeter",
+    "GonioArm",
+    "Goniometer",
+    "LabDevices",
+    "Spectro",
+    "connect_lab",
+    "inplane_scan",
+]
 
 #: Timeout of one arm move, seconds (the config's ``move_timeout_s`` when known).
 DEFAULT_MOVE_TIMEOUT_S = 60.0
@@ -154,13 +167,65 @@ class GonioArm(StandardReadable):
     async def set(self, value: float) -> None:
         """Move this arm to ``value`` deg, the other arm staying where it is.
 
-        The goniometer checks the arm limits and the separation interlock first; an unsafe
-        target fails the status (``LimitError`` / ``InterlockError``) and nothing moves.
+        The goniometer reserves both arms for the move and checks the arm limits and the
+        separation interlock against the other arm's position read under that reservation
+        (:meth:`drivers.goniometer.TwoArmGoniometer.move_arm`): when bluesky sets both
+        arms at once (``bps.mv(lamp, a, detector, b)``), the moves run one after the other
+        and the second is checked against where the first really left its arm. An unsafe
+        target fails the status (``LimitError`` / ``InterlockError``) and that arm does not
+        move. To move both arms to a geometry in a safe order, set :class:`Goniometer`.
         """
-        ti, tr = await self._gonio.positions_deg()
-        target = (float(value), tr) if self._which == "lamp" else (ti, float(value))
-        reached = await self._gonio.move_to(*target, self._timeout_s)
+        reached = await self._gonio.move_arm(self._which, float(value), self._timeout_s)
         self._set_readback(float(reached[0] if self._which == "lamp" else reached[1]))
+
+    async def stop(self, success: bool = True) -> None:
+        """Stop both arms (bluesky calls this on pause and abort)."""
+        await self._gonio.stop()
+
+
+class Goniometer(StandardReadable):
+    """Both arms as one bluesky ``Movable``: ``set((theta_i_deg, theta_r_deg))`` moves to the
+    geometry through :meth:`drivers.goniometer.TwoArmGoniometer.move_to` (limits, the
+    separation interlock and the safe order of the two arms' moves), so a plan that changes
+    both angles at once never brings the arms closer than their minimum on the way.
+
+    ``theta_i_deg`` and ``theta_r_deg`` are the hinted readbacks.
+    """
+
+    def __init__(
+        self,
+        goniometer: Any,
+        *,
+        move_timeout_s: float = DEFAULT_MOVE_TIMEOUT_S,
+        name: str = "",
+    ) -> None:
+        self._gonio = goniometer
+        self._timeout_s = float(move_timeout_s)
+        with self.add_children_as_readables(Format.HINTED_SIGNAL):
+            self.theta_i_deg, self._set_ti = soft_signal_r_and_setter(float, math.nan, units="deg")
+            self.theta_r_deg, self._set_tr = soft_signal_r_and_setter(float, math.nan, units="deg")
+        with self.add_children_as_readables(Format.CONFIG_SIGNAL):
+            self.min_separation_deg, _ = soft_signal_r_and_setter(
+                float, float(goniometer.min_separation_deg), units="deg"
+            )
+        super().__init__(name=name)
+
+    async def refresh(self) -> tuple[float, float]:
+        """Read both arms' positions into the readbacks."""
+        ti, tr = await self._gonio.positions_deg()
+        self._set_ti(float(ti))
+        self._set_tr(float(tr))
+        return float(ti), float(tr)
+
+    @AsyncStatus.wrap
+    async def set(self, value: Sequence[float]) -> None:
+        """Move to ``(theta_i_deg, theta_r_deg)``; an unsafe geometry fails the status and
+        nothing moves."""
+        if len(value) != 2:
+            raise ValueError(f"goniometer: set takes (theta_i_deg, theta_r_deg), got {value!r}")
+        reached = await self._gonio.move_to(float(value[0]), float(value[1]), self._timeout_s)
+        self._set_ti(float(reached[0]))
+        self._set_tr(float(reached[1]))
 
     async def stop(self, success: bool = True) -> None:
         """Stop both arms (bluesky calls this on pause and abort)."""
@@ -236,6 +301,7 @@ class LabDevices:
     lamp: GonioArm
     detector: GonioArm
     spectro: Spectro
+    goniometer: Goniometer
     glossmeter: Glossmeter | None
     sample: str
 
@@ -283,16 +349,24 @@ def connect_lab(
                 lamp=GonioArm(gonio, "lamp", move_timeout_s=timeout, name="lamp"),
                 detector=GonioArm(gonio, "detector", move_timeout_s=timeout, name="detector"),
                 spectro=Spectro(lab.spectro, exposure_us=c.spectro.exposure_us, name="spectro"),
+                goniometer=Goniometer(gonio, move_timeout_s=timeout, name="goniometer"),
                 glossmeter=None
                 if getattr(lab, "glossmeter", None) is None
                 else Glossmeter(lab.glossmeter, name="glossmeter"),
                 sample=c.sample.map,
             )
-            for dev in (devices.lamp, devices.detector, devices.spectro, devices.glossmeter):
+            for dev in (
+                devices.lamp,
+                devices.detector,
+                devices.goniometer,
+                devices.spectro,
+                devices.glossmeter,
+            ):
                 if dev is not None:
                     await dev.connect()
             await devices.lamp.refresh()
             await devices.detector.refresh()
+            await devices.goniometer.refresh()
             await lab.spectro.set_exposure_us(c.spectro.exposure_us)
             return devices
         except BaseException:

@@ -105,3 +105,63 @@ def test_the_interlock_fails_the_move(engine: Any) -> None:
         assert ti == pytest.approx(30.0, abs=0.05)
     finally:
         lab.close()
+
+
+def _sim_separation_monitor(lab: Any) -> Any:
+    """Record the smallest |theta_i + theta_r| of the twin's arms (their encoders) at every
+    10 ms of the lab clock, in the RunEngine's loop, until stopped."""
+    import asyncio
+
+    from bluesky.run_engine import call_in_bluesky_event_loop
+
+    sims = lab.lab.sims
+    clock = lab.lab.clock
+    state: dict[str, Any] = {"min": float("inf"), "stop": False}
+
+    async def watch() -> None:
+        while not state["stop"]:
+            now = clock.now()
+            s = abs(sims.lamp.motor.position_deg(now) + sims.detector.motor.position_deg(now))
+            state["min"] = min(state["min"], s)
+            await clock.sleep(0.01)
+
+    async def start() -> None:
+        state["task"] = asyncio.ensure_future(watch())
+
+    call_in_bluesky_event_loop(start())
+    return state
+
+
+def test_two_arms_set_at_once_keep_their_minimum(engine: Any) -> None:
+    # issue 22 item 1: from (45, 45), bps.mv(lamp, 5, detector, 3) ended at (5, 3), 8 deg
+    # apart; bp.scan(lamp 20->4, detector 20->4) ended at (4, 4)
+    from bluesky import plan_stubs as bps
+    from bluesky import plans as bp
+
+    lab = connect_lab(CONFIG, time_scale=0)
+    try:
+        sep = lab.lab.config.goniometer.min_separation_deg
+        engine(bps.mv(lab.goniometer, (45.0, 45.0)))
+        state = _sim_separation_monitor(lab)
+        with pytest.raises(FailedStatus):
+            engine(bps.mv(lab.lamp, 5.0, lab.detector, 3.0))
+        ti = engine(bps.rd(lab.lamp)).plan_result
+        tr = engine(bps.rd(lab.detector)).plan_result
+        assert (ti, tr) == (pytest.approx(5.0, abs=0.05), pytest.approx(45.0, abs=0.05))
+        engine(bps.mv(lab.goniometer, (20.0, 20.0)))
+        with pytest.raises(FailedStatus):
+            engine(bp.scan([lab.spectro], lab.lamp, 20.0, 4.0, lab.detector, 20.0, 4.0, num=5))
+        ti = engine(bps.rd(lab.lamp)).plan_result
+        tr = engine(bps.rd(lab.detector)).plan_result
+        assert ti + tr >= sep - 0.01
+        state["stop"] = True
+        assert state["min"] >= sep - 0.01, state["min"]
+        # the two-arm device moves both arms in the safe order to a geometry
+        engine(bps.mv(lab.goniometer, (30.0, 60.0)))
+        ti = engine(bps.rd(lab.goniometer.theta_i_deg)).plan_result
+        tr = engine(bps.rd(lab.goniometer.theta_r_deg)).plan_result
+        assert (ti, tr) == (pytest.approx(30.0, abs=0.05), pytest.approx(60.0, abs=0.05))
+        with pytest.raises(FailedStatus):  # 5 deg apart: refused, nothing moves
+            engine(bps.mv(lab.goniometer, (2.0, 3.0)))
+    finally:
+        lab.close()
