@@ -152,6 +152,9 @@ class SpectroReading:
         Counts of the strongest channel over the detector's full scale (1.0 = saturated:
         the values understate the light), when the instrument reports it; ``None`` if not.
         Auto-exposure aims at a peak fraction well below 1 and well above the noise.
+    stale_lines
+        Reply lines that belonged to earlier requests (a late or repeated answer) and were
+        dropped before this reading was taken as the answer to its own request; 0 normally.
     """
 
     wavelengths_nm: tuple[float, ...]
@@ -160,6 +163,7 @@ class SpectroReading:
     exposure_us: int = 0
     timestamp: float = field(default_factory=time.time)
     peak_fraction: float | None = None
+    stale_lines: int = 0
 
 
 @dataclass(frozen=True, slots=True)

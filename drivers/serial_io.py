@@ -108,12 +108,46 @@ class LineTransport:
         except (serial.SerialException, OSError) as exc:
             raise Disconnected(f"write to {self.port!r} failed: {exc}", device=self.device) from exc
 
-    def discard_input(self) -> None:
-        """Drop bytes already received but not read (stale replies)."""
+    def discard_input(self) -> int:
+        """Drop bytes already received but not read (stale replies); return how many."""
         reader, _ = self._streams()
         buffered = getattr(reader, "_buffer", None)
         if isinstance(buffered, bytearray):
+            dropped = len(buffered)
             buffered.clear()
+            return dropped
+        return 0
+
+    async def drain_quiet(self, quiet_s: float, max_s: float) -> int:
+        """Read and drop everything that arrives until the line has been quiet for
+        ``quiet_s`` (at most ``max_s`` in all); return the number of bytes dropped.
+
+        Used after a request went unanswered: the late answer may still be on its way, and
+        would otherwise be read as the answer to the next request.
+        """
+        reader, _ = self._streams()
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + max(0.0, max_s)
+        dropped = 0
+        buffered = getattr(reader, "_buffer", None)
+        if isinstance(buffered, bytearray):
+            dropped += len(buffered)
+            buffered.clear()
+        while True:
+            wait_s = min(quiet_s, deadline - loop.time())
+            if wait_s <= 0.0:
+                return dropped
+            try:
+                chunk = await asyncio.wait_for(reader.read(65536), wait_s)
+            except TimeoutError:
+                return dropped  # quiet for quiet_s: whatever was late has arrived
+            except (serial.SerialException, OSError) as exc:
+                raise Disconnected(
+                    f"read from {self.port!r} failed: {exc}", device=self.device
+                ) from exc
+            if not chunk:  # end of stream: the port closed
+                raise Disconnected(f"port {self.port!r} closed", device=self.device)
+            dropped += len(chunk)
 
     async def read_line(self, terminator: str, timeout_s: float | None) -> str:
         """Read one line ending in ``terminator``; return it without the terminator.

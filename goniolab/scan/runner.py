@@ -678,10 +678,22 @@ class ScanRunner:
                 return reading
             return await self.spectro.measure()
 
-        return await self._retry(
+        reading = await self._retry(
             f"point {p.index}, repeat {p.repeat}", read, self._reconnect_spectro,
             self.reading_retries, "spectro",
         )  # fmt: skip
+        if reading.stale_lines:  # a late or repeated answer was dropped: say so
+            self.bus.publish(
+                InstrumentError(
+                    run_id=self.run_id,
+                    device="spectro",
+                    message=f"point {p.index}, repeat {p.repeat}: dropped {reading.stale_lines} "
+                    "reply line(s) of an earlier request (a late or repeated answer); the "
+                    "reading kept is the answer to this point's own request",
+                    fatal=False,
+                )
+            )
+        return reading
 
     async def _retry(
         self,
