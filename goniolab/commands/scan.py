@@ -251,8 +251,8 @@ async def _execute(
     adaptive: bool = False,
 ) -> int:
     import asyncio
-    import signal
 
+    from goniolab.commands._signals import describe, install_stop_signals
     from goniolab.config import load_lab_config
     from goniolab.scan.events import RunState
     from goniolab.scan.plans import BrdfPlan
@@ -302,20 +302,20 @@ async def _execute(
         report = asyncio.create_task(_report(session.bus.subscribe(), bar))
         loop = asyncio.get_running_loop()
         main_task = asyncio.current_task()
-        interrupts = 0
 
-        def on_sigint() -> None:
-            nonlocal interrupts
-            interrupts += 1
-            if interrupts == 1:
-                bar.message(
-                    "goniolab: stopping: the arms stop, then park (Ctrl-C again to quit at once)"
-                )
-                runner.abort()
-            elif main_task is not None:
+        def stop_first(name: str) -> None:
+            bar.message(
+                f"goniolab: {describe(name)}: stopping: the arms stop, then park "
+                "(Ctrl-C again to quit at once: the arms still stop and the run is recorded)"
+            )
+            runner.abort(by=describe(name))
+
+        def stop_again(name: str) -> None:
+            bar.message(f"goniolab: {describe(name)} again: quitting, the arms stop and park")
+            if main_task is not None:
                 main_task.cancel()
 
-        loop.add_signal_handler(signal.SIGINT, on_sigint)
+        remove_signals = install_stop_signals(loop, stop_first, stop_again)
         try:
             result: RunResult = await session.run(runner)
         except PlanRefused as exc:
@@ -330,7 +330,7 @@ async def _execute(
             )
             return 130
         finally:
-            loop.remove_signal_handler(signal.SIGINT)
+            remove_signals()
             session.bus.close()
             await report
             bar.close()

@@ -124,13 +124,17 @@ class GlossLogger:
         self.max_backoff_s = max_backoff_s
         self.max_failures = max_failures
         self._stop = False
+        self._stop_by = ""
         self._stop_event = asyncio.Event()
         self._values: list[dict[int, float | None]] = []
         self.reconnects = 0
 
-    def stop(self) -> None:
+    def stop(self, by: str = "") -> None:
         """End the session: a requested reading is completed and stored; a wait for a
-        pushed reading, the interval between readings or a reconnect backoff ends now."""
+        pushed reading, the interval between readings or a reconnect backoff ends now.
+        ``by`` says who asked when it was not the operator (``"SIGTERM"``)."""
+        if by and not self._stop:
+            self._stop_by = by
         self._stop = True
         self._stop_event.set()
 
@@ -249,10 +253,11 @@ class GlossLogger:
         if (
             self._stop
             and state is RunState.DONE
-            and self.plan.count
-            and len(self._values) < self.plan.count
+            and (self._stop_by or (self.plan.count and len(self._values) < self.plan.count))
         ):
-            state, reason = RunState.ABORTED, "stopped by the operator"
+            # a count cut short, or any session ended by a signal (SIGTERM, SIGHUP): the
+            # run did not end the way it was meant to
+            state, reason = RunState.ABORTED, f"stopped by {self._stop_by or 'the operator'}"
         self.store.set_status(self.run_id, state.value, reason)
         self.bus.publish(StateChanged(run_id=self.run_id, state=state, reason=reason))
         stats = gloss_statistics(self._values, self.plan.angles_deg)

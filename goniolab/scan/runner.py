@@ -401,6 +401,7 @@ class ScanRunner:
         self._state = RunState.IDLE
         self._pause_requested = False
         self._abort_requested = False
+        self._abort_by = ""
         self._wake = asyncio.Event()
         self._abort_event = asyncio.Event()
         self._homing_interrupted = False
@@ -431,10 +432,13 @@ class ScanRunner:
         self._pause_requested = False
         self._wake.set()
 
-    def abort(self) -> None:
+    def abort(self, by: str = "") -> None:
         """Stop the run: a move in progress is interrupted (the arms are stopped where they
         are), a reading in progress is completed and stored; then the arms are parked and
-        the run is marked ``aborted``."""
+        the run is marked ``aborted``. ``by`` says who asked when it was not the operator
+        (``"SIGTERM"``); it goes into the stored reason."""
+        if by and not self._abort_requested:
+            self._abort_by = by
         self._abort_requested = True
         self._abort_event.set()
         self._wake.set()
@@ -812,7 +816,8 @@ class ScanRunner:
             # Cancelled from outside (the process is shutting down): park, record, re-raise.
             predict_task.cancel()
             colour_task.cancel()
-            await asyncio.shield(self._park_and_record(RunState.ABORTED, "cancelled"))
+            why = f"aborted by {self._abort_by}, quit at once" if self._abort_by else "cancelled"
+            await asyncio.shield(self._park_and_record(RunState.ABORTED, why))
             raise
         except Exception as exc:
             # Not an instrument fault (a bug, a full disk): still leave the arms parked (or
@@ -824,7 +829,17 @@ class ScanRunner:
                 RunFinished(run_id=self.run_id, state=RunState.FAILED, reason=why, summary={})
             )
             raise
-        return await self._finish(state, reason, predict_task, colour_task)
+        finish = asyncio.ensure_future(self._finish(state, reason, predict_task, colour_task))
+        try:
+            return await asyncio.shield(finish)
+        except asyncio.CancelledError:
+            # quit at once while the run ends (a second Ctrl-C, SIGTERM during the park):
+            # the predictions are dropped, the park and the run's record are awaited
+            predict_task.cancel()
+            colour_task.cancel()
+            with contextlib.suppress(Exception, asyncio.CancelledError):
+                await finish
+            raise
 
     async def _dry_run(self, todo: Sequence[PlanPoint]) -> _Eta:
         """:func:`dry_run` of ``todo`` from where the arms stand (raises PlanRefused)."""
@@ -865,6 +880,8 @@ class ScanRunner:
             state, reason = RunState.DONE, ""
         except _Aborted as stop:
             state, reason = RunState.ABORTED, stop.reason
+            if self._abort_by:
+                reason = reason.replace("by the operator", f"by {self._abort_by}", 1)
         if self._specimen == "mirror":
             assert self.specimen_hook is not None
             await self.specimen_hook("sample")
@@ -959,6 +976,11 @@ class ScanRunner:
         failure must not lose the run."""
         try:
             await task
+        except asyncio.CancelledError:
+            me = asyncio.current_task()
+            if me is not None and me.cancelling():
+                raise
+            # the prediction itself was dropped (quit at once): nothing to report
         except Exception as exc:
             self.bus.publish(
                 InstrumentError(
