@@ -7,12 +7,16 @@ from __future__ import annotations
 
 import ast
 import asyncio
+import contextlib
+import os
 import tomllib
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import sim.wire.zgm as zgm_module
 from drivers.profiles import load_stepper_profile
@@ -192,3 +196,44 @@ async def test_tcp_gateway_answers_0b_for_an_unknown_unit() -> None:
         assert reply == bytes.fromhex("00 01 00 00 00 03 02 83 0B")
     finally:
         await server.stop()
+
+
+async def test_zgm_pty_answers_the_printed_request_byte_for_byte(tmp_path: Path) -> None:
+    """Through the pseudo-terminal (``:``-terminated command, the profile's reply
+    terminator): the manual's p. 16 example with isTemp 1 gives its printed return string."""
+    from drivers.profiles import load_zgm_profile
+    from sim.instruments import SimGlossmeter
+    from sim.wire import ZgmPtyDevice
+    from tests.sim.lobe import LobeModel
+
+    case = ZGM["measure_with_temperature"]
+    clock = SimClock(0)
+    device = ZgmPtyDevice(SimGlossmeter(LobeModel(), clock), load_zgm_profile("zgm1120"),
+                          tmp_path / "gloss", serial_number="401120999")  # fmt: skip
+    device.protocol = ZgmProtocol(Scripted(gu(case)), "401120999")
+    await device.start()
+    try:
+        fd = os.open(device.link_path, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+        try:
+            os.write(fd, case["request"].encode())
+            data = b""
+            loop = asyncio.get_running_loop()
+            deadline = loop.time() + 5.0
+            while not data.endswith(b"\r\n") and loop.time() < deadline:
+                await asyncio.sleep(0.01)
+                with contextlib.suppress(BlockingIOError):
+                    data += os.read(fd, 256)
+        finally:
+            os.close(fd)
+    finally:
+        await device.stop()
+    assert data == case["sim_reply"].encode() + b"\r\n"
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.text(alphabet=st.sampled_from(list("0123456789|: -xyA\x00")), max_size=40))
+def test_zgm_interpreter_answers_any_line_without_raising(line: str) -> None:
+    meter = ZgmProtocol(Scripted({20: 1.0, 60: 2.0, 85: 3.0}), "401120999")
+    reply = asyncio.run(meter.handle(f"1| 401120999{line}"))
+    assert reply is None or reply.startswith(("1| 401120999|", "56| 401120999|", "6| ",
+                                              "28| ", "36| ", "48| ", "52| ", "72| "))  # fmt: skip
