@@ -5,6 +5,7 @@ Motion profile, over Modbus TCP."""
 from __future__ import annotations
 
 from collections.abc import AsyncIterator
+from pathlib import Path
 
 import pytest
 
@@ -12,9 +13,11 @@ from drivers.base import DeviceFault
 from drivers.modbus_stepper import ModbusStepperAxis
 from drivers.profiles import load_stepper_profile
 from drivers.timing import SimClock, trapezoid_duration_s
+from goniolab.lab import Lab
 from sim.instruments import SimAxis
 from sim.motion import ALARM_OVERLOAD, SimMotor
 from sim.wire import ModbusAxisServer, WireAxis
+from tests.contract.contract_support import MODEL, lab_toml
 
 pytestmark = pytest.mark.wire
 
@@ -56,3 +59,17 @@ async def test_real_driver_moves_an_st_q_arm(stq: tuple[ModbusAxisServer, SimClo
         assert (await axis.status()).alarm_code is None
     finally:
         await axis.close()
+
+
+@pytest.mark.parametrize("backend", ["wire", "wire-rtu"])
+async def test_a_lab_config_selects_the_st_q_map(tmp_path: Path, backend: str) -> None:
+    """``profile = "applied-motion-stq"`` in a lab config: the config validates, the
+    simulated lab serves the ST-Q map and the real drivers move both arms through it."""
+    path = lab_toml(tmp_path, backend,
+                    extra={'profile = "oriental-az"': 'profile = "applied-motion-stq"'})  # fmt: skip
+    async with Lab.from_config(path, model=MODEL) as lab:
+        assert lab.server is not None
+        profiles = {w.profile.name for s in lab.server.modbus for w in s.axes.values()}
+        assert profiles == {"applied-motion-stq"}
+        await lab.goniometer.move_to(30.0, 40.0, 30.0)
+        assert await lab.goniometer.positions_deg() == pytest.approx((30.0, 40.0), abs=1e-3)
