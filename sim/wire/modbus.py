@@ -23,7 +23,7 @@ request.
 Unit ids and function codes: over RTU a request for a unit id that no arm answers to gets
 no reply at all (a real AZ on the line stays silent; MBS section 2.1), over TCP the gateway
 exception 0Bh; function 04h (read input registers), which the AZ does not support, gets
-exception 01h (illegal function). 16-bit fields (profile ``single_register_fields``: the
+exception 01h (illegal function) from a direct-data (AZ) unit. 16-bit fields (profile ``single_register_fields``: the
 ST-Q's alarm and status codes) are served as one register. Sources: docs/PROTOCOLS.md.
 
 Injected faults (:mod:`sim.faults`): a timed-out request gets no answer (not executed, no
@@ -66,9 +66,10 @@ _REFRESHED = (
     "command_position",
     "input_command",
 )
-#: Function codes the simulated controllers serve: 03h read holding registers, 06h write
-#: one, 10h write multiple (HM-60262E, 920-0072). 04h (read input registers) is not in the
-#: AZ's function-code list: answered with exception 01h, illegal function (docs/PROTOCOLS.md).
+#: 04h (read input registers) is not in the AZ's function-code list (HM-60262E: 03h, 06h,
+#: 08h, 10h, 17h): the simulated AZ answers it with exception 01h, illegal function
+#: (docs/PROTOCOLS.md). The Applied Motion pages retrieved do not list the function codes;
+#: the simulated AMP drives answer 04h from the holding registers (pymodbus' default).
 _UNSUPPORTED_FUNCTIONS = frozenset({0x04})
 
 
@@ -353,8 +354,8 @@ class ModbusAxisServer:
             registers: list[int],
             set_values: list[int] | list[bool] | None,
         ) -> ExcCodes | None:
-            if function_code in _UNSUPPORTED_FUNCTIONS:
-                return ExcCodes.ILLEGAL_FUNCTION
+            if function_code in _UNSUPPORTED_FUNCTIONS and wire.profile.move_style == "direct-data":
+                return ExcCodes.ILLEGAL_FUNCTION  # the AZ's function-code list (HM-60262E)
             faults = wire.axis.faults
             now = wire.axis.clock.now()
             if faults.is_down(now):
