@@ -1,9 +1,9 @@
 """One goniometer arm driven by a stepper controller over Modbus TCP or RTU.
 
 :class:`ModbusStepperAxis` implements :class:`drivers.base.Axis` for any controller whose
-register map is a ``kind = "modbus-stepper"`` profile (``drivers.profiles``): the Oriental
-Motor AZ "direct data operation" (default) and the Applied Motion MDX+ command-register
-style. What goes on the wire is fixed by the profile's documented move sequences:
+register map is a ``kind = "modbus-stepper"`` profile (``drivers.profiles``; every
+address and opcode with its source in docs/PROTOCOLS.md): the Oriental Motor AZ "direct
+data operation" (default) and the Applied Motion command-register style (ST-Q / MDX+). What goes on the wire is fixed by the profile's documented move sequences:
 
 * direct-data (AZ): ``move_to`` writes the 18 registers of the direct-data block in ONE
   function-16 request (data number, operation type 1 = absolute, position [steps], speed,
@@ -568,11 +568,19 @@ class ModbusStepperAxis:
         sb = self.profile.status_bits
         return self._bit(word, sb.alarm) or self._bit(word, sb.fault)
 
+    async def _read_word_field(self, field: str, address: int, what: str) -> int:
+        # a 16-bit field on some drives (profile single_register_fields; docs/PROTOCOLS.md)
+        if field in self.profile.single_register_fields:
+            return (await self._read(address, 1, what))[0]
+        return await self._read_int32(address, what, signed=False)
+
     async def _status_word(self) -> int:
-        return await self._read_int32(self.profile.registers.output_status, "status", signed=False)
+        address = self.profile.registers.output_status
+        return await self._read_word_field("output_status", address, "status")
 
     async def _alarm_code(self) -> int:
-        return await self._read_int32(self.profile.registers.alarm_code, "alarm code", signed=False)
+        address = self.profile.registers.alarm_code
+        return await self._read_word_field("alarm_code", address, "alarm code")
 
     async def _raise_alarm(self, context: str) -> NoReturn:
         code = await self._alarm_code()

@@ -1,6 +1,6 @@
 """STIL (Marposs) "Ruby" spectro-colorimeter over a serial line, plus CIE colour maths.
 
-The Ruby's raw serial command set is NOT public (shared/PROTOCOLS.md). The driver speaks the
+The Ruby's raw serial command set is NOT public (docs/PROTOCOLS.md). The driver speaks the
 line-based ASCII protocol described by a ``kind = "stil-spectro"`` profile
 (``configs/profiles/stil-ruby.toml``, every command UNCONFIRMED): one command line, then
 the profile's reply line(s) or one error line. With the built-in profile::

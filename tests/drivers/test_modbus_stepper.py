@@ -1,7 +1,7 @@
 """ModbusStepperAxis against a byte-recording fake controller: exact ADUs/frames, error paths.
 
 Expected bytes are written out by hand from the Modbus spec (MBAP header, function 3/16
-PDUs, RTU CRC-16/MODBUS) and the AZ direct-data table in shared/PROTOCOLS.md.
+PDUs, RTU CRC-16/MODBUS) and the AZ direct-data table in docs/PROTOCOLS.md.
 """
 
 from __future__ import annotations
