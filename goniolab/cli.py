@@ -61,13 +61,86 @@ class _Parser(argparse.ArgumentParser):
     """argparse with goniolab's one-line errors (``goniolab: error: ...``, exit 2) and
     negative angle ranges taken as values; sub-command parsers are of the same class."""
 
+    #: The command line being parsed (set by :func:`main`), for the hints of :meth:`error`.
+    argv: Sequence[str] = ()
+
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         # a private attribute (stable since Python 3.2): widen "looks like a negative number"
         self._negative_number_matcher = _NEGATIVE_ARG
 
     def error(self, message: str) -> NoReturn:
-        raise UserError(f"{self.prog}: {message} (see {self.prog} --help)")
+        # one prefix: "goniolab: error: scan: ..." (the top level names no command)
+        where = self.prog.removeprefix("goniolab").strip()
+        if "invalid choice" in message:
+            # an unknown option before a sub-command's positional makes argparse blame the
+            # positional ("argument resume: invalid choice: '0:70:1'"): name the option
+            unknown = [
+                tok.split("=", 1)[0]
+                for tok in _Parser.argv
+                if tok.startswith("--") and tok.split("=", 1)[0] not in self._options()
+            ]
+            if unknown:
+                message = "unrecognized arguments: " + " ".join(unknown)
+        prog = self.prog
+        words = [t for t in _Parser.argv if not t.startswith("-")][:2]
+        if not where and words and message.startswith("unrecognized arguments"):
+            # the top-level parser reports a command's leftovers: name that command (and
+            # its action, "predict brdf", when it has one)
+            sub = self._subcommand(words)
+            where, prog = sub, f"{self.prog} {sub}"
+        hint = self._did_you_mean(message)
+        raise UserError(f"{where + ': ' if where else ''}{message}{hint} (see {prog} --help)")
+
+    def _subcommand(self, words: list[str]) -> str:
+        """The command (and its action) among the first positional ``words``."""
+        for action in self._actions:
+            if isinstance(action, argparse._SubParsersAction) and words[0] in action.choices:
+                child = action.choices[words[0]]
+                for inner in child._actions:
+                    if (
+                        isinstance(inner, argparse._SubParsersAction)
+                        and len(words) > 1
+                        and words[1] in inner.choices
+                    ):
+                        return f"{words[0]} {words[1]}"
+                return words[0]
+        return words[0]
+
+    def _options(self) -> set[str]:
+        """Every option string of this parser and of its sub-commands' parsers."""
+        found: set[str] = set()
+        todo: list[argparse.ArgumentParser] = [self]
+        while todo:
+            parser = todo.pop()
+            for action in parser._actions:
+                found.update(action.option_strings)
+                if isinstance(action, argparse._SubParsersAction):
+                    todo.extend(action.choices.values())
+        return found
+
+    def _did_you_mean(self, message: str) -> str:
+        """``" (did you mean --theta-r?)"`` for a mistyped option or command, else ""."""
+        import difflib
+
+        m = re.match(r"unrecognized arguments: (.*)", message)
+        if m:
+            options = sorted(self._options())
+            guesses = []
+            for token in m.group(1).split():
+                if not token.startswith("--"):
+                    continue
+                name = token.split("=", 1)[0]
+                close = difflib.get_close_matches(name.replace("_", "-"), options, n=1)
+                if close and close[0] != name:
+                    guesses.append(close[0])
+            return f" (did you mean {', '.join(guesses)}?)" if guesses else ""
+        m = re.match(r"argument \S+: invalid choice: '(.*?)' \(choose from (.*)\)", message)
+        if m:
+            choices = [c.strip(" '") for c in m.group(2).split(",")]
+            close = difflib.get_close_matches(m.group(1), choices, n=1)
+            return f" (did you mean {close[0]!r}?)" if close else ""
+        return ""
 
 
 #: Top-level options that take a value (the token after them is not the command).
@@ -257,6 +330,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     _one_blas_thread()
     try:
         parser = build_parser(_command_in(sys.argv[1:] if argv is None else argv))
+        _Parser.argv = list(sys.argv[1:] if argv is None else argv)
         args = parser.parse_args(argv)
         if not getattr(args, "func", None):
             parser.print_help()
