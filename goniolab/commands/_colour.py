@@ -84,11 +84,12 @@ def _cmd_predict_colour(args: argparse.Namespace) -> int:
     from goniolab.colour.multiangle import (
         E2194_ASPECULAR_DEG,
         aspecular_deg,
+        flop_index_note,
+        flop_of_rows,
         theta_r_for_aspecular,
     )
     from goniolab.colour.spectra import spectra_to_xyz, xyz_to_colour
     from goniolab.colour.spectral import reflectance_factor_scale
-    from goniolab.scan.colour import flop_of_rows
     from goniolab.scan.plans import PlanError, parse_angles
 
     settings = _settings(args)
@@ -127,7 +128,8 @@ def _cmd_predict_colour(args: argparse.Namespace) -> int:
                 "spectrum_pct": [float(v) for v in s],
             }
         )
-    fi = flop_of_rows(rows)
+    fi = flop_of_rows(rows, args.theta_i)
+    fi_note = flop_index_note(args.theta_i)
     if args.json:
         doc = {
             "map": args.map,
@@ -139,6 +141,7 @@ def _cmd_predict_colour(args: argparse.Namespace) -> int:
             "model": sp.describe(),
             "geometries": rows,
             "flop_index": fi,
+            "flop_index_note": fi_note,
         }
         print(json.dumps(doc, indent=2))
         return 0
@@ -154,6 +157,8 @@ def _cmd_predict_colour(args: argparse.Namespace) -> int:
         )
     if fi is not None:
         print(f"  flop index (2.69 (L*15 - L*110)^1.11 / L*45^0.86): {fi:.2f}")
+    elif fi_note:
+        print(f"  {fi_note}")
     return 0
 
 
@@ -185,6 +190,6 @@ def register_predict_colour(sub: Any, add_common: Any) -> None:
         "--scale",
         choices=("diffuser", "mirror"),
         default="diffuser",
-        help="reflectance factor vs the perfect diffuser (default) or % of the mirror",
+        help="reflectance factor vs the perfect diffuser (default) or %% of the mirror",
     )
     p.set_defaults(func=_cmd_predict_colour)
