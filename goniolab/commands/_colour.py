@@ -396,7 +396,7 @@ def colour_report(
                         "reference_lab": [float(x) for x in a],
                         "sample_lab": [float(x) for x in b],
                         **v.as_dict(),
-                    }  # fmt: skip
+                    }
                     for a, b, v in zip(lab_r, lab_s, v_ill, strict=True)
                 ],
                 "overall": o_ill,
