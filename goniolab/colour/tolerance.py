@@ -152,7 +152,7 @@ def _limits_at(tol: ToleranceSet, aspecular: float) -> AngleLimits | None:
 
 def evaluate(
     tol: ToleranceSet,
-    aspecular_deg: Sequence[float],
+    aspecular_deg: Sequence[float] | np.ndarray,
     reference_lab: Any,
     sample_lab: Any,
 ) -> tuple[list[AngleVerdict], dict[str, Any]]:
@@ -177,7 +177,8 @@ def evaluate(
     smp = np.atleast_2d(np.asarray(sample_lab, dtype=np.float64))
     d = differences(ref, smp, cmc_l=tol.cmc_l, cmc_c=tol.cmc_c)
     verdicts: list[AngleVerdict] = []
-    for k, a in enumerate(aspecular_deg):
+    asp = [float(a) for a in np.asarray(aspecular_deg, dtype=np.float64).ravel()]
+    for k, a in enumerate(asp):
         values = {key: float(arr[k]) for key, arr in d.items()}
         lim = _limits_at(tol, float(a))
         failed: list[str] = []
@@ -194,9 +195,7 @@ def evaluate(
         verdicts.append(AngleVerdict(float(a), values, lim, tuple(failed)))
     checked = [v.aspecular_deg for v in verdicts if v.limits is not None]
     failed_angles = [v.aspecular_deg for v in verdicts if v.passed is False]
-    missing = [
-        a for a in sorted(tol.limits) if not any(abs(a - float(x)) < 1e-6 for x in aspecular_deg)
-    ]
+    missing = [a for a in sorted(tol.limits) if not any(abs(a - x) < 1e-6 for x in asp)]
     passed: bool | None = None
     if checked:
         passed = not failed_angles and not missing
