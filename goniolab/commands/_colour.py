@@ -93,7 +93,11 @@ def _cmd_predict_colour(args: argparse.Namespace) -> int:
     from goniolab.scan.plans import PlanError, parse_angles
 
     settings = _settings(args)
-    if args.theta_r:
+    measured = _compare_file(args) if args.compare else None
+    if measured is not None:
+        args.theta_i = float(measured.theta_i_deg[0])
+        tr = np.asarray(measured.theta_r_deg, dtype=np.float64)
+    elif args.theta_r:
         try:
             tr = np.asarray(parse_angles(args.theta_r, name="--theta-r"), dtype=np.float64)
         except PlanError as exc:
@@ -112,7 +116,7 @@ def _cmd_predict_colour(args: argparse.Namespace) -> int:
         raise UserError(str(exc)) from None
     colours = xyz_to_colour(spectra_to_xyz(sp.wavelengths_nm, factors, settings), settings)
     rows: list[dict[str, Any]] = []
-    for t, c, s in zip(tr, colours, spectra, strict=True):
+    for t, c, s, f in zip(tr, colours, spectra, factors, strict=True):
         rows.append(
             {
                 "theta_r_deg": float(t),
@@ -126,10 +130,34 @@ def _cmd_predict_colour(args: argparse.Namespace) -> int:
                 "C": float(c[6]),
                 "h_deg": float(c[7]),
                 "spectrum_pct": [float(v) for v in s],
+                "reflectance_factor": [float(v) for v in f],
             }
         )
     fi = flop_of_rows(rows, args.theta_i)
     fi_note = flop_index_note(args.theta_i)
+    if args.spectra_out:
+        from goniolab.colour.exchange import MultiAngleSpectra
+
+        tables = [] if measured is None else [measured]
+        tables.append(
+            MultiAngleSpectra(
+                np.asarray(sp.wavelengths_nm, dtype=np.float64),
+                np.full(tr.size, float(args.theta_i)),
+                tr,
+                factors,
+                tuple("predicted" for _ in tr),
+                tuple(0 for _ in tr),
+            )
+        )
+        write_spectra(
+            tables,
+            args.spectra_out,
+            {"map": args.map, "scale": args.scale, "detector_cone_deg": args.detector_deg},
+        )
+    compare = None
+    if measured is not None:
+        compare = _compare_doc(args, measured, np.array([[r["L"], r["a"], r["b"]] for r in rows]),
+                               settings)  # fmt: skip
     if args.json:
         doc = {
             "map": args.map,
@@ -143,6 +171,10 @@ def _cmd_predict_colour(args: argparse.Namespace) -> int:
             "flop_index": fi,
             "flop_index_note": fi_note,
         }
+        if compare is not None:
+            doc["compare"] = compare
+        if args.spectra_out:
+            doc["spectra_out"] = str(Path(args.spectra_out).resolve())
         print(json.dumps(doc, indent=2))
         return 0
     print(
@@ -159,7 +191,81 @@ def _cmd_predict_colour(args: argparse.Namespace) -> int:
         print(f"  flop index (2.69 (L*15 - L*110)^1.11 / L*45^0.86): {fi:.2f}")
     elif fi_note:
         print(f"  {fi_note}")
+    if compare is not None:
+        print(f"measured spectra {args.compare} ({compare['rows_read']} rows, repeats "
+              "averaged as spectra) vs this prediction:")  # fmt: skip
+        print("\n".join(colour_report_text({"tolerance": compare["tolerance"],
+                                              "pair": compare["pair"],
+                                              "spectra_notes": compare["spectra_notes"]},
+                                             with_geometries=False)))  # fmt: skip
+    if args.spectra_out:
+        print(f"  spectra (reflectance factors) written to {args.spectra_out}")
     return 0
+
+
+def _compare_file(args: argparse.Namespace) -> Any:
+    """``--compare FILE.csv``: the measured multi-angle spectra (one incidence), repeats
+    averaged as spectra."""
+    import numpy as np
+
+    from goniolab.colour.exchange import read_spectra_csv
+    from goniolab.colour.spectra import ColourError
+
+    p = Path(args.compare)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise UserError(f"--compare {p}: cannot read: {exc.strerror}") from None
+    try:
+        table = read_spectra_csv(text, where=str(p), unit=args.compare_unit,
+                                 theta_i_deg=args.theta_i).select("measured")  # fmt: skip
+    except ColourError as exc:
+        raise UserError(str(exc)) from None
+    incidences = sorted({round(float(t), 6) for t in table.theta_i_deg})
+    if len(incidences) != 1:
+        raise UserError(
+            f"--compare {p}: one incidence per file, found theta_i "
+            + ", ".join(f"{t:g}" for t in incidences)
+        )
+    avg = table.averaged()
+    avg_rows = table.factors.shape[0]
+    args._compare_rows = avg_rows
+    order = np.argsort(-avg.theta_r_deg)
+    from goniolab.colour.exchange import MultiAngleSpectra
+
+    return MultiAngleSpectra(
+        avg.wavelengths_nm,
+        avg.theta_i_deg[order],
+        avg.theta_r_deg[order],
+        avg.factors[order],
+        tuple(avg.source[k] for k in order),
+        tuple(0 for _ in order),
+    )
+
+
+def _compare_doc(args: argparse.Namespace, measured: Any, predicted_lab: Any,
+                 settings: Any) -> dict[str, Any]:  # fmt: skip
+    """Differences and tolerance verdicts of the prediction against the measured file."""
+    from goniolab.colour.spectra import range_note
+    from goniolab.colour.tolerance import evaluate, lab_under
+
+    tolerance = load_tolerance(args.tolerance)
+    lab_m = lab_under(measured.wavelengths_nm, measured.factors, settings.illuminant,
+                      settings.observer)  # fmt: skip
+    verdicts, overall = evaluate(tolerance, measured.aspecular_deg, lab_m, predicted_lab)
+    return {
+        "file": str(args.compare),
+        "rows_read": int(getattr(args, "_compare_rows", measured.factors.shape[0])),
+        "wavelengths_nm": [float(w) for w in measured.wavelengths_nm],
+        "measured_lab": [[float(v) for v in row] for row in lab_m],
+        "pair": {"reference": f"measured {args.compare}", "sample": "this prediction"},
+        "spectra_notes": [n for n in (range_note(measured.wavelengths_nm),) if n],
+        "tolerance": {
+            **tolerance.describe(),
+            "geometries": [v.as_dict() for v in verdicts],
+            "overall": overall,
+        },
+    }
 
 
 def _add_colour_options(p: argparse.ArgumentParser) -> None:
@@ -185,6 +291,30 @@ def register_predict_colour(sub: Any, add_common: Any) -> None:
         "--theta-r",
         default=None,
         help="detector angles (default: the E2194 aspecular angles -15,15,25,45,75,110)",
+    )
+    p.add_argument(
+        "--compare",
+        metavar="FILE.csv",
+        help="measured multi-angle spectra (R_400.. columns, aspecular_deg or theta_r_deg): "
+        "predicted at the file's geometries and judged against it",
+    )
+    p.add_argument(
+        "--compare-unit",
+        choices=("factor", "percent"),
+        default="factor",
+        help="the --compare file's values: reflectance factors (default) or percent",
+    )
+    p.add_argument(
+        "--tolerance",
+        default="din6175-2",
+        metavar="SET",
+        help="tolerance set for --compare (din6175-2, de00-1 or FILE.toml)",
+    )
+    p.add_argument(
+        "--spectra-out",
+        metavar="FILE",
+        help="write the predicted (and --compare measured) spectra as reflectance factors: "
+        "FILE.csv (R_380.. columns), .parquet or .nc",
     )
     p.add_argument(
         "--scale",
@@ -433,11 +563,11 @@ def _overall_text(overall: dict[str, Any]) -> str:
     return parts[0] + (f" ({'; '.join(parts[1:])})" if parts[1:] else "")
 
 
-def colour_report_text(doc: dict[str, Any]) -> list[str]:
+def colour_report_text(doc: dict[str, Any], *, with_geometries: bool = True) -> list[str]:
     """The text ``runs colour`` prints for :func:`colour_report`'s document."""
     from goniolab.commands.runs import colour_text
 
-    out = colour_text(doc["geometries"], doc["theta_i_deg"])
+    out = colour_text(doc["geometries"], doc["theta_i_deg"]) if with_geometries else []
     tol = doc["tolerance"]
     pair = doc["pair"]
     out.append(
@@ -505,3 +635,195 @@ def add_runs_colour_options(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="dE00 of the pair under D65, A, F11 (FL11) and LED (LED-B3), per angle",
     )
+
+
+# --------------------------------------------------------------------------- spectra files
+#: Spectra file formats by suffix.
+SPECTRA_SUFFIXES = {".csv": "csv", ".parquet": "parquet", ".pq": "parquet", ".nc": "netcdf"}
+
+
+def write_spectra(tables: list[Any], path: str, attrs: dict[str, Any]) -> str:
+    """Write multi-angle reflectance-factor tables (:class:`MultiAngleSpectra`) to ``path``:
+    CSV (``R_400..`` columns), Parquet (the same columns, ``attrs`` as JSON in the schema
+    metadata under ``goniolab.spectra``) or netCDF (``reflectance_factor`` over
+    ``(geometry, wavelength_nm)`` with units and long names). Returns the format."""
+    import numpy as np
+
+    from goniolab.colour.exchange import spectra_csv, spectral_column, union_table
+
+    fmt = SPECTRA_SUFFIXES.get(Path(path).suffix.lower())
+    if fmt is None:
+        raise UserError(f"{path}: spectra files are .csv, .parquet or .nc")
+    table = union_table(tables)
+    try:
+        if fmt == "csv":
+            Path(path).write_text(spectra_csv(tables), encoding="utf-8")
+        elif fmt == "parquet":
+            import pandas as pd
+            import pyarrow as pa
+            import pyarrow.parquet as pq
+
+            df = pd.DataFrame(
+                {
+                    "source": list(table.source),
+                    "theta_i_deg": table.theta_i_deg,
+                    "theta_r_deg": table.theta_r_deg,
+                    "aspecular_deg": table.aspecular_deg,
+                    "repeat": np.asarray(table.repeat, dtype=np.int64),
+                    **{
+                        spectral_column(w): table.factors[:, k]
+                        for k, w in enumerate(table.wavelengths_nm)
+                    },
+                }
+            )
+            t = pa.Table.from_pandas(df, preserve_index=False)
+            meta = dict(t.schema.metadata or {})
+            meta[b"goniolab.spectra"] = json.dumps(
+                {**attrs, "values": "reflectance factor (1 = perfect reflecting diffuser)",
+                 "aspecular": "theta_i_deg - theta_r_deg (ASTM E2194)"},
+                sort_keys=True, default=str,
+            ).encode()  # fmt: skip
+            pq.write_table(t.replace_schema_metadata(meta), path)
+        else:
+            import xarray as xr
+
+            from goniolab.datasets import _LONG_NAMES, UNITS, write_netcdf
+
+            geom = np.arange(table.factors.shape[0])
+            ds = xr.Dataset(
+                {
+                    "reflectance_factor": (
+                        ("geometry", "wavelength_nm"),
+                        table.factors,
+                        {
+                            "units": "1",
+                            "long_name": "spectral reflectance factor "
+                            "(1 = perfect reflecting diffuser), measured or predicted per "
+                            "the source variable",
+                        },
+                    ),
+                    "source": (
+                        "geometry",
+                        np.array(table.source, dtype=str),
+                        {"long_name": "measured or predicted"},
+                    ),
+                    "repeat": (
+                        "geometry",
+                        np.asarray(table.repeat, dtype=np.int64),
+                        {"long_name": "repeat number", "units": "1"},
+                    ),
+                },
+                coords={
+                    "geometry": ("geometry", geom, {"long_name": "row number"}),
+                    "wavelength_nm": (
+                        "wavelength_nm",
+                        table.wavelengths_nm,
+                        {"units": UNITS["wavelength_nm"], "long_name": "wavelength"},
+                    ),
+                    **{
+                        name: (
+                            "geometry",
+                            values,
+                            {"units": UNITS[name], "long_name": _LONG_NAMES.get(name, name)},
+                        )
+                        for name, values in (
+                            ("theta_i_deg", table.theta_i_deg),
+                            ("theta_r_deg", table.theta_r_deg),
+                            ("aspecular_deg", table.aspecular_deg),
+                        )
+                    },
+                },
+                attrs={"title": "goniolab multi-angle spectra", **attrs},
+            )
+            write_netcdf(ds, path)
+    except OSError as exc:
+        raise UserError(f"{path}: cannot write: {exc.strerror or exc}") from None
+    return fmt
+
+
+def run_spectra_tables(store: Any, rec: Any, which: str) -> list[Any]:
+    """A run's spectra as :class:`MultiAngleSpectra` tables (``measured`` per reading,
+    ``predicted`` per geometry)."""
+    import numpy as np
+
+    from goniolab.colour.exchange import MultiAngleSpectra
+    from goniolab.datasets import predicted_grid_nm, run_reflectance_factors
+
+    wl, measured, predicted = run_reflectance_factors(store, rec.id)
+    theta_i = float(rec.plan.get("theta_i_deg", 45.0))
+    tr = np.asarray(rec.plan.get("theta_r_deg", []), dtype=np.float64)
+    out: list[Any] = []
+    if which in ("measured", "both") and wl.size:
+        n, reps, _ = measured.shape
+        keep = [
+            (k, r) for k in range(n) for r in range(reps) if np.all(np.isfinite(measured[k, r]))
+        ]
+        if keep:
+            out.append(
+                MultiAngleSpectra(
+                    wl,
+                    np.full(len(keep), theta_i),
+                    np.array([tr[k] for k, _ in keep]),
+                    np.array([measured[k, r] for k, r in keep]),
+                    tuple("measured" for _ in keep),
+                    tuple(r for _, r in keep),
+                )
+            )
+    if which in ("predicted", "both") and predicted is not None:
+        keep_p = [k for k in range(predicted.shape[0]) if np.all(np.isfinite(predicted[k]))]
+        if keep_p:
+            out.append(
+                MultiAngleSpectra(
+                    predicted_grid_nm(predicted.shape[-1]),
+                    np.full(len(keep_p), theta_i),
+                    tr[keep_p],
+                    predicted[keep_p],
+                    tuple("predicted" for _ in keep_p),
+                    tuple(0 for _ in keep_p),
+                )
+            )
+    return out
+
+
+def cmd_runs_spectra(args: argparse.Namespace) -> int:
+    """``goniolab runs spectra RUN -o FILE``: the run's spectra as reflectance factors."""
+    from goniolab.commands.runs import _get_run, open_store
+
+    with open_store(args.store, args.config) as store:
+        rec = _get_run(store, args.run)
+        if rec.kind != "brdf":
+            raise UserError(f"run {rec.id} is a {rec.kind} run: spectra need a scan (brdf) run")
+        tables = run_spectra_tables(store, rec, args.which)
+    if not tables:
+        raise UserError(f"run {rec.id} has no {args.which} spectra on one wavelength grid")
+    cfg = rec.config if isinstance(rec.config, dict) else {}
+    attrs = {
+        "run_id": rec.id,
+        "sample": rec.sample,
+        "colour_scale": str((cfg.get("colour") or {}).get("scale", "diffuser")),
+        "detector_cone_deg": float((cfg.get("spectro") or {}).get("detector_cone_deg", 6.0)),
+    }
+    fmt = write_spectra(tables, args.output, attrs)
+    rows = sum(t.factors.shape[0] for t in tables)
+    if args.json:
+        print(json.dumps({"output": str(Path(args.output).resolve()), "format": fmt,
+                          "rows": rows, "which": args.which}))  # fmt: skip
+    else:
+        print(f"run {rec.id}: {rows} {args.which} spectra (reflectance factors) -> {args.output}")
+    return 0
+
+
+def register_runs_spectra(sub: Any, common: argparse.ArgumentParser) -> None:
+    """Add ``runs spectra`` to the ``runs`` sub-parsers."""
+    p = sub.add_parser(
+        "spectra",
+        parents=[common],
+        help="a scan's measured/predicted spectra as reflectance factors (CSV R_400.., "
+        "Parquet, netCDF)",
+    )
+    p.add_argument("run", type=int, metavar="RUN")
+    p.add_argument("-o", "--output", required=True, metavar="FILE",
+                   help="FILE.csv, FILE.parquet or FILE.nc")  # fmt: skip
+    p.add_argument("--which", choices=("measured", "predicted", "both"), default="both")
+    p.add_argument("--json", action="store_true", help="report what was written as JSON")
+    p.set_defaults(func=cmd_runs_spectra)

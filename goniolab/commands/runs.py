@@ -384,6 +384,9 @@ def register(subparsers: Any) -> None:
 
     add_runs_colour_options(pc)
     pc.set_defaults(func=_cmd_colour)
+    from goniolab.commands._colour import register_runs_spectra
+
+    register_runs_spectra(sub, common)
 
     pe = sub.add_parser(
         "export",
