@@ -203,9 +203,13 @@ class MetallicFlakes:
     spread_deg: float
     depth_um: float = 0.0
     metal: Dispersion = ALUMINIUM
+    #: Flake diameter (um): sparkle and graininess (:mod:`goniolab.colour.sparkle`); the
+    #: averaged colour does not depend on it. Automotive aluminium flakes: D50 10-30 um.
+    size_um: float = 20.0
 
     def __post_init__(self) -> None:
         _check_flakes(self.area_fraction, self.spread_deg, self.depth_um, "metallic")
+        _check_size(self.size_um, "metallic")
 
     def reflectance(
         self, cos_local: FloatArray, n_binder: FloatArray, wl: FloatArray
@@ -225,9 +229,12 @@ class PearlFlakes:
     depth_um: float = 0.0
     film: Dispersion = TIO2
     mica_n: float = MICA_N
+    #: Platelet diameter (um), for sparkle and graininess; pearl pigments: D50 10-25 um.
+    size_um: float = 15.0
 
     def __post_init__(self) -> None:
         _check_flakes(self.area_fraction, self.spread_deg, self.depth_um, "pearl")
+        _check_size(self.size_um, "pearl")
         if not (math.isfinite(self.film_nm) and self.film_nm > 0):
             raise PaintError("pearl film_nm must be > 0")
 
@@ -243,6 +250,11 @@ class PearlFlakes:
         r2, _ = airy_film(cos_m, wl, self.mica_n, nf, self.film_nm, n_binder)
         out: FloatArray = r1 + t1 * t1 * r2 / (1.0 - r1 * r2)
         return out
+
+
+def _check_size(size_um: float, what: str) -> None:
+    if not (math.isfinite(size_um) and 0.5 <= size_um <= 500.0):
+        raise PaintError(f"{what} size_um must be in [0.5, 500] um")
 
 
 def _check_flakes(area: float, spread: float, depth: float, what: str) -> None:
@@ -494,6 +506,7 @@ class Paint:
                 "area_fraction": m.area_fraction,
                 "spread_deg": m.spread_deg,
                 "depth_um": m.depth_um,
+                "size_um": m.size_um,
                 "metal": m.metal.describe(),
             }
         if self.pearl is not None:
@@ -503,6 +516,7 @@ class Paint:
                 "spread_deg": p.spread_deg,
                 "film_nm": p.film_nm,
                 "depth_um": p.depth_um,
+                "size_um": p.size_um,
             }
         return out
 
@@ -585,7 +599,7 @@ def paint_from_dict(
         if "metallic" in spec:
             m = spec["metallic"]
             w = f"{where}.metallic"
-            _known(m, {"area_fraction", "spread_deg", "depth_um", "metal"}, w)
+            _known(m, {"area_fraction", "spread_deg", "depth_um", "metal", "size_um"}, w)
             metal = (
                 dispersion_from_dict(m["metal"], where=f"{w}.metal", tables=tables)
                 if "metal" in m
@@ -596,17 +610,19 @@ def paint_from_dict(
                 spread_deg=_number(m, "spread_deg", w),
                 depth_um=_number(m, "depth_um", w, 0.0),
                 metal=metal,
+                size_um=_number(m, "size_um", w, 20.0),
             )
         pearl = None
         if "pearl" in spec:
             p = spec["pearl"]
             w = f"{where}.pearl"
-            _known(p, {"area_fraction", "spread_deg", "film_nm", "depth_um"}, w)
+            _known(p, {"area_fraction", "spread_deg", "film_nm", "depth_um", "size_um"}, w)
             pearl = PearlFlakes(
                 area_fraction=_number(p, "area_fraction", w),
                 spread_deg=_number(p, "spread_deg", w),
                 film_nm=_number(p, "film_nm", w),
                 depth_um=_number(p, "depth_um", w, 0.0),
+                size_um=_number(p, "size_um", w, 15.0),
             )
         form, k1, k2 = "directional", None, None
         if "saunderson" in spec:
@@ -679,6 +695,7 @@ def paint_to_dict(paint: Paint, *, stem: str = "paint") -> tuple[dict[str, Any],
             "area_fraction": m.area_fraction,
             "spread_deg": m.spread_deg,
             "depth_um": m.depth_um,
+            "size_um": m.size_um,
             "metal": _dispersion_value(m.metal, f"{stem}-metal.nk", tables),
         }
     if paint.pearl is not None:
@@ -688,5 +705,6 @@ def paint_to_dict(paint: Paint, *, stem: str = "paint") -> tuple[dict[str, Any],
             "spread_deg": p.spread_deg,
             "film_nm": p.film_nm,
             "depth_um": p.depth_um,
+            "size_um": p.size_um,
         }
     return out, tables

@@ -135,6 +135,9 @@ def _cmd_predict_colour(args: argparse.Namespace) -> int:
         )
     fi = flop_of_rows(rows, args.theta_i)
     fi_note = flop_index_note(args.theta_i)
+    from goniolab.colour.sparkle import sparkle_report
+
+    sparkle = sparkle_report(sp.paint) if sp.paint.has_flakes else {}
     if args.spectra_out:
         from goniolab.colour.exchange import MultiAngleSpectra
 
@@ -171,6 +174,8 @@ def _cmd_predict_colour(args: argparse.Namespace) -> int:
             "flop_index": fi,
             "flop_index_note": fi_note,
         }
+        if sparkle:
+            doc["sparkle"] = sparkle
         if compare is not None:
             doc["compare"] = compare
         if args.spectra_out:
@@ -191,6 +196,18 @@ def _cmd_predict_colour(args: argparse.Namespace) -> int:
         print(f"  flop index (2.69 (L*15 - L*110)^1.11 / L*45^0.86): {fi:.2f}")
     elif fi_note:
         print(f"  {fi_note}")
+    for name, rep in sparkle.items():
+        fl = rep["flakes"]
+        print(
+            f"  {name} sparkle (flakes {fl['size_um']:g} um, camera along the normal, "
+            f"{rep['pixel_um']:g} um pixels; goniolab.colour.sparkle):"
+        )
+        for a in rep["angles"]:
+            print(
+                f"    lamp {a['illumination_deg']:4.0f} deg: S_a {a['S_a_pct']:.3g} % of pixels,"
+                f" S_i {a['S_i']:.3g} x the surround"
+            )
+        print(f"    graininess G {rep['G']:.3g} % ({rep['grain_pixel_um']:g} um pixels)")
     if compare is not None:
         print(f"measured spectra {args.compare} ({compare['rows_read']} rows, repeats "
               "averaged as spectra) vs this prediction:")  # fmt: skip
