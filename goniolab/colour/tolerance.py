@@ -181,6 +181,8 @@ def evaluate(
     for k, a in enumerate(asp):
         values = {key: float(arr[k]) for key, arr in d.items()}
         lim = _limits_at(tol, float(a))
+        if not all(math.isfinite(v) for v in values.values()):
+            lim = None  # no pair at this angle (a colour missing): not judged, see missing
         failed: list[str] = []
         if lim is not None:
             checks = (
@@ -195,7 +197,8 @@ def evaluate(
         verdicts.append(AngleVerdict(float(a), values, lim, tuple(failed)))
     checked = [v.aspecular_deg for v in verdicts if v.limits is not None]
     failed_angles = [v.aspecular_deg for v in verdicts if v.passed is False]
-    missing = [a for a in sorted(tol.limits) if not any(abs(a - x) < 1e-6 for x in asp)]
+    judged = [v.aspecular_deg for v in verdicts if v.limits is not None]
+    missing = [a for a in sorted(tol.limits) if not any(abs(a - x) < 1e-6 for x in judged)]
     passed: bool | None = None
     if checked:
         passed = not failed_angles and not missing

@@ -159,3 +159,13 @@ def test_metamerism_table_flags_a_metameric_pair() -> None:
     by = {r["illuminant"]: r for r in rows}
     assert by["D65"]["dE00"] < 1e-6
     assert max(by["A"]["dE00"], by["FL11"]["dE00"], by["LED-B3"]["dE00"]) > 0.1
+
+
+def test_an_angle_without_a_pair_is_missing_not_failed() -> None:
+    tol = BUILTIN_SETS["de00-1"]
+    ref = np.array([[50.0, 0.0, 0.0], [40.0, 0.0, 0.0]])
+    smp = np.array([[50.2, 0.0, 0.0], [np.nan, np.nan, np.nan]])
+    verdicts, overall = evaluate(tol, [15.0, 45.0], ref, smp)
+    assert verdicts[0].passed is True and verdicts[1].passed is None
+    assert overall["failed_angles"] == [] and 45.0 in overall["missing_angles"]
+    assert overall["passed"] is False  # an angle of the set was not judged
