@@ -469,6 +469,9 @@ def colour_report(
         if other_rows is None and all(np.isfinite(lab_of(r, "predicted_"))):
             r.update({k: v.values[k] for k in ("dL", "dC", "dH", "dE_CMC")})
     settings = rec.config.get("colour", {}) if isinstance(rec.config, dict) else {}
+    note = ""
+    if other is None and not any(r.get("predicted_L") is not None for r in rows):
+        note = f"run {rec.id} has no predicted colours to judge against (compare runs: --vs RUN)"
     doc: dict[str, Any] = {
         "run": rec.id,
         "theta_i_deg": theta_i,
@@ -487,6 +490,7 @@ def colour_report(
             **tolerance.describe(),
             "geometries": [v.as_dict() for v in verdicts],
             "overall": overall,
+            "note": note,
         },
     }
     if other is not None:
@@ -591,6 +595,9 @@ def colour_report_text(doc: dict[str, Any], *, with_geometries: bool = True) -> 
         f"tolerance {tol['name']} ({tol['metric']}): {pair['sample']} vs {pair['reference']}"
     )
     out.append(f"  source: {tol['source']}")
+    if tol.get("note"):
+        out.append(f"  {tol['note']}")
+        return out
     metric = tol["metric"]
     out.append(
         f"  aspec    dL*    dC*    dH*   dE*ab   dE94   dE00  {metric:>6}  limits"

@@ -164,7 +164,7 @@ def run_colour(store: RunStore, rec: RunRecord) -> list[dict[str, Any]]:
 
 
 def _f(v: Any, fmt: str = "6.1f") -> str:
-    return "-" if v is None else format(float(v), fmt)
+    return "-".rjust(len(format(0.0, fmt))) if v is None else format(float(v), fmt)
 
 
 def colour_text(rows: list[dict[str, Any]], theta_i_deg: float = 45.0) -> list[str]:

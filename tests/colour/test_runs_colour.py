@@ -116,3 +116,17 @@ def test_no_flop_index_away_from_45_deg(tmp_path: Path, capsys: pytest.CaptureFi
     assert doc["flop_index"] is None and "45 deg incidence" in doc["flop_index_note"]
     assert main(["runs", "colour", "1", "--store", str(path)]) == 0
     assert "no flop index at theta_i 30 deg" in capsys.readouterr().out
+
+
+def test_without_predictions_it_says_so_and_vs_judges_two_runs(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = make_spectral_store(tmp_path / "np.sqlite", with_predictions=False)
+    doc = _colour(capsys, path)
+    assert "no predicted colours" in doc["tolerance"]["note"]
+    assert doc["tolerance"]["overall"]["passed"] is None
+    # a run against itself: every difference 0, every angle of the set passes
+    doc = _colour(capsys, path, "--vs", "1", "--metamerism")
+    assert doc["tolerance"]["overall"]["passed"] is True
+    assert max(r["dE00"] for r in doc["metamerism"]) < 1e-9
+    assert doc["vs"]["max_dE2000"] == pytest.approx(0.0, abs=1e-9)
