@@ -17,8 +17,9 @@ geometry are repeats and are averaged *as spectra* (the colour of the mean spect
 mean of colours). The grid is validated by :func:`goniolab.colour.spectra.check_spectrum`
 (evenly spaced, inside 360-830 nm, covering 400-700 nm).
 
-No CxF/X3 reader: no maintained Python library reads CxF3 (checked Nov 2026; colour-science
-has none), so CxF files are converted to CSV by the instrument software first.
+No CxF/X3 reader: colour-science 0.4.7 reads no CxF3 and no maintained Python package for it
+was found among those this project installs (Nov 2026), so CxF files are exported to CSV by
+the instrument software first.
 """
 
 from __future__ import annotations
