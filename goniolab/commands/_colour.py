@@ -506,6 +506,13 @@ def colour_report(
             "max_dE2000": max(de) if de else None,
             "mean_dE2000": sum(de) / len(de) if de else None,
         }
+    # how the stored colours were integrated: a grid short of 380-780 nm is said
+    grids = {
+        tuple(p.raw.get("wavelengths_nm") or ())
+        for p in store.points(rec.id)
+        if p.index >= 0 and p.raw.get("wavelengths_nm")
+    }
+    doc["spectra_notes"] = sorted({n for g in grids if (n := range_note(np.asarray(g)))})
     if not (illuminants or metamerism):
         return doc
     # spectra of both sides, for colours under other illuminants
@@ -531,7 +538,7 @@ def colour_report(
     ref_pair = (ref_wl, ref_r[idx_ref])
     smp_pair = (smp_wl, smp_r[idx_smp])
     notes = sorted({n for n in (range_note(ref_wl), range_note(smp_wl)) if n})
-    doc["spectra_notes"] = notes
+    doc["spectra_notes"] = sorted(set(doc["spectra_notes"]) | set(notes))
     try:
         per_ill: dict[str, Any] = {}
         for ill in illuminants:
