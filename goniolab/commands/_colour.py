@@ -137,7 +137,18 @@ def _cmd_predict_colour(args: argparse.Namespace) -> int:
     fi_note = flop_index_note(args.theta_i)
     from goniolab.colour.sparkle import sparkle_report
 
-    sparkle = sparkle_report(sp.paint) if sp.paint.has_flakes else {}
+    try:
+        sparkle = (
+            sparkle_report(
+                sp.paint,
+                pixel_um=args.sparkle_pixel_um,
+                lamp_radius_deg=0.5 * args.sparkle_lamp_deg,
+            )
+            if sp.paint.has_flakes
+            else {}
+        )
+    except ValueError as exc:
+        raise UserError(f"sparkle: {exc}") from None
     if args.spectra_out:
         from goniolab.colour.exchange import MultiAngleSpectra
 
@@ -326,6 +337,18 @@ def register_predict_colour(sub: Any, add_common: Any) -> None:
         default="din6175-2",
         metavar="SET",
         help="tolerance set for --compare (din6175-2, de00-1 or FILE.toml)",
+    )
+    p.add_argument(
+        "--sparkle-pixel-um",
+        type=float,
+        default=15.0,
+        help="camera pixel on the sample for the sparkle prediction (default 15 um)",
+    )
+    p.add_argument(
+        "--sparkle-lamp-deg",
+        type=float,
+        default=2.0,
+        help="angular diameter of the sparkle lamp (default 2 deg)",
     )
     p.add_argument(
         "--spectra-out",
