@@ -367,7 +367,8 @@ def render(
             side = np.sign(np.sum(np.cross(mirror, view) * np.cross(mirror, li), -1))
             asp[mask.ravel()] = np.where(side >= 0, a, -a)
             cos_key[mask.ravel()] = ci
-    peak = _linear_peak(xyz, settings)
+    linear = _linear_rgb(xyz, settings)  # once: the exposure scales it linearly
+    peak = np.max(linear, axis=-1) if linear.size else np.zeros(0)
     if exposure is None:
         q = float(np.quantile(peak, 1.0 - CLIP_FRACTION, method="higher")) if peak.size else 0.0
         # 1 % headroom: 8-bit rounding would otherwise saturate the quantile pixel itself
@@ -378,8 +379,8 @@ def render(
     clipped = float(np.mean(peak * exposure > 1.0 + 1e-9)) if peak.size else 0.0
     full = np.zeros((size * size, 3))
     full[mask.ravel()] = xyz
-    srgb = _to_srgb(full * exposure, settings)
-    srgb[~mask.ravel()] = 0.0
+    srgb = np.zeros((size * size, 3))
+    srgb[mask.ravel()] = _encode_srgb(linear * exposure)
     spark = np.zeros(size * size, dtype=bool)
     spark[mask.ravel()] = sparkling
     return Render(
@@ -396,35 +397,27 @@ def render(
     )
 
 
-def _linear_peak(xyz: FloatArray, settings: ColourSettings | None) -> FloatArray:
-    """Per pixel, the largest linear sRGB channel of XYZ (Y = 100 scale): a pixel clips to
-    white when it exceeds 1."""
+def _linear_rgb(xyz: FloatArray, settings: ColourSettings | None) -> FloatArray:
+    """Linear sRGB of XYZ (Y = 100 scale), ``colour.XYZ_to_sRGB`` without the encoding, with
+    chromatic adaptation from the illuminant's white point: a pixel clips to white when a
+    channel exceeds 1."""
     import warnings
 
     from goniolab.colour.spectra import colour_module
 
     if xyz.size == 0:
-        return np.zeros(0)
+        return np.zeros((0, 3))
     colour = colour_module()
     s = (settings or ColourSettings()).validated()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         rgb = colour.XYZ_to_sRGB(xyz / 100.0, s.white_xy, apply_cctf_encoding=False)
-    out: FloatArray = np.max(np.nan_to_num(rgb), axis=-1)
+    out: FloatArray = np.nan_to_num(np.asarray(rgb, dtype=np.float64))
     return out
 
 
-def _to_srgb(xyz: FloatArray, settings: ColourSettings | None) -> FloatArray:
-    """Display sRGB of XYZ (Y = 100 scale): ``colour.XYZ_to_sRGB`` with chromatic adaptation
-    from the illuminant's white point, clipped to [0, 1]."""
-    import warnings
-
-    from goniolab.colour.spectra import colour_module
-
-    colour = colour_module()
-    s = (settings or ColourSettings()).validated()
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        rgb = colour.XYZ_to_sRGB(xyz / 100.0, s.white_xy)
-    out: FloatArray = np.clip(np.nan_to_num(rgb), 0.0, 1.0)
+def _encode_srgb(linear: FloatArray) -> FloatArray:
+    """Display sRGB in [0, 1] of linear sRGB: IEC 61966-2-1's encoding, clipped."""
+    c = np.clip(linear, 0.0, 1.0)
+    out: FloatArray = np.where(c <= 0.0031308, 12.92 * c, 1.055 * np.power(c, 1 / 2.4) - 0.055)
     return out
