@@ -184,8 +184,11 @@ def tabulate_brdf(
     f = np.zeros((wi.shape[0], wl.size))
     n_coat = paint.coat_n(wl)
     f[ok] = gloss_brdf(wi[ok], wo[ok], n_coat, alpha, alpha_lobe)
-    f[ok] += paint.subsurface_brdf(wi[ok], wo[ok], wl)
-    xyz = (f @ w.T).reshape(n_h, n_d, n_phi, 3)
+    # the paint beneath: :meth:`Paint.subsurface_brdf` written out as its body term plus
+    # one lobe per flake population, each lobe also tabulated alone (the sparkle texture)
+    wi_ok, wo_ok = wi[ok], wo[ok]
+    t_body = paint.body_transmission(wi_ok[:, 2], wl) * paint.body_transmission(wo_ok[:, 2], wl)
+    f[ok] += t_body * paint.body_term(wl)[None, :]
     flakes: list[MetallicFlakes | PearlFlakes] = []
     tables: list[FloatArray] = []
     for pop in (paint.metallic, paint.pearl):
@@ -197,9 +200,11 @@ def tabulate_brdf(
             pearl=pop if pop is paint.pearl else None,
         )
         fl = np.zeros((wi.shape[0], wl.size))
-        fl[ok] = alone.flake_brdf(wi[ok], wo[ok], wl)
+        fl[ok] = alone.flake_brdf(wi_ok, wo_ok, wl)
+        f += fl
         tables.append((fl @ w.T).reshape(n_h, n_d, n_phi, 3))
         flakes.append(pop)
+    xyz = (f @ w.T).reshape(n_h, n_d, n_phi, 3)
     n550 = float(paint.coat_n(np.array([550.0]))[0])
     return BrdfTable(xyz, tuple(tables), tuple(flakes), n550, float(lamp_radius_deg))
 
