@@ -438,13 +438,13 @@ def _brdf_run_dataset(store: RunStore, rec: RunRecord) -> xr.Dataset:
         data["reflectance_factor"] = (
             (*dims, "wavelength_nm"),
             factors,
-            _attrs("reflectance_factor", scale=_scale_name(rec)),
+            _attrs("reflectance_factor", scale=_scale_name(rec), **_mirror_label(rec)),
         )
     if predicted_factors is not None:
         data["predicted_reflectance_factor"] = (
             ("theta_r_deg", "predicted_wavelength_nm"),
             predicted_factors,
-            _attrs("predicted_reflectance_factor", scale=_scale_name(rec)),
+            _attrs("predicted_reflectance_factor", scale=_scale_name(rec), **_mirror_label(rec)),
         )
     if plan.mirror_reference:
         data["mirror_pct"] = (
@@ -506,6 +506,17 @@ def _factor_scale(rec: RunRecord, theta_r_deg: NDArray[np.float64]) -> NDArray[n
     except ValueError:  # a point detector or a grazing angle: no factor (NaN, not a guess)
         return np.full(theta_r_deg.shape, np.nan)
     return np.broadcast_to(out, theta_r_deg.shape).astype(np.float64)
+
+
+def _mirror_label(rec: RunRecord) -> dict[str, str]:
+    """A run whose ``[colour] scale`` is ``mirror`` keeps fractions of the mirror, not
+    reflectance factors: its long_name says so."""
+    if _scale_name(rec) != "mirror":
+        return {}
+    return {
+        "long_name": "spectral reading as a fraction of the mirror reference ([colour] "
+        "scale = mirror): not a reflectance factor"
+    }
 
 
 def _scale_name(rec: RunRecord) -> str:

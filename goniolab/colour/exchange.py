@@ -49,6 +49,11 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 
+#: The first line of an exported table; a run on the ``mirror`` scale says otherwise.
+MIRROR_NOTE = (
+    "# goniolab multi-angle spectra: fraction of the mirror reference ([colour] scale = "
+    "mirror), not reflectance factors; aspecular_deg = theta_i_deg - theta_r_deg (ASTM E2194)"
+)
 CSV_HEADER_NOTE = (
     "# goniolab multi-angle spectra: reflectance factor (1 = perfect reflecting diffuser); "
     "aspecular_deg = theta_i_deg - theta_r_deg (ASTM E2194)"
@@ -131,12 +136,14 @@ def union_table(spectra: Sequence[MultiAngleSpectra]) -> MultiAngleSpectra:
     )
 
 
-def spectra_csv(spectra: Sequence[MultiAngleSpectra], *, digits: int = 6) -> str:
+def spectra_csv(
+    spectra: Sequence[MultiAngleSpectra], *, digits: int = 6, note: str = CSV_HEADER_NOTE
+) -> str:
     """The CSV text of one or more tables, on the union of their grids (an empty cell where
     a table has no value: a 400-700 nm measurement beside a 380-780 nm prediction)."""
     sp = union_table(spectra)
     buf = io.StringIO()
-    buf.write(CSV_HEADER_NOTE + "\n")
+    buf.write(note + "\n")
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(
         ["source", "theta_i_deg", "theta_r_deg", "aspecular_deg", "repeat"]

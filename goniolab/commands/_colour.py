@@ -167,6 +167,7 @@ def _cmd_predict_colour(args: argparse.Namespace) -> int:
             tables,
             args.spectra_out,
             {"map": args.map, "scale": args.scale, "detector_cone_deg": args.detector_deg},
+            mirror_scale=args.scale == "mirror",
         )
     compare = None
     if measured is not None:
@@ -696,14 +697,28 @@ def add_runs_colour_options(p: argparse.ArgumentParser) -> None:
 SPECTRA_SUFFIXES = {".csv": "csv", ".parquet": "parquet", ".pq": "parquet", ".nc": "netcdf"}
 
 
-def write_spectra(tables: list[Any], path: str, attrs: dict[str, Any]) -> str:
+def write_spectra(
+    tables: list[Any], path: str, attrs: dict[str, Any], *, mirror_scale: bool = False
+) -> str:
     """Write multi-angle reflectance-factor tables (:class:`MultiAngleSpectra`) to ``path``:
     CSV (``R_400..`` columns), Parquet (the same columns, ``attrs`` as JSON in the schema
     metadata under ``goniolab.spectra``) or netCDF (``reflectance_factor`` over
     ``(geometry, wavelength_nm)`` with units and long names). Returns the format."""
     import numpy as np
 
-    from goniolab.colour.exchange import spectra_csv, spectral_column, union_table
+    from goniolab.colour.exchange import (
+        CSV_HEADER_NOTE,
+        MIRROR_NOTE,
+        spectra_csv,
+        spectral_column,
+        union_table,
+    )
+
+    values_label = (
+        "fraction of the mirror reference (scale = mirror): not a reflectance factor"
+        if mirror_scale
+        else "reflectance factor (1 = perfect reflecting diffuser)"
+    )
 
     fmt = SPECTRA_SUFFIXES.get(Path(path).suffix.lower())
     if fmt is None:
@@ -711,7 +726,8 @@ def write_spectra(tables: list[Any], path: str, attrs: dict[str, Any]) -> str:
     table = union_table(tables)
     try:
         if fmt == "csv":
-            Path(path).write_text(spectra_csv(tables), encoding="utf-8")
+            note = MIRROR_NOTE if mirror_scale else CSV_HEADER_NOTE
+            Path(path).write_text(spectra_csv(tables, note=note), encoding="utf-8")
         elif fmt == "parquet":
             import pandas as pd
             import pyarrow as pa
@@ -733,7 +749,7 @@ def write_spectra(tables: list[Any], path: str, attrs: dict[str, Any]) -> str:
             t = pa.Table.from_pandas(df, preserve_index=False)
             meta = dict(t.schema.metadata or {})
             meta[b"goniolab.spectra"] = json.dumps(
-                {**attrs, "values": "reflectance factor (1 = perfect reflecting diffuser)",
+                {**attrs, "values": values_label,
                  "aspecular": "theta_i_deg - theta_r_deg (ASTM E2194)"},
                 sort_keys=True, default=str,
             ).encode()  # fmt: skip
@@ -751,9 +767,8 @@ def write_spectra(tables: list[Any], path: str, attrs: dict[str, Any]) -> str:
                         table.factors,
                         {
                             "units": "1",
-                            "long_name": "spectral reflectance factor "
-                            "(1 = perfect reflecting diffuser), measured or predicted per "
-                            "the source variable",
+                            "long_name": f"spectral {values_label}, measured or "
+                            "predicted per the source variable",
                         },
                     ),
                     "source": (
@@ -857,7 +872,7 @@ def cmd_runs_spectra(args: argparse.Namespace) -> int:
         "colour_scale": str((cfg.get("colour") or {}).get("scale", "diffuser")),
         "detector_cone_deg": float((cfg.get("spectro") or {}).get("detector_cone_deg", 6.0)),
     }
-    fmt = write_spectra(tables, args.output, attrs)
+    fmt = write_spectra(tables, args.output, attrs, mirror_scale=attrs["colour_scale"] == "mirror")
     rows = sum(t.factors.shape[0] for t in tables)
     if args.json:
         print(json.dumps({"output": str(Path(args.output).resolve()), "format": fmt,

@@ -141,3 +141,24 @@ def test_a_prediction_compared_with_its_own_exported_spectra_matches(
 def test_bad_files_name_line_and_reason(text: str, needle: str) -> None:
     with pytest.raises(ColourError, match=needle):
         read_spectra_csv(text, where="m.csv")
+
+
+def test_a_mirror_scale_run_is_not_labelled_reflectance_factor(tmp_path: Path) -> None:
+    import xarray as xr
+
+    store = make_spectral_store(tmp_path / "m.sqlite", scale="mirror")
+    out = tmp_path / "m.csv"
+    assert main(["runs", "spectra", "1", "--store", str(store), "-o", str(out)]) == 0
+    assert "not reflectance factors" in out.read_text().splitlines()[0]
+    nc = tmp_path / "m.nc"
+    assert main(["runs", "export", "1", "--store", str(store), "-o", str(nc)]) == 0
+    with xr.open_dataset(nc, engine="h5netcdf") as ds:
+        assert "not a reflectance factor" in ds["reflectance_factor"].attrs["long_name"]
+        assert ds["reflectance_factor"].attrs["scale"] == "mirror"
+        # the mirror scale: the reading / 100, no detector-cone factor
+        k = int(np.argmin(np.abs(ds["theta_r_deg"].values)))
+        with RunStore(store, readonly=True) as s:
+            p = next(p for p in s.points(1) if p.index == k and p.repeat == 0)
+        np.testing.assert_allclose(
+            ds["reflectance_factor"].values[k, 0], np.asarray(p.raw["values"]) / 100.0
+        )
