@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -93,9 +94,18 @@ def _cmd_predict_colour(args: argparse.Namespace) -> int:
     from goniolab.scan.plans import PlanError, parse_angles
 
     settings = _settings(args)
+    if args.compare and args.theta_r:
+        raise UserError("--compare takes the geometries from its file: leave out --theta-r")
     measured = _compare_file(args) if args.compare else None
     if measured is not None:
-        args.theta_i = float(measured.theta_i_deg[0])
+        file_ti = float(measured.theta_i_deg[0])
+        if abs(file_ti - args.theta_i) > 1e-9:
+            print(
+                f"goniolab: note: --compare {args.compare} was measured at theta_i {file_ti:g}"
+                f" deg: predicting there, not at --theta-i {args.theta_i:g}",
+                file=sys.stderr,
+            )
+        args.theta_i = file_ti
         tr = np.asarray(measured.theta_r_deg, dtype=np.float64)
     elif args.theta_r:
         try:
@@ -467,6 +477,13 @@ def colour_report(
     rows = run_colour(store, rec)
     if not any("L" in r for r in rows):
         raise UserError(f"run {rec.id} has no measured colour (no readings, or no usable spectra)")
+    if other is not None:
+        ti_other = float(other.plan.get("theta_i_deg", 45.0))
+        if abs(ti_other - theta_i) > 1e-6:
+            raise UserError(
+                f"runs {rec.id} and {other.id} were lit at theta_i {theta_i:g} and "
+                f"{ti_other:g} deg: their colours are not comparable geometry by geometry"
+            )
     other_rows = run_colour(store, other) if other is not None else None
     pairs = _pairs_by_index(rows, other_rows)
     if other is not None and not pairs:

@@ -162,3 +162,19 @@ def test_a_mirror_scale_run_is_not_labelled_reflectance_factor(tmp_path: Path) -
         np.testing.assert_allclose(
             ds["reflectance_factor"].values[k, 0], np.asarray(p.raw["values"]) / 100.0
         )
+
+
+def test_compare_keeps_the_files_geometry_and_says_so(
+    store: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    meas = tmp_path / "meas.csv"
+    argv = ["runs", "spectra", "1", "--store", str(store), "-o", str(meas), "--which", "measured"]
+    assert main(argv) == 0
+    capsys.readouterr()
+    base = ["predict", "colour", "sample:flat", "--compare", str(meas), "--step-nm", "20"]
+    assert main([*base, "--theta-r", "10"]) == 2
+    assert "leave out --theta-r" in capsys.readouterr().err
+    assert main([*base, "--theta-i", "40", "--json"]) == 0
+    cap = capsys.readouterr()
+    assert "measured at theta_i 45 deg: predicting there" in cap.err
+    assert json.loads(cap.out)["theta_i_deg"] == 45.0
