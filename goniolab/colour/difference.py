@@ -80,8 +80,8 @@ def delta_e_cie1994(reference: ArrayLike, sample: ArrayLike) -> FloatArray:
 def delta_e_cmc(
     reference: ArrayLike,
     sample: ArrayLike,
-    l: float = 2.0,
-    c: float = 1.0,  # noqa: E741
+    l: float = 2.0,  # noqa: E741 (CMC's own name)
+    c: float = 1.0,
 ) -> FloatArray:
     """CMC(l:c) (BS 6923; Clarke, McDonald, Rigg 1984), the ellipsoid at the reference."""
     r, s = _lab(reference), _lab(sample)
