@@ -360,8 +360,14 @@ class ColourConfig(_Strict):
     def _known_illuminant(cls, v: str) -> str:
         # only a non-default value gets here (pydantic skips defaults); the usual names are
         # known without importing colour-science (seconds), the rest are checked by it
-        from goniolab.colour.spectra import COMMON_ILLUMINANTS, ColourError, ColourSettings
+        from goniolab.colour.spectra import (
+            COMMON_ILLUMINANTS,
+            ColourError,
+            ColourSettings,
+            resolve_illuminant,
+        )
 
+        v = resolve_illuminant(v)  # F11 / TL84 -> FL11 (the name colour-science knows)
         if v in COMMON_ILLUMINANTS:
             return v
 

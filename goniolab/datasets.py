@@ -31,12 +31,15 @@ if TYPE_CHECKING:  # pragma: no cover - typing only
 
 __all__ = [
     "UNITS",
+    "aspecular_of",
     "brdf_dataset",
     "gloss_dataset",
     "heightmap_dataarray",
     "iso_utc",
     "netcdf_attrs",
+    "predicted_grid_nm",
     "run_dataset",
+    "run_reflectance_factors",
     "to_datetime64",
     "write_netcdf",
 ]
@@ -56,6 +59,8 @@ UNITS: dict[str, str] = {
     "residual_pct": "percent",
     "mirror_pct": "percent",
     "reflectance_pct": "percent",
+    "reflectance_factor": "1",
+    "predicted_reflectance_factor": "1",
     "brdf_sr": "sr-1",
     "wavelength_nm": "nm",
     "x_um": "um",
@@ -86,7 +91,10 @@ UNITS: dict[str, str] = {
 _LONG_NAMES: dict[str, str] = {
     "theta_i_deg": "lamp (incidence) angle from the sample normal",
     "theta_r_deg": "detector angle from the sample normal (> 0 on the specular side)",
-    "aspecular_deg": "aspecular angle theta_r - theta_i (0 = specular direction)",
+    "aspecular_deg": (
+        "aspecular angle theta_i - theta_r, ASTM E2194 / DIN 6175-2 (0 = specular, "
+        "> 0 towards the lamp)"
+    ),
     "measured_theta_i_deg": "lamp arm angle read back at the reading",
     "measured_theta_r_deg": "detector arm angle read back at the reading",
     "luminance_pct": "relative luminance, % of a mirror",
@@ -94,7 +102,17 @@ _LONG_NAMES: dict[str, str] = {
     "luminance_std_pct": "standard deviation of the repeats (ddof = 1)",
     "predicted_pct": "model prediction of the relative luminance",
     "residual_pct": "mean measured minus predicted",
-    "reflectance_pct": "spectral reflectance factor, % of the reference",
+    "reflectance_pct": (
+        "spectral reading as the spectro reports it, % of its reference (the mirror), "
+        "before the mirror level and the detector-cone scale: not a reflectance factor"
+    ),
+    "reflectance_factor": (
+        "measured spectral reflectance factor (1 = perfect reflecting diffuser, "
+        "CIE 15:2004 sec. 3.3) at the geometry"
+    ),
+    "predicted_reflectance_factor": (
+        "predicted spectral reflectance factor (1 = perfect reflecting diffuser)"
+    ),
     "brdf_sr": "in-plane BRDF",
     "time": "time of the reading (UTC)",
     "L_star": "CIE 1976 L*",
@@ -125,6 +143,14 @@ _COLOUR_VARS: tuple[tuple[str, str], ...] = (
     ("C", "C_star"),
     ("h_deg", "h_deg"),
 )
+
+
+def aspecular_of(theta_r_deg: Any, theta_i_deg: float) -> NDArray[np.float64]:
+    """ASTM E2194 / DIN 6175-2 aspecular angles of signed detector angles: the core's
+    ``theta_i - theta_r`` (:func:`goniolab.colour.multiangle.aspecular_deg`; 15 deg
+    aspecular = theta_r 30 at theta_i 45, -15 = beyond the specular direction)."""
+    out: NDArray[np.float64] = float(theta_i_deg) - np.asarray(theta_r_deg, dtype=np.float64)
+    return out
 
 
 def _attrs(name: str, **extra: Any) -> dict[str, Any]:
@@ -250,7 +276,7 @@ def brdf_dataset(
     coords = {
         "theta_r_deg": ("theta_r_deg", tr, _attrs("theta_r_deg")),
         "theta_i_deg": ((), float(theta_i_deg), _attrs("theta_i_deg")),
-        "aspecular_deg": ("theta_r_deg", tr - float(theta_i_deg), _attrs("aspecular_deg")),
+        "aspecular_deg": ("theta_r_deg", aspecular_of(tr, theta_i_deg), _attrs("aspecular_deg")),
     }
     ds = xr.Dataset(data, coords=coords)
     ds.attrs = {"title": "goniolab in-plane BRDF prediction", **dict(attrs or {})}
@@ -407,6 +433,19 @@ def _brdf_run_dataset(store: RunStore, rec: RunRecord) -> xr.Dataset:
     }
     if spec is not None:
         data["reflectance_pct"] = ((*dims, "wavelength_nm"), spec, _attrs("reflectance_pct"))
+    _, factors, predicted_factors = run_reflectance_factors(store, rec.id)
+    if spec is not None and factors.shape[-1] == spec.shape[-1]:
+        data["reflectance_factor"] = (
+            (*dims, "wavelength_nm"),
+            factors,
+            _attrs("reflectance_factor", scale=_scale_name(rec), **_mirror_label(rec)),
+        )
+    if predicted_factors is not None:
+        data["predicted_reflectance_factor"] = (
+            ("theta_r_deg", "predicted_wavelength_nm"),
+            predicted_factors,
+            _attrs("predicted_reflectance_factor", scale=_scale_name(rec), **_mirror_label(rec)),
+        )
     if plan.mirror_reference:
         data["mirror_pct"] = (
             "repeat",
@@ -421,13 +460,23 @@ def _brdf_run_dataset(store: RunStore, rec: RunRecord) -> xr.Dataset:
         "theta_r_deg": ("theta_r_deg", tr, _attrs("theta_r_deg")),
         "repeat": ("repeat", np.arange(reps), {"long_name": "repeat number"}),
         "theta_i_deg": ((), float(plan.theta_i_deg), _attrs("theta_i_deg")),
-        "aspecular_deg": ("theta_r_deg", tr - float(plan.theta_i_deg), _attrs("aspecular_deg")),
+        "aspecular_deg": (
+            "theta_r_deg",
+            aspecular_of(tr, plan.theta_i_deg),
+            _attrs("aspecular_deg"),
+        ),
     }
     if grid:
         coords["wavelength_nm"] = (
             "wavelength_nm",
             np.asarray(grid, dtype=np.float64),
             _attrs("wavelength_nm"),
+        )
+    if predicted_factors is not None:
+        coords["predicted_wavelength_nm"] = (
+            "predicted_wavelength_nm",
+            predicted_grid_nm(predicted_factors.shape[-1]),
+            _attrs("wavelength_nm", long_name="wavelength of the predicted spectra"),
         )
     ds = xr.Dataset(data, coords=coords)
     ds.attrs = {
@@ -438,6 +487,96 @@ def _brdf_run_dataset(store: RunStore, rec: RunRecord) -> xr.Dataset:
         "stored_readings": int(np.sum(counts)),
     }
     return ds
+
+
+def _factor_scale(rec: RunRecord, theta_r_deg: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Per geometry, what turns a fraction of the mirror into a reflectance factor: the
+    run's ``[colour] scale`` through its detector cone
+    (:func:`goniolab.colour.spectral.reflectance_factor_scale`, as the runner does)."""
+    from goniolab.colour.spectral import reflectance_factor_scale
+
+    cfg = rec.config if isinstance(rec.config, dict) else {}
+    scale = str((cfg.get("colour") or {}).get("scale", "diffuser"))
+    cone = float((cfg.get("spectro") or {}).get("detector_cone_deg", 6.0))
+    try:
+        out = np.asarray(
+            reflectance_factor_scale(theta_r_deg, cone, scale),  # type: ignore[arg-type]
+            dtype=np.float64,
+        )
+    except ValueError:  # a point detector or a grazing angle: no factor (NaN, not a guess)
+        return np.full(theta_r_deg.shape, np.nan)
+    return np.broadcast_to(out, theta_r_deg.shape).astype(np.float64)
+
+
+def _mirror_label(rec: RunRecord) -> dict[str, str]:
+    """A run whose ``[colour] scale`` is ``mirror`` keeps fractions of the mirror, not
+    reflectance factors: its long_name says so."""
+    if _scale_name(rec) != "mirror":
+        return {}
+    return {
+        "long_name": "spectral reading as a fraction of the mirror reference ([colour] "
+        "scale = mirror): not a reflectance factor"
+    }
+
+
+def _scale_name(rec: RunRecord) -> str:
+    cfg = rec.config if isinstance(rec.config, dict) else {}
+    return str((cfg.get("colour") or {}).get("scale", "diffuser"))
+
+
+def run_reflectance_factors(
+    store: RunStore, run_id: int
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64] | None]:
+    """Measured and predicted spectra of a scan run as reflectance factors.
+
+    Returns ``(wavelengths_nm, measured (n_geometries, repeats, n_wl), predicted
+    (n_geometries, n_wl_pred) or None)``; measured is empty along ``n_wl`` when the readings
+    carry no common wavelength grid. A reading's spectrum (% of the spectro's reference)
+    is divided by the run's mirror level when the plan measured one, then scaled to the
+    perfect diffuser through the detector cone (the runner's
+    :meth:`goniolab.scan.colour.PointColour.factors`). Predicted spectra (% of the mirror,
+    on the standard 380-780 nm grid) get the same cone scale.
+    """
+    from goniolab.scan.plans import MIRROR_INDEX, BrdfPlan
+
+    rec = store.get_run(run_id)
+    plan = BrdfPlan.from_dict(rec.plan)
+    tr = np.asarray(plan.theta_r_deg, dtype=np.float64)
+    n, reps = tr.size, plan.repeats
+    points = [p for p in store.points(rec.id) if p.index != MIRROR_INDEX]
+    grids = {tuple(p.raw.get("wavelengths_nm") or ()) for p in points if p.index >= 0}
+    grid = next(iter(grids)) if len(grids) == 1 else ()
+    wl = np.asarray(grid, dtype=np.float64)
+    measured = np.full((n, reps, wl.size), np.nan)
+    scale = _factor_scale(rec, tr)
+    for p in points:
+        if not (0 <= p.index < n and 0 <= p.repeat < reps) or not grid:
+            continue
+        values = p.raw.get("values")
+        if values is None or len(values) != wl.size:
+            continue
+        r = np.asarray(values, dtype=np.float64) / 100.0
+        mirror = p.raw.get("mirror_pct")
+        if plan.mirror_reference and mirror:
+            r = r * (100.0 / float(mirror))
+        measured[p.index, p.repeat, :] = r * scale[p.index]
+    predicted: NDArray[np.float64] | None = None
+    getter = getattr(store, "predicted_colours", None)
+    rows = getter(rec.id) if getter is not None else {}
+    spectra = {int(k): pc.spectrum_pct for k, pc in rows.items() if pc.spectrum_pct}
+    if spectra:
+        m = len(next(iter(spectra.values())))
+        predicted = np.full((n, m), np.nan)
+        for k, sp in spectra.items():
+            if 0 <= k < n and len(sp) == m:
+                predicted[k] = np.asarray(sp, dtype=np.float64) / 100.0 * scale[k]
+    return wl, measured, predicted
+
+
+def predicted_grid_nm(n_wavelengths: int) -> NDArray[np.float64]:
+    """The grid of stored predicted spectra: the standard 380-780 nm in ``n`` steps
+    (:func:`goniolab.colour.spectra.standard_grid_nm`, what the spectral predictor uses)."""
+    return np.linspace(380.0, 780.0, int(n_wavelengths))
 
 
 def _predicted_colour(store: RunStore, run_id: int, n: int) -> dict[str, NDArray[np.float64]]:

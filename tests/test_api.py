@@ -42,7 +42,9 @@ def test_predict_brdf_matches_the_cli_numbers(capsys: pytest.CaptureFixture[str]
     assert ds["luminance_pct"].dims == ("theta_r_deg",)
     assert ds["brdf_sr"].attrs["units"] == "sr-1"
     assert ds["theta_r_deg"].attrs["units"] == "degree"
-    np.testing.assert_array_equal(ds["aspecular_deg"].values, [-5.0, 0.0, 5.0])
+    np.testing.assert_array_equal(
+        ds["aspecular_deg"].values, [5.0, 0.0, -5.0]
+    )  # E2194: theta_i - theta_r
 
 
 def test_predict_gloss_of_a_flat_black_glass_is_100_gu() -> None:

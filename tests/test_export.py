@@ -73,7 +73,9 @@ def test_netcdf_round_trip(store_file: Path, tmp_path: Path) -> None:
     np.testing.assert_allclose(
         ds["residual_pct"].values, np.nanmean(expected, axis=1) - [1.0, 12.0, 3.0]
     )
-    np.testing.assert_allclose(ds["aspecular_deg"].values, [-5.0, 0.0, 5.0])
+    np.testing.assert_allclose(
+        ds["aspecular_deg"].values, [5.0, 0.0, -5.0]
+    )  # E2194: theta_i - theta_r
     np.testing.assert_array_equal(ds["reflectance_pct"].sel(theta_r_deg=45.0).values[:, :2],
                                   [[1.0, 0.0], [1.0, 1.0]])  # fmt: skip
     t = ds["time"].values

@@ -164,24 +164,40 @@ def run_colour(store: RunStore, rec: RunRecord) -> list[dict[str, Any]]:
 
 
 def _f(v: Any, fmt: str = "6.1f") -> str:
-    return "-" if v is None else format(float(v), fmt)
+    return "-".rjust(len(format(0.0, fmt))) if v is None else format(float(v), fmt)
 
 
-def colour_text(rows: list[dict[str, Any]]) -> list[str]:
-    """Lines of the colour table (one per geometry) printed by ``runs show/colour``."""
-    from goniolab.scan.colour import flop_of_rows
+def colour_text(rows: list[dict[str, Any]], theta_i_deg: float = 45.0) -> list[str]:
+    """Lines of the colour table (one per geometry) printed by ``runs show/colour``: the
+    measured and predicted L*a*b*, the signed dL*, dC*, dH* (predicted - measured) and
+    dE*ab, dE94, dE00 (:mod:`goniolab.colour.difference`); the flop index at 45 deg only."""
+    from goniolab.colour.difference import differences
+    from goniolab.colour.multiangle import flop_index_note, flop_of_rows
 
-    out = ["  theta_r  aspec     L*     a*     b*     C*      h   pred L*  a*     b*    dE00"]
+    out = [
+        "  theta_r  aspec     L*     a*     b*     C*      h |  pred L*     a*     b* |"
+        "    dL*    dC*    dH*  dE*ab   dE94   dE00"
+    ]
     for r in rows:
+        d: dict[str, Any] = {}
+        if r.get("L") is not None and r.get("predicted_L") is not None:
+            m = [r["L"], r["a"], r["b"]]
+            p_ = [r["predicted_L"], r["predicted_a"], r["predicted_b"]]
+            d = {k: float(v) for k, v in differences(m, p_).items()}
         out.append(
             f"  {r['theta_r_deg']:7.2f} {r['aspecular_deg']:6.1f} {_f(r.get('L'))} "
-            f"{_f(r.get('a'))} {_f(r.get('b'))} {_f(r.get('C'))} {_f(r.get('h_deg'))}   "
-            f"{_f(r.get('predicted_L'))} {_f(r.get('predicted_a'))} {_f(r.get('predicted_b'))}"
-            f" {_f(r.get('dE2000'), '6.2f')}"
+            f"{_f(r.get('a'))} {_f(r.get('b'))} {_f(r.get('C'))} {_f(r.get('h_deg'))} |   "
+            f"{_f(r.get('predicted_L'))} {_f(r.get('predicted_a'))} {_f(r.get('predicted_b'))} |"
+            + "".join(
+                f" {_f(d.get(k), '6.2f')}" for k in ("dL", "dC", "dH", "dE76", "dE94", "dE00")
+            )
         )
-    fi = flop_of_rows(rows)
-    fi_p = flop_of_rows(rows, "predicted_L")
-    if fi is not None or fi_p is not None:
+    fi = flop_of_rows(rows, theta_i_deg)
+    fi_p = flop_of_rows(rows, theta_i_deg, "predicted_L")
+    note = flop_index_note(theta_i_deg)
+    if note:
+        out.append(f"  {note}")
+    elif fi is not None or fi_p is not None:
         out.append(f"  flop index: measured {_f(fi, '.2f')}, predicted {_f(fi_p, '.2f')}")
     return out
 
@@ -215,7 +231,8 @@ def _cmd_show(args: argparse.Namespace) -> int:
             print(format_summary(summary))
             if any("L" in r for r in colour):
                 print("  colour (reflectance factor, per geometry):")
-                print("\n".join(colour_text(colour)))
+                theta_i = float(rec.plan.get("theta_i_deg", 45.0))
+                print("\n".join(colour_text(colour, theta_i)))
         else:
             predicted = rec.model.get("predicted_gu") or {}
             for angle, st in summary["statistics"].items():
@@ -230,55 +247,31 @@ def _cmd_show(args: argparse.Namespace) -> int:
 
 
 def _cmd_colour(args: argparse.Namespace) -> int:
-    from goniolab.scan.colour import compare_rows, flop_of_rows
+    from goniolab.commands._colour import colour_report, colour_report_text, load_tolerance
 
+    tolerance = load_tolerance(args.tolerance)
     with open_store(args.store, args.config) as store:
         rec = _get_run(store, args.run)
         if rec.kind != "brdf":
             raise UserError(f"run {rec.id} is a {rec.kind} run: colour needs a scan (brdf) run")
-        rows = run_colour(store, rec)
-        other_rows: list[dict[str, Any]] = []
+        other = None
         if args.vs is not None:
             other = _get_run(store, args.vs)
             if other.kind != "brdf":
                 raise UserError(f"run {other.id} is a {other.kind} run: --vs needs a scan run")
-            other_rows = run_colour(store, other)
-    if not any("L" in r for r in rows):
-        raise UserError(f"run {rec.id} has no measured colour (no readings, or no usable spectra)")
-    doc: dict[str, Any] = {
-        "run": rec.id,
-        "colour_settings": rec.config.get("colour", {}),
-        "geometries": rows,
-        "flop_index": flop_of_rows(rows),
-        "predicted_flop_index": flop_of_rows(rows, "predicted_L"),
-    }
-    if args.vs is not None:
-        pairs = compare_rows(rows, other_rows)
-        if not pairs:
-            raise UserError(f"runs {rec.id} and {args.vs} share no detector angle with colour")
-        doc["vs"] = {
-            "run": args.vs,
-            "pairs": pairs,
-            "flop_index": flop_of_rows(other_rows),
-            "max_dE2000": max(p["dE2000"] for p in pairs),
-            "mean_dE2000": sum(p["dE2000"] for p in pairs) / len(pairs),
-        }
+        doc = colour_report(
+            store,
+            rec,
+            other,
+            tolerance=tolerance,
+            illuminants=list(args.illuminant),
+            metamerism=bool(args.metamerism),
+        )
     if args.json:
         print(json.dumps(doc, indent=2))
         return 0
     print(f"run {rec.id} on {rec.sample or '-'}: colour per geometry")
-    print("\n".join(colour_text(rows)))
-    if args.vs is not None:
-        v = doc["vs"]
-        print(f"vs run {args.vs}:")
-        print("  theta_r  aspec     L*     a*     b*  |  L*     a*     b*   dE*ab   dE94  dE2000")
-        for p in v["pairs"]:
-            print(
-                f"  {p['theta_r_deg']:7.2f} {p['aspecular_deg']:6.1f} {p['L']:6.1f} {p['a']:6.1f}"
-                f" {p['b']:6.1f} | {p['other_L']:6.1f} {p['other_a']:6.1f} {p['other_b']:6.1f}"
-                f" {p['dE76']:6.2f} {p['dE94']:6.2f} {p['dE2000']:6.2f}"
-            )
-        print(f"  dE2000: mean {v['mean_dE2000']:.2f}, max {v['max_dE2000']:.2f}")
+    print("\n".join(colour_report_text(doc)))
     return 0
 
 
@@ -381,12 +374,19 @@ def register(subparsers: Any) -> None:
     pc = sub.add_parser(
         "colour",
         parents=[common],
-        help="measured vs predicted colour per geometry (dE76/94/2000, flop index)",
+        help="measured vs predicted colour per geometry (dL*/dC*/dH*, dE76/94/2000, CMC, "
+        "tolerances per angle, flop index, metamerism)",
     )
     pc.add_argument("run", type=int, metavar="RUN")
     pc.add_argument("--vs", type=int, metavar="RUN", help="compare with another run")
     pc.add_argument("--json", action="store_true", help="print JSON")
+    from goniolab.commands._colour import add_runs_colour_options
+
+    add_runs_colour_options(pc)
     pc.set_defaults(func=_cmd_colour)
+    from goniolab.commands._colour import register_runs_spectra
+
+    register_runs_spectra(sub, common)
 
     pe = sub.add_parser(
         "export",

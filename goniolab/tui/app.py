@@ -460,7 +460,11 @@ class GonioApp(App[int]):
             if ev.kind != "brdf":
                 return
             self.run_id, self.run_kind = ev.run_id, ev.kind
-            self.comparison.clear(run_id=ev.run_id, sample=ev.sample)
+            self.comparison.clear(
+                run_id=ev.run_id,
+                sample=ev.sample,
+                theta_i_deg=float(ev.plan.get("theta_i_deg", 45.0)),
+            )
             self.progress = (0, ev.total_points, math.nan)
             self.hide_banner()
             self.schedule_redraw()

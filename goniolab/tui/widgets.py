@@ -58,34 +58,55 @@ class ColourSwatch(Static):
 
 
 class ColourTable(DataTable[str]):
-    """Per point: theta_r, measured L*, a*, b*, predicted L*, dE*ab (measured - predicted)."""
+    """Per point: theta_r, the E2194 aspecular angle, measured L*a*b*, predicted L*, the
+    signed dL*, dC*, dH* and dE00 (predicted - measured) and the verdict of the tolerance
+    set at that aspecular angle (:data:`goniolab.colour.tolerance.BUILTIN_SETS`
+    ``din6175-2`` by default); a last row gives the overall verdict."""
+
+    #: The tolerance set judged per angle (a :class:`goniolab.colour.tolerance.ToleranceSet`).
+    tolerance_name = "din6175-2"
 
     def on_mount(self) -> None:
         self.cursor_type = "none"
         self.zebra_stripes = True
-        for label, key in (
-            ("θr °", "theta"),
-            ("L*", "L"),
-            ("a*", "a"),
-            ("b*", "b"),
-            ("pred L*", "pL"),
-            ("ΔE*ab", "dE"),
+        for label, key, width in (
+            ("θr °", "theta", 7),
+            ("asp °", "asp", 6),
+            ("L*", "L", 6),
+            ("a*", "a", 6),
+            ("b*", "b", 6),
+            ("pred L*", "pL", 7),
+            ("ΔL*", "dL", 6),
+            ("ΔC*", "dC", 6),
+            ("ΔH*", "dH", 6),
+            ("ΔE00", "dE", 6),
+            ("tol", "tol", 5),
         ):
-            self.add_column(label, key=key, width=7)
+            self.add_column(label, key=key, width=width)
 
     def show(self, comparison: Comparison) -> None:
-        """Refill from ``comparison`` (one row per point)."""
+        """Refill from ``comparison`` (one row per point, then the overall verdict)."""
+        from goniolab.colour.tolerance import BUILTIN_SETS, evaluate
+
         c = comparison.colour_arrays()
         self.clear()
-        de = c.delta_e_ab
+        d = c.differences()
+        tol = BUILTIN_SETS[self.tolerance_name]
+        verdicts, overall = evaluate(tol, c.aspecular_deg, c.measured_lab, c.predicted_lab)
         for k, t in enumerate(c.theta_r_deg):
             m, p = c.measured_lab[k], c.predicted_lab[k]
+            passed = verdicts[k].passed if np.all(np.isfinite(d["dE00"][k])) else None
             self.add_row(
                 fmt_num(float(t), 1),
+                fmt_num(float(c.aspecular_deg[k]), 0),
                 *(fmt_num(float(v), 1) for v in m),
                 fmt_num(float(p[0]), 1),
-                fmt_num(float(de[k]), 2),
+                *(fmt_num(float(d[key][k]), 2) for key in ("dL", "dC", "dH", "dE00")),
+                {True: "pass", False: "FAIL", None: "-"}[passed],
             )
+        if overall["checked_angles"] and np.all(np.isfinite(d["dE00"])):
+            verdict = "PASS" if overall["passed"] else "FAIL"
+            self.add_row("overall", "", "", "", "", "", "", "", "", tol.name[:6], verdict)
 
 
 def fmt_num(value: float | None, digits: int = 2) -> str:
