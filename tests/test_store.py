@@ -175,7 +175,7 @@ def test_readonly_store_reads_and_never_writes(tmp_path: Path) -> None:
     with RunStore(path, readonly=True) as ro:
         assert [r.id for r in ro.list_runs()] == [rid]
         assert [p.luminance_pct for p in ro.points(rid)] == [1.5]
-        with pytest.raises(sqlite3.OperationalError, match="readonly"):
+        with pytest.raises(StoreError, match="readonly"):
             _point(ro, rid, 1, 0, 2.5)
     assert path.read_bytes() == before
 
