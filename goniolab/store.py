@@ -168,7 +168,7 @@ _ADDED_COLUMNS = (*_COLOUR_COLUMNS, ("runs", _RUN_IDENTITY_COLUMNS))
 #: Indexes that need the added columns (``runs list`` filters and ``migrate`` by UUID).
 _ADDED_INDEXES = (
     "CREATE UNIQUE INDEX IF NOT EXISTS runs_uuid ON runs(uuid)",
-    "CREATE INDEX IF NOT EXISTS gloss_run ON gloss_readings(run_id, seq)",
+    "CREATE INDEX IF NOT EXISTS runs_operator ON runs(operator)",
 )
 
 #: The same tables in PostgreSQL (``DOUBLE PRECISION`` where SQLite's REAL is 8 bytes),
@@ -238,6 +238,7 @@ _PG_SCHEMA_LOCK = 0x60_1010_AB
 #: CSV columns of a scan export (one row per reading) and of a gloss export.
 _POINT_FIELDS = (
     "run_id",
+    "run_uuid",
     "index",
     "repeat",
     "theta_i_deg",
@@ -262,6 +263,7 @@ _POINT_FIELDS = (
 )
 _GLOSS_FIELDS = (
     "run_id",
+    "run_uuid",
     "seq",
     "timestamp",
     "g20_gu",
@@ -393,6 +395,11 @@ def legacy_uuid(location: str, run_id: int, created_at: float) -> str:
     run id and its creation time (the same whether the store is upgraded or read as it is,
     distinct for two PCs' stores at the same path: their creation times differ)."""
     return str(uuidlib.uuid5(_LEGACY_NAMESPACE, f"{location}\n{run_id}\n{created_at!r}"))
+
+
+def _haystack(rec: RunRecord) -> str:
+    """What ``runs list --search`` looks in, lower-case."""
+    return "\n".join([rec.sample, rec.sample_id, rec.operator, rec.notes, *rec.tags]).lower()
 
 
 def _json_column(run_id: int, column: str, text: Any) -> Any:
@@ -1001,9 +1008,9 @@ class RunStore:
         :func:`legacy_uuid`); record the schema version and give the store its own UUID."""
         pg = self.is_postgres
         for table, cols in _ADDED_COLUMNS:
-            have = set(self.table_columns(table))
+            have = {c.lower() for c in self.table_columns(table)}  # PostgreSQL folds case
             for name, sql_type in cols:
-                if name not in have:
+                if name.lower() not in have:
                     kind = "DOUBLE PRECISION" if pg and sql_type == "REAL" else sql_type
                     self._db.execute(f"ALTER TABLE {table} ADD COLUMN {name} {kind}")
         self._columns.clear()
@@ -1035,9 +1042,10 @@ class RunStore:
         return None if row is None else str(row[0])
 
     def _has_column(self, table: str, column: str) -> bool:
+        """Whether ``table`` has ``column`` (case-insensitive: PostgreSQL folds names)."""
         if table not in self._columns:
-            self._columns[table] = self.table_columns(table)
-        return column in self._columns[table]
+            self._columns[table] = [c.lower() for c in self.table_columns(table)]
+        return column.lower() in self._columns[table]
 
     @property
     def _has_colour(self) -> bool:
@@ -1333,6 +1341,90 @@ class RunStore:
             params = (limit,)
         return [RunRecord.from_row(r, self.location) for r in self._db.execute(sql, params)]
 
+    def list_briefs(
+        self,
+        limit: int | None = None,
+        *,
+        operator: str | None = None,
+        tag: str | None = None,
+        sample_id: str | None = None,
+        text: str | None = None,
+    ) -> list[tuple[RunRecord, int | None]]:
+        """Runs newest first with their number of readings (points of a scan, readings of
+        a gloss log), in one query (no reading is loaded: the counts come from the
+        ``(run_id, ...)`` indexes). Filters: ``operator``, ``sample_id`` (exact), ``tag``
+        (one of the run's tags), ``text`` (a case-insensitive substring of the sample,
+        sample id, operator, notes or tags).
+
+        A store whose readings cannot be counted (a damaged page) gets each run's count
+        on its own; a run whose count fails has ``None`` (and :meth:`count_readings`
+        says why).
+        """
+        where: list[str] = []
+        params: list[Any] = []
+        has_ident = self._has_column("runs", "uuid")
+        if has_ident:
+            if operator is not None:
+                where.append("operator = ?")
+                params.append(operator)
+            if sample_id is not None:
+                where.append("sample_id = ?")
+                params.append(sample_id)
+            if tag is not None:
+                where.append("tags_json LIKE ?")
+                params.append(f"%{json.dumps(tag)}%")  # narrowed; the exact test is below
+            if text is not None:
+                like = f"%{text.lower()}%"
+                where.append(
+                    "(LOWER(sample) LIKE ? OR LOWER(COALESCE(sample_id, '')) LIKE ?"
+                    " OR LOWER(COALESCE(operator, '')) LIKE ? OR LOWER(COALESCE(notes, '')) LIKE ?"
+                    " OR LOWER(COALESCE(tags_json, '')) LIKE ?)"
+                )
+                params += [like] * 5
+        sql = self._run_select.replace(
+            " FROM runs",
+            ", (SELECT COUNT(*) FROM points p WHERE p.run_id = runs.id),"
+            " (SELECT COUNT(*) FROM gloss_readings g WHERE g.run_id = runs.id) FROM runs",
+        )
+        if where:
+            sql += " WHERE " + " AND ".join(where)
+        sql += " ORDER BY id DESC"
+        if limit is not None and has_ident and tag is None:
+            sql += " LIMIT ?"
+            params.append(limit)
+        out: list[tuple[RunRecord, int | None]] = []
+        try:
+            rows = self._db.execute(sql, params).fetchall()
+        except StoreDamaged:
+            rows = None
+        if rows is not None:
+            for r in rows:
+                rec = RunRecord.from_row(r[:-2], self.location)
+                out.append((rec, int(r[-1] if rec.kind == "gloss" else r[-2])))
+        else:
+            for rec in self.list_runs():
+                try:
+                    out.append((rec, self.count_readings(rec)))
+                except StoreDamaged:
+                    out.append((rec, None))
+        if not has_ident or rows is None or tag is not None:  # the exact filter
+            out = [
+                (rec, n)
+                for rec, n in out
+                if (operator is None or rec.operator == operator)
+                and (sample_id is None or rec.sample_id == sample_id)
+                and (tag is None or tag in rec.tags)
+                and (text is None or text.lower() in _haystack(rec))
+            ]
+            out = out[:limit] if limit is not None else out
+        return out
+
+    def count_readings(self, rec: RunRecord) -> int:
+        """The number of readings of ``rec``: points of a scan, readings of a gloss log."""
+        table = "gloss_readings" if rec.kind == "gloss" else "points"
+        row = self._db.execute(f"SELECT COUNT(*) FROM {table} WHERE run_id = ?", (rec.id,))
+        return int(row.fetchone()[0])
+
     # ------------------------------------------------------------------ points
     def add_point(
         self,
@@ -1600,8 +1692,8 @@ class RunStore:
         run ``here`` lacks (inside the caller's transaction); return how many were added."""
         added = 0
         for table, key in self._CHILD_KEYS.items():
-            theirs = src.table_columns(table)
-            cols = [c for c in self.table_columns(table) if c in theirs and c != "id"]
+            theirs = {c.lower() for c in src.table_columns(table)}
+            cols = [c for c in self.table_columns(table) if c.lower() in theirs and c != "id"]
             rows = src._db.execute(
                 f"SELECT {', '.join(cols)} FROM {table} WHERE run_id = ?", (run_id,)
             ).fetchall()
@@ -1631,6 +1723,7 @@ class RunStore:
             return [
                 {
                     "run_id": run_id,
+                    "run_uuid": run.uuid,
                     "seq": g.seq,
                     "timestamp": g.timestamp,
                     "g20_gu": g.values_gu.get(20),
@@ -1667,6 +1760,7 @@ class RunStore:
         return [
             {
                 "run_id": run_id,
+                "run_uuid": run.uuid,
                 "index": p.index,
                 "repeat": p.repeat,
                 "theta_i_deg": p.theta_i_deg,
