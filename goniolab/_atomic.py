@@ -14,7 +14,7 @@ from pathlib import Path
 __all__ = ["atomic_write", "atomic_write_bytes"]
 
 
-def atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
+def atomic_write(path: str | Path, write: Callable[[Path], object]) -> Path:
     """Call ``write(tmp)`` to fill a temporary file beside ``path``, then move it there.
 
     Raises
