@@ -1022,6 +1022,9 @@ class RunStore:
                 "UPDATE runs SET uuid = ? WHERE id = ?",
                 (legacy_uuid(self.location, int(run_id), float(created)), int(run_id)),
             )
+        have_meta = dict(self._db.execute("SELECT key, value FROM meta").fetchall())
+        if have_meta.get("schema_version") == str(_SCHEMA_VERSION) and "store_uuid" in have_meta:
+            return  # up to date: opening writes nothing (another program may hold the lock)
         for sql in _ADDED_INDEXES:
             self._db.execute(sql)
         self._db.execute(
