@@ -324,6 +324,12 @@ class Run:
     id: int
     store: str | Path
 
+    def __repr__(self) -> str:
+        # a notebook shows (and saves in the .ipynb) this: never the store's password
+        from goniolab.redact import redact
+
+        return f"Run(id={self.id}, store={redact(str(self.store))!r})"
+
     @property
     def record(self) -> RunRecord:
         """The run's row: kind, plan, config snapshot, sample, model, status, times."""

@@ -3,6 +3,8 @@ passwords, linear time, and driver messages that quote a password withheld whole
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from goniolab.redact import (
@@ -113,3 +115,44 @@ def test_many_urls_all_redacted() -> None:
     text = "postgresql://u:SECRET-1@h/d and host=h password=SECRET-2\n" * 50_000
     out = redact(text)
     assert "SECRET" not in out and out.count("***") == 100_000
+
+
+def test_run_repr_hides_the_password() -> None:
+    from goniolab.api import Run
+
+    run = Run(1, "postgresql://lab:PW-zz9@db.example/runs")
+    assert repr(run) == "Run(id=1, store='postgresql://lab:***@db.example/runs')"
+    assert "PW-zz9" not in str(run)
+
+
+def test_libpq_keyword_store_is_a_database_not_a_file(
+    _log_dir: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # issue 22.7: `host=... password=...` was taken for an SQLite path and echoed whole
+    pytest.importorskip("psycopg")
+    from goniolab.cli import main
+
+    store = "host=127.0.0.1 port=1 dbname=runs password='Zq7 secret' connect_timeout=2"
+    assert main(["runs", "list", "--store", store]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("goniolab: error: store host=127.0.0.1 port=1 dbname=runs password=***")
+    assert "Zq7" not in err and "secret" not in err
+    assert "Zq7" not in (_log_dir / "goniolab.log").read_text()
+
+
+def test_an_unexpected_error_reaches_the_log_redacted(
+    _log_dir: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # issue 23.6: tracebacks never reached the log file
+    import goniolab.commands.runs as runs_cmd
+    from goniolab.cli import main
+
+    def boom(args: object) -> int:
+        raise RuntimeError("bug near postgresql://lab:Tb-77@h/d")
+
+    monkeypatch.setattr(runs_cmd, "_cmd_list", boom)
+    with pytest.raises(RuntimeError):
+        main(["runs", "list", "--store", "x.sqlite"])
+    text = (_log_dir / "goniolab.log").read_text()
+    assert "ERROR goniolab: unexpected error" in text and "Traceback" in text
+    assert "RuntimeError: bug near postgresql://lab:***@h/d" in text and "Tb-77" not in text

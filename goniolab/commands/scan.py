@@ -422,11 +422,14 @@ def run_lab(coro: Coroutine[Any, Any, _T]) -> _T:
     import asyncio
 
     from drivers.base import DeviceError
+    from goniolab.store import StoreError
 
     try:
         return asyncio.run(coro)
     except DeviceError as exc:
         raise UserError(f"instrument error: {exc}", exit_code=1) from exc
+    except StoreError as exc:  # the store refused a write outside a run (creating one)
+        raise UserError(str(exc), exit_code=1) from exc
 
 
 def _e2194_geometry(args: argparse.Namespace, cfg: Any) -> tuple[float, str]:
