@@ -259,3 +259,23 @@ def test_a_damaged_page_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixtur
     assert main(["runs", "list", "--store", str(store)]) == 0  # the run is listed
     out = capsys.readouterr().out
     assert f"{rid:>5}  brdf" in out and "cannot be counted" in out
+
+
+def test_api_annotates_a_run(tmp_path: Path) -> None:
+    from goniolab.api import open_run
+
+    store = make_store(tmp_path / "s.sqlite")
+    run = open_run(1, store)
+    rec = run.annotate(operator="cy", tags=["api"], notes="from a notebook")
+    assert (rec.operator, rec.tags, rec.notes) == ("cy", ("api",), "from a notebook")
+    assert run.record.operator == "cy"
+
+
+def test_config_run_table_sets_a_new_runs_metadata() -> None:
+    from goniolab.config import LabConfig
+    from goniolab.session import config_meta
+
+    cfg = LabConfig.model_validate({"run": {"operator": "dee", "tags": ["night"]}})
+    meta = config_meta(cfg, RunMeta(sample_id="S-1", tags=("cli",)))
+    assert meta == RunMeta(operator="dee", sample_id="S-1", notes="", tags=("night", "cli"))
+    assert config_meta(cfg, RunMeta(operator="eve")).operator == "eve"  # the CLI wins

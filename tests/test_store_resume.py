@@ -98,9 +98,11 @@ def test_relative_sample_is_stored_absolute(
     monkeypatch.chdir(tmp_path / "maps")
     store = tmp_path / "s.sqlite"
     argv = ["scan", "--config", str(cfg), "--sample", "w.npy", "--theta-i", "30",
-            "--theta-r", "20:30:10", "--repeats", "1", "--store", str(store), "--json"]  # fmt: skip
+            "--theta-r", "20:30:10", "--repeats", "1", "--store", str(store), "--json",
+            "--operator", "ada", "--sample-id", "P-3", "--tag", "t1", "--note", "n"]  # fmt: skip
     assert main(argv) == 0, capsys.readouterr().err
     with RunStore(store) as s:
         rec = s.get_run(1)
     assert rec.sample == str(tmp_path / "maps" / "w.npy")
     assert rec.plan["sample"] == rec.sample
+    assert (rec.operator, rec.sample_id, rec.tags, rec.notes) == ("ada", "P-3", ("t1",), "n")
