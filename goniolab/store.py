@@ -8,7 +8,20 @@ the same per-reading commit and the same claim semantics: a claim is a row lock 
 that process dies (also on ``kill -9``), as the file lock is by the kernel. Credentials come
 from libpq's own sources (``PGPASSWORD``, ``~/.pgpass``, ``PGSSLMODE`` and certificate
 files, or the URL); a password never appears in a message, a log line or a run's config
-snapshot (:func:`goniolab.logs.redact`).
+snapshot (:func:`goniolab.redact.redact`, by parsing the URL or keyword string). A libpq
+keyword string (``host=... dbname=...``) names a database as well as a URL does.
+
+Identity: every run has a UUID (``runs.uuid``, unique), kept by ``runs migrate`` and written
+into every export, and the operator's ``operator``, ``sample_id``, ``notes`` and ``tags``.
+A store from an older goniolab gets the columns on open and a UUID 5 per run
+(:func:`legacy_uuid`); the store itself has a UUID (``meta.store_uuid``).
+
+Failures: every error is one line (:class:`StoreError`); a write the store cannot take now
+is :class:`StoreUnavailable` (a full disk, an SQLite lock held past the 10 s busy timeout, a
+PostgreSQL server down, restarted, frozen or unreachable: connect, statement and TCP
+timeouts, a client watchdog, reconnect with backoff), which a runner answers by pausing
+with the arms parked; a page or row that cannot be read is :class:`StoreDamaged`, naming
+the run. Claims on an SQLite store are filelock locks (no ``fcntl``: Windows works).
 
 Tables
 ------

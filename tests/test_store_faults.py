@@ -246,3 +246,16 @@ def test_frozen_postgres_write_is_bounded(pg: Any, monkeypatch: pytest.MonkeyPat
                 assert time.monotonic() < deadline
                 time.sleep(0.5)
         assert s.get_run(rid).status == "paused"
+
+
+def test_readme_states_the_store_timeouts() -> None:
+    """The numbers the README gives are the code's."""
+    import goniolab.store as sm
+    from goniolab.scan.runner import ScanRunner
+
+    text = " ".join((Path(__file__).resolve().parents[1] / "README.md").read_text().split())
+    outage_min = ScanRunner.__init__.__kwdefaults__["store_outage_s"] / 60
+    assert f"connect ({sm._PG_CONNECT_TIMEOUT_S:g} s)" in text
+    assert f"statement ({sm._PG_STATEMENT_TIMEOUT_S:g} s, server side)" in text
+    assert f"locked by another program for more than {sm._SQLITE_BUSY_S:g} s" in text
+    assert f"fails in one line after {outage_min:g} minutes" in text
