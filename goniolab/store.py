@@ -1166,8 +1166,6 @@ class RunStore:
         ``None`` when the store is read-only and it cannot be told. A run whose status
         says ``running`` but that nobody claims was interrupted (e.g. ``kill -9``)."""
         if self.is_postgres:
-            if self.readonly:
-                return self._is_claimed_postgres(run_id)
             return self._is_claimed_postgres(run_id)
         return _RunLocks.is_held(self._lock_dir, run_id)
 

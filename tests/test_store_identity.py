@@ -279,3 +279,16 @@ def test_config_run_table_sets_a_new_runs_metadata() -> None:
     meta = config_meta(cfg, RunMeta(sample_id="S-1", tags=("cli",)))
     assert meta == RunMeta(operator="dee", sample_id="S-1", notes="", tags=("night", "cli"))
     assert config_meta(cfg, RunMeta(operator="eve")).operator == "eve"  # the CLI wins
+
+
+@pytest.mark.timeout(60)
+def test_a_fifo_as_the_store_is_refused_not_waited_on(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import os
+
+    fifo = tmp_path / "s.sqlite"
+    os.mkfifo(fifo)
+    for argv in (["runs", "list"], ["runs", "show", "1"], ["scan", "resume", "1"]):
+        assert main([*argv, "--store", str(fifo)]) == 2
+        assert "not a regular file" in capsys.readouterr().err
