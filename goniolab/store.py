@@ -1235,6 +1235,38 @@ class RunStore:
                 conn.rollback()
             conn.close()
 
+    def ensure_claim(self, run_id: int) -> None:
+        """After a lost PostgreSQL connection: take this process's claim of ``run_id``
+        again if the server dropped it with the connection (a restart); :class:`RunBusy`
+        if another runner took the run meanwhile. A no-op for SQLite (the OS keeps a file
+        lock as long as the process lives)."""
+        conn = self._claims.get(run_id)
+        if conn is None:
+            return
+        psycopg = _psycopg()
+        with contextlib.suppress(psycopg.Error):
+            if not (conn.closed or conn.broken):
+                conn.execute("SELECT 1")
+                return
+        with contextlib.suppress(Exception):
+            conn.close()
+        new = self._pg_connect(autocommit=False)
+        try:
+            new.execute(
+                "SELECT run_id FROM run_claims WHERE run_id = %s FOR UPDATE NOWAIT", (run_id,)
+            )
+        except psycopg.errors.LockNotAvailable:
+            new.close()
+            raise RunBusy(
+                f"store {self.location}: run {run_id} was taken by another goniolab process "
+                "while the database was away"
+            ) from None
+        except psycopg.Error as exc:
+            new.close()
+            why = scrub_driver_message(str(exc), self._conninfo)
+            raise StoreUnavailable(f"store {self.location}: {why}") from None
+        self._claims[run_id] = new
+
     @property
     def _lock_dir(self) -> Path:
         return self.path.resolve().with_name(self.path.name + "-locks")

@@ -259,3 +259,34 @@ def test_readme_states_the_store_timeouts() -> None:
     assert f"statement ({sm._PG_STATEMENT_TIMEOUT_S:g} s, server side)" in text
     assert f"locked by another program for more than {sm._SQLITE_BUSY_S:g} s" in text
     assert f"fails in one line after {outage_min:g} minutes" in text
+
+
+@pytest.mark.slow
+def test_postgres_restart_mid_scan_reconnects_and_reclaims(
+    pg: Any, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # issue 23.6: a 3 s restart gave two chained tracebacks and left the run 'running'
+    from tests.pg_server import PLANTED_PASSWORD, _as_server_user, find_pg_bin
+
+    bindir, _ = find_pg_bin()
+    assert bindir is not None
+    monkeypatch.setenv("PGPASSWORD", PLANTED_PASSWORD)
+    url = pg.create_db(f"restart{os.getpid()}")
+    cfg = sim_config(tmp_path)
+
+    def restart() -> None:
+        subprocess.run(
+            _as_server_user([str(bindir / "pg_ctl"), "-D", str(pg.root / "data"), "-m", "fast",
+                             "-l", str(pg.root / "server.log"), "-w", "-t", "60", "restart"]),
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=120, check=True,
+        )  # fmt: skip
+
+    with RunStore(url) as store:
+        result, events = asyncio.run(
+            _scan_with_outage(cfg, store, break_store=restart, mend_store=None)
+        )
+        assert result.state is RunState.DONE, result.reason
+        assert sorted(store.done_keys(result.run_id)) == [k.key for k in PLAN.points()]
+        assert store.get_run(result.run_id).status == "done"
+    msgs = _store_messages(events)
+    assert any("the store is back" in m for m in msgs)

@@ -1005,6 +1005,9 @@ class ScanRunner:
                 if p.key in await asyncio.to_thread(self.store.done_keys, self.run_id):
                     break  # the lost answer's commit: stored once
                 raise
+        # a restarted server dropped the claim with its connection: take it again (the
+        # server answers now, so this cannot hang)
+        await asyncio.to_thread(self.store.ensure_claim, self.run_id)
         self.bus.publish(
             InstrumentError(
                 run_id=self.run_id,
