@@ -98,9 +98,12 @@ def _redact_uris(text: str) -> str:
         colon = text.find(":", start, at if at >= 0 else end)
         if at < 0 and colon >= 0:
             # "user:pass word@host": a raw space in the password; follow to the next '@'
-            # on the line, unless what follows the colon is a port ("host:5432/db")
-            after = text[colon + 1 : end].split("/", 1)[0]
-            if after and not after.isdigit() and text[start] != "[":
+            # on the line, unless what follows the colon is a port with a path after it
+            # ("host:5432/db"; a bare "host:5432" is followed too: safe rather than sorry)
+            rest = text[colon + 1 : end]
+            after = rest.split("/", 1)[0]
+            port = after.isdigit() and "/" in rest
+            if after and not port and text[start] != "[":
                 if next_at != -1 and next_at < end:
                     next_at = text.find("@", end)
                 if next_nl != -1 and next_nl < end:

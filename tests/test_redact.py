@@ -156,3 +156,37 @@ def test_an_unexpected_error_reaches_the_log_redacted(
     text = (_log_dir / "goniolab.log").read_text()
     assert "ERROR goniolab: unexpected error" in text and "Traceback" in text
     assert "RuntimeError: bug near postgresql://lab:***@h/d" in text and "Tb-77" not in text
+
+
+# ---------------------------------------------------------------- fuzz: any password
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+# printable passwords as a user types them: any character but a line break or a quote
+# that ends the surrounding text; at least 4 characters so that "not in the output" means
+# something (a 1-character password occurs in any text)
+_PASSWORDS = st.text(
+    alphabet=st.characters(min_codepoint=0x21, max_codepoint=0x7E, blacklist_characters="'\"`<>"),
+    min_size=4,
+    max_size=40,
+).filter(lambda p: p not in "postgresql://lab@db.example:5432/runs host=db dbname=runs")
+
+
+@settings(max_examples=300, deadline=None)
+@given(pw=_PASSWORDS, space=st.booleans())
+def test_fuzz_uri_password_never_survives(pw: str, space: bool) -> None:
+    if space:
+        pw = pw[:2] + " " + pw[2:]
+    text = f"store postgresql://lab:{pw}@db.example:5432/runs: cannot connect"
+    out = redact(text)
+    assert pw not in out and "postgresql://lab:***@" in out
+
+
+@settings(max_examples=300, deadline=None)
+@given(pw=st.text(min_size=4, max_size=40).filter(lambda p: "\n" not in p and p.strip() == p))
+def test_fuzz_keyword_password_never_survives(pw: str) -> None:
+    quoted = "'" + pw.replace("\\", "\\\\").replace("'", "\\'") + "'"
+    text = f"host=db password={quoted} dbname=runs"
+    assert conninfo_password(text) == pw  # the parser reads what libpq reads
+    out = redact(text)
+    assert out == "host=db password=*** dbname=runs" or pw not in out
