@@ -290,3 +290,43 @@ def test_postgres_restart_mid_scan_reconnects_and_reclaims(
         assert store.get_run(result.run_id).status == "done"
     msgs = _store_messages(events)
     assert any("the store is back" in m for m in msgs)
+
+
+@pytest.mark.slow
+def test_gloss_log_keeps_readings_through_a_full_disk(tmp_path: Path) -> None:
+    from goniolab.scan.events import GlossRead
+    from goniolab.scan.plans import GlossPlan
+    from goniolab.session import GlossSession
+
+    cfg = load_lab_config(sim_config(tmp_path))
+    with small_tmpfs(tmp_path / "disk", 1024) as disk, RunStore(disk / "s.sqlite") as store:
+
+        async def go() -> tuple[Any, list[Any]]:
+            events: list[Any] = []
+            async with GlossSession.open(cfg, store) as session:
+                logger = await session.start(GlossPlan(count=6))
+                q = session.bus.subscribe()
+
+                async def watch() -> None:
+                    n = 0
+                    while (ev := await q.get()) is not None:
+                        events.append(ev)
+                        if isinstance(ev, GlossRead):
+                            n += 1
+                            if n == 2:
+                                await asyncio.to_thread(fill, disk)
+                        if isinstance(ev, InstrumentError) and "kept" in ev.message:
+                            (disk / "filler").unlink()
+                            (disk / "filler-tail").unlink()
+
+                watcher = asyncio.create_task(watch())
+                result = await logger.run()
+                session.bus.close()
+                await watcher
+            return result, events
+
+        result, events = asyncio.run(go())
+        assert result.state is RunState.DONE and result.readings == 6
+        assert [g.seq for g in store.gloss_readings(result.run_id)] == list(range(6))
+        assert store.get_run(result.run_id).status == "done"
+    assert any("kept" in m for m in _store_messages(events))
