@@ -214,7 +214,7 @@ def test_a_bad_plan_row_is_one_line_and_spares_the_others(
     assert main(["runs", "list", "--store", str(store)]) == 0
     out = capsys.readouterr().out
     assert "damaged" in out and "plan_json is not valid JSON" in out and "sample:g" in out
-    for cmd in (["runs", "show", "1"], ["runs", "export", "1"]):
+    for cmd in (["runs", "show", "1"], ["runs", "export", "1"], ["scan", "resume", "1"]):
         assert main([*cmd, "--store", str(store)]) == 2
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and "run 1 is damaged: plan_json" in err
