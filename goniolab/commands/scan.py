@@ -680,11 +680,20 @@ def resume_config(rec: Any, config_arg: str | None, use_current: bool) -> LabCon
     from pydantic import ValidationError
 
     from goniolab.config import LabConfig, load_lab_config
+    from goniolab.models import MODEL_NAMES
+    from goniolab.session import with_sample
 
     snap = dict(rec.config)
     source = str(snap.pop("_source", "") or "")
     live_path = config_arg or (source if source and Path(source).exists() else "")
     live = load_lab_config(live_path) if live_path else None
+    if live is not None:
+        # what the run's own command line set (its sample, a --model) is no config change
+        live = with_sample(live, rec.sample)
+        started_with = rec.model.get("model_name")
+        if started_with in MODEL_NAMES:
+            s = live.sample.model_copy(update={"model": started_with})
+            live = live.model_copy(update={"sample": s})
     stored: LabConfig | None = None
     why = ""
     try:
