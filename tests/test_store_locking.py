@@ -63,3 +63,36 @@ def test_claim_lives_beside_the_store_not_in_it(tmp_path: Path) -> None:
         with s.claim_run(rid):
             locks = sorted(p.name for p in (tmp_path / "s.sqlite-locks").iterdir())
             assert locks == [f"run-{rid}.lock"]
+
+
+def test_one_store_serves_several_threads(tmp_path: Path) -> None:
+    # issue 22.2: a store opened in Jupyter's thread and written by the scan's worker thread
+    # failed ("SQLite objects created in a thread can only be used in that same thread")
+    import threading
+
+    with RunStore(tmp_path / "s.sqlite") as s:
+        runs = [
+            s.create_run(kind="brdf", plan={}, config={}, sample="", model={}, version="0")
+            for _ in range(4)
+        ]
+        errors: list[BaseException] = []
+
+        def write(rid: int) -> None:
+            try:
+                for i in range(50):
+                    s.add_point(rid, index=i, repeat=0, theta_i_deg=45.0, theta_r_deg=float(i),
+                                measured_theta_i_deg=45.0, measured_theta_r_deg=float(i),
+                                luminance_pct=float(rid), raw={}, timestamp=0.0)  # fmt: skip
+                    s.set_status(rid, "running")
+            except BaseException as exc:
+                errors.append(exc)
+
+        threads = [threading.Thread(target=write, args=(rid,)) for rid in runs]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+        assert errors == []
+        for rid in runs:
+            assert sorted(s.done_keys(rid)) == [(i, 0) for i in range(50)]
+            assert {p.luminance_pct for p in s.points(rid)} == {float(rid)}
