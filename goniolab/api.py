@@ -324,6 +324,30 @@ class Run:
     id: int
     store: str | Path
 
+    def __repr__(self) -> str:
+        # a notebook shows (and saves in the .ipynb) this: never the store's password
+        from goniolab.redact import redact
+
+        return f"Run(id={self.id}, store={redact(str(self.store))!r})"
+
+    def annotate(
+        self,
+        *,
+        operator: str | None = None,
+        sample_id: str | None = None,
+        notes: str | None = None,
+        tags: Sequence[str] | None = None,
+    ) -> RunRecord:
+        """Set the run's operator, physical sample id, notes or tags (``None`` keeps one;
+        the config's ``[run]`` table gives a new run its defaults); returns the record."""
+        try:
+            with RunStore(self.store, create=False) as s:
+                return s.set_meta(
+                    self.id, operator=operator, sample_id=sample_id, notes=notes, tags=tags
+                )
+        except StoreError as exc:
+            raise UserError(str(exc)) from exc
+
     @property
     def record(self) -> RunRecord:
         """The run's row: kind, plan, config snapshot, sample, model, status, times."""

@@ -38,6 +38,7 @@ Example
 from __future__ import annotations
 
 import math
+import uuid
 from collections.abc import Generator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -390,7 +391,9 @@ def inplane_scan(
     Moves the lamp to ``theta_i_deg``, then for each detector angle moves the detector and
     takes ``repeats`` readings of the spectro (one event each, with both arms' readbacks).
     The start document carries the plan (``plan_name = "goniolab_inplane_scan"``, the
-    angles, the sample) so that a bluesky-side analysis finds the geometry.
+    angles, the sample) so that a bluesky-side analysis finds the geometry, and the run's
+    identity as goniolab stores it: ``run_uuid`` (a UUID 4), ``operator``, ``sample_id``,
+    ``notes`` and ``tags`` (from the config's ``[run]`` table; ``md`` overrides them).
 
     Returns
     -------
@@ -403,7 +406,16 @@ def inplane_scan(
     if repeats < 1:
         raise ValueError(f"repeats must be >= 1, got {repeats}")
     detectors = [lab.spectro]
+    run_cfg = getattr(getattr(lab.lab, "config", None), "run", None)
+    identity = {  # the run identity a stored run has (issue 22.4): UUID, who, what sample
+        "run_uuid": str(uuid.uuid4()),
+        "operator": getattr(run_cfg, "operator", ""),
+        "sample_id": getattr(run_cfg, "sample_id", ""),
+        "notes": getattr(run_cfg, "notes", ""),
+        "tags": list(getattr(run_cfg, "tags", ())),
+    }
     metadata = {
+        **identity,
         "plan_name": "goniolab_inplane_scan",
         "plan_args": {
             "theta_i_deg": float(theta_i_deg),

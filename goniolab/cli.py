@@ -357,6 +357,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("goniolab: interrupted", file=sys.stderr)
         return 130
+    except Exception:
+        # a bug or an unforeseen failure: the traceback goes to the log file too (the
+        # README promises it), passwords redacted by the file's filter
+        if "logging" in sys.modules and sys.modules["logging"].getLogger().handlers:
+            _log().exception("unexpected error")
+        raise
     return code
 
 

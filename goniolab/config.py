@@ -401,6 +401,17 @@ class AlignmentConfig(_Strict):
         )
 
 
+class RunSection(_Strict):
+    """``[run]``: what every run started with this config records about itself unless the
+    command says otherwise (``scan --operator/--sample-id/--note/--tag``): who measures,
+    the physical sample's id (a label, a LIMS number), notes and tags."""
+
+    operator: str = ""
+    sample_id: str = ""
+    notes: str = ""
+    tags: tuple[str, ...] = ()
+
+
 class LabConfig(_Strict):
     """A whole lab config file (docs/ARCHITECTURE.md, "Lab config")."""
 
@@ -412,6 +423,7 @@ class LabConfig(_Strict):
     sim: SimConfig = SimConfig()
     colour: ColourConfig = ColourConfig()
     alignment: AlignmentConfig = AlignmentConfig()
+    run: RunSection = RunSection()
     #: The file this config came from ("" when built in code).
     source: str = Field(default="", exclude=True)
 

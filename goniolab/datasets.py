@@ -214,9 +214,12 @@ def write_netcdf(ds: xr.Dataset, path: str | Path) -> Path:
     out.attrs = netcdf_attrs(out.attrs)
     for name in list(out.variables):
         out[name].attrs = netcdf_attrs(out[name].attrs)
-    target = Path(path)
-    out.to_netcdf(target, engine="h5netcdf", invalid_netcdf=False)
-    return target
+    # built in memory, then replaced whole: a full disk never meets HDF5 (which crashed
+    # the process) and never destroys an existing file (goniolab._atomic)
+    from goniolab._atomic import atomic_write_bytes
+
+    data = out.to_netcdf(engine="h5netcdf", invalid_netcdf=False)
+    return atomic_write_bytes(path, bytes(data))
 
 
 # --------------------------------------------------------------------------- height maps
@@ -328,8 +331,13 @@ def _run_attrs(store: RunStore, rec: RunRecord) -> dict[str, Any]:
         "Conventions": "CF-1.10",
         "source": f"goniolab {rec.version}",
         "run_id": rec.id,
+        "run_uuid": getattr(rec, "uuid", ""),
         "kind": rec.kind,
         "sample": rec.sample,
+        "sample_id": getattr(rec, "sample_id", ""),
+        "operator": getattr(rec, "operator", ""),
+        "notes": getattr(rec, "notes", ""),
+        "tags": ", ".join(getattr(rec, "tags", ())),
         "status": rec.status,
         "reason": rec.reason,
         "goniolab_version": rec.version,

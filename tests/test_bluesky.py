@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import uuid
 from pathlib import Path
 from typing import Any
 
@@ -52,6 +53,7 @@ def test_inplane_scan_documents(engine: Any, tmp_path: Path) -> None:
     assert start["plan_name"] == "goniolab_inplane_scan"
     assert start["sample"] == "sample:wittmann-3"
     assert start["plan_args"]["theta_r_deg"] == [35.0, 45.0, 55.0]
+    assert uuid.UUID(start["run_uuid"]).version == 4 and start["tags"] == []  # issue 22.4
     assert result.run_start_uids == (start["uid"],)
     stop = docs[-1][1]
     assert stop["exit_status"] == "success" and stop["num_events"] == {"primary": 6}

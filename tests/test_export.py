@@ -190,3 +190,35 @@ def test_predict_gloss_out_netcdf(tmp_path: Path, capsys: pytest.CaptureFixture[
     np.testing.assert_array_equal(ds["gloss_gu"].values, [doc["G20"], doc["G60"], doc["G85"]])
     assert float(ds["haze_index"]) == doc["haze_index"]
     assert ds.attrs["d523_recommended_angle_deg"] == doc["d523_angle"]
+
+
+@pytest.mark.parametrize("fmt", ["csv", "json", "netcdf", "parquet"])
+def test_export_to_a_full_disk_keeps_the_old_file(
+    store_file: Path, tmp_path: Path, fmt: str
+) -> None:
+    # issue 23.14: netCDF raised then segfaulted; a re-export over an existing file on a full
+    # disk destroyed it. Now: one line, exit 2, the old file byte for byte, no temp file left.
+    import subprocess
+    import sys
+
+    from goniolab.export import FORMATS
+    from tests._fulldisk import fill, small_tmpfs
+
+    with small_tmpfs(tmp_path / "disk", 256) as disk:
+        out = disk / f"run{FORMATS[fmt]}"
+        old = b"an earlier export\n"
+        out.write_bytes(old)
+        fill(disk)
+        code = (
+            "import sys; from goniolab.cli import main; "
+            f"sys.exit(main(['runs', 'export', '1', '--store', {str(store_file)!r}, "
+            f"'--format', {fmt!r}, '-o', {str(out)!r}]))"
+        )
+        done = subprocess.run(
+            [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=False
+        )
+        assert done.returncode == 2, done.stderr  # not -11 (a segfault)
+        assert done.stderr.count("\n") == 1 and "No space left on device" in done.stderr
+        assert f"{out} is left as it was" in done.stderr
+        assert out.read_bytes() == old
+        assert sorted(p.name for p in disk.iterdir()) == ["filler", "filler-tail", out.name]

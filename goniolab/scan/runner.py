@@ -75,7 +75,7 @@ from goniolab.scan.exposure import AutoExposure
 from goniolab.scan.plans import MIRROR_INDEX, BrdfPlan, PlanPoint
 from goniolab.scan.predict import Predictor
 from goniolab.scan.summary import summarize_brdf
-from goniolab.store import RunStore
+from goniolab.store import RunStore, StoreError, StoreUnavailable
 
 __all__ = [
     "ArmMotion",
@@ -369,6 +369,7 @@ class ScanRunner:
         move_retries: int = 2,
         reconnect_backoff_s: float = 0.5,
         point_colour: PointColour | None = None,
+        store_outage_s: float = 600.0,
     ) -> None:
         if reading_retries < 0:
             raise ValueError(f"reading_retries must be >= 0, got {reading_retries}")
@@ -393,6 +394,9 @@ class ScanRunner:
         self.reading_retries = reading_retries
         self.move_retries = move_retries
         self.reconnect_backoff_s = reconnect_backoff_s
+        #: how long a run waits, paused with the arms parked, for a store that cannot take
+        #: a reading (a database down, a full disk) before it fails
+        self.store_outage_s = store_outage_s
         self.point_colour = point_colour if point_colour is not None else PointColour()
         #: the last colour took under _INLINE_COLOUR_S: compute the next on the loop
         self._colour_inline = False
@@ -446,7 +450,17 @@ class ScanRunner:
     # ------------------------------------------------------------------ helpers
     def _set_state(self, state: RunState, reason: str = "") -> None:
         self._state = state
-        self.store.set_status(self.run_id, state.value, reason)
+        try:
+            self.store.set_status(self.run_id, state.value, reason)
+        except StoreError as exc:  # the store is down: say so, the run's own state holds
+            self.bus.publish(
+                InstrumentError(
+                    run_id=self.run_id,
+                    device="store",
+                    message=f"the run's state ({state.value}) could not be recorded: {exc}",
+                    fatal=False,
+                )
+            )
         self.bus.publish(StateChanged(run_id=self.run_id, state=state, reason=reason))
 
     async def _checkpoint(self) -> bool:
@@ -805,6 +819,11 @@ class ScanRunner:
         self._specimen = "sample" if not (self.plan.mirror_reference and done) else None
         try:
             state, reason = await self._measure(todo, eta)
+        except StoreError as exc:  # the store stayed unavailable, or refused a write
+            state, reason = RunState.FAILED, f"store: {exc}"
+            self.bus.publish(
+                InstrumentError(run_id=self.run_id, device="store", message=str(exc), fatal=True)
+            )
         except DeviceError as exc:
             state, reason = RunState.FAILED, str(exc)
             self.bus.publish(
@@ -913,7 +932,7 @@ class ScanRunner:
         value = raw_pct if p.index == MIRROR_INDEX else self._relative_to_mirror(raw_pct)
         colour, colour_error = await self._colour_of(reading, p, self._mirror_pct)
         ts = time.time()
-        self.store.add_point(
+        await self._store_reading(p, lambda: self.store.add_point(
             self.run_id,
             index=p.index,
             repeat=p.repeat,
@@ -933,7 +952,7 @@ class ScanRunner:
             timestamp=ts,
             colour=colour,
             colour_error=colour_error,
-        )
+        ))  # fmt: skip
         self._n_done += 1
         self.bus.publish(
             PointMeasured(
@@ -957,6 +976,76 @@ class ScanRunner:
         if self._mirror_pct is None and self.plan.mirror_reference:
             self._mirror_pct = self._mirror_level()
         return raw_pct if self._mirror_pct is None else 100.0 * raw_pct / self._mirror_pct
+
+    async def _store_reading(self, p: PlanPoint, write: Callable[[], None]) -> None:
+        """Commit reading ``p`` with ``write``. When the store cannot take it
+        (:class:`~goniolab.store.StoreUnavailable`: a database down or frozen, a full disk,
+        a lock held by another program) the run pauses with the arms parked, says why,
+        and tries again with a growing delay (0.5 s doubling to 10 s, each try in a worker
+        thread so that Ctrl-C stays live) until the store takes the reading (the run goes
+        on: the next move re-checks the arms) or ``store_outage_s`` passes (the store
+        error ends the run as failed) or an abort arrives.
+
+        A try whose commit reached the store but whose answer was lost finds the reading
+        already stored (a unique-key refusal for a key now in the store): that counts as
+        stored.
+        """
+        try:
+            write()
+            return
+        except StoreUnavailable as exc:
+            first = exc
+        self.bus.publish(
+            InstrumentError(
+                run_id=self.run_id,
+                device="store",
+                message=f"{first}; the run pauses with the arms parked until the store is back",
+                fatal=False,
+            )
+        )
+        park_problem = await self._park()
+        self._verify_position = True  # the arms left the geometry: the next move checks
+        self._set_state(RunState.PAUSED, f"store unavailable: {first}" + (
+            f"; {park_problem}" if park_problem else ""))  # fmt: skip
+        deadline = time.monotonic() + self.store_outage_s
+        delay = 0.5
+        last: StoreError = first
+        while True:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise StoreUnavailable(
+                    f"{last} (waited {self.store_outage_s:g} s with the arms parked; "
+                    f"the reading at index {p.index}, repeat {p.repeat} was not stored)"
+                )
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self._abort_event.wait(), timeout=min(delay, left))
+            if self._abort_requested:
+                raise _Aborted(
+                    f"aborted while the store was unavailable ({last}); the reading at "
+                    f"index {p.index}, repeat {p.repeat} was not stored"
+                )
+            delay = min(10.0, delay * 2)
+            try:
+                await asyncio.to_thread(write)
+                break
+            except StoreUnavailable as exc:
+                last = exc
+            except Exception:
+                if p.key in await asyncio.to_thread(self.store.done_keys, self.run_id):
+                    break  # the lost answer's commit: stored once
+                raise
+        # a restarted server dropped the claim with its connection: take it again (the
+        # server answers now, so this cannot hang)
+        await asyncio.to_thread(self.store.ensure_claim, self.run_id)
+        self.bus.publish(
+            InstrumentError(
+                run_id=self.run_id,
+                device="store",
+                message="the store is back: the reading is stored, the run goes on",
+                fatal=False,
+            )
+        )
+        self._set_state(RunState.RUNNING)
 
     def _publish_progress(self, eta_s: float) -> None:
         self.bus.publish(
