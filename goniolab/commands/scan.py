@@ -133,6 +133,9 @@ class ProgressBar:
             TextColumn("ETA {task.fields[eta]}"),
             TextColumn("{task.fields[detail]}"),
             console=Console(file=self.stream, highlight=False),
+            # never wrap sys.stdout: the summary and --json go there (issue 22.3)
+            redirect_stdout=False,
+            redirect_stderr=False,
         )
         self._rich.start()
         self._task = self._rich.add_task("scan", total=total, eta="?", detail="")
