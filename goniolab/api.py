@@ -22,6 +22,7 @@ from __future__ import annotations
 import asyncio
 import concurrent.futures
 import math
+import sys
 from collections.abc import Coroutine, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -48,6 +49,7 @@ __all__ = [
     "predict_brdf",
     "predict_gloss",
     "run_scan",
+    "run_scan_async",
 ]
 
 _T = TypeVar("_T")
@@ -368,11 +370,49 @@ class Run:
             return run_summary(s, self.record)
 
     def plot(self, out: str | Path | None = None, *, log: bool = False) -> Any:
-        """The figure ``goniolab plot`` draws; saved to ``out`` when given."""
+        """The figure ``goniolab plot`` draws; saved to ``out`` when given.
+
+        In a notebook the figure shows inline as the cell's value (no ``%matplotlib
+        inline`` needed: :func:`_show_figures_inline`)."""
         from goniolab.plot import plot_run
 
         with _open_readonly(self.store) as s:
-            return plot_run(s, self.id, out=out, log=log)
+            fig = plot_run(s, self.id, out=out, log=log)
+        _show_figures_inline()
+        return fig
+
+
+def _figure_png(fig: Any) -> bytes:
+    import io
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=100)
+    return buf.getvalue()
+
+
+def _show_figures_inline() -> None:
+    """In IPython / Jupyter: display a matplotlib ``Figure`` as a PNG.
+
+    :mod:`goniolab.plot` builds figures without pyplot (no global state, Agg canvas), so
+    the inline backend never registers its display formatter and a returned figure shows as
+    ``<Figure size 800x600 with 2 Axes>`` (issue 22.2). This registers a PNG formatter for
+    ``Figure`` with the running shell's display formatter (IPython's documented
+    ``formatters['image/png'].for_type``), unless one is there already (``%matplotlib
+    inline`` registers its own). Outside IPython it does nothing.
+    """
+    ipython_mod = sys.modules.get("IPython")
+    if ipython_mod is None:
+        return
+    shell = ipython_mod.get_ipython()
+    if shell is None:
+        return
+    from matplotlib.figure import Figure
+
+    png = shell.display_formatter.formatters["image/png"]
+    try:
+        png.lookup_by_type(Figure)
+    except KeyError:
+        png.for_type(Figure, _figure_png)
 
 
 def open_run(run_id: int, store: str | Path | None = None) -> Run:
@@ -425,23 +465,79 @@ def open_runs(
 
 # --------------------------------------------------------------------------- scans
 def _run_blocking(coro: Coroutine[Any, Any, _T]) -> _T:
-    """Run ``coro`` to completion from plain code or from a notebook (whose event loop
-    is already running in this thread: the scan then gets its own loop in a thread)."""
-    from drivers.base import DeviceError
+    """Run ``coro`` to completion from plain code or from a notebook.
 
+    A notebook (Jupyter, IPython) already runs an event loop in this thread, so the
+    coroutine gets its own loop in a worker thread. Everything it uses must then be made in
+    that thread too: the run store is opened *inside* the coroutine (an SQLite connection
+    may only be used by the thread that made it; issue 22.2). ``await run_scan_async(...)``
+    runs on the notebook's own loop instead.
+    """
     try:
         asyncio.get_running_loop()
     except RuntimeError:
-        in_loop = False
-    else:
-        in_loop = True
+        return asyncio.run(coro)
+    with concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="goniolab-scan") as pool:
+        return pool.submit(asyncio.run, coro).result()
+
+
+@dataclass(frozen=True)
+class _ScanCall:
+    """A checked ``run_scan`` call: the plan, the config file and the store location."""
+
+    config_path: str
+    plan: Any
+    location: str | Path
+    time_scale: float | None
+    progress: bool
+
+
+def _scan_call(
+    config: str | Path,
+    *,
+    sample: str | None,
+    theta_i_deg: float,
+    theta_r_deg: str | Sequence[float],
+    repeats: int,
+    dwell_s: float,
+    exposure_us: int | None,
+    store: str | Path | None,
+    time_scale: float | None,
+    progress: bool,
+) -> _ScanCall:
+    from goniolab.config import load_lab_config
+    from goniolab.scan.plans import BrdfPlan, PlanError
+
+    cfg = load_lab_config(config)
     try:
-        if not in_loop:
-            return asyncio.run(coro)
-        with concurrent.futures.ThreadPoolExecutor(1) as pool:
-            return pool.submit(asyncio.run, coro).result()
+        plan = BrdfPlan(
+            theta_i_deg=float(theta_i_deg),
+            theta_r_deg=tuple(float(v) for v in _angles(theta_r_deg)),
+            repeats=int(repeats),
+            dwell_s=float(dwell_s),
+            exposure_us=cfg.spectro.exposure_us if exposure_us is None else int(exposure_us),
+            sample=sample or cfg.sample.map,
+        )
+    except PlanError as exc:
+        raise UserError(f"run_scan: {exc}") from None
+    location = resolve_store_path(None if store is None else str(store), cfg.lab.store)
+    return _ScanCall(str(Path(config).resolve()), plan, location, time_scale, progress)
+
+
+async def _scan_in_this_thread(call: _ScanCall) -> Run:
+    """Open the store in the running thread, scan, close the store."""
+    from drivers.base import DeviceError
+
+    try:
+        rs = RunStore(call.location)
+    except StoreError as exc:
+        raise UserError(str(exc)) from exc
+    try:
+        with rs:
+            run_id = await _scan(call.config_path, call.plan, rs, call.time_scale, call.progress)
     except DeviceError as exc:
         raise UserError(f"instrument error: {exc}", exit_code=1) from exc
+    return Run(run_id, call.location)
 
 
 def run_scan(
@@ -459,6 +555,10 @@ def run_scan(
 ) -> Run:
     """Run an in-plane scan in one call (blocking) and return the stored :class:`Run`.
 
+    Works from a script and from a notebook cell (whose event loop is already running:
+    the scan then runs on its own loop in a worker thread, the store opened there). In a
+    notebook, ``await run_scan_async(...)`` runs it on the notebook's loop instead.
+
     Parameters
     ----------
     config
@@ -473,7 +573,8 @@ def run_scan(
     time_scale
         Simulated lab only: clock scale (0 = no waiting).
     progress
-        Show a progress bar (rich: in a terminal and in a notebook).
+        Show a progress bar (``tqdm.auto``: a widget in a notebook, a text bar on stderr in
+        a terminal; never on stdout).
 
     Returns
     -------
@@ -481,29 +582,50 @@ def run_scan(
         Also when the run ends ``failed``: its ``status`` and ``record.reason`` say why and
         what was measured stays stored.
     """
-    from goniolab.config import load_lab_config
-    from goniolab.scan.plans import BrdfPlan, PlanError
+    call = _scan_call(
+        config,
+        sample=sample,
+        theta_i_deg=theta_i_deg,
+        theta_r_deg=theta_r_deg,
+        repeats=repeats,
+        dwell_s=dwell_s,
+        exposure_us=exposure_us,
+        store=store,
+        time_scale=time_scale,
+        progress=progress,
+    )
+    return _run_blocking(_scan_in_this_thread(call))
 
-    cfg = load_lab_config(config)
-    try:
-        plan = BrdfPlan(
-            theta_i_deg=float(theta_i_deg),
-            theta_r_deg=tuple(float(v) for v in _angles(theta_r_deg)),
-            repeats=int(repeats),
-            dwell_s=float(dwell_s),
-            exposure_us=cfg.spectro.exposure_us if exposure_us is None else int(exposure_us),
-            sample=sample or cfg.sample.map,
-        )
-    except PlanError as exc:
-        raise UserError(f"run_scan: {exc}") from None
-    location = resolve_store_path(None if store is None else str(store), cfg.lab.store)
-    try:
-        rs = RunStore(location)
-    except StoreError as exc:
-        raise UserError(str(exc)) from exc
-    with rs:
-        run_id = _run_blocking(_scan(str(Path(config).resolve()), plan, rs, time_scale, progress))
-    return Run(run_id, location)
+
+async def run_scan_async(
+    config: str | Path,
+    *,
+    sample: str | None = None,
+    theta_i_deg: float = 45.0,
+    theta_r_deg: str | Sequence[float] = "0:70:1",
+    repeats: int = DEFAULT_REPEATS,
+    dwell_s: float = 0.0,
+    exposure_us: int | None = None,
+    store: str | Path | None = None,
+    time_scale: float | None = None,
+    progress: bool = True,
+) -> Run:
+    """:func:`run_scan` as a coroutine on the caller's event loop: ``run = await
+    gl.run_scan_async(...)`` in a notebook cell (the kernel stays responsive to other
+    cells' ``await``s; the model work runs in threads). Same parameters and result."""
+    call = _scan_call(
+        config,
+        sample=sample,
+        theta_i_deg=theta_i_deg,
+        theta_r_deg=theta_r_deg,
+        repeats=repeats,
+        dwell_s=dwell_s,
+        exposure_us=exposure_us,
+        store=store,
+        time_scale=time_scale,
+        progress=progress,
+    )
+    return await _scan_in_this_thread(call)
 
 
 async def _scan(
@@ -529,13 +651,15 @@ async def _scan(
                 while await queue.get() is not None:
                     pass
                 return
-            from rich.progress import Progress as Bar
+            # tqdm.auto: an ipywidgets bar in a Jupyter kernel, a text bar on stderr
+            # elsewhere (never stdout, so a script's output stays clean)
+            from tqdm.auto import tqdm
 
-            with Bar(transient=False) as bar:
-                task = bar.add_task(f"run {run_id}", total=len(plan.points()))
+            with tqdm(total=len(plan.points()), desc=f"run {run_id}", unit="pt") as bar:
                 while (ev := await queue.get()) is not None:
                     if isinstance(ev, Progress):
-                        bar.update(task, completed=ev.done, total=ev.total)
+                        bar.total = ev.total
+                        bar.update(ev.done - bar.n)
 
         reporter = asyncio.create_task(report())
         try:
