@@ -69,21 +69,73 @@ def _heightmap(surface: Any, step_um: float | None = None) -> HeightMap:
         return resolve_map(surface, step_um=step_um)
     attrs = getattr(surface, "attrs", None)
     if attrs is not None and getattr(surface, "ndim", 0) == 2:
-        try:
-            return HeightMap(
-                np.asarray(surface.values, dtype=np.float64),
-                float(attrs["dx_um"]),
-                float(attrs["dy_um"]),
-                source=str(attrs.get("source", "<DataArray>")),
-            )
-        except KeyError as exc:
-            raise UserError(
-                f"surface DataArray: no {exc.args[0]} attribute (use load_surface)"
-            ) from None
+        return _dataarray_heightmap(surface)
     raise UserError(
         f"surface: expected a file path, sample:NAME or a load_surface() DataArray, "
         f"got {type(surface).__name__}"
     )
+
+
+#: Relative tolerance between a DataArray's coordinate steps and its dx_um/dy_um attributes
+#: (and between its own steps: the grid must be regular).
+_STEP_RTOL = 1e-6
+
+
+def _coordinate_step(da: Any, dim: str, attr: str) -> float:
+    """The lateral step along ``dim``: its coordinates' spacing, checked regular and
+    against the ``attr`` attribute when both exist.
+
+    After ``z.isel(x_um=slice(None, None, 2))`` or ``z.coarsen(x_um=2).mean()`` xarray keeps
+    the attributes (``dx_um = 1``) while the coordinates step by 2: the step from the
+    attribute silently gave the gloss of a map twice as steep (issue 22.10). The
+    coordinates are what xarray keeps right, so they decide; a disagreeing attribute is
+    refused rather than guessed over.
+    """
+    name = f"surface DataArray: {dim}"
+    given = da.attrs.get(attr)
+    coord = da.coords.get(dim)
+    if coord is None or coord.size < 2:
+        if given is None:
+            raise UserError(f"{name}: no coordinates and no {attr} attribute (use load_surface)")
+        step = float(given)
+    else:
+        diffs = np.diff(np.asarray(coord.values, dtype=np.float64))
+        step = float(np.mean(diffs))
+        if not (math.isfinite(step) and step > 0):
+            raise UserError(f"{name}: coordinates must increase (mean step {step:g} um)")
+        if float(np.max(np.abs(diffs - step))) > _STEP_RTOL * step:
+            raise UserError(
+                f"{name}: coordinates are not evenly spaced (steps {float(diffs.min()):g} to "
+                f"{float(diffs.max()):g} um): a height map needs a regular grid"
+            )
+        if given is not None and abs(float(given) - step) > _STEP_RTOL * step:
+            raise UserError(
+                f"{name}: coordinates step by {step:g} um but attrs['{attr}'] = {float(given):g}"
+                f" (after isel/coarsen/interp xarray keeps the old attribute): set "
+                f"attrs['{attr}'] = {step:g} or delete it"
+            )
+    if not (math.isfinite(step) and step > 0):
+        raise UserError(f"{name}: step {step:g} um must be positive")
+    return step
+
+
+def _dataarray_heightmap(da: Any) -> HeightMap:
+    from goniolab.optics.heightmap import HeightMap
+
+    dims = tuple(da.dims)
+    if set(dims) == {"y_um", "x_um"} and dims != ("y_um", "x_um"):
+        da = da.transpose("y_um", "x_um")  # rows are y, whatever order the user left
+    elif dims != ("y_um", "x_um"):
+        raise UserError(f"surface DataArray: dims {dims}, expected ('y_um', 'x_um')")
+    try:
+        return HeightMap(
+            np.asarray(da.values, dtype=np.float64),
+            _coordinate_step(da, "x_um", "dx_um"),
+            _coordinate_step(da, "y_um", "dy_um"),
+            source=str(da.attrs.get("source", "<DataArray>")),
+        )
+    except ValueError as exc:
+        raise UserError(f"surface DataArray: {exc}") from None
 
 
 def load_surface(path: str | Path, *, step_um: float | None = None) -> xr.DataArray:
@@ -101,7 +153,9 @@ def load_surface(path: str | Path, *, step_um: float | None = None) -> xr.DataAr
     -------
     xarray.DataArray
         Heights in micrometres; coords ``y_um``/``x_um`` in micrometres; attrs ``dx_um``,
-        ``dy_um``, ``source`` and the file's metadata as ``meta_*``.
+        ``dy_um``, ``source`` and the file's metadata as ``meta_*``. The predictions take
+        the steps from the coordinates (so ``isel``/``coarsen`` results work once
+        ``dx_um``/``dy_um`` are set right or deleted; a disagreeing attribute is refused).
     """
     from goniolab.datasets import heightmap_dataarray
 

@@ -91,3 +91,36 @@ def test_the_readme_example_runs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch
     worst = float(np.nanmax(np.abs(ds["residual_pct"].values)))
     peak = float(np.nanmax(ds["predicted_pct"].values))
     assert 0.02 * peak < worst < 0.3 * peak
+
+
+def _rough(n: int = 96) -> np.ndarray:
+    rng = np.random.default_rng(7)
+    z = np.cumsum(np.cumsum(rng.normal(size=(n, n)), axis=0), axis=1)
+    return z / np.std(np.diff(z, axis=1)) * 0.05
+
+
+def test_a_subsampled_map_takes_its_step_from_the_coordinates(tmp_path: Path) -> None:
+    """Issue 22.10: after ``isel(x_um=slice(None, None, 2))`` xarray keeps ``dx_um = 1`` while
+    the coordinates step by 2. The truth: the same heights as a HeightMap of dx 2 um."""
+    from goniolab.optics.heightmap import HeightMap
+
+    z = _rough()
+    np.save(tmp_path / "m.npy", z)
+    (tmp_path / "m.npy.json").write_text('{"dx_um": 1.0, "dy_um": 1.0}')
+    da = gl.load_surface(tmp_path / "m.npy")
+    half = da.isel(x_um=slice(None, None, 2))
+    with pytest.raises(UserError, match=r"x_um: coordinates step by 2 um but attrs\['dx_um'\] = 1"):
+        gl.predict_gloss(half, model="facet")
+    truth = gl.predict_gloss(HeightMap(z[:, ::2], 2.0, 1.0), model="facet")["gloss_gu"].values
+    del half.attrs["dx_um"]  # the coordinates alone decide
+    np.testing.assert_allclose(gl.predict_gloss(half, model="facet")["gloss_gu"].values, truth)
+    half.attrs["dx_um"] = 2.0  # or the attribute set right
+    np.testing.assert_allclose(gl.predict_gloss(half, model="facet")["gloss_gu"].values, truth)
+    # a transposed DataArray is the same map, not a map with x and y swapped
+    np.testing.assert_allclose(
+        gl.predict_gloss(half.T, model="facet")["gloss_gu"].values, truth, rtol=1e-12
+    )
+    # an uneven grid is refused
+    uneven = da.isel(x_um=[0, 1, 3, 4, 5, 6])
+    with pytest.raises(UserError, match="not evenly spaced"):
+        gl.predict_gloss(uneven, model="facet")
