@@ -44,6 +44,7 @@ if TYPE_CHECKING:  # pragma: no cover - typing only
 __all__ = [
     "Run",
     "load_surface",
+    "open_dataset",
     "open_run",
     "open_runs",
     "predict_brdf",
@@ -467,6 +468,18 @@ def _show_figures_inline() -> None:
         png.lookup_by_type(Figure)
     except KeyError:
         png.for_type(Figure, _figure_png)
+
+
+def open_dataset(path: str | Path) -> xr.Dataset:
+    """Read back a netCDF file goniolab wrote (``goniolab runs export RUN -o run.nc``, or
+    a prediction saved with :func:`goniolab.datasets.write_netcdf`): the same variables,
+    units and attributes as :meth:`Run.to_xarray`, times as UTC ``datetime64``."""
+    from goniolab.datasets import open_dataset as read
+
+    try:
+        return read(path)
+    except OSError as exc:
+        raise UserError(str(exc)) from None
 
 
 def open_run(run_id: int, store: str | Path | None = None) -> Run:
