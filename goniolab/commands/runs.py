@@ -11,6 +11,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from goniolab import jsonout
 from goniolab.errors import UserError
 
 if TYPE_CHECKING:  # sqlite3 and the plans load when a command runs, not at --help
@@ -87,7 +88,7 @@ def _cmd_list(args: argparse.Namespace) -> int:
     with open_store(args.store, args.config) as store:
         runs = store.list_runs(limit=args.limit)
         if args.json:
-            print(json.dumps([_brief(store, r) for r in runs], indent=2))
+            print(jsonout.dumps([_brief(store, r) for r in runs], indent=2))
             return 0
         if not runs:
             print(f"no runs in {store.location}", file=sys.stderr)
@@ -214,7 +215,7 @@ def _cmd_show(args: argparse.Namespace) -> int:
                 "summary": summary,
                 "colour": colour,
             }
-            print(json.dumps(doc, indent=2))
+            print(jsonout.dumps(doc, indent=2))
             return 0
         status = rec.status
         if interrupted(store, rec):
@@ -268,7 +269,7 @@ def _cmd_colour(args: argparse.Namespace) -> int:
             metamerism=bool(args.metamerism),
         )
     if args.json:
-        print(json.dumps(doc, indent=2))
+        print(jsonout.dumps(doc, indent=2))
         return 0
     print(f"run {rec.id} on {rec.sample or '-'}: colour per geometry")
     print("\n".join(colour_report_text(doc)))
@@ -302,7 +303,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
     if args.output:
         if args.json:
             doc = {"run_id": args.run, "format": fmt, "output": str(Path(args.output).resolve())}
-            print(json.dumps(doc, indent=2))
+            print(jsonout.dumps(doc, indent=2))
         else:
             print(f"run {args.run} written to {args.output} ({fmt})", file=sys.stderr)
     else:

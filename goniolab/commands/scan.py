@@ -19,12 +19,12 @@ predicted curve bends (:mod:`goniolab.scan.adaptive`): as many readings, the sam
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 from collections.abc import Coroutine
 from typing import TYPE_CHECKING, Any, TextIO, TypeVar
 
+from goniolab import jsonout
 from goniolab.commands._angles import allow_negative_angles
 from goniolab.errors import UserError
 
@@ -344,7 +344,7 @@ async def _execute(
         **result.summary,
     }
     if json_out:
-        print(json.dumps(payload, indent=2))
+        print(jsonout.dumps(payload, indent=2))
     else:
         print(
             f"run {run_id}: {result.state.value}" + (f" ({result.reason})" if result.reason else "")
@@ -401,7 +401,7 @@ async def _execute_align(
     payload = {"run_id": run_id, "state": "done", "config_written": write_config}
     payload.update(result.as_dict())
     if json_out:
-        print(json.dumps(payload, indent=2))
+        print(jsonout.dumps(payload, indent=2))
         return 0
     c = result.corrections_deg()
     print(f"run {run_id}: alignment done ({result.readings} readings)")

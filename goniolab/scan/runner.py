@@ -74,6 +74,7 @@ from goniolab.scan.events import (
 from goniolab.scan.exposure import AutoExposure
 from goniolab.scan.plans import MIRROR_INDEX, BrdfPlan, PlanPoint
 from goniolab.scan.predict import Predictor
+from goniolab.scan.sanity import check_reading
 from goniolab.scan.summary import summarize_brdf
 from goniolab.store import RunStore
 
@@ -673,14 +674,16 @@ class ScanRunner:
 
     async def _read_spectro(self, p: PlanPoint) -> SpectroReading:
         """One spectro reading, taken again after a transient fault (timeout, garbled reply,
-        a lost link: then the port is reopened first) up to ``reading_retries`` times; each
-        retry is reported, nothing is stored twice."""
+        an implausible value (:mod:`goniolab.scan.sanity`), a lost link: then the port is
+        reopened first) up to ``reading_retries`` times; each retry is reported, nothing is
+        stored twice."""
 
         async def read() -> SpectroReading:
             if self.plan.auto_exposure:
                 reading, self._exposure_us = await self._auto.read(self.spectro, self._exposure_us)
-                return reading
-            return await self.spectro.measure()
+            else:
+                reading = await self.spectro.measure()
+            return check_reading(reading)  # an implausible Y is read again, never stored
 
         reading = await self._retry(
             f"point {p.index}, repeat {p.repeat}", read, self._reconnect_spectro,
