@@ -57,6 +57,7 @@ from drivers.base import (
 )
 from drivers.timing import Clock, trapezoid_duration_s
 from goniolab.config import GoniometerConfig
+from goniolab.scan.alarm import failure_reason
 from goniolab.scan.colour import PointColour
 from goniolab.scan.events import (
     ArmsMoved,
@@ -809,7 +810,7 @@ class ScanRunner:
         try:
             state, reason = await self._measure(todo, eta)
         except DeviceError as exc:
-            state, reason = RunState.FAILED, str(exc)
+            state, reason = RunState.FAILED, failure_reason(exc)  # with a latched alarm's cure
             self.bus.publish(
                 InstrumentError(
                     run_id=self.run_id, device=exc.device, message=exc.message, fatal=True
