@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 from goniolab import jsonout
 from goniolab.errors import UserError
+from goniolab.textsafe import escaped_stdout
 
 if TYPE_CHECKING:  # sqlite3 and the plans load when a command runs, not at --help
     from goniolab.store import RunRecord, RunStore
@@ -365,12 +366,12 @@ def register(subparsers: Any) -> None:
     pl = sub.add_parser("list", parents=[common], help="list runs, newest first")
     pl.add_argument("--limit", type=int, default=None, help="show at most N runs")
     pl.add_argument("--json", action="store_true", help="print JSON")
-    pl.set_defaults(func=_cmd_list)
+    pl.set_defaults(func=escaped_stdout(_cmd_list))  # stored names may hold escapes
 
     ps = sub.add_parser("show", parents=[common], help="show one run and its summary")
     ps.add_argument("run", type=int, metavar="RUN")
     ps.add_argument("--json", action="store_true", help="print JSON")
-    ps.set_defaults(func=_cmd_show)
+    ps.set_defaults(func=escaped_stdout(_cmd_show))
 
     pc = sub.add_parser(
         "colour",
