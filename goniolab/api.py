@@ -531,7 +531,25 @@ def open_runs(
 
 
 # --------------------------------------------------------------------------- scans
-def _run_blocking(coro: Coroutine[Any, Any, _T]) -> _T:
+class _ScanControl:
+    """The running scan's loop and runner, so that another thread can abort it."""
+
+    def __init__(self) -> None:
+        self.loop: asyncio.AbstractEventLoop | None = None
+        self.runner: Any = None
+
+    def abort(self) -> bool:
+        """Ask the runner to stop (the arms stop, then park); False before it started."""
+        if self.loop is None or self.runner is None:
+            return False
+        try:
+            self.loop.call_soon_threadsafe(self.runner.abort)
+        except RuntimeError:  # the scan's loop has closed: it ended meanwhile
+            return False
+        return True
+
+
+def _run_blocking(coro: Coroutine[Any, Any, _T], control: _ScanControl | None = None) -> _T:
     """Run ``coro`` to completion from plain code or from a notebook.
 
     A notebook (Jupyter, IPython) already runs an event loop in this thread, so the
@@ -539,13 +557,26 @@ def _run_blocking(coro: Coroutine[Any, Any, _T]) -> _T:
     that thread too: the run store is opened *inside* the coroutine (an SQLite connection
     may only be used by the thread that made it; issue 22.2). ``await run_scan_async(...)``
     runs on the notebook's own loop instead.
+
+    Interrupting the kernel (a KeyboardInterrupt here, while the scan runs in its thread)
+    aborts the scan through ``control``: the arms stop and park and the run is stored as
+    aborted, as Ctrl-C does in ``goniolab scan``; this call then returns the aborted run.
     """
     try:
         asyncio.get_running_loop()
     except RuntimeError:
         return asyncio.run(coro)
     with concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="goniolab-scan") as pool:
-        return pool.submit(asyncio.run, coro).result()
+        future = pool.submit(asyncio.run, coro)
+        try:
+            return future.result()
+        except KeyboardInterrupt:
+            if future.done():
+                return future.result()
+            if control is None or not control.abort():
+                raise
+            print("goniolab: stopping: the arms stop, then park", file=sys.stderr, flush=True)
+            return future.result()
 
 
 @dataclass(frozen=True)
@@ -591,7 +622,7 @@ def _scan_call(
     return _ScanCall(str(Path(config).resolve()), plan, location, time_scale, progress)
 
 
-async def _scan_in_this_thread(call: _ScanCall) -> Run:
+async def _scan_in_this_thread(call: _ScanCall, control: _ScanControl | None = None) -> Run:
     """Open the store in the running thread, scan, close the store."""
     from drivers.base import DeviceError
 
@@ -601,7 +632,9 @@ async def _scan_in_this_thread(call: _ScanCall) -> Run:
         raise UserError(str(exc)) from exc
     try:
         with rs:
-            run_id = await _scan(call.config_path, call.plan, rs, call.time_scale, call.progress)
+            run_id = await _scan(
+                call.config_path, call.plan, rs, call.time_scale, call.progress, control
+            )
     except DeviceError as exc:
         raise UserError(f"instrument error: {exc}", exit_code=1) from exc
     return Run(run_id, call.location)
@@ -625,6 +658,8 @@ def run_scan(
     Works from a script and from a notebook cell (whose event loop is already running:
     the scan then runs on its own loop in a worker thread, the store opened there). In a
     notebook, ``await run_scan_async(...)`` runs it on the notebook's loop instead.
+    Interrupting the kernel aborts the scan (arms stopped and parked, the run stored
+    ``aborted``) and returns that run.
 
     Parameters
     ----------
@@ -661,7 +696,8 @@ def run_scan(
         time_scale=time_scale,
         progress=progress,
     )
-    return _run_blocking(_scan_in_this_thread(call))
+    control = _ScanControl()
+    return _run_blocking(_scan_in_this_thread(call, control), control)
 
 
 async def run_scan_async(
@@ -696,7 +732,12 @@ async def run_scan_async(
 
 
 async def _scan(
-    config_path: str, plan: Any, store: RunStore, time_scale: float | None, progress: bool
+    config_path: str,
+    plan: Any,
+    store: RunStore,
+    time_scale: float | None,
+    progress: bool,
+    control: _ScanControl | None = None,
 ) -> int:
     from goniolab.config import load_lab_config
     from goniolab.scan.events import Progress
@@ -710,6 +751,8 @@ async def _scan(
         except PlanRefused as exc:
             raise UserError(f"plan refused (no arm moved): {exc}") from exc
         run_id = runner.run_id
+        if control is not None:
+            control.loop, control.runner = asyncio.get_running_loop(), runner
         bus = session.bus
         queue = bus.subscribe()
 

@@ -125,3 +125,49 @@ def test_a_subsampled_map_takes_its_step_from_the_coordinates(tmp_path: Path) ->
     uneven = da.isel(x_um=[0, 1, 3, 4, 5, 6])
     with pytest.raises(UserError, match="not evenly spaced"):
         gl.predict_gloss(uneven, model="facet")
+
+
+def test_interrupting_a_scan_in_a_running_loop_aborts_it(tmp_path: Path) -> None:
+    """A notebook's kernel interrupt arrives as KeyboardInterrupt in the thread waiting for
+    the scan (which runs on its own loop in a worker thread): the scan is aborted like
+    Ctrl-C in ``goniolab scan`` (arms stopped and parked, run stored ``aborted``), not left
+    moving in the background."""
+    import asyncio
+    import os
+    import signal
+    import threading
+
+    async def cell() -> gl.Run:  # what a notebook cell runs: inside a running loop
+        return gl.run_scan(ROOT / "configs" / "lab-sim.toml", sample="sample:flat",
+                           theta_r_deg="20:60:1", time_scale=4.0,
+                           store=store, progress=False)  # fmt: skip
+
+    store = tmp_path / "runs.sqlite"
+    stop = threading.Event()
+
+    def interrupt_after_two_readings() -> None:
+        """The kernel's interrupt: SIGINT to the process (KeyboardInterrupt in the main
+        thread), sent once the scan has stored readings, whatever the machine's speed."""
+        from goniolab.store import RunStore, StoreError
+
+        while not stop.wait(0.05):
+            try:
+                with RunStore(store, readonly=True) as s:
+                    if any(s.count_points(r.id) >= 2 for r in s.list_runs()):
+                        os.kill(os.getpid(), signal.SIGINT)
+                        return
+            except StoreError:  # not created yet
+                continue
+
+    watcher = threading.Thread(target=interrupt_after_two_readings, daemon=True)
+    loop = asyncio.new_event_loop()  # no asyncio.Runner SIGINT handler: as in ipykernel
+    watcher.start()
+    try:
+        run = loop.run_until_complete(cell())
+    finally:
+        stop.set()
+        watcher.join()
+        loop.close()
+    rec = run.record
+    assert rec.status == "aborted" and "aborted by the operator" in (rec.reason or "")
+    assert 0 < run.to_xarray().attrs["stored_readings"] < 41
