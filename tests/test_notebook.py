@@ -110,3 +110,52 @@ def test_run_scan_in_a_kernel_with_postgresql(
         with RunStore(url, readonly=True) as s:
             assert [s.get_run(r).status for r in (1, 2)] == ["done", "done"]
             assert s.count_points(2) == 6
+
+
+@pytest.mark.parametrize("call", ["gl.run_scan", "await gl.run_scan_async"])
+def test_interrupting_the_kernel_aborts_the_scan(tmp_path: Path, call: str) -> None:
+    """Jupyter's "interrupt kernel" (SIGINT) during a scan stops it: the run is stored
+    ``aborted`` (arms stopped and parked) and no reading is added afterwards, whether the
+    scan ran in its worker thread (run_scan) or on the kernel's loop (run_scan_async)."""
+    import time
+
+    from jupyter_client.manager import start_new_kernel
+
+    store = tmp_path / "runs.sqlite"
+    env = {
+        **os.environ,
+        "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]),
+    }
+    km, kc = start_new_kernel(kernel_name="python3", env=env)
+    try:
+        kc.execute_interactive("import goniolab.api as gl", timeout=120)
+        msg_id = kc.execute(
+            f"run = {call}({str(CONFIG)!r}, sample='sample:flat', theta_r_deg='20:60:1', "
+            f"time_scale=4.0, store={str(store)!r}, progress=False)"
+        )
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:  # interrupt once readings are being stored
+            time.sleep(0.2)
+            if store.exists():
+                with RunStore(store, readonly=True) as s:
+                    runs = s.list_runs()
+                    if runs and s.count_points(runs[0].id) >= 2:
+                        break
+        km.interrupt_kernel()
+        while True:  # the cell ends (its result or the interruption)
+            msg = kc.get_iopub_msg(timeout=120)
+            if (
+                msg["parent_header"].get("msg_id") == msg_id
+                and msg["msg_type"] == "status"
+                and msg["content"]["execution_state"] == "idle"
+            ):
+                break
+        with RunStore(store, readonly=True) as s:
+            rec = s.list_runs()[0]
+            n = s.count_points(rec.id)
+            assert rec.status == "aborted" and 2 <= n < 41
+        time.sleep(1.0)  # nothing keeps measuring in the background
+        with RunStore(store, readonly=True) as s:
+            assert s.count_points(rec.id) == n
+    finally:
+        km.shutdown_kernel(now=True)
