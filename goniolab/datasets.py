@@ -245,7 +245,9 @@ def cf_dataset(ds: xr.Dataset, *, history: str | None = None) -> xr.Dataset:
     - ``time`` variables encoded as float64 :data:`TIME_UNITS`, calendar ``standard``,
       ``standard_name = "time"``;
     - no ``_FillValue`` on coordinate variables (CF 2.5.1: coordinates have no missing
-      values; xarray adds NaN fills to float coordinates by default);
+      values; xarray adds NaN fills to float coordinates by default), ``units = "1"`` on an
+      integer coordinate that has none (an index or a count);
+    - text variables as char arrays (CF 2.2 has no variable-length strings);
     - every variable with a ``long_name``, ``Conventions`` and a ``history`` line (CF 2.6.2)
       prepended to any the data already had.
     """
@@ -270,6 +272,11 @@ def cf_dataset(ds: xr.Dataset, *, history: str | None = None) -> xr.Dataset:
             encoding.update(units=TIME_UNITS, calendar="standard", dtype="float64")
         if name in out.coords:
             encoding["_FillValue"] = None
+            if var.dtype.kind in "iu" and "units" not in attrs:
+                attrs["units"] = "1"  # an index or a count (row, repeat, reading number)
+        if var.dtype.kind in "UO":
+            # text as a char array (CF 2.2: netCDF-4 variable-length strings are not CF)
+            encoding["dtype"] = "S1"
         var.attrs = attrs
         var.encoding = encoding
     return out

@@ -43,11 +43,23 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     out["gloss"] = write_netcdf(gl.predict_gloss("sample:flat"), d / "gloss.nc")
     out["brdf"] = write_netcdf(gl.predict_brdf("sample:flat", theta_r_deg="40:50:5"), d / "brdf.nc")
     out["map"] = write_netcdf(gl.load_surface("sample:flat").to_dataset(), d / "map.nc")
+    # a multi-angle run with spectra and predicted reflectance factors, its run export and
+    # its spectra export (a text variable: measured / predicted)
+    from tests.colour._spectral_runs import make_spectral_store
+
+    spectral = make_spectral_store(d / "spectral.sqlite")
+    out["spectral_run"] = d / "spectral_run.nc"
+    assert (
+        main(["runs", "export", "1", "--store", str(spectral), "-o", str(out["spectral_run"])]) == 0
+    )
+    out["spectra"] = d / "spectra.nc"
+    assert main(["runs", "spectra", "1", "--store", str(spectral), "-o", str(out["spectra"]),
+                 "--which", "both"]) == 0  # fmt: skip
     out["store"] = store
     return out
 
 
-NAMES = ["run1", "run2", "gloss", "brdf", "map"]
+NAMES = ["run1", "run2", "gloss", "brdf", "map", "spectral_run", "spectra"]
 
 # The checker needs the CF standard-name, area-type and region tables (it downloads them
 # otherwise). goniolab uses one standard name, "time" (canonical units s, as in the CF
