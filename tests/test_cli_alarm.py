@@ -35,6 +35,7 @@ def _cli(*args: str, env: dict[str, str]) -> subprocess.CompletedProcess[str]:
 
 
 @pytest.mark.wire
+@pytest.mark.timeout(600)  # three scans and two resets over the wire on a loaded machine
 def test_an_alarm_before_a_scan_is_cleared_from_the_cli(tmp_path: Path) -> None:
     server_cfg = lab_config(
         tmp_path, base="lab-sim-wire.toml", faults={"detector_alarm_at_deg": "47.2"},

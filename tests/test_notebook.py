@@ -17,6 +17,9 @@ import pytest
 
 from goniolab.store import RunStore
 
+# a kernel starts in seconds, more on a loaded machine; each test runs whole scans in it
+pytestmark = pytest.mark.timeout(600)
+
 nbformat = pytest.importorskip("nbformat")
 nbclient = pytest.importorskip("nbclient")
 pytest.importorskip("ipykernel")
