@@ -242,13 +242,40 @@ def _silence_stdout() -> None:
         pass
 
 
-def _one_line_warnings() -> None:
-    """Show warnings (e.g. heights that look like nm read as um) as one line, like errors."""
+def _own_warning(category: type[Warning], filename: str) -> bool:
+    """A warning goniolab itself issues: its class is goniolab's (or the drivers'), or it
+    was raised from goniolab's or the drivers' code."""
+    module = getattr(category, "__module__", "")
+    if module.split(".")[0] in ("goniolab", "drivers"):
+        return True
+    here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    path = os.path.abspath(filename)
+    return any(path.startswith(os.path.join(here, pkg) + os.sep) for pkg in ("goniolab", "drivers"))
+
+
+def _one_line_warnings(debug: bool = False) -> None:
+    """Show goniolab's own warnings (e.g. heights that look like nm read as um) as one line,
+    like errors. A library's warning (numpy, pandas, colour-science ...) is not goniolab's
+    to say: it goes to the log file with its origin, and to stderr only under ``--debug``
+    (issue 23, Low: they leaked as ``goniolab: warning: ...``)."""
     import warnings
 
-    def show(message: Warning | str, category: type[Warning], *_: object, **__: object) -> None:
-        print(f"goniolab: warning: {message}", file=sys.stderr)
-        _log().warning("%s", message)
+    def show(
+        message: Warning | str,
+        category: type[Warning],
+        filename: str = "",
+        lineno: int = 0,
+        *_: object,
+        **__: object,
+    ) -> None:
+        if _own_warning(category, filename):
+            print(f"goniolab: warning: {message}", file=sys.stderr)
+            _log().warning("%s", message)
+            return
+        origin = f"{category.__name__} from {filename}:{lineno}"
+        _log().warning("library warning (%s): %s", origin, message)
+        if debug:
+            print(f"goniolab: library warning ({origin}): {message}", file=sys.stderr)
 
     warnings.showwarning = show
 
@@ -336,7 +363,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             parser.print_help()
             return 2
         _quiet_library_logs(args.debug)
-        _one_line_warnings()
+        _one_line_warnings(args.debug)
         _start_log(args, argv)
         code: int = args.func(args)
         sys.stdout.flush()  # a closed pipe shows here, not in the interpreter's exit

@@ -25,6 +25,7 @@ import json
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from goniolab import jsonout
 from goniolab._atomic import atomic_write_bytes
 from goniolab.datasets import iso_utc
 
@@ -117,7 +118,7 @@ def _csv_text(store: RunStore, run_id: int) -> str:
 
 def _json_text(store: RunStore, run_id: int) -> str:
     doc = {"run": _run_doc(store, run_id), "readings": export_rows_iso(store, run_id)}
-    return json.dumps(doc, indent=2, default=str) + "\n"
+    return jsonout.dumps(doc, indent=2, default=str) + "\n"  # no NaN/Infinity
 
 
 def export_run(store: RunStore, run_id: int, fmt: str, out: str | Path | None = None) -> str:

@@ -39,7 +39,7 @@ from goniolab.scan.align import AlignAborted, AlignPlan, AlignResult, AlignRunne
 from goniolab.scan.colour import PointColour
 from goniolab.scan.events import EventBus, RunState
 from goniolab.scan.gloss import GlossLogger, predict_gloss
-from goniolab.scan.plans import BrdfPlan, GlossPlan
+from goniolab.scan.plans import BrdfPlan, GlossPlan, PlanError
 from goniolab.scan.predict import Predictor
 from goniolab.scan.runner import ArmMotion, DryRun, PlanRefused, RunResult, ScanRunner, dry_run
 from goniolab.store import RunMeta, RunRecord, RunStore
@@ -382,8 +382,13 @@ class ScanSession:
             ``failed`` with the reason) or was aborted (marked ``aborted``).
         """
         from goniolab.config import write_alignment
+        from goniolab.scan.align_reach import check_align_reach
 
         cfg = self.config
+        try:  # an incidence the arms cannot sweep is refused before any run or motion
+            check_align_reach(plan, cfg.goniometer)
+        except PlanError as exc:
+            raise UserError(f"scan --plan align: {exc}") from exc
         model = await self.models.get(plan.sample)
         await self.lab.prepare_sample(plan.sample)
         self.lab.put_sample(model, plan.sample)

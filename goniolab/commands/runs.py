@@ -11,7 +11,9 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from goniolab import jsonout
 from goniolab.errors import UserError
+from goniolab.textsafe import escaped_stdout
 
 if TYPE_CHECKING:  # sqlite3 and the plans load when a command runs, not at --help
     from goniolab.store import RunRecord, RunStore
@@ -105,7 +107,7 @@ def _cmd_list(args: argparse.Namespace) -> int:
         except StoreError as exc:
             raise UserError(str(exc)) from exc
         if args.json:
-            print(json.dumps([_brief(store, r, n) for r, n in briefs], indent=2))
+            print(jsonout.dumps([_brief(store, r, n) for r, n in briefs], indent=2))
             return 0
         if not briefs:
             filtered = any(
@@ -263,7 +265,7 @@ def _cmd_show(args: argparse.Namespace) -> int:
                 "summary": summary,
                 "colour": colour,
             }
-            print(json.dumps(doc, indent=2))
+            print(jsonout.dumps(doc, indent=2))
             return 0
         status = rec.status
         if interrupted(store, rec):
@@ -328,7 +330,7 @@ def _cmd_colour(args: argparse.Namespace) -> int:
             metamerism=bool(args.metamerism),
         )
     if args.json:
-        print(json.dumps(doc, indent=2))
+        print(jsonout.dumps(doc, indent=2))
         return 0
     print(f"run {rec.id} on {rec.sample or '-'}: colour per geometry")
     print("\n".join(colour_report_text(doc)))
@@ -369,7 +371,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
     if args.output:
         if args.json:
             doc = {"run_id": args.run, "format": fmt, "output": str(Path(args.output).resolve())}
-            print(json.dumps(doc, indent=2))
+            print(jsonout.dumps(doc, indent=2))
         else:
             print(f"run {args.run} written to {args.output} ({fmt})", file=sys.stderr)
     else:
@@ -522,12 +524,12 @@ def register(subparsers: Any) -> None:
         help="only runs whose sample, sample id, operator, notes or tags contain TEXT",
     )
     pl.add_argument("--json", action="store_true", help="print JSON")
-    pl.set_defaults(func=_cmd_list)
+    pl.set_defaults(func=escaped_stdout(_cmd_list))  # stored names may hold escapes
 
     ps = sub.add_parser("show", parents=[common], help="show one run and its summary")
     ps.add_argument("run", type=int, metavar="RUN")
     ps.add_argument("--json", action="store_true", help="print JSON")
-    ps.set_defaults(func=_cmd_show)
+    ps.set_defaults(func=escaped_stdout(_cmd_show))
 
     pc = sub.add_parser(
         "colour",

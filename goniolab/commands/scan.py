@@ -19,12 +19,12 @@ predicted curve bends (:mod:`goniolab.scan.adaptive`): as many readings, the sam
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 from collections.abc import Coroutine
 from typing import TYPE_CHECKING, Any, TextIO, TypeVar
 
+from goniolab import jsonout
 from goniolab.commands._angles import allow_negative_angles
 from goniolab.errors import UserError
 
@@ -134,6 +134,9 @@ class ProgressBar:
             TextColumn("ETA {task.fields[eta]}"),
             TextColumn("{task.fields[detail]}"),
             console=Console(file=self.stream, highlight=False),
+            # never wrap sys.stdout: the summary and --json go there (issue 22.3)
+            redirect_stdout=False,
+            redirect_stderr=False,
         )
         self._rich.start()
         self._task = self._rich.add_task("scan", total=total, eta="?", detail="")
@@ -345,7 +348,7 @@ async def _execute(
         **result.summary,
     }
     if json_out:
-        print(json.dumps(payload, indent=2))
+        print(jsonout.dumps(payload, indent=2))
     else:
         print(
             f"run {run_id}: {result.state.value}" + (f" ({result.reason})" if result.reason else "")
@@ -402,7 +405,7 @@ async def _execute_align(
     payload = {"run_id": run_id, "state": "done", "config_written": write_config}
     payload.update(result.as_dict())
     if json_out:
-        print(json.dumps(payload, indent=2))
+        print(jsonout.dumps(payload, indent=2))
         return 0
     c = result.corrections_deg()
     print(f"run {run_id}: alignment done ({result.readings} readings)")

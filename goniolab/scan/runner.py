@@ -57,6 +57,7 @@ from drivers.base import (
 )
 from drivers.timing import Clock, trapezoid_duration_s
 from goniolab.config import GoniometerConfig
+from goniolab.scan.alarm import failure_reason
 from goniolab.scan.colour import PointColour
 from goniolab.scan.events import (
     ArmsMoved,
@@ -74,6 +75,7 @@ from goniolab.scan.events import (
 from goniolab.scan.exposure import AutoExposure
 from goniolab.scan.plans import MIRROR_INDEX, BrdfPlan, PlanPoint
 from goniolab.scan.predict import Predictor
+from goniolab.scan.sanity import check_reading
 from goniolab.scan.summary import summarize_brdf
 from goniolab.store import RunStore, StoreError, StoreUnavailable
 
@@ -687,14 +689,16 @@ class ScanRunner:
 
     async def _read_spectro(self, p: PlanPoint) -> SpectroReading:
         """One spectro reading, taken again after a transient fault (timeout, garbled reply,
-        a lost link: then the port is reopened first) up to ``reading_retries`` times; each
-        retry is reported, nothing is stored twice."""
+        an implausible value (:mod:`goniolab.scan.sanity`), a lost link: then the port is
+        reopened first) up to ``reading_retries`` times; each retry is reported, nothing is
+        stored twice."""
 
         async def read() -> SpectroReading:
             if self.plan.auto_exposure:
                 reading, self._exposure_us = await self._auto.read(self.spectro, self._exposure_us)
-                return reading
-            return await self.spectro.measure()
+            else:
+                reading = await self.spectro.measure()
+            return check_reading(reading)  # an implausible Y is read again, never stored
 
         reading = await self._retry(
             f"point {p.index}, repeat {p.repeat}", read, self._reconnect_spectro,
@@ -825,7 +829,7 @@ class ScanRunner:
                 InstrumentError(run_id=self.run_id, device="store", message=str(exc), fatal=True)
             )
         except DeviceError as exc:
-            state, reason = RunState.FAILED, str(exc)
+            state, reason = RunState.FAILED, failure_reason(exc)  # with a latched alarm's cure
             self.bus.publish(
                 InstrumentError(
                     run_id=self.run_id, device=exc.device, message=exc.message, fatal=True
