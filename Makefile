@@ -1,23 +1,37 @@
 # The README's two commands are the contract: `make run` and `make test`.
+# `make run` installs what the app needs and starts it on the simulated lab; `make test`
+# adds the test and lint tools (pytest, ruff, mypy, the bluesky/PostgreSQL/dask extras).
+# Each stage says what it does; pip shows a line per package it fetches or installs.
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
-STAMP  := $(VENV)/.installed
+RUN_STAMP := $(VENV)/.installed-run
+DEV_STAMP := $(VENV)/.installed-dev
+PIP    := $(BIN)/python -m pip install --disable-pip-version-check --progress-bar on
 
 .PHONY: run test check lint format typecheck bench venv clean
 
-$(STAMP): pyproject.toml
-	@test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev]'
-	@touch $(STAMP)
+$(BIN)/python:
+	@echo "goniolab: creating the virtual environment $(VENV) ..."
+	$(PYTHON) -m venv $(VENV)
 
-venv: $(STAMP)
+$(RUN_STAMP): pyproject.toml | $(BIN)/python
+	@echo "goniolab: installing goniolab and the libraries it runs on into $(VENV) (a minute the first time) ..."
+	$(PIP) -e .
+	@touch $@
 
-run: $(STAMP)
+$(DEV_STAMP): pyproject.toml $(RUN_STAMP)
+	@echo "goniolab: installing the test and lint tools and the optional extras ..."
+	$(PIP) -e '.[dev]'
+	@touch $@
+
+venv: $(RUN_STAMP)
+
+run: $(RUN_STAMP)
+	@echo "goniolab: starting the TUI on the simulated lab (q quits) ..."
 	$(BIN)/goniolab tui --config configs/lab-sim.toml --autostart --gloss-every 5
 
-check: $(STAMP)
+check: $(DEV_STAMP)
 	$(BIN)/ruff check goniolab drivers sim tests bench
 	$(BIN)/ruff format --check goniolab drivers sim tests bench
 	$(BIN)/mypy
@@ -25,11 +39,11 @@ check: $(STAMP)
 test: check
 	$(BIN)/python -m pytest -n 2 -q
 
-format: $(STAMP)
+format: $(DEV_STAMP)
 	$(BIN)/ruff check --fix goniolab drivers sim tests bench
 	$(BIN)/ruff format goniolab drivers sim tests bench
 
-bench: $(STAMP)
+bench: $(RUN_STAMP)
 	$(BIN)/python bench/bench_optics.py
 
 clean:

@@ -152,6 +152,9 @@ class SpectroReading:
         Counts of the strongest channel over the detector's full scale (1.0 = saturated:
         the values understate the light), when the instrument reports it; ``None`` if not.
         Auto-exposure aims at a peak fraction well below 1 and well above the noise.
+    stale_lines
+        Reply lines that belonged to earlier requests (a late or repeated answer) and were
+        dropped before this reading was taken as the answer to its own request; 0 normally.
     """
 
     wavelengths_nm: tuple[float, ...]
@@ -160,6 +163,7 @@ class SpectroReading:
     exposure_us: int = 0
     timestamp: float = field(default_factory=time.time)
     peak_fraction: float | None = None
+    stale_lines: int = 0
 
 
 @dataclass(frozen=True, slots=True)
@@ -215,7 +219,9 @@ class Goniometer(Protocol):
     """The two-arm in-plane goniometer: lamp arm (theta_i) and detector arm (theta_r).
 
     theta_r is signed: > 0 on the specular side, < 0 on the lamp side. Every move is
-    checked against both arms' limits and the minimum arm separation *before* any motion.
+    checked against both arms' limits and the minimum arm separation *before* any motion,
+    and every motion holds the goniometer for its whole travel: two moves never overlap, so
+    a move of one arm (``move_arm``) is checked against where the other one really stands.
     """
 
     lamp: Axis
@@ -228,6 +234,9 @@ class Goniometer(Protocol):
     async def home(self, timeout_s: float) -> None: ...
     async def move_to(
         self, theta_i_deg: float, theta_r_deg: float, timeout_s: float
+    ) -> tuple[float, float]: ...
+    async def move_arm(
+        self, arm: str, target_deg: float, timeout_s: float
     ) -> tuple[float, float]: ...
     async def positions_deg(self) -> tuple[float, float]: ...
     async def park(self, timeout_s: float) -> None: ...

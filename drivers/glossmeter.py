@@ -1,26 +1,32 @@
 """Glossmeters: the Zehntner ZGM1120 protocol and line-printing meters.
 
-ZGM1120 (Technical Manual rev 3.0, 2021, pp. 16-28; shared/PROTOCOLS.md)
--------------------------------------------------------------------------
-ASCII fields separated by ``|``; commands end with ``:``, replies do not (they end with
-the profile's ``reply_terminator``, UNCONFIRMED ``\\r\\n``). Every command is
-``<opcode>| <serial>|<tid>[|<arg>...]:`` -- the serial number with one leading blank and a
-2-character transaction id that the reply must echo. Measure (opcode 1)::
+ZGM1120 (ZGM 1120 Technical Manual rev 3.0, 2021, section 6; docs/PROTOCOLS.md)
+-------------------------------------------------------------------------------
+ASCII components separated by ``|``; a command ends with ``:``, a return string does not
+(it ends with the profile's ``reply_terminator``, unconfirmed ``\\r\\n``). Every string is
+``<opcode>| <serial>|<tid>[|<value>...]``: the serial number with one leading blank and a
+2-character transaction id that the return string mirrors (p. 12-13). Measure (opcode 1,
+MeasureValue(SerialNo, TID, AngleBinary, Count, isTemp), p. 16)::
 
-    > 1| 401120999|xy|5|1|0:          angle mask (bit0 20, bit1 60, bit2 85), count, temp flag
+    > 1| 401120999|xy|5|1|0:          angle mask (bit0 20, bit1 60, bit2 85), count 1, isTemp
     < 1| 401120999|xy|958|94|-1|-1|993|78|1|25
 
-The reply carries, per angle 20/60/85, the value in 0.1 GU and the raw ADC offset
-(``-1`` not measured, ``-2`` overflow), then the count and the temperature [deg C].
+Per angle 20/60/85 the return string carries the value in dGU (0.1 GU) and the offset
+(raw A/D zero-current value); ``-1``/``-1`` = not measured; an overflow is ``-2`` in the
+OFFSET field (p. 16), whatever the value field holds. Then the count (always 1) and the
+temperature in deg C, which is ``0`` when isTemp = 0 (p. 16): the reading's temperature is
+``None`` unless the command asked for it.
 
-Other opcodes: 28 GetIsOnStandard, 36 MeasureTemp, 48/52 LED on/off, 64 Reset,
-72 Calibrate (deviation in ppm), 6 AutoSend. The manual's payload layout of these replies is
-not in PROTOCOLS.md; this driver assumes (UNCONFIRMED) the same header echo
-``<opcode>| <serial>|<tid>`` followed by the payload fields: 28 -> ``1``/``0``, 36 -> the
-temperature, 72 -> one deviation in ppm per calibrated angle, 48/52/64 -> anything.
-AutoSend: ``6| <serial>|<tid>|7|1|0:`` (same arguments as measure) switches it on without
-an immediate reply; every button press then pushes a line in the measure-reply format,
-opcode ``6`` (or ``1``), with the AutoSend transaction id.
+Other commands (p. 12, 18, 20, 22): 28 GetIsOnStandard -> flag 1/0; 36 MeasureTemp ->
+integer deg C; 48 / 52 ControlLEDOn / Off with their LED argument (the profile's
+``led_argument``: its encoding is unconfirmed) -> header echo (inferred); 64 Reset_Device,
+no return string; 72 Calibrate(Angle, Cal2Standard, Cal2StandValue) of ONE angle ->
+deviation in ppm (``72| 401120999|xy|5361``); 6 AutoSend with a 3-character cluster:
+enable (1/0), AngleBinary, isTemp (3rd character inferred), e.g. ``6| SN|qq|170:``; each
+press of the meter's button then pushes a measure return string (opcode 6, or 1: the
+pushed opcode is unconfirmed) with the AutoSend transaction id. A failed command is
+answered by an error string ``56| SN|tid|<ErrorCode>|<ErrorDetails>`` (p. 20, 24; field
+layout inferred), raised as :class:`~drivers.base.DeviceFault`.
 
 Transaction ids run ``aa, ab, ..., az, ba, ..., zz`` and wrap (configurable first id).
 
@@ -61,22 +67,27 @@ __all__ = [
     "parse_zgm_measure",
 ]
 
+# ZGM 1120 opcodes (Technical Manual rev 3.0, p. 12; docs/PROTOCOLS.md)
 OP_MEASURE = 1
 OP_AUTOSEND = 6
 OP_IS_ON_STANDARD = 28
 OP_MEASURE_TEMP = 36
 OP_LED_ON = 48
 OP_LED_OFF = 52
+OP_ERROR = 56
 OP_RESET = 64
 OP_CALIBRATE = 72
 
 _ANGLE_BITS = {20: 0, 60: 1, 85: 2}
 _TID_CHARS = string.ascii_lowercase
 _INT = re.compile(r"-?[0-9]{1,9}")
+#: Field values of the measure return string (p. 16).
+_NOT_MEASURED = -1
+_OVERFLOW = -2
 
 
 def angle_mask(angles_deg: Sequence[int]) -> int:
-    """ZGM1120 angle bitmask: bit0 20 deg, bit1 60 deg, bit2 85 deg."""
+    """ZGM1120 AngleBinary: bit0 20 deg, bit1 60 deg, bit2 85 deg (manual p. 15)."""
     if not angles_deg:
         raise ValueError("at least one gloss angle is needed")
     mask = 0
@@ -95,16 +106,19 @@ def _int_field(text: str, what: str, line: str, device: str) -> int:
 
 
 def _header(line: str, opcodes: Sequence[int], serial: str, tid: str, device: str) -> list[str]:
-    """Split a reply and check the echoed opcode, serial number and transaction id."""
+    """Split a reply and check the echoed opcode, serial number and transaction id.
+
+    Raises
+    ------
+    DeviceFault
+        The meter answered with an error string (opcode 56) for this transaction.
+    ProtocolError
+        Too few fields, another opcode, serial number or transaction id.
+    """
     fields = line.split("|")
     if len(fields) < 3:
         raise ProtocolError(f"reply {quote(line)} has fewer than 3 '|' fields", device=device)
     opcode = _int_field(fields[0], "opcode", line, device)
-    if opcode not in opcodes:
-        raise ProtocolError(
-            f"reply {quote(line)} is for opcode {opcode}, expected {' or '.join(map(str, opcodes))}",
-            device=device,
-        )
     if fields[1].strip() != serial:
         raise ProtocolError(
             f"reply {quote(line)} is from serial number {fields[1].strip()!r}, expected {serial!r}",
@@ -115,6 +129,19 @@ def _header(line: str, opcodes: Sequence[int], serial: str, tid: str, device: st
             f"transaction id mismatch: sent {tid!r}, reply {quote(line)} carries {fields[2]!r}",
             device=device,
         )
+    if opcode == OP_ERROR and OP_ERROR not in opcodes:
+        detail = "|".join(fields[3:])
+        code = _int_field(fields[3], "error code", line, device) if len(fields) > 3 else None
+        raise DeviceFault(
+            f"the glossmeter refused the command: error string {quote(line)} ({detail})",
+            device=device,
+            code=code,
+        )
+    if opcode not in opcodes:
+        raise ProtocolError(
+            f"reply {quote(line)} is for opcode {opcode}, expected {' or '.join(map(str, opcodes))}",
+            device=device,
+        )
     return fields[3:]
 
 
@@ -123,43 +150,56 @@ def parse_zgm_measure(
     *,
     serial: str,
     tid: str,
+    with_temperature: bool,
     opcodes: Sequence[int] = (OP_MEASURE,),
     device: str = "glossmeter",
 ) -> GlossReading:
-    """Parse a ZGM1120 measure reply (or AutoSend push) into a :class:`GlossReading`.
+    """Parse a ZGM1120 measure return string (or AutoSend push) into a :class:`GlossReading`.
+
+    Parameters
+    ----------
+    with_temperature
+        The command's isTemp flag: with 0 the meter puts ``0`` in the temperature field
+        (manual p. 16), so the reading's temperature is ``None``.
 
     Raises
     ------
     ProtocolError
-        Wrong field count, non-numeric field, wrong opcode / serial / transaction id.
+        Wrong field count, non-numeric field, a negative value that is not ``-1`` (not
+        measured) without the overflow mark ``-2`` in the offset field, count not 1,
+        wrong opcode / serial / transaction id.
+    DeviceFault
+        The meter sent its error string instead.
     """
     payload = _header(line, opcodes, serial, tid, device)
     if len(payload) != 8:
         raise ProtocolError(
             f"measure reply {quote(line)} has {len(payload)} payload fields, expected 8 "
-            "(value and ADC for 20/60/85, count, temperature)",
+            "(value and offset for 20/60/85, count, temperature)",
             device=device,
         )
     values: dict[int, float | None] = {}
     overflow: list[int] = []
     for k, angle in enumerate(GLOSS_ANGLES_DEG):
         raw = _int_field(payload[2 * k], f"{angle} deg value", line, device)
-        _int_field(payload[2 * k + 1], f"{angle} deg ADC offset", line, device)
-        if raw == -1:
-            values[angle] = None
-        elif raw == -2:
+        offset = _int_field(payload[2 * k + 1], f"{angle} deg offset", line, device)
+        if offset == _OVERFLOW:  # p. 16: "-2" in the offset field on overflow
             values[angle] = None
             overflow.append(angle)
+        elif raw == _NOT_MEASURED:
+            values[angle] = None
         elif raw < 0:
             raise ProtocolError(f"{angle} deg value {raw} in reply {quote(line)}", device=device)
         else:
             values[angle] = raw / 10.0
-    _int_field(payload[6], "count", line, device)
+    count = _int_field(payload[6], "count", line, device)
+    if count != 1:
+        raise ProtocolError(f"count {count} in reply {quote(line)}, expected 1", device=device)
     temperature = _float_field(payload[7], "temperature", line, device)
     return GlossReading(
         values_gu=values,
         overflow_deg=tuple(overflow),
-        temperature_c=temperature,
+        temperature_c=temperature if with_temperature else None,
         timestamp=time.time(),
         raw=line,
     )
@@ -230,8 +270,8 @@ class Zgm1120:
         self._tid_index = i + 1
         return _TID_CHARS[i // 26] + _TID_CHARS[i % 26]
 
-    def command(self, opcode: int, tid: str, *args: int) -> str:
-        """The command line ``<opcode>| <serial>|<tid>[|arg...]:``."""
+    def command(self, opcode: int, tid: str, *args: int | str) -> str:
+        """The command string ``<opcode>| <serial>|<tid>[|arg...]:`` (manual p. 12)."""
         fields = [str(opcode), " " + self.serial_number, tid, *(str(a) for a in args)]
         return "|".join(fields) + ":"
 
@@ -243,25 +283,39 @@ class Zgm1120:
         """Close the serial port."""
         await self._io.close()
 
-    async def _transact(
-        self, opcode: int, *args: int, timeout_s: float | None = None
-    ) -> tuple[str, list[str]]:
+    async def _send(self, opcode: int, *args: int | str) -> str:
         tid = self.next_transaction_id()
         self._io.discard_input()
         await self._io.write(self.command(opcode, tid, *args))
-        line = await self._io.read_line(
+        return tid
+
+    async def _reply(self, timeout_s: float | None = None) -> str:
+        return await self._io.read_line(
             self.profile.reply_terminator, self.timeout_s if timeout_s is None else timeout_s
         )
+
+    async def _transact(
+        self, opcode: int, *args: int | str, timeout_s: float | None = None
+    ) -> tuple[str, list[str]]:
+        tid = await self._send(opcode, *args)
+        line = await self._reply(timeout_s)
         return line, _header(line, (opcode,), self.serial_number, tid, self.name)
 
-    async def measure(self, angles_deg: Sequence[int] = GLOSS_ANGLES_DEG) -> GlossReading:
-        """Measure at the given geometries (opcode 1, count 1, no temperature measurement)."""
+    async def measure(
+        self, angles_deg: Sequence[int] = GLOSS_ANGLES_DEG, *, with_temperature: bool = False
+    ) -> GlossReading:
+        """MeasureValue (opcode 1, count 1) at the given geometries; with
+        ``with_temperature`` the meter also measures its temperature (isTemp = 1)."""
         mask = angle_mask(angles_deg)
-        tid = self.next_transaction_id()
-        self._io.discard_input()
-        await self._io.write(self.command(OP_MEASURE, tid, mask, 1, 0))
-        line = await self._io.read_line(self.profile.reply_terminator, self.timeout_s)
-        return parse_zgm_measure(line, serial=self.serial_number, tid=tid, device=self.name)
+        tid = await self._send(OP_MEASURE, mask, 1, int(with_temperature))
+        line = await self._reply()
+        return parse_zgm_measure(
+            line,
+            serial=self.serial_number,
+            tid=tid,
+            with_temperature=with_temperature,
+            device=self.name,
+        )
 
     async def is_on_standard(self) -> bool:
         """Opcode 28 GetIsOnStandard: whether the meter sits on its calibration tile."""
@@ -271,48 +325,94 @@ class Zgm1120:
         return payload[0].strip() == "1"
 
     async def measure_temperature(self) -> float:
-        """Opcode 36 MeasureTemp: instrument temperature in deg C."""
+        """Opcode 36 MeasureTemp: instrument temperature in deg C (an integer, p. 18)."""
         line, payload = await self._transact(OP_MEASURE_TEMP)
         if len(payload) != 1:
             raise ProtocolError(
                 f"expected one temperature in reply {quote(line)}", device=self.name
             )
-        return _float_field(payload[0], "temperature", line, self.name)
+        return float(_int_field(payload[0], "temperature", line, self.name))
 
-    async def set_led(self, on: bool) -> None:
-        """Opcode 48 (LED on) / 52 (LED off)."""
-        await self._transact(OP_LED_ON if on else OP_LED_OFF)
+    async def set_led(self, on: bool, led: int | None = None) -> None:
+        """Opcode 48 ControlLEDOn / 52 ControlLEDOff with the LED argument (p. 12).
+
+        ``led`` ``None`` sends the profile's ``led_argument`` (its encoding is unconfirmed).
+        """
+        argument = self.profile.led_argument if led is None else int(led)
+        line, payload = await self._transact(OP_LED_ON if on else OP_LED_OFF, argument)
+        if payload not in ([], [""]):
+            raise ProtocolError(f"unexpected LED reply {quote(line)}", device=self.name)
 
     async def reset(self) -> None:
-        """Opcode 64 Reset."""
-        await self._transact(OP_RESET)
+        """Opcode 64 Reset_Device: a hardware reset of the measuring head, which sends no
+        return string (p. 20)."""
+        await self._send(OP_RESET)
 
-    async def calibrate(self, timeout_s: float = 10.0) -> tuple[int, ...]:
-        """Opcode 72 Calibrate on the standard tile; deviations in ppm as reported.
+    async def calibrate(
+        self,
+        angle_deg: int,
+        *,
+        second_standard_dgu: int | None = None,
+        timeout_s: float = 10.0,
+    ) -> int:
+        """Opcode 72 Calibrate ONE angle (p. 20-22); returns the deviation from the factory
+        calibration in ppm (``5361`` = 0.5361 %).
+
+        Parameters
+        ----------
+        angle_deg
+            20, 60 or 85 (sent as its AngleBinary bit: inferred, docs/PROTOCOLS.md).
+        second_standard_dgu
+            ``None``: calibrate on the supplied working standard (Cal2Standard 0,
+            Cal2StandValue 0). Otherwise the value of a second standard in dGU (0.1 GU),
+            Cal2Standard 1.
 
         Raises
         ------
         DeviceFault
-            The meter reports no deviation values (calibration refused).
+            The meter answers with its error string (calibration refused).
         """
-        line, payload = await self._transact(OP_CALIBRATE, timeout_s=timeout_s)
-        if not payload or payload == [""]:
-            raise DeviceFault(
-                f"calibration returned no deviation ({quote(line)})", device=self.name
+        angle = angle_mask([angle_deg])
+        if second_standard_dgu is None:
+            args: tuple[int, int, int] = (angle, 0, 0)
+        else:
+            if not 0 < second_standard_dgu <= 99999:
+                raise ValueError(f"second_standard_dgu {second_standard_dgu} out of 1..99999")
+            args = (angle, 1, int(second_standard_dgu))
+        line, payload = await self._transact(OP_CALIBRATE, *args, timeout_s=timeout_s)
+        if len(payload) != 1:
+            raise ProtocolError(
+                f"expected one deviation in ppm in reply {quote(line)}", device=self.name
             )
-        return tuple(_int_field(p, "ppm deviation", line, self.name) for p in payload)
+        return _int_field(payload[0], "ppm deviation", line, self.name)
 
-    async def readings(self) -> AsyncGenerator[GlossReading, None]:
-        """Switch AutoSend on (opcode 6, all angles) and yield each pushed reading."""
-        tid = self.next_transaction_id()
-        self._io.discard_input()
-        await self._io.write(self.command(OP_AUTOSEND, tid, angle_mask(GLOSS_ANGLES_DEG), 1, 0))
+    async def set_autosend(
+        self,
+        enabled: bool,
+        angles_deg: Sequence[int] = GLOSS_ANGLES_DEG,
+        *,
+        with_temperature: bool = False,
+    ) -> str:
+        """Opcode 6 AutoSend with its 3-character cluster (enable, AngleBinary, isTemp);
+        returns the transaction id the pushed readings carry."""
+        cluster = f"{int(enabled)}{angle_mask(angles_deg)}{int(with_temperature)}"
+        return await self._send(OP_AUTOSEND, cluster)
+
+    async def readings(
+        self, *, with_temperature: bool = False
+    ) -> AsyncGenerator[GlossReading, None]:
+        """Switch AutoSend on (all angles) and yield each pushed reading."""
+        tid = await self.set_autosend(True, GLOSS_ANGLES_DEG, with_temperature=with_temperature)
         while True:
             line = await self._io.read_line(self.profile.reply_terminator, None)
+            fields = line.split("|")
+            if len(fields) == 3 and fields[2] == tid:
+                continue  # a header-only acknowledgement of AutoSend (unconfirmed): skip it
             yield parse_zgm_measure(
                 line,
                 serial=self.serial_number,
                 tid=tid,
+                with_temperature=with_temperature,
                 opcodes=(OP_AUTOSEND, OP_MEASURE),
                 device=self.name,
             )

@@ -30,6 +30,17 @@ when that is far enough), and then the other is homed; each step is checked befo
 runs and the positions are checked against the interlock after it. A home search is
 assumed to run straight to the home position (a controller that first searches the other
 way for its switch needs the switch on the side it searches first).
+
+Concurrency: every motion of the two arms (:meth:`TwoArmGoniometer.move_to`,
+:meth:`~TwoArmGoniometer.move_arm`, :meth:`~TwoArmGoniometer.home`,
+:meth:`~TwoArmGoniometer.park`) reserves the goniometer under one lock for its whole
+travel, and is checked and planned inside it against the other arm's position *read under
+the lock*. Two callers that move one arm each at the same time (bluesky's
+``bps.mv(lamp, 5, detector, 3)`` sets both devices at once) are thus run one after the
+other, and the second is checked against where the first one really left its arm, not
+against where that arm stood when the second call was made. :attr:`pending_deg` says
+which targets are reserved while a move runs. Only :meth:`~TwoArmGoniometer.stop` does not
+wait for the lock: it must reach the arms at any moment.
 """
 
 from __future__ import annotations
@@ -270,6 +281,31 @@ class TwoArmGoniometer:
             self.plan_homing(self.park_deg)
         except InterlockError as exc:
             raise ValueError(f"goniometer: {exc.message} (from the park position)") from None
+        self._locks: dict[asyncio.AbstractEventLoop, asyncio.Lock] = {}
+        self._pending: tuple[float, float] | None = None
+
+    def _motion_lock(self) -> asyncio.Lock:
+        """The lock that every motion holds for its whole travel (one per event loop: a
+        lab opened in one loop and driven from another, as bluesky's RunEngine does, still
+        gets one lock per loop that moves it)."""
+        loop = asyncio.get_running_loop()
+        lock = self._locks.get(loop)
+        if lock is None:
+            for old in [k for k in self._locks if k.is_closed()]:
+                del self._locks[old]
+            lock = self._locks[loop] = asyncio.Lock()
+        return lock
+
+    @property
+    def pending_deg(self) -> tuple[float, float] | None:
+        """``(theta_i_deg, theta_r_deg)`` reserved by the motion now running (corrected
+        angles, as requested), ``None`` when the arms are not being moved."""
+        return self._pending
+
+    @property
+    def busy(self) -> bool:
+        """Whether a motion holds the goniometer now."""
+        return self._pending is not None or any(lock.locked() for lock in self._locks.values())
 
     def _axis(self, name: str) -> Axis:
         return self.lamp if name == "lamp" else self.detector
@@ -347,16 +383,51 @@ class TwoArmGoniometer:
     ) -> tuple[float, float]:
         """Check the geometry, move the arms in a safe order, return the reached positions.
 
+        The goniometer is reserved for the whole travel (module docstring, Concurrency).
         ``timeout_s`` applies to each arm's move. On any error both arms are stopped and
         the error is re-raised.
         """
+        self.check_geometry(theta_i_deg, theta_r_deg)
+        async with self._motion_lock():
+            return await self._move_locked(theta_i_deg, theta_r_deg, timeout_s)
+
+    async def move_arm(self, arm: str, target_deg: float, timeout_s: float) -> tuple[float, float]:
+        """Move one arm (``"lamp"``: theta_i, ``"detector"``: theta_r) to ``target_deg``, the
+        other arm staying where it stands when the move starts.
+
+        The other arm's position is read under the motion lock, so a concurrent move of
+        the other arm (bluesky setting both devices at once) is finished first and this
+        move is checked against where it really left that arm.
+
+        Raises
+        ------
+        LimitError, InterlockError
+            The target is outside the arm's limits, or puts the arms too close (nothing
+            moves).
+        """
+        if arm not in ("lamp", "detector"):
+            raise ValueError(f"arm must be 'lamp' or 'detector', got {arm!r}")
+        async with self._motion_lock():
+            ti, tr = await self.positions_deg()
+            target = (float(target_deg), tr) if arm == "lamp" else (ti, float(target_deg))
+            self.check_geometry(*target)
+            return await self._move_locked(*target, timeout_s)
+
+    async def _move_locked(
+        self, theta_i_deg: float, theta_r_deg: float, timeout_s: float
+    ) -> tuple[float, float]:
+        """:meth:`move_to` with the motion lock held by the caller."""
         self.check_geometry(theta_i_deg, theta_r_deg)
         start = await self._arm_positions_deg()
         arm_i, arm_r = self._arms(theta_i_deg, theta_r_deg)
         stages = plan_moves(start, (arm_i, arm_r))
         target = {"lamp": arm_i, "detector": arm_r}
-        for stage in stages:
-            await self._run_stage(stage, target, timeout_s)
+        self._pending = (float(theta_i_deg), float(theta_r_deg))
+        try:
+            for stage in stages:
+                await self._run_stage(stage, target, timeout_s)
+        finally:
+            self._pending = None
         return await self.positions_deg()
 
     def plan_homing(self, start_deg: tuple[float, float]) -> list[HomingStep]:
@@ -383,6 +454,10 @@ class TwoArmGoniometer:
             The arms stand too close now, the homes cannot be reached safely with these
             limits (nothing moves), or a step ended closer than allowed (arms stopped).
         """
+        async with self._motion_lock():
+            await self._home_locked(timeout_s)
+
+    async def _home_locked(self, timeout_s: float) -> None:
         start = await self._arm_positions_deg()  # homing works in the arms' own angles
         steps = self.plan_homing(start)
         sigma = 1.0 if start[0] + start[1] > 0 else -1.0
@@ -412,7 +487,7 @@ class TwoArmGoniometer:
             raise
 
     async def park(self, timeout_s: float) -> None:
-        """Move to the park position with the same interlocks as :meth:`move_to`."""
+        """Move to the park position with the same interlocks (and lock) as :meth:`move_to`."""
         await self.move_to(*self.park_deg, timeout_s)
 
     async def _stop_all(self) -> None:

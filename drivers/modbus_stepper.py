@@ -1,9 +1,9 @@
 """One goniometer arm driven by a stepper controller over Modbus TCP or RTU.
 
 :class:`ModbusStepperAxis` implements :class:`drivers.base.Axis` for any controller whose
-register map is a ``kind = "modbus-stepper"`` profile (``drivers.profiles``): the Oriental
-Motor AZ "direct data operation" (default) and the Applied Motion MDX+ command-register
-style. What goes on the wire is fixed by the profile's documented move sequences:
+register map is a ``kind = "modbus-stepper"`` profile (``drivers.profiles``; every
+address and opcode with its source in docs/PROTOCOLS.md): the Oriental Motor AZ "direct
+data operation" (default) and the Applied Motion command-register style (ST-Q / MDX+). What goes on the wire is fixed by the profile's documented move sequences:
 
 * direct-data (AZ): ``move_to`` writes the 18 registers of the direct-data block in ONE
   function-16 request (data number, operation type 1 = absolute, position [steps], speed,
@@ -30,13 +30,31 @@ has stopped short: also a stall. ALM-A (or the profile's fault bit) -> STOP is s
 alarm code is read and :class:`~drivers.base.DeviceFault` raised; no completion by the
 deadline -> STOP is sent and :class:`~drivers.base.DeviceTimeout` raised.
 
+Request/response integrity: Modbus TCP matches each reply to its request by the MBAP
+transaction id; Modbus RTU has none, and pymodbus takes the first frame that arrives while
+a request waits for the answer to it. A reply that comes after its request timed out would
+thus answer the *next* request of the same shape (a stale feedback position read after a
+move, a position word read as a status word: issue 23, item 2). On RTU the driver
+therefore retries itself (pymodbus' own retry is off, its re-send would leave the first
+answer on the line) and, after any request that went unanswered or came back garbled,
+keeps the line idle for ``late_reply_guard_s`` before the next request: a late frame that
+arrives while no request waits is dropped by pymodbus. Every reply is also checked
+against its request: the function code, a read's register count, a write's echoed
+address and count; a mismatch is a :class:`~drivers.base.ProtocolError` and guards the
+line the same way. A reply later than the request's timeout plus the guard cannot be told
+from an answer on RTU: the guard (default: the request timeout) is the bound.
+
 Errors: connection refused / port missing -> :class:`~drivers.base.Disconnected` naming
 ``host:port`` or the serial port; no answer -> :class:`~drivers.base.DeviceTimeout`;
 bytes received but no valid frame (bad CRC, corrupted MBAP header) after the retries ->
 :class:`~drivers.base.ProtocolError` quoting the bytes;
-Modbus exception responses 1-3 (illegal function / address / value: the profile does not
-fit the device) -> :class:`~drivers.base.ProtocolError`, 4 and above (device failure,
-busy...) -> :class:`~drivers.base.DeviceFault`, both carrying the exception code; any
+Modbus exception responses (Modbus Application Protocol V1.1b3, sec. 7):
+1-3 (illegal function / address / value: the profile does not fit the device) and 4, 8, 10
+(server device failure, memory parity error, gateway path unavailable: nothing a retry
+cures) -> :class:`~drivers.base.DeviceFault` carrying the code, never retried;
+5 and 6 (acknowledge: still processing; server device busy) and 11 (gateway target failed
+to respond) are transient: the request is sent again after a pause, up to ``retries``
+times, then :class:`~drivers.base.DeviceTimeout` (which a scan retries). Any
 other pymodbus error is wrapped in :class:`~drivers.base.ProtocolError`.
 """
 
@@ -87,6 +105,19 @@ _EXCEPTION_NAMES = {
 }
 
 
+#: Exception codes that say "try again later" (spec sec. 7: 05 ACKNOWLEDGE, 06 SERVER DEVICE
+#: BUSY, 0B GATEWAY TARGET DEVICE FAILED TO RESPOND); every other code is final.
+_TRANSIENT_EXCEPTIONS = frozenset({5, 6, 11})
+
+
+class _Busy(Exception):
+    """A transient Modbus exception reply (internal: retried by ``_call``)."""
+
+    def __init__(self, code: int) -> None:
+        super().__init__(code)
+        self.code = code
+
+
 def int32_registers(value: int) -> list[int]:
     """Split a signed 32-bit integer into two registers, high word first."""
     return list(ModbusClientMixin.convert_to_registers(value, _INT32, word_order="big"))
@@ -131,7 +162,11 @@ class ModbusStepperAxis:
     poll_interval_s
         Status polling interval while waiting for IN-POS.
     retries
-        pymodbus request retries.
+        Request retries after a timeout or a garbled reply (pymodbus' own on TCP, the
+        driver's with the late-reply guard on RTU).
+    late_reply_guard_s
+        RTU: how long the line is kept idle after an unanswered or garbled request before
+        the next one (``None``: ``timeout_s``). See the module docstring.
     sleep, clock
         ``await sleep(dt_s)`` and ``clock() -> s`` used for polling and deadlines
         (``asyncio.sleep`` / ``time.monotonic``; pass a sim clock's ``sleep`` / ``now``).
@@ -158,6 +193,7 @@ class ModbusStepperAxis:
         timeout_s: float = 1.0,
         poll_interval_s: float = 0.02,
         retries: int = 1,
+        late_reply_guard_s: float | None = None,
         sleep: Callable[[float], Awaitable[Any]] = asyncio.sleep,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
@@ -211,6 +247,16 @@ class ModbusStepperAxis:
         self.timeout_s = float(timeout_s)
         self.poll_interval_s = float(poll_interval_s)
         self.retries = retries
+        self.late_reply_guard_s = (
+            float(timeout_s) if late_reply_guard_s is None else float(late_reply_guard_s)
+        )
+        if not (math.isfinite(self.late_reply_guard_s) and self.late_reply_guard_s >= 0):
+            raise ValueError(f"{name}: late_reply_guard_s must be >= 0, got {late_reply_guard_s}")
+        #: RTU: a request went unanswered or its reply was garbled or mismatched; the
+        #: line is kept idle for the guard before the next request.
+        self._line_suspect = False
+        #: RTU: requests that were answered late, garbled or by a reply to another request.
+        self.suspect_replies = 0
         self._sleep = sleep
         self._clock = clock
         self.speed_counts = self._counts(
@@ -283,7 +329,7 @@ class ModbusStepperAxis:
                 parity=self.parity,
                 stopbits=s.stopbits,
                 timeout=self.timeout_s,
-                retries=self.retries,
+                retries=0,  # the driver retries, with the late-reply guard (module docstring)
                 reconnect_delay=0,
                 trace_packet=self._trace_packet,
             )
@@ -353,48 +399,115 @@ class ModbusStepperAxis:
                 f"unit {self.unit_id}"
             )
             if code in (1, 2, 3):
-                raise ProtocolError(
-                    f"{message}: the profile {self.profile.name!r} does not fit the device",
+                raise DeviceFault(
+                    f"{message}: the profile {self.profile.name!r} does not fit the device "
+                    "(not retried; check the profile's addresses against the manual)",
                     device=self.name,
+                    code=code,
                 )
             raise DeviceFault(message, device=self.name, code=code)
         return rr
 
     async def _call(
-        self, what: str, fn: Callable[..., Awaitable[Any]], *args: Any, **kw: Any
+        self,
+        what: str,
+        fn: Callable[..., Awaitable[Any]],
+        *args: Any,
+        expect: Callable[[Any], str] | None = None,
+        **kw: Any,
     ) -> Any:
+        """One request; ``expect(reply)`` returns "" when the reply answers this request,
+        else what is wrong with it. On RTU a timeout, a garbled reply or a reply to another
+        request is retried here after the late-reply guard (module docstring)."""
         if self._client is None:
             raise Disconnected(f"not connected to {self.endpoint}", device=self.name)
         if not self._client.connected:
             raise Disconnected(f"connection to {self.endpoint} is closed", device=self.name)
+        rtu = self.transport == "rtu"
+        attempts = self.retries + 1
         async with self._lock:
-            self._received = b""
-            try:
-                rr = await fn(*args, device_id=self.unit_id, **kw)
-            except ConnectionException as exc:
+            for attempt in range(attempts):
+                if rtu and self._line_suspect:
+                    # a real-time wait: it is about bytes on the line, not the lab's clock
+                    await asyncio.sleep(self.late_reply_guard_s)
+                    self._line_suspect = False
+                try:
+                    rr = await self._request(what, fn, *args, **kw)
+                    if rr.isError():
+                        code = int(getattr(rr, "exception_code", 0))
+                        if code in _TRANSIENT_EXCEPTIONS:
+                            raise _Busy(code)
+                    wrong = "" if rr.isError() or expect is None else expect(rr)
+                    if wrong:
+                        raise ProtocolError(
+                            f"reply from {self.endpoint} to {what} answers another request: "
+                            f"{wrong}",
+                            device=self.name,
+                        )
+                except _Busy as busy:
+                    if attempt == attempts - 1:
+                        text = _EXCEPTION_NAMES.get(busy.code, "unknown exception")
+                        raise DeviceTimeout(
+                            f"Modbus exception {busy.code} ({text}) on {what} at "
+                            f"{self.endpoint}, unit {self.unit_id}, {attempts} times",
+                            device=self.name,
+                        ) from None
+                    await self._sleep(self.poll_interval_s * 2**attempt)
+                    continue
+                except (DeviceTimeout, ProtocolError):
+                    if not rtu:  # TCP: pymodbus has retried a timeout; ids match replies
+                        raise
+                    self._line_suspect = True
+                    self.suspect_replies += 1
+                    if attempt == attempts - 1:
+                        raise
+                    continue
+                return self._check(rr, what)
+        raise AssertionError("unreachable")  # pragma: no cover - the loop returns or raises
+
+    async def _request(
+        self, what: str, fn: Callable[..., Awaitable[Any]], *args: Any, **kw: Any
+    ) -> Any:
+        """Send one request through pymodbus; map its errors onto drivers.base errors."""
+        assert self._client is not None
+        self._received = b""
+        try:
+            return await fn(*args, device_id=self.unit_id, **kw)
+        except ConnectionException as exc:
+            raise Disconnected(
+                f"connection to {self.endpoint} lost during {what}: {exc}", device=self.name
+            ) from exc
+        except ModbusIOException as exc:
+            if not self._client.connected:
                 raise Disconnected(
-                    f"connection to {self.endpoint} lost during {what}: {exc}", device=self.name
+                    f"connection to {self.endpoint} lost during {what}", device=self.name
                 ) from exc
-            except ModbusIOException as exc:
-                if not self._client.connected:
-                    raise Disconnected(
-                        f"connection to {self.endpoint} lost during {what}", device=self.name
-                    ) from exc
-                raise self._no_valid_answer(what, exc) from exc
-            except ModbusException as exc:
-                raise ProtocolError(
-                    f"{what} at {self.endpoint} failed: {exc}", device=self.name
-                ) from exc
-            except TimeoutError as exc:
-                raise self._no_valid_answer(what, exc) from exc
-        return self._check(rr, what)
+            raise self._no_valid_answer(what, exc) from exc
+        except ModbusException as exc:
+            raise ProtocolError(
+                f"{what} at {self.endpoint} failed: {exc}", device=self.name
+            ) from exc
+        except TimeoutError as exc:
+            raise self._no_valid_answer(what, exc) from exc
 
     async def _read(self, address: int, count: int, what: str) -> list[int]:
         client = self._client
         if client is None:
             raise Disconnected(f"not connected to {self.endpoint}", device=self.name)
+
+        def expect(rr: Any) -> str:
+            got = int(getattr(rr, "function_code", 0))
+            n = len(getattr(rr, "registers", []))
+            if got != 3 or n != count:
+                return f"function {got} with {n} registers, expected function 3 with {count}"
+            return ""
+
         rr = await self._call(
-            f"read {what} (0x{address:04X})", client.read_holding_registers, address, count=count
+            f"read {what} (0x{address:04X})",
+            client.read_holding_registers,
+            address,
+            count=count,
+            expect=expect,
         )
         registers = list(getattr(rr, "registers", []))
         if len(registers) != count:
@@ -409,8 +522,23 @@ class ModbusStepperAxis:
         client = self._client
         if client is None:
             raise Disconnected(f"not connected to {self.endpoint}", device=self.name)
+
+        def expect(rr: Any) -> str:
+            got = int(getattr(rr, "function_code", 0))
+            echoed = (int(getattr(rr, "address", -1)), int(getattr(rr, "count", -1)))
+            if got != 16 or echoed != (address, len(values)):
+                return (
+                    f"function {got} echoing address 0x{echoed[0]:04X} count {echoed[1]}, "
+                    f"expected function 16 echoing 0x{address:04X} count {len(values)}"
+                )
+            return ""
+
         await self._call(
-            f"write {what} (0x{address:04X})", client.write_registers, address, list(values)
+            f"write {what} (0x{address:04X})",
+            client.write_registers,
+            address,
+            list(values),
+            expect=expect,
         )
 
     async def _read_int32(self, address: int, what: str, *, signed: bool = True) -> int:
@@ -440,11 +568,19 @@ class ModbusStepperAxis:
         sb = self.profile.status_bits
         return self._bit(word, sb.alarm) or self._bit(word, sb.fault)
 
+    async def _read_word_field(self, field: str, address: int, what: str) -> int:
+        # a 16-bit field on some drives (profile single_register_fields; docs/PROTOCOLS.md)
+        if field in self.profile.single_register_fields:
+            return (await self._read(address, 1, what))[0]
+        return await self._read_int32(address, what, signed=False)
+
     async def _status_word(self) -> int:
-        return await self._read_int32(self.profile.registers.output_status, "status", signed=False)
+        address = self.profile.registers.output_status
+        return await self._read_word_field("output_status", address, "status")
 
     async def _alarm_code(self) -> int:
-        return await self._read_int32(self.profile.registers.alarm_code, "alarm code", signed=False)
+        address = self.profile.registers.alarm_code
+        return await self._read_word_field("alarm_code", address, "alarm code")
 
     async def _raise_alarm(self, context: str) -> NoReturn:
         code = await self._alarm_code()

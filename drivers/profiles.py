@@ -1,7 +1,9 @@
 """Device profiles: the TOML files in ``configs/profiles/`` as validated, frozen dataclasses.
 
-Every fact about an instrument that is not fixed by a public document (PROTOCOLS.md)
-lives in a profile, so a lab can correct it from its own manual without touching Python.
+Every fact about an instrument that is not fixed by a public document lives in a profile,
+so a lab can correct it from its own manual without touching Python. Each address, opcode
+and scaling in the built-in profiles is listed, with its source and a confidence mark
+(confirmed / inferred / unconfirmed), in ``docs/PROTOCOLS.md`` (a test checks it).
 Both the drivers (``drivers.modbus_stepper``, ``drivers.stil``, ``drivers.glossmeter``)
 and the simulated lab (``sim.wire``) read the same profile, so they speak the same bytes.
 
@@ -60,6 +62,10 @@ All 32-bit values are two registers, high word first (pymodbus ``word_order="big
     ``accel``, ``decel``, ``velocity``   16-bit registers (counts, see ``[units]``).
     ``target_position``    32-bit signed target position in steps.
 
+``single_register_fields``  (optional) names among ``output_status`` and ``alarm_code``
+                   that are ONE 16-bit register on this drive (Applied Motion ST-Q: alarm
+                   code 40001 and status code 40002 are SHORT, 920-0072 p. 7); the driver
+                   and the simulator then read / serve one register instead of a pair.
 ``[status_bits]``  bit numbers: ``in_position``, ``moving``, ``alarm`` required; ``ready``,
                    ``busy``, ``home_end``, ``fault``, ``homing``, ``stopping`` optional.
 ``[input_bits]``   (direct-data) ``start``, ``zhome``, ``stop``, ``free``, ``alarm_reset``,
@@ -108,8 +114,10 @@ The STIL Ruby raw command set is NOT public; the whole command table is a design
 
 kind = "zgm1120"
 ----------------
-The protocol is fixed in ``drivers.glossmeter``; the profile holds ``reply_terminator``,
-``timeout_s`` and ``[serial]``.
+The protocol is fixed in ``drivers.glossmeter`` (Zehntner ZGM 1120 technical manual
+rev 3.0, docs/PROTOCOLS.md); the profile holds ``reply_terminator``, ``timeout_s``,
+``[serial]`` and ``led_argument`` (the ``LED`` argument of ControlLEDOn/Off, opcodes 48/52,
+whose encoding the manual's retrieved pages do not give: unconfirmed, default 1).
 
 kind = "line-gloss"
 -------------------
@@ -326,6 +334,7 @@ class StepperProfile:
     direct_data: DirectDataDefaults | None = None
     opcodes: Opcodes | None = None
     unconfirmed: tuple[str, ...] = ()
+    single_register_fields: tuple[str, ...] = ()
     kind: str = "modbus-stepper"
 
 
@@ -365,6 +374,7 @@ class ZgmProfile:
     serial: SerialSettings
     reply_terminator: str
     timeout_s: float
+    led_argument: int = 1
     unconfirmed: tuple[str, ...] = ()
     kind: str = "zgm1120"
 
@@ -536,6 +546,7 @@ class _StepperFile(_File):
     direct_data: DirectDataDefaults | None = None
     opcodes: Opcodes | None = None
     units: _Units
+    single_register_fields: list[Literal["output_status", "alarm_code"]] = []
 
     @field_validator("serial", mode="before")
     @classmethod
@@ -587,6 +598,7 @@ class _StepperFile(_File):
             direct_data=self.direct_data,
             opcodes=self.opcodes,
             unconfirmed=tuple(self.unconfirmed),
+            single_register_fields=tuple(self.single_register_fields),
         )
 
 
@@ -755,6 +767,7 @@ class _ZgmFile(_File):
     kind: Literal["zgm1120"]
     reply_terminator: NonEmpty
     timeout_s: Positive
+    led_argument: Annotated[int, Strict(), Field(ge=0, le=99)] = 1
 
     def profile(self, path: Path) -> ZgmProfile:
         return ZgmProfile(
@@ -764,6 +777,7 @@ class _ZgmFile(_File):
             serial=self.serial,
             reply_terminator=self.reply_terminator,
             timeout_s=self.timeout_s,
+            led_argument=self.led_argument,
             unconfirmed=tuple(self.unconfirmed),
         )
 

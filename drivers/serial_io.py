@@ -24,6 +24,12 @@ from drivers.profiles import SerialSettings
 __all__ = ["LineTransport", "busy_hint", "quote"]
 
 
+#: After a line overran the read buffer: how long the link must stay silent before it
+#: counts as drained, and the longest the drain goes on (a device streaming garbage).
+FLOOD_QUIET_S = 0.1
+FLOOD_DRAIN_MAX_S = 10.0
+
+
 def busy_hint(exc: BaseException) -> str:
     """The open error, with the likely cause spelled out when the port is locked."""
     text = str(exc)
@@ -108,12 +114,73 @@ class LineTransport:
         except (serial.SerialException, OSError) as exc:
             raise Disconnected(f"write to {self.port!r} failed: {exc}", device=self.device) from exc
 
-    def discard_input(self) -> None:
-        """Drop bytes already received but not read (stale replies)."""
+    def discard_input(self) -> int:
+        """Drop bytes already received but not read (stale replies); return how many."""
         reader, _ = self._streams()
         buffered = getattr(reader, "_buffer", None)
         if isinstance(buffered, bytearray):
+            dropped = len(buffered)
             buffered.clear()
+            return dropped
+        return 0
+
+    async def drain_quiet(self, quiet_s: float, max_s: float) -> int:
+        """Read and drop everything that arrives until the line has been quiet for
+        ``quiet_s`` (at most ``max_s`` in all); return the number of bytes dropped.
+
+        Used after a request went unanswered: the late answer may still be on its way, and
+        would otherwise be read as the answer to the next request.
+        """
+        reader, _ = self._streams()
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + max(0.0, max_s)
+        dropped = 0
+        buffered = getattr(reader, "_buffer", None)
+        if isinstance(buffered, bytearray):
+            dropped += len(buffered)
+            buffered.clear()
+        while True:
+            wait_s = min(quiet_s, deadline - loop.time())
+            if wait_s <= 0.0:
+                return dropped
+            try:
+                chunk = await asyncio.wait_for(reader.read(65536), wait_s)
+            except TimeoutError:
+                return dropped  # quiet for quiet_s: whatever was late has arrived
+            except (serial.SerialException, OSError) as exc:
+                raise Disconnected(
+                    f"read from {self.port!r} failed: {exc}", device=self.device
+                ) from exc
+            if not chunk:  # end of stream: the port closed
+                raise Disconnected(f"port {self.port!r} closed", device=self.device)
+            dropped += len(chunk)
+
+    async def drain_until_quiet(
+        self, quiet_s: float = FLOOD_QUIET_S, max_s: float = FLOOD_DRAIN_MAX_S
+    ) -> tuple[int, bool]:
+        """Read and drop input until none arrives for ``quiet_s`` (or ``max_s`` passed).
+
+        Returns the bytes dropped and whether the line went quiet.
+        """
+        reader, _ = self._streams()
+        buffered = getattr(reader, "_buffer", None)
+        dropped = len(buffered) if isinstance(buffered, bytearray) else 0
+        self.discard_input()
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + max_s
+        while (left := deadline - loop.time()) > 0:
+            try:
+                chunk = await asyncio.wait_for(reader.read(1 << 16), min(quiet_s, left))
+            except TimeoutError:
+                return dropped, True
+            except (serial.SerialException, OSError) as exc:
+                raise Disconnected(
+                    f"read from {self.port!r} failed: {exc}", device=self.device
+                ) from exc
+            if not chunk:  # end of file: the port closed
+                return dropped, True
+            dropped += len(chunk)
+        return dropped, False
 
     async def read_line(self, terminator: str, timeout_s: float | None) -> str:
         """Read one line ending in ``terminator``; return it without the terminator.
@@ -134,9 +201,13 @@ class LineTransport:
                 device=self.device,
             ) from exc
         except asyncio.LimitOverrunError as exc:
-            self.discard_input()
+            # a flood (megabytes without the terminator): drop it until the line goes
+            # quiet, or every retry meets the rest of the same flood
+            dropped, quiet = await self.drain_until_quiet()
             raise ProtocolError(
-                f"line on {self.port!r} longer than the buffer without terminator {terminator!r}",
+                f"line on {self.port!r} longer than the buffer without terminator "
+                f"{terminator!r}: {dropped} bytes dropped"
+                + ("" if quiet else f", still arriving after {FLOOD_DRAIN_MAX_S:g} s"),
                 device=self.device,
             ) from exc
         except (serial.SerialException, OSError) as exc:

@@ -1,6 +1,6 @@
 """STIL (Marposs) "Ruby" spectro-colorimeter over a serial line, plus CIE colour maths.
 
-The Ruby's raw serial command set is NOT public (shared/PROTOCOLS.md). The driver speaks the
+The Ruby's raw serial command set is NOT public (docs/PROTOCOLS.md). The driver speaks the
 line-based ASCII protocol described by a ``kind = "stil-spectro"`` profile
 (``configs/profiles/stil-ruby.toml``, every command UNCONFIRMED): one command line, then
 the profile's reply line(s) or one error line. With the built-in profile::
@@ -10,6 +10,23 @@ the profile's reply line(s) or one error line. With the built-in profile::
     > MEAS\\r                      < Y=12.3456\\r\\n
                                    < SPEC 380 5 81 12.1,12.3,...\\r\\n      (81 values, %)
     > EXP 100\\r                   < ERR 2 exposure out of range\\r\\n
+
+Every reply is matched to its request. The protocol carries no sequence number, so the
+driver relies on the device answering in order: after each measurement it sends a *fence*,
+the set-exposure command with the exposure already set, and reads up to that command's
+echo. The measurement's own reply is the last complete reply before the echo; any lines
+before it are a late or repeated answer to an earlier request and are dropped (counted in
+:attr:`drivers.base.SpectroReading.stale_lines`). After a request went unanswered or a
+reply was malformed, the next request first drains the line until it has been quiet for
+``resync_quiet_s``. Without this a spectro that answered one MEAS after the timeout shifted
+every later reading to the next geometry (issue 23, item 1)::
+
+    > MEAS\r                      (no reply within the timeout: the runner retries)
+    > MEAS\r                      < Y=...  (late answer to the first MEAS)
+                                   < SPEC ...
+    > EXP 10000\r                 < Y=...  (answer to the retry: this one is kept)
+                                   < SPEC ...
+                                   < EXP=10000   (the fence)
 
 Colour is computed on our side from the returned spectrum with colour-science
 (:func:`spectrum_to_xyz`, :func:`spectrum_to_lab`): CIE 15:2004 tristimulus integration
@@ -29,6 +46,7 @@ from numpy.typing import ArrayLike
 
 from drivers.base import (
     DeviceFault,
+    DeviceTimeout,
     LimitError,
     ProtocolError,
     SpectroReading,
@@ -136,6 +154,12 @@ class StilSpectro:
         Exposure set on :meth:`connect` (profile default when ``None``).
     timeout_s
         Reply timeout (profile default when ``None``).
+    fence
+        Confirm each measurement's reply with the fence (module docstring). Only a device
+        that cannot take a command right after a measurement needs ``False``; a late reply
+        is then caught by the drain alone, which cannot tell a repeated answer.
+    resync_quiet_s
+        After a failed request: how long the line must stay quiet before the next request.
     """
 
     def __init__(
@@ -147,8 +171,18 @@ class StilSpectro:
         baudrate: int | None = None,
         exposure_us: int | None = None,
         timeout_s: float | None = None,
+        fence: bool = True,
+        resync_quiet_s: float = 0.2,
     ) -> None:
         self.name = name
+        self.fence = bool(fence)
+        self.resync_quiet_s = float(resync_quiet_s)
+        #: Set when a request went unanswered or its reply was malformed: the line may
+        #: still carry that request's answer, so the next request first drains it.
+        self._dirty = False
+        #: Bytes dropped by the drains and reply lines dropped by the fences since connect.
+        self.stale_bytes = 0
+        self.stale_lines = 0
         self.profile = profile if isinstance(profile, StilProfile) else load_stil_profile(profile)
         settings = self.profile.serial
         if baudrate is not None:
@@ -173,6 +207,7 @@ class StilSpectro:
     async def connect(self) -> None:
         """Open the port, identify the device and set the configured exposure."""
         await self._io.open()
+        self._dirty = False
         try:
             await self.identify()
             await self.set_exposure_us(self._initial_exposure_us)
@@ -184,16 +219,38 @@ class StilSpectro:
         """Close the port."""
         await self._io.close()
 
+    async def _begin(self) -> None:
+        """Before a request: drop what is buffered, and after a failed request wait for the
+        line to go quiet (its late answer may still be coming)."""
+        if self._dirty:
+            max_s = self.timeout_s + self.exposure_us * 1e-6
+            self.stale_bytes += await self._io.drain_quiet(self.resync_quiet_s, max_s)
+            self._dirty = False
+        else:
+            self.stale_bytes += self._io.discard_input()
+
+    async def _read(self, timeout_s: float) -> str:
+        """One reply line; a timeout or an unreadable line marks the link for a resync."""
+        try:
+            return await self._io.read_line(self.profile.reply_terminator, timeout_s)
+        except (DeviceTimeout, ProtocolError):
+            self._dirty = True
+            raise
+
     async def _transact(
         self, command: str, templates: tuple[str, ...], timeout_s: float
     ) -> list[tuple[str, dict[str, str]]]:
         """Send one command; return each reply line with its template fields."""
-        self._io.discard_input()
+        await self._begin()
         await self._io.write(command + self.profile.command_terminator)
         replies: list[tuple[str, dict[str, str]]] = []
         for template in templates:
-            line = await self._io.read_line(self.profile.reply_terminator, timeout_s)
-            replies.append((line, match_reply(self.profile, template, line, self.name)))
+            line = await self._read(timeout_s)
+            try:
+                replies.append((line, match_reply(self.profile, template, line, self.name)))
+            except ProtocolError:
+                self._dirty = True
+                raise
         return replies
 
     async def identify(self) -> str:
@@ -222,19 +279,87 @@ class StilSpectro:
 
     async def measure(self) -> SpectroReading:
         """Take one reading: relative luminance and the spectrum, both in % of the reference."""
+        p = self.profile
         timeout_s = self.timeout_s + self.exposure_us * 1e-6
-        replies = await self._transact(
-            self.profile.cmd_measure, self.profile.reply_measure, timeout_s
-        )
-        lines = [line for line, _ in replies]
-        luminance, wavelengths, values = parse_measure_reply(self.profile, lines, device=self.name)
+        n = len(p.reply_measure)
+        error_re = template_regex(p.reply_error)
+        await self._begin()
+        await self._io.write(p.cmd_measure + p.command_terminator)
+        lines: list[str] = []
+        for _ in range(n):
+            line = await self._read(timeout_s)
+            if error_re.match(line):  # the device refused the measurement: its one reply
+                match_reply(p, p.reply_measure[0], line, self.name)  # raises DeviceFault
+            lines.append(line)
+        if self.fence:
+            lines = await self._fenced(lines)
+        stale = len(lines) - n
+        own = lines[stale:]
+        try:
+            luminance, wavelengths, values = parse_measure_reply(p, own, device=self.name)
+        except ProtocolError:
+            self._dirty = True
+            raise
+        self.stale_lines += stale
         return SpectroReading(
             wavelengths_nm=wavelengths,
             values=values,
             luminance_pct=luminance,
             exposure_us=self.exposure_us,
             timestamp=time.time(),
+            stale_lines=stale,
         )
+
+    async def _fenced(self, lines: list[str]) -> list[str]:
+        """Send the fence and read every line up to its echo; return ``lines`` plus the
+        lines that came before the echo (the measurement's reply is the last of them).
+
+        The fence is idempotent (it sets the exposure already set), so a fence that goes
+        unanswered or comes back garbled is sent once more after a drain: one lost or
+        corrupted line does not cost the measurement."""
+        p = self.profile
+        command = p.cmd_set_exposure.format(exposure_us=self.exposure_us)
+        echo_re = template_regex(p.reply_set_exposure)
+        error_re = template_regex(p.reply_error)
+        reply_res = [template_regex(t) for t in p.reply_measure]
+        # at most one stale reply per earlier request of this reading (first try, retries)
+        limit = len(lines) + 4 * len(p.reply_measure) + 4
+        for attempt in range(2):
+            await self._io.write(command + p.command_terminator)
+            try:
+                while True:
+                    line = await self._read(self.timeout_s)
+                    echo = echo_re.match(line)
+                    if (
+                        echo is not None
+                        and int(echo.groupdict().get("exposure_us") or self.exposure_us)
+                        == self.exposure_us
+                    ):
+                        self._dirty = False  # in step with the device again
+                        return lines
+                    if error_re.match(line):  # the fence refused: its answer; resync next
+                        self._dirty = True
+                        return lines
+                    if not any(r.match(line) for r in reply_res):
+                        raise ProtocolError(
+                            f"unexpected line {quote(line)} while waiting for the echo of "
+                            f"the fence {command!r}",
+                            device=self.name,
+                        )
+                    lines.append(line)
+                    if len(lines) > limit:
+                        self._dirty = True
+                        raise ProtocolError(
+                            f"{len(lines)} reply lines to one measurement and no echo of the "
+                            f"fence {command!r}: the device does not answer in order",
+                            device=self.name,
+                        )
+            except (DeviceTimeout, ProtocolError):
+                if attempt == 1 or len(lines) > limit:
+                    self._dirty = True
+                    raise
+                self.stale_bytes += await self._io.drain_quiet(self.resync_quiet_s, self.timeout_s)
+        raise AssertionError("unreachable")  # pragma: no cover - the loop returns or raises
 
 
 # --------------------------------------------------------------------------- colour

@@ -22,6 +22,7 @@ from __future__ import annotations
 import asyncio
 import concurrent.futures
 import math
+import sys
 from collections.abc import Coroutine, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -43,11 +44,13 @@ if TYPE_CHECKING:  # pragma: no cover - typing only
 __all__ = [
     "Run",
     "load_surface",
+    "open_dataset",
     "open_run",
     "open_runs",
     "predict_brdf",
     "predict_gloss",
     "run_scan",
+    "run_scan_async",
 ]
 
 _T = TypeVar("_T")
@@ -67,21 +70,73 @@ def _heightmap(surface: Any, step_um: float | None = None) -> HeightMap:
         return resolve_map(surface, step_um=step_um)
     attrs = getattr(surface, "attrs", None)
     if attrs is not None and getattr(surface, "ndim", 0) == 2:
-        try:
-            return HeightMap(
-                np.asarray(surface.values, dtype=np.float64),
-                float(attrs["dx_um"]),
-                float(attrs["dy_um"]),
-                source=str(attrs.get("source", "<DataArray>")),
-            )
-        except KeyError as exc:
-            raise UserError(
-                f"surface DataArray: no {exc.args[0]} attribute (use load_surface)"
-            ) from None
+        return _dataarray_heightmap(surface)
     raise UserError(
         f"surface: expected a file path, sample:NAME or a load_surface() DataArray, "
         f"got {type(surface).__name__}"
     )
+
+
+#: Relative tolerance between a DataArray's coordinate steps and its dx_um/dy_um attributes
+#: (and between its own steps: the grid must be regular).
+_STEP_RTOL = 1e-6
+
+
+def _coordinate_step(da: Any, dim: str, attr: str) -> float:
+    """The lateral step along ``dim``: its coordinates' spacing, checked regular and
+    against the ``attr`` attribute when both exist.
+
+    After ``z.isel(x_um=slice(None, None, 2))`` or ``z.coarsen(x_um=2).mean()`` xarray keeps
+    the attributes (``dx_um = 1``) while the coordinates step by 2: the step from the
+    attribute silently gave the gloss of a map twice as steep (issue 22.10). The
+    coordinates are what xarray keeps right, so they decide; a disagreeing attribute is
+    refused rather than guessed over.
+    """
+    name = f"surface DataArray: {dim}"
+    given = da.attrs.get(attr)
+    coord = da.coords.get(dim)
+    if coord is None or coord.size < 2:
+        if given is None:
+            raise UserError(f"{name}: no coordinates and no {attr} attribute (use load_surface)")
+        step = float(given)
+    else:
+        diffs = np.diff(np.asarray(coord.values, dtype=np.float64))
+        step = float(np.mean(diffs))
+        if not (math.isfinite(step) and step > 0):
+            raise UserError(f"{name}: coordinates must increase (mean step {step:g} um)")
+        if float(np.max(np.abs(diffs - step))) > _STEP_RTOL * step:
+            raise UserError(
+                f"{name}: coordinates are not evenly spaced (steps {float(diffs.min()):g} to "
+                f"{float(diffs.max()):g} um): a height map needs a regular grid"
+            )
+        if given is not None and abs(float(given) - step) > _STEP_RTOL * step:
+            raise UserError(
+                f"{name}: coordinates step by {step:g} um but attrs['{attr}'] = {float(given):g}"
+                f" (after isel/coarsen/interp xarray keeps the old attribute): set "
+                f"attrs['{attr}'] = {step:g} or delete it"
+            )
+    if not (math.isfinite(step) and step > 0):
+        raise UserError(f"{name}: step {step:g} um must be positive")
+    return step
+
+
+def _dataarray_heightmap(da: Any) -> HeightMap:
+    from goniolab.optics.heightmap import HeightMap
+
+    dims = tuple(da.dims)
+    if set(dims) == {"y_um", "x_um"} and dims != ("y_um", "x_um"):
+        da = da.transpose("y_um", "x_um")  # rows are y, whatever order the user left
+    elif dims != ("y_um", "x_um"):
+        raise UserError(f"surface DataArray: dims {dims}, expected ('y_um', 'x_um')")
+    try:
+        return HeightMap(
+            np.asarray(da.values, dtype=np.float64),
+            _coordinate_step(da, "x_um", "dx_um"),
+            _coordinate_step(da, "y_um", "dy_um"),
+            source=str(da.attrs.get("source", "<DataArray>")),
+        )
+    except ValueError as exc:
+        raise UserError(f"surface DataArray: {exc}") from None
 
 
 def load_surface(path: str | Path, *, step_um: float | None = None) -> xr.DataArray:
@@ -99,7 +154,9 @@ def load_surface(path: str | Path, *, step_um: float | None = None) -> xr.DataAr
     -------
     xarray.DataArray
         Heights in micrometres; coords ``y_um``/``x_um`` in micrometres; attrs ``dx_um``,
-        ``dy_um``, ``source`` and the file's metadata as ``meta_*``.
+        ``dy_um``, ``source`` and the file's metadata as ``meta_*``. The predictions take
+        the steps from the coordinates (so ``isel``/``coarsen`` results work once
+        ``dx_um``/``dy_um`` are set right or deleted; a disagreeing attribute is refused).
     """
     from goniolab.datasets import heightmap_dataarray
 
@@ -324,6 +381,30 @@ class Run:
     id: int
     store: str | Path
 
+    def __repr__(self) -> str:
+        # a notebook shows (and saves in the .ipynb) this: never the store's password
+        from goniolab.redact import redact
+
+        return f"Run(id={self.id}, store={redact(str(self.store))!r})"
+
+    def annotate(
+        self,
+        *,
+        operator: str | None = None,
+        sample_id: str | None = None,
+        notes: str | None = None,
+        tags: Sequence[str] | None = None,
+    ) -> RunRecord:
+        """Set the run's operator, physical sample id, notes or tags (``None`` keeps one;
+        the config's ``[run]`` table gives a new run its defaults); returns the record."""
+        try:
+            with RunStore(self.store, create=False) as s:
+                return s.set_meta(
+                    self.id, operator=operator, sample_id=sample_id, notes=notes, tags=tags
+                )
+        except StoreError as exc:
+            raise UserError(str(exc)) from exc
+
     @property
     def record(self) -> RunRecord:
         """The run's row: kind, plan, config snapshot, sample, model, status, times."""
@@ -368,11 +449,61 @@ class Run:
             return run_summary(s, self.record)
 
     def plot(self, out: str | Path | None = None, *, log: bool = False) -> Any:
-        """The figure ``goniolab plot`` draws; saved to ``out`` when given."""
+        """The figure ``goniolab plot`` draws; saved to ``out`` when given.
+
+        In a notebook the figure shows inline as the cell's value (no ``%matplotlib
+        inline`` needed: :func:`_show_figures_inline`)."""
         from goniolab.plot import plot_run
 
         with _open_readonly(self.store) as s:
-            return plot_run(s, self.id, out=out, log=log)
+            fig = plot_run(s, self.id, out=out, log=log)
+        _show_figures_inline()
+        return fig
+
+
+def _figure_png(fig: Any) -> bytes:
+    import io
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=100)
+    return buf.getvalue()
+
+
+def _show_figures_inline() -> None:
+    """In IPython / Jupyter: display a matplotlib ``Figure`` as a PNG.
+
+    :mod:`goniolab.plot` builds figures without pyplot (no global state, Agg canvas), so
+    the inline backend never registers its display formatter and a returned figure shows as
+    ``<Figure size 800x600 with 2 Axes>`` (issue 22.2). This registers a PNG formatter for
+    ``Figure`` with the running shell's display formatter (IPython's documented
+    ``formatters['image/png'].for_type``), unless one is there already (``%matplotlib
+    inline`` registers its own). Outside IPython it does nothing.
+    """
+    ipython_mod = sys.modules.get("IPython")
+    if ipython_mod is None:
+        return
+    shell = ipython_mod.get_ipython()
+    if shell is None:
+        return
+    from matplotlib.figure import Figure
+
+    png = shell.display_formatter.formatters["image/png"]
+    try:
+        png.lookup_by_type(Figure)
+    except KeyError:
+        png.for_type(Figure, _figure_png)
+
+
+def open_dataset(path: str | Path) -> xr.Dataset:
+    """Read back a netCDF file goniolab wrote (``goniolab runs export RUN -o run.nc``, or
+    a prediction saved with :func:`goniolab.datasets.write_netcdf`): the same variables,
+    units and attributes as :meth:`Run.to_xarray`, times as UTC ``datetime64``."""
+    from goniolab.datasets import open_dataset as read
+
+    try:
+        return read(path)
+    except OSError as exc:
+        raise UserError(str(exc)) from None
 
 
 def open_run(run_id: int, store: str | Path | None = None) -> Run:
@@ -424,24 +555,113 @@ def open_runs(
 
 
 # --------------------------------------------------------------------------- scans
-def _run_blocking(coro: Coroutine[Any, Any, _T]) -> _T:
-    """Run ``coro`` to completion from plain code or from a notebook (whose event loop
-    is already running in this thread: the scan then gets its own loop in a thread)."""
-    from drivers.base import DeviceError
+class _ScanControl:
+    """The running scan's loop and runner, so that another thread can abort it."""
 
+    def __init__(self) -> None:
+        self.loop: asyncio.AbstractEventLoop | None = None
+        self.runner: Any = None
+
+    def abort(self) -> bool:
+        """Ask the runner to stop (the arms stop, then park); False before it started."""
+        if self.loop is None or self.runner is None:
+            return False
+        try:
+            self.loop.call_soon_threadsafe(self.runner.abort)
+        except RuntimeError:  # the scan's loop has closed: it ended meanwhile
+            return False
+        return True
+
+
+def _run_blocking(coro: Coroutine[Any, Any, _T], control: _ScanControl | None = None) -> _T:
+    """Run ``coro`` to completion from plain code or from a notebook.
+
+    A notebook (Jupyter, IPython) already runs an event loop in this thread, so the
+    coroutine gets its own loop in a worker thread. Everything it uses must then be made in
+    that thread too: the run store is opened *inside* the coroutine (an SQLite connection
+    may only be used by the thread that made it; issue 22.2). ``await run_scan_async(...)``
+    runs on the notebook's own loop instead.
+
+    Interrupting the kernel (a KeyboardInterrupt here, while the scan runs in its thread)
+    aborts the scan through ``control``: the arms stop and park and the run is stored as
+    aborted, as Ctrl-C does in ``goniolab scan``; this call then returns the aborted run.
+    """
     try:
         asyncio.get_running_loop()
     except RuntimeError:
-        in_loop = False
-    else:
-        in_loop = True
+        return asyncio.run(coro)
+    with concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="goniolab-scan") as pool:
+        future = pool.submit(asyncio.run, coro)
+        try:
+            return future.result()
+        except KeyboardInterrupt:
+            if future.done():
+                return future.result()
+            if control is None or not control.abort():
+                raise
+            print("goniolab: stopping: the arms stop, then park", file=sys.stderr, flush=True)
+            return future.result()
+
+
+@dataclass(frozen=True)
+class _ScanCall:
+    """A checked ``run_scan`` call: the plan, the config file and the store location."""
+
+    config_path: str
+    plan: Any
+    location: str | Path
+    time_scale: float | None
+    progress: bool
+
+
+def _scan_call(
+    config: str | Path,
+    *,
+    sample: str | None,
+    theta_i_deg: float,
+    theta_r_deg: str | Sequence[float],
+    repeats: int,
+    dwell_s: float,
+    exposure_us: int | None,
+    store: str | Path | None,
+    time_scale: float | None,
+    progress: bool,
+) -> _ScanCall:
+    from goniolab.config import load_lab_config
+    from goniolab.scan.plans import BrdfPlan, PlanError
+
+    cfg = load_lab_config(config)
     try:
-        if not in_loop:
-            return asyncio.run(coro)
-        with concurrent.futures.ThreadPoolExecutor(1) as pool:
-            return pool.submit(asyncio.run, coro).result()
+        plan = BrdfPlan(
+            theta_i_deg=float(theta_i_deg),
+            theta_r_deg=tuple(float(v) for v in _angles(theta_r_deg)),
+            repeats=int(repeats),
+            dwell_s=float(dwell_s),
+            exposure_us=cfg.spectro.exposure_us if exposure_us is None else int(exposure_us),
+            sample=sample or cfg.sample.map,
+        )
+    except PlanError as exc:
+        raise UserError(f"run_scan: {exc}") from None
+    location = resolve_store_path(None if store is None else str(store), cfg.lab.store)
+    return _ScanCall(str(Path(config).resolve()), plan, location, time_scale, progress)
+
+
+async def _scan_in_this_thread(call: _ScanCall, control: _ScanControl | None = None) -> Run:
+    """Open the store in the running thread, scan, close the store."""
+    from drivers.base import DeviceError
+
+    try:
+        rs = RunStore(call.location)
+    except StoreError as exc:
+        raise UserError(str(exc)) from exc
+    try:
+        with rs:
+            run_id = await _scan(
+                call.config_path, call.plan, rs, call.time_scale, call.progress, control
+            )
     except DeviceError as exc:
         raise UserError(f"instrument error: {exc}", exit_code=1) from exc
+    return Run(run_id, call.location)
 
 
 def run_scan(
@@ -459,6 +679,12 @@ def run_scan(
 ) -> Run:
     """Run an in-plane scan in one call (blocking) and return the stored :class:`Run`.
 
+    Works from a script and from a notebook cell (whose event loop is already running:
+    the scan then runs on its own loop in a worker thread, the store opened there). In a
+    notebook, ``await run_scan_async(...)`` runs it on the notebook's loop instead.
+    Interrupting the kernel aborts the scan (arms stopped and parked, the run stored
+    ``aborted``) and returns that run.
+
     Parameters
     ----------
     config
@@ -473,7 +699,8 @@ def run_scan(
     time_scale
         Simulated lab only: clock scale (0 = no waiting).
     progress
-        Show a progress bar (rich: in a terminal and in a notebook).
+        Show a progress bar (``tqdm.auto``: a widget in a notebook, a text bar on stderr in
+        a terminal; never on stdout).
 
     Returns
     -------
@@ -481,33 +708,60 @@ def run_scan(
         Also when the run ends ``failed``: its ``status`` and ``record.reason`` say why and
         what was measured stays stored.
     """
-    from goniolab.config import load_lab_config
-    from goniolab.scan.plans import BrdfPlan, PlanError
+    call = _scan_call(
+        config,
+        sample=sample,
+        theta_i_deg=theta_i_deg,
+        theta_r_deg=theta_r_deg,
+        repeats=repeats,
+        dwell_s=dwell_s,
+        exposure_us=exposure_us,
+        store=store,
+        time_scale=time_scale,
+        progress=progress,
+    )
+    control = _ScanControl()
+    return _run_blocking(_scan_in_this_thread(call, control), control)
 
-    cfg = load_lab_config(config)
-    try:
-        plan = BrdfPlan(
-            theta_i_deg=float(theta_i_deg),
-            theta_r_deg=tuple(float(v) for v in _angles(theta_r_deg)),
-            repeats=int(repeats),
-            dwell_s=float(dwell_s),
-            exposure_us=cfg.spectro.exposure_us if exposure_us is None else int(exposure_us),
-            sample=sample or cfg.sample.map,
-        )
-    except PlanError as exc:
-        raise UserError(f"run_scan: {exc}") from None
-    location = resolve_store_path(None if store is None else str(store), cfg.lab.store)
-    try:
-        rs = RunStore(location)
-    except StoreError as exc:
-        raise UserError(str(exc)) from exc
-    with rs:
-        run_id = _run_blocking(_scan(str(Path(config).resolve()), plan, rs, time_scale, progress))
-    return Run(run_id, location)
+
+async def run_scan_async(
+    config: str | Path,
+    *,
+    sample: str | None = None,
+    theta_i_deg: float = 45.0,
+    theta_r_deg: str | Sequence[float] = "0:70:1",
+    repeats: int = DEFAULT_REPEATS,
+    dwell_s: float = 0.0,
+    exposure_us: int | None = None,
+    store: str | Path | None = None,
+    time_scale: float | None = None,
+    progress: bool = True,
+) -> Run:
+    """:func:`run_scan` as a coroutine on the caller's event loop: ``run = await
+    gl.run_scan_async(...)`` in a notebook cell (the kernel stays responsive to other
+    cells' ``await``s; the model work runs in threads). Same parameters and result."""
+    call = _scan_call(
+        config,
+        sample=sample,
+        theta_i_deg=theta_i_deg,
+        theta_r_deg=theta_r_deg,
+        repeats=repeats,
+        dwell_s=dwell_s,
+        exposure_us=exposure_us,
+        store=store,
+        time_scale=time_scale,
+        progress=progress,
+    )
+    return await _scan_in_this_thread(call)
 
 
 async def _scan(
-    config_path: str, plan: Any, store: RunStore, time_scale: float | None, progress: bool
+    config_path: str,
+    plan: Any,
+    store: RunStore,
+    time_scale: float | None,
+    progress: bool,
+    control: _ScanControl | None = None,
 ) -> int:
     from goniolab.config import load_lab_config
     from goniolab.scan.events import Progress
@@ -521,6 +775,8 @@ async def _scan(
         except PlanRefused as exc:
             raise UserError(f"plan refused (no arm moved): {exc}") from exc
         run_id = runner.run_id
+        if control is not None:
+            control.loop, control.runner = asyncio.get_running_loop(), runner
         bus = session.bus
         queue = bus.subscribe()
 
@@ -529,13 +785,15 @@ async def _scan(
                 while await queue.get() is not None:
                     pass
                 return
-            from rich.progress import Progress as Bar
+            # tqdm.auto: an ipywidgets bar in a Jupyter kernel, a text bar on stderr
+            # elsewhere (never stdout, so a script's output stays clean)
+            from tqdm.auto import tqdm
 
-            with Bar(transient=False) as bar:
-                task = bar.add_task(f"run {run_id}", total=len(plan.points()))
+            with tqdm(total=len(plan.points()), desc=f"run {run_id}", unit="pt") as bar:
                 while (ev := await queue.get()) is not None:
                     if isinstance(ev, Progress):
-                        bar.update(task, completed=ev.done, total=ev.total)
+                        bar.total = ev.total
+                        bar.update(ev.done - bar.n)
 
         reporter = asyncio.create_task(report())
         try:

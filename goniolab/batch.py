@@ -3,7 +3,8 @@
 ``goniolab predict gloss A.sur B.sur ...`` predicts each map in its own worker process
 (:class:`concurrent.futures.ProcessPoolExecutor`, ``--jobs`` workers, default one per
 core); ``--scheduler ADDRESS`` sends the same work to an existing dask.distributed cluster
-(the optional extra ``goniolab[dask]``; its workers must see the same file paths). Results
+(the optional extra ``goniolab[dask]``; its workers must see the same files: relative
+paths are made absolute before they are sent). Results
 stream back as maps finish (completion order, each row names its map), so a long batch
 shows progress and a failure on one map does not stop the others.
 
@@ -21,7 +22,7 @@ from typing import Any
 
 from goniolab.errors import UserError
 
-__all__ = ["GlossOptions", "gloss_row", "run_dask", "run_local"]
+__all__ = ["GlossOptions", "absolute_specs", "gloss_row", "run_dask", "run_local"]
 
 #: What to install for ``--scheduler``.
 DASK_EXTRA = "goniolab[dask]"
@@ -70,6 +71,10 @@ def gloss_row(spec: str, options: GlossOptions) -> dict[str, Any]:
         return {"map": spec, "error": str(exc)}
     except ValueError as exc:  # a geometry the model cannot answer for this map
         return {"map": spec, "error": f"{spec}: {exc}"}
+    except MemoryError:
+        return {"map": spec, "error": f"{spec}: out of memory predicting this map"}
+    except Exception as exc:  # one map's failure must not end the batch
+        return {"map": spec, "error": f"{spec}: {type(exc).__name__}: {exc}"}
     return {
         "map": spec,
         "n": _index_json(options.n),
@@ -103,13 +108,36 @@ def run_local(
             yield gloss_row(spec, options)
         return
     with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker) as pool:
-        futures = [pool.submit(gloss_row, spec, options) for spec in specs]
+        futures = {pool.submit(gloss_row, spec, options): spec for spec in specs}
         try:
             for fut in as_completed(futures):
-                yield fut.result()
+                yield _result_row(fut, futures[fut])
         finally:
             for fut in futures:
                 fut.cancel()
+
+
+def _result_row(fut: Any, spec: str) -> dict[str, Any]:
+    """The row of a finished future, or an error row naming the map when its worker died
+    (killed by the kernel's OOM killer, a crash in a native library): the batch goes on
+    with the other maps (issue 23.5)."""
+    try:
+        row: dict[str, Any] = fut.result()
+    except Exception as exc:  # BrokenProcessPool, a dask worker lost ...
+        reason = str(exc).splitlines()[0] if str(exc) else ""
+        return {"map": spec, "error": f"{spec}: worker failed: {type(exc).__name__}: {reason}"}
+    return row
+
+
+def absolute_specs(specs: Sequence[str]) -> list[str]:
+    """``specs`` with every file path made absolute against this process's directory
+    (``sample:NAME`` as it is): a dask worker runs in its own directory, where a relative
+    ``w1.npy`` is not found (issue 22.10)."""
+    from pathlib import Path
+
+    from goniolab.surfaces.resolve import SAMPLE_PREFIX
+
+    return [s if s.startswith(SAMPLE_PREFIX) or not s else str(Path(s).absolute()) for s in specs]
 
 
 def _client(address: str) -> Any:
@@ -133,10 +161,14 @@ def run_dask(
     try:
         from distributed import as_completed
 
-        futures = client.map(gloss_row, list(specs), options=options, pure=False)
+        paths = absolute_specs(specs)
+        futures = client.map(gloss_row, paths, options=options, pure=False)
+        typed = {fut.key: spec for fut, spec in zip(futures, specs, strict=True)}
         try:
             for fut in as_completed(futures):
-                yield fut.result()
+                row = _result_row(fut, typed[fut.key])
+                row["map"] = typed[fut.key]  # as the user typed it, as the local rows
+                yield row
         finally:
             client.cancel(futures)
     finally:

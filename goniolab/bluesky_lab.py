@@ -8,9 +8,16 @@ describes: real controllers, the wire sim, or the in-process twin):
   :meth:`drivers.goniometer.TwoArmGoniometer.move_to`, so the arm limits and the two-arm
   separation interlock refuse an unsafe target (the status fails, nothing moves);
   ``readback_deg`` is the hinted reading, the limits are configuration signals.
+- :class:`Goniometer` -- both arms as one ``Movable``: ``set((theta_i, theta_r))`` moves to a
+  geometry in the safe order of :meth:`~drivers.goniometer.TwoArmGoniometer.move_to`. Every
+  move of either device holds the goniometer for its whole travel, so ``bps.mv(lamp, a,
+  detector, b)`` runs the two moves one after the other, each checked against the other
+  arm's real position.
 - :class:`Spectro` -- the spectro-colorimeter as a triggerable detector: ``luminance_pct``
-  (hinted), the ``spectrum_pct`` array and CIE ``L_star``, ``a_star``, ``b_star``
-  (D65, CIE 1964 10 deg, ASTM E308); ``wavelengths_nm`` and ``exposure_us`` are configuration.
+  (hinted), the ``spectrum_pct`` array and CIE ``L_star``, ``a_star``, ``b_star`` computed
+  as the store computes them (the config's ``[colour]``, the reflectance factor through the
+  detector cone at the reading's angle, ASTM E308); ``wavelengths_nm``, ``exposure_us`` and
+  ``colour_settings`` are configuration.
 - :class:`Glossmeter` -- ``g20_gu``, ``g60_gu``, ``g85_gu`` (ISO 2813).
 
 :func:`connect_lab` opens the lab in the RunEngine's event loop (where ophyd-async devices
@@ -32,17 +39,26 @@ Example
 
 from __future__ import annotations
 
+import functools
+import json
+import logging
 import math
-from collections.abc import Generator, Sequence
+import uuid
+from collections.abc import Awaitable, Callable, Generator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from goniolab.errors import UserError
 from goniolab.scan.plans import DEFAULT_REPEATS
+
+if TYPE_CHECKING:  # pragma: no cover - typing only
+    from goniolab.scan.colour import PointColour
+
+_log = logging.getLogger(__name__)
 
 try:
     from bluesky import plan_stubs as bps
@@ -60,47 +76,53 @@ except ImportError as _exc:  # pragma: no cover - depends on the installed extra
         f"the bluesky devices need the extra: pip install 'goniolab[bluesky]' ({_exc})"
     ) from None
 
-__all__ = ["Glossmeter", "GonioArm", "LabDevices", "Spectro", "connect_lab", "inplane_scan"]
+__all__ = [
+    "Glossmeter",
+    "GonioArm",
+    "Goniometer",
+    "LabDevices",
+    "Spectro",
+    "connect_lab",
+    "inplane_scan",
+]
 
 #: Timeout of one arm move, seconds (the config's ``move_timeout_s`` when known).
 DEFAULT_MOVE_TIMEOUT_S = 60.0
 
 
-def lab_of_spectrum(wavelengths_nm: ArrayLike, values_pct: ArrayLike) -> tuple[float, ...]:
-    """CIE L*, a*, b* of a reflectance-factor spectrum in % (D65, CIE 1964 10 deg, ASTM E308).
+def lab_of_spectrum(
+    wavelengths_nm: ArrayLike,
+    values_pct: ArrayLike,
+    *,
+    theta_r_deg: float,
+    colour: PointColour | None = None,
+) -> tuple[float, float, float]:
+    """CIE L*, a*, b* of one spectro reading, through the pipeline the store's colour takes.
 
-    Returns NaNs when the spectrum does not cover 380-780 nm evenly (colour undefined).
+    The spectrum (% of the instrument's reference) becomes a reflectance factor through the
+    detector cone at ``theta_r_deg`` with the lab's ``[colour]`` settings (illuminant,
+    observer, method, scale: :class:`goniolab.scan.colour.PointColour`, the runner's own)
+    and is integrated per ASTM E308. Issue 22.9: the bluesky face integrated the raw % as
+    if it were a reflectance factor, with fixed D65 / 10 deg, and disagreed with the store
+    (L* 0.31 against 46.5 at theta_r 35 deg).
+
+    Returns NaNs, and logs why, when the spectrum gives no colour (wrong grid, NaN,
+    negative beyond the noise floor), as the runner stores such a reading without colour.
     """
-    import importlib
+    from goniolab.colour.spectra import ColourError
+    from goniolab.scan.colour import PointColour
 
-    try:  # the colour package of issue 11, where it is installed
-        spectrum_to_colour = importlib.import_module("goniolab.colour.spectra").spectrum_to_colour
-    except ImportError:
-        spectrum_to_colour = None
-    wl = np.asarray(wavelengths_nm, dtype=np.float64)
-    factors = np.asarray(values_pct, dtype=np.float64) / 100.0
-    if spectrum_to_colour is not None:
-        try:
-            c = spectrum_to_colour(wl, factors)
-        except ValueError:
-            return (math.nan, math.nan, math.nan)
-        return (float(c.L), float(c.a), float(c.b))
-    import warnings
-
-    from goniolab._lazy import import_colour
-
-    colour = import_colour()
-
-    if wl.size < 2 or wl[0] > 380.0 or wl[-1] < 780.0 or np.ptp(np.diff(wl)) > 1e-6:
+    pc = colour if colour is not None else PointColour()
+    try:
+        c = pc.measured(
+            np.asarray(wavelengths_nm, dtype=np.float64).tolist(),
+            np.asarray(values_pct, dtype=np.float64).tolist(),
+            float(theta_r_deg),
+        )
+    except (ColourError, ValueError) as exc:
+        _log.warning("spectro at theta_r %.3f deg: no colour: %s", theta_r_deg, exc)
         return (math.nan, math.nan, math.nan)
-    observer = "CIE 1964 10 Degree Standard Observer"
-    sd = colour.SpectralDistribution(dict(zip(wl.tolist(), factors.tolist(), strict=True)))
-    cmfs = colour.MSDS_CMFS[observer]
-    with warnings.catch_warnings():  # colour-science notes its trimming of the CMFs
-        warnings.simplefilter("ignore", colour.utilities.ColourRuntimeWarning)
-        xyz = colour.sd_to_XYZ(sd, cmfs, colour.SDS_ILLUMINANTS["D65"], method="ASTM E308") / 100
-    lab = colour.XYZ_to_Lab(xyz, colour.CCS_ILLUMINANTS[observer]["D65"])
-    return (float(lab[0]), float(lab[1]), float(lab[2]))
+    return (float(c.L), float(c.a), float(c.b))
 
 
 class GonioArm(StandardReadable):
@@ -154,13 +176,65 @@ class GonioArm(StandardReadable):
     async def set(self, value: float) -> None:
         """Move this arm to ``value`` deg, the other arm staying where it is.
 
-        The goniometer checks the arm limits and the separation interlock first; an unsafe
-        target fails the status (``LimitError`` / ``InterlockError``) and nothing moves.
+        The goniometer reserves both arms for the move and checks the arm limits and the
+        separation interlock against the other arm's position read under that reservation
+        (:meth:`drivers.goniometer.TwoArmGoniometer.move_arm`): when bluesky sets both
+        arms at once (``bps.mv(lamp, a, detector, b)``), the moves run one after the other
+        and the second is checked against where the first really left its arm. An unsafe
+        target fails the status (``LimitError`` / ``InterlockError``) and that arm does not
+        move. To move both arms to a geometry in a safe order, set :class:`Goniometer`.
         """
-        ti, tr = await self._gonio.positions_deg()
-        target = (float(value), tr) if self._which == "lamp" else (ti, float(value))
-        reached = await self._gonio.move_to(*target, self._timeout_s)
+        reached = await self._gonio.move_arm(self._which, float(value), self._timeout_s)
         self._set_readback(float(reached[0] if self._which == "lamp" else reached[1]))
+
+    async def stop(self, success: bool = True) -> None:
+        """Stop both arms (bluesky calls this on pause and abort)."""
+        await self._gonio.stop()
+
+
+class Goniometer(StandardReadable):
+    """Both arms as one bluesky ``Movable``: ``set((theta_i_deg, theta_r_deg))`` moves to the
+    geometry through :meth:`drivers.goniometer.TwoArmGoniometer.move_to` (limits, the
+    separation interlock and the safe order of the two arms' moves), so a plan that changes
+    both angles at once never brings the arms closer than their minimum on the way.
+
+    ``theta_i_deg`` and ``theta_r_deg`` are the hinted readbacks.
+    """
+
+    def __init__(
+        self,
+        goniometer: Any,
+        *,
+        move_timeout_s: float = DEFAULT_MOVE_TIMEOUT_S,
+        name: str = "",
+    ) -> None:
+        self._gonio = goniometer
+        self._timeout_s = float(move_timeout_s)
+        with self.add_children_as_readables(Format.HINTED_SIGNAL):
+            self.theta_i_deg, self._set_ti = soft_signal_r_and_setter(float, math.nan, units="deg")
+            self.theta_r_deg, self._set_tr = soft_signal_r_and_setter(float, math.nan, units="deg")
+        with self.add_children_as_readables(Format.CONFIG_SIGNAL):
+            self.min_separation_deg, _ = soft_signal_r_and_setter(
+                float, float(goniometer.min_separation_deg), units="deg"
+            )
+        super().__init__(name=name)
+
+    async def refresh(self) -> tuple[float, float]:
+        """Read both arms' positions into the readbacks."""
+        ti, tr = await self._gonio.positions_deg()
+        self._set_ti(float(ti))
+        self._set_tr(float(tr))
+        return float(ti), float(tr)
+
+    @AsyncStatus.wrap
+    async def set(self, value: Sequence[float]) -> None:
+        """Move to ``(theta_i_deg, theta_r_deg)``; an unsafe geometry fails the status and
+        nothing moves."""
+        if len(value) != 2:
+            raise ValueError(f"goniometer: set takes (theta_i_deg, theta_r_deg), got {value!r}")
+        reached = await self._gonio.move_to(float(value[0]), float(value[1]), self._timeout_s)
+        self._set_ti(float(reached[0]))
+        self._set_tr(float(reached[1]))
 
     async def stop(self, success: bool = True) -> None:
         """Stop both arms (bluesky calls this on pause and abort)."""
@@ -170,8 +244,22 @@ class GonioArm(StandardReadable):
 class Spectro(StandardReadable):
     """The spectro-colorimeter as a triggerable detector (one reading per trigger)."""
 
-    def __init__(self, spectro: Any, *, exposure_us: int = 10000, name: str = "") -> None:
+    def __init__(
+        self,
+        spectro: Any,
+        *,
+        exposure_us: int = 10000,
+        colour: PointColour | None = None,
+        theta_r_deg: Callable[[], Awaitable[float]] | None = None,
+        name: str = "",
+    ) -> None:
+        from goniolab.scan.colour import PointColour
+
         self._spectro = spectro
+        # the colour of a reading as the store computes it: the lab's [colour] settings and
+        # the detector angle at the reading (lab_of_spectrum)
+        self._colour = colour if colour is not None else PointColour()
+        self._theta_r_deg = theta_r_deg
         with self.add_children_as_readables(Format.HINTED_SIGNAL):
             self.luminance_pct, self._set_luminance = soft_signal_r_and_setter(
                 float, math.nan, units="%"
@@ -190,6 +278,9 @@ class Spectro(StandardReadable):
             self.exposure_us, self._set_exposure = soft_signal_r_and_setter(
                 int, int(exposure_us), units="us"
             )
+            self.colour_settings, _ = soft_signal_r_and_setter(
+                str, json.dumps(self._colour.describe(), sort_keys=True)
+            )
         super().__init__(name=name)
 
     @AsyncStatus.wrap
@@ -202,7 +293,8 @@ class Spectro(StandardReadable):
         self._set_spectrum(values)
         self._set_exposure(int(reading.exposure_us))
         self._set_luminance(float(reading.luminance_pct))
-        L, a, b = lab_of_spectrum(wl, values)
+        theta_r = math.nan if self._theta_r_deg is None else await self._theta_r_deg()
+        L, a, b = lab_of_spectrum(wl, values, theta_r_deg=theta_r, colour=self._colour)
         self._set_L(L)
         self._set_a(a)
         self._set_b(b)
@@ -236,6 +328,7 @@ class LabDevices:
     lamp: GonioArm
     detector: GonioArm
     spectro: Spectro
+    goniometer: Goniometer
     glossmeter: Glossmeter | None
     sample: str
 
@@ -252,6 +345,11 @@ class LabDevices:
         call_in_bluesky_event_loop(_close())
 
 
+async def _detector_deg(gonio: Any) -> float:
+    """The detector arm's angle now (the geometry of a spectro reading)."""
+    return float((await gonio.positions_deg())[1])
+
+
 def connect_lab(
     config: str | Path, *, sample: str | None = None, time_scale: float | None = None
 ) -> LabDevices:
@@ -261,6 +359,7 @@ def connect_lab(
     """
     from goniolab.config import load_lab_config
     from goniolab.lab import Lab
+    from goniolab.scan.colour import PointColour
     from goniolab.session import home_timeout_s, with_sample
 
     cfg = load_lab_config(config)
@@ -282,17 +381,31 @@ def connect_lab(
                 lab=lab,
                 lamp=GonioArm(gonio, "lamp", move_timeout_s=timeout, name="lamp"),
                 detector=GonioArm(gonio, "detector", move_timeout_s=timeout, name="detector"),
-                spectro=Spectro(lab.spectro, exposure_us=c.spectro.exposure_us, name="spectro"),
+                spectro=Spectro(
+                    lab.spectro,
+                    exposure_us=c.spectro.exposure_us,
+                    colour=PointColour.from_config(c),
+                    theta_r_deg=functools.partial(_detector_deg, gonio),
+                    name="spectro",
+                ),
+                goniometer=Goniometer(gonio, move_timeout_s=timeout, name="goniometer"),
                 glossmeter=None
                 if getattr(lab, "glossmeter", None) is None
                 else Glossmeter(lab.glossmeter, name="glossmeter"),
                 sample=c.sample.map,
             )
-            for dev in (devices.lamp, devices.detector, devices.spectro, devices.glossmeter):
+            for dev in (
+                devices.lamp,
+                devices.detector,
+                devices.goniometer,
+                devices.spectro,
+                devices.glossmeter,
+            ):
                 if dev is not None:
                     await dev.connect()
             await devices.lamp.refresh()
             await devices.detector.refresh()
+            await devices.goniometer.refresh()
             await lab.spectro.set_exposure_us(c.spectro.exposure_us)
             return devices
         except BaseException:
@@ -316,7 +429,9 @@ def inplane_scan(
     Moves the lamp to ``theta_i_deg``, then for each detector angle moves the detector and
     takes ``repeats`` readings of the spectro (one event each, with both arms' readbacks).
     The start document carries the plan (``plan_name = "goniolab_inplane_scan"``, the
-    angles, the sample) so that a bluesky-side analysis finds the geometry.
+    angles, the sample) so that a bluesky-side analysis finds the geometry, and the run's
+    identity as goniolab stores it: ``run_uuid`` (a UUID 4), ``operator``, ``sample_id``,
+    ``notes`` and ``tags`` (from the config's ``[run]`` table; ``md`` overrides them).
 
     Returns
     -------
@@ -329,7 +444,16 @@ def inplane_scan(
     if repeats < 1:
         raise ValueError(f"repeats must be >= 1, got {repeats}")
     detectors = [lab.spectro]
+    run_cfg = getattr(getattr(lab.lab, "config", None), "run", None)
+    identity = {  # the run identity a stored run has (issue 22.4): UUID, who, what sample
+        "run_uuid": str(uuid.uuid4()),
+        "operator": getattr(run_cfg, "operator", ""),
+        "sample_id": getattr(run_cfg, "sample_id", ""),
+        "notes": getattr(run_cfg, "notes", ""),
+        "tags": list(getattr(run_cfg, "tags", ())),
+    }
     metadata = {
+        **identity,
         "plan_name": "goniolab_inplane_scan",
         "plan_args": {
             "theta_i_deg": float(theta_i_deg),

@@ -61,13 +61,86 @@ class _Parser(argparse.ArgumentParser):
     """argparse with goniolab's one-line errors (``goniolab: error: ...``, exit 2) and
     negative angle ranges taken as values; sub-command parsers are of the same class."""
 
+    #: The command line being parsed (set by :func:`main`), for the hints of :meth:`error`.
+    argv: Sequence[str] = ()
+
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         # a private attribute (stable since Python 3.2): widen "looks like a negative number"
         self._negative_number_matcher = _NEGATIVE_ARG
 
     def error(self, message: str) -> NoReturn:
-        raise UserError(f"{self.prog}: {message} (see {self.prog} --help)")
+        # one prefix: "goniolab: error: scan: ..." (the top level names no command)
+        where = self.prog.removeprefix("goniolab").strip()
+        if "invalid choice" in message:
+            # an unknown option before a sub-command's positional makes argparse blame the
+            # positional ("argument resume: invalid choice: '0:70:1'"): name the option
+            unknown = [
+                tok.split("=", 1)[0]
+                for tok in _Parser.argv
+                if tok.startswith("--") and tok.split("=", 1)[0] not in self._options()
+            ]
+            if unknown:
+                message = "unrecognized arguments: " + " ".join(unknown)
+        prog = self.prog
+        words = [t for t in _Parser.argv if not t.startswith("-")][:2]
+        if not where and words and message.startswith("unrecognized arguments"):
+            # the top-level parser reports a command's leftovers: name that command (and
+            # its action, "predict brdf", when it has one)
+            sub = self._subcommand(words)
+            where, prog = sub, f"{self.prog} {sub}"
+        hint = self._did_you_mean(message)
+        raise UserError(f"{where + ': ' if where else ''}{message}{hint} (see {prog} --help)")
+
+    def _subcommand(self, words: list[str]) -> str:
+        """The command (and its action) among the first positional ``words``."""
+        for action in self._actions:
+            if isinstance(action, argparse._SubParsersAction) and words[0] in action.choices:
+                child = action.choices[words[0]]
+                for inner in child._actions:
+                    if (
+                        isinstance(inner, argparse._SubParsersAction)
+                        and len(words) > 1
+                        and words[1] in inner.choices
+                    ):
+                        return f"{words[0]} {words[1]}"
+                return words[0]
+        return words[0]
+
+    def _options(self) -> set[str]:
+        """Every option string of this parser and of its sub-commands' parsers."""
+        found: set[str] = set()
+        todo: list[argparse.ArgumentParser] = [self]
+        while todo:
+            parser = todo.pop()
+            for action in parser._actions:
+                found.update(action.option_strings)
+                if isinstance(action, argparse._SubParsersAction):
+                    todo.extend(action.choices.values())
+        return found
+
+    def _did_you_mean(self, message: str) -> str:
+        """``" (did you mean --theta-r?)"`` for a mistyped option or command, else ""."""
+        import difflib
+
+        m = re.match(r"unrecognized arguments: (.*)", message)
+        if m:
+            options = sorted(self._options())
+            guesses = []
+            for token in m.group(1).split():
+                if not token.startswith("--"):
+                    continue
+                name = token.split("=", 1)[0]
+                close = difflib.get_close_matches(name.replace("_", "-"), options, n=1)
+                if close and close[0] != name:
+                    guesses.append(close[0])
+            return f" (did you mean {', '.join(guesses)}?)" if guesses else ""
+        m = re.match(r"argument \S+: invalid choice: '(.*?)' \(choose from (.*)\)", message)
+        if m:
+            choices = [c.strip(" '") for c in m.group(2).split(",")]
+            close = difflib.get_close_matches(m.group(1), choices, n=1)
+            return f" (did you mean {close[0]!r}?)" if close else ""
+        return ""
 
 
 #: Top-level options that take a value (the token after them is not the command).
@@ -169,13 +242,40 @@ def _silence_stdout() -> None:
         pass
 
 
-def _one_line_warnings() -> None:
-    """Show warnings (e.g. heights that look like nm read as um) as one line, like errors."""
+def _own_warning(category: type[Warning], filename: str) -> bool:
+    """A warning goniolab itself issues: its class is goniolab's (or the drivers'), or it
+    was raised from goniolab's or the drivers' code."""
+    module = getattr(category, "__module__", "")
+    if module.split(".")[0] in ("goniolab", "drivers"):
+        return True
+    here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    path = os.path.abspath(filename)
+    return any(path.startswith(os.path.join(here, pkg) + os.sep) for pkg in ("goniolab", "drivers"))
+
+
+def _one_line_warnings(debug: bool = False) -> None:
+    """Show goniolab's own warnings (e.g. heights that look like nm read as um) as one line,
+    like errors. A library's warning (numpy, pandas, colour-science ...) is not goniolab's
+    to say: it goes to the log file with its origin, and to stderr only under ``--debug``
+    (issue 23, Low: they leaked as ``goniolab: warning: ...``)."""
     import warnings
 
-    def show(message: Warning | str, category: type[Warning], *_: object, **__: object) -> None:
-        print(f"goniolab: warning: {message}", file=sys.stderr)
-        _log().warning("%s", message)
+    def show(
+        message: Warning | str,
+        category: type[Warning],
+        filename: str = "",
+        lineno: int = 0,
+        *_: object,
+        **__: object,
+    ) -> None:
+        if _own_warning(category, filename):
+            print(f"goniolab: warning: {message}", file=sys.stderr)
+            _log().warning("%s", message)
+            return
+        origin = f"{category.__name__} from {filename}:{lineno}"
+        _log().warning("library warning (%s): %s", origin, message)
+        if debug:
+            print(f"goniolab: library warning ({origin}): {message}", file=sys.stderr)
 
     warnings.showwarning = show
 
@@ -257,12 +357,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     _one_blas_thread()
     try:
         parser = build_parser(_command_in(sys.argv[1:] if argv is None else argv))
+        _Parser.argv = list(sys.argv[1:] if argv is None else argv)
         args = parser.parse_args(argv)
         if not getattr(args, "func", None):
             parser.print_help()
             return 2
         _quiet_library_logs(args.debug)
-        _one_line_warnings()
+        _one_line_warnings(args.debug)
         _start_log(args, argv)
         code: int = args.func(args)
         sys.stdout.flush()  # a closed pipe shows here, not in the interpreter's exit
@@ -283,6 +384,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("goniolab: interrupted", file=sys.stderr)
         return 130
+    except Exception:
+        # a bug or an unforeseen failure: the traceback goes to the log file too (the
+        # README promises it), passwords redacted by the file's filter
+        if "logging" in sys.modules and sys.modules["logging"].getLogger().handlers:
+            _log().exception("unexpected error")
+        raise
     return code
 
 

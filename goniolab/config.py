@@ -107,6 +107,13 @@ PositiveFloat = Annotated[float, Field(strict=True, gt=0.0, allow_inf_nan=False)
 NonNegFloat = Annotated[float, Field(strict=True, ge=0.0, allow_inf_nan=False)]
 FiniteFloat = Annotated[float, Field(strict=True, allow_inf_nan=False)]
 AngleOrNone = Annotated[float, Field(strict=True)] | None
+#: A timeout or wait in seconds: positive, at most an hour (a longer one is a typo that
+#: would hang a scan without a word).
+TimeoutS = Annotated[float, Field(strict=True, gt=0.0, le=3600.0, allow_inf_nan=False)]
+#: Following error tolerated before a move counts as stalled, deg: beyond 5 deg an arm
+#: could be held by an obstacle (or the other arm, min_separation 10 deg) unnoticed, and
+#: ``stall_tolerance_deg = 1e9`` switched stall detection off (issue 23, Low).
+STALL_TOLERANCE_MAX_DEG = 5.0
 
 
 class LabSection(_Strict):
@@ -170,8 +177,10 @@ class AxisConfig(_Strict):
     limits_deg: tuple[FiniteFloat, FiniteFloat] = (0.0, 85.0)
     speed_deg_s: PositiveFloat = 20.0
     accel_deg_s2: PositiveFloat = 40.0
-    stall_tolerance_deg: PositiveFloat = 0.5
-    timeout_s: PositiveFloat = 1.0
+    stall_tolerance_deg: Annotated[
+        float, Field(strict=True, gt=0.0, le=STALL_TOLERANCE_MAX_DEG, allow_inf_nan=False)
+    ] = 0.5
+    timeout_s: TimeoutS = 1.0
 
     @field_validator("limits_deg")
     @classmethod
@@ -196,7 +205,7 @@ class GoniometerConfig(_Strict):
     min_separation_deg: FiniteFloat = 10.0
     source_cone_deg: Annotated[float, Field(strict=True, ge=0.0, lt=90.0)] = 6.0
     park: ParkConfig = ParkConfig()
-    move_timeout_s: PositiveFloat = 30.0
+    move_timeout_s: TimeoutS = 30.0
     lamp: AxisConfig = AxisConfig(unit_id=1, limits_deg=(0.0, 85.0))
     detector: AxisConfig = AxisConfig(unit_id=2, limits_deg=(-85.0, 85.0))
 
@@ -219,7 +228,7 @@ class SpectroConfig(_Strict):
     baudrate: Annotated[int, Field(strict=True, ge=300, le=4_000_000)] = 115200
     exposure_us: Annotated[int, Field(strict=True, ge=1)] = 10000
     detector_cone_deg: Annotated[float, Field(strict=True, ge=0.0, lt=90.0)] = 6.0
-    timeout_s: PositiveFloat = 2.0
+    timeout_s: TimeoutS = 2.0
 
 
 class GlossmeterConfig(_Strict):
@@ -230,7 +239,7 @@ class GlossmeterConfig(_Strict):
     port: str = "/tmp/goniolab-sim/gloss"
     serial_number: str = "401120999"
     baudrate: Annotated[int, Field(strict=True, ge=300, le=4_000_000)] = 9600
-    timeout_s: PositiveFloat = 2.0
+    timeout_s: TimeoutS = 2.0
 
 
 class FaultsConfig(_Strict):
@@ -360,8 +369,14 @@ class ColourConfig(_Strict):
     def _known_illuminant(cls, v: str) -> str:
         # only a non-default value gets here (pydantic skips defaults); the usual names are
         # known without importing colour-science (seconds), the rest are checked by it
-        from goniolab.colour.spectra import COMMON_ILLUMINANTS, ColourError, ColourSettings
+        from goniolab.colour.spectra import (
+            COMMON_ILLUMINANTS,
+            ColourError,
+            ColourSettings,
+            resolve_illuminant,
+        )
 
+        v = resolve_illuminant(v)  # F11 / TL84 -> FL11 (the name colour-science knows)
         if v in COMMON_ILLUMINANTS:
             return v
 
@@ -395,6 +410,17 @@ class AlignmentConfig(_Strict):
         )
 
 
+class RunSection(_Strict):
+    """``[run]``: what every run started with this config records about itself unless the
+    command says otherwise (``scan --operator/--sample-id/--note/--tag``): who measures,
+    the physical sample's id (a label, a LIMS number), notes and tags."""
+
+    operator: str = ""
+    sample_id: str = ""
+    notes: str = ""
+    tags: tuple[str, ...] = ()
+
+
 class LabConfig(_Strict):
     """A whole lab config file (docs/ARCHITECTURE.md, "Lab config")."""
 
@@ -406,6 +432,7 @@ class LabConfig(_Strict):
     sim: SimConfig = SimConfig()
     colour: ColourConfig = ColourConfig()
     alignment: AlignmentConfig = AlignmentConfig()
+    run: RunSection = RunSection()
     #: The file this config came from ("" when built in code).
     source: str = Field(default="", exclude=True)
 

@@ -31,15 +31,27 @@ if TYPE_CHECKING:  # pragma: no cover - typing only
 
 __all__ = [
     "UNITS",
+    "aspecular_of",
     "brdf_dataset",
+    "cf_dataset",
     "gloss_dataset",
     "heightmap_dataarray",
     "iso_utc",
     "netcdf_attrs",
+    "open_dataset",
+    "predicted_grid_nm",
     "run_dataset",
+    "run_reflectance_factors",
     "to_datetime64",
     "write_netcdf",
 ]
+
+#: Gloss units (GU, ISO 2813: 100 = the polished black glass of n = 1.567) are a scale,
+#: not a unit UDUNITS knows ("GU" parses as giga-U, pint reads enzyme units): gloss is
+#: dimensionless ``"1"`` and its long_name and ``units_metadata`` say "gloss units".
+GLOSS_UNITS = "1"
+#: The ``units_metadata`` of every gloss variable (what the number is a multiple of).
+GLOSS_UNITS_METADATA = "gloss units (GU), ISO 2813: 100 GU = polished black glass, n = 1.567"
 
 #: Units (CF / UDUNITS spelling) of every variable goniolab writes, by variable name.
 UNITS: dict[str, str] = {
@@ -56,19 +68,21 @@ UNITS: dict[str, str] = {
     "residual_pct": "percent",
     "mirror_pct": "percent",
     "reflectance_pct": "percent",
+    "reflectance_factor": "1",
+    "predicted_reflectance_factor": "1",
     "brdf_sr": "sr-1",
     "wavelength_nm": "nm",
     "x_um": "um",
     "y_um": "um",
     "height_um": "um",
-    "gloss_gu": "GU",
-    "predicted_gloss_gu": "GU",
-    "g20_gu": "GU",
-    "g60_gu": "GU",
-    "g85_gu": "GU",
-    "predicted_g20_gu": "GU",
-    "predicted_g60_gu": "GU",
-    "predicted_g85_gu": "GU",
+    "gloss_gu": GLOSS_UNITS,
+    "predicted_gloss_gu": GLOSS_UNITS,
+    "g20_gu": GLOSS_UNITS,
+    "g60_gu": GLOSS_UNITS,
+    "g85_gu": GLOSS_UNITS,
+    "predicted_g20_gu": GLOSS_UNITS,
+    "predicted_g60_gu": GLOSS_UNITS,
+    "predicted_g85_gu": GLOSS_UNITS,
     "temperature_c": "degC",
     "X": "1",
     "Y": "1",
@@ -86,7 +100,10 @@ UNITS: dict[str, str] = {
 _LONG_NAMES: dict[str, str] = {
     "theta_i_deg": "lamp (incidence) angle from the sample normal",
     "theta_r_deg": "detector angle from the sample normal (> 0 on the specular side)",
-    "aspecular_deg": "aspecular angle theta_r - theta_i (0 = specular direction)",
+    "aspecular_deg": (
+        "aspecular angle theta_i - theta_r, ASTM E2194 / DIN 6175-2 (0 = specular, "
+        "> 0 towards the lamp)"
+    ),
     "measured_theta_i_deg": "lamp arm angle read back at the reading",
     "measured_theta_r_deg": "detector arm angle read back at the reading",
     "luminance_pct": "relative luminance, % of a mirror",
@@ -94,7 +111,17 @@ _LONG_NAMES: dict[str, str] = {
     "luminance_std_pct": "standard deviation of the repeats (ddof = 1)",
     "predicted_pct": "model prediction of the relative luminance",
     "residual_pct": "mean measured minus predicted",
-    "reflectance_pct": "spectral reflectance factor, % of the reference",
+    "reflectance_pct": (
+        "spectral reading as the spectro reports it, % of its reference (the mirror), "
+        "before the mirror level and the detector-cone scale: not a reflectance factor"
+    ),
+    "reflectance_factor": (
+        "measured spectral reflectance factor (1 = perfect reflecting diffuser, "
+        "CIE 15:2004 sec. 3.3) at the geometry"
+    ),
+    "predicted_reflectance_factor": (
+        "predicted spectral reflectance factor (1 = perfect reflecting diffuser)"
+    ),
     "brdf_sr": "in-plane BRDF",
     "time": "time of the reading (UTC)",
     "L_star": "CIE 1976 L*",
@@ -108,11 +135,28 @@ _LONG_NAMES: dict[str, str] = {
     "predicted_L_star": "predicted CIE 1976 L*",
     "predicted_a_star": "predicted CIE 1976 a*",
     "predicted_b_star": "predicted CIE 1976 b*",
-    "gloss_gu": "specular gloss, ISO 2813 (gloss units)",
-    "predicted_gloss_gu": "predicted specular gloss, ISO 2813",
+    "gloss_gu": "specular gloss, ISO 2813, in gloss units",
+    "predicted_gloss_gu": "predicted specular gloss, ISO 2813, in gloss units",
     "temperature_c": "instrument temperature",
     "height_um": "surface height",
+    "x_um": "lateral position along the map's rows",
+    "y_um": "lateral position along the map's columns",
+    "geometry_deg": "ISO 2813 gloss geometry (incidence = reception angle)",
+    "wavelength_nm": "wavelength",
+    "mirror_pct": "raw reading of the reference mirror (sets 100 %)",
+    "n_readings": "readings stored at the geometry",
+    "reading": "reading number of the gloss log",
+    "repeat": "repeat number",
+    "g20_gu": "measured 20 deg specular gloss, ISO 2813, in gloss units",
+    "g60_gu": "measured 60 deg specular gloss, ISO 2813, in gloss units",
+    "g85_gu": "measured 85 deg specular gloss, ISO 2813, in gloss units",
+    "predicted_g20_gu": "predicted 20 deg specular gloss, ISO 2813, in gloss units",
+    "predicted_g60_gu": "predicted 60 deg specular gloss, ISO 2813, in gloss units",
+    "predicted_g85_gu": "predicted 85 deg specular gloss, ISO 2813, in gloss units",
 }
+
+#: Variables in gloss units (their ``units`` is "1", see :data:`GLOSS_UNITS`).
+_GLOSS_VARS = frozenset(k for k, v in UNITS.items() if k.endswith("_gu") and v == GLOSS_UNITS)
 
 #: Measured colour of a point as the store keeps it (issue 11) -> the variable name.
 _COLOUR_VARS: tuple[tuple[str, str], ...] = (
@@ -127,12 +171,22 @@ _COLOUR_VARS: tuple[tuple[str, str], ...] = (
 )
 
 
+def aspecular_of(theta_r_deg: Any, theta_i_deg: float) -> NDArray[np.float64]:
+    """ASTM E2194 / DIN 6175-2 aspecular angles of signed detector angles: the core's
+    ``theta_i - theta_r`` (:func:`goniolab.colour.multiangle.aspecular_deg`; 15 deg
+    aspecular = theta_r 30 at theta_i 45, -15 = beyond the specular direction)."""
+    out: NDArray[np.float64] = float(theta_i_deg) - np.asarray(theta_r_deg, dtype=np.float64)
+    return out
+
+
 def _attrs(name: str, **extra: Any) -> dict[str, Any]:
     out: dict[str, Any] = {}
     if name in UNITS:
         out["units"] = UNITS[name]
     if name in _LONG_NAMES:
         out["long_name"] = _LONG_NAMES[name]
+    if name in _GLOSS_VARS:
+        out["units_metadata"] = GLOSS_UNITS_METADATA
     out.update(extra)
     return out
 
@@ -176,21 +230,98 @@ def netcdf_attrs(attrs: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
-def write_netcdf(ds: xr.Dataset, path: str | Path) -> Path:
-    """Write ``ds`` as netCDF-4 (h5netcdf engine), attributes made storable.
+#: The CF version goniolab's netCDF files follow (checked by tests/test_cf_files.py).
+CF_CONVENTIONS = "CF-1.8"
+#: Time in netCDF files: seconds since the Unix epoch (UDUNITS: UTC midnight), float64 (microseconds exact until
+#: 2255); ``nanoseconds since`` (xarray's default for datetime64[ns]) is refused by cftime
+#: and by UDUNITS-based readers (issue 22.11).
+TIME_UNITS = "seconds since 1970-01-01"
+
+
+def cf_dataset(ds: xr.Dataset, *, history: str | None = None) -> xr.Dataset:
+    """A copy of ``ds`` ready for a CF-conventions netCDF file (CF-1.8, UDUNITS units).
+
+    - attributes made storable (:func:`netcdf_attrs`);
+    - ``time`` variables encoded as float64 :data:`TIME_UNITS`, calendar ``standard``,
+      ``standard_name = "time"``;
+    - no ``_FillValue`` on coordinate variables (CF 2.5.1: coordinates have no missing
+      values; xarray adds NaN fills to float coordinates by default), ``units = "1"`` on an
+      integer coordinate that has none (an index or a count);
+    - text variables as char arrays (CF 2.2 has no variable-length strings);
+    - every variable with a ``long_name``, ``Conventions`` and a ``history`` line (CF 2.6.2)
+      prepended to any the data already had.
+    """
+    from goniolab._version import __version__
+
+    out = ds.copy()
+    out.attrs = netcdf_attrs(out.attrs)
+    out.attrs["Conventions"] = CF_CONVENTIONS
+    now = dt.datetime.now(dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+    line = f"{now} goniolab {__version__}: {history or 'written by goniolab.datasets'}"
+    previous = str(ds.attrs.get("history", "")).strip()
+    out.attrs["history"] = line + ("\n" + previous if previous else "")
+    for name in list(out.variables):
+        var = out[name]
+        attrs = netcdf_attrs(var.attrs)
+        attrs.setdefault("long_name", _LONG_NAMES.get(str(name), str(name).replace("_", " ")))
+        encoding = dict(var.encoding)
+        if np.issubdtype(var.dtype, np.datetime64):
+            attrs.pop("units", None)
+            attrs.pop("calendar", None)
+            attrs["standard_name"] = "time"
+            encoding.update(units=TIME_UNITS, calendar="standard", dtype="float64")
+        if name in out.coords:
+            encoding["_FillValue"] = None
+            if var.dtype.kind in "iu" and "units" not in attrs:
+                attrs["units"] = "1"  # an index or a count (row, repeat, reading number)
+        if var.dtype.kind in "UO":
+            # text as a char array (CF 2.2: netCDF-4 variable-length strings are not CF)
+            encoding["dtype"] = "S1"
+        var.attrs = attrs
+        var.encoding = encoding
+    return out
+
+
+def write_netcdf(ds: xr.Dataset, path: str | Path, *, history: str | None = None) -> Path:
+    """Write ``ds`` as a CF-conventions netCDF-4 file (h5netcdf engine, :func:`cf_dataset`).
+
+    ``history`` says what made the file (``runs export 3``); it is prepended, dated, to the
+    Dataset's own history.
 
     Raises
     ------
     OSError
         The file cannot be written.
     """
-    out = ds.copy()
-    out.attrs = netcdf_attrs(out.attrs)
-    for name in list(out.variables):
-        out[name].attrs = netcdf_attrs(out[name].attrs)
+    out = cf_dataset(ds, history=history)
+    # built in memory, then replaced whole: a full disk never meets HDF5 (which crashed
+    # the process) and never destroys an existing file (goniolab._atomic)
+    from goniolab._atomic import atomic_write_bytes
+
+    data = out.to_netcdf(engine="h5netcdf", invalid_netcdf=False)
+    return atomic_write_bytes(path, bytes(data))
+
+
+def open_dataset(path: str | Path) -> xr.Dataset:
+    """Read back a netCDF file goniolab wrote (a run export, a prediction).
+
+    Times decode to ``datetime64`` (UTC), the JSON attributes (``plan_json``,
+    ``model_json``, ``config_json``) stay text as written; the data are loaded and the
+    file closed, so it may be overwritten afterwards.
+
+    Raises
+    ------
+    OSError
+        The file cannot be read or is not netCDF.
+    """
+    import xarray as xr
+
     target = Path(path)
-    out.to_netcdf(target, engine="h5netcdf", invalid_netcdf=False)
-    return target
+    try:
+        with xr.open_dataset(target, engine="h5netcdf") as ds:
+            return ds.load()
+    except (OSError, ValueError) as exc:
+        raise OSError(f"{target}: not a netCDF file goniolab can read: {exc}") from exc
 
 
 # --------------------------------------------------------------------------- height maps
@@ -250,7 +381,7 @@ def brdf_dataset(
     coords = {
         "theta_r_deg": ("theta_r_deg", tr, _attrs("theta_r_deg")),
         "theta_i_deg": ((), float(theta_i_deg), _attrs("theta_i_deg")),
-        "aspecular_deg": ("theta_r_deg", tr - float(theta_i_deg), _attrs("aspecular_deg")),
+        "aspecular_deg": ("theta_r_deg", aspecular_of(tr, theta_i_deg), _attrs("aspecular_deg")),
     }
     ds = xr.Dataset(data, coords=coords)
     ds.attrs = {"title": "goniolab in-plane BRDF prediction", **dict(attrs or {})}
@@ -263,26 +394,30 @@ def gloss_dataset(report: GlossReport, *, attrs: Mapping[str, Any] | None = None
     import xarray as xr
 
     e = report.e430
+    # every reading but DOI is on the gloss-unit scale (E430 sec. 3: haze and Rs in GU as
+    # read by the instrument); DOI is a 0-100 index, 100 (Rs - R0.3) / Rs
+    gu = ", in gloss units"
     scalars: dict[str, tuple[float, str]] = {
-        "haze_index": (report.haze_index, "ASTM D4039 haze index G60 - G85"),
-        "e430_gloss_20": (e.gloss_20, "ASTM E430 method B specular gloss at 20 deg"),
-        "e430_haze_18_1": (e.haze_18_1, "ASTM E430 method B haze at 18.1 deg"),
-        "e430_haze_21_9": (e.haze_21_9, "ASTM E430 method B haze at 21.9 deg"),
-        "e430_haze_b": (e.haze_b, "ASTM E430 method B haze (mean)"),
-        "e430_rs_30": (e.gloss_30, "ASTM E430 method A specular reading Rs at 30 deg"),
-        "e430_haze_narrow": (e.haze_narrow, "ASTM E430 method A narrow-angle haze"),
-        "e430_haze_wide": (e.haze_wide, "ASTM E430 method A wide-angle haze"),
-        "doi": (e.doi, "distinctness of image 100 (Rs - R0.3) / Rs, ASTM E430"),
+        "haze_index": (report.haze_index, "ASTM D4039 haze index G60 - G20" + gu),
+        "e430_gloss_20": (e.gloss_20, "ASTM E430 method B specular gloss at 20 deg" + gu),
+        "e430_haze_18_1": (e.haze_18_1, "ASTM E430 method B haze at 18.1 deg" + gu),
+        "e430_haze_21_9": (e.haze_21_9, "ASTM E430 method B haze at 21.9 deg" + gu),
+        "e430_haze_b": (e.haze_b, "ASTM E430 method B haze (mean)" + gu),
+        "e430_rs_30": (e.gloss_30, "ASTM E430 method A specular reading Rs at 30 deg" + gu),
+        "e430_haze_narrow": (e.haze_narrow, "ASTM E430 method A narrow-angle haze" + gu),
+        "e430_haze_wide": (e.haze_wide, "ASTM E430 method A wide-angle haze" + gu),
+        "doi": (e.doi, "distinctness of image 100 (Rs - R0.3) / Rs, ASTM E430, of 100"),
     }
     data: dict[str, Any] = {
         "gloss_gu": (
             "geometry_deg",
             np.array([report.G20, report.G60, report.G85]),
-            _attrs("gloss_gu", long_name="predicted specular gloss, ISO 2813"),
+            _attrs("gloss_gu", long_name="predicted specular gloss, ISO 2813, in gloss units"),
         )
     }
     for name, (value, long_name) in scalars.items():
-        data[name] = ((), float(value), {"units": "1", "long_name": long_name})
+        extra = {} if name == "doi" else {"units_metadata": GLOSS_UNITS_METADATA}
+        data[name] = ((), float(value), {"units": "1", "long_name": long_name, **extra})
     ds = xr.Dataset(
         data,
         coords={"geometry_deg": ("geometry_deg", np.array([20, 60, 85]), _attrs("geometry_deg"))},
@@ -299,11 +434,16 @@ def gloss_dataset(report: GlossReport, *, attrs: Mapping[str, Any] | None = None
 def _run_attrs(store: RunStore, rec: RunRecord) -> dict[str, Any]:
     return {
         "title": f"goniolab run {rec.id} ({rec.kind}) on {rec.sample or '-'}",
-        "Conventions": "CF-1.10",
+        "Conventions": CF_CONVENTIONS,
         "source": f"goniolab {rec.version}",
         "run_id": rec.id,
+        "run_uuid": getattr(rec, "uuid", ""),
         "kind": rec.kind,
         "sample": rec.sample,
+        "sample_id": getattr(rec, "sample_id", ""),
+        "operator": getattr(rec, "operator", ""),
+        "notes": getattr(rec, "notes", ""),
+        "tags": ", ".join(getattr(rec, "tags", ())),
         "status": rec.status,
         "reason": rec.reason,
         "goniolab_version": rec.version,
@@ -401,17 +541,30 @@ def _brdf_run_dataset(store: RunStore, rec: RunRecord) -> xr.Dataset:
         ),
         "luminance_mean_pct": ("theta_r_deg", mean, _attrs("luminance_mean_pct")),
         "luminance_std_pct": ("theta_r_deg", std, _attrs("luminance_std_pct")),
-        "n_readings": ("theta_r_deg", counts.astype(np.int64), {"units": "1"}),
+        "n_readings": ("theta_r_deg", counts.astype(np.int64), _attrs("n_readings", units="1")),
         "predicted_pct": ("theta_r_deg", predicted, _attrs("predicted_pct")),
         "residual_pct": ("theta_r_deg", mean - predicted, _attrs("residual_pct")),
     }
     if spec is not None:
         data["reflectance_pct"] = ((*dims, "wavelength_nm"), spec, _attrs("reflectance_pct"))
+    _, factors, predicted_factors = run_reflectance_factors(store, rec.id)
+    if spec is not None and factors.shape[-1] == spec.shape[-1]:
+        data["reflectance_factor"] = (
+            (*dims, "wavelength_nm"),
+            factors,
+            _attrs("reflectance_factor", scale=_scale_name(rec), **_mirror_label(rec)),
+        )
+    if predicted_factors is not None:
+        data["predicted_reflectance_factor"] = (
+            ("theta_r_deg", "predicted_wavelength_nm"),
+            predicted_factors,
+            _attrs("predicted_reflectance_factor", scale=_scale_name(rec), **_mirror_label(rec)),
+        )
     if plan.mirror_reference:
         data["mirror_pct"] = (
             "repeat",
             mirror,
-            _attrs("mirror_pct", long_name="raw reading of the reference mirror (sets 100 %)"),
+            _attrs("mirror_pct"),
         )
     for name, arr in colour.items():
         data[name] = (dims, arr, _attrs(name))
@@ -419,15 +572,25 @@ def _brdf_run_dataset(store: RunStore, rec: RunRecord) -> xr.Dataset:
         data[name] = ("theta_r_deg", arr, _attrs(name))
     coords: dict[str, Any] = {
         "theta_r_deg": ("theta_r_deg", tr, _attrs("theta_r_deg")),
-        "repeat": ("repeat", np.arange(reps), {"long_name": "repeat number"}),
+        "repeat": ("repeat", np.arange(reps), _attrs("repeat", units="1")),
         "theta_i_deg": ((), float(plan.theta_i_deg), _attrs("theta_i_deg")),
-        "aspecular_deg": ("theta_r_deg", tr - float(plan.theta_i_deg), _attrs("aspecular_deg")),
+        "aspecular_deg": (
+            "theta_r_deg",
+            aspecular_of(tr, plan.theta_i_deg),
+            _attrs("aspecular_deg"),
+        ),
     }
     if grid:
         coords["wavelength_nm"] = (
             "wavelength_nm",
             np.asarray(grid, dtype=np.float64),
             _attrs("wavelength_nm"),
+        )
+    if predicted_factors is not None:
+        coords["predicted_wavelength_nm"] = (
+            "predicted_wavelength_nm",
+            predicted_grid_nm(predicted_factors.shape[-1]),
+            _attrs("wavelength_nm", long_name="wavelength of the predicted spectra"),
         )
     ds = xr.Dataset(data, coords=coords)
     ds.attrs = {
@@ -438,6 +601,96 @@ def _brdf_run_dataset(store: RunStore, rec: RunRecord) -> xr.Dataset:
         "stored_readings": int(np.sum(counts)),
     }
     return ds
+
+
+def _factor_scale(rec: RunRecord, theta_r_deg: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Per geometry, what turns a fraction of the mirror into a reflectance factor: the
+    run's ``[colour] scale`` through its detector cone
+    (:func:`goniolab.colour.spectral.reflectance_factor_scale`, as the runner does)."""
+    from goniolab.colour.spectral import reflectance_factor_scale
+
+    cfg = rec.config if isinstance(rec.config, dict) else {}
+    scale = str((cfg.get("colour") or {}).get("scale", "diffuser"))
+    cone = float((cfg.get("spectro") or {}).get("detector_cone_deg", 6.0))
+    try:
+        out = np.asarray(
+            reflectance_factor_scale(theta_r_deg, cone, scale),  # type: ignore[arg-type]
+            dtype=np.float64,
+        )
+    except ValueError:  # a point detector or a grazing angle: no factor (NaN, not a guess)
+        return np.full(theta_r_deg.shape, np.nan)
+    return np.broadcast_to(out, theta_r_deg.shape).astype(np.float64)
+
+
+def _mirror_label(rec: RunRecord) -> dict[str, str]:
+    """A run whose ``[colour] scale`` is ``mirror`` keeps fractions of the mirror, not
+    reflectance factors: its long_name says so."""
+    if _scale_name(rec) != "mirror":
+        return {}
+    return {
+        "long_name": "spectral reading as a fraction of the mirror reference ([colour] "
+        "scale = mirror): not a reflectance factor"
+    }
+
+
+def _scale_name(rec: RunRecord) -> str:
+    cfg = rec.config if isinstance(rec.config, dict) else {}
+    return str((cfg.get("colour") or {}).get("scale", "diffuser"))
+
+
+def run_reflectance_factors(
+    store: RunStore, run_id: int
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64] | None]:
+    """Measured and predicted spectra of a scan run as reflectance factors.
+
+    Returns ``(wavelengths_nm, measured (n_geometries, repeats, n_wl), predicted
+    (n_geometries, n_wl_pred) or None)``; measured is empty along ``n_wl`` when the readings
+    carry no common wavelength grid. A reading's spectrum (% of the spectro's reference)
+    is divided by the run's mirror level when the plan measured one, then scaled to the
+    perfect diffuser through the detector cone (the runner's
+    :meth:`goniolab.scan.colour.PointColour.factors`). Predicted spectra (% of the mirror,
+    on the standard 380-780 nm grid) get the same cone scale.
+    """
+    from goniolab.scan.plans import MIRROR_INDEX, BrdfPlan
+
+    rec = store.get_run(run_id)
+    plan = BrdfPlan.from_dict(rec.plan)
+    tr = np.asarray(plan.theta_r_deg, dtype=np.float64)
+    n, reps = tr.size, plan.repeats
+    points = [p for p in store.points(rec.id) if p.index != MIRROR_INDEX]
+    grids = {tuple(p.raw.get("wavelengths_nm") or ()) for p in points if p.index >= 0}
+    grid = next(iter(grids)) if len(grids) == 1 else ()
+    wl = np.asarray(grid, dtype=np.float64)
+    measured = np.full((n, reps, wl.size), np.nan)
+    scale = _factor_scale(rec, tr)
+    for p in points:
+        if not (0 <= p.index < n and 0 <= p.repeat < reps) or not grid:
+            continue
+        values = p.raw.get("values")
+        if values is None or len(values) != wl.size:
+            continue
+        r = np.asarray(values, dtype=np.float64) / 100.0
+        mirror = p.raw.get("mirror_pct")
+        if plan.mirror_reference and mirror:
+            r = r * (100.0 / float(mirror))
+        measured[p.index, p.repeat, :] = r * scale[p.index]
+    predicted: NDArray[np.float64] | None = None
+    getter = getattr(store, "predicted_colours", None)
+    rows = getter(rec.id) if getter is not None else {}
+    spectra = {int(k): pc.spectrum_pct for k, pc in rows.items() if pc.spectrum_pct}
+    if spectra:
+        m = len(next(iter(spectra.values())))
+        predicted = np.full((n, m), np.nan)
+        for k, sp in spectra.items():
+            if 0 <= k < n and len(sp) == m:
+                predicted[k] = np.asarray(sp, dtype=np.float64) / 100.0 * scale[k]
+    return wl, measured, predicted
+
+
+def predicted_grid_nm(n_wavelengths: int) -> NDArray[np.float64]:
+    """The grid of stored predicted spectra: the standard 380-780 nm in ``n`` steps
+    (:func:`goniolab.colour.spectra.standard_grid_nm`, what the spectral predictor uses)."""
+    return np.linspace(380.0, 780.0, int(n_wavelengths))
 
 
 def _predicted_colour(store: RunStore, run_id: int, n: int) -> dict[str, NDArray[np.float64]]:
@@ -488,18 +741,22 @@ def _gloss_run_dataset(store: RunStore, rec: RunRecord) -> xr.Dataset:
         data[f"g{angle}_gu"] = (
             "reading",
             np.array([np.nan if v is None else float(v) for v in measured]),
-            _attrs(f"g{angle}_gu", long_name=f"measured {angle} deg gloss, ISO 2813"),
+            _attrs(f"g{angle}_gu"),
         )
         data[f"predicted_g{angle}_gu"] = (
             "reading",
             np.array([np.nan if v is None else float(v) for v in predicted]),
-            _attrs(f"predicted_g{angle}_gu", long_name=f"predicted {angle} deg gloss"),
+            _attrs(f"predicted_g{angle}_gu"),
         )
     ds = xr.Dataset(
         data,
-        coords={"reading": ("reading", np.array([g.seq for g in rows], dtype=np.int64))}
-        if m
-        else {"reading": ("reading", np.zeros(0, dtype=np.int64))},
+        coords={
+            "reading": (
+                "reading",
+                np.array([g.seq for g in rows], dtype=np.int64),
+                _attrs("reading", units="1"),
+            )
+        },
     )
     ds.attrs = {**_run_attrs(store, rec), "stored_readings": m}
     return ds

@@ -11,6 +11,10 @@
 - **Parquet** (pyarrow): the CSV's table with typed columns (timestamps as
   ``timestamp[us, UTC]``) and the run record as JSON in the schema metadata under the key
   ``goniolab.run``.
+
+Every file is built in memory and replaced whole (:mod:`goniolab._atomic`): a full disk
+or a failed export leaves an existing file as it was. Each carries the run's UUID
+(``run_uuid`` column, ``uuid`` in the run record, ``run_uuid`` attribute).
 """
 
 from __future__ import annotations
@@ -21,6 +25,8 @@ import json
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from goniolab import jsonout
+from goniolab._atomic import atomic_write_bytes
 from goniolab.datasets import iso_utc
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
@@ -112,7 +118,7 @@ def _csv_text(store: RunStore, run_id: int) -> str:
 
 def _json_text(store: RunStore, run_id: int) -> str:
     doc = {"run": _run_doc(store, run_id), "readings": export_rows_iso(store, run_id)}
-    return json.dumps(doc, indent=2, default=str) + "\n"
+    return jsonout.dumps(doc, indent=2, default=str) + "\n"  # no NaN/Infinity
 
 
 def export_run(store: RunStore, run_id: int, fmt: str, out: str | Path | None = None) -> str:
@@ -162,7 +168,7 @@ def export_run(store: RunStore, run_id: int, fmt: str, out: str | Path | None = 
         return ""
     if out is None:
         return text
-    Path(out).write_text(text, encoding="utf-8")
+    atomic_write_bytes(out, text.encode("utf-8"))
     return ""
 
 
@@ -174,4 +180,6 @@ def _write_parquet(store: RunStore, run_id: int, out: Path) -> None:
     table = pa.Table.from_pandas(df, preserve_index=False)
     meta = dict(table.schema.metadata or {})
     meta[PARQUET_RUN_KEY] = json.dumps(_run_doc(store, run_id), sort_keys=True).encode()
-    pq.write_table(table.replace_schema_metadata(meta), out)
+    sink = pa.BufferOutputStream()  # in memory, then replaced whole (goniolab._atomic)
+    pq.write_table(table.replace_schema_metadata(meta), sink)
+    atomic_write_bytes(out, sink.getvalue().to_pybytes())

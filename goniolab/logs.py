@@ -4,8 +4,9 @@
 ``GONIOLAB_LOG_DIR`` overrides it), 1 MB per file, five old files kept. ``--log-level``
 sets what goes in (default ``INFO``: commands, configs, stores, runs started and finished,
 instrument errors). Passwords never reach the file: :class:`RedactingFilter` blanks the
-password of any ``postgresql://user:password@`` URL and the value of ``PGPASSWORD`` in
-every record.
+password of any ``postgresql://user:password@`` URL and of any libpq ``password=`` value
+in every record, tracebacks included (:func:`goniolab.redact.redact`, by parsing: an
+environment variable's value is never searched for as text).
 """
 
 from __future__ import annotations
@@ -13,8 +14,9 @@ from __future__ import annotations
 import logging
 import logging.handlers
 import os
-import re
 from pathlib import Path
+
+from goniolab.redact import redact
 
 __all__ = [
     "LEVELS",
@@ -29,20 +31,6 @@ LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR")
 _MAX_BYTES = 1_000_000
 _BACKUPS = 5
 _MARK = "_goniolab_file_handler"
-#: ``scheme://user:password@`` in any URL (libpq's own URI form included).
-_URL_PASSWORD = re.compile(r"(?P<head>[a-zA-Z][a-zA-Z0-9+.-]*://[^:/@\s]*):(?P<pw>[^@\s/]*)@")
-#: ``password=...`` in a libpq key/value connection string.
-_KV_PASSWORD = re.compile(r"(?P<head>\bpassword\s*=\s*)(?P<pw>'(?:[^'\\]|\\.)*'|\S+)", re.I)
-
-
-def redact(text: str) -> str:
-    """``text`` with URL passwords, ``password=`` values and ``$PGPASSWORD`` blanked."""
-    out = _URL_PASSWORD.sub(lambda m: f"{m.group('head')}:***@", text)
-    out = _KV_PASSWORD.sub(lambda m: f"{m.group('head')}***", out)
-    secret = os.environ.get("PGPASSWORD")
-    if secret:
-        out = out.replace(secret, "***")
-    return out
 
 
 class RedactingFilter(logging.Filter):

@@ -39,10 +39,10 @@ from goniolab.scan.align import AlignAborted, AlignPlan, AlignResult, AlignRunne
 from goniolab.scan.colour import PointColour
 from goniolab.scan.events import EventBus, RunState
 from goniolab.scan.gloss import GlossLogger, predict_gloss
-from goniolab.scan.plans import BrdfPlan, GlossPlan
+from goniolab.scan.plans import BrdfPlan, GlossPlan, PlanError
 from goniolab.scan.predict import Predictor
 from goniolab.scan.runner import ArmMotion, DryRun, PlanRefused, RunResult, ScanRunner, dry_run
-from goniolab.store import RunRecord, RunStore
+from goniolab.store import RunMeta, RunRecord, RunStore
 
 __all__ = [
     "HOME_TIMEOUT_MOVES",
@@ -52,6 +52,7 @@ __all__ = [
     "SampleModels",
     "ScanSession",
     "check_sample",
+    "config_meta",
     "config_snapshot",
     "home_timeout_s",
     "resume_target",
@@ -85,6 +86,16 @@ def config_snapshot(cfg: LabConfig) -> dict[str, Any]:
     snap: dict[str, Any] = cfg.model_dump(mode="json")
     snap["_source"] = str(Path(cfg.source).resolve()) if cfg.source else ""
     return snap
+
+
+def config_meta(cfg: LabConfig | dict[str, Any], meta: RunMeta | None = None) -> RunMeta:
+    """The run metadata of the config's ``[run]`` table with ``meta``'s fields over it
+    (a command-line ``--operator`` wins over the config's; tags of both are kept)."""
+    base = RunMeta()
+    if isinstance(cfg, LabConfig):
+        r = cfg.run
+        base = RunMeta(operator=r.operator, sample_id=r.sample_id, notes=r.notes, tags=r.tags)
+    return base if meta is None else base.merged(meta)
 
 
 def check_sample(spec: str, *, option: str = "--sample", given: str = "") -> None:
@@ -294,9 +305,10 @@ class ScanSession:
         """:meth:`prepare` for the stored plan of ``run_id``."""
         return await self.prepare(BrdfPlan.from_dict(self.store.get_run(run_id).plan), run_id)
 
-    def start(self, scan: PreparedScan) -> ScanRunner:
+    def start(self, scan: PreparedScan, *, meta: RunMeta | None = None) -> ScanRunner:
         """Put the plan's sample under the instruments (simulated lab), record a new run
-        in the store, and return its runner (call :meth:`run`)."""
+        in the store (with the config's ``[run]`` metadata, ``meta``'s fields over it), and
+        return its runner (call :meth:`run`)."""
         plan, cfg = scan.plan, self.config
         hook = self._specimen_hook() if plan.mirror_reference else None
         self.lab.put_sample(scan.model, plan.sample)
@@ -309,6 +321,7 @@ class ScanSession:
                 sample=plan.sample,
                 model=scan.predictor.describe(),
                 version=__version__,
+                meta=config_meta(cfg, meta),
             )
         g = cfg.goniometer
         return ScanRunner(
@@ -369,8 +382,13 @@ class ScanSession:
             ``failed`` with the reason) or was aborted (marked ``aborted``).
         """
         from goniolab.config import write_alignment
+        from goniolab.scan.align_reach import check_align_reach
 
         cfg = self.config
+        try:  # an incidence the arms cannot sweep is refused before any run or motion
+            check_align_reach(plan, cfg.goniometer)
+        except PlanError as exc:
+            raise UserError(f"scan --plan align: {exc}") from exc
         model = await self.models.get(plan.sample)
         await self.lab.prepare_sample(plan.sample)
         self.lab.put_sample(model, plan.sample)
@@ -382,6 +400,7 @@ class ScanSession:
             sample=plan.sample,
             model=predictor.describe(),
             version=__version__,
+            meta=config_meta(cfg),
         )
         hook = self.lab.place_specimen or self.operator
         if hook is None:
@@ -434,9 +453,12 @@ class ScanSession:
         return self.operator
 
 
-def resume_target(rec: RunRecord, config_path: str | None, done_readings: int) -> str:
+def resume_target(
+    rec: RunRecord, config_path: str | None, done_readings: int, *, need_file: bool = True
+) -> str:
     """The config file to resume the stored run ``rec`` with: ``config_path`` when given,
-    else the one the run was started with (its ``_source``).
+    else the one the run was started with (its ``_source``); ``need_file=False`` only
+    checks that the run can be resumed (``scan resume`` uses the run's stored config).
 
     Raises
     ------
@@ -447,6 +469,8 @@ def resume_target(rec: RunRecord, config_path: str | None, done_readings: int) -
         raise UserError(f"run {rec.id} is a {rec.kind} run; only scans can be resumed")
     if rec.status == RunState.DONE.value:
         raise UserError(f"run {rec.id} is already done ({done_readings} readings)")
+    if not need_file:
+        return config_path or ""
     path = config_path or rec.config.get("_source", "")
     if not path:
         raise UserError(f"run {rec.id}: no config file recorded; pass --config FILE")
@@ -542,8 +566,11 @@ class GlossSession:
         model = await self.models.get(sample)
         return GlossPrediction(model, await predict_gloss(model, angles_deg))
 
-    def create_run(self, plan: GlossPlan, prediction: GlossPrediction) -> int:
-        """Record a new ``gloss`` run for ``plan``; return its id."""
+    def create_run(
+        self, plan: GlossPlan, prediction: GlossPrediction, *, meta: RunMeta | None = None
+    ) -> int:
+        """Record a new ``gloss`` run for ``plan`` (with the config's ``[run]`` metadata,
+        ``meta``'s fields over it); return its id."""
         config = (
             config_snapshot(with_sample(self.config, plan.sample))
             if isinstance(self.config, LabConfig)
@@ -556,6 +583,7 @@ class GlossSession:
             sample=plan.sample,
             model=prediction.describe(),
             version=__version__,
+            meta=config_meta(self.config, meta),
         )
 
     def logger(
@@ -581,9 +609,14 @@ class GlossSession:
         )
 
     async def start(
-        self, plan: GlossPlan, *, mode: str = "measure", interval_s: float = 0.0
+        self,
+        plan: GlossPlan,
+        *,
+        mode: str = "measure",
+        interval_s: float = 0.0,
+        meta: RunMeta | None = None,
     ) -> GlossLogger:
-        """Predict ``plan.sample``, record a new run, and return its logger."""
+        """Predict ``plan.sample``, record a new run (with ``meta``), and return its logger."""
         prediction = await self.predict(plan.sample, plan.angles_deg)
-        run_id = self.create_run(plan, prediction)
+        run_id = self.create_run(plan, prediction, meta=meta)
         return self.logger(plan, run_id, prediction, mode=mode, interval_s=interval_s)

@@ -8,7 +8,20 @@ the same per-reading commit and the same claim semantics: a claim is a row lock 
 that process dies (also on ``kill -9``), as the file lock is by the kernel. Credentials come
 from libpq's own sources (``PGPASSWORD``, ``~/.pgpass``, ``PGSSLMODE`` and certificate
 files, or the URL); a password never appears in a message, a log line or a run's config
-snapshot (:func:`goniolab.logs.redact`).
+snapshot (:func:`goniolab.redact.redact`, by parsing the URL or keyword string). A libpq
+keyword string (``host=... dbname=...``) names a database as well as a URL does.
+
+Identity: every run has a UUID (``runs.uuid``, unique), kept by ``runs migrate`` and written
+into every export, and the operator's ``operator``, ``sample_id``, ``notes`` and ``tags``.
+A store from an older goniolab gets the columns on open and a UUID 5 per run
+(:func:`legacy_uuid`); the store itself has a UUID (``meta.store_uuid``).
+
+Failures: every error is one line (:class:`StoreError`); a write the store cannot take now
+is :class:`StoreUnavailable` (a full disk, an SQLite lock held past the 10 s busy timeout, a
+PostgreSQL server down, restarted, frozen or unreachable: connect, statement and TCP
+timeouts, a client watchdog, reconnect with backoff), which a runner answers by pausing
+with the arms parked; a page or row that cannot be read is :class:`StoreDamaged`, naming
+the run. Claims on an SQLite store are filelock locks (no ``fcntl``: Windows works).
 
 Tables
 ------
@@ -36,21 +49,23 @@ from __future__ import annotations
 
 import contextlib
 import csv
-import fcntl
 import io
 import json
 import os
+import socket
 import sqlite3
+import threading
 import time
-from collections.abc import Iterator, Mapping, Sequence
+import uuid as uuidlib
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar
 
 import platformdirs
 
-from goniolab.logs import redact
+from goniolab.redact import is_conninfo, redact, redact_obj, scrub_driver_message
 
 __all__ = [
     "COLOUR_KEYS",
@@ -58,15 +73,20 @@ __all__ = [
     "PointRow",
     "PredictedColour",
     "RunBusy",
+    "RunMeta",
     "RunRecord",
     "RunStore",
+    "StoreDamaged",
     "StoreError",
+    "StoreUnavailable",
     "default_store_path",
     "is_store_url",
+    "legacy_uuid",
     "resolve_store_path",
 ]
 
-_SCHEMA_VERSION = 1
+#: 2: run identity (uuid, operator, notes, tags, sample_id), added to older stores on open.
+_SCHEMA_VERSION = 2
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (
@@ -145,7 +165,24 @@ _PREDICTION_COLOUR_COLUMNS: tuple[tuple[str, str], ...] = (
     ("predicted_b", "REAL"),
     ("predicted_spectrum_json", "TEXT"),
 )
+#: Run identity (issue 22): a UUID that travels with the run (exports, migrations, bluesky
+#: documents) and what the operator says about it. Older stores get them by ``ALTER TABLE``
+#: and a UUID per existing run (:func:`legacy_uuid`).
+_RUN_IDENTITY_COLUMNS: tuple[tuple[str, str], ...] = (
+    ("uuid", "TEXT"),
+    ("operator", "TEXT"),
+    ("notes", "TEXT"),
+    ("tags_json", "TEXT"),
+    ("sample_id", "TEXT"),
+)
 _COLOUR_COLUMNS = (("points", _POINT_COLOUR_COLUMNS), ("predictions", _PREDICTION_COLOUR_COLUMNS))
+#: Every column added after the first schema, by table.
+_ADDED_COLUMNS = (*_COLOUR_COLUMNS, ("runs", _RUN_IDENTITY_COLUMNS))
+#: Indexes that need the added columns (``runs list`` filters and ``migrate`` by UUID).
+_ADDED_INDEXES = (
+    "CREATE UNIQUE INDEX IF NOT EXISTS runs_uuid ON runs(uuid)",
+    "CREATE INDEX IF NOT EXISTS runs_operator ON runs(operator)",
+)
 
 #: The same tables in PostgreSQL (``DOUBLE PRECISION`` where SQLite's REAL is 8 bytes),
 #: plus ``run_claims``: one row per claimed run, row-locked while a runner holds it.
@@ -214,6 +251,7 @@ _PG_SCHEMA_LOCK = 0x60_1010_AB
 #: CSV columns of a scan export (one row per reading) and of a gloss export.
 _POINT_FIELDS = (
     "run_id",
+    "run_uuid",
     "index",
     "repeat",
     "theta_i_deg",
@@ -238,6 +276,7 @@ _POINT_FIELDS = (
 )
 _GLOSS_FIELDS = (
     "run_id",
+    "run_uuid",
     "seq",
     "timestamp",
     "g20_gu",
@@ -250,11 +289,16 @@ _GLOSS_FIELDS = (
 )
 
 
-#: The columns of a :class:`RunRecord`, in the order :meth:`RunRecord.from_row` reads them.
+#: The columns of a :class:`RunRecord`, in the order :meth:`RunRecord.from_row` reads them
+#: (``{identity}``: the identity columns, or NULLs in an old read-only store).
 _RUN_SELECT = (
     "SELECT id, kind, plan_json, config_json, sample, model_json, version, status,"
-    " reason, created_at, updated_at, finished_at FROM runs"
+    " reason, created_at, updated_at, finished_at, {identity} FROM runs"
 )
+_IDENTITY_SELECT = "uuid, operator, notes, tags_json, sample_id"
+_NO_IDENTITY_SELECT = "NULL, NULL, NULL, NULL, NULL"
+#: The namespace of the UUIDs given to runs stored before runs had one.
+_LEGACY_NAMESPACE = uuidlib.UUID("6f1c2a7e-3b1d-5c4e-9a8b-0d2e4f6a8c10")
 
 
 class StoreError(Exception):
@@ -265,77 +309,128 @@ class RunBusy(StoreError):
     """Another runner (this process or another one) is measuring the run right now."""
 
 
-class _ClaimFile:
-    """One open lock file per store, shared by every claim of this process.
+class StoreUnavailable(StoreError):
+    """The store cannot take a write right now (a database down, frozen or unreachable, a
+    full disk, an SQLite file locked by another program for more than its busy timeout).
+    Transient: the same call may succeed later (:meth:`RunStore.wait_writable`)."""
 
-    POSIX record locks (``lockf``) belong to the process and closing *any* descriptor of
-    the file drops all of them, so the file is opened once and closed only when the last
-    claim is released. The kernel drops the locks when the process dies (also on
-    ``kill -9``): a crashed run is never left claimed.
+
+class StoreDamaged(StoreError):
+    """A page of the store file, or one run's row, cannot be read (the message says which)."""
+
+
+def _lock_class() -> Any:
+    """filelock's lock for this platform (``fcntl.flock`` on POSIX, ``msvcrt`` on Windows)."""
+    import warnings
+
+    with warnings.catch_warnings():
+        # without fcntl (and not Windows) filelock falls back to its soft lock and warns
+        warnings.simplefilter("ignore")
+        import filelock
+
+    return filelock.FileLock, filelock.Timeout
+
+
+class _RunLocks:
+    """Per-run claim locks of this process: ``<store>-locks/run-<id>.lock`` beside the store.
+
+    The locks are filelock's (``flock`` on POSIX, ``LockFileEx``/``msvcrt`` on Windows):
+    held by an open file the OS closes when the process dies (also on ``kill -9``), so a
+    crashed run is never left claimed. No ``fcntl`` import here: the store opens on
+    Windows (tests/test_store_locking.py imports it with ``fcntl`` unavailable).
     """
 
-    _open: ClassVar[dict[Path, tuple[int, set[int]]]] = {}
+    _held: ClassVar[dict[tuple[Path, int], Any]] = {}
+    _guard: ClassVar[threading.Lock] = threading.Lock()
+
+    @staticmethod
+    def path(lock_dir: Path, run_id: int) -> Path:
+        return lock_dir / f"run-{run_id}.lock"
 
     @classmethod
-    def acquire(cls, lock_path: Path, run_id: int) -> None:
-        fd, held = cls._open.get(lock_path, (-1, set()))
-        if run_id in held:
-            raise RunBusy(f"run {run_id} is already being measured by this process")
-        if fd < 0:
-            fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o644)
-        try:
-            fcntl.lockf(fd, fcntl.LOCK_EX | fcntl.LOCK_NB, 1, run_id)
-        except OSError as exc:
-            if not held:
-                os.close(fd)
-            raise RunBusy(
-                f"run {run_id} is being measured by another goniolab process; stop that one first"
-            ) from exc
-        held.add(run_id)
-        cls._open[lock_path] = (fd, held)
+    def _new(cls, lock_dir: Path, run_id: int) -> Any:
+        file_lock, _ = _lock_class()
+        return file_lock(
+            str(cls.path(lock_dir, run_id)), timeout=0, thread_local=False, is_singleton=False
+        )
 
     @classmethod
-    def is_held(cls, lock_path: Path, run_id: int) -> bool | None:
+    def acquire(cls, lock_dir: Path, run_id: int) -> None:
+        _, timeout_error = _lock_class()
+        with cls._guard:
+            if (lock_dir, run_id) in cls._held:
+                raise RunBusy(f"run {run_id} is already being measured by this process")
+            lock_dir.mkdir(exist_ok=True)
+            lock = cls._new(lock_dir, run_id)
+            try:
+                lock.acquire(blocking=False)
+            except timeout_error:
+                raise RunBusy(
+                    f"run {run_id} is being measured by another goniolab process; "
+                    "stop that one first"
+                ) from None
+            cls._held[(lock_dir, run_id)] = lock
+
+    @classmethod
+    def is_held(cls, lock_dir: Path, run_id: int) -> bool | None:
         """Whether a runner (any process) holds ``run_id``; ``None`` when it cannot be told.
 
         The probe takes the lock for an instant: a runner claiming the run in exactly that
         instant is refused (and says so); it never breaks a held claim.
         """
-        fd, held = cls._open.get(lock_path, (-1, set()))
-        if run_id in held:
+        if (lock_dir, run_id) in cls._held:
             return True
-        if not lock_path.exists():
+        if not cls.path(lock_dir, run_id).exists():
             return False
-        own = fd < 0
-        if own:
-            try:
-                fd = os.open(lock_path, os.O_RDWR)
-            except OSError:  # a read-only store: no write lock can be tried
-                return None
+        if not os.access(lock_dir, os.W_OK):  # a read-only store: no lock can be tried
+            return None
+        _, timeout_error = _lock_class()
+        lock = cls._new(lock_dir, run_id)
         try:
-            fcntl.lockf(fd, fcntl.LOCK_EX | fcntl.LOCK_NB, 1, run_id)
-        except OSError:
+            lock.acquire(blocking=False)
+        except timeout_error:
             return True
-        else:
-            fcntl.lockf(fd, fcntl.LOCK_UN, 1, run_id)
-            return False
-        finally:
-            if own:  # this process holds no lock on the file: closing drops nothing
-                os.close(fd)
+        except OSError:
+            return None
+        lock.release()
+        return False
 
     @classmethod
-    def release(cls, lock_path: Path, run_id: int) -> None:
-        fd, held = cls._open[lock_path]
-        fcntl.lockf(fd, fcntl.LOCK_UN, 1, run_id)
-        held.discard(run_id)
-        if not held:
-            os.close(fd)
-            del cls._open[lock_path]
+    def release(cls, lock_dir: Path, run_id: int) -> None:
+        with cls._guard:
+            lock = cls._held.pop((lock_dir, run_id), None)
+        if lock is not None:
+            lock.release()
+
+
+def legacy_uuid(location: str, run_id: int, created_at: float) -> str:
+    """The UUID of a run stored before runs had one: a UUID 5 of the store's location, the
+    run id and its creation time (the same whether the store is upgraded or read as it is,
+    distinct for two PCs' stores at the same path: their creation times differ)."""
+    return str(uuidlib.uuid5(_LEGACY_NAMESPACE, f"{location}\n{run_id}\n{created_at!r}"))
+
+
+def _haystack(rec: RunRecord) -> str:
+    """What ``runs list --search`` looks in, lower-case."""
+    return "\n".join([rec.sample, rec.sample_id, rec.operator, rec.notes, *rec.tags]).lower()
+
+
+def _json_column(run_id: int, column: str, text: Any) -> Any:
+    """Decode one JSON column; :class:`StoreDamaged` naming the run and column if it is not."""
+    try:
+        return json.loads(text)
+    except (TypeError, ValueError) as exc:
+        raise StoreDamaged(f"run {run_id}: {column} is not valid JSON ({exc})") from None
 
 
 @dataclass(frozen=True, slots=True)
 class RunRecord:
-    """One row of ``runs`` with its JSON columns decoded."""
+    """One row of ``runs`` with its JSON columns decoded.
+
+    ``damage`` is empty for a sound row; for a row whose JSON cannot be decoded it says
+    which column and why (``plan``/``config``/``model`` are then empty): :meth:`RunStore.
+    list_runs` lists such a run, :meth:`RunStore.get_run` refuses it in one line.
+    """
 
     id: int
     kind: str
@@ -349,33 +444,71 @@ class RunRecord:
     created_at: float
     updated_at: float
     finished_at: float | None
+    uuid: str = ""
+    operator: str = ""
+    notes: str = ""
+    tags: tuple[str, ...] = ()
+    sample_id: str = ""
+    damage: str = ""
 
     @classmethod
-    def from_row(cls, row: Sequence[Any]) -> RunRecord:
-        """From the columns of ``_RUN_SELECT``, in that order."""
+    def from_row(cls, row: Sequence[Any], location: str = "") -> RunRecord:
+        """From the columns of ``_RUN_SELECT``, in that order (a row without the identity
+        columns gets :func:`legacy_uuid` and empty metadata)."""
+        run_id = int(row[0])
+        damage: list[str] = []
+        decoded: list[Any] = []
+        for k, column in ((2, "plan_json"), (3, "config_json"), (5, "model_json")):
+            try:
+                value = _json_column(run_id, column, row[k])
+                if not isinstance(value, dict):
+                    raise StoreDamaged(f"run {run_id}: {column} is not a JSON object")
+            except StoreDamaged as exc:
+                damage.append(str(exc).split(": ", 1)[1])
+                value = {}
+            decoded.append(value)
+        ident = list(row[12:17]) if len(row) > 12 else [None] * 5
+        tags: tuple[str, ...] = ()
+        if ident[3]:
+            try:
+                tags = tuple(str(t) for t in json.loads(ident[3]))
+            except (TypeError, ValueError):
+                damage.append("tags_json is not valid JSON")
+        created = float(row[9])
         return cls(
-            id=int(row[0]),
+            id=run_id,
             kind=str(row[1]),
-            plan=json.loads(row[2]),
-            config=json.loads(row[3]),
+            plan=decoded[0],
+            config=decoded[1],
             sample=str(row[4]),
-            model=json.loads(row[5]),
+            model=decoded[2],
             version=str(row[6]),
             status=str(row[7]),
             reason=str(row[8]),
-            created_at=float(row[9]),
+            created_at=created,
             updated_at=float(row[10]),
             finished_at=None if row[11] is None else float(row[11]),
+            uuid=str(ident[0]) if ident[0] else legacy_uuid(location, run_id, created),
+            operator=str(ident[1] or ""),
+            notes=str(ident[2] or ""),
+            tags=tags,
+            sample_id=str(ident[4] or ""),
+            damage="; ".join(damage),
         )
 
     def as_dict(self) -> dict[str, Any]:
         """Return the record as a JSON-serialisable dict."""
-        return {
+        doc = {
             "id": self.id,
+            "uuid": self.uuid,
             "kind": self.kind,
             "plan": self.plan,
             "config": self.config,
             "sample": self.sample,
+            "sample_id": self.sample_id,
+            "operator": self.operator,
+            "notes": self.notes,
+            "tags": list(self.tags),
             "model": self.model,
             "version": self.version,
             "status": self.status,
@@ -384,6 +517,32 @@ class RunRecord:
             "updated_at": self.updated_at,
             "finished_at": self.finished_at,
         }
+        if self.damage:
+            doc["damage"] = self.damage
+        return doc
+
+
+@dataclass(frozen=True, slots=True)
+class RunMeta:
+    """What the operator says about a run: who, which physical sample, notes, tags.
+
+    Set from ``goniolab scan --operator/--sample-id/--note/--tag``, the config's ``[run]``
+    table, the TUI and the API; changed later with ``goniolab runs annotate``.
+    """
+
+    operator: str = ""
+    sample_id: str = ""
+    notes: str = ""
+    tags: tuple[str, ...] = field(default_factory=tuple)
+
+    def merged(self, other: RunMeta) -> RunMeta:
+        """``other``'s non-empty fields over this one's (tags: both, in order, once each)."""
+        return RunMeta(
+            operator=other.operator or self.operator,
+            sample_id=other.sample_id or self.sample_id,
+            notes=other.notes or self.notes,
+            tags=tuple(dict.fromkeys((*self.tags, *other.tags))),
+        )
 
 
 @dataclass(frozen=True, slots=True)
@@ -472,8 +631,11 @@ def default_store_path() -> Path:
 
 
 def is_store_url(location: str | Path) -> bool:
-    """Whether ``location`` names a PostgreSQL database (``postgresql://`` or ``postgres://``)."""
-    return isinstance(location, str) and location.startswith(("postgresql://", "postgres://"))
+    """Whether ``location`` names a PostgreSQL database: a ``postgresql://`` (or
+    ``postgres://``) URL, or a libpq keyword/value string (``host=... dbname=...``)."""
+    if not isinstance(location, str):
+        return False
+    return location.startswith(("postgresql://", "postgres://")) or is_conninfo(location)
 
 
 def resolve_store_path(cli_store: str | None, config_store: str | None = None) -> Path | str:
@@ -487,16 +649,20 @@ def resolve_store_path(cli_store: str | None, config_store: str | None = None) -
     return default_store_path()
 
 
-def _pg_why(exc: BaseException) -> str:
-    """psycopg's reason on one line (libpq's messages span lines)."""
-    return " ".join(str(exc).split()) or type(exc).__name__
-
-
 def _why(exc: BaseException) -> str:
-    """SQLite's reason, with the one a user meets most often made explicit."""
-    text = str(exc)
+    """SQLite's reason, with the ones a user meets most often made explicit."""
+    text = str(exc) or type(exc).__name__
     if "file is not a database" in text:
         return "not a goniolab run store (the file is not an SQLite database)"
+    if "disk is full" in text or getattr(exc, "sqlite_errorname", "") == "SQLITE_FULL":
+        return "the disk is full (free some space; every reading taken so far is stored)"
+    if "database is locked" in text or "database table is locked" in text:
+        return (
+            f"locked by another program for more than {_SQLITE_BUSY_S:g} s "
+            "(a database browser holding a write transaction?)"
+        )
+    if "malformed" in text:
+        return "the file is damaged (database disk image is malformed)"
     return text
 
 
@@ -505,38 +671,183 @@ def _dumps(obj: Any) -> str:
 
 
 def _redacted(obj: Any) -> Any:
-    """``obj`` with every string passed through :func:`goniolab.logs.redact` (a config
-    snapshot keeps the store URL, never its password)."""
-    if isinstance(obj, str):
-        return redact(obj)
-    if isinstance(obj, Mapping):
-        return {k: _redacted(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_redacted(v) for v in obj]
-    return obj
+    """``obj`` with the password of every connection string in it blanked
+    (:func:`goniolab.redact.redact`, by parsing: other text is kept as it is)."""
+    return redact_obj(obj)
 
 
-class _PgConnection:
-    """A psycopg connection that speaks the SQLite store's SQL: ``?`` placeholders,
-    ``BEGIN IMMEDIATE``; autocommit outside explicit transactions."""
+#: SQLite's busy timeout: a writer waits this long for another program's lock.
+_SQLITE_BUSY_S = 10.0
+#: PostgreSQL: connect timeout, and the longest one statement may take before the client
+#: gives the connection up (a frozen or partitioned server) and the server cancels it.
+_PG_CONNECT_TIMEOUT_S = 5
+_PG_STATEMENT_TIMEOUT_S = 10.0
+#: Reconnect backoff after a lost PostgreSQL connection: first wait, factor, longest wait.
+_BACKOFF_FIRST_S, _BACKOFF_FACTOR, _BACKOFF_MAX_S = 0.5, 2.0, 10.0
 
-    def __init__(self, conn: Any) -> None:
-        self.conn = conn
 
+class _Result:
+    """The rows of one statement, fetched while the connection was held (thread-safe)."""
+
+    __slots__ = ("description", "rowcount", "rows")
+
+    def __init__(self, rows: list[Any], description: Any, rowcount: int) -> None:
+        self.rows = rows
+        self.description = description
+        self.rowcount = rowcount
+
+    def fetchone(self) -> Any:
+        return self.rows[0] if self.rows else None
+
+    def fetchall(self) -> list[Any]:
+        return self.rows
+
+    def __iter__(self) -> Iterator[Any]:
+        return iter(self.rows)
+
+
+class _Conn:
+    """One database connection shared by the threads of a process: every statement runs
+    under a lock and returns its rows already fetched, so the scan's event loop, a worker
+    thread (``goniolab.api.run_scan`` in Jupyter) and the TUI may share one store.
+
+    SQLite statements speak as written; PostgreSQL ones get ``%s`` placeholders, a
+    statement timeout (server side), a client-side watchdog that gives a connection up
+    when a statement does not return in time (a frozen or partitioned server: the socket
+    is shut down, the call fails with :class:`StoreUnavailable`), and a reconnect with
+    exponential backoff on the next call.
+    """
+
+    def __init__(
+        self,
+        raw: Any,
+        *,
+        location: str,
+        connect: Callable[[], Any] | None = None,
+        conninfo: str = "",
+    ) -> None:
+        self.raw = raw
+        self.location = location
+        self.is_postgres = connect is not None
+        self._connect = connect
+        self._conninfo = conninfo
+        self.lock = threading.RLock()
+        self._broken = ""
+        self._next_try = 0.0
+        self._backoff_s = _BACKOFF_FIRST_S
+        self.in_tx = False
+
+    # ------------------------------------------------------------------ statements
     @staticmethod
-    def _sql(sql: str) -> str:
+    def _pg_sql(sql: str) -> str:
         return "BEGIN" if sql == "BEGIN IMMEDIATE" else sql.replace("?", "%s")
 
-    def execute(self, sql: str, params: Sequence[Any] = ()) -> Any:
-        return self.conn.execute(self._sql(sql), tuple(params))
+    def execute(self, sql: str, params: Sequence[Any] = ()) -> _Result:
+        with self.lock:
+            if not self.is_postgres:
+                return self._sqlite(lambda: self.raw.execute(sql, tuple(params)))
+            return self._pg(lambda: self.raw.execute(self._pg_sql(sql), tuple(params)))
 
-    def executemany(self, sql: str, rows: Sequence[Sequence[Any]]) -> Any:
-        cur = self.conn.cursor()
-        cur.executemany(self._sql(sql), [tuple(r) for r in rows])
-        return cur
+    def executemany(self, sql: str, rows: Sequence[Sequence[Any]]) -> _Result:
+        with self.lock:
+            if not self.is_postgres:
+                return self._sqlite(lambda: self.raw.executemany(sql, [tuple(r) for r in rows]))
+
+            def many() -> Any:
+                cur = self.raw.cursor()
+                cur.executemany(self._pg_sql(sql), [tuple(r) for r in rows])
+                return cur
+
+            return self._pg(many)
+
+    def _sqlite(self, run: Callable[[], Any]) -> _Result:
+        try:
+            cur = run()
+            rows = cur.fetchall() if cur.description is not None else []
+            return _Result(rows, cur.description, cur.rowcount)
+        except sqlite3.IntegrityError:
+            raise
+        except sqlite3.OperationalError as exc:
+            why = _why(exc)
+            if "disk is full" in why or "locked" in why or "disk I/O" in str(exc):
+                raise StoreUnavailable(f"store {self.location}: {why}") from exc
+            raise StoreError(f"store {self.location}: {why}") from exc
+        except sqlite3.DatabaseError as exc:
+            raise StoreDamaged(f"store {self.location}: {_why(exc)}") from exc
+
+    def _pg(self, run: Callable[[], Any]) -> _Result:
+        psycopg = _psycopg()
+        self._ensure_connected()
+        timer = threading.Timer(_PG_STATEMENT_TIMEOUT_S + 2.0, self._give_up)
+        timer.daemon = True
+        timer.start()
+        try:
+            cur = run()
+            rows = cur.fetchall() if cur.description is not None else []
+            return _Result(rows, cur.description, cur.rowcount)
+        except psycopg.IntegrityError:
+            raise
+        except (psycopg.OperationalError, psycopg.InterfaceError) as exc:
+            if self.raw.closed or self.raw.broken or isinstance(exc, psycopg.InterfaceError):
+                self._mark_broken(exc)
+            raise StoreUnavailable(
+                f"store {self.location}: {self._pg_why(exc)}"
+                + (" (a write timed out)" if isinstance(exc, psycopg.errors.QueryCanceled) else "")
+            ) from None
+        except psycopg.Error as exc:
+            raise StoreError(f"store {self.location}: {self._pg_why(exc)}") from None
+        finally:
+            timer.cancel()
+
+    def _pg_why(self, exc: BaseException) -> str:
+        return scrub_driver_message(str(exc) or type(exc).__name__, self._conninfo)
+
+    # ------------------------------------------------------------------ reconnect
+    def _give_up(self) -> None:
+        """The watchdog: a statement has run past its time (the server is frozen or the
+        network partitioned; a TCP connection to a stopped server never errs by itself).
+        Shut the socket down so that the blocked call returns with an error."""
+        with contextlib.suppress(Exception):
+            fd = self.raw.pgconn.socket
+            s = socket.socket(fileno=os.dup(fd))
+            try:
+                s.shutdown(socket.SHUT_RDWR)
+            finally:
+                s.close()
+        self._broken = f"no answer within {_PG_STATEMENT_TIMEOUT_S + 2.0:g} s"
+
+    def _mark_broken(self, exc: BaseException) -> None:
+        if not self._broken:
+            self._broken = self._pg_why(exc)
+        self._next_try = time.monotonic() + self._backoff_s
+
+    def _ensure_connected(self) -> None:
+        """Reconnect a lost connection, no sooner than the backoff allows."""
+        if not (self._broken or self.raw.closed or self.raw.broken):
+            return
+        if not self._broken:
+            self._broken = "the connection was closed"
+        now = time.monotonic()
+        if now < self._next_try:
+            raise StoreUnavailable(
+                f"store {self.location}: unreachable ({self._broken}); "
+                f"next reconnect in {self._next_try - now:.1f} s"
+            )
+        with contextlib.suppress(Exception):
+            self.raw.close()
+        assert self._connect is not None
+        try:
+            self.raw = self._connect()
+        except StoreError as exc:
+            self._next_try = time.monotonic() + self._backoff_s
+            self._backoff_s = min(_BACKOFF_MAX_S, self._backoff_s * _BACKOFF_FACTOR)
+            raise StoreUnavailable(str(exc)) from None
+        self._broken = ""
+        self._backoff_s = _BACKOFF_FIRST_S
 
     def close(self) -> None:
-        self.conn.close()
+        with self.lock, contextlib.suppress(Exception):
+            self.raw.close()
 
 
 def _psycopg() -> Any:
@@ -550,12 +861,13 @@ def _psycopg() -> Any:
 
 
 class RunStore:
-    """The SQLite run store (one file, WAL mode).
+    """The run store: an SQLite file (WAL mode) or a PostgreSQL database.
 
     Parameters
     ----------
     path
-        The database file; its directory is created if missing.
+        The database file (its directory is created if missing), or a PostgreSQL
+        ``postgresql://`` URL or libpq ``host=... dbname=...`` string.
     readonly
         Open for reading only (``runs list/show/export``): the file must exist, nothing
         is created or written, and a store on read-only media can still be read.
@@ -571,27 +883,34 @@ class RunStore:
 
     Notes
     -----
-    A :class:`RunStore` is used from one thread (the event loop's); numeric work goes to
-    worker threads, store writes never do.
+    One store may be used from several threads (each statement holds the connection's
+    lock; a transaction holds it throughout). A write that cannot be made raises
+    :class:`StoreUnavailable` (transient: a database down, a full disk, a lock held by
+    another program) or :class:`StoreError`, always in one line; a read of a damaged
+    page or row raises :class:`StoreDamaged`.
     """
 
     def __init__(self, path: str | Path, *, readonly: bool = False, create: bool = True) -> None:
         self.readonly = readonly
         self.is_postgres = is_store_url(path)
         self._claims: dict[int, Any] = {}
-        self._colour_cols: bool | None = None
+        self._columns: dict[str, list[str]] = {}
         if self.is_postgres:
             self._conninfo = str(path)
-            #: How the store names itself (a URL without its password).
+            #: How the store names itself (its URL or keyword string without the password).
             self.location = redact(self._conninfo)
             self.path = Path(self.location.split("://", 1)[-1])
-            self._db: Any = self._open_postgres(readonly=readonly, create=create)
+            self._db: _Conn = self._open_postgres(readonly=readonly, create=create)
             return
+        self._conninfo = ""
         self.path = Path(path)
         self.location = str(self.path)
         self._db = self._open_sqlite(readonly=readonly, create=create)
 
-    def _open_sqlite(self, *, readonly: bool, create: bool) -> sqlite3.Connection:
+    def __repr__(self) -> str:
+        return f"RunStore({self.location!r}{', readonly=True' if self.readonly else ''})"
+
+    def _open_sqlite(self, *, readonly: bool, create: bool) -> _Conn:
         """Open the SQLite file: read-only, or for writing (created when missing and
         ``create``), after checks that say why a location cannot serve."""
         where = f"store {self.path}"
@@ -600,6 +919,9 @@ class RunStore:
         exists = self.path.exists()
         if not exists and (readonly or not create):
             raise StoreError(f"{where}: no such file (no run has been recorded there)")
+        if exists and not self.path.is_file():
+            # a FIFO or a device would block SQLite's open or read for ever
+            raise StoreError(f"{where}: not a regular file, not a store")
         if readonly:
             return self._open_readonly(where)
         self._check_writable(where, exists)
@@ -628,100 +950,158 @@ class RunStore:
         if exists and not os.access(self.path, os.W_OK):
             raise StoreError(f"{where}: the file is read-only; choose another --store")
 
-    def _open_writable(self, where: str) -> sqlite3.Connection:
-        """Open (and create) the SQLite store: WAL, ``synchronous=FULL``, the schema."""
+    def _open_writable(self, where: str) -> _Conn:
+        """Open (and create) the SQLite store: WAL, ``synchronous=FULL``, the schema, the
+        columns and run UUIDs an older store lacks."""
         try:
-            db = sqlite3.connect(self.path, isolation_level=None, timeout=10.0)
-            db.execute("PRAGMA journal_mode=WAL")
-            db.execute("PRAGMA synchronous=FULL")
-            db.execute("PRAGMA foreign_keys=ON")
-            db.executescript(_SCHEMA)
-            self._db = db  # _add_missing_columns reads the tables through self._db
-            self._add_missing_columns()
-            db.execute(
-                "INSERT INTO meta(key, value) VALUES ('schema_version', ?)"
-                " ON CONFLICT (key) DO NOTHING",
-                (str(_SCHEMA_VERSION),),
+            raw = sqlite3.connect(
+                self.path, isolation_level=None, timeout=_SQLITE_BUSY_S, check_same_thread=False
             )
+            raw.execute("PRAGMA journal_mode=WAL")
+            raw.execute("PRAGMA synchronous=FULL")
+            raw.execute("PRAGMA foreign_keys=ON")
+            raw.executescript(_SCHEMA)
         except (OSError, sqlite3.Error) as exc:
             raise StoreError(f"{where}: cannot open: {_why(exc)}") from exc
-        return db
-
-    def _open_postgres(self, *, readonly: bool, create: bool) -> _PgConnection:
-        """Connect (libpq reads PGPASSWORD, ~/.pgpass, PGSSLMODE ... itself) and create the
-        tables unless ``readonly``; every message is passed through :func:`redact`."""
-        psycopg = _psycopg()
-        where = f"store {self.location}"
+        self._db = _Conn(raw, location=self.location)
         try:
-            conn = psycopg.connect(self._conninfo, autocommit=True, connect_timeout=10)
+            self._upgrade()
+        except StoreError as exc:
+            raw.close()
+            raise StoreError(f"{where}: cannot open: {str(exc).split(': ', 1)[-1]}") from exc
+        return self._db
+
+    def _pg_connect(self, *, autocommit: bool = True) -> Any:
+        """A new psycopg connection with the store's timeouts: connect, statement (server
+        side) and TCP keepalives/user timeout (a dead peer is noticed in seconds)."""
+        psycopg = _psycopg()
+        try:
+            return psycopg.connect(
+                self._conninfo,
+                autocommit=autocommit,
+                connect_timeout=_PG_CONNECT_TIMEOUT_S,
+                options=f"-c statement_timeout={int(_PG_STATEMENT_TIMEOUT_S * 1000)}",
+                keepalives=1,
+                keepalives_idle=5,
+                keepalives_interval=2,
+                keepalives_count=3,
+                tcp_user_timeout=int((_PG_STATEMENT_TIMEOUT_S + 2) * 1000),
+            )
         except psycopg.Error as exc:
-            raise StoreError(redact(f"{where}: cannot connect: {_pg_why(exc)}")) from None
-        db = _PgConnection(conn)
+            why = scrub_driver_message(str(exc) or type(exc).__name__, self._conninfo)
+            raise StoreError(f"store {self.location}: cannot connect: {why}") from None
+
+    def _open_postgres(self, *, readonly: bool, create: bool) -> _Conn:
+        """Connect (libpq reads PGPASSWORD, ~/.pgpass, PGSSLMODE ... itself) and create the
+        tables unless ``readonly``; every message is scrubbed of the password."""
+        where = f"store {self.location}"
+        conn = self._pg_connect()
+        self._db = db = _Conn(
+            conn, location=self.location, connect=self._pg_connect, conninfo=self._conninfo
+        )
         try:
             have = db.execute("SELECT to_regclass('runs') IS NOT NULL").fetchone()[0]
             if not have and (readonly or not create):
                 raise StoreError(f"{where}: no goniolab run store in this database (no runs table)")
             if not readonly:
-                with conn.transaction():
-                    conn.execute("SELECT pg_advisory_xact_lock(%s)", (_PG_SCHEMA_LOCK,))
-                    conn.execute(_PG_SCHEMA)
-                    db.execute(
-                        "INSERT INTO meta(key, value) VALUES ('schema_version', ?)"
-                        " ON CONFLICT (key) DO NOTHING",
-                        (str(_SCHEMA_VERSION),),
-                    )
-                    for table, cols in _COLOUR_COLUMNS:
-                        for name, sql_type in cols:
-                            pg_type = "DOUBLE PRECISION" if sql_type == "REAL" else sql_type
-                            db.execute(
-                                f"ALTER TABLE {table} ADD COLUMN IF NOT EXISTS {name} {pg_type}"
-                            )
-        except psycopg.Error as exc:
-            conn.close()
-            raise StoreError(redact(f"{where}: cannot open: {_pg_why(exc)}")) from None
-        except StoreError:
-            conn.close()
-            raise
+                with self._tx():
+                    db.execute("SELECT pg_advisory_xact_lock(?)", (_PG_SCHEMA_LOCK,))
+                    db.execute(_PG_SCHEMA)
+                    self._upgrade()
+        except StoreError as exc:
+            db.close()
+            if str(exc).startswith(where):
+                raise
+            raise StoreError(f"{where}: cannot open: {exc}") from None
         return db
 
-    def _add_missing_columns(self) -> None:
-        """Bring an SQLite store written by an older goniolab up to the colour columns
-        (additive: nothing stored is touched; the new columns are NULL for old rows)."""
-        for table, cols in _COLOUR_COLUMNS:
-            have = set(self.table_columns(table))
+    def _upgrade(self) -> None:
+        """Bring a store written by an older goniolab up to this schema (additive: nothing
+        stored is changed; new columns are NULL for old rows, and each old run gets its
+        :func:`legacy_uuid`); record the schema version and give the store its own UUID."""
+        pg = self.is_postgres
+        for table, cols in _ADDED_COLUMNS:
+            have = {c.lower() for c in self.table_columns(table)}  # PostgreSQL folds case
             for name, sql_type in cols:
-                if name not in have:
-                    self._db.execute(f"ALTER TABLE {table} ADD COLUMN {name} {sql_type}")
+                if name.lower() not in have:
+                    kind = "DOUBLE PRECISION" if pg and sql_type == "REAL" else sql_type
+                    self._db.execute(f"ALTER TABLE {table} ADD COLUMN {name} {kind}")
+        self._columns.clear()
+        missing = self._db.execute(
+            "SELECT id, created_at FROM runs WHERE uuid IS NULL OR uuid = ''"
+        ).fetchall()
+        for run_id, created in missing:
+            self._db.execute(
+                "UPDATE runs SET uuid = ? WHERE id = ?",
+                (legacy_uuid(self.location, int(run_id), float(created)), int(run_id)),
+            )
+        have_meta = dict(self._db.execute("SELECT key, value FROM meta").fetchall())
+        if have_meta.get("schema_version") == str(_SCHEMA_VERSION) and "store_uuid" in have_meta:
+            return  # up to date: opening writes nothing (another program may hold the lock)
+        for sql in _ADDED_INDEXES:
+            self._db.execute(sql)
+        self._db.execute(
+            "INSERT INTO meta(key, value) VALUES ('schema_version', ?) ON CONFLICT (key)"
+            " DO UPDATE SET value = excluded.value",
+            (str(_SCHEMA_VERSION),),
+        )
+        self._db.execute(
+            "INSERT INTO meta(key, value) VALUES ('store_uuid', ?) ON CONFLICT (key) DO NOTHING",
+            (str(uuidlib.uuid4()),),
+        )
+
+    @property
+    def store_uuid(self) -> str | None:
+        """The store's own UUID (``None`` for an old store opened read-only): two handles
+        on one store (a symlink, a relative path, another spelling of a URL) share it."""
+        row = self._db.execute("SELECT value FROM meta WHERE key = 'store_uuid'").fetchone()
+        return None if row is None else str(row[0])
+
+    def _has_column(self, table: str, column: str) -> bool:
+        """Whether ``table`` has ``column`` (case-insensitive: PostgreSQL folds names)."""
+        if table not in self._columns:
+            self._columns[table] = [c.lower() for c in self.table_columns(table)]
+        return column.lower() in self._columns[table]
 
     @property
     def _has_colour(self) -> bool:
         """Whether this store has the colour columns (an old read-only store may not)."""
-        if self._colour_cols is None:
-            self._colour_cols = "colour_L" in self.table_columns("points")
-        return self._colour_cols
+        return self._has_column("points", "colour_L")
 
-    def _open_readonly(self, where: str) -> sqlite3.Connection:
+    @property
+    def _run_select(self) -> str:
+        ident = _IDENTITY_SELECT if self._has_column("runs", "uuid") else _NO_IDENTITY_SELECT
+        return _RUN_SELECT.format(identity=ident)
+
+    def _open_readonly(self, where: str) -> _Conn:
         """Open for reading only: ``mode=ro``; on a read-only directory (no ``-shm`` can be
         created beside the file) ``immutable=1``, which reads the main file as it is."""
         uri = self.path.resolve().as_uri()
         query = "mode=ro" if os.access(self.path.parent, os.W_OK) else "immutable=1"
         try:
-            db = sqlite3.connect(f"{uri}?{query}", uri=True, isolation_level=None, timeout=10.0)
-            row = db.execute(
+            raw = sqlite3.connect(
+                f"{uri}?{query}",
+                uri=True,
+                isolation_level=None,
+                timeout=_SQLITE_BUSY_S,
+                check_same_thread=False,
+            )
+            row = raw.execute(
                 "SELECT COUNT(*) FROM sqlite_master WHERE type = 'table' AND name = 'runs'"
             ).fetchone()
         except sqlite3.Error as exc:
             raise StoreError(f"{where}: cannot open: {_why(exc)}") from exc
         if not row[0]:
-            db.close()
+            raw.close()
             raise StoreError(f"{where}: not a goniolab run store (no runs table)")
-        return db
+        return _Conn(raw, location=self.location)
 
     # ------------------------------------------------------------------ lifecycle
     def close(self) -> None:
         """Close the connection (committed data is already on disk)."""
         for conn in self._claims.values():
-            conn.close()
+            with contextlib.suppress(Exception):
+                conn.close()
         self._claims.clear()
         self._db.close()
 
@@ -732,14 +1112,31 @@ class RunStore:
         self.close()
 
     @contextmanager
-    def _tx(self) -> Iterator[Any]:
-        self._db.execute("BEGIN IMMEDIATE")
-        try:
-            yield self._db
-        except BaseException:
-            self._db.execute("ROLLBACK")
-            raise
-        self._db.execute("COMMIT")
+    def _tx(self) -> Iterator[_Conn]:
+        """One transaction, holding the connection's lock throughout (a nested call joins
+        the outer transaction)."""
+        db = self._db
+        with db.lock:
+            if db.in_tx:
+                yield db
+                return
+            db.execute("BEGIN IMMEDIATE")
+            db.in_tx = True
+            try:
+                yield db
+            except BaseException:
+                db.in_tx = False
+                with contextlib.suppress(Exception):  # a lost connection has nothing to undo
+                    db.execute("ROLLBACK")
+                raise
+            db.in_tx = False
+            db.execute("COMMIT")
+
+    def wait_writable(self) -> None:
+        """Return when the store takes writes again; :class:`StoreUnavailable` (one line,
+        why) while it does not. Used by a runner that paused on a failed write."""
+        with self._tx() as db:
+            db.execute("UPDATE meta SET value = value WHERE key = 'schema_version'")
 
     @property
     def journal_mode(self) -> str:
@@ -754,11 +1151,11 @@ class RunStore:
         """Hold the run for measuring: a second runner of the same run (another process,
         e.g. ``scan resume`` while the scan still runs, or this one) gets :class:`RunBusy`.
 
-        The claim is a POSIX record lock on byte ``run_id`` of ``<store>-lock`` beside the
-        store file, released on exit and by the kernel when the process dies. In
-        PostgreSQL it is a row lock (``SELECT ... FOR UPDATE NOWAIT`` on ``run_claims``) held
-        by a connection of its own, released on exit and by the server when the process
-        (and so its connection) dies.
+        For SQLite the claim is a lock on ``<store>-locks/run-<id>.lock`` beside the store
+        file (filelock: ``flock`` on POSIX, ``msvcrt`` on Windows), released on exit and by
+        the OS when the process dies. In PostgreSQL it is a row lock (``SELECT ... FOR
+        UPDATE NOWAIT`` on ``run_claims``) held by a connection of its own, released on exit
+        and by the server when the process (and so its connection) dies.
         """
         claim = self._claim_postgres if self.is_postgres else self._claim_file
         with claim(run_id):
@@ -770,14 +1167,14 @@ class RunStore:
         says ``running`` but that nobody claims was interrupted (e.g. ``kill -9``)."""
         if self.is_postgres:
             return self._is_claimed_postgres(run_id)
-        return _ClaimFile.is_held(self._lock_path, run_id)
+        return _RunLocks.is_held(self._lock_dir, run_id)
 
     @contextmanager
     def _claim_file(self, run_id: int) -> Iterator[None]:
-        """SQLite: the POSIX record lock on byte ``run_id`` of ``<store>-lock``."""
-        lock_path = self._lock_path
+        """SQLite: the file lock of the run (:class:`_RunLocks`)."""
+        lock_dir = self._lock_dir
         try:
-            _ClaimFile.acquire(lock_path, run_id)
+            _RunLocks.acquire(lock_dir, run_id)
         except RunBusy as exc:
             raise RunBusy(f"store {self.path}: {exc}") from None
         except OSError as exc:
@@ -785,7 +1182,7 @@ class RunStore:
         try:
             yield
         finally:
-            _ClaimFile.release(lock_path, run_id)
+            _RunLocks.release(lock_dir, run_id)
 
     def _is_claimed_postgres(self, run_id: int) -> bool:
         """PostgreSQL: the run's ``run_claims`` row is locked by some connection."""
@@ -812,10 +1209,10 @@ class RunStore:
             "INSERT INTO run_claims(run_id) VALUES (?) ON CONFLICT (run_id) DO NOTHING", (run_id,)
         )
         try:
-            conn = psycopg.connect(self._conninfo, autocommit=False, connect_timeout=10)
-        except psycopg.Error as exc:
+            conn = self._pg_connect(autocommit=False)
+        except StoreError as exc:
             raise StoreError(
-                redact(f"{where}: cannot claim run {run_id}: {_pg_why(exc)}")
+                f"{where}: cannot claim run {run_id}: {str(exc).split('cannot connect: ', 1)[-1]}"
             ) from None
         try:
             conn.execute(
@@ -838,9 +1235,41 @@ class RunStore:
                 conn.rollback()
             conn.close()
 
+    def ensure_claim(self, run_id: int) -> None:
+        """After a lost PostgreSQL connection: take this process's claim of ``run_id``
+        again if the server dropped it with the connection (a restart); :class:`RunBusy`
+        if another runner took the run meanwhile. A no-op for SQLite (the OS keeps a file
+        lock as long as the process lives)."""
+        conn = self._claims.get(run_id)
+        if conn is None:
+            return
+        psycopg = _psycopg()
+        with contextlib.suppress(psycopg.Error):
+            if not (conn.closed or conn.broken):
+                conn.execute("SELECT 1")
+                return
+        with contextlib.suppress(Exception):
+            conn.close()
+        new = self._pg_connect(autocommit=False)
+        try:
+            new.execute(
+                "SELECT run_id FROM run_claims WHERE run_id = %s FOR UPDATE NOWAIT", (run_id,)
+            )
+        except psycopg.errors.LockNotAvailable:
+            new.close()
+            raise RunBusy(
+                f"store {self.location}: run {run_id} was taken by another goniolab process "
+                "while the database was away"
+            ) from None
+        except psycopg.Error as exc:
+            new.close()
+            why = scrub_driver_message(str(exc), self._conninfo)
+            raise StoreUnavailable(f"store {self.location}: {why}") from None
+        self._claims[run_id] = new
+
     @property
-    def _lock_path(self) -> Path:
-        return self.path.resolve().with_name(self.path.name + "-lock")
+    def _lock_dir(self) -> Path:
+        return self.path.resolve().with_name(self.path.name + "-locks")
 
     # ------------------------------------------------------------------ runs
     def create_run(
@@ -853,18 +1282,50 @@ class RunStore:
         model: Mapping[str, Any],
         version: str,
         status: str = "idle",
+        meta: RunMeta | None = None,
     ) -> int:
-        """Insert a run and return its id."""
+        """Insert a run (with a new UUID and ``meta``) and return its id."""
         now = time.time()
+        m = meta or RunMeta()
         with self._tx() as db:
             row = db.execute(
                 "INSERT INTO runs(kind, plan_json, config_json, sample, model_json, version,"
-                " status, reason, created_at, updated_at) VALUES (?,?,?,?,?,?,?,?,?,?)"
-                " RETURNING id",
+                " status, reason, created_at, updated_at, uuid, operator, notes, tags_json,"
+                " sample_id) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?) RETURNING id",
                 (kind, _dumps(plan), _dumps(_redacted(config)), sample, _dumps(model), version,
-                 status, "", now, now),
+                 status, "", now, now, str(uuidlib.uuid4()), m.operator, m.notes,
+                 json.dumps(list(m.tags)), m.sample_id),
             ).fetchone()  # fmt: skip
         return int(row[0])
+
+    def set_meta(
+        self,
+        run_id: int,
+        *,
+        operator: str | None = None,
+        sample_id: str | None = None,
+        notes: str | None = None,
+        tags: Sequence[str] | None = None,
+    ) -> RunRecord:
+        """Change what is said about a run (``None`` keeps a field); returns the record."""
+        sets: list[str] = []
+        values: list[Any] = []
+        for column, value in (("operator", operator), ("sample_id", sample_id), ("notes", notes)):
+            if value is not None:
+                sets.append(f"{column} = ?")
+                values.append(value)
+        if tags is not None:
+            sets.append("tags_json = ?")
+            values.append(json.dumps(list(dict.fromkeys(tags))))
+        if sets:
+            with self._tx() as db:
+                cur = db.execute(
+                    f"UPDATE runs SET {', '.join(sets)}, updated_at = ? WHERE id = ?",
+                    (*values, time.time(), run_id),
+                )
+                if cur.rowcount != 1:
+                    raise StoreError(f"store {self.location}: no run {run_id}")
+        return self.get_run(run_id)
 
     def set_status(self, run_id: int, status: str, reason: str = "") -> None:
         """Record the run's state; terminal states (done, aborted, failed) set ``finished_at``."""
@@ -884,28 +1345,131 @@ class RunStore:
         with self._tx() as db:
             row = db.execute("SELECT model_json FROM runs WHERE id = ?", (run_id,)).fetchone()
             if row is None:
-                raise StoreError(f"store {self.path}: no run {run_id}")
-            model = {**json.loads(row[0]), **extra}
+                raise StoreError(f"store {self.location}: no run {run_id}")
+            model = {**_json_column(run_id, "model_json", row[0]), **extra}
             db.execute(
                 "UPDATE runs SET model_json = ?, updated_at = ? WHERE id = ?",
                 (_dumps(model), time.time(), run_id),
             )
 
-    def get_run(self, run_id: int) -> RunRecord:
-        """Return run ``run_id``; :class:`StoreError` naming the file when it does not exist."""
-        row = self._db.execute(f"{_RUN_SELECT} WHERE id = ?", (run_id,)).fetchone()
+    def get_run(self, run_id: int, *, allow_damaged: bool = False) -> RunRecord:
+        """Return run ``run_id``.
+
+        Raises
+        ------
+        StoreError
+            No such run (the message names the store).
+        StoreDamaged
+            The run's row cannot be decoded (unless ``allow_damaged``: then the record
+            says so in ``damage``).
+        """
+        row = self._db.execute(f"{self._run_select} WHERE id = ?", (run_id,)).fetchone()
         if row is None:
             raise StoreError(f"store {self.location}: no run {run_id}")
-        return RunRecord.from_row(row)
+        rec = RunRecord.from_row(row, self.location)
+        if rec.damage and not allow_damaged:
+            raise StoreDamaged(f"store {self.location}: run {run_id} is damaged: {rec.damage}")
+        return rec
+
+    def find_uuid(self, run_uuid: str) -> int | None:
+        """The id of the run with UUID ``run_uuid`` in this store, else ``None``."""
+        if not self._has_column("runs", "uuid"):
+            return next((r.id for r in self.list_runs() if r.uuid == run_uuid), None)
+        row = self._db.execute("SELECT id FROM runs WHERE uuid = ?", (run_uuid,)).fetchone()
+        return None if row is None else int(row[0])
 
     def list_runs(self, limit: int | None = None) -> list[RunRecord]:
-        """Return runs, newest first."""
-        sql = f"{_RUN_SELECT} ORDER BY id DESC"
+        """Return runs, newest first (a damaged row is listed with its ``damage``)."""
+        sql = f"{self._run_select} ORDER BY id DESC"
         params: tuple[int, ...] = ()
         if limit is not None:
             sql += " LIMIT ?"
             params = (limit,)
-        return [RunRecord.from_row(r) for r in self._db.execute(sql, params).fetchall()]
+        return [RunRecord.from_row(r, self.location) for r in self._db.execute(sql, params)]
+
+    def list_briefs(
+        self,
+        limit: int | None = None,
+        *,
+        operator: str | None = None,
+        tag: str | None = None,
+        sample_id: str | None = None,
+        text: str | None = None,
+    ) -> list[tuple[RunRecord, int | None]]:
+        """Runs newest first with their number of readings (points of a scan, readings of
+        a gloss log), in one query (no reading is loaded: the counts come from the
+        ``(run_id, ...)`` indexes). Filters: ``operator``, ``sample_id`` (exact), ``tag``
+        (one of the run's tags), ``text`` (a case-insensitive substring of the sample,
+        sample id, operator, notes or tags).
+
+        A store whose readings cannot be counted (a damaged page) gets each run's count
+        on its own; a run whose count fails has ``None`` (and :meth:`count_readings`
+        says why).
+        """
+        where: list[str] = []
+        params: list[Any] = []
+        has_ident = self._has_column("runs", "uuid")
+        if has_ident:
+            if operator is not None:
+                where.append("operator = ?")
+                params.append(operator)
+            if sample_id is not None:
+                where.append("sample_id = ?")
+                params.append(sample_id)
+            if tag is not None:
+                where.append("tags_json LIKE ?")
+                params.append(f"%{json.dumps(tag)}%")  # narrowed; the exact test is below
+            if text is not None:
+                like = f"%{text.lower()}%"
+                where.append(
+                    "(LOWER(sample) LIKE ? OR LOWER(COALESCE(sample_id, '')) LIKE ?"
+                    " OR LOWER(COALESCE(operator, '')) LIKE ? OR LOWER(COALESCE(notes, '')) LIKE ?"
+                    " OR LOWER(COALESCE(tags_json, '')) LIKE ?)"
+                )
+                params += [like] * 5
+        sql = self._run_select.replace(
+            " FROM runs",
+            ", (SELECT COUNT(*) FROM points p WHERE p.run_id = runs.id),"
+            " (SELECT COUNT(*) FROM gloss_readings g WHERE g.run_id = runs.id) FROM runs",
+        )
+        if where:
+            sql += " WHERE " + " AND ".join(where)
+        sql += " ORDER BY id DESC"
+        if limit is not None and has_ident and tag is None:
+            sql += " LIMIT ?"
+            params.append(limit)
+        out: list[tuple[RunRecord, int | None]] = []
+        try:
+            rows = self._db.execute(sql, params).fetchall()
+        except StoreDamaged:
+            rows = None
+        if rows is not None:
+            for r in rows:
+                rec = RunRecord.from_row(r[:-2], self.location)
+                out.append((rec, int(r[-1] if rec.kind == "gloss" else r[-2])))
+        else:
+            for rec in self.list_runs():
+                try:
+                    out.append((rec, self.count_readings(rec)))
+                except StoreDamaged:
+                    out.append((rec, None))
+        if not has_ident or rows is None or tag is not None:  # the exact filter
+            out = [
+                (rec, n)
+                for rec, n in out
+                if (operator is None or rec.operator == operator)
+                and (sample_id is None or rec.sample_id == sample_id)
+                and (tag is None or tag in rec.tags)
+                and (text is None or text.lower() in _haystack(rec))
+            ]
+            out = out[:limit] if limit is not None else out
+        return out
+
+    def count_readings(self, rec: RunRecord) -> int:
+        """The number of readings of ``rec``: points of a scan, readings of a gloss log."""
+        table = "gloss_readings" if rec.kind == "gloss" else "points"
+        row = self._db.execute(f"SELECT COUNT(*) FROM {table} WHERE run_id = ?", (rec.id,))
+        return int(row.fetchone()[0])
 
     # ------------------------------------------------------------------ points
     def add_point(
@@ -971,7 +1535,7 @@ class RunStore:
             + " FROM points WHERE run_id = ? ORDER BY idx, repeat",
             (run_id,),
         ).fetchall()
-        return [PointRow.from_row(r) for r in rows]
+        return [self._decoded(PointRow.from_row, run_id, "reading", r) for r in rows]
 
     def count_points(self, run_id: int) -> int:
         """Return the number of stored readings of ``run_id``."""
@@ -1073,7 +1637,16 @@ class RunStore:
             " FROM gloss_readings WHERE run_id = ? ORDER BY seq",
             (run_id,),
         ).fetchall()
-        return [GlossRow.from_row(r) for r in rows]
+        return [self._decoded(GlossRow.from_row, run_id, "gloss reading", r) for r in rows]
+
+    def _decoded(self, build: Callable[[Any], Any], run_id: int, what: str, row: Any) -> Any:
+        """``build(row)``, or :class:`StoreDamaged` naming the store, run and row."""
+        try:
+            return build(row)
+        except (TypeError, ValueError, IndexError) as exc:
+            raise StoreDamaged(
+                f"store {self.location}: run {run_id} is damaged: {what} {row[0]}: {exc}"
+            ) from None
 
     # ------------------------------------------------------------------ migration
     def table_columns(self, table: str) -> list[str]:
@@ -1089,51 +1662,104 @@ class RunStore:
             rows = [(r[1],) for r in self._db.execute(f"PRAGMA table_info({table})").fetchall()]
         return [str(r[0]) for r in rows]
 
-    def copy_run_from(self, src: RunStore, run_id: int) -> tuple[int, bool]:
+    def copy_run_from(self, src: RunStore, run_id: int) -> tuple[int, str]:
         """Copy run ``run_id`` of ``src`` (with its readings, predictions and gloss readings)
-        into this store in one transaction; returns ``(new id, copied)``.
+        into this store in one transaction; returns ``(id here, action)``.
 
-        The source run is remembered (``meta``): copying it again returns the id of the
-        first copy and ``copied = False``, so a migration can be re-run after a failure.
-        Columns both stores have are copied (a newer source's extra columns are dropped).
+        A run is matched by its UUID: a run not here yet is ``"copied"`` (a new id); a copy
+        that is behind its source (copied while it was aborted or still running, finished
+        later) is ``"updated"``: its row takes the source's status, reason and metadata and
+        the readings it lacks are added; an up-to-date copy is ``"unchanged"``. A copy made
+        by an older goniolab (remembered in ``meta`` by the source's path and id) is matched
+        only when its creation time is the source run's too (another PC's store at the same
+        path holds other runs). Columns both stores have are copied.
+
+        Raises
+        ------
+        StoreDamaged
+            The source run's row cannot be read (nothing is written).
         """
-        key = f"migrated:{src.location}:{run_id}"
-        done = self._db.execute("SELECT value FROM meta WHERE key = ?", (key,)).fetchone()
-        if done is not None:
-            return int(done[0]), False
+        rec = src.get_run(run_id)
         src_run = src._db.execute("SELECT * FROM runs WHERE id = ?", (run_id,))
         names = [d[0] for d in src_run.description]
-        row = src_run.fetchone()
-        if row is None:
-            raise StoreError(f"store {src.location}: no run {run_id}")
-        record = dict(zip(names, row, strict=True))
-        record["config_json"] = _dumps(_redacted(json.loads(record["config_json"])))
+        record = dict(zip(names, src_run.fetchone(), strict=True))
+        record["uuid"] = rec.uuid
+        record["config_json"] = _dumps(_redacted(rec.config))
+        existing = self.find_uuid(rec.uuid)
+        if existing is None:
+            legacy = self._db.execute(
+                "SELECT value FROM meta WHERE key = ?", (f"migrated:{src.location}:{run_id}",)
+            ).fetchone()
+            if legacy is not None:
+                row = self._db.execute(
+                    "SELECT created_at FROM runs WHERE id = ?", (int(legacy[0]),)
+                ).fetchone()
+                if row is not None and float(row[0]) == rec.created_at:
+                    existing = int(legacy[0])
         run_cols = [c for c in self.table_columns("runs") if c in record and c != "id"]
         with self._tx() as db:
-            new_id = int(
-                db.execute(
-                    f"INSERT INTO runs({', '.join(run_cols)}) VALUES"
-                    f" ({', '.join('?' for _ in run_cols)}) RETURNING id",
-                    [record[c] for c in run_cols],
-                ).fetchone()[0]
-            )
-            for table in ("points", "predictions", "gloss_readings"):
-                theirs = src.table_columns(table)
-                cols = [c for c in self.table_columns(table) if c in theirs and c != "id"]
-                rows = src._db.execute(
-                    f"SELECT {', '.join(cols)} FROM {table} WHERE run_id = ?", (run_id,)
-                ).fetchall()
-                if not rows:
-                    continue
-                at = cols.index("run_id")
-                values = [[new_id if k == at else v for k, v in enumerate(r)] for r in rows]
-                db.executemany(
-                    f"INSERT INTO {table}({', '.join(cols)}) VALUES"
-                    f" ({', '.join('?' for _ in cols)})",
-                    values,
+            if existing is None:
+                here = int(
+                    db.execute(
+                        f"INSERT INTO runs({', '.join(run_cols)}) VALUES"
+                        f" ({', '.join('?' for _ in run_cols)}) RETURNING id",
+                        [record[c] for c in run_cols],
+                    ).fetchone()[0]
                 )
-            db.execute("INSERT INTO meta(key, value) VALUES (?, ?)", (key, str(new_id)))
-        return new_id, True
+                action = "copied"
+            else:
+                here = existing
+                mine = db.execute(
+                    f"SELECT {', '.join(run_cols)} FROM runs WHERE id = ?", (here,)
+                ).fetchone()
+                theirs = [record[c] for c in run_cols]
+                changed = list(mine) != theirs
+                if changed:
+                    upd = [c for c in run_cols if c not in ("created_at",)]
+                    db.execute(
+                        f"UPDATE runs SET {', '.join(f'{c} = ?' for c in upd)} WHERE id = ?",
+                        [*(record[c] for c in upd), here],
+                    )
+                action = "updated" if changed else "unchanged"
+            added = self._copy_children(src, run_id, here)
+            if action == "unchanged" and added:
+                action = "updated"
+        return here, action
+
+    #: The conflict target of each child table (what makes a row "already there").
+    _CHILD_KEYS: ClassVar[dict[str, str]] = {
+        "points": "run_id, idx, repeat",
+        "predictions": "run_id, idx",
+        "gloss_readings": "run_id, seq",
+    }
+
+    def _copy_children(self, src: RunStore, run_id: int, here: int) -> int:
+        """Add the readings, predictions and gloss readings of ``src``'s run ``run_id`` that
+        run ``here`` lacks (inside the caller's transaction); return how many were added."""
+        added = 0
+        for table, key in self._CHILD_KEYS.items():
+            theirs = {c.lower() for c in src.table_columns(table)}
+            cols = [c for c in self.table_columns(table) if c.lower() in theirs and c != "id"]
+            rows = src._db.execute(
+                f"SELECT {', '.join(cols)} FROM {table} WHERE run_id = ?", (run_id,)
+            ).fetchall()
+            if not rows:
+                continue
+            before = self._db.execute(
+                f"SELECT COUNT(*) FROM {table} WHERE run_id = ?", (here,)
+            ).fetchone()[0]
+            at = cols.index("run_id")
+            values = [[here if k == at else v for k, v in enumerate(r)] for r in rows]
+            self._db.executemany(
+                f"INSERT INTO {table}({', '.join(cols)}) VALUES"
+                f" ({', '.join('?' for _ in cols)}) ON CONFLICT ({key}) DO NOTHING",
+                values,
+            )
+            after = self._db.execute(
+                f"SELECT COUNT(*) FROM {table} WHERE run_id = ?", (here,)
+            ).fetchone()[0]
+            added += int(after) - int(before)
+        return added
 
     # ------------------------------------------------------------------ export
     def export_rows(self, run_id: int) -> list[dict[str, Any]]:
@@ -1143,6 +1769,7 @@ class RunStore:
             return [
                 {
                     "run_id": run_id,
+                    "run_uuid": run.uuid,
                     "seq": g.seq,
                     "timestamp": g.timestamp,
                     "g20_gu": g.values_gu.get(20),
@@ -1179,6 +1806,7 @@ class RunStore:
         return [
             {
                 "run_id": run_id,
+                "run_uuid": run.uuid,
                 "index": p.index,
                 "repeat": p.repeat,
                 "theta_i_deg": p.theta_i_deg,

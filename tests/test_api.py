@@ -42,7 +42,9 @@ def test_predict_brdf_matches_the_cli_numbers(capsys: pytest.CaptureFixture[str]
     assert ds["luminance_pct"].dims == ("theta_r_deg",)
     assert ds["brdf_sr"].attrs["units"] == "sr-1"
     assert ds["theta_r_deg"].attrs["units"] == "degree"
-    np.testing.assert_array_equal(ds["aspecular_deg"].values, [-5.0, 0.0, 5.0])
+    np.testing.assert_array_equal(
+        ds["aspecular_deg"].values, [5.0, 0.0, -5.0]
+    )  # E2194: theta_i - theta_r
 
 
 def test_predict_gloss_of_a_flat_black_glass_is_100_gu() -> None:
@@ -50,7 +52,8 @@ def test_predict_gloss_of_a_flat_black_glass_is_100_gu() -> None:
     ds = gl.predict_gloss("sample:flat", n=1.567)
     np.testing.assert_allclose(ds["gloss_gu"].values, [100.0, 100.0, 100.0], rtol=1e-3)
     assert list(ds["geometry_deg"].values) == [20, 60, 85]
-    assert ds["gloss_gu"].attrs["units"] == "GU"
+    assert ds["gloss_gu"].attrs["units"] == "1"  # UDUNITS has no GU: the scale is said
+    assert "gloss units" in ds["gloss_gu"].attrs["long_name"]
 
 
 def test_open_runs_and_run_to_xarray(tmp_path: Path) -> None:
@@ -89,3 +92,82 @@ def test_the_readme_example_runs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch
     worst = float(np.nanmax(np.abs(ds["residual_pct"].values)))
     peak = float(np.nanmax(ds["predicted_pct"].values))
     assert 0.02 * peak < worst < 0.3 * peak
+
+
+def _rough(n: int = 96) -> np.ndarray:
+    rng = np.random.default_rng(7)
+    z = np.cumsum(np.cumsum(rng.normal(size=(n, n)), axis=0), axis=1)
+    return z / np.std(np.diff(z, axis=1)) * 0.05
+
+
+def test_a_subsampled_map_takes_its_step_from_the_coordinates(tmp_path: Path) -> None:
+    """Issue 22.10: after ``isel(x_um=slice(None, None, 2))`` xarray keeps ``dx_um = 1`` while
+    the coordinates step by 2. The truth: the same heights as a HeightMap of dx 2 um."""
+    from goniolab.optics.heightmap import HeightMap
+
+    z = _rough()
+    np.save(tmp_path / "m.npy", z)
+    (tmp_path / "m.npy.json").write_text('{"dx_um": 1.0, "dy_um": 1.0}')
+    da = gl.load_surface(tmp_path / "m.npy")
+    half = da.isel(x_um=slice(None, None, 2))
+    with pytest.raises(UserError, match=r"x_um: coordinates step by 2 um but attrs\['dx_um'\] = 1"):
+        gl.predict_gloss(half, model="facet")
+    truth = gl.predict_gloss(HeightMap(z[:, ::2], 2.0, 1.0), model="facet")["gloss_gu"].values
+    del half.attrs["dx_um"]  # the coordinates alone decide
+    np.testing.assert_allclose(gl.predict_gloss(half, model="facet")["gloss_gu"].values, truth)
+    half.attrs["dx_um"] = 2.0  # or the attribute set right
+    np.testing.assert_allclose(gl.predict_gloss(half, model="facet")["gloss_gu"].values, truth)
+    # a transposed DataArray is the same map, not a map with x and y swapped
+    np.testing.assert_allclose(
+        gl.predict_gloss(half.T, model="facet")["gloss_gu"].values, truth, rtol=1e-12
+    )
+    # an uneven grid is refused
+    uneven = da.isel(x_um=[0, 1, 3, 4, 5, 6])
+    with pytest.raises(UserError, match="not evenly spaced"):
+        gl.predict_gloss(uneven, model="facet")
+
+
+def test_interrupting_a_scan_in_a_running_loop_aborts_it(tmp_path: Path) -> None:
+    """A notebook's kernel interrupt arrives as KeyboardInterrupt in the thread waiting for
+    the scan (which runs on its own loop in a worker thread): the scan is aborted like
+    Ctrl-C in ``goniolab scan`` (arms stopped and parked, run stored ``aborted``), not left
+    moving in the background."""
+    import asyncio
+    import os
+    import signal
+    import threading
+
+    async def cell() -> gl.Run:  # what a notebook cell runs: inside a running loop
+        return gl.run_scan(ROOT / "configs" / "lab-sim.toml", sample="sample:flat",
+                           theta_r_deg="20:60:1", time_scale=4.0,
+                           store=store, progress=False)  # fmt: skip
+
+    store = tmp_path / "runs.sqlite"
+    stop = threading.Event()
+
+    def interrupt_after_two_readings() -> None:
+        """The kernel's interrupt: SIGINT to the process (KeyboardInterrupt in the main
+        thread), sent once the scan has stored readings, whatever the machine's speed."""
+        from goniolab.store import RunStore, StoreError
+
+        while not stop.wait(0.05):
+            try:
+                with RunStore(store, readonly=True) as s:
+                    if any(s.count_points(r.id) >= 2 for r in s.list_runs()):
+                        os.kill(os.getpid(), signal.SIGINT)
+                        return
+            except StoreError:  # not created yet
+                continue
+
+    watcher = threading.Thread(target=interrupt_after_two_readings, daemon=True)
+    loop = asyncio.new_event_loop()  # no asyncio.Runner SIGINT handler: as in ipykernel
+    watcher.start()
+    try:
+        run = loop.run_until_complete(cell())
+    finally:
+        stop.set()
+        watcher.join()
+        loop.close()
+    rec = run.record
+    assert rec.status == "aborted" and "aborted by the operator" in (rec.reason or "")
+    assert 0 < run.to_xarray().attrs["stored_readings"] < 41

@@ -29,6 +29,7 @@ def _write(path: Path, z: np.ndarray) -> str:
 
 
 def _maps(tmp_path: Path) -> list[str]:
+    tmp_path.mkdir(exist_ok=True)
     rng = np.random.default_rng(5)
     maps = [_write(tmp_path / "flat.npy", np.zeros((48, 48)))]
     for k, rough in enumerate((0.01, 0.03, 0.08)):
@@ -119,3 +120,81 @@ def test_scheduler_without_dask_names_the_extra(monkeypatch: pytest.MonkeyPatch)
     monkeypatch.setitem(sys.modules, "distributed", None)  # import fails as if absent
     with pytest.raises(UserError, match=r"goniolab\[dask\]"):
         list(run_dask(["sample:flat"], GlossOptions(), address="tcp://127.0.0.1:1"))
+
+
+def test_hostile_maps_each_get_a_row_and_the_batch_goes_on(tmp_path: Path) -> None:
+    """Issue 23.5: a 20 um spike, an int8 map of heights in um (slopes up to 255) and a map
+    in the wrong units (slopes ~5e6) in one batch with a good map: every map has its row,
+    the unusable one an ``{"map", "error"}`` row naming the reason, and the good map's row
+    equals its single-map prediction."""
+    rng = np.random.default_rng(2)
+    good = _maps(tmp_path)[1]
+    spike = rng.normal(0.0, 0.05, (256, 256))
+    spike[128, 128] += 20.0
+    maps = [
+        good,
+        _write(tmp_path / "spike.npy", spike),
+        _write(tmp_path / "int8.npy", rng.integers(-128, 127, (256, 256), dtype=np.int8)),
+        _write(tmp_path / "units.npy", np.pad([[5e6]], 8)),
+    ]
+    code, out, err = _run(["predict", "gloss", *maps, "--model", "facet", "--json", "--jobs", "2"])
+    rows = {r["map"]: r for r in map(json.loads, out.splitlines())}
+    assert sorted(rows) == sorted(maps)
+    assert code == 2 and "1 of 4 maps failed" in err
+    assert "height unit" in rows[maps[3]]["error"] and "units.npy" in rows[maps[3]]["error"]
+    for m in maps[:3]:
+        assert "error" not in rows[m] and np.isfinite(rows[m]["G60"])
+    _, single, _ = _run(["predict", "gloss", good, "--model", "facet", "--json"])
+    assert rows[good]["G60"] == pytest.approx(json.loads(single)["G60"], rel=1e-12)
+
+
+def test_a_dead_worker_is_an_error_row_not_the_end_of_the_batch() -> None:
+    from concurrent.futures import Future
+    from concurrent.futures.process import BrokenProcessPool
+
+    from goniolab.batch import _result_row
+
+    fut: Future[dict[str, object]] = Future()
+    fut.set_exception(BrokenProcessPool("A process in the process pool was terminated"))
+    row = _result_row(fut, "maps/a.sur")
+    assert row == {
+        "map": "maps/a.sur",
+        "error": "maps/a.sur: worker failed: BrokenProcessPool: A process in the process pool "
+        "was terminated",
+    }
+
+
+def test_dask_workers_get_absolute_paths(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 22.10: a relative map path typed where the client runs is not found by a worker
+    running in another directory. The cluster's worker process starts in ``elsewhere``; the
+    client then works in ``maps`` and names its maps relative to it."""
+    distributed = pytest.importorskip("distributed")
+    (tmp_path / "elsewhere").mkdir()
+    (tmp_path / "maps").mkdir()
+    names = [Path(m).name for m in _maps(tmp_path / "maps")[:2]]
+    monkeypatch.chdir(tmp_path / "elsewhere")
+    with distributed.LocalCluster(
+        n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None
+    ) as cluster:
+        monkeypatch.chdir(tmp_path / "maps")
+        remote = {
+            r["map"]: r for r in run_dask(names, GlossOptions(), address=cluster.scheduler_address)
+        }
+    assert sorted(remote) == sorted(names)  # named as typed
+    local = {r["map"]: r for r in run_local(names, GlossOptions(), jobs=1)}
+    assert remote == local
+
+
+def test_an_integer_map_reads_as_its_heights_in_float(tmp_path: Path) -> None:
+    """Issue 23.5: an int8 map (heights in um as integers; slopes up to 255) once asked the
+    dense histogram for 1.9 TiB. It is converted exactly (every int8 is a float64) and
+    predicts what the same heights stored as float64 predict."""
+    rng = np.random.default_rng(4)
+    ints = rng.integers(-3, 4, (64, 64), dtype=np.int8)
+    as_int = _write(tmp_path / "int8.npy", ints)
+    as_float = _write(tmp_path / "f64.npy", ints.astype(np.float64))
+    opts = GlossOptions(model="facet")
+    a, b = gloss_row(as_int, opts), gloss_row(as_float, opts)
+    assert "error" not in a
+    for key in ("G20", "G60", "G85", "haze_index"):
+        assert a[key] == b[key]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import uuid
 from pathlib import Path
 from typing import Any
 
@@ -52,6 +53,7 @@ def test_inplane_scan_documents(engine: Any, tmp_path: Path) -> None:
     assert start["plan_name"] == "goniolab_inplane_scan"
     assert start["sample"] == "sample:wittmann-3"
     assert start["plan_args"]["theta_r_deg"] == [35.0, 45.0, 55.0]
+    assert uuid.UUID(start["run_uuid"]).version == 4 and start["tags"] == []  # issue 22.4
     assert result.run_start_uids == (start["uid"],)
     stop = docs[-1][1]
     assert stop["exit_status"] == "success" and stop["num_events"] == {"primary": 6}
@@ -78,8 +80,11 @@ def test_inplane_scan_documents(engine: Any, tmp_path: Path) -> None:
     lum = np.array([e["data"]["spectro-luminance_pct"] for e in events]).reshape(3, 2)
     np.testing.assert_allclose(lum.mean(axis=1), pred, rtol=0.05, atol=0.01)
     assert lum[1].mean() > 10 * lum[0].mean()  # the specular peak
-    L = [e["data"]["spectro-L_star"] for e in events]
-    assert all(0.0 <= v <= 100.0 for v in L)
+    # L* on the [colour] diffuser scale, as the store reports it: above 100 at the specular
+    # peak (a reflectance factor > 1 relative to the perfect diffuser), finite everywhere
+    L = np.array([e["data"]["spectro-L_star"] for e in events]).reshape(3, 2)
+    assert np.all(np.isfinite(L)) and np.all(L > 0.0)
+    assert L[1].min() > 100.0 > L[0].max()
     assert len(events[0]["data"]["spectro-spectrum_pct"]) == len(
         desc["configuration"]["spectro"]["data"]["spectro-wavelengths_nm"]
     )
@@ -105,3 +110,102 @@ def test_the_interlock_fails_the_move(engine: Any) -> None:
         assert ti == pytest.approx(30.0, abs=0.05)
     finally:
         lab.close()
+
+
+def _sim_separation_monitor(lab: Any) -> Any:
+    """Record the smallest |theta_i + theta_r| of the twin's arms (their encoders) at every
+    10 ms of the lab clock, in the RunEngine's loop, until stopped."""
+    import asyncio
+
+    from bluesky.run_engine import call_in_bluesky_event_loop
+
+    sims = lab.lab.sims
+    clock = lab.lab.clock
+    state: dict[str, Any] = {"min": float("inf"), "stop": False}
+
+    async def watch() -> None:
+        while not state["stop"]:
+            now = clock.now()
+            s = abs(sims.lamp.motor.position_deg(now) + sims.detector.motor.position_deg(now))
+            state["min"] = min(state["min"], s)
+            await clock.sleep(0.01)
+
+    async def start() -> None:
+        state["task"] = asyncio.ensure_future(watch())
+
+    call_in_bluesky_event_loop(start())
+    return state
+
+
+def test_two_arms_set_at_once_keep_their_minimum(engine: Any) -> None:
+    # issue 22 item 1: from (45, 45), bps.mv(lamp, 5, detector, 3) ended at (5, 3), 8 deg
+    # apart; bp.scan(lamp 20->4, detector 20->4) ended at (4, 4)
+    from bluesky import plan_stubs as bps
+    from bluesky import plans as bp
+
+    lab = connect_lab(CONFIG, time_scale=0)
+    try:
+        sep = lab.lab.config.goniometer.min_separation_deg
+        engine(bps.mv(lab.goniometer, (45.0, 45.0)))
+        state = _sim_separation_monitor(lab)
+        with pytest.raises(FailedStatus):
+            engine(bps.mv(lab.lamp, 5.0, lab.detector, 3.0))
+        ti = engine(bps.rd(lab.lamp)).plan_result
+        tr = engine(bps.rd(lab.detector)).plan_result
+        assert (ti, tr) == (pytest.approx(5.0, abs=0.05), pytest.approx(45.0, abs=0.05))
+        engine(bps.mv(lab.goniometer, (20.0, 20.0)))
+        with pytest.raises(FailedStatus):
+            engine(bp.scan([lab.spectro], lab.lamp, 20.0, 4.0, lab.detector, 20.0, 4.0, num=5))
+        ti = engine(bps.rd(lab.lamp)).plan_result
+        tr = engine(bps.rd(lab.detector)).plan_result
+        assert ti + tr >= sep - 0.01
+        state["stop"] = True
+        assert state["min"] >= sep - 0.01, state["min"]
+        # the two-arm device moves both arms in the safe order to a geometry
+        engine(bps.mv(lab.goniometer, (30.0, 60.0)))
+        ti = engine(bps.rd(lab.goniometer.theta_i_deg)).plan_result
+        tr = engine(bps.rd(lab.goniometer.theta_r_deg)).plan_result
+        assert (ti, tr) == (pytest.approx(30.0, abs=0.05), pytest.approx(60.0, abs=0.05))
+        with pytest.raises(FailedStatus):  # 5 deg apart: refused, nothing moves
+            engine(bps.mv(lab.goniometer, (2.0, 3.0)))
+    finally:
+        lab.close()
+
+
+@pytest.mark.parametrize(
+    "colour",
+    [
+        "",  # the defaults: D65, CIE 1964 10 deg, diffuser scale
+        '[colour]\nilluminant = "A"\nobserver = "CIE 1931 2 Degree Standard Observer"\n'
+        'scale = "mirror"\n',
+    ],
+)
+def test_bluesky_colour_equals_the_stored_runs(engine: Any, tmp_path: Path, colour: str) -> None:
+    """Issue 22.9: the Spectro device integrated the raw % as a reflectance factor with a
+    fixed D65 / 10 deg (L* 0.31 against the store's 46.5 at theta_r 35, 18.7 against 263
+    at the specular angle). The truth is the store's colour of the same readings: the
+    simulated lab of one config and seed measures the same spectra through both faces, so
+    L*a*b* must agree to rounding, with the config's [colour] honoured by both."""
+    import goniolab.api as gl
+
+    config = tmp_path / "lab.toml"
+    config.write_text((ROOT / "configs" / "lab-sim.toml").read_text() + "\n" + colour)
+    angles = [35.0, 45.0, 55.0]
+    lab = connect_lab(config, time_scale=0)
+    docs: list[tuple[str, dict[str, Any]]] = []
+    engine.subscribe(lambda name, doc: docs.append((name, doc)))
+    try:
+        engine(inplane_scan(lab, theta_i_deg=45.0, theta_r_deg=angles, repeats=2))
+    finally:
+        lab.close()
+    events = [d["data"] for n, d in docs if n == "event"]
+    got = np.array([[e[f"spectro-{k}_star"] for k in "Lab"] for e in events]).reshape(3, 2, 3)
+    run = gl.run_scan(config, theta_r_deg=angles, repeats=2, time_scale=0,
+                      store=tmp_path / "runs.sqlite", progress=False)  # fmt: skip
+    ds = run.to_xarray()
+    stored = np.stack([ds[f"{k}_star"].values for k in "Lab"], axis=-1)
+    assert np.all(np.isfinite(stored))
+    np.testing.assert_allclose(got, stored, rtol=0, atol=1e-6)
+    desc = next(d for n, d in docs if n == "descriptor")
+    settings = desc["configuration"]["spectro"]["data"]["spectro-colour_settings"]
+    assert ('"A"' in settings) == bool(colour)

@@ -73,7 +73,9 @@ def test_netcdf_round_trip(store_file: Path, tmp_path: Path) -> None:
     np.testing.assert_allclose(
         ds["residual_pct"].values, np.nanmean(expected, axis=1) - [1.0, 12.0, 3.0]
     )
-    np.testing.assert_allclose(ds["aspecular_deg"].values, [-5.0, 0.0, 5.0])
+    np.testing.assert_allclose(
+        ds["aspecular_deg"].values, [5.0, 0.0, -5.0]
+    )  # E2194: theta_i - theta_r
     np.testing.assert_array_equal(ds["reflectance_pct"].sel(theta_r_deg=45.0).values[:, :2],
                                   [[1.0, 0.0], [1.0, 1.0]])  # fmt: skip
     t = ds["time"].values
@@ -117,7 +119,7 @@ def test_gloss_log_to_netcdf(store_file: Path, tmp_path: Path) -> None:
         ds.load()
     np.testing.assert_array_equal(ds["g60_gu"].values, [90.0, 91.0])
     np.testing.assert_array_equal(ds["predicted_g20_gu"].values, [81.0, 81.0])
-    assert ds["g60_gu"].attrs["units"] == "GU"
+    assert ds["g60_gu"].attrs["units"] == "1" and "GU" in ds["g60_gu"].attrs["units_metadata"]
     assert ds["temperature_c"].attrs["units"] == "degC"
     assert ds.attrs["kind"] == "gloss"
     dt_s = (ds["time"].values[1] - ds["time"].values[0]) / np.timedelta64(1, "s")
@@ -188,3 +190,35 @@ def test_predict_gloss_out_netcdf(tmp_path: Path, capsys: pytest.CaptureFixture[
     np.testing.assert_array_equal(ds["gloss_gu"].values, [doc["G20"], doc["G60"], doc["G85"]])
     assert float(ds["haze_index"]) == doc["haze_index"]
     assert ds.attrs["d523_recommended_angle_deg"] == doc["d523_angle"]
+
+
+@pytest.mark.parametrize("fmt", ["csv", "json", "netcdf", "parquet"])
+def test_export_to_a_full_disk_keeps_the_old_file(
+    store_file: Path, tmp_path: Path, fmt: str
+) -> None:
+    # issue 23.14: netCDF raised then segfaulted; a re-export over an existing file on a full
+    # disk destroyed it. Now: one line, exit 2, the old file byte for byte, no temp file left.
+    import subprocess
+    import sys
+
+    from goniolab.export import FORMATS
+    from tests._fulldisk import fill, small_tmpfs
+
+    with small_tmpfs(tmp_path / "disk", 256) as disk:
+        out = disk / f"run{FORMATS[fmt]}"
+        old = b"an earlier export\n"
+        out.write_bytes(old)
+        fill(disk)
+        code = (
+            "import sys; from goniolab.cli import main; "
+            f"sys.exit(main(['runs', 'export', '1', '--store', {str(store_file)!r}, "
+            f"'--format', {fmt!r}, '-o', {str(out)!r}]))"
+        )
+        done = subprocess.run(
+            [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=False
+        )
+        assert done.returncode == 2, done.stderr  # not -11 (a segfault)
+        assert done.stderr.count("\n") == 1 and "No space left on device" in done.stderr
+        assert f"{out} is left as it was" in done.stderr
+        assert out.read_bytes() == old
+        assert sorted(p.name for p in disk.iterdir()) == ["filler", "filler-tail", out.name]

@@ -47,7 +47,14 @@ def test_version_names_store_config_and_log(
     assert out[3] == f"log:    {_log_dir / 'goniolab.log'}"
 
 
-def test_redact_blanks_url_passwords_and_pgpassword(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setenv("PGPASSWORD", "s3cr3t-planted")
-    text = "postgresql://lab:hunter2@db.example:5432/runs password=abc x s3cr3t-planted"
-    assert redact(text) == "postgresql://lab:***@db.example:5432/runs password=*** x ***"
+def test_redact_blanks_url_and_keyword_passwords_never_env_text(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # issue 23.7: $PGPASSWORD used to be replaced as plain text ("lab" -> configs/***-sim.toml);
+    # redaction parses connection strings instead, and leaves other text alone
+    monkeypatch.setenv("PGPASSWORD", "lab")
+    text = "postgresql://lab:hunter2@db.example:5432/runs password=abc configs/lab-sim.toml"
+    assert (
+        redact(text)
+        == "postgresql://lab:***@db.example:5432/runs password=*** configs/lab-sim.toml"
+    )

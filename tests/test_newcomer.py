@@ -78,8 +78,34 @@ def test_argparse_errors_are_one_line(capsys: pytest.CaptureFixture[str]) -> Non
     assert main(["scan", "--bogus"]) == 2
     assert main(["predict", "brdf"]) == 2
     err = capsys.readouterr().err.splitlines()
-    assert len(err) == 2 and all(e.startswith("goniolab: error: goniolab") for e in err)
-    assert "unrecognized arguments: --bogus" in err[0] and "MAP" in err[1]
+    # one prefix, then the command (issue 27: "goniolab: error: goniolab: ..." doubled it)
+    assert len(err) == 2 and all(e.startswith("goniolab: error: ") for e in err)
+    assert not any(e.startswith("goniolab: error: goniolab") for e in err)
+    assert err[0].startswith("goniolab: error: scan: unrecognized arguments: --bogus")
+    assert err[1].startswith("goniolab: error: predict brdf: ") and "MAP" in err[1]
+
+
+@pytest.mark.parametrize(
+    ("argv", "said"),
+    [
+        # an unknown option before a value: argparse blamed `scan resume` for the value
+        (
+            ["scan", "--theta_r", "0:70:1"],
+            "scan: unrecognized arguments: --theta_r (did you mean --theta-r?)",
+        ),
+        (["predict", "brdf", "sample:flat", "--modle", "facet"], "(did you mean --model?)"),
+        (["scna"], "invalid choice: 'scna'"),
+        (["scna"], "(did you mean 'scan'?)"),
+        (["runs", "lst"], "(did you mean 'list'?)"),
+        (["samples", "save", "wittman-3", "x.sur"], "(did you mean 'wittmann-3'?)"),
+    ],
+)
+def test_typos_get_a_did_you_mean(
+    capsys: pytest.CaptureFixture[str], argv: list[str], said: str
+) -> None:
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert said in err and err.count("\n") == 1, err
 
 
 def test_a_negative_angle_range_needs_no_equals(capsys: pytest.CaptureFixture[str]) -> None:

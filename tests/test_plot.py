@@ -136,5 +136,5 @@ def test_colour_per_point_reaches_the_dataset_and_the_plot(tmp_path: Path) -> No
     lab_ax = fig.axes[2]
     assert lab_ax.get_xlabel() == "" and fig.axes[3].get_xlabel() == "aspecular angle (deg)"
     measured = next(ln for ln in lab_ax.get_lines() if ln.get_label() == "L* measured")
-    np.testing.assert_array_equal(measured.get_xdata(), [-5.0, 0.0, 5.0])
+    np.testing.assert_array_equal(measured.get_xdata(), [5.0, 0.0, -5.0])  # E2194 aspecular
     np.testing.assert_array_equal(measured.get_ydata(), [50.0, 51.0, 52.0])

@@ -68,10 +68,10 @@ async def _tui_scan(cfg: Path, store: Path, *, abort: bool = False) -> int:
 
 
 def _rows(store: Path, run_id: int) -> dict[str, Any]:
-    """A run's rows without ids and time stamps (wall clock and lab clock)."""
+    """A run's rows without ids (its UUID too) and time stamps (wall clock and lab clock)."""
     with RunStore(store) as s:
         run = s.get_run(run_id).as_dict()
-        for key in ("id", "created_at", "updated_at", "finished_at"):
+        for key in ("id", "uuid", "created_at", "updated_at", "finished_at"):
             run.pop(key)
         points = [
             dataclasses.replace(p, timestamp=0.0, raw={**p.raw, "clock_s": None})

@@ -175,7 +175,7 @@ def test_readonly_store_reads_and_never_writes(tmp_path: Path) -> None:
     with RunStore(path, readonly=True) as ro:
         assert [r.id for r in ro.list_runs()] == [rid]
         assert [p.luminance_pct for p in ro.points(rid)] == [1.5]
-        with pytest.raises(sqlite3.OperationalError, match="readonly"):
+        with pytest.raises(StoreError, match="readonly"):
             _point(ro, rid, 1, 0, 2.5)
     assert path.read_bytes() == before
 
@@ -213,7 +213,7 @@ def test_export_of_a_run_without_readings_has_the_header(store_path: Path) -> No
         rid = _run(s)
         header = s.export(rid, "csv").splitlines()
         assert header == [
-            "run_id,index,repeat,theta_i_deg,theta_r_deg,measured_theta_i_deg,"
+            "run_id,run_uuid,index,repeat,theta_i_deg,theta_r_deg,measured_theta_i_deg,"
             "measured_theta_r_deg,luminance_pct,predicted_pct,X,Y,Z,L_star,a_star,b_star,"
             "C_star,h_deg,predicted_L_star,predicted_a_star,predicted_b_star,colour_error,"
             "timestamp"

@@ -220,7 +220,7 @@ def paint_with(paint: Paint, base: Mapping[str, float], values: Mapping[str, flo
         elif name.startswith("pearl.") and pearl is not None:
             kw = {name.split(".")[1]: float(v)}
             pearl = replace(pearl, **kw)
-    return Paint(coat=coat, body=body, metallic=metallic, pearl=pearl)
+    return replace(paint, coat=coat, body=body, metallic=metallic, pearl=pearl)
 
 
 # ------------------------------------------------------------------ the forward model

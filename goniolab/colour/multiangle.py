@@ -27,6 +27,8 @@ __all__ = [
     "E2194_INCIDENCE_DEG",
     "aspecular_deg",
     "flop_index",
+    "flop_index_note",
+    "flop_of_rows",
     "theta_r_for_aspecular",
 ]
 
@@ -77,3 +79,33 @@ def aspecular_table(theta_r_deg: Sequence[float], theta_i_deg: float) -> dict[fl
             if abs(a - std) < 1e-6:
                 out[std] = k
     return out
+
+
+def flop_index_note(theta_i_deg: float) -> str:
+    """Why there is no flop index at this incidence ('' at 45 deg): the index is defined on
+    L* at 15, 45 and 110 deg aspecular of a 45 deg illumination (ASTM E2194, X-Rite);
+    the same aspecular angles at another incidence are other geometries."""
+    if abs(float(theta_i_deg) - E2194_INCIDENCE_DEG) < 1e-6:
+        return ""
+    return (
+        f"no flop index at theta_i {float(theta_i_deg):g} deg: it is defined for "
+        f"{E2194_INCIDENCE_DEG:g} deg incidence only (ASTM E2194)"
+    )
+
+
+def flop_of_rows(
+    rows: Sequence[Mapping[str, object]], theta_i_deg: float, key: str = "L"
+) -> float | None:
+    """Flop index of per-geometry rows (``aspecular_deg`` and ``key`` = L*), ``None`` when
+    the incidence is not 45 deg (:func:`flop_index_note`) or 15/45/110 is missing."""
+    if flop_index_note(theta_i_deg):
+        return None
+    ls: dict[float, float] = {}
+    for r in rows:
+        v = r.get(key)
+        if isinstance(v, int | float) and math.isfinite(float(v)):
+            ls[round(float(r["aspecular_deg"]), 6)] = float(v)  # type: ignore[arg-type]
+    try:
+        return flop_index(ls)
+    except ValueError:
+        return None

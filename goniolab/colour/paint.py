@@ -22,13 +22,30 @@ beneath, computed here per wavelength and returned as an *outside* BRDF (sr^-1):
   (the seed's Cook-Torrance lobe, eq. 1, in Walter's normalisation; no masking for
   near-parallel flakes), and outside ``f_m = T(t_i) T(t_o) f'_m / n^2``. R_m is the flake's
   Fresnel reflectance against the binder (complex metal index / n), seen through the
-  pigment above the flake as the seed's eq. 5 prescribes (a KM layer of thickness X' over
-  a "substrate" of reflectance rho_m). The lobe is centred on the mirror direction of the
-  flakes: the refracted specular direction, which leaves the coat at theta_o = theta_i.
+  pigment of thickness X' (``depth_um``) above the flake. The seed's eq. 5 puts the whole
+  KM reflectance of that layer over the flake into the lobe, i.e. also the pigment's own
+  *diffuse* backscatter R_l(X') -- light that never reached the flake and has lost its
+  direction (42 % of R_m for the built-in silver). Here the lobe keeps only the light that
+  went to the flake and back, attenuated twice by the layer's KM transmittance
+  ``T_l(X')`` (Kubelka 1948): ``R_m -> T_l^2 R_m``; the layer's backscatter
+  ``A_m R_l(X')`` joins the Lambertian body term (through the same Saunderson interface).
+  Flake-pigment inter-reflections (order ``T_l^2 R_m^2 R_l``) are left out.
+  The lobe is centred on the mirror direction of the flakes: the refracted specular
+  direction, which leaves the coat at theta_o = theta_i.
 - Pearlescent flakes: the same lobe with the reflectance of a TiO2-coated mica platelet:
   an Airy film (binder | TiO2 d | mica) and, the mica being too thick for coherence (seed
   sec. 5.4), the film on the far side added incoherently:
-  ``R = R1 + T1^2 R2 / (1 - R1 R2)``; then the seed's eq. 8 (pigment above the flake).
+  ``R = R1 + T1^2 R2 / (1 - R1 R2)``; the pigment above it as for metal flakes (the
+  seed's eq. 8, with the same correction).
+- Saunderson form. ``saunderson = "directional"`` (default) is the radiance form above:
+  the body seen through T(t_i) T(t_o) / n^2, right for a goniometer. K/S databases and
+  colour-matching software use the textbook form for a hemispherical/45-0 instrument,
+  ``R = (1 - k1)(1 - k2) R_b / (1 - k2 R_b)`` (k1: external specular reflectance, by
+  default F(0; n) = 0.04 for n = 1.5; k2: internal diffuse reflectance, by default r_i(n)
+  = 0.596; specular component excluded), a constant radiance factor R / pi.
+  ``saunderson = "textbook"`` uses it for the body so that K and S from such software
+  reproduce their reflectances. The two differ by ``T(t_i) T(t_o) / (n^2 (1 - k1)(1 - k2))``
+  = 1.046 at 45/0 for n = 1.5 (Y of a white is 4.6 % higher in the directional form).
 
 Stated approximations: the coat's surface transmission uses the mean normal (a smooth
 interface) for the light that reaches the body; flake reflections are single (no flake-flake
@@ -40,7 +57,9 @@ References
    Cent. Eur. J. Phys. 5 (2007) 416, eqs. 1-8, sec. 7.
 .. [2] B. Walter et al., "Microfacet models for refraction through rough surfaces", EGSR
    2007 (normalisation of D and the 4 cos cos denominator).
-.. [3] J. L. Saunderson, JOSA 32 (1942) 727.
+.. [3] J. L. Saunderson, JOSA 32 (1942) 727 (k1, k2); D. B. Judd, G. Wyszecki, Color in
+   Business, Science and Industry, 3rd ed. (1975), ch. 8.
+.. [4] P. Kubelka, JOSA 38 (1948) 448 (transmittance of a layer, composition of layers).
 """
 
 from __future__ import annotations
@@ -63,7 +82,7 @@ from goniolab.colour.dispersion import (
     Tabulated,
     dispersion_from_dict,
 )
-from goniolab.colour.km import internal_diffuse_reflectance, km_reflectance
+from goniolab.colour.km import internal_diffuse_reflectance, km_reflectance, km_transmittance
 from goniolab.colour.optics import airy_film, fresnel_unpolarised
 
 __all__ = [
@@ -152,9 +171,18 @@ class PigmentLayer:
         return km_reflectance(k, s, self.thickness_um, self.substrate.at(wavelength_nm))
 
     def over(self, depth_um: float, r_flake: FloatArray, wavelength_nm: ArrayLike) -> FloatArray:
-        """The seed's eqs. 5 and 8: the pigment of thickness ``depth_um`` over a flake."""
+        """The seed's eqs. 5 and 8 as printed: the KM reflectance of the pigment of
+        thickness ``depth_um`` over a flake (its diffuse backscatter included)."""
         k, s = self.ks(wavelength_nm)
         return km_reflectance(k, s, depth_um, r_flake)
+
+    def above_flake(
+        self, depth_um: float, wavelength_nm: ArrayLike
+    ) -> tuple[FloatArray, FloatArray]:
+        """``(T_l, R_l)``: KM transmittance and reflectance (over black) of the pigment of
+        thickness ``depth_um`` above a flake (Kubelka 1948)."""
+        k, s = self.ks(wavelength_nm)
+        return km_transmittance(k, s, depth_um), km_reflectance(k, s, depth_um, 0.0 * k)
 
 
 def beckmann_flake_d(cos_h: ArrayLike, alpha: float) -> FloatArray:
@@ -175,9 +203,13 @@ class MetallicFlakes:
     spread_deg: float
     depth_um: float = 0.0
     metal: Dispersion = ALUMINIUM
+    #: Flake diameter (um): sparkle and graininess (:mod:`goniolab.colour.sparkle`); the
+    #: averaged colour does not depend on it. Automotive aluminium flakes: D50 10-30 um.
+    size_um: float = 20.0
 
     def __post_init__(self) -> None:
         _check_flakes(self.area_fraction, self.spread_deg, self.depth_um, "metallic")
+        _check_size(self.size_um, "metallic")
 
     def reflectance(
         self, cos_local: FloatArray, n_binder: FloatArray, wl: FloatArray
@@ -197,9 +229,12 @@ class PearlFlakes:
     depth_um: float = 0.0
     film: Dispersion = TIO2
     mica_n: float = MICA_N
+    #: Platelet diameter (um), for sparkle and graininess; pearl pigments: D50 10-25 um.
+    size_um: float = 15.0
 
     def __post_init__(self) -> None:
         _check_flakes(self.area_fraction, self.spread_deg, self.depth_um, "pearl")
+        _check_size(self.size_um, "pearl")
         if not (math.isfinite(self.film_nm) and self.film_nm > 0):
             raise PaintError("pearl film_nm must be > 0")
 
@@ -215,6 +250,11 @@ class PearlFlakes:
         r2, _ = airy_film(cos_m, wl, self.mica_n, nf, self.film_nm, n_binder)
         out: FloatArray = r1 + t1 * t1 * r2 / (1.0 - r1 * r2)
         return out
+
+
+def _check_size(size_um: float, what: str) -> None:
+    if not (math.isfinite(size_um) and 0.5 <= size_um <= 500.0):
+        raise PaintError(f"{what} size_um must be in [0.5, 500] um")
 
 
 def _check_flakes(area: float, spread: float, depth: float, what: str) -> None:
@@ -252,6 +292,9 @@ class Paint:
 
     Parameters
     ----------
+    saunderson, k1, k2
+        The body's interface form: ``"directional"`` (radiance through T(t_i) T(t_o) / n^2,
+        default) or ``"textbook"`` ((1 - k1)(1 - k2) R / (1 - k2 R), for K/S databases).
     coat
         The clear coat's n(lambda) (binder of the same index, seed sec. 5.1).
     body
@@ -264,8 +307,18 @@ class Paint:
     body: PigmentLayer | None = None
     metallic: MetallicFlakes | None = None
     pearl: PearlFlakes | None = None
+    #: ``"directional"`` (default) or ``"textbook"`` Saunderson form for the body.
+    saunderson: str = "directional"
+    #: Textbook Saunderson k1, k2 (``None``: F(0; n) and r_i(n) of the coat).
+    k1: float | None = None
+    k2: float | None = None
 
     def __post_init__(self) -> None:
+        if self.saunderson not in ("directional", "textbook"):
+            raise PaintError(f"saunderson: {self.saunderson!r} is not 'directional' or 'textbook'")
+        for name, v in (("k1", self.k1), ("k2", self.k2)):
+            if v is not None and not (math.isfinite(v) and 0.0 <= v < 1.0):
+                raise PaintError(f"saunderson.{name}: must be in [0, 1), got {v!r}")
         a = (self.metallic.area_fraction if self.metallic else 0.0) + (
             self.pearl.area_fraction if self.pearl else 0.0
         )
@@ -316,7 +369,8 @@ class Paint:
         d = beckmann_flake_d(cos_h, alpha)
         rho = flakes.reflectance(cos_d, n, wl)
         if self.body is not None and flakes.depth_um > 0:
-            rho = self.body.over(flakes.depth_um, rho, wl)
+            t_l, _ = self.body.above_flake(flakes.depth_um, wl)
+            rho = t_l * t_l * rho  # attenuation only: the backscatter is diffuse (body_term)
         out: FloatArray = flakes.area_fraction * rho * d / (4.0 * wi_in[..., 2] * wo_in[..., 2])
         return out
 
@@ -333,20 +387,71 @@ class Paint:
         out: FloatArray = np.where(c > 0, t, 0.0)
         return out
 
-    def body_term(self, wavelength_nm: ArrayLike) -> FloatArray:
-        """The Lambertian part of :meth:`subsurface_brdf` divided by ``T(t_i) T(t_o)``:
-        ``(1 - A) R_b / (pi n^2 (1 - r_i R_b))`` per wavelength (0 without a body)."""
+    def diffuse_reflectance(self, wavelength_nm: ArrayLike) -> FloatArray:
+        """The diffuse reflectance under the coat: ``(1 - A) R_b`` of the body between the
+        flakes plus ``A_f R_l(X'_f)``, the backscatter of the pigment above each flake
+        population (0 without a body)."""
         wl = np.asarray(wavelength_nm, dtype=np.float64).ravel()
         if self.body is None:
             return np.zeros(wl.shape)
-        n = self.coat_n(wl)
-        a_flakes = (self.metallic.area_fraction if self.metallic else 0.0) + (
-            self.pearl.area_fraction if self.pearl else 0.0
-        )
-        rb = self.body.reflectance(wl)
-        ri = internal_diffuse_reflectance(n)
-        out: FloatArray = (1.0 - a_flakes) * rb / (np.pi * (1.0 - ri * rb) * n * n)
+        a_flakes = 0.0
+        above = np.zeros(wl.shape)
+        for flakes in (self.metallic, self.pearl):
+            if flakes is not None:
+                a_flakes += flakes.area_fraction
+                if flakes.depth_um > 0:
+                    above = (
+                        above + flakes.area_fraction * self.body.above_flake(flakes.depth_um, wl)[1]
+                    )
+        out: FloatArray = (1.0 - a_flakes) * self.body.reflectance(wl) + above
         return out
+
+    def saunderson_k(self, wavelength_nm: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """``(k1, k2)`` of the textbook Saunderson form per wavelength: the given values, or
+        F(0; n) and r_i(n) of the coat."""
+        wl = np.asarray(wavelength_nm, dtype=np.float64).ravel()
+        n = self.coat_n(wl)
+        k1 = (
+            np.full(wl.shape, self.k1)
+            if self.k1 is not None
+            else fresnel_unpolarised(np.ones(wl.shape), n).reshape(wl.shape)
+        )
+        k2 = np.full(wl.shape, self.k2) if self.k2 is not None else internal_diffuse_reflectance(n)
+        return np.asarray(k1, dtype=np.float64), np.asarray(k2, dtype=np.float64)
+
+    def body_term(self, wavelength_nm: ArrayLike) -> FloatArray:
+        """The Lambertian part of :meth:`subsurface_brdf` divided by
+        :meth:`body_transmission` at both ends, per wavelength (0 without a body):
+        ``R_d / (pi n^2 (1 - r_i R_b))`` (directional Saunderson) or
+        ``(1 - k1)(1 - k2) R_d / (pi (1 - k2 R_b))`` (textbook), R_d the
+        :meth:`diffuse_reflectance`, R_b the body's."""
+        wl = np.asarray(wavelength_nm, dtype=np.float64).ravel()
+        if self.body is None:
+            return np.zeros(wl.shape)
+        rd = self.diffuse_reflectance(wl)
+        # the flux the interface returns meets the body and the flakes' mirrors alike: the
+        # inter-reflection denominator keeps the body's own R_b (as before the flakes'
+        # share was split out), not the flake-diluted R_d
+        rb = self.body.reflectance(wl)
+        if self.saunderson == "textbook":
+            k1, k2 = self.saunderson_k(wl)
+            tb: FloatArray = (1.0 - k1) * (1.0 - k2) * rd / (np.pi * (1.0 - k2 * rb))
+            return tb
+        n = self.coat_n(wl)
+        ri = internal_diffuse_reflectance(n)
+        out: FloatArray = rd / (np.pi * (1.0 - ri * rb) * n * n)
+        return out
+
+    def body_transmission(self, cos_theta: ArrayLike, wavelength_nm: ArrayLike) -> FloatArray:
+        """What the body term is seen through at each end, ``(N, n_wl)``: the coat's
+        ``1 - F`` (directional Saunderson) or 1 above the horizon (textbook: the k1, k2
+        losses are in :meth:`body_term`)."""
+        if self.saunderson == "textbook":
+            wl = np.asarray(wavelength_nm, dtype=np.float64).ravel()
+            c = np.asarray(cos_theta, dtype=np.float64).reshape(-1, 1)
+            out: FloatArray = np.where(c > 0, 1.0, 0.0) * np.ones((1, wl.size))
+            return out
+        return self.coat_transmission(cos_theta, wavelength_nm)
 
     def flake_brdf(self, wi: ArrayLike, wo: ArrayLike, wavelength_nm: ArrayLike) -> FloatArray:
         """The flake lobes of :meth:`subsurface_brdf` alone (outside, sr^-1), ``(N, n_wl)``."""
@@ -379,13 +484,15 @@ class Paint:
         wl = np.asarray(wavelength_nm, dtype=np.float64).ravel()
         wi_a = np.atleast_2d(np.asarray(wi, dtype=np.float64))
         wo_a = np.atleast_2d(np.asarray(wo, dtype=np.float64))
-        t = self.coat_transmission(wi_a[:, 2], wl) * self.coat_transmission(wo_a[:, 2], wl)
+        t = self.body_transmission(wi_a[:, 2], wl) * self.body_transmission(wo_a[:, 2], wl)
         out: FloatArray = t * self.body_term(wl)[None, :] + self.flake_brdf(wi_a, wo_a, wl)
         return out
 
     def describe(self) -> dict[str, Any]:
         """Parameters as stored with a run or printed by ``predict colour``."""
         out: dict[str, Any] = {"coat": self.coat.describe()}
+        if self.saunderson != "directional" or self.k1 is not None or self.k2 is not None:
+            out["saunderson"] = {"form": self.saunderson, "k1": self.k1, "k2": self.k2}
         if self.body is not None:
             out["body"] = {
                 "K_per_um": self.body.k_per_um.describe(),
@@ -399,6 +506,7 @@ class Paint:
                 "area_fraction": m.area_fraction,
                 "spread_deg": m.spread_deg,
                 "depth_um": m.depth_um,
+                "size_um": m.size_um,
                 "metal": m.metal.describe(),
             }
         if self.pearl is not None:
@@ -408,6 +516,7 @@ class Paint:
                 "spread_deg": p.spread_deg,
                 "film_nm": p.film_nm,
                 "depth_um": p.depth_um,
+                "size_um": p.size_um,
             }
         return out
 
@@ -472,7 +581,7 @@ def paint_from_dict(
     PaintError
         ``where.key: reason``.
     """
-    _known(spec, {"coat", "body", "metallic", "pearl"}, where)
+    _known(spec, {"coat", "body", "metallic", "pearl", "saunderson"}, where)
     try:
         coat = dispersion_from_dict(spec.get("coat", 1.5), where=f"{where}.coat", tables=tables)
         body = None
@@ -490,7 +599,7 @@ def paint_from_dict(
         if "metallic" in spec:
             m = spec["metallic"]
             w = f"{where}.metallic"
-            _known(m, {"area_fraction", "spread_deg", "depth_um", "metal"}, w)
+            _known(m, {"area_fraction", "spread_deg", "depth_um", "metal", "size_um"}, w)
             metal = (
                 dispersion_from_dict(m["metal"], where=f"{w}.metal", tables=tables)
                 if "metal" in m
@@ -501,19 +610,31 @@ def paint_from_dict(
                 spread_deg=_number(m, "spread_deg", w),
                 depth_um=_number(m, "depth_um", w, 0.0),
                 metal=metal,
+                size_um=_number(m, "size_um", w, 20.0),
             )
         pearl = None
         if "pearl" in spec:
             p = spec["pearl"]
             w = f"{where}.pearl"
-            _known(p, {"area_fraction", "spread_deg", "film_nm", "depth_um"}, w)
+            _known(p, {"area_fraction", "spread_deg", "film_nm", "depth_um", "size_um"}, w)
             pearl = PearlFlakes(
                 area_fraction=_number(p, "area_fraction", w),
                 spread_deg=_number(p, "spread_deg", w),
                 film_nm=_number(p, "film_nm", w),
                 depth_um=_number(p, "depth_um", w, 0.0),
+                size_um=_number(p, "size_um", w, 15.0),
             )
-        return Paint(coat=coat, body=body, metallic=metallic, pearl=pearl)
+        form, k1, k2 = "directional", None, None
+        if "saunderson" in spec:
+            sd = spec["saunderson"]
+            w = f"{where}.saunderson"
+            _known(sd, {"form", "k1", "k2"}, w)
+            form = str(sd.get("form", "directional"))
+            k1 = _number(sd, "k1", w) if "k1" in sd else None
+            k2 = _number(sd, "k2", w) if "k2" in sd else None
+        return Paint(
+            coat=coat, body=body, metallic=metallic, pearl=pearl, saunderson=form, k1=k1, k2=k2
+        )
     except DispersionError as exc:
         raise PaintError(str(exc)) from None
     except PaintError as exc:
@@ -553,6 +674,13 @@ def paint_to_dict(paint: Paint, *, stem: str = "paint") -> tuple[dict[str, Any],
     ``STEM-metal.nk``, to be written beside the TOML file)."""
     tables: dict[str, str] = {}
     out: dict[str, Any] = {"coat": _dispersion_value(paint.coat, f"{stem}-coat.nk", tables)}
+    if paint.saunderson != "directional" or paint.k1 is not None or paint.k2 is not None:
+        sd: dict[str, Any] = {"form": paint.saunderson}
+        if paint.k1 is not None:
+            sd["k1"] = paint.k1
+        if paint.k2 is not None:
+            sd["k2"] = paint.k2
+        out["saunderson"] = sd
     if paint.body is not None:
         b = paint.body
         out["body"] = {
@@ -567,6 +695,7 @@ def paint_to_dict(paint: Paint, *, stem: str = "paint") -> tuple[dict[str, Any],
             "area_fraction": m.area_fraction,
             "spread_deg": m.spread_deg,
             "depth_um": m.depth_um,
+            "size_um": m.size_um,
             "metal": _dispersion_value(m.metal, f"{stem}-metal.nk", tables),
         }
     if paint.pearl is not None:
@@ -576,5 +705,6 @@ def paint_to_dict(paint: Paint, *, stem: str = "paint") -> tuple[dict[str, Any],
             "spread_deg": p.spread_deg,
             "film_nm": p.film_nm,
             "depth_um": p.depth_um,
+            "size_um": p.size_um,
         }
     return out, tables

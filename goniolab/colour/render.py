@@ -45,14 +45,14 @@ References
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
 from goniolab.colour.optics import fresnel_unpolarised
-from goniolab.colour.paint import Paint
+from goniolab.colour.paint import MetallicFlakes, Paint, PearlFlakes
 from goniolab.colour.spectra import ColourSettings, xyz_weights
 
 __all__ = [
@@ -91,12 +91,26 @@ class BrdfTable:
     (theta_h on a square-root scale, theta_d, phi_d in [0, pi])."""
 
     xyz: FloatArray  # (n_h, n_d, n_phi, 3)
+    #: The flake lobes alone, one table per flake population (for the sparkle texture).
+    flakes_xyz: tuple[FloatArray, ...] = ()
+    #: The populations (:class:`goniolab.colour.paint.MetallicFlakes` / ``PearlFlakes``).
+    flakes: tuple[MetallicFlakes | PearlFlakes, ...] = ()
+    #: Coat index at 550 nm and the lamp's angular radius the table was made for.
+    n_coat: float = 1.5
+    lamp_radius_deg: float = 3.0
 
-    def lookup(self, theta_h: FloatArray, theta_d: FloatArray, phi_d: FloatArray) -> FloatArray:
+    def lookup(
+        self,
+        theta_h: FloatArray,
+        theta_d: FloatArray,
+        phi_d: FloatArray,
+        table: FloatArray | None = None,
+    ) -> FloatArray:
         """Trilinear interpolation at the given angles (radians), ``(..., 3)``."""
         from scipy.ndimage import map_coordinates  # lazy: scipy is slow to import
 
-        n_h, n_d, n_p, _ = self.xyz.shape
+        data = self.xyz if table is None else table
+        n_h, n_d, n_p, _ = data.shape
         half = 0.5 * math.pi
         u = np.sqrt(np.clip(theta_h / half, 0.0, 1.0)) * (n_h - 1)
         v = np.clip(theta_d / half, 0.0, 1.0) * (n_d - 1)
@@ -104,7 +118,7 @@ class BrdfTable:
         coords = np.stack([u.ravel(), v.ravel(), w.ravel()])
         out = np.empty((u.size, 3))
         for c in range(3):
-            out[:, c] = map_coordinates(self.xyz[..., c], coords, order=1, mode="nearest")
+            out[:, c] = map_coordinates(data[..., c], coords, order=1, mode="nearest")
         result: FloatArray = out.reshape(*np.shape(theta_h), 3)
         return result
 
@@ -170,9 +184,29 @@ def tabulate_brdf(
     f = np.zeros((wi.shape[0], wl.size))
     n_coat = paint.coat_n(wl)
     f[ok] = gloss_brdf(wi[ok], wo[ok], n_coat, alpha, alpha_lobe)
-    f[ok] += paint.subsurface_brdf(wi[ok], wo[ok], wl)
+    # the paint beneath: :meth:`Paint.subsurface_brdf` written out as its body term plus
+    # one lobe per flake population, each lobe also tabulated alone (the sparkle texture)
+    wi_ok, wo_ok = wi[ok], wo[ok]
+    t_body = paint.body_transmission(wi_ok[:, 2], wl) * paint.body_transmission(wo_ok[:, 2], wl)
+    f[ok] += t_body * paint.body_term(wl)[None, :]
+    flakes: list[MetallicFlakes | PearlFlakes] = []
+    tables: list[FloatArray] = []
+    for pop in (paint.metallic, paint.pearl):
+        if pop is None:
+            continue
+        alone = replace(
+            paint,
+            metallic=pop if pop is paint.metallic else None,
+            pearl=pop if pop is paint.pearl else None,
+        )
+        fl = np.zeros((wi.shape[0], wl.size))
+        fl[ok] = alone.flake_brdf(wi_ok, wo_ok, wl)
+        f += fl
+        tables.append((fl @ w.T).reshape(n_h, n_d, n_phi, 3))
+        flakes.append(pop)
     xyz = (f @ w.T).reshape(n_h, n_d, n_phi, 3)
-    return BrdfTable(xyz)
+    n550 = float(paint.coat_n(np.array([550.0]))[0])
+    return BrdfTable(xyz, tuple(tables), tuple(flakes), n550, float(lamp_radius_deg))
 
 
 def _rusinkiewicz(
@@ -208,14 +242,23 @@ def _rusinkiewicz(
 
 @dataclass(frozen=True)
 class Render:
-    """A rendered image: linear XYZ (Y = 100 for the lit white diffuser), display sRGB and,
-    per pixel, the key lamp's aspecular angle and cos theta_i (NaN off the shape)."""
+    """A rendered image: linear XYZ (Y = 100 for the lit white diffuser, before the
+    exposure), display sRGB (the XYZ times the exposure) and, per pixel, the key lamp's
+    aspecular angle and cos theta_i (NaN off the shape)."""
 
     xyz: FloatArray  # (size, size, 3)
     srgb: FloatArray  # (size, size, 3) in [0, 1]
     mask: NDArray[np.bool_]
     aspecular_deg: FloatArray
     cos_i: FloatArray
+    #: The exposure applied, whether it was chosen automatically, and the share of the
+    #: shape's pixels whose linear sRGB exceeds white at it.
+    exposure: float = 1.0
+    exposure_auto: bool = False
+    clipped_fraction: float = 0.0
+    #: Pixels where at least one flake mirrors the lamp (sparkle render only).
+    sparkle_pixels: NDArray[np.bool_] | None = None
+    pixel_um: float = 0.0
 
 
 def _geometry(shape: Shape, size: int) -> tuple[FloatArray, NDArray[np.bool_]]:
@@ -237,33 +280,90 @@ def _geometry(shape: Shape, size: int) -> tuple[FloatArray, NDArray[np.bool_]]:
     return normals, mask
 
 
+#: Physical width of the rendered panel / sphere (sets the pixel size for the sparkle).
+SCENE_WIDTH_MM = 60.0
+#: Largest share of the shape's pixels the automatic exposure lets clip to white.
+CLIP_FRACTION = 0.01
+
+
+def _local_frame(normals: FloatArray, v: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """An orthonormal tangent pair per normal (any: the sparkle count is isotropic)."""
+    ref = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    t1 = np.cross(normals, ref)
+    t1 /= np.linalg.norm(t1, axis=-1, keepdims=True)
+    t2 = np.cross(normals, t1)
+    return t1, t2
+
+
+def _to_local(v: FloatArray, t1: FloatArray, t2: FloatArray, nm: FloatArray) -> FloatArray:
+    out: FloatArray = np.stack(
+        [np.sum(v * t1, -1), np.sum(v * t2, -1), np.sum(v * nm, -1)], axis=-1
+    )
+    return out
+
+
 def render(
     table: BrdfTable,
     *,
     shape: Shape = "panel",
     size: int = 512,
     lamps: int = 1,
-    exposure: float = 1.0,
+    exposure: float | None = None,
     settings: ColourSettings | None = None,
+    sparkle: bool = False,
+    seed: int = 0,
 ) -> Render:
-    """Render ``shape`` at ``size`` x ``size`` lit by the first ``lamps`` of :data:`LAMPS`."""
+    """Render ``shape`` at ``size`` x ``size`` lit by the first ``lamps`` of :data:`LAMPS`.
+
+    ``exposure``: the factor on the XYZ before display; ``None`` (default) chooses the
+    largest that clips at most :data:`CLIP_FRACTION` of the shape's pixels (1 % of them may
+    exceed display white; the chosen value and the clipped share are in the result).
+    ``sparkle``: each pixel (a ``SCENE_WIDTH_MM / size`` square of paint) draws the number
+    of flakes that mirror the lamp from a Poisson law of mean ``mu``
+    (:func:`goniolab.colour.sparkle.expected_sparkles`) and shows the flake lobe times
+    ``k / mu``: the mean over many pixels is the smooth render, single pixels sparkle.
+    """
     if not 1 <= lamps <= len(LAMPS):
         raise ValueError(f"lamps must be 1 or 2, got {lamps}")
     if not (8 <= size <= 8192):
         raise ValueError(f"size must be in [8, 8192] pixels, got {size}")
-    if not (math.isfinite(exposure) and exposure > 0):
+    if exposure is not None and not (math.isfinite(exposure) and exposure > 0):
         raise ValueError(f"exposure must be > 0, got {exposure}")
+    from goniolab.colour.sparkle import expected_sparkles
+
     normals, mask = _geometry(shape, size)
     nm = normals[mask]
     view = np.broadcast_to(np.array([0.0, 0.0, 1.0]), nm.shape)
     xyz = np.zeros((nm.shape[0], 3))
     asp = np.full(size * size, np.nan)
     cos_key = np.full(size * size, np.nan)
+    rng = np.random.default_rng(seed)
+    pixel_um = SCENE_WIDTH_MM * 1000.0 / size
+    sparkling = np.zeros(nm.shape[0], dtype=bool)
+    t1, t2 = _local_frame(nm, view)
     for k, (lamp, irradiance) in enumerate(LAMPS[:lamps]):
         li = np.broadcast_to(lamp, nm.shape)
         th, td, pd, ci, co = _rusinkiewicz(nm, li, view)
         lit = (ci > 0) & (co > 0)
         f = table.lookup(th, td, pd)
+        if sparkle and table.flakes_xyz:
+            wi_l = _to_local(li, t1, t2, nm)
+            wo_l = _to_local(view, t1, t2, nm)
+            for flakes, ftab in zip(table.flakes, table.flakes_xyz, strict=True):
+                lobe = table.lookup(th, td, pd, ftab)
+                mu = expected_sparkles(
+                    wi_l,
+                    wo_l,
+                    flakes,
+                    table.n_coat,
+                    table.lamp_radius_deg,
+                    pixel_um,
+                )
+                mu = np.where(lit, mu, 0.0)
+                count = rng.poisson(mu)
+                ratio = np.where(mu > 0, count / np.where(mu > 0, mu, 1.0), 0.0)
+                f = f - lobe + lobe * ratio[:, None]
+                sparkling |= count > 0
         xyz += np.where(lit[:, None], math.pi * irradiance * ci[:, None] * f, 0.0)
         if k == 0:
             mirror = 2.0 * ci[:, None] * nm - li
@@ -272,30 +372,57 @@ def render(
             side = np.sign(np.sum(np.cross(mirror, view) * np.cross(mirror, li), -1))
             asp[mask.ravel()] = np.where(side >= 0, a, -a)
             cos_key[mask.ravel()] = ci
+    linear = _linear_rgb(xyz, settings)  # once: the exposure scales it linearly
+    peak = np.max(linear, axis=-1) if linear.size else np.zeros(0)
+    if exposure is None:
+        q = float(np.quantile(peak, 1.0 - CLIP_FRACTION, method="higher")) if peak.size else 0.0
+        # 1 % headroom: 8-bit rounding would otherwise saturate the quantile pixel itself
+        exposure = 0.99 / q if q > 0 else 1.0
+        auto = True
+    else:
+        auto = False
+    clipped = float(np.mean(peak * exposure > 1.0 + 1e-9)) if peak.size else 0.0
     full = np.zeros((size * size, 3))
-    full[mask.ravel()] = xyz * exposure
-    srgb = _to_srgb(full, settings)
-    srgb[~mask.ravel()] = 0.0
+    full[mask.ravel()] = xyz
+    srgb = np.zeros((size * size, 3))
+    srgb[mask.ravel()] = _encode_srgb(linear * exposure)
+    spark = np.zeros(size * size, dtype=bool)
+    spark[mask.ravel()] = sparkling
     return Render(
         xyz=full.reshape(size, size, 3),
         srgb=srgb.reshape(size, size, 3),
         mask=mask,
         aspecular_deg=asp.reshape(size, size),
         cos_i=cos_key.reshape(size, size),
+        exposure=float(exposure),
+        exposure_auto=auto,
+        clipped_fraction=clipped,
+        sparkle_pixels=spark.reshape(size, size),
+        pixel_um=pixel_um,
     )
 
 
-def _to_srgb(xyz: FloatArray, settings: ColourSettings | None) -> FloatArray:
-    """Display sRGB of XYZ (Y = 100 scale): ``colour.XYZ_to_sRGB`` with chromatic adaptation
-    from the illuminant's white point, clipped to [0, 1]."""
+def _linear_rgb(xyz: FloatArray, settings: ColourSettings | None) -> FloatArray:
+    """Linear sRGB of XYZ (Y = 100 scale), ``colour.XYZ_to_sRGB`` without the encoding, with
+    chromatic adaptation from the illuminant's white point: a pixel clips to white when a
+    channel exceeds 1."""
     import warnings
 
     from goniolab.colour.spectra import colour_module
 
+    if xyz.size == 0:
+        return np.zeros((0, 3))
     colour = colour_module()
     s = (settings or ColourSettings()).validated()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        rgb = colour.XYZ_to_sRGB(xyz / 100.0, s.white_xy)
-    out: FloatArray = np.clip(np.nan_to_num(rgb), 0.0, 1.0)
+        rgb = colour.XYZ_to_sRGB(xyz / 100.0, s.white_xy, apply_cctf_encoding=False)
+    out: FloatArray = np.nan_to_num(np.asarray(rgb, dtype=np.float64))
+    return out
+
+
+def _encode_srgb(linear: FloatArray) -> FloatArray:
+    """Display sRGB in [0, 1] of linear sRGB: IEC 61966-2-1's encoding, clipped."""
+    c = np.clip(linear, 0.0, 1.0)
+    out: FloatArray = np.where(c <= 0.0031308, 12.92 * c, 1.055 * np.power(c, 1 / 2.4) - 0.055)
     return out

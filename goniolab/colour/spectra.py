@@ -38,6 +38,8 @@ from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
     "DELTA_E_METHODS",
+    "E308_LIMITS_NM",
+    "ILLUMINANT_ALIASES",
     "OBSERVERS",
     "VISIBLE_NM",
     "ColourError",
@@ -47,6 +49,8 @@ __all__ = [
     "colour_module",
     "delta_e",
     "lab_to_srgb",
+    "range_note",
+    "resolve_illuminant",
     "spectra_to_xyz",
     "spectrum_to_colour",
     "standard_grid_nm",
@@ -56,8 +60,16 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 
-#: The range a spectrum must cover (ASTM E308 tables start at 360 or 380 nm; CIE 15 ends at 780).
-VISIBLE_NM: tuple[float, float] = (380.0, 780.0)
+#: The range the ASTM E308 weighting tables span (360-780 nm) and CIE 15's CMFs reach (830 nm):
+#: a measured grid must lie inside it.
+E308_LIMITS_NM: tuple[float, float] = (360.0, 830.0)
+#: The range a spectrum must at least cover: 400-700 nm, the range of most multi-angle
+#: instruments (BYK-mac, X-Rite MA-T), which ASTM E308-18 sec. 7.3 handles by holding the
+#: end readings over the unmeasured ends of the tables (what colour-science's ``sd_to_XYZ``
+#: does: constant extrapolation). The standard grid the models predict on is 380-780 nm.
+VISIBLE_NM: tuple[float, float] = (400.0, 700.0)
+#: The standard range of a prediction (CIE 15's 380-780 nm).
+STANDARD_NM: tuple[float, float] = (380.0, 780.0)
 
 #: Observers accepted by name (colour-science's ``MSDS_CMFS`` keys), with short aliases.
 OBSERVERS: dict[str, str] = {
@@ -85,6 +97,33 @@ COMMON_ILLUMINANTS: frozenset[str] = frozenset(
     | {"LED-BH1", "LED-RGB1", "LED-V1", "LED-V2"}
 )
 
+#: Common names of CIE illuminants -> colour-science's key. CIE 15:2004 table T.6 names the
+#: fluorescent illuminants F1..F12 (colour-science spells them FL1..FL12); TL84 and CWF are
+#: the trade names of the lamps F11 and F2 stand for (X-Rite / BYK light booths); "LED" is
+#: CIE 15:2018's LED-B3 (phosphor-type, 4103 K, the white LED of the metamerism table).
+ILLUMINANT_ALIASES: dict[str, str] = {
+    **{f"F{k}": f"FL{k}" for k in range(1, 13)},
+    **{f"F3.{k}": f"FL3.{k}" for k in range(1, 16)},
+    "TL84": "FL11",
+    "CWF": "FL2",
+    "LED": "LED-B3",
+    "ILLUMINANT A": "A",
+    "CIE A": "A",
+}
+
+
+def resolve_illuminant(name: str) -> str:
+    """colour-science's key of an illuminant name or alias (case-insensitive): ``"F11"``,
+    ``"f11"``, ``"TL84"`` -> ``"FL11"``; ``"d65"`` -> ``"D65"``; unknown names unchanged."""
+    text = str(name).strip()
+    up = text.upper()
+    if up in ILLUMINANT_ALIASES:
+        return ILLUMINANT_ALIASES[up]
+    for known in COMMON_ILLUMINANTS:
+        if known.upper() == up:
+            return known
+    return text
+
 
 class ColourError(ValueError):
     """A spectrum or a colour setting is unusable; the message names what is wrong."""
@@ -105,7 +144,8 @@ class ColourSettings:
     Parameters
     ----------
     illuminant
-        A ``colour.SDS_ILLUMINANTS`` name (``"D65"``, ``"A"``, ``"C"``, ``"D50"``, ``"F2"``...).
+        A ``colour.SDS_ILLUMINANTS`` name (``"D65"``, ``"A"``, ``"C"``, ``"D50"``, ``"FL11"``...)
+        or a common alias (``"F11"``, ``"TL84"``, ``"LED"``: :data:`ILLUMINANT_ALIASES`).
     observer
         ``"CIE 1964 10 Degree Standard Observer"`` (default, alias ``"10"``) or
         ``"CIE 1931 2 Degree Standard Observer"`` (alias ``"2"``).
@@ -139,9 +179,14 @@ def _validated(illuminant: str, observer_name: str, method: str) -> ColourSettin
         raise ColourError(f"unknown observer {observer_name!r} (known: {known}, or 2 / 10)")
     if method not in ("ASTM E308", "Integration"):
         raise ColourError(f"unknown weighting method {method!r} (ASTM E308 or Integration)")
+    given = illuminant
+    illuminant = resolve_illuminant(illuminant)
     colour = colour_module()
     if illuminant not in colour.SDS_ILLUMINANTS:
-        raise ColourError(f"unknown illuminant {illuminant!r} (e.g. D65, D50, A, C, FL2, FL11)")
+        raise ColourError(
+            f"unknown illuminant {given!r} (e.g. D65, D50, A, C, F2 = FL2, F11 = FL11 = TL84, "
+            "LED = LED-B3)"
+        )
     if illuminant not in colour.CCS_ILLUMINANTS[observer]:
         raise ColourError(f"illuminant {illuminant!r} has no white point for the {observer}")
     return ColourSettings(illuminant, observer, method)  # type: ignore[arg-type]
@@ -211,7 +256,9 @@ def check_spectrum(
     ColourError
         Naming the problem: not 1-D, lengths differ, fewer than 3 wavelengths, a NaN or
         infinite value or wavelength, a negative value (below the noise floor), wavelengths
-        not ascending and evenly spaced, or a grid that does not cover 380-780 nm.
+        not ascending and evenly spaced, a grid reaching outside 360-830 nm or one that does
+        not cover 400-700 nm (ASTM E308-18 sec. 7.3: shorter ranges are completed by
+        holding the end readings, :func:`range_note`).
     """
     try:
         wl = np.asarray(wavelengths_nm, dtype=np.float64)
@@ -255,7 +302,28 @@ def _check_grid_cached(wl_bytes: bytes) -> str:
     lo, hi = VISIBLE_NM
     if wl[0] > lo + 1e-9 or wl[-1] < hi - 1e-9:
         return f"wavelengths {wl[0]:g}-{wl[-1]:g} nm do not cover {lo:g}-{hi:g} nm"
+    e_lo, e_hi = E308_LIMITS_NM
+    if wl[0] < e_lo - 1e-9 or wl[-1] > e_hi + 1e-9:
+        return (
+            f"wavelengths {wl[0]:g}-{wl[-1]:g} nm reach outside {e_lo:g}-{e_hi:g} nm "
+            "(the CIE observers' range; trim the grid)"
+        )
     return ""
+
+
+def range_note(wavelengths_nm: ArrayLike) -> str:
+    """How a grid short of 360-780 nm is completed ('' when it covers 380-780 nm): the text
+    every face prints beside colours computed from it (no silent extrapolation)."""
+    wl = np.asarray(wavelengths_nm, dtype=np.float64).ravel()
+    if wl.size == 0:
+        return ""
+    lo, hi = STANDARD_NM
+    if wl[0] <= lo + 1e-9 and wl[-1] >= hi - 1e-9:
+        return ""
+    return (
+        f"spectra cover {wl[0]:g}-{wl[-1]:g} nm: the end readings are held over the rest of "
+        "360-780 nm (ASTM E308-18 sec. 7.3)"
+    )
 
 
 def _check_grid(wl_bytes: bytes, what: str) -> None:
@@ -344,7 +412,7 @@ def spectrum_to_colour(
     Parameters
     ----------
     wavelengths_nm
-        Ascending, evenly spaced wavelengths covering 380-780 nm.
+        Ascending, evenly spaced wavelengths inside 360-830 nm covering 400-700 nm.
     factors
         Reflectance factor per wavelength (1 = perfect reflecting diffuser; a gloss peak
         can exceed 1).

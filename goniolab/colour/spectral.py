@@ -218,7 +218,7 @@ class SpectralPredictor:
             return np.zeros((tr.size, wl.size))
         src = src / total
         # the body term is separable: T(t_i) T(t_o) g(lambda)
-        t_src = src @ self.paint.coat_transmission(wi[:, 2], wl)  # (n_wl,)
+        t_src = src @ self.paint.body_transmission(wi[:, 2], wl)  # (n_wl,)
         body = self.paint.body_term(wl)
         dets = []
         for t in tr:
@@ -229,7 +229,7 @@ class SpectralPredictor:
             dets.append((wo, np.clip(wo[:, 2], 0.0, None) * w_d))
         out = np.empty((tr.size, wl.size))
         for g, (wo, proj) in enumerate(dets):
-            out[g] = t_src * body * (proj @ self.paint.coat_transmission(wo[:, 2], wl))
+            out[g] = t_src * body * (proj @ self.paint.body_transmission(wo[:, 2], wl))
         if self.paint.has_flakes:
             ns = wi.shape[0]
             wo_all = np.concatenate([wo for wo, _ in dets])

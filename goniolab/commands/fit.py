@@ -203,14 +203,27 @@ def _cmd_fit_colour(args: argparse.Namespace) -> int:
         "correlation": corr,
         "geometries": geometries,
         "skipped_aspecular_deg": [float(r["aspecular_deg"]) for r in skipped],
+        "minimised": (
+            "sum of squared dE2000 (local metric of each measured colour)"
+            if args.metric == "de2000"
+            else "sum of squared CIE 1976 L*a*b* differences (dE*ab^2)"
+        ),
         "mean_dE2000": fit.mean_dE2000,
         "start_mean_dE2000": fit.start_mean_dE2000,
+        "dE2000_worse_after_fit": fit.mean_dE2000 > fit.start_mean_dE2000,
         "residual_rms": fit.residual_rms,
         "dof": fit.dof,
         "evaluations": fit.evaluations,
         "paint": fit.paint.describe(),
         "saved": saved,
     }
+    if doc["dE2000_worse_after_fit"]:
+        print(
+            f"goniolab: warning: the fit minimised {doc['minimised']}; its mean dE2000 rose "
+            f"from {fit.start_mean_dE2000:.2f} to {fit.mean_dE2000:.2f} "
+            "(--metric de2000 minimises dE2000 itself)",
+            file=sys.stderr,
+        )
     if args.json:
         print(json.dumps(doc, indent=2))
         return 0

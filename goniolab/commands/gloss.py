@@ -97,9 +97,9 @@ def _open_meter_from_port(args: argparse.Namespace) -> Any:
 
 async def _session(args: argparse.Namespace, store: RunStore, plan: GlossPlan) -> GlossResult:
     import asyncio
-    import signal
     from contextlib import AsyncExitStack
 
+    from goniolab.commands._signals import describe, install_stop_signals
     from goniolab.session import GlossSession, SampleModels
 
     async with AsyncExitStack() as stack:
@@ -134,11 +134,22 @@ async def _session(args: argparse.Namespace, store: RunStore, plan: GlossPlan) -
         announce_store(store, logger.run_id)
         printer = asyncio.create_task(_print_events(session.bus.subscribe(), args.json))
         loop = asyncio.get_running_loop()
-        loop.add_signal_handler(signal.SIGINT, logger.stop)
+        run_task = asyncio.ensure_future(logger.run())
+
+        def stop_first(name: str) -> None:
+            # Ctrl-C ends a log as the operator's stop; SIGTERM / SIGHUP as an abort
+            logger.stop(by="" if name == "SIGINT" else describe(name))
+
+        def stop_again(name: str) -> None:
+            # the stop already ends every wait; a reading in progress ends within its
+            # timeout and is stored, and so is the run's end: nothing to cancel
+            logger.stop(by=describe(name))
+
+        remove_signals = install_stop_signals(loop, stop_first, stop_again)
         try:
-            result = await logger.run()
+            result = await run_task
         finally:
-            loop.remove_signal_handler(signal.SIGINT)
+            remove_signals()
             session.bus.close()
             await printer
         return result

@@ -441,20 +441,44 @@ def _cmd_gloss_batch(args: argparse.Namespace) -> int:
         else run_local(maps, opts, jobs=args.jobs)
     )
     failed = 0
-    with _progress(len(maps)) as advance:
+    with _progress(len(maps)) as bar:
         for row in rows:
             if "error" in row:
                 failed += 1
-                print(f"goniolab: error: {row['error']}", file=sys.stderr, flush=True)
+                bar.message(f"goniolab: error: {row['error']}")
             if args.json:
                 print(json.dumps(row), flush=True)  # JSON Lines: one object per map
             elif "error" not in row:
                 print(_batch_line(row), flush=True)
-            advance()
+            bar.advance()
     if failed:
         print(f"goniolab: {failed} of {len(maps)} maps failed", file=sys.stderr)
         return 2
     return 0
+
+
+class _BatchBar:
+    """The batch's progress: a rich bar drawn on stderr, messages scrolled above it.
+
+    The bar never touches stdout: rich's ``Progress`` redirects ``sys.stdout`` into its own
+    console by default (``redirect_stdout=True``), so with the console on stderr every row
+    printed while the bar was live went to the terminal and ``--json > file`` stayed empty
+    (issue 22.3). Here both redirections are off and messages go through the bar's console.
+    """
+
+    def __init__(self, progress: Any = None, task: Any = None) -> None:
+        self._progress = progress
+        self._task = task
+
+    def advance(self) -> None:
+        if self._progress is not None:
+            self._progress.advance(self._task)
+
+    def message(self, text: str) -> None:
+        if self._progress is not None:
+            self._progress.console.print(text, markup=False, highlight=False, soft_wrap=True)
+        else:
+            print(text, file=sys.stderr, flush=True)
 
 
 def _progress(total: int) -> Any:
@@ -464,7 +488,7 @@ def _progress(total: int) -> Any:
     @contextmanager
     def bar() -> Any:
         if not sys.stderr.isatty():
-            yield lambda: None
+            yield _BatchBar()
             return
         from rich.console import Console
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
@@ -476,9 +500,11 @@ def _progress(total: int) -> Any:
             TimeRemainingColumn(),
             console=Console(stderr=True),
             transient=True,
+            redirect_stdout=False,
+            redirect_stderr=False,
         ) as progress:
             task = progress.add_task("gloss", total=total)
-            yield lambda: progress.advance(task)
+            yield _BatchBar(progress, task)
 
     return bar()
 

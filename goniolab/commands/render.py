@@ -42,8 +42,14 @@ def _cmd_render(args: argparse.Namespace) -> int:
         raise UserError(f"--out {out}: no such directory {out.parent}")
     if not 8 <= args.size <= 8192:
         raise UserError(f"--size {args.size}: must be in [8, 8192] pixels")
-    if not (math.isfinite(args.exposure) and args.exposure > 0):
-        raise UserError(f"--exposure {args.exposure:g}: must be > 0")
+    exposure: float | None = None
+    if args.exposure != "auto":
+        try:
+            exposure = float(args.exposure)
+        except ValueError:
+            raise UserError(f"--exposure {args.exposure}: a number or auto") from None
+        if not (math.isfinite(exposure) and exposure > 0):
+            raise UserError(f"--exposure {exposure:g}: must be > 0")
     if not (math.isfinite(args.lamp_deg) and 0.0 <= args.lamp_deg <= 60.0):
         raise UserError(f"--lamp-deg {args.lamp_deg:g}: must be in [0, 60] deg")
     t0 = time.perf_counter()
@@ -82,13 +88,16 @@ def _cmd_render(args: argparse.Namespace) -> int:
         table = tabulate_brdf(
             paint, alpha, lamp_radius_deg=0.5 * args.lamp_deg, wavelengths_nm=wl, settings=settings
         )
+        sparkle = paint.has_flakes if args.sparkle is None else args.sparkle
         pic = render(
             table,
             shape=args.shape,
             size=args.size,
             lamps=args.lamps,
-            exposure=args.exposure,
+            exposure=exposure,
             settings=settings,
+            sparkle=sparkle,
+            seed=args.seed,
         )
     except (ColourError, DispersionError, PaintError, ValueError) as exc:
         raise UserError(f"{args.map}: {' '.join(str(exc).split())}") from None
@@ -112,6 +121,14 @@ def _cmd_render(args: argparse.Namespace) -> int:
         "alpha_sdq": alpha,
         "lamp_deg": args.lamp_deg,
         "paint": paint.describe(),
+        "exposure": pic.exposure,
+        "exposure_auto": pic.exposure_auto,
+        "clipped_fraction": pic.clipped_fraction,
+        "sparkle": sparkle,
+        "sparkle_pixel_fraction": (
+            float(np.mean(pic.sparkle_pixels[pic.mask])) if pic.sparkle_pixels is not None else 0.0
+        ),
+        "pixel_um": pic.pixel_um,
         "lightness_factor_range": [float(np.min(factor_l)), float(np.max(factor_l))]
         if factor_l.size
         else None,
@@ -122,7 +139,15 @@ def _cmd_render(args: argparse.Namespace) -> int:
     else:
         print(
             f"{args.map}: {args.shape} {args.size}x{args.size}, {args.lamps} lamp"
-            f"{'s' if args.lamps > 1 else ''}, drawn to {out} in {seconds:.1f} s",
+            f"{'s' if args.lamps > 1 else ''}, drawn to {out} in {seconds:.1f} s; exposure "
+            f"{pic.exposure:.3g} ({'auto: ' if pic.exposure_auto else ''}"
+            f"{100 * pic.clipped_fraction:.2f} % of the pixels clip)"
+            + (
+                f"; sparkle: {100 * doc['sparkle_pixel_fraction']:.2f} % of the pixels "
+                f"({pic.pixel_um:.0f} um each) mirror the lamp"
+                if sparkle
+                else ""
+            ),
             file=sys.stderr,
         )
     return 0
@@ -155,9 +180,17 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument(
         "--exposure",
-        type=float,
-        default=1.0,
-        help="1: a white diffuser lit along its normal by the key lamp is display white",
+        default="auto",
+        help="auto (default): the largest exposure that lets at most 1%% of the pixels clip "
+        "to white; a number: 1 = a white diffuser lit along its normal is display white",
     )
+    p.add_argument(
+        "--sparkle",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="draw each pixel's flakes (Poisson number mirroring the lamp): on for paints "
+        "with flakes",
+    )
+    p.add_argument("--seed", type=int, default=0, help="random seed of the sparkle texture")
     p.add_argument("--json", action="store_true", help="print what was drawn as JSON")
     p.set_defaults(func=_cmd_render)

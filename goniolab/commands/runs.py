@@ -11,7 +11,9 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from goniolab import jsonout
 from goniolab.errors import UserError
+from goniolab.textsafe import escaped_stdout
 
 if TYPE_CHECKING:  # sqlite3 and the plans load when a command runs, not at --help
     from goniolab.store import RunRecord, RunStore
@@ -64,9 +66,16 @@ def run_summary(store: RunStore, rec: RunRecord) -> dict[str, Any]:
 
         try:
             plan = BrdfPlan.from_dict(rec.plan)
-        except PlanError as exc:
-            raise UserError(f"store {store.location}: run {rec.id}: {exc}") from exc
-        return summarize_brdf(plan, store.points(rec.id), store.predictions(rec.id))
+        except (PlanError, KeyError, TypeError, ValueError) as exc:
+            raise UserError(
+                f"store {store.location}: run {rec.id}: its stored plan cannot be read: {exc}"
+            ) from exc
+        from goniolab.store import StoreError
+
+        try:
+            return summarize_brdf(plan, store.points(rec.id), store.predictions(rec.id))
+        except StoreError as exc:
+            raise UserError(str(exc)) from exc
     from goniolab.scan.plans import gloss_statistics
 
     rows = store.gloss_readings(rec.id)
@@ -77,6 +86,8 @@ def run_summary(store: RunStore, rec: RunRecord) -> dict[str, Any]:
 
 
 def _cmd_list(args: argparse.Namespace) -> int:
+    from goniolab.store import StoreError
+
     path = store_path(args.store, args.config)
     if isinstance(path, Path) and not path.exists():
         # a fresh installation (or a mistyped --store): nothing to list, nothing created
@@ -85,24 +96,57 @@ def _cmd_list(args: argparse.Namespace) -> int:
         print(f"no runs: store {path} does not exist yet", file=sys.stderr)
         return 0
     with open_store(args.store, args.config) as store:
-        runs = store.list_runs(limit=args.limit)
+        try:
+            briefs = store.list_briefs(
+                limit=args.limit,
+                operator=args.operator,
+                tag=args.tag,
+                sample_id=args.sample_id,
+                text=args.search,
+            )
+        except StoreError as exc:
+            raise UserError(str(exc)) from exc
         if args.json:
-            print(json.dumps([_brief(store, r) for r in runs], indent=2))
+            print(jsonout.dumps([_brief(store, r, n) for r, n in briefs], indent=2))
             return 0
-        if not runs:
-            print(f"no runs in {store.location}", file=sys.stderr)
+        if not briefs:
+            filtered = any(
+                v is not None for v in (args.operator, args.tag, args.sample_id, args.search)
+            )
+            print(f"no runs{' match' if filtered else ''} in {store.location}", file=sys.stderr)
             return 0
         print(
             f"{'RUN':>5}  {'KIND':5}  {'STATUS':11}  {'READINGS':>8}  {'CREATED (UTC)':19}  SAMPLE"
         )
-        for r in runs:
-            b = _brief(store, r)
-            status = "interrupted" if b["interrupted"] else r.status
-            print(
-                f"{r.id:>5}  {r.kind:5}  {status:11}  {b['readings']:>8}  "
-                f"{_when(r.created_at):19}  {r.sample}"
+        for r, n in briefs:
+            b = _brief(store, r, n)
+            status = "damaged" if r.damage else "interrupted" if b["interrupted"] else r.status
+            readings = "?" if n is None else str(n)
+            extra = "".join(
+                f"  {label}{safe_text(v)}"
+                for label, v in (
+                    ("id:", r.sample_id),
+                    ("by ", r.operator),
+                    ("#", " #".join(r.tags)),
+                )
+                if v
             )
+            print(
+                f"{r.id:>5}  {safe_text(r.kind):5}  {status:11}  {readings:>8}  "
+                f"{_when(r.created_at):19}  {safe_text(r.sample)}{extra}"
+            )
+            if r.damage:
+                print(f"       damaged: {safe_text(r.damage)}")
+            elif n is None:
+                print("       damaged: its readings cannot be counted (a damaged page)")
     return 0
+
+
+def safe_text(text: str) -> str:
+    """``text`` with control characters (terminal escape sequences) shown as ``\\xNN``."""
+    if text.isprintable():
+        return text
+    return "".join(c if c.isprintable() else f"\\x{ord(c):02x}" for c in text)
 
 
 def interrupted(store: RunStore, r: RunRecord) -> bool:
@@ -110,19 +154,26 @@ def interrupted(store: RunStore, r: RunRecord) -> bool:
     return r.status in ("running", "paused") and store.is_claimed(r.id) is False
 
 
-def _brief(store: RunStore, r: RunRecord) -> dict[str, Any]:
-    n = store.count_points(r.id) if r.kind == "brdf" else len(store.gloss_readings(r.id))
-    return {
+def _brief(store: RunStore, r: RunRecord, readings: int | None) -> dict[str, Any]:
+    doc = {
         "id": r.id,
+        "uuid": r.uuid,
         "kind": r.kind,
         "status": r.status,
         "interrupted": interrupted(store, r),
         "reason": r.reason,
         "sample": r.sample,
-        "readings": n,
+        "sample_id": r.sample_id,
+        "operator": r.operator,
+        "tags": list(r.tags),
+        "notes": r.notes,
+        "readings": readings,
         "created_at": r.created_at,
         "finished_at": r.finished_at,
     }
+    if r.damage:
+        doc["damage"] = r.damage
+    return doc
 
 
 def angles_text(angles_deg: Sequence[float]) -> str:
@@ -164,24 +215,40 @@ def run_colour(store: RunStore, rec: RunRecord) -> list[dict[str, Any]]:
 
 
 def _f(v: Any, fmt: str = "6.1f") -> str:
-    return "-" if v is None else format(float(v), fmt)
+    return "-".rjust(len(format(0.0, fmt))) if v is None else format(float(v), fmt)
 
 
-def colour_text(rows: list[dict[str, Any]]) -> list[str]:
-    """Lines of the colour table (one per geometry) printed by ``runs show/colour``."""
-    from goniolab.scan.colour import flop_of_rows
+def colour_text(rows: list[dict[str, Any]], theta_i_deg: float = 45.0) -> list[str]:
+    """Lines of the colour table (one per geometry) printed by ``runs show/colour``: the
+    measured and predicted L*a*b*, the signed dL*, dC*, dH* (predicted - measured) and
+    dE*ab, dE94, dE00 (:mod:`goniolab.colour.difference`); the flop index at 45 deg only."""
+    from goniolab.colour.difference import differences
+    from goniolab.colour.multiangle import flop_index_note, flop_of_rows
 
-    out = ["  theta_r  aspec     L*     a*     b*     C*      h   pred L*  a*     b*    dE00"]
+    out = [
+        "  theta_r  aspec     L*     a*     b*     C*      h |  pred L*     a*     b* |"
+        "    dL*    dC*    dH*  dE*ab   dE94   dE00"
+    ]
     for r in rows:
+        d: dict[str, Any] = {}
+        if r.get("L") is not None and r.get("predicted_L") is not None:
+            m = [r["L"], r["a"], r["b"]]
+            p_ = [r["predicted_L"], r["predicted_a"], r["predicted_b"]]
+            d = {k: float(v) for k, v in differences(m, p_).items()}
         out.append(
             f"  {r['theta_r_deg']:7.2f} {r['aspecular_deg']:6.1f} {_f(r.get('L'))} "
-            f"{_f(r.get('a'))} {_f(r.get('b'))} {_f(r.get('C'))} {_f(r.get('h_deg'))}   "
-            f"{_f(r.get('predicted_L'))} {_f(r.get('predicted_a'))} {_f(r.get('predicted_b'))}"
-            f" {_f(r.get('dE2000'), '6.2f')}"
+            f"{_f(r.get('a'))} {_f(r.get('b'))} {_f(r.get('C'))} {_f(r.get('h_deg'))} |   "
+            f"{_f(r.get('predicted_L'))} {_f(r.get('predicted_a'))} {_f(r.get('predicted_b'))} |"
+            + "".join(
+                f" {_f(d.get(k), '6.2f')}" for k in ("dL", "dC", "dH", "dE76", "dE94", "dE00")
+            )
         )
-    fi = flop_of_rows(rows)
-    fi_p = flop_of_rows(rows, "predicted_L")
-    if fi is not None or fi_p is not None:
+    fi = flop_of_rows(rows, theta_i_deg)
+    fi_p = flop_of_rows(rows, theta_i_deg, "predicted_L")
+    note = flop_index_note(theta_i_deg)
+    if note:
+        out.append(f"  {note}")
+    elif fi is not None or fi_p is not None:
         out.append(f"  flop index: measured {_f(fi, '.2f')}, predicted {_f(fi_p, '.2f')}")
     return out
 
@@ -198,14 +265,23 @@ def _cmd_show(args: argparse.Namespace) -> int:
                 "summary": summary,
                 "colour": colour,
             }
-            print(json.dumps(doc, indent=2))
+            print(jsonout.dumps(doc, indent=2))
             return 0
         status = rec.status
         if interrupted(store, rec):
             status += " (interrupted: no goniolab process is measuring it)"
-        print(f"run {rec.id} ({rec.kind}) on {rec.sample or '-'}: {status}")
+        print(f"run {rec.id} ({safe_text(rec.kind)}) on {safe_text(rec.sample) or '-'}: {status}")
+        print(f"  uuid {rec.uuid}")
+        for label, value in (
+            ("physical sample id", rec.sample_id),
+            ("operator", rec.operator),
+            ("tags", ", ".join(rec.tags)),
+            ("notes", rec.notes),
+        ):
+            if value:
+                print(f"  {label}: {safe_text(value)}")
         if rec.reason:
-            print(f"  reason: {rec.reason}")
+            print(f"  reason: {safe_text(rec.reason)}")
         print(f"  created {_when(rec.created_at)} UTC, finished {_when(rec.finished_at)} UTC")
         print(f"  goniolab {rec.version}; model {json.dumps(rec.model, sort_keys=True)}")
         print(f"  plan: {plan_text(rec.plan)}")
@@ -215,7 +291,8 @@ def _cmd_show(args: argparse.Namespace) -> int:
             print(format_summary(summary))
             if any("L" in r for r in colour):
                 print("  colour (reflectance factor, per geometry):")
-                print("\n".join(colour_text(colour)))
+                theta_i = float(rec.plan.get("theta_i_deg", 45.0))
+                print("\n".join(colour_text(colour, theta_i)))
         else:
             predicted = rec.model.get("predicted_gu") or {}
             for angle, st in summary["statistics"].items():
@@ -225,60 +302,38 @@ def _cmd_show(args: argparse.Namespace) -> int:
                     + ("" if pred is None else f", predicted {float(pred):.1f} GU")
                 )
         if rec.status != "done" and rec.kind == "brdf":
-            print(f"  continue it with: goniolab scan resume {rec.id}")
+            from goniolab.commands.scan import resume_command
+
+            print(f"  continue it with: {resume_command(rec.id, store)}")
     return 0
 
 
 def _cmd_colour(args: argparse.Namespace) -> int:
-    from goniolab.scan.colour import compare_rows, flop_of_rows
+    from goniolab.commands._colour import colour_report, colour_report_text, load_tolerance
 
+    tolerance = load_tolerance(args.tolerance)
     with open_store(args.store, args.config) as store:
         rec = _get_run(store, args.run)
         if rec.kind != "brdf":
             raise UserError(f"run {rec.id} is a {rec.kind} run: colour needs a scan (brdf) run")
-        rows = run_colour(store, rec)
-        other_rows: list[dict[str, Any]] = []
+        other = None
         if args.vs is not None:
             other = _get_run(store, args.vs)
             if other.kind != "brdf":
                 raise UserError(f"run {other.id} is a {other.kind} run: --vs needs a scan run")
-            other_rows = run_colour(store, other)
-    if not any("L" in r for r in rows):
-        raise UserError(f"run {rec.id} has no measured colour (no readings, or no usable spectra)")
-    doc: dict[str, Any] = {
-        "run": rec.id,
-        "colour_settings": rec.config.get("colour", {}),
-        "geometries": rows,
-        "flop_index": flop_of_rows(rows),
-        "predicted_flop_index": flop_of_rows(rows, "predicted_L"),
-    }
-    if args.vs is not None:
-        pairs = compare_rows(rows, other_rows)
-        if not pairs:
-            raise UserError(f"runs {rec.id} and {args.vs} share no detector angle with colour")
-        doc["vs"] = {
-            "run": args.vs,
-            "pairs": pairs,
-            "flop_index": flop_of_rows(other_rows),
-            "max_dE2000": max(p["dE2000"] for p in pairs),
-            "mean_dE2000": sum(p["dE2000"] for p in pairs) / len(pairs),
-        }
+        doc = colour_report(
+            store,
+            rec,
+            other,
+            tolerance=tolerance,
+            illuminants=list(args.illuminant),
+            metamerism=bool(args.metamerism),
+        )
     if args.json:
-        print(json.dumps(doc, indent=2))
+        print(jsonout.dumps(doc, indent=2))
         return 0
     print(f"run {rec.id} on {rec.sample or '-'}: colour per geometry")
-    print("\n".join(colour_text(rows)))
-    if args.vs is not None:
-        v = doc["vs"]
-        print(f"vs run {args.vs}:")
-        print("  theta_r  aspec     L*     a*     b*  |  L*     a*     b*   dE*ab   dE94  dE2000")
-        for p in v["pairs"]:
-            print(
-                f"  {p['theta_r_deg']:7.2f} {p['aspecular_deg']:6.1f} {p['L']:6.1f} {p['a']:6.1f}"
-                f" {p['b']:6.1f} | {p['other_L']:6.1f} {p['other_a']:6.1f} {p['other_b']:6.1f}"
-                f" {p['dE76']:6.2f} {p['dE94']:6.2f} {p['dE2000']:6.2f}"
-            )
-        print(f"  dE2000: mean {v['mean_dE2000']:.2f}, max {v['max_dE2000']:.2f}")
+    print("\n".join(colour_report_text(doc)))
     return 0
 
 
@@ -300,16 +355,23 @@ def _cmd_export(args: argparse.Namespace) -> int:
         raise UserError(
             f"runs export --format {fmt}: a binary format needs -o FILE (e.g. -o run{FORMATS[fmt]})"
         )
+    from goniolab.store import StoreError
+
     with open_store(args.store, args.config) as store:
         _get_run(store, args.run)
         try:
             text = export_run(store, args.run, fmt, args.output)
         except OSError as exc:
-            raise UserError(f"cannot write {args.output}: {exc.strerror or exc}") from exc
+            raise UserError(
+                f"cannot write {args.output}: {exc.strerror or exc}"
+                + (f" ({args.output} is left as it was)" if Path(args.output).exists() else "")
+            ) from exc
+        except StoreError as exc:
+            raise UserError(str(exc)) from exc
     if args.output:
         if args.json:
             doc = {"run_id": args.run, "format": fmt, "output": str(Path(args.output).resolve())}
-            print(json.dumps(doc, indent=2))
+            print(jsonout.dumps(doc, indent=2))
         else:
             print(f"run {args.run} written to {args.output} ({fmt})", file=sys.stderr)
     else:
@@ -317,42 +379,125 @@ def _cmd_export(args: argparse.Namespace) -> int:
     return 0
 
 
+def _same_store(src: RunStore, dst: RunStore) -> bool:
+    """Whether two open stores are one (a symlink, a relative path, another spelling of
+    the URL): the same store UUID, or for files the same file."""
+    a, b = src.store_uuid, dst.store_uuid
+    if a is not None and b is not None:
+        return a == b
+    if not (src.is_postgres or dst.is_postgres):
+        try:
+            return src.path.resolve().samefile(dst.path.resolve())
+        except OSError:
+            return False
+    return False
+
+
 def _cmd_migrate(args: argparse.Namespace) -> int:
-    """Copy every run of an SQLite store (or another store) into the target store."""
+    """Copy every run of an SQLite store (or another store) into the target store, matched
+    by run UUID: new runs are copied, partial copies brought up to date."""
     from goniolab.store import RunStore, StoreError, is_store_url
 
     source = args.source if is_store_url(args.source) else Path(args.source).expanduser()
     target = store_path(args.store, args.config)
-    if str(source) == str(target):
-        raise UserError(f"runs migrate: {args.source} is the target store itself")
+    if isinstance(source, Path) and isinstance(target, Path):
+        same = source.resolve() == target.resolve() or (
+            source.exists() and target.exists() and source.samefile(target)
+        )
+        if same:
+            raise UserError(f"runs migrate: --from {args.source} is the target store itself")
     try:
         src = RunStore(source, readonly=True)
     except StoreError as exc:
         raise UserError(str(exc)) from exc
     moved: list[dict[str, Any]] = []
+    errors = 0
     with src:
         try:
             dst = RunStore(target)
         except StoreError as exc:
             raise UserError(str(exc)) from exc
         with dst:
-            for rec in sorted(src.list_runs(), key=lambda r: r.id):
+            if _same_store(src, dst):
+                raise UserError(
+                    f"runs migrate: --from {src.location} is the target store {dst.location} "
+                    "itself (the same store UUID)"
+                )
+            try:
+                runs = sorted(src.list_runs(), key=lambda r: r.id)
+            except StoreError as exc:
+                raise UserError(str(exc)) from exc
+            for rec in runs:
+                entry: dict[str, Any] = {"from": rec.id, "uuid": rec.uuid}
                 if rec.status in ("running", "paused") and src.is_claimed(rec.id):
-                    raise UserError(
-                        f"run {rec.id} of {src.location} is being measured right now; "
-                        "migrate when it has finished"
-                    )
-                new_id, copied = dst.copy_run_from(src, rec.id)
-                moved.append({"from": rec.id, "to": new_id, "copied": copied})
+                    entry.update(to=None, copied=False, action="skipped")
+                    why = "being measured right now; run migrate again when it has finished"
+                    entry["reason"] = why
+                    moved.append(entry)
+                    if not args.json:
+                        print(f"run {rec.id} ({rec.kind}, {rec.status}): skipped: {why}")
+                    continue
+                try:
+                    new_id, action = dst.copy_run_from(src, rec.id)
+                except StoreError as exc:
+                    errors += 1
+                    entry.update(to=None, copied=False, action="error", error=str(exc))
+                    moved.append(entry)
+                    print(f"run {rec.id}: not copied: {exc}", file=sys.stderr)
+                    continue
+                entry.update(to=new_id, copied=action == "copied", action=action)
+                moved.append(entry)
                 if not args.json:
-                    what = "copied as" if copied else "already there as"
+                    what = {
+                        "copied": "copied as",
+                        "updated": "brought up to date in",
+                        "unchanged": "already there as",
+                    }[action]
                     print(f"run {rec.id} ({rec.kind}, {rec.status}): {what} run {new_id}")
             where = dst.location
     if args.json:
         print(json.dumps({"source": src.location, "target": where, "runs": moved}, indent=2))
     else:
-        n = sum(1 for m in moved if m["copied"])
-        print(f"{n} of {len(moved)} runs copied from {src.location} to {where}", file=sys.stderr)
+        n = sum(1 for m in moved if m["action"] == "copied")
+        u = sum(1 for m in moved if m["action"] == "updated")
+        print(
+            f"{n} of {len(moved)} runs copied, {u} updated, from {src.location} to {where}"
+            + (f"; {errors} could not be read" if errors else ""),
+            file=sys.stderr,
+        )
+    return 1 if errors else 0
+
+
+def _cmd_annotate(args: argparse.Namespace) -> int:
+    """Set a run's operator, physical sample id, notes and tags."""
+    from goniolab.commands.scan import run_meta_args
+    from goniolab.store import RunStore, StoreError
+
+    meta = run_meta_args(args)
+    tags: list[str] | None = None
+    try:
+        with RunStore(store_path(args.store, args.config), create=False) as store:
+            rec = store.get_run(args.run, allow_damaged=True)
+            if meta.tags or args.untag:
+                tags = [t for t in (*rec.tags, *meta.tags) if t not in set(args.untag)]
+            rec = store.set_meta(
+                args.run,
+                operator=args.operator,
+                sample_id=args.sample_id,
+                notes=args.note,
+                tags=tags,
+            )
+    except StoreError as exc:
+        raise UserError(str(exc)) from exc
+    if args.json:
+        print(json.dumps(rec.as_dict(), indent=2))
+    else:
+        print(
+            f"run {rec.id} ({rec.uuid}): operator {rec.operator or '-'}, sample id "
+            f"{rec.sample_id or '-'}, tags {', '.join(rec.tags) or '-'}"
+            + (f", notes {safe_text(rec.notes)!r}" if rec.notes else ""),
+            file=sys.stderr,
+        )
     return 0
 
 
@@ -370,23 +515,38 @@ def register(subparsers: Any) -> None:
 
     pl = sub.add_parser("list", parents=[common], help="list runs, newest first")
     pl.add_argument("--limit", type=int, default=None, help="show at most N runs")
+    pl.add_argument("--operator", help="only the runs of this operator")
+    pl.add_argument("--tag", help="only the runs with this tag")
+    pl.add_argument("--sample-id", help="only the runs of this physical sample id")
+    pl.add_argument(
+        "--search",
+        metavar="TEXT",
+        help="only runs whose sample, sample id, operator, notes or tags contain TEXT",
+    )
     pl.add_argument("--json", action="store_true", help="print JSON")
-    pl.set_defaults(func=_cmd_list)
+    pl.set_defaults(func=escaped_stdout(_cmd_list))  # stored names may hold escapes
 
     ps = sub.add_parser("show", parents=[common], help="show one run and its summary")
     ps.add_argument("run", type=int, metavar="RUN")
     ps.add_argument("--json", action="store_true", help="print JSON")
-    ps.set_defaults(func=_cmd_show)
+    ps.set_defaults(func=escaped_stdout(_cmd_show))
 
     pc = sub.add_parser(
         "colour",
         parents=[common],
-        help="measured vs predicted colour per geometry (dE76/94/2000, flop index)",
+        help="measured vs predicted colour per geometry (dL*/dC*/dH*, dE76/94/2000, CMC, "
+        "tolerances per angle, flop index, metamerism)",
     )
     pc.add_argument("run", type=int, metavar="RUN")
     pc.add_argument("--vs", type=int, metavar="RUN", help="compare with another run")
     pc.add_argument("--json", action="store_true", help="print JSON")
+    from goniolab.commands._colour import add_runs_colour_options
+
+    add_runs_colour_options(pc)
     pc.set_defaults(func=_cmd_colour)
+    from goniolab.commands._colour import register_runs_spectra
+
+    register_runs_spectra(sub, common)
 
     pe = sub.add_parser(
         "export",
@@ -418,9 +578,24 @@ def register(subparsers: Any) -> None:
         parents=[common],
         help="copy every run of an SQLite store into this store (e.g. a shared PostgreSQL)",
         description="Copy the runs of --from (an instrument's SQLite file) into the store "
-        "chosen by --store/--config (e.g. postgresql://lab@dbhost/goniolab). Runs get new ids; "
-        "a run already copied is skipped, so the command can be re-run.",
+        "chosen by --store/--config (e.g. postgresql://lab@dbhost/goniolab). Runs get new ids "
+        "and keep their UUID: a run already copied is matched by it (skipped, or brought up "
+        "to date when it was copied before it finished), so the command can be re-run; a "
+        "store is never migrated into itself.",
     )
     pm.add_argument("--from", dest="source", required=True, metavar="STORE")
     pm.add_argument("--json", action="store_true", help="print the id mapping as JSON")
     pm.set_defaults(func=_cmd_migrate)
+
+    pa = sub.add_parser(
+        "annotate",
+        parents=[common],
+        help="set a run's operator, physical sample id, notes and tags",
+    )
+    pa.add_argument("run", type=int, metavar="RUN")
+    from goniolab.commands.scan import add_run_meta_args
+
+    add_run_meta_args(pa)
+    pa.add_argument("--untag", action="append", default=[], metavar="TAG", help="remove a tag")
+    pa.add_argument("--json", action="store_true", help="print the run record as JSON")
+    pa.set_defaults(func=_cmd_annotate)

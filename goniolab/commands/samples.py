@@ -1,9 +1,13 @@
-"""``goniolab samples``: the built-in synthetic samples usable as ``sample:NAME``."""
+"""``goniolab samples``: the built-in synthetic samples usable as ``sample:NAME``, and
+``goniolab samples save NAME FILE``: one of them written as a height-map file in any format
+goniolab reads (``.sur``, ``.sdf``, ``.gwy``, ``.npy`` + sidecar, ``.csv``, ``.txt``), so
+that every file-based example has a file to start from."""
 
 from __future__ import annotations
 
 import argparse
 import json
+import sys
 from typing import Any
 
 from goniolab.errors import UserError
@@ -47,8 +51,88 @@ def _cmd_samples(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_save(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from goniolab.optics.heightmap import HeightMapError
+    from goniolab.surfaces.registry import save_heightmap
+    from goniolab.surfaces.samples import SampleError, make_sample
+
+    name = args.name.removeprefix("sample:")
+    try:
+        hm = make_sample(name, size=args.size, seed=args.seed, step_um=args.step_um)
+    except SampleError as exc:
+        raise UserError(str(exc)) from None
+    path = Path(args.file)
+    if path.exists() and not args.force:
+        raise UserError(f"{path}: exists; pass --force to overwrite it")
+    if not path.parent.is_dir():
+        raise UserError(f"{path}: no such directory {path.parent}")
+    try:
+        save_heightmap(hm, path, fmt=args.format)
+    except HeightMapError as exc:
+        raise UserError(str(exc)) from None
+    ny, nx = hm.z_um.shape
+    info = {
+        "sample": f"sample:{name}",
+        "file": str(path),
+        "shape": [ny, nx],
+        "step_um": [hm.dx_um, hm.dy_um],
+        "field_um": [nx * hm.dx_um, ny * hm.dy_um],
+    }
+    if args.json:
+        print(json.dumps(info))
+    else:
+        print(
+            f"goniolab: wrote sample:{name} to {path} ({nx} x {ny} points, step "
+            f"{hm.dx_um:g} um, field {nx * hm.dx_um:g} x {ny * hm.dy_um:g} um)",
+            file=sys.stderr,
+        )
+    return 0
+
+
+EXAMPLES = """\
+examples:
+  goniolab samples                              # the built-in samples
+  goniolab samples save wittmann-3 scan.sur     # a Digital Surf file to try the commands on
+  goniolab samples save gaussian-s0.05 scan.sdf --size 1024 --step-um 0.5
+"""
+
+
 def register(subparsers: Any) -> None:
-    """Add ``goniolab samples``."""
-    p = subparsers.add_parser("samples", help="list the built-in samples (sample:NAME)")
+    """Add ``goniolab samples`` and ``goniolab samples save``."""
+    p = subparsers.add_parser(
+        "samples",
+        help="list the built-in samples (sample:NAME), or save one as a height-map file",
+        epilog=EXAMPLES,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.set_defaults(func=_cmd_samples)
+    sub = p.add_subparsers(dest="samples_command", metavar="ACTION")
+    ps = sub.add_parser(
+        "save",
+        help="write a built-in sample as a height-map file",
+        description="Write a built-in sample as a height-map file in the format of the "
+        "file's extension (or --format): .sur, .sdf, .gwy, .npy (+ .json sidecar), .csv, .txt.",
+        epilog=EXAMPLES,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    ps.add_argument("name", metavar="NAME", help="a name from 'goniolab samples'")
+    ps.add_argument("file", metavar="FILE", help="where to write it")
+    ps.add_argument(
+        "--size", type=int, default=None, help="points per side (default: 512, the library's)"
+    )
+    ps.add_argument(
+        "--step-um", type=float, default=None, help="lateral step in um (default: 1 um)"
+    )
+    ps.add_argument("--seed", type=int, default=None, help="random seed (default: the library's)")
+    ps.add_argument(
+        "--format",
+        default=None,
+        help="npy, csv, txt, sdf, sdf-ascii, sdf-int16, sdf-int32, sur, sur-int16, gwy "
+        "(default: from the extension)",
+    )
+    ps.add_argument("--force", action="store_true", help="overwrite an existing file")
+    ps.add_argument("--json", action="store_true", help="print what was written as JSON")
+    ps.set_defaults(func=_cmd_save)

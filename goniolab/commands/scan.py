@@ -19,22 +19,23 @@ predicted curve bends (:mod:`goniolab.scan.adaptive`): as many readings, the sam
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 from collections.abc import Coroutine
 from typing import TYPE_CHECKING, Any, TextIO, TypeVar
 
+from goniolab import jsonout
 from goniolab.commands._angles import allow_negative_angles
 from goniolab.errors import UserError
 
 if TYPE_CHECKING:  # loaded when a scan runs, not at --help (tests/test_startup.py)
     import asyncio
 
+    from goniolab.config import LabConfig
     from goniolab.scan.events import PointMeasured, Progress, RunState
     from goniolab.scan.plans import BrdfPlan
     from goniolab.scan.runner import RunResult
-    from goniolab.store import RunStore
+    from goniolab.store import RunMeta, RunStore
 
 __all__ = [
     "format_eta",
@@ -133,6 +134,9 @@ class ProgressBar:
             TextColumn("ETA {task.fields[eta]}"),
             TextColumn("{task.fields[detail]}"),
             console=Console(file=self.stream, highlight=False),
+            # never wrap sys.stdout: the summary and --json go there (issue 22.3)
+            redirect_stdout=False,
+            redirect_stderr=False,
         )
         self._rich.start()
         self._task = self._rich.add_task("scan", total=total, eta="?", detail="")
@@ -249,10 +253,12 @@ async def _execute(
     json_out: bool,
     model: str | None = None,
     adaptive: bool = False,
+    config: LabConfig | None = None,
+    meta: RunMeta | None = None,
 ) -> int:
     import asyncio
-    import signal
 
+    from goniolab.commands._signals import describe, install_stop_signals
     from goniolab.config import load_lab_config
     from goniolab.scan.events import RunState
     from goniolab.scan.plans import BrdfPlan
@@ -263,7 +269,7 @@ async def _execute(
     if plan is None:
         assert run_id is not None
         plan = BrdfPlan.from_dict(store.get_run(run_id).plan)
-    cfg = load_lab_config(config_path)
+    cfg = config if config is not None else load_lab_config(config_path)
     if model is not None:  # --model overrides the config's [sample] model
         cfg = cfg.model_copy(update={"sample": cfg.sample.model_copy(update={"model": model})})
     async with ScanSession.open(
@@ -295,27 +301,27 @@ async def _execute(
             + ("" if homed else " after homing the arms (the home search is not estimated)"),
             file=sys.stderr,
         )
-        runner = session.start(scan)
+        runner = session.start(scan, meta=meta)
         run_id = runner.run_id
         announce_store(store, run_id)
         bar = ProgressBar(sys.stderr, clock_scale)
         report = asyncio.create_task(_report(session.bus.subscribe(), bar))
         loop = asyncio.get_running_loop()
         main_task = asyncio.current_task()
-        interrupts = 0
 
-        def on_sigint() -> None:
-            nonlocal interrupts
-            interrupts += 1
-            if interrupts == 1:
-                bar.message(
-                    "goniolab: stopping: the arms stop, then park (Ctrl-C again to quit at once)"
-                )
-                runner.abort()
-            elif main_task is not None:
+        def stop_first(name: str) -> None:
+            bar.message(
+                f"goniolab: {describe(name)}: stopping: the arms stop, then park "
+                "(Ctrl-C again to quit at once: the arms still stop and the run is recorded)"
+            )
+            runner.abort(by=describe(name))
+
+        def stop_again(name: str) -> None:
+            bar.message(f"goniolab: {describe(name)} again: quitting, the arms stop and park")
+            if main_task is not None:
                 main_task.cancel()
 
-        loop.add_signal_handler(signal.SIGINT, on_sigint)
+        remove_signals = install_stop_signals(loop, stop_first, stop_again)
         try:
             result: RunResult = await session.run(runner)
         except PlanRefused as exc:
@@ -325,12 +331,13 @@ async def _execute(
         except asyncio.CancelledError:
             bar.close()
             print(
-                f"goniolab: run {run_id} aborted; continue it with: goniolab scan resume {run_id}",
+                f"goniolab: run {run_id} aborted; continue it with: "
+                f"{resume_command(run_id, store)}",
                 file=sys.stderr,
             )
             return 130
         finally:
-            loop.remove_signal_handler(signal.SIGINT)
+            remove_signals()
             session.bus.close()
             await report
             bar.close()
@@ -341,7 +348,7 @@ async def _execute(
         **result.summary,
     }
     if json_out:
-        print(json.dumps(payload, indent=2))
+        print(jsonout.dumps(payload, indent=2))
     else:
         print(
             f"run {run_id}: {result.state.value}" + (f" ({result.reason})" if result.reason else "")
@@ -350,7 +357,7 @@ async def _execute(
     if result.state is not RunState.DONE:
         print(
             f"goniolab: run {run_id} {result.state.value}; continue it with: "
-            f"goniolab scan resume {run_id}",
+            f"{resume_command(run_id, store)}",
             file=sys.stderr,
         )
     return _exit_code(result.state)
@@ -398,7 +405,7 @@ async def _execute_align(
     payload = {"run_id": run_id, "state": "done", "config_written": write_config}
     payload.update(result.as_dict())
     if json_out:
-        print(json.dumps(payload, indent=2))
+        print(jsonout.dumps(payload, indent=2))
         return 0
     c = result.corrections_deg()
     print(f"run {run_id}: alignment done ({result.readings} readings)")
@@ -418,11 +425,14 @@ def run_lab(coro: Coroutine[Any, Any, _T]) -> _T:
     import asyncio
 
     from drivers.base import DeviceError
+    from goniolab.store import StoreError
 
     try:
         return asyncio.run(coro)
     except DeviceError as exc:
         raise UserError(f"instrument error: {exc}", exit_code=1) from exc
+    except StoreError as exc:  # the store refused a write outside a run (creating one)
+        raise UserError(str(exc), exit_code=1) from exc
 
 
 def _e2194_geometry(args: argparse.Namespace, cfg: Any) -> tuple[float, str]:
@@ -484,6 +494,7 @@ def _cmd_scan(args: argparse.Namespace) -> int:
         from goniolab.session import check_sample
 
         check_sample(args.sample)
+        sample = absolute_sample(args.sample)
     if args.plan == "align":
         from goniolab.scan.align import AlignPlan
 
@@ -540,6 +551,7 @@ def _cmd_scan(args: argparse.Namespace) -> int:
                 json_out=args.json,
                 model=args.model,
                 adaptive=args.adaptive,
+                meta=run_meta_args(args),
             )
         )
 
@@ -554,6 +566,62 @@ def _open(store_arg: str | None, config_store: str | None, *, create: bool = Tru
     return store
 
 
+def resume_command(run_id: int, store: RunStore) -> str:
+    """The command that resumes run ``run_id`` of ``store``: ``--store`` named unless it is
+    the default store (a store chosen by ``--store`` or a config's ``[lab] store`` would
+    otherwise be lost: ``scan resume`` reads the run's config from the store itself). A
+    PostgreSQL URL is shown without its password (libpq reads it from PGPASSWORD or
+    ~/.pgpass)."""
+    import shlex
+
+    from goniolab.store import default_store_path
+
+    cmd = f"goniolab scan resume {run_id}"
+    if store.is_postgres:
+        return f"{cmd} --store {shlex.quote(store.location)}"
+    try:
+        default = store.path.resolve() == default_store_path().resolve()
+    except OSError:
+        default = False
+    if not default:
+        cmd += f" --store {shlex.quote(str(store.path.resolve()))}"
+    return cmd
+
+
+def add_run_meta_args(p: argparse.ArgumentParser) -> None:
+    """``--operator``, ``--sample-id``, ``--note`` and ``--tag`` (run identity, issue 22)."""
+    p.add_argument("--operator", default=None, help="who measures (default: config [run])")
+    p.add_argument(
+        "--sample-id", default=None, help="the physical sample's id (label, LIMS number)"
+    )
+    p.add_argument("--note", default=None, help="free-text notes stored with the run")
+    p.add_argument(
+        "--tag", action="append", default=[], metavar="TAG", help="a tag (repeat for more)"
+    )
+
+
+def run_meta_args(args: argparse.Namespace) -> RunMeta:
+    """The run metadata given on the command line (empty fields: not given)."""
+    from goniolab.store import RunMeta
+
+    return RunMeta(
+        operator=args.operator or "",
+        sample_id=args.sample_id or "",
+        notes=args.note or "",
+        tags=tuple(dict.fromkeys(t for t in args.tag if t)),
+    )
+
+
+def absolute_sample(spec: str) -> str:
+    """A height-map path made absolute (``sample:NAME`` as it is), so that the stored run
+    names the same file from any directory (``scan resume`` elsewhere, a dask worker)."""
+    if not spec or spec.startswith("sample:"):
+        return spec
+    from pathlib import Path
+
+    return str(Path(spec).expanduser().resolve())
+
+
 def announce_store(store: RunStore, run_id: int) -> None:
     """Say (stderr and the log) which run of which store the readings go to."""
     import logging
@@ -561,6 +629,113 @@ def announce_store(store: RunStore, run_id: int) -> None:
     where = store.location
     print(f"goniolab: run {run_id} in store {where}", file=sys.stderr)
     logging.getLogger("goniolab").info("run %d in store %s", run_id, where)
+
+
+#: Config keys that do not change what a run measures (where the instruments are plugged,
+#: how long to wait for them, the store, the run's own metadata): a live config that
+#: differs from the run's snapshot only there resumes without a word.
+_RESUME_IGNORED_SECTIONS = ("lab", "run", "glossmeter")
+_RESUME_IGNORED_KEYS = frozenset(
+    {"transport", "host", "port", "unit_id", "serial_port", "baudrate", "parity", "timeout_s",
+     "move_timeout_s", "serial_number", "protocol"}
+)  # fmt: skip
+
+
+def _flat(doc: Any, prefix: str = "") -> dict[str, Any]:
+    if isinstance(doc, dict):
+        out: dict[str, Any] = {}
+        for k, v in doc.items():
+            out.update(_flat(v, f"{prefix}{k}."))
+        return out
+    return {prefix[:-1]: doc}
+
+
+def config_changes(snapshot: dict[str, Any], live: dict[str, Any]) -> list[str]:
+    """The keys (dotted) whose value differs between a run's stored config and the live
+    one, among those that change what is measured; ``"key: stored -> live"`` each."""
+    a, b = _flat(snapshot), _flat(live)
+    out = []
+    for key in sorted(set(a) | set(b)):
+        parts = key.split(".")
+        if key.startswith("_") or parts[0] in _RESUME_IGNORED_SECTIONS:
+            continue
+        if parts[-1] in _RESUME_IGNORED_KEYS:
+            continue
+        if a.get(key) != b.get(key):
+            out.append(f"{key}: {a.get(key, '(unset)')!r} -> {b.get(key, '(unset)')!r}")
+    return out
+
+
+def resume_config(rec: Any, config_arg: str | None, use_current: bool) -> LabConfig:
+    """The config a stored run resumes with: its stored snapshot (issue 23.9), unless
+    ``use_current``. The live file (``--config`` or the one the run started with) is
+    compared with the snapshot: a change that alters the measurement is refused, naming
+    each key, unless ``use_current`` (then the live file is used, and the changes are
+    printed on stderr).
+
+    Raises
+    ------
+    UserError
+        A change refused, or a snapshot that cannot be used and no live file.
+    """
+    from pathlib import Path
+
+    from pydantic import ValidationError
+
+    from goniolab.config import LabConfig, load_lab_config
+    from goniolab.models import MODEL_NAMES
+    from goniolab.session import with_sample
+
+    snap = dict(rec.config)
+    source = str(snap.pop("_source", "") or "")
+    live_path = config_arg or (source if source and Path(source).exists() else "")
+    live = load_lab_config(live_path) if live_path else None
+    if live is not None:
+        # what the run's own command line set (its sample, a --model) is no config change
+        live = with_sample(live, rec.sample)
+        started_with = rec.model.get("model_name")
+        if started_with in MODEL_NAMES:
+            s = live.sample.model_copy(update={"model": started_with})
+            live = live.model_copy(update={"sample": s})
+    stored: LabConfig | None = None
+    why = ""
+    try:
+        stored = LabConfig.model_validate(snap).model_copy(update={"source": source})
+    except ValidationError as exc:
+        why = " ".join(str(exc).split())
+    if use_current:
+        if live is None:
+            raise UserError(f"run {rec.id}: --use-current-config needs --config FILE")
+        if stored is not None:
+            for line in config_changes(
+                stored.model_dump(mode="json"), live.model_dump(mode="json")
+            ):
+                print(f"goniolab: resuming with the current config: {line}", file=sys.stderr)
+        return live
+    if stored is None:
+        if live is None:
+            raise UserError(
+                f"run {rec.id}: its stored config cannot be used ({why}); pass --config FILE"
+            )
+        print(
+            f"goniolab: run {rec.id}: its stored config cannot be used ({why}); "
+            f"resuming with {live_path}",
+            file=sys.stderr,
+        )
+        return live
+    if live is not None:
+        changes = config_changes(stored.model_dump(mode="json"), live.model_dump(mode="json"))
+        if changes:
+            raise UserError(
+                f"run {rec.id}: {live_path} changed since the run started ("
+                + "; ".join(changes)
+                + "): the rest of the run would not measure what its first readings did. "
+                "Resume with the run's stored config by restoring the file, or pass "
+                "--use-current-config to go on with the new one"
+            )
+        # the live file may hold what the snapshot could not keep (a store password)
+        stored = stored.model_copy(update={"lab": live.lab, "source": live.source})
+    return stored
 
 
 def _cmd_resume(args: argparse.Namespace) -> int:
@@ -578,7 +753,8 @@ def _cmd_resume(args: argparse.Namespace) -> int:
             raise UserError(str(exc)) from exc
         from goniolab.session import resume_target
 
-        config_path = resume_target(rec, args.config, store.count_points(rec.id))
+        resume_target(rec, None, store.count_points(rec.id), need_file=False)
+        cfg = resume_config(rec, args.config, args.use_current_config)
         # the run goes on with the model it started with (a `scan --model` override included),
         # so the predictions still to compute are that model's, not the config's
         from goniolab.models import MODEL_NAMES
@@ -590,13 +766,14 @@ def _cmd_resume(args: argparse.Namespace) -> int:
         )
         return run_lab(
             _execute(
-                config_path=config_path,
+                config_path=cfg.source,
                 time_scale=args.time_scale,
                 store=store,
                 plan=None,
                 run_id=rec.id,
                 json_out=args.json,
                 model=started_with if started_with in MODEL_NAMES else None,
+                config=cfg,
             )
         )
 
@@ -678,11 +855,22 @@ def register(subparsers: Any) -> None:
         action="store_true",
         help="adapt the spectro's exposure to each reading (no saturation, no drowning)",
     )
+    add_run_meta_args(p)
     allow_negative_angles(p)  # "--theta-r -40:-30:5" is a lamp-side range, not an option
     p.set_defaults(func=_cmd_scan)
     sub = p.add_subparsers(dest="scan_command", metavar="resume")
     pr = sub.add_parser("resume", help="continue an interrupted run (also after a crash)")
     _add_common(pr)
     pr.add_argument("run", type=int, metavar="RUN")
-    pr.add_argument("--config", help="lab config TOML (default: the one the run was started with)")
+    pr.add_argument(
+        "--config",
+        help="lab config TOML compared with the run's stored config (default: the file the "
+        "run was started with); the run resumes with its stored config",
+    )
+    pr.add_argument(
+        "--use-current-config",
+        action="store_true",
+        help="resume with the live config file even where it changed something that matters "
+        "(each change is printed)",
+    )
     pr.set_defaults(func=_cmd_resume)

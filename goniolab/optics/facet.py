@@ -141,6 +141,29 @@ _M1_TABLE_SIZE = 1025
 LEAN_SLOPE_BIN = 1e-3
 #: Facets per block when the slope cells are counted.
 _CELL_BLOCK = 1 << 18
+#: The lean histogram keeps its counts dense while the slope range has at most this many
+#: cells per facet (8 bytes each): beyond, only the occupied cells are counted.
+_DENSE_CELLS_PER_FACET = 4
+#: ... and always up to this many cells (8 MiB).
+_DENSE_MIN_CELLS = 1 << 20
+#: Largest |slope| / bin the lean histogram indexes: (2 * 2**30)**2 cells fit an int64 key.
+_MAX_SLOPE_CELLS = 1 << 30
+
+
+def _check_slope_range(p: FloatArray, q: FloatArray, bin_: float, source: str) -> None:
+    """Refuse slopes the lean histogram cannot index, naming the map and the range.
+
+    A slope of ``2**30 * 1e-3`` (about 1e6, a facet 6e-5 deg from vertical) means a map
+    in the wrong units or with the wrong step, not a surface.
+    """
+    worst = max(float(np.max(np.abs(p))), float(np.max(np.abs(q))))
+    if not (math.isfinite(worst) and worst / bin_ < _MAX_SLOPE_CELLS):
+        raise ValueError(
+            f"{source}: slopes up to {worst:.3g} (a facet {math.degrees(math.atan(worst)):.6g} "
+            f"deg from horizontal): beyond the {_MAX_SLOPE_CELLS * bin_:.3g} the slope "
+            "histogram indexes; check the map's height unit and lateral step"
+        )
+
 
 _executor: ThreadPoolExecutor | None = None
 #: Empty third facet array: the kernels read ``(p, q)`` slopes instead of unit normals.
@@ -627,34 +650,64 @@ class FacetModel:
         mirror direction by up to about 0.06 deg, and the readings, which average
         over many facets spread over apertures of degrees, by a fraction of that (the
         tests hold the lean readings to the per-facet kernels).
+
+        Memory is bounded by the map, never by its slope range (issue 23.5: one 20 um spike
+        on a 512^2 map asked a dense 1e-3 histogram for 48 GiB): the counts are kept dense
+        only while the slope range's cells number at most :data:`_DENSE_CELLS_PER_FACET`
+        per facet (or :data:`_DENSE_MIN_CELLS`), otherwise only the occupied cells are counted (a sort of each
+        block's cell keys, merged), at most one per facet. A slope range whose cell index
+        does not fit 64-bit integers is refused (:func:`_check_slope_range`).
         """
         b = LEAN_SLOPE_BIN
         p, q = self.surface.p, self.surface.q
+        _check_slope_range(p, q, b, self.surface.source)
         p0 = math.floor(float(p.min()) / b + 0.5)
         q0 = math.floor(float(q.min()) / b + 0.5)
         n_q = math.floor(float(q.max()) / b + 0.5) - q0 + 1
         n_p = math.floor(float(p.max()) / b + 0.5) - p0 + 1
-        # the cell index (ip - p0) n_q + (iq - q0), ip = floor(p/b + 1/2), in float64 (exact:
-        # far below 2**53), block by block: the temporaries stay a block's, not the map's
-        counts = np.zeros(n_p * n_q, dtype=np.int64)
         size = p.size
+        dense = n_p * n_q <= max(_DENSE_CELLS_PER_FACET * size, _DENSE_MIN_CELLS)
+        counts = np.zeros(n_p * n_q if dense else 0, dtype=np.int64)
+        keys: list[NDArray[np.int64]] = []
+        tallies: list[NDArray[np.int64]] = []
+        # the cell index (ip - p0) n_q + (iq - q0), ip = floor(p/b + 1/2), block by block:
+        # the temporaries stay a block's, not the map's
         for lo in range(0, size, _CELL_BLOCK):
             hi = min(lo + _CELL_BLOCK, size)
-            kf = np.multiply(p[lo:hi], 1.0 / b)
-            kf += 0.5 - p0
-            np.floor(kf, out=kf)
-            kf *= n_q
+            kp = np.multiply(p[lo:hi], 1.0 / b)
+            kp += 0.5
+            np.floor(kp, out=kp)
             kq = np.multiply(q[lo:hi], 1.0 / b)
-            kq += 0.5 - q0
+            kq += 0.5
             np.floor(kq, out=kq)
-            kf += kq
-            key = kf.astype(np.intp)
-            np.clip(key, 0, n_p * n_q - 1, out=key)  # rounding at the last cell's edge
-            counts += np.bincount(key, minlength=n_p * n_q)
-        cells = np.flatnonzero(counts)
+            key = kp.astype(np.int64)
+            del kp
+            key -= p0
+            np.clip(key, 0, n_p - 1, out=key)  # rounding at the last cell's edge
+            key *= n_q
+            iq = kq.astype(np.int64)
+            del kq
+            iq -= q0
+            np.clip(iq, 0, n_q - 1, out=iq)
+            key += iq
+            del iq
+            if dense:
+                counts += np.bincount(key, minlength=n_p * n_q)
+            else:
+                k, c = np.unique(key, return_counts=True)
+                keys.append(k)
+                tallies.append(c)
+        if dense:
+            cells = np.flatnonzero(counts)
+            weights = counts[cells]
+        elif len(keys) == 1:
+            cells, weights = keys[0], tallies[0]
+        else:
+            cells, inverse = np.unique(np.concatenate(keys), return_inverse=True)
+            weights = np.bincount(inverse, weights=np.concatenate(tallies)).astype(np.int64)
         cp = ((cells // n_q + p0) * b).astype(np.float64)
         cq = ((cells % n_q + q0) * b).astype(np.float64)
-        return cp, cq, counts[cells].astype(np.float64)
+        return cp, cq, weights.astype(np.float64)
 
     def _facets_near(
         self, wi: FloatArray, alpha_rad: float, reach_a: float, reach_b: float
@@ -696,6 +749,7 @@ class FacetModel:
     @cached_property
     def _p22_index(self) -> tuple[NDArray[np.int64], NDArray[np.int64], int, int, int, int]:
         b = self.slope_bin
+        _check_slope_range(self.surface.p, self.surface.q, b, self.surface.source)
         ip = np.floor(self.surface.p / b + 0.5).astype(np.int64)
         iq = np.floor(self.surface.q / b + 0.5).astype(np.int64)
         p0, q0 = int(ip.min()), int(iq.min())

@@ -39,7 +39,7 @@ from drivers.timing import Clock
 from goniolab.optics.models import ReflectanceModel
 from goniolab.scan.events import EventBus, GlossRead, InstrumentError, RunState, StateChanged
 from goniolab.scan.plans import GlossPlan, GlossStats, gloss_statistics
-from goniolab.store import RunStore
+from goniolab.store import RunStore, StoreError, StoreUnavailable
 
 __all__ = ["GlossLogger", "GlossResult", "predict_gloss"]
 
@@ -124,13 +124,17 @@ class GlossLogger:
         self.max_backoff_s = max_backoff_s
         self.max_failures = max_failures
         self._stop = False
+        self._stop_by = ""
         self._stop_event = asyncio.Event()
         self._values: list[dict[int, float | None]] = []
         self.reconnects = 0
 
-    def stop(self) -> None:
+    def stop(self, by: str = "") -> None:
         """End the session: a requested reading is completed and stored; a wait for a
-        pushed reading, the interval between readings or a reconnect backoff ends now."""
+        pushed reading, the interval between readings or a reconnect backoff ends now.
+        ``by`` says who asked when it was not the operator (``"SIGTERM"``)."""
+        if by and not self._stop:
+            self._stop_by = by
         self._stop = True
         self._stop_event.set()
 
@@ -150,16 +154,46 @@ class GlossLogger:
             raise _Stopped
         return work.result()
 
-    def _record(self, reading: GlossReading) -> None:
+    #: How long a reading the store cannot take (a full disk, a database down) is kept and
+    #: tried again (backoff 0.5 s doubling to 10 s) before the log fails, in one line.
+    store_outage_s: float = 600.0
+
+    async def _record(self, reading: GlossReading) -> None:
         values = {a: reading.values_gu.get(a) for a in self.plan.angles_deg}
-        self.store.add_gloss_reading(
-            self.run_id,
-            values_gu=values,
-            temperature_c=reading.temperature_c,
-            predicted_gu=self.predicted_gu,
-            raw=reading.raw,
-            timestamp=reading.timestamp,
-        )
+
+        def write() -> None:
+            self.store.add_gloss_reading(
+                self.run_id,
+                values_gu=values,
+                temperature_c=reading.temperature_c,
+                predicted_gu=self.predicted_gu,
+                raw=reading.raw,
+                timestamp=reading.timestamp,
+            )
+
+        try:
+            write()
+        except StoreUnavailable as exc:
+            self.bus.publish(
+                InstrumentError(
+                    run_id=self.run_id,
+                    device="store",
+                    message=f"{exc}; the reading is kept and stored when the store is back",
+                    fatal=False,
+                )
+            )
+            loop = asyncio.get_running_loop()
+            deadline, delay = loop.time() + self.store_outage_s, 0.5
+            while True:
+                if loop.time() >= deadline:
+                    raise StoreUnavailable(f"{exc} (for {self.store_outage_s:g} s)") from None
+                await self._until_stop(asyncio.sleep(delay))
+                delay = min(10.0, 2 * delay)
+                try:
+                    await asyncio.to_thread(write)
+                    break
+                except StoreUnavailable as again:
+                    exc = again
         self._values.append(values)
         self.bus.publish(
             GlossRead(
@@ -242,18 +276,41 @@ class GlossLogger:
                 )
                 break
             failures = 0
-            self._record(reading)
+            try:
+                await self._record(reading)
+            except _Stopped:
+                state, reason = RunState.ABORTED, "stopped while the store was unavailable"
+                break
+            except StoreError as exc:
+                state, reason = RunState.FAILED, f"store: {exc}"
+                self.bus.publish(
+                    InstrumentError(
+                        run_id=self.run_id, device="store", message=str(exc), fatal=True
+                    )
+                )
+                break
             if stream is None and self.interval_s > 0 and not self._done():
                 with contextlib.suppress(_Stopped):
                     await self._until_stop(self.clock.sleep(self.interval_s))
         if (
             self._stop
             and state is RunState.DONE
-            and self.plan.count
-            and len(self._values) < self.plan.count
+            and (self._stop_by or (self.plan.count and len(self._values) < self.plan.count))
         ):
-            state, reason = RunState.ABORTED, "stopped by the operator"
-        self.store.set_status(self.run_id, state.value, reason)
+            # a count cut short, or any session ended by a signal (SIGTERM, SIGHUP): the
+            # run did not end the way it was meant to
+            state, reason = RunState.ABORTED, f"stopped by {self._stop_by or 'the operator'}"
+        try:
+            self.store.set_status(self.run_id, state.value, reason)
+        except StoreError as exc:  # the store is still away: say so, never a traceback
+            self.bus.publish(
+                InstrumentError(
+                    run_id=self.run_id,
+                    device="store",
+                    message=f"the run's state ({state.value}) could not be recorded: {exc}",
+                    fatal=False,
+                )
+            )
         self.bus.publish(StateChanged(run_id=self.run_id, state=state, reason=reason))
         stats = gloss_statistics(self._values, self.plan.angles_deg)
         return GlossResult(

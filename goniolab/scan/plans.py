@@ -38,6 +38,10 @@ __all__ = [
 
 #: Most detector angles one plan may hold (a 0.01 deg step over 90 deg is 9001).
 MAX_ANGLES = 10_000
+#: Longest settling wait before a reading, s: ten minutes is already far beyond any
+#: vibration or thermal settling of the arms; ``--dwell 1e300`` was accepted and its ETA
+#: printed 300 digits (issue 23, Low).
+MAX_DWELL_S = 600.0
 #: Most readings (angles x repeats) one plan may hold.
 MAX_READINGS = 100_000
 
@@ -208,8 +212,11 @@ class BrdfPlan:
                 f"{len(self.theta_r_deg)} angles x {self.repeats} repeats = "
                 f"{len(self.theta_r_deg) * self.repeats} readings, more than {MAX_READINGS}"
             )
-        if not (math.isfinite(self.dwell_s) and self.dwell_s >= 0):
-            raise PlanError(f"dwell_s must be >= 0, got {self.dwell_s}")
+        if not (math.isfinite(self.dwell_s) and 0 <= self.dwell_s <= MAX_DWELL_S):
+            raise PlanError(
+                f"dwell_s must be in 0..{MAX_DWELL_S:g} s (a settling wait per reading), "
+                f"got {self.dwell_s:.6g}"
+            )
         if not 500 <= self.exposure_us <= 250000:
             raise PlanError(
                 f"exposure_us must be in 500..250000 (STIL Ruby range), got {self.exposure_us}"

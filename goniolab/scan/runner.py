@@ -57,6 +57,7 @@ from drivers.base import (
 )
 from drivers.timing import Clock, trapezoid_duration_s
 from goniolab.config import GoniometerConfig
+from goniolab.scan.alarm import failure_reason
 from goniolab.scan.colour import PointColour
 from goniolab.scan.events import (
     ArmsMoved,
@@ -74,8 +75,9 @@ from goniolab.scan.events import (
 from goniolab.scan.exposure import AutoExposure
 from goniolab.scan.plans import MIRROR_INDEX, BrdfPlan, PlanPoint
 from goniolab.scan.predict import Predictor
+from goniolab.scan.sanity import check_reading
 from goniolab.scan.summary import summarize_brdf
-from goniolab.store import RunStore
+from goniolab.store import RunStore, StoreError, StoreUnavailable
 
 __all__ = [
     "ArmMotion",
@@ -369,6 +371,7 @@ class ScanRunner:
         move_retries: int = 2,
         reconnect_backoff_s: float = 0.5,
         point_colour: PointColour | None = None,
+        store_outage_s: float = 600.0,
     ) -> None:
         if reading_retries < 0:
             raise ValueError(f"reading_retries must be >= 0, got {reading_retries}")
@@ -393,6 +396,9 @@ class ScanRunner:
         self.reading_retries = reading_retries
         self.move_retries = move_retries
         self.reconnect_backoff_s = reconnect_backoff_s
+        #: how long a run waits, paused with the arms parked, for a store that cannot take
+        #: a reading (a database down, a full disk) before it fails
+        self.store_outage_s = store_outage_s
         self.point_colour = point_colour if point_colour is not None else PointColour()
         #: the last colour took under _INLINE_COLOUR_S: compute the next on the loop
         self._colour_inline = False
@@ -401,6 +407,7 @@ class ScanRunner:
         self._state = RunState.IDLE
         self._pause_requested = False
         self._abort_requested = False
+        self._abort_by = ""
         self._wake = asyncio.Event()
         self._abort_event = asyncio.Event()
         self._homing_interrupted = False
@@ -431,10 +438,13 @@ class ScanRunner:
         self._pause_requested = False
         self._wake.set()
 
-    def abort(self) -> None:
+    def abort(self, by: str = "") -> None:
         """Stop the run: a move in progress is interrupted (the arms are stopped where they
         are), a reading in progress is completed and stored; then the arms are parked and
-        the run is marked ``aborted``."""
+        the run is marked ``aborted``. ``by`` says who asked when it was not the operator
+        (``"SIGTERM"``); it goes into the stored reason."""
+        if by and not self._abort_requested:
+            self._abort_by = by
         self._abort_requested = True
         self._abort_event.set()
         self._wake.set()
@@ -442,7 +452,17 @@ class ScanRunner:
     # ------------------------------------------------------------------ helpers
     def _set_state(self, state: RunState, reason: str = "") -> None:
         self._state = state
-        self.store.set_status(self.run_id, state.value, reason)
+        try:
+            self.store.set_status(self.run_id, state.value, reason)
+        except StoreError as exc:  # the store is down: say so, the run's own state holds
+            self.bus.publish(
+                InstrumentError(
+                    run_id=self.run_id,
+                    device="store",
+                    message=f"the run's state ({state.value}) could not be recorded: {exc}",
+                    fatal=False,
+                )
+            )
         self.bus.publish(StateChanged(run_id=self.run_id, state=state, reason=reason))
 
     async def _checkpoint(self) -> bool:
@@ -669,19 +689,33 @@ class ScanRunner:
 
     async def _read_spectro(self, p: PlanPoint) -> SpectroReading:
         """One spectro reading, taken again after a transient fault (timeout, garbled reply,
-        a lost link: then the port is reopened first) up to ``reading_retries`` times; each
-        retry is reported, nothing is stored twice."""
+        an implausible value (:mod:`goniolab.scan.sanity`), a lost link: then the port is
+        reopened first) up to ``reading_retries`` times; each retry is reported, nothing is
+        stored twice."""
 
         async def read() -> SpectroReading:
             if self.plan.auto_exposure:
                 reading, self._exposure_us = await self._auto.read(self.spectro, self._exposure_us)
-                return reading
-            return await self.spectro.measure()
+            else:
+                reading = await self.spectro.measure()
+            return check_reading(reading)  # an implausible Y is read again, never stored
 
-        return await self._retry(
+        reading = await self._retry(
             f"point {p.index}, repeat {p.repeat}", read, self._reconnect_spectro,
             self.reading_retries, "spectro",
         )  # fmt: skip
+        if reading.stale_lines:  # a late or repeated answer was dropped: say so
+            self.bus.publish(
+                InstrumentError(
+                    run_id=self.run_id,
+                    device="spectro",
+                    message=f"point {p.index}, repeat {p.repeat}: dropped {reading.stale_lines} "
+                    "reply line(s) of an earlier request (a late or repeated answer); the "
+                    "reading kept is the answer to this point's own request",
+                    fatal=False,
+                )
+            )
+        return reading
 
     async def _retry(
         self,
@@ -789,8 +823,13 @@ class ScanRunner:
         self._specimen = "sample" if not (self.plan.mirror_reference and done) else None
         try:
             state, reason = await self._measure(todo, eta)
+        except StoreError as exc:  # the store stayed unavailable, or refused a write
+            state, reason = RunState.FAILED, f"store: {exc}"
+            self.bus.publish(
+                InstrumentError(run_id=self.run_id, device="store", message=str(exc), fatal=True)
+            )
         except DeviceError as exc:
-            state, reason = RunState.FAILED, str(exc)
+            state, reason = RunState.FAILED, failure_reason(exc)  # with a latched alarm's cure
             self.bus.publish(
                 InstrumentError(
                     run_id=self.run_id, device=exc.device, message=exc.message, fatal=True
@@ -800,7 +839,8 @@ class ScanRunner:
             # Cancelled from outside (the process is shutting down): park, record, re-raise.
             predict_task.cancel()
             colour_task.cancel()
-            await asyncio.shield(self._park_and_record(RunState.ABORTED, "cancelled"))
+            why = f"aborted by {self._abort_by}, quit at once" if self._abort_by else "cancelled"
+            await asyncio.shield(self._park_and_record(RunState.ABORTED, why))
             raise
         except Exception as exc:
             # Not an instrument fault (a bug, a full disk): still leave the arms parked (or
@@ -812,7 +852,17 @@ class ScanRunner:
                 RunFinished(run_id=self.run_id, state=RunState.FAILED, reason=why, summary={})
             )
             raise
-        return await self._finish(state, reason, predict_task, colour_task)
+        finish = asyncio.ensure_future(self._finish(state, reason, predict_task, colour_task))
+        try:
+            return await asyncio.shield(finish)
+        except asyncio.CancelledError:
+            # quit at once while the run ends (a second Ctrl-C, SIGTERM during the park):
+            # the predictions are dropped, the park and the run's record are awaited
+            predict_task.cancel()
+            colour_task.cancel()
+            with contextlib.suppress(Exception, asyncio.CancelledError):
+                await finish
+            raise
 
     async def _dry_run(self, todo: Sequence[PlanPoint]) -> _Eta:
         """:func:`dry_run` of ``todo`` from where the arms stand (raises PlanRefused)."""
@@ -853,6 +903,8 @@ class ScanRunner:
             state, reason = RunState.DONE, ""
         except _Aborted as stop:
             state, reason = RunState.ABORTED, stop.reason
+            if self._abort_by:
+                reason = reason.replace("by the operator", f"by {self._abort_by}", 1)
         if self._specimen == "mirror":
             assert self.specimen_hook is not None
             await self.specimen_hook("sample")
@@ -884,7 +936,7 @@ class ScanRunner:
         value = raw_pct if p.index == MIRROR_INDEX else self._relative_to_mirror(raw_pct)
         colour, colour_error = await self._colour_of(reading, p, self._mirror_pct)
         ts = time.time()
-        self.store.add_point(
+        await self._store_reading(p, lambda: self.store.add_point(
             self.run_id,
             index=p.index,
             repeat=p.repeat,
@@ -904,7 +956,7 @@ class ScanRunner:
             timestamp=ts,
             colour=colour,
             colour_error=colour_error,
-        )
+        ))  # fmt: skip
         self._n_done += 1
         self.bus.publish(
             PointMeasured(
@@ -929,6 +981,76 @@ class ScanRunner:
             self._mirror_pct = self._mirror_level()
         return raw_pct if self._mirror_pct is None else 100.0 * raw_pct / self._mirror_pct
 
+    async def _store_reading(self, p: PlanPoint, write: Callable[[], None]) -> None:
+        """Commit reading ``p`` with ``write``. When the store cannot take it
+        (:class:`~goniolab.store.StoreUnavailable`: a database down or frozen, a full disk,
+        a lock held by another program) the run pauses with the arms parked, says why,
+        and tries again with a growing delay (0.5 s doubling to 10 s, each try in a worker
+        thread so that Ctrl-C stays live) until the store takes the reading (the run goes
+        on: the next move re-checks the arms) or ``store_outage_s`` passes (the store
+        error ends the run as failed) or an abort arrives.
+
+        A try whose commit reached the store but whose answer was lost finds the reading
+        already stored (a unique-key refusal for a key now in the store): that counts as
+        stored.
+        """
+        try:
+            write()
+            return
+        except StoreUnavailable as exc:
+            first = exc
+        self.bus.publish(
+            InstrumentError(
+                run_id=self.run_id,
+                device="store",
+                message=f"{first}; the run pauses with the arms parked until the store is back",
+                fatal=False,
+            )
+        )
+        park_problem = await self._park()
+        self._verify_position = True  # the arms left the geometry: the next move checks
+        self._set_state(RunState.PAUSED, f"store unavailable: {first}" + (
+            f"; {park_problem}" if park_problem else ""))  # fmt: skip
+        deadline = time.monotonic() + self.store_outage_s
+        delay = 0.5
+        last: StoreError = first
+        while True:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise StoreUnavailable(
+                    f"{last} (waited {self.store_outage_s:g} s with the arms parked; "
+                    f"the reading at index {p.index}, repeat {p.repeat} was not stored)"
+                )
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self._abort_event.wait(), timeout=min(delay, left))
+            if self._abort_requested:
+                raise _Aborted(
+                    f"aborted while the store was unavailable ({last}); the reading at "
+                    f"index {p.index}, repeat {p.repeat} was not stored"
+                )
+            delay = min(10.0, delay * 2)
+            try:
+                await asyncio.to_thread(write)
+                break
+            except StoreUnavailable as exc:
+                last = exc
+            except Exception:
+                if p.key in await asyncio.to_thread(self.store.done_keys, self.run_id):
+                    break  # the lost answer's commit: stored once
+                raise
+        # a restarted server dropped the claim with its connection: take it again (the
+        # server answers now, so this cannot hang)
+        await asyncio.to_thread(self.store.ensure_claim, self.run_id)
+        self.bus.publish(
+            InstrumentError(
+                run_id=self.run_id,
+                device="store",
+                message="the store is back: the reading is stored, the run goes on",
+                fatal=False,
+            )
+        )
+        self._set_state(RunState.RUNNING)
+
     def _publish_progress(self, eta_s: float) -> None:
         self.bus.publish(
             Progress(run_id=self.run_id, done=self._n_done, total=self._total, eta_s=eta_s)
@@ -947,6 +1069,11 @@ class ScanRunner:
         failure must not lose the run."""
         try:
             await task
+        except asyncio.CancelledError:
+            me = asyncio.current_task()
+            if me is not None and me.cancelling():
+                raise
+            # the prediction itself was dropped (quit at once): nothing to report
         except Exception as exc:
             self.bus.publish(
                 InstrumentError(

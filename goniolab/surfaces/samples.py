@@ -188,8 +188,12 @@ def sample_info(name: str) -> SampleInfo:
     try:
         return lib.samples[name]
     except KeyError:
+        import difflib
+
+        close = difflib.get_close_matches(name, list(lib.samples), n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
         raise SampleError(
-            f"unknown sample {name!r}; known samples: {', '.join(lib.samples)}"
+            f"unknown sample {name!r}{hint}; known samples: {', '.join(lib.samples)}"
         ) from None
 
 

@@ -15,7 +15,7 @@ import time
 from collections.abc import Callable
 from typing import ClassVar
 
-from textual import work
+from textual import events, work
 from textual.app import App, ComposeResult
 from textual.binding import Binding, BindingType
 from textual.containers import Horizontal, Vertical
@@ -43,7 +43,7 @@ from goniolab.tui.comparison import Comparison
 from goniolab.tui.palette import ScanCommands
 from goniolab.tui.screens import RunsScreen
 from goniolab.tui.view_model import ArmState, Backend, ScanSetup
-from goniolab.tui.widgets import ComparisonPanel, GlossLog, ScanForm, StatusPanel
+from goniolab.tui.widgets import ComparisonPanel, GlossLog, ScanForm, StatusLine, StatusPanel
 
 __all__ = ["GonioApp", "alignment_note"]
 
@@ -95,6 +95,7 @@ _LAB_ACTIONS = frozenset(
         "toggle_log",
         "cycle_plot",
         "browse_runs",
+        "toggle_form",
         "blur",
     }
 )
@@ -137,15 +138,34 @@ class GonioApp(App[int]):
         Binding("l", "toggle_log", "Residual/log"),
         Binding("c", "cycle_plot", "Colour plot"),
         Binding("r", "browse_runs", "Runs"),
+        Binding("f", "toggle_form", "Form/plot"),
         Binding("q", "quit", "Quit"),
         Binding("escape", "blur", "Leave field", show=False),
     ]
+    #: The smallest terminal the app is laid out for (columns, rows).
+    MIN_SIZE: ClassVar[tuple[int, int]] = (80, 24)
     CSS = """
     #top { height: 1fr; }
     #left { width: 50; overflow-y: auto; }
     #gloss-log { height: 9; border: round $primary; }
     #banner { display: none; background: $error; color: $text; height: auto; padding: 0 1; }
     #banner.shown { display: block; }
+    #too-small { display: none; }
+    /* 120 to 159 columns: a narrower form beside the plots */
+    App.-medium #left { width: 40; }
+    /* under 120 columns: the plots take the width; f swaps the form in */
+    App.-narrow #left { display: none; }
+    App.-narrow.-form #left { display: block; width: 1fr; }
+    App.-narrow.-form #live { display: none; }
+    /* under 34 rows: a shorter gloss log; under 30 the residual plot gives way */
+    App.-short #gloss-log { height: 5; }
+    App.-cramped ComparisonPanel .side-plot { display: none; }
+    /* below the minimum: only a message saying so */
+    App.-tiny #top, App.-tiny #gloss-log, App.-tiny #banner { display: none; }
+    App.-tiny #too-small {
+        display: block; height: 1fr; content-align: center middle; text-align: center;
+        color: $warning;
+    }
     """
 
     def __init__(
@@ -215,9 +235,42 @@ class GonioApp(App[int]):
         left = Vertical(form, StatusPanel(), id="left")
         return [
             Static("", id="banner"),
+            Static("", id="too-small"),
             Horizontal(left, ComparisonPanel(id="live"), id="top"),
             GlossLog(id="gloss-log"),
+            StatusLine(id="statusline"),
         ]
+
+    def on_resize(self, event: events.Resize) -> None:
+        """Lay the screen out for the terminal's size (see :attr:`CSS`)."""
+        self.layout_for(event.size.width, event.size.height)
+
+    def layout_for(self, width: int, height: int) -> None:
+        """Set the size classes: ``-narrow`` under 120 columns, ``-medium`` under 160,
+        ``-short`` under 34 rows, ``-cramped`` under 30, ``-tiny`` below :attr:`MIN_SIZE`."""
+        min_w, min_h = self.MIN_SIZE
+        tiny = width < min_w or height < min_h
+        self.set_class(width < 120, "-narrow")
+        self.set_class(120 <= width < 160, "-medium")
+        self.set_class(height < 34, "-short")
+        self.set_class(height < 30, "-cramped")
+        self.set_class(tiny, "-tiny")
+        with contextlib.suppress(NoMatches):
+            self.query_one("#too-small", Static).update(
+                f"goniolab needs a terminal of at least {min_w} x {min_h} characters; "
+                f"this one is {width} x {height}.\nEnlarge the window (q quits; a running "
+                "scan goes on)."
+                if tiny
+                else ""
+            )
+
+    def action_toggle_form(self) -> None:
+        """Under 120 columns: show the setup form and instrument panel instead of the
+        plots, or the plots again (wider terminals show both)."""
+        self.toggle_class("-form")
+        if self.has_class("-narrow"):
+            shown = "form" if self.has_class("-form") else "plots"
+            self.notify(f"showing the {shown} (f swaps)", timeout=2)
 
     def on_mount(self) -> None:
         self._watch_hangup()
@@ -228,6 +281,9 @@ class GonioApp(App[int]):
         self._lab_mounted()
 
     def _lab_mounted(self) -> None:
+        self.layout_for(self.size.width, self.size.height)
+        # the footer listed the bindings while the lab opened (only q then): list them again
+        self.refresh_bindings()
         self.sub_title = self.backend.title
         self.query_one("#gloss-log", GlossLog).border_title = "glossmeter log"
         self.consume_events()
@@ -460,7 +516,11 @@ class GonioApp(App[int]):
             if ev.kind != "brdf":
                 return
             self.run_id, self.run_kind = ev.run_id, ev.kind
-            self.comparison.clear(run_id=ev.run_id, sample=ev.sample)
+            self.comparison.clear(
+                run_id=ev.run_id,
+                sample=ev.sample,
+                theta_i_deg=float(ev.plan.get("theta_i_deg", 45.0)),
+            )
             self.progress = (0, ev.total_points, math.nan)
             self.hide_banner()
             self.schedule_redraw()

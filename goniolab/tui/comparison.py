@@ -90,6 +90,21 @@ class ColourArrays:
     theta_r_deg: FloatArray
     measured_lab: FloatArray
     predicted_lab: FloatArray
+    #: Incidence of the run (the aspecular angles are ``theta_i - theta_r``, ASTM E2194).
+    theta_i_deg: float = 45.0
+
+    @property
+    def aspecular_deg(self) -> FloatArray:
+        """ASTM E2194 aspecular angle of each point, ``theta_i - theta_r``."""
+        out: FloatArray = self.theta_i_deg - self.theta_r_deg
+        return out
+
+    def differences(self) -> dict[str, FloatArray]:
+        """dL*, dC*, dH*, dE76/94/00, CMC of predicted vs measured (measured = reference;
+        :func:`goniolab.colour.difference.differences`), NaN where either is missing."""
+        from goniolab.colour.difference import differences
+
+        return differences(self.measured_lab, self.predicted_lab)
 
     @property
     def delta_e_ab(self) -> FloatArray:
@@ -130,14 +145,17 @@ class Comparison:
     predicted_lab: dict[int, tuple[float, float, float]] = field(default_factory=dict)
     #: The plan point of the last reading with a colour (the swatch shows it).
     last_colour_index: int | None = None
+    #: The run's incidence (for the aspecular angles of the colour table).
+    theta_i_deg: float = 45.0
 
-    def clear(self, *, run_id: int = 0, sample: str = "") -> None:
+    def clear(self, *, run_id: int = 0, sample: str = "", theta_i_deg: float = 45.0) -> None:
         """Forget the curve and start collecting for ``run_id``.
 
         Glossmeter readings are a log of the session, not of one scan: they are kept.
         """
         self.run_id = run_id
         self.sample = sample
+        self.theta_i_deg = float(theta_i_deg)
         self.readings.clear()
         self.theta_r_deg.clear()
         self.predicted.clear()
@@ -183,7 +201,7 @@ class Comparison:
                 meas[k] = np.mean(np.array(self.lab[i]), axis=0)
             if i in self.predicted_lab:
                 pred[k] = self.predicted_lab[i]
-        return ColourArrays(theta, meas, pred)
+        return ColourArrays(theta, meas, pred, self.theta_i_deg)
 
     def add_predicted(self, ev: PointPredicted) -> None:
         """Record the model's prediction for plan point ``ev.index``."""

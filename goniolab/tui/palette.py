@@ -23,6 +23,7 @@ SCAN_COMMANDS: tuple[tuple[str, str, str], ...] = (
     ("Toggle residual / log view", "toggle_log", "Side plot: residuals or log10 curves (l)"),
     ("Cycle colour plot", "cycle_plot", "Main plot: luminance, L* or a*/b* vs angle (c)"),
     ("Browse stored runs", "browse_runs", "Reopen a stored run's comparison (r)"),
+    ("Show form / plots", "toggle_form", "Under 120 columns: the setup form or the plots (f)"),
     ("Quit", "quit", "Leave goniolab (q)"),
 )
 

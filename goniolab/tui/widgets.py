@@ -9,6 +9,8 @@ import numpy as np
 from textual import events
 from textual.app import ComposeResult
 from textual.containers import Horizontal, Vertical
+from textual.css.query import NoMatches
+from textual.widget import Widget
 from textual.widgets import DataTable, Input, Label, Select, Static
 from textual_plot import HiResMode, LegendLocation, PlotWidget
 
@@ -28,6 +30,7 @@ __all__ = [
     "GlossLog",
     "MetricsTable",
     "ScanForm",
+    "StatusLine",
     "StatusPanel",
     "fmt_num",
 ]
@@ -58,34 +61,55 @@ class ColourSwatch(Static):
 
 
 class ColourTable(DataTable[str]):
-    """Per point: theta_r, measured L*, a*, b*, predicted L*, dE*ab (measured - predicted)."""
+    """Per point: theta_r, the E2194 aspecular angle, measured L*a*b*, predicted L*, the
+    signed dL*, dC*, dH* and dE00 (predicted - measured) and the verdict of the tolerance
+    set at that aspecular angle (:data:`goniolab.colour.tolerance.BUILTIN_SETS`
+    ``din6175-2`` by default); a last row gives the overall verdict."""
+
+    #: The tolerance set judged per angle (a :class:`goniolab.colour.tolerance.ToleranceSet`).
+    tolerance_name = "din6175-2"
 
     def on_mount(self) -> None:
         self.cursor_type = "none"
         self.zebra_stripes = True
-        for label, key in (
-            ("θr °", "theta"),
-            ("L*", "L"),
-            ("a*", "a"),
-            ("b*", "b"),
-            ("pred L*", "pL"),
-            ("ΔE*ab", "dE"),
+        for label, key, width in (
+            ("θr °", "theta", 7),
+            ("asp °", "asp", 6),
+            ("L*", "L", 6),
+            ("a*", "a", 6),
+            ("b*", "b", 6),
+            ("pred L*", "pL", 7),
+            ("ΔL*", "dL", 6),
+            ("ΔC*", "dC", 6),
+            ("ΔH*", "dH", 6),
+            ("ΔE00", "dE", 6),
+            ("tol", "tol", 5),
         ):
-            self.add_column(label, key=key, width=7)
+            self.add_column(label, key=key, width=width)
 
     def show(self, comparison: Comparison) -> None:
-        """Refill from ``comparison`` (one row per point)."""
+        """Refill from ``comparison`` (one row per point, then the overall verdict)."""
+        from goniolab.colour.tolerance import BUILTIN_SETS, evaluate
+
         c = comparison.colour_arrays()
         self.clear()
-        de = c.delta_e_ab
+        d = c.differences()
+        tol = BUILTIN_SETS[self.tolerance_name]
+        verdicts, overall = evaluate(tol, c.aspecular_deg, c.measured_lab, c.predicted_lab)
         for k, t in enumerate(c.theta_r_deg):
             m, p = c.measured_lab[k], c.predicted_lab[k]
+            passed = verdicts[k].passed if np.all(np.isfinite(d["dE00"][k])) else None
             self.add_row(
                 fmt_num(float(t), 1),
+                fmt_num(float(c.aspecular_deg[k]), 0),
                 *(fmt_num(float(v), 1) for v in m),
                 fmt_num(float(p[0]), 1),
-                fmt_num(float(de[k]), 2),
+                *(fmt_num(float(d[key][k]), 2) for key in ("dL", "dC", "dH", "dE00")),
+                {True: "pass", False: "FAIL", None: "-"}[passed],
             )
+        if overall["checked_angles"] and np.all(np.isfinite(d["dE00"])):
+            verdict = "PASS" if overall["passed"] else "FAIL"
+            self.add_row("overall", "", "", "", "", "", "", "", "", tol.name[:6], verdict)
 
 
 def fmt_num(value: float | None, digits: int = 2) -> str:
@@ -149,7 +173,7 @@ class ComparisonPanel(Horizontal):
     ComparisonPanel { height: 1fr; }
     ComparisonPanel > .main-plot { width: 3fr; border: round $primary; }
     ComparisonPanel > Vertical { width: 2fr; min-width: 36; }
-    ComparisonPanel .side-plot { height: 1fr; border: round $secondary; }
+    ComparisonPanel .side-plot { height: 2fr; min-height: 8; border: round $secondary; }
     ComparisonPanel MetricsTable { height: 9; }
     ComparisonPanel ColourTable { height: 1fr; }
     """
@@ -261,7 +285,8 @@ class ComparisonPanel(Horizontal):
             if np.any(half > 0):
                 main.errorbar(x, mid, yerr=half, marker_style="yellow", label="min/max")
             main.scatter(x, mean, marker="●", marker_style="bold yellow", label="measured")
-        main.show_legend(LegendLocation.TOPRIGHT, is_visible=bool(has_pred.any() or has_meas.any()))
+        # top left: an in-plane curve is low there (its peak sits near theta_r = theta_i)
+        main.show_legend(LegendLocation.TOPLEFT, is_visible=bool(has_pred.any() or has_meas.any()))
         # Head-room above the peak so the top point is not drawn on the frame.
         ys = np.concatenate([a.predicted_pct[has_pred], a.max_pct[has_meas]])
         if ys.size:
@@ -331,11 +356,12 @@ class StatusPanel(Vertical):
     def on_mount(self) -> None:
         self.border_title = "instrument"
         table = self.query_one("#arms", DataTable)
+        table.cell_padding = 0  # fits a 40-column panel: each width leaves its own gap
         for key, label, width in (
-            ("angle", "angle °", 7),
-            ("motion", "motion", 6),
-            ("homed", "homed", 5),
-            ("link", "link", 4),
+            ("angle", "angle°", 7),
+            ("motion", "motion", 7),
+            ("homed", "homed", 6),
+            ("link", "link", 5),
             ("alarm", "alarm", 5),
         ):
             table.add_column(label, key=key, width=width)
@@ -359,6 +385,16 @@ class StatusPanel(Vertical):
         self._notes[arm.name] = f"{arm.name}: {arm.message}" if arm.message else ""
         note = "\n".join(n for n in (self._notes.get("lamp"), self._notes.get("detector")) if n)
         self.query_one("#arm-note", Static).update(note)
+        line = _status_line(self)
+        if line is not None:
+            state = "moving" if arm.moving else "idle"
+            if not arm.connected:
+                state = "link lost"
+            elif arm.alarm_code is not None:
+                state = f"alarm {arm.alarm_code:#x}"
+            elif not arm.homed:
+                state += ", not homed"
+            line.set_arm(arm.name, f"{arm.name} {fmt_num(arm.position_deg, 2)} {state}")
 
     def show_angles(self, theta_i_deg: float, theta_r_deg: float, moving: bool) -> None:
         """Update both arms from an ArmsMoved event (angles in degrees)."""
@@ -367,10 +403,53 @@ class StatusPanel(Vertical):
         self._set("detector", "angle", fmt_num(theta_r_deg, 2))
         self._set("lamp", "motion", motion)
         self._set("detector", "motion", motion)
+        line = _status_line(self)
+        if line is not None:
+            line.set_arm("lamp", f"lamp {fmt_num(theta_i_deg, 2)} {motion}")
+            line.set_arm("detector", f"detector {fmt_num(theta_r_deg, 2)} {motion}")
 
     def show_run(self, text: str) -> None:
-        """Replace the run-state line."""
+        """Replace the run-state line (and the status line's run part)."""
         self.query_one("#run-state", Static).update(text)
+        line = _status_line(self)
+        if line is not None:
+            line.set_run(text)
+
+
+class StatusLine(Static):
+    """One line that stays on screen at any terminal size: the run (state, points, ETA) and
+    the lab (each arm's angle and motion, homed, link, alarm)."""
+
+    DEFAULT_CSS = """
+    StatusLine { height: 1; background: $boost; padding: 0 1; }
+    """
+
+    def __init__(self, *, id: str | None = None) -> None:
+        super().__init__("run: idle", id=id)
+        self._run = "run: idle"
+        self._arms: dict[str, str] = {}
+
+    def set_run(self, text: str) -> None:
+        """The run part (what the instrument panel's run line says)."""
+        self._run = text
+        self._show()
+
+    def set_arm(self, name: str, text: str) -> None:
+        """One arm's part (``lamp 45.00 idle``)."""
+        self._arms[name] = text
+        self._show()
+
+    def _show(self) -> None:
+        arms = "  ".join(self._arms[n] for n in ("lamp", "detector") if n in self._arms)
+        self.update(f"{self._run}  |  {arms}" if arms else self._run)
+
+
+def _status_line(widget: Widget) -> StatusLine | None:
+    """The app's status line, if it is mounted."""
+    try:
+        return widget.app.query_one(StatusLine)
+    except NoMatches:
+        return None
 
 
 class GlossLog(DataTable[str]):

@@ -9,7 +9,8 @@
   ``configs/profiles/oriental-az.toml``): writing the 18-register direct-data block with
   trigger = 1 starts a move of the simulated arm; rising edges of ZHOME / STOP / ALM-RST in
   the latched input-command word act.
-* ``command-opcode`` (Applied Motion MDX+ eSCL register map,
+* ``command-opcode`` (Applied Motion ST-Q register table 920-0072,
+  ``configs/profiles/applied-motion-stq.toml``, or the MDX+ map
   ``configs/profiles/applied-motion-mdx.toml``): accel, decel, velocity (one register
   each, 1/6 rps/s and 1/240 rps) and the int32 target position are latched; an opcode
   written to the command register acts: absolute (FP) or relative (FL) move with them,
@@ -18,6 +19,12 @@
 
 The status, alarm, feedback (and command) registers are refreshed from the arm on every
 request.
+
+Unit ids and function codes: over RTU a request for a unit id that no arm answers to gets
+no reply at all (a real AZ on the line stays silent; MBS section 2.1), over TCP the gateway
+exception 0Bh; function 04h (read input registers), which the AZ does not support, gets
+exception 01h (illegal function) from a direct-data (AZ) unit. 16-bit fields (profile ``single_register_fields``: the
+ST-Q's alarm and status codes) are served as one register. Sources: docs/PROTOCOLS.md.
 
 Injected faults (:mod:`sim.faults`): a timed-out request gets no answer (not executed, no
 reply sent); a garbled one a corrupted MBAP header (TCP) or a wrong CRC (RTU), which a
@@ -49,6 +56,21 @@ __all__ = ["ModbusAxisServer", "WireAxis"]
 
 #: Size of the simulated register space (covers every address of the AZ map).
 _REGISTER_SPACE = 0x0200
+
+
+#: The registers :meth:`WireAxis.refresh` writes, in its order.
+_REFRESHED = (
+    "output_status",
+    "alarm_code",
+    "feedback_position",
+    "command_position",
+    "input_command",
+)
+#: 04h (read input registers) is not in the AZ's function-code list (HM-60262E: 03h, 06h,
+#: 08h, 10h, 17h): the simulated AZ answers it with exception 01h, illegal function
+#: (docs/PROTOCOLS.md). The Applied Motion pages retrieved do not list the function codes;
+#: the simulated AMP drives answer 04h from the holding registers (pymodbus' default).
+_UNSUPPORTED_FUNCTIONS = frozenset({0x04})
 
 
 def _split32(value: int) -> tuple[int, int]:
@@ -153,8 +175,12 @@ class WireAxis:
             (regs.command_position, round((st.command_deg or 0.0) * self.steps_per_deg)),
             (regs.input_command, self._input_word),
         ]
-        for addr, value in values:
+        single = self.profile.single_register_fields
+        for (addr, value), name in zip(values, _REFRESHED, strict=True):
             if addr is None:
+                continue
+            if name in single:  # one 16-bit register on this drive (AMP ST-Q)
+                registers[addr - start_address] = value & 0xFFFF
                 continue
             hi, lo = _split32(value)
             registers[addr - start_address] = hi
@@ -328,6 +354,8 @@ class ModbusAxisServer:
             registers: list[int],
             set_values: list[int] | list[bool] | None,
         ) -> ExcCodes | None:
+            if function_code in _UNSUPPORTED_FUNCTIONS and wire.profile.move_style == "direct-data":
+                return ExcCodes.ILLEGAL_FUNCTION  # the AZ's function-code list (HM-60262E)
             faults = wire.axis.faults
             now = wire.axis.clock.now()
             if faults.is_down(now):
@@ -358,6 +386,8 @@ class ModbusAxisServer:
         unit_at = 6 if self.transport == "tcp" else 0  # MBAP unit id / RTU address
         if not sending or len(data) <= unit_at:
             return data
+        if data[unit_at] not in self.axes:
+            return self._no_such_unit(data)
         pending = self._pending.get(data[unit_at])
         if not pending:
             return data
@@ -369,6 +399,21 @@ class ModbusAxisServer:
             return b""  # no answer at all
         out = bytearray(data)
         out[5 if self.transport == "tcp" else -1] ^= 0x3C  # MBAP length / CRC high byte
+        return bytes(out)
+
+    def _no_such_unit(self, data: bytes) -> bytes:
+        """The reply to a request for a unit id no arm answers to.
+
+        RTU: nothing. Only the addressed slave answers a query (MBS section 2.1), so a real
+        AZ on the line stays silent and the master times out. TCP: the arms sit behind a
+        gateway, which answers exception 0Bh, "gateway target device failed to respond"
+        (pymodbus itself would answer 04h, slave device failure).
+        """
+        if self.transport == "rtu" or len(data) < 9:
+            return b""
+        out = bytearray(data)
+        out[7] |= 0x80
+        out[8] = int(ExcCodes.GATEWAY_NO_RESPONSE)
         return bytes(out)
 
     def _drop_connections(self) -> None:

@@ -3,7 +3,7 @@
 * :class:`StilPtyDevice`: the STIL line protocol of a ``stil-spectro`` profile
   (``configs/profiles/stil-ruby.toml``).
 * :class:`ZgmPtyDevice`: the Zehntner ZGM1120 protocol (Technical Manual rev. 3.0, 2021,
-  pp. 16-28).
+  section 6), interpreted by :mod:`sim.wire.zgm` (docs/PROTOCOLS.md).
 
 Injected faults (:mod:`sim.faults`): a timed-out request gets no answer, a garbled one has
 one byte of the reply flipped, a disconnected device closes its port. A recoverable drop
@@ -27,6 +27,7 @@ from drivers.profiles import StilProfile, ZgmProfile, template_regex
 from drivers.timing import Clock
 from sim.faults import Fault, FaultInjector
 from sim.instruments import SPECTRUM_WAVELENGTHS_NM, SimGlossmeter, SimSpectro
+from sim.wire.zgm import ZgmProtocol
 
 __all__ = ["MAX_LINE_BYTES", "MAX_PENDING_LINES", "StilPtyDevice", "ZgmPtyDevice"]
 
@@ -367,22 +368,15 @@ class StilPtyDevice(PtyDevice):
 class ZgmPtyDevice(PtyDevice):
     """The simulated Zehntner ZGM1120 glossmeter behind a pty.
 
-    Protocol (Technical Manual rev. 3.0, 2021, pp. 16-28): ASCII fields separated by
-    ``|``, commands end with ``:``, replies end with the profile's ``reply_terminator``.
-    Measure request ``1| SN|xy|mask|count|tempflag:`` (mask bit0 20 deg, bit1 60 deg,
-    bit2 85 deg); reply ``1| SN|xy|v20|a20|v60|a60|v85|a85|count|temp`` with values in
-    0.1 GU, -1 = not measured, -2 = overflow; the ``a`` fields are raw ADC readings.
-    Opcode 6 AutoSend (``6| SN|xy|mask|count|tempflag:``, not acknowledged): the meter
-    then pushes a reply ``6| SN|xy|...`` (measure-reply fields, the request's transaction
-    id) for every reading -- simulated as a button press every ``autosend_interval_s``;
-    mask 0 switches it off.
-    Requests for another serial number are ignored (RS-232 multi-drop behaviour).
+    The protocol is :class:`sim.wire.zgm.ZgmProtocol`, written from the ZGM 1120 Technical
+    Manual rev 3.0 (section 6; docs/PROTOCOLS.md) independently of the driver: command
+    strings end with ``:``, return strings with the profile's ``reply_terminator``.
+    Requests for another serial number are ignored (RS-232 multi-drop behaviour). While
+    AutoSend is on, the measure button is "pressed" every ``autosend_interval_s`` of lab
+    clock and the meter pushes a reading.
     """
 
     name = "glossmeter"
-
-    #: Raw ADC counts per GU of the simulated photodiode chain (any positive number).
-    ADC_PER_GU = 10.0
 
     def __init__(
         self,
@@ -398,42 +392,15 @@ class ZgmPtyDevice(PtyDevice):
         self.clock = gloss.clock
         self.profile = profile
         self.serial_number = serial_number.strip()
+        self.protocol = ZgmProtocol(gloss, self.serial_number)
         self._autosend: asyncio.Task[None] | None = None
-
-    async def _reading_fields(self, angles: list[int]) -> list[str]:
-        values, overflow = await self.gloss.read_values_gu(angles)
-        out: list[str] = []
-        for a in (20, 60, 85):
-            v = values.get(a)
-            if a in overflow:
-                out += ["-2", "-2"]
-            elif v is None:
-                out += ["-1", "-1"]
-            else:
-                out += [str(round(v * 10)), str(round(v * self.ADC_PER_GU))]
-        return out
-
-    async def _measure_reply(self, tid: str, mask: int, count: int, *, opcode: str = "1") -> str:
-        angles = [a for bit, a in enumerate((20, 60, 85)) if mask >> bit & 1]
-        fields = await self._reading_fields(angles)
-        return "|".join(
-            [
-                opcode,
-                f" {self.serial_number}",
-                tid,
-                *fields,
-                str(count),
-                str(round(self.gloss.current_temperature_c())),
-            ]
-        )
 
     async def _handle_line(self, line: bytes) -> None:
         try:
             text = line.decode("ascii").strip("\r\n ")
         except UnicodeDecodeError:
             return  # not the protocol's alphabet: a real meter ignores the line
-        parts = text.split("|")
-        if len(parts) < 3 or parts[1].strip() != self.serial_number:
+        if not self.protocol.addressed(text):
             return
         fault = self.faults.decide()
         if fault is Fault.DISCONNECT:
@@ -444,58 +411,36 @@ class ZgmPtyDevice(PtyDevice):
             return
         if fault is Fault.TIMEOUT:
             return
-        opcode, tid, args = parts[0].strip(), parts[2], parts[3:]
-        reply: str
-        if opcode == "1":
-            try:
-                mask = int(args[0]) if args else 7
-                count = int(args[1]) if len(args) > 1 else 1
-            except ValueError:
-                return
-            reply = await self._measure_reply(tid, mask & 7, count)
-        elif opcode == "6":
-            try:
-                mask = int(args[0]) if args else 7
-            except ValueError:
-                return
-            self._set_autosend(tid, mask & 7)
-            return  # AutoSend is not acknowledged: readings follow as they are taken
-        elif opcode == "36":
-            reply = "|".join(
-                [
-                    "36",
-                    f" {self.serial_number}",
-                    tid,
-                    str(round(self.gloss.current_temperature_c())),
-                ]
-            )
-        elif opcode == "72":  # Calibrate: the deviation found on the standard, in ppm
-            ppm = self.gloss.calibrate_ppm()
-            reply = "|".join([opcode, f" {self.serial_number}", tid, str(ppm)])
-        elif opcode in ("28", "48", "52", "64"):
-            reply = "|".join([opcode, f" {self.serial_number}", tid, "0"])
-        else:
+        reply = await self.protocol.handle(text)
+        self._sync_autosend()
+        if reply is None:
             return
         data = reply.encode("ascii")
         if fault is Fault.GARBLE:
             data = self.gloss.faults.garble(data)
         self.write(data + self.profile.reply_terminator.encode("ascii"))
 
-    def _set_autosend(self, tid: str, mask: int) -> None:
-        if self._autosend is not None:
+    def _sync_autosend(self) -> None:
+        """Start or stop the button-press task to match the protocol's AutoSend state."""
+        wanted = self.protocol.autosend is not None and self.gloss.autosend_interval_s > 0
+        running = self._autosend is not None and not self._autosend.done()
+        if wanted and not running:
+            self._autosend = asyncio.get_running_loop().create_task(self._push())
+        elif not wanted and self._autosend is not None:
             self._autosend.cancel()
             self._autosend = None
-        if mask and self.gloss.autosend_interval_s > 0:
-            self._autosend = asyncio.get_running_loop().create_task(self._push(tid, mask))
 
-    async def _push(self, tid: str, mask: int) -> None:
+    async def _push(self) -> None:
         while self.open:
             await self.gloss.clock.sleep(self.gloss.autosend_interval_s)
             await self._drained.wait()  # back-pressure: the line took the last reading
-            reply = await self._measure_reply(tid, mask, 1, opcode="6")
+            reply = await self.protocol.pushed()
+            if reply is None:
+                return
             self.write(reply.encode("ascii") + self.profile.reply_terminator.encode("ascii"))
 
     async def stop(self) -> None:
         """Stop auto-send and the pty."""
-        self._set_autosend("", 0)
+        self.protocol.autosend = None
+        self._sync_autosend()
         await super().stop()

@@ -198,6 +198,9 @@ def test_fit_colour_command_recovers_the_paint_and_saves_it(
     for p in doc["parameters"]:
         assert p["determined"] and abs(p["value"] - SILVER_TRUTH[p["name"]]) < 4 * p["sigma"]
     assert doc["mean_dE2000"] < 0.6 < 5.0 < doc["start_mean_dE2000"]
+    # it says what it minimised, and dE2000 before and after (issue 25)
+    assert doc["minimised"] == "sum of squared CIE 1976 L*a*b* differences (dE*ab^2)"
+    assert doc["dE2000_worse_after_fit"] is False
     assert doc["dof"] == 18 - 4
     # the saved paint is what --paint reads, with the fitted values
     saved = paint_from_dict(tomllib.loads(out.read_text()))

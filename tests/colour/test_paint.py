@@ -97,7 +97,10 @@ def test_flake_reflectance_is_aluminium_fresnel_in_the_binder() -> None:
 
 
 def test_pigment_over_a_flake_tints_it() -> None:
-    # seed eq. 5: a red pigment of depth X' over the flake absorbs the blue end
+    # a red pigment of depth X' over the flake absorbs the blue end: the lobe keeps the
+    # light that went to the flake and back, T^2 R_m with Kubelka's layer transmittance
+    # T = b / (a sinh(bSX) + b cosh(bSX)) (JOSA 38 (1948) 448); the seed's eq. 5 also put
+    # the layer's diffuse backscatter into the lobe (issue 25), which this test allowed
     body = PigmentLayer(
         Spectrum((400, 580, 620, 700), (8, 8, 0.05, 0.05)),
         Spectrum.flat(2.0),
@@ -110,7 +113,16 @@ def test_pigment_over_a_flake_tints_it() -> None:
     wo = direction(45.0, 180.0)[None]
     wl = np.array([450.0, 650.0])
     fd, fs = deep.flake_brdf(wi, wo, wl)[0], shallow.flake_brdf(wi, wo, wl)[0]
-    assert fd[0] < 0.2 * fs[0] and fd[1] > 0.5 * fs[1]
+    k, s_ = body.ks(wl)
+    a = 1.0 + k / s_
+    b = np.sqrt(a * a - 1.0)
+    t = b / (a * np.sinh(b * s_ * 1.0) + b * np.cosh(b * s_ * 1.0))
+    np.testing.assert_allclose(fd, t * t * fs, rtol=1e-12)
+    assert fd[0] < 1e-3 * fd[1]  # tinted red
+    # the layer's backscatter is in the diffuse body term instead: A R_l(X') more
+    r_l = np.sinh(b * s_) / (a * np.sinh(b * s_) + b * np.cosh(b * s_))  # KM over black
+    gain = deep.diffuse_reflectance(wl) - shallow.diffuse_reflectance(wl)
+    np.testing.assert_allclose(gain, 0.3 * r_l, rtol=1e-10)
 
 
 def test_paint_from_toml_tables_and_errors() -> None:

@@ -93,8 +93,10 @@ def test_metallic_panel_shows_flop_and_a_solid_none(
     spread = {}
     for name in ("silver-metallic", "solid-red"):
         out = tmp_path / f"{name}.png"
+        # exposure 1 and no sparkle: the PNG holds the documented physical scale
         assert main(["render", f"sample:{name}", "--out", str(out), "--size", "64",
-                     "--step-nm", "20", "--json"]) == 0  # fmt: skip
+                     "--step-nm", "20", "--json", "--exposure", "1",
+                     "--no-sparkle"]) == 0  # fmt: skip
         doc = json.loads(capsys.readouterr().out)
         assert doc["output"] == str(out.resolve()) and doc["size"] == 64
         assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -71,7 +71,8 @@ def test_delta_e_2000_sharma_pairs() -> None:
         (standard_grid_nm(10), np.ones(40), "40 values for 41 wavelengths"),
         (standard_grid_nm(10), np.r_[np.ones(40), np.nan], "780 nm is nan"),
         (standard_grid_nm(10), np.r_[-0.1, np.ones(40)], "380 nm is negative"),
-        (np.linspace(400, 700, 31), np.ones(31), "do not cover 380-780 nm"),
+        (np.linspace(420, 700, 29), np.ones(29), "420-700 nm do not cover 400-700 nm"),
+        (np.linspace(350, 750, 41), np.ones(41), "reach outside 360-830 nm"),
         (np.r_[380.0, 390.0, 385.0], np.ones(3), "ascending"),
     ],
 )
@@ -140,3 +141,40 @@ def test_lab_and_lch_match_colour_science() -> None:
         np.testing.assert_allclose(got[:, 6], lch[:, 1], rtol=1e-10, atol=1e-10)
         dh = (got[:, 7] - lch[:, 2] + 180.0) % 360.0 - 180.0
         np.testing.assert_allclose(dh[lch[:, 1] > 1e-6], 0.0, atol=1e-8)
+
+
+def test_a_400_700_grid_is_completed_as_astm_e308_says() -> None:
+    """ASTM E308-18 sec. 7.3: a spectrum short of the tables' range is completed by
+    repeating its end readings; the colour equals that of the spectrum written out on
+    380-780 nm with the ends held, and every face can print how it was done."""
+    from goniolab.colour.spectra import range_note
+
+    wl = np.arange(400.0, 701.0, 10.0)
+    r = 0.2 + 0.5 * np.exp(-(((wl - 600.0) / 50.0) ** 2))
+    full_wl = standard_grid_nm(10)
+    full = np.interp(full_wl, wl, r)  # np.interp holds the end values
+    for s in (ColourSettings(), ColourSettings("A", "2")):
+        a = spectrum_to_colour(wl, r, s)
+        b = spectrum_to_colour(full_wl, full, s)
+        assert a.lab == pytest.approx(b.lab, abs=1e-9)
+    assert "400-700 nm" in range_note(wl) and "E308" in range_note(wl)
+    assert range_note(full_wl) == ""
+    # a 5 nm grid from 360 to 830 (the CMFs' range) is accepted too
+    wl5 = np.arange(360.0, 831.0, 5.0)
+    c = spectrum_to_colour(wl5, np.ones_like(wl5))
+    assert c.lab == pytest.approx((100.0, 0.0, 0.0), abs=0.05)
+
+
+@pytest.mark.parametrize(
+    ("alias", "key"),
+    [("F2", "FL2"), ("F11", "FL11"), ("f11", "FL11"), ("TL84", "FL11"), ("CWF", "FL2"),
+     ("LED", "LED-B3"), ("d65", "D65"), ("FL11", "FL11")],
+)  # fmt: skip
+def test_illuminant_aliases(alias: str, key: str) -> None:
+    import colour
+
+    s = ColourSettings(alias).validated()
+    assert s.illuminant == key
+    np.testing.assert_array_equal(
+        s.white_xy, colour.CCS_ILLUMINANTS["CIE 1964 10 Degree Standard Observer"][key]
+    )

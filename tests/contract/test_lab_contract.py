@@ -3,9 +3,11 @@ the wire simulators must behave the same (see conftest.py for the backends)."""
 
 from __future__ import annotations
 
+import asyncio
 import socket
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -207,3 +209,51 @@ async def test_geared_arms_reach_the_commanded_angles(make_lab: Callable[..., La
         assert await lab.goniometer.move_to(30.0, 40.0, timeout_s=30.0) == (30.0, 40.0)
         assert lab.sims is not None
         assert (lab.sims.lamp.actual_deg(), lab.sims.detector.actual_deg()) == (30.0, 40.0)
+
+
+async def _watch_separation(lab: Lab, done: asyncio.Event) -> float:
+    """Smallest |theta_i + theta_r| of the simulated arms' encoders, sampled every 10 ms of
+    the lab clock while the moves run (the arms' truth, not the drivers' bookkeeping)."""
+    assert lab.sims is not None
+    lamp, det = lab.sims.lamp.motor, lab.sims.detector.motor
+    smallest = float("inf")
+    while not done.is_set():
+        now = lab.clock.now()
+        smallest = min(smallest, abs(lamp.position_deg(now) + det.position_deg(now)))
+        await lab.clock.sleep(0.01)
+    return smallest
+
+
+@pytest.mark.parametrize(
+    "batch",
+    [
+        [("lamp", 5.0), ("detector", 3.0)],  # bluesky's bps.mv(lamp, 5, detector, 3)
+        [("detector", 4.0), ("lamp", 4.0)],  # the last step of bp.scan(lamp 20->4, det 20->4)
+        [("move_to", 20.0, 5.0), ("lamp", 3.0), ("detector", 30.0)],
+    ],
+)
+async def test_concurrent_moves_never_pass_the_separation_minimum(
+    lab: Lab, batch: list[tuple[Any, ...]]
+) -> None:
+    # issue 22 item 1: moves from several callers at once (bluesky devices, a jog beside a
+    # scan) reserve the goniometer in turn; each is checked where the others left the arms
+    g = lab.goniometer
+    minimum = g.min_separation_deg
+    done = asyncio.Event()
+    watch = asyncio.ensure_future(_watch_separation(lab, done))
+
+    async def op(spec: tuple[Any, ...]) -> None:
+        if spec[0] == "move_to":
+            await g.move_to(spec[1], spec[2], timeout_s=60.0)
+        else:
+            await g.move_arm(spec[0], spec[1], timeout_s=60.0)
+
+    results = await asyncio.gather(*(op(s) for s in batch), return_exceptions=True)
+    done.set()
+    smallest = await watch
+    for r in results:
+        assert r is None or isinstance(r, InterlockError), repr(r)
+    assert any(isinstance(r, InterlockError) for r in results)  # each batch has a refusal
+    ti, tr = await g.positions_deg()
+    assert abs(ti + tr) >= minimum - STEP_DEG
+    assert smallest >= minimum - 2 * STEP_DEG, smallest

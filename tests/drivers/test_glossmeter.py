@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from drivers.base import Disconnected, Glossmeter, GlossReading, ProtocolError
+from drivers.base import DeviceFault, Disconnected, Glossmeter, GlossReading, ProtocolError
 from drivers.glossmeter import (
     LineGlossmeter,
     Zgm1120,
@@ -34,19 +34,45 @@ async def exchange(pty: Any, reply: bytes) -> bytes:
 
 
 def test_manual_example_reply_parses_to_exact_values() -> None:
-    reading = parse_zgm_measure(MANUAL_REPLY, serial="401120999", tid="xy")
+    reading = parse_zgm_measure(MANUAL_REPLY, serial="401120999", tid="xy", with_temperature=True)
     assert reading.values_gu == {20: 95.8, 60: None, 85: 99.3}
     assert reading.overflow_deg == ()
     assert reading.temperature_c == 25.0
     assert reading.raw == MANUAL_REPLY
 
 
-def test_overflow_marker() -> None:
-    reading = parse_zgm_measure(
-        "1| 401120999|ab|-2|4095|35|12|-1|-1|1|23", serial="401120999", tid="ab"
+def test_temperature_only_when_the_command_asked_for_it() -> None:
+    """Manual p. 16: with isTemp = 0 the meter returns "0" in the temperature field, which
+    is no temperature (the old driver logged it as 0 deg C)."""
+    line = "1| 401120999|xy|958|94|-1|-1|993|78|1|0"
+    assert (
+        parse_zgm_measure(line, serial="401120999", tid="xy", with_temperature=False).temperature_c
+        is None
     )
+    assert (
+        parse_zgm_measure(line, serial="401120999", tid="xy", with_temperature=True).temperature_c
+        == 0.0
+    )
+
+
+def test_overflow_is_read_from_the_offset_field() -> None:
+    """Manual p. 16: "-2" in the OFFSET field marks an overflow, whatever the value says."""
+    reading = parse_zgm_measure(
+        "1| 401120999|ab|2150|-2|35|12|-1|-1|1|0", serial="401120999", tid="ab",
+        with_temperature=False,
+    )  # fmt: skip
     assert reading.values_gu == {20: None, 60: 3.5, 85: None}
     assert reading.overflow_deg == (20,)
+    with pytest.raises(ProtocolError, match="20 deg value -2"):  # -2 in the value field only
+        parse_zgm_measure("1| 401120999|ab|-2|4095|35|12|-1|-1|1|0", serial="401120999",
+                          tid="ab", with_temperature=False)  # fmt: skip
+
+
+def test_error_string_is_a_device_fault_with_its_code() -> None:
+    with pytest.raises(DeviceFault, match="refused") as info:
+        parse_zgm_measure("56| 401120999|xy|1|angle not available", serial="401120999",
+                          tid="xy", with_temperature=False)  # fmt: skip
+    assert info.value.code == 1
 
 
 def test_angle_mask_bits() -> None:
@@ -65,6 +91,17 @@ async def test_measure_sends_manual_example_bytes(pty_pair: Any) -> None:
     await meter.close()
     assert await fake == b"1| 401120999|xy|5|1|0:"
     assert reading.values_gu[20] == 95.8 and reading.values_gu[85] == 99.3
+    assert reading.temperature_c is None  # isTemp = 0 was sent
+
+
+async def test_measure_with_temperature_sends_istemp_1(pty_pair: Any) -> None:
+    meter = Zgm1120(port=pty_pair.path, serial_number="401120999", first_transaction_id="xy")
+    await meter.connect()
+    fake = asyncio.create_task(exchange(pty_pair, MANUAL_REPLY.encode() + b"\r\n"))
+    reading = await meter.measure([20, 85], with_temperature=True)
+    await meter.close()
+    assert await fake == b"1| 401120999|xy|5|1|1:"
+    assert reading.temperature_c == 25.0
 
 
 async def test_transaction_ids_advance_and_mismatch_is_protocol_error(pty_pair: Any) -> None:
@@ -84,11 +121,13 @@ async def test_transaction_ids_advance_and_mismatch_is_protocol_error(pty_pair: 
     ("method", "args", "command", "reply", "expected"),
     [
         ("is_on_standard", (), b"28| 401120999|aa:", b"28| 401120999|aa|1", True),
-        ("measure_temperature", (), b"36| 401120999|aa:", b"36| 401120999|aa|23.5", 23.5),
-        ("set_led", (True,), b"48| 401120999|aa:", b"48| 401120999|aa", None),
-        ("set_led", (False,), b"52| 401120999|aa:", b"52| 401120999|aa", None),
-        ("reset", (), b"64| 401120999|aa:", b"64| 401120999|aa", None),
-        ("calibrate", (), b"72| 401120999|aa:", b"72| 401120999|aa|-120|35|410", (-120, 35, 410)),
+        ("measure_temperature", (), b"36| 401120999|aa:", b"36| 401120999|aa|23", 23.0),
+        # ControlLEDOn/Off(SerialNo, TID, LED): the LED argument (profile led_argument = 1)
+        ("set_led", (True,), b"48| 401120999|aa|1:", b"48| 401120999|aa", None),
+        ("set_led", (False, 4), b"52| 401120999|aa|4:", b"52| 401120999|aa", None),
+        # Calibrate(SerialNo, TID, Angle, Cal2Standard, Cal2StandValue), reply p. 22
+        ("calibrate", (60,), b"72| 401120999|aa|2|0|0:", b"72| 401120999|aa|5361", 5361),
+        ("calibrate", (85,), b"72| 401120999|aa|4|0|0:", b"72| 401120999|aa|-120", -120),
     ],
 )
 async def test_other_opcodes(
@@ -103,6 +142,34 @@ async def test_other_opcodes(
     assert result == expected
 
 
+async def test_calibrate_on_a_second_standard_sends_its_value(pty_pair: Any) -> None:
+    meter = Zgm1120(port=pty_pair.path)
+    await meter.connect()
+    fake = asyncio.create_task(exchange(pty_pair, b"72| 401120999|aa|88\r\n"))
+    assert await meter.calibrate(20, second_standard_dgu=934) == 88
+    await meter.close()
+    assert await fake == b"72| 401120999|aa|1|1|934:"
+
+
+async def test_reset_expects_no_return_string(pty_pair: Any) -> None:
+    """Manual p. 20: Reset_Device has no return string; the driver must not wait for one."""
+    meter = Zgm1120(port=pty_pair.path, timeout_s=0.2)
+    await meter.connect()
+    await asyncio.wait_for(meter.reset(), 0.1)
+    assert await pty_pair.read_until(b":") == b"64| 401120999|aa:"
+    await meter.close()
+
+
+async def test_a_refused_command_raises_device_fault(pty_pair: Any) -> None:
+    meter = Zgm1120(port=pty_pair.path)
+    await meter.connect()
+    fake = asyncio.create_task(exchange(pty_pair, b"56| 401120999|aa|72|not on standard\r\n"))
+    with pytest.raises(DeviceFault, match="not on standard") as info:
+        await meter.calibrate(60)
+    await meter.close()
+    assert info.value.code == 72 and await fake == b"72| 401120999|aa|2|0|0:"
+
+
 async def test_autosend_yields_pushed_readings(pty_pair: Any) -> None:
     meter = Zgm1120(port=pty_pair.path, first_transaction_id="qq")
     await meter.connect()
@@ -113,14 +180,15 @@ async def test_autosend_yields_pushed_readings(pty_pair: Any) -> None:
 
     first = asyncio.create_task(next_reading())
     command = await pty_pair.read_until(b":")
-    assert command == b"6| 401120999|qq|7|1|0:"
-    pty_pair.send(b"6| 401120999|qq|120|5|450|40|801|77|1|22\r\n")
-    pty_pair.send(b"6| 401120999|qq|121|5|451|40|-2|77|1|22\r\n")
+    # AutoSendCluster (p. 22): enable 1, AngleBinary 7, isTemp 0
+    assert command == b"6| 401120999|qq|170:"
+    pty_pair.send(b"6| 401120999|qq|120|5|450|40|801|77|1|0\r\n")
+    pty_pair.send(b"6| 401120999|qq|121|5|451|40|1873|-2|1|0\r\n")
     a = await first
     b = await stream.__anext__()
     await stream.aclose()
     await meter.close()
-    assert a.values_gu == {20: 12.0, 60: 45.0, 85: 80.1}
+    assert a.values_gu == {20: 12.0, 60: 45.0, 85: 80.1} and a.temperature_c is None
     assert b.values_gu == {20: 12.1, 60: 45.1, 85: None} and b.overflow_deg == (85,)
 
 
@@ -137,12 +205,13 @@ async def test_missing_port_is_disconnected_naming_it() -> None:
         ("1| 401120999|xy|9x8|94|-1|-1|993|78|1|25", "bad 20 deg value '9x8'"),
         ("2| 401120999|xy|958|94|-1|-1|993|78|1|25", "opcode 2, expected 1"),
         ("1| 401120998|xy|958|94|-1|-1|993|78|1|25", "serial number '401120998'"),
+        ("1| 401120999|xy|958|94|-1|-1|993|78|2|25", "count 2"),
         ("garbage" * 30, "fewer than 3"),
     ],
 )
 def test_garbled_replies(line: str, text: str) -> None:
     with pytest.raises(ProtocolError, match=text) as info:
-        parse_zgm_measure(line, serial="401120999", tid="xy")
+        parse_zgm_measure(line, serial="401120999", tid="xy", with_temperature=True)
     quoted = repr(line) if len(repr(line)) <= 80 else repr(line)[:77] + "..."
     assert quoted in str(info.value)
 
@@ -190,7 +259,7 @@ def assert_sane(reading: GlossReading) -> None:
 @given(st.text(max_size=200))
 def test_garbage_into_gloss_parsers_raises_only_protocol_error(line: str) -> None:
     for parse in (
-        lambda: parse_zgm_measure(line, serial="401120999", tid="xy"),
+        lambda: parse_zgm_measure(line, serial="401120999", tid="xy", with_temperature=True),
         lambda: parse_gloss_line(LINE_PROFILE, line),
     ):
         try:
@@ -209,7 +278,9 @@ def test_garbage_into_gloss_parsers_raises_only_protocol_error(line: str) -> Non
 )
 def test_near_miss_zgm_replies_raise_only_protocol_error(fields: list[str]) -> None:
     try:
-        reading = parse_zgm_measure("|".join(fields), serial="401120999", tid="xy")
+        reading = parse_zgm_measure(
+            "|".join(fields), serial="401120999", tid="xy", with_temperature=False
+        )
     except ProtocolError:
         return
     assert_sane(reading)

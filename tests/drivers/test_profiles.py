@@ -1,4 +1,4 @@
-"""Profile loader: the built-in profiles' facts (shared/PROTOCOLS.md) and error messages."""
+"""Profile loader: the built-in profiles' facts (docs/PROTOCOLS.md) and error messages."""
 
 from __future__ import annotations
 
@@ -25,6 +25,7 @@ def test_builtin_profiles_load_with_their_kinds() -> None:
     assert kinds == {
         "oriental-az": StepperProfile,
         "applied-motion-mdx": StepperProfile,
+        "applied-motion-stq": StepperProfile,
         "stil-ruby": StilProfile,
         "zgm1120": ZgmProfile,
         "line-gloss-example": LineGlossProfile,
@@ -54,6 +55,8 @@ def test_oriental_az_register_map_matches_protocols_md() -> None:
     assert (s.ready, s.alarm, s.busy, s.moving, s.in_position, s.home_end) == (5, 7, 8, 13, 14, 4)
     assert (p.serial.parity, p.serial.bytesize, p.serial.stopbits) == ("E", 8, 1)
     assert {"registers.command_position", "status_bits.home_end"} <= set(p.unconfirmed)
+    # 0x0120 in one public AZ driver, 0x00CC in another (issue 28): not confirmed
+    assert "registers.feedback_position" in p.unconfirmed
 
 
 def test_applied_motion_numbers_become_protocol_addresses() -> None:
@@ -68,7 +71,35 @@ def test_applied_motion_numbers_become_protocol_addresses() -> None:
     # 1 count = 1/240 rps; at 20000 steps/rev: 240 counts per 20000 steps/s
     assert p.speed_counts_per_step_s == pytest.approx(240 / 20000)
     assert p.accel_counts_per_step_s2 == pytest.approx(6 / 20000)
-    assert {"opcodes.stop", "opcodes.home"} <= set(p.unconfirmed)
+    # the SCL opcodes are confirmed by 920-0072 p. 9; the MDX+ register numbers are not
+    # public (the old profile had both marks the wrong way round, issue 28)
+    assert not any(k.startswith("opcodes") for k in p.unconfirmed)
+    assert "registers" in p.unconfirmed and p.single_register_fields == ()
+
+
+def test_applied_motion_stq_map_is_the_published_table() -> None:
+    """920-0072 Rev E p. 7: alarm 40001 and status 40002 are SHORT; AC/DE/VE 40028-40030,
+    DI 40031-32, immediate absolute position 40007-08."""
+    p = load_stepper_profile("applied-motion-stq")
+    r = p.registers
+    assert (r.alarm_code, r.output_status, r.feedback_position) == (0, 1, 6)
+    assert (r.accel, r.decel, r.velocity, r.target_position, r.command) == (27, 28, 29, 30, 124)
+    assert p.single_register_fields == ("output_status", "alarm_code")
+    assert p.opcodes is not None and p.opcodes.alarm_reset == 0xBA and p.opcodes.stop == 0xE1
+    s = p.status_bits
+    assert (s.ready, s.fault, s.in_position, s.moving, s.alarm) == (0, 2, 3, 4, 9)
+    assert p.speed_counts_per_step_s == pytest.approx(240 / 20000)
+    assert p.accel_counts_per_step_s2 == pytest.approx(6 / 20000)
+    assert set(p.unconfirmed) == {"registers.command", "units.steps_per_rev", "serial"}
+
+
+def test_single_register_fields_accept_only_status_and_alarm(tmp_path: Path) -> None:
+    text = (PROFILES_DIR / "applied-motion-stq.toml").read_text()
+    old = 'single_register_fields = ["output_status", "alarm_code"]'
+    path = write(tmp_path, text.replace(old, 'single_register_fields = ["velocity"]'))
+    with pytest.raises(ProfileError) as info:
+        load_profile(path)
+    assert str(info.value).startswith(f"{path}: key 'single_register_fields[0]': ")
 
 
 def test_stil_profile_is_all_unconfirmed_and_templates_parse() -> None:

@@ -74,7 +74,9 @@ async def test_connect_identifies_and_sets_exposure(spectro: Any) -> None:
 async def test_measure_parses_luminance_and_spectrum(spectro: Any) -> None:
     dev, log = spectro
     reading = await dev.measure()
-    assert log[-1] == b"MEAS\r"
+    # the measurement, then its fence: the exposure set again, whose echo closes the reply
+    assert log[-2:] == [b"MEAS\r", b"EXP 10000\r"]
+    assert reading.stale_lines == 0
     assert reading.luminance_pct == 12.3456
     assert reading.values == tuple(SPECTRUM)
     assert reading.wavelengths_nm == tuple(float(w) for w in range(380, 781, 5))

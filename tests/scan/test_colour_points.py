@@ -117,7 +117,7 @@ def _spoil(r: SpectroReading, how: str) -> SpectroReading:
     elif how == "nan":
         v[3] = float("nan")
     elif how == "short":
-        wl, v = wl[2:-4], v[2:-4]
+        wl, v = wl[5:-4], v[5:-4]
     return SpectroReading(tuple(wl), tuple(v), r.luminance_pct, r.exposure_us)
 
 
@@ -127,7 +127,7 @@ def _spoil(r: SpectroReading, how: str) -> SpectroReading:
         ("length", "40 values for 41 wavelengths"),
         ("negative", "value at 430 nm is negative (-0.25, below the noise floor -0.05)"),
         ("nan", "value at 410 nm is nan"),
-        ("short", "wavelengths 400-740 nm do not cover 380-780 nm"),
+        ("short", "wavelengths 430-740 nm do not cover 400-700 nm"),
     ],
 )
 async def test_a_bad_spectrum_is_named_and_nothing_is_lost(

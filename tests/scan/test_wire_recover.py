@@ -7,6 +7,7 @@ no reading."""
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -20,7 +21,8 @@ pytestmark = pytest.mark.wire
 def test_scan_reconnects_the_spectro_and_stores_every_reading(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    # seeded: with seed 5 the spectro drops at the 10th point (not while the lab connects)
+    # seeded: with seed 5 the spectro drops during the scan (not while the lab connects);
+    # which points it hits depends on how many requests a reading takes (the STIL fence)
     faults = {"devices": '["spectro"]', "disconnect_rate": "0.15", "recover_after_s": "0.5"}
     sim = {**NOISELESS, "seed": "5"}
     cfg = lab_config(tmp_path, base="lab-sim-wire.toml", sim=sim, faults=faults)
@@ -34,7 +36,7 @@ def test_scan_reconnects_the_spectro_and_stores_every_reading(
     s = json.loads(out)
     assert s["state"] == "done" and s["readings"] == 11
     # the drop was reported and the port reopened while the scan went on
-    assert "(point 9, repeat 0: retry 1 of 2, reconnecting)" in err
+    assert re.search(r"\(point \d+, repeat 0: retry 1 of 2, reconnecting\)", err), err
     with RunStore(store) as st:
         points = st.points(s["run_id"])
         assert [p.index for p in points] == list(range(11))

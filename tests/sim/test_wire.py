@@ -256,16 +256,23 @@ async def test_zgm1120_pty_measure_reply_bytes(ptys) -> None:  # type: ignore[no
     try:
         writer.write(b"1| 401120999|ab|7|1|0:")
         reply = await asyncio.wait_for(reader.readuntil(b"\r\n"), 5)
-        # 81.26 -> 81.3 GU = 813 (0.1 GU); 93.04 -> 930; 85 deg 2500 GU overflows (-2)
-        assert reply == b"1| 401120999|ab|813|813|930|930|-2|-2|1|23\r\n"
-        writer.write(b"1| 401120999|cd|2|1|0:")  # 60 deg only
+        # 81.26 -> 81.3 GU = 813 dGU, 93.04 -> 930 dGU, each with the zero-current offset
+        # (94, 91: the manual's p. 24 example); 85 deg 2500 GU overflows: -2 in the OFFSET
+        # field (manual p. 16; the value field's 9999 is the simulator's choice); isTemp 0 -> temperature field 0 (p. 16)
+        assert reply == b"1| 401120999|ab|813|94|930|91|9999|-2|1|0\r\n"
+        writer.write(b"1| 401120999|cd|2|1|1:")  # 60 deg only, with temperature
         assert (
             await asyncio.wait_for(reader.readuntil(b"\r\n"), 5)
-            == b"1| 401120999|cd|-1|-1|930|930|-1|-1|1|23\r\n"
+            == b"1| 401120999|cd|-1|-1|930|91|-1|-1|1|23\r\n"
         )
-        writer.write(b"6| 401120999|ef|7|1|0:")  # AutoSend: no ack, readings pushed
+        writer.write(b"6| 401120999|ef|170:")  # AutoSend on, all angles: readings pushed
         pushed = await asyncio.wait_for(reader.readuntil(b"\r\n"), 5)
-        assert pushed == b"6| 401120999|ef|813|813|930|930|-2|-2|1|23\r\n"
+        assert pushed == b"6| 401120999|ef|813|94|930|91|9999|-2|1|0\r\n"
+        writer.write(b"72| 401120999|gh:")  # Calibrate without its arguments: error string
+        error = await asyncio.wait_for(reader.readuntil(b"\r\n"), 5)
+        while error.startswith(b"6| "):  # AutoSend is still on: pushes may come first
+            error = await asyncio.wait_for(reader.readuntil(b"\r\n"), 5)
+        assert error.startswith(b"56| 401120999|gh|72|")
     finally:
         writer.close()
 

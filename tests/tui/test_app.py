@@ -448,3 +448,40 @@ async def test_quitting_while_the_lab_opens_leaves_cleanly() -> None:
         await pilot.pause()
         gate.set()
     assert app.return_code == 0
+
+
+async def test_layout_follows_the_terminal_size() -> None:
+    """Issue 27 item 1: at 80 x 24 the plots take the screen and the status line says the
+    run and the lab; f swaps the form in; below 80 x 24 a message says what is needed."""
+    from textual.widgets import Static
+
+    from goniolab.scan.events import RunState
+    from goniolab.tui.app import GonioApp
+    from goniolab.tui.widgets import StatusLine
+    from tests.tui.tui_scripted import ScriptedBackend, wait_until
+
+    app = GonioApp(ScriptedBackend(gated=False), poll_hz=0, autostart=True)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await wait_until(pilot, lambda: app.run_state is RunState.DONE)
+        await pilot.pause()
+        left, live = app.query_one("#left"), app.query_one("#live")
+        assert not left.display and live.display
+        assert live.size.width == 80 and live.size.height >= 10
+        line = str(app.query_one(StatusLine).render())
+        assert "done" in line and "lamp" in line and "detector" in line
+        await pilot.press("f")
+        await pilot.pause()
+        assert left.display and not live.display
+        await pilot.press("f")
+        await pilot.pause()
+        assert not left.display and live.display
+        await pilot.resize_terminal(70, 20)
+        await pilot.pause()
+        note = app.query_one("#too-small", Static)
+        assert note.display and "at least 80 x 24" in str(note.render())
+        assert "70 x 20" in str(note.render())
+        assert not app.query_one("#top").display
+        await pilot.resize_terminal(160, 50)
+        await pilot.pause()
+        assert left.display and live.display and not note.display
+        assert left.size.width == 50

@@ -391,8 +391,16 @@ async def test_colour_columns_swatch_and_colour_plot(tmp_path: Path) -> None:
         np.testing.assert_allclose(c.measured_lab[:, 0], 116.0 * np.cbrt(y) - 16.0, atol=0.3)
         np.testing.assert_allclose(c.measured_lab[:, 0], c.predicted_lab[:, 0], atol=0.3)
         table = app.query_one(ColourTable)
-        assert table.row_count == 3
-        assert str(table.get_cell_at((1, 1))) == f"{c.measured_lab[1, 0]:.1f}"
+        assert table.row_count == 4  # three points and the din6175-2 overall verdict
+        assert str(table.get_cell_at((3, 0))) == "overall"
+        assert str(table.get_cell_at((3, 10))) in ("PASS", "FAIL")
+        assert str(table.get_cell_at((1, 2))) == f"{c.measured_lab[1, 0]:.1f}"
+        # the E2194 aspecular angle (theta_i - theta_r) and dE00 against colour-science
+        import colour
+
+        assert str(table.get_cell_at((0, 1))) == f"{45.0 - c.theta_r_deg[0]:.0f}"
+        de00 = colour.delta_E(c.measured_lab[1], c.predicted_lab[1], "CIE 2000")
+        assert str(table.get_cell_at((1, 9))) == f"{float(de00):.2f}".replace("-0.00", "0.00")
         swatch = str(app.query_one(ColourSwatch).render())
         assert f"L* {c.measured_lab[2, 0]:.1f}" in swatch  # the last point read
         await pilot.press("c")

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+import pytest
 from textual.pilot import Pilot
 from textual.widgets import DataTable
 
@@ -31,7 +32,10 @@ async def _wait_done(pilot: Pilot[int], app: GonioApp) -> None:
     await wait_until(pilot, lambda: any(n.title == "Scan" for n in app._notifications))
 
 
-def test_main_screen_after_scan(snap_compare: Callable[..., bool]) -> None:
+@pytest.mark.parametrize("size", [(80, 24), (120, 35), (140, 42), (200, 60)])
+def test_main_screen_after_scan(snap_compare: Callable[..., bool], size: tuple[int, int]) -> None:
+    # 80 x 24, the default of most terminals, up to a large one (issue 27 item 1): the
+    # plots first, the form behind f under 120 columns, the status line always there
     app, backend = _finished_app()
 
     async def run_before(pilot: Pilot[int]) -> None:
@@ -43,7 +47,7 @@ def test_main_screen_after_scan(snap_compare: Callable[..., bool]) -> None:
         app.clear_notifications()
         await settle(pilot, app)
 
-    assert snap_compare(app, terminal_size=SIZE, run_before=run_before)
+    assert snap_compare(app, terminal_size=size, run_before=run_before)
 
 
 def test_main_screen_log_view_and_timeout(snap_compare: Callable[..., bool]) -> None:

@@ -1,0 +1,118 @@
+"""The README's "Try it" examples are run, and their printed output compared (issue 27,
+item 4: docs that cannot go stale).
+
+A fenced ``sh`` block right after the line ``<!-- example: run -->`` is run with bash
+(``set -euo pipefail``) in one scratch directory shared by all such blocks, in order (a
+later block uses the files an earlier one wrote), with ``goniolab`` of this environment on
+the PATH, its own store and log directory, and ``configs/`` linked in. A fenced ``text``
+block right after ``<!-- example: output -->`` is what the run block before it must print
+on stdout, to the character. When a change moves a number, the test fails; regenerate the
+outputs with::
+
+    .venv/bin/python -m tests.test_readme_examples --update
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+README = ROOT / "README.md"
+_BLOCK = re.compile(
+    r"<!-- example: (?P<kind>run|output) -->\n```(?P<lang>\w*)\n(?P<body>.*?)```", re.S
+)
+
+
+@dataclass
+class Example:
+    """A run block and the output block that follows it (if any)."""
+
+    script: str
+    expected: str | None
+    output_span: tuple[int, int] | None  # where the output block's body is in the README
+
+
+def examples(text: str) -> list[Example]:
+    """The README's run blocks with their expected outputs, in order."""
+    found: list[Example] = []
+    for m in _BLOCK.finditer(text):
+        if m["kind"] == "run":
+            if m["lang"] != "sh":
+                raise ValueError(f"README: an example run block must be ```sh, got {m['lang']!r}")
+            found.append(Example(m["body"], None, None))
+        else:
+            if not found or found[-1].expected is not None:
+                raise ValueError("README: an example output block without its run block")
+            found[-1].expected = m["body"]
+            found[-1].output_span = m.span("body")
+    return found
+
+
+def run_examples(workdir: Path, found: list[Example]) -> list[str]:
+    """Run every block in ``workdir``; return their stdouts (fails on a non-zero exit)."""
+    (workdir / "configs").symlink_to(ROOT / "configs")
+    env = {
+        **os.environ,
+        "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}",
+        "XDG_DATA_HOME": str(workdir / ".data"),
+        "GONIOLAB_LOG_DIR": str(workdir / ".log"),
+        "COLUMNS": "100",
+        "NO_COLOR": "1",
+    }
+    outputs = []
+    for ex in found:
+        done = subprocess.run(
+            ["bash", "-c", "set -euo pipefail\n" + ex.script],
+            cwd=workdir, env=env, capture_output=True, text=True, timeout=600, check=False,
+        )  # fmt: skip
+        if done.returncode != 0:
+            raise AssertionError(
+                f"README example failed (exit {done.returncode}):\n{ex.script}\n"
+                f"stderr:\n{done.stderr[-3000:]}"
+            )
+        outputs.append(done.stdout)
+    return outputs
+
+
+def test_readme_has_examples() -> None:
+    found = examples(README.read_text())
+    assert len(found) >= 2 and any(ex.expected is not None for ex in found)
+
+
+@pytest.mark.slow
+def test_readme_examples_run_and_print_what_the_readme_says(tmp_path: Path) -> None:
+    found = examples(README.read_text())
+    outputs = run_examples(tmp_path, found)
+    for ex, out in zip(found, outputs, strict=True):
+        if ex.expected is not None:
+            assert out == ex.expected, (
+                f"README output is stale for:\n{ex.script}\nregenerate with "
+                "'.venv/bin/python -m tests.test_readme_examples --update'"
+            )
+
+
+def update() -> None:
+    """Rewrite the README's output blocks with what the run blocks print now."""
+    text = README.read_text()
+    found = examples(text)
+    with tempfile.TemporaryDirectory() as tmp:
+        outputs = run_examples(Path(tmp), found)
+    for ex, out in reversed(list(zip(found, outputs, strict=True))):
+        if ex.output_span is not None:
+            a, b = ex.output_span
+            text = text[:a] + out + text[b:]
+    README.write_text(text)
+
+
+if __name__ == "__main__":
+    if sys.argv[1:] != ["--update"]:
+        sys.exit("usage: python -m tests.test_readme_examples --update")
+    update()
