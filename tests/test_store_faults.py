@@ -294,12 +294,24 @@ def test_postgres_restart_mid_scan_reconnects_and_reclaims(
 
 @pytest.mark.slow
 def test_gloss_log_keeps_readings_through_a_full_disk(tmp_path: Path) -> None:
-    from goniolab.scan.events import GlossRead
     from goniolab.scan.plans import GlossPlan
     from goniolab.session import GlossSession
 
     cfg = load_lab_config(sim_config(tmp_path))
     with small_tmpfs(tmp_path / "disk", 1024) as disk, RunStore(disk / "s.sqlite") as store:
+        # the disk fills just before the third reading is written (a hook on the store:
+        # filling it from a subscriber raced the readings, which at a scale-0 clock were
+        # all written before the subscriber ran)
+        writes = {"n": 0}
+        add = store.add_gloss_reading
+
+        def add_filling_third(*args: Any, **kwargs: Any) -> Any:
+            writes["n"] += 1
+            if writes["n"] == 3:
+                fill(disk)
+            return add(*args, **kwargs)
+
+        store.add_gloss_reading = add_filling_third  # type: ignore[method-assign]
 
         async def go() -> tuple[Any, list[Any]]:
             events: list[Any] = []
@@ -308,13 +320,8 @@ def test_gloss_log_keeps_readings_through_a_full_disk(tmp_path: Path) -> None:
                 q = session.bus.subscribe()
 
                 async def watch() -> None:
-                    n = 0
                     while (ev := await q.get()) is not None:
                         events.append(ev)
-                        if isinstance(ev, GlossRead):
-                            n += 1
-                            if n == 2:
-                                await asyncio.to_thread(fill, disk)
                         if isinstance(ev, InstrumentError) and "kept" in ev.message:
                             (disk / "filler").unlink()
                             (disk / "filler-tail").unlink()
