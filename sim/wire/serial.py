@@ -292,6 +292,8 @@ class StilPtyDevice(PtyDevice):
         self.clock = spectro.clock
         self.profile = profile
         self._exposure_re = template_regex(profile.cmd_set_exposure)
+        #: Every measurement answered: (effective theta_i, theta_r, the reply's first line).
+        self.answered: list[tuple[float, float, str]] = []
 
     def _reply(self, lines: list[str], fault: Fault) -> None:
         p = self.profile
@@ -334,8 +336,13 @@ class StilPtyDevice(PtyDevice):
                 lines = [p.reply_set_exposure.format(exposure_us=exposure)]
         elif text == p.cmd_measure:
             lines = await self._measure_lines()
+            # what was answered at which geometry (the soak checks each stored reading
+            # against it: a reading stored at the wrong angle cannot hide)
+            self.answered.append((*self.spectro.geometry_deg(), lines[0]))
         else:
             lines = self._error(1, f"unknown command {text[:40]}")
+        if fault is Fault.LATE:  # busy: the answer, and every command behind it, waits
+            await asyncio.sleep(self.faults.spec.late_s)
         self._reply(lines, fault)
 
     async def _handle_overlong(self) -> None:
@@ -415,6 +422,8 @@ class ZgmPtyDevice(PtyDevice):
         self._sync_autosend()
         if reply is None:
             return
+        if fault is Fault.LATE:  # busy: the answer, and every command behind it, waits
+            await asyncio.sleep(self.faults.spec.late_s)
         data = reply.encode("ascii")
         if fault is Fault.GARBLE:
             data = self.gloss.faults.garble(data)
