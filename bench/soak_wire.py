@@ -299,6 +299,16 @@ def main() -> int:
     ap.add_argument("--garble-rate", type=float, default=0.01)
     ap.add_argument("--disconnect-rate", type=float, default=0.005)
     ap.add_argument(
+        "--late-rate", type=float, default=0.0, help="serial answers --late-s late (default 0)"
+    )
+    ap.add_argument("--late-s", type=float, default=1.5, help="how late, s (default 1.5)")
+    ap.add_argument(
+        "--freeze-store-s",
+        type=float,
+        default=0.0,
+        help="hold the store's write lock this long after the scan's 2nd point (default 0)",
+    )
+    ap.add_argument(
         "--no-arm-drops",
         action="store_true",
         help="the arms get timeouts and garbled frames only (their link never drops)",
@@ -315,6 +325,9 @@ def main() -> int:
                 timeout_rate=args.timeout_rate,
                 garble_rate=args.garble_rate,
                 disconnect_rate=args.disconnect_rate,
+                late_rate=args.late_rate,
+                late_s=args.late_s,
+                freeze_store_s=args.freeze_store_s,
                 arm_drops=not args.no_arm_drops,
                 workdir=Path(tmp),
             )
@@ -325,7 +338,12 @@ def main() -> int:
     else:
         for key, value in out.items():
             print(f"{key:20s} {value}")
-    bad = out["gloss"]["lost"] or out["scan"]["lost"] or out["runs_left_running"]
+    bad = (
+        out["gloss"]["lost"]
+        or out["scan"]["lost"]
+        or out["runs_left_running"]
+        or out["scan"]["readings_off_geometry"]
+    )
     return 1 if bad else 0
 
 

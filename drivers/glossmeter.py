@@ -49,7 +49,13 @@ import string
 import time
 from collections.abc import AsyncGenerator, Sequence
 
-from drivers.base import GLOSS_ANGLES_DEG, DeviceFault, GlossReading, ProtocolError
+from drivers.base import (
+    GLOSS_ANGLES_DEG,
+    DeviceFault,
+    DeviceTimeout,
+    GlossReading,
+    ProtocolError,
+)
 from drivers.profiles import (
     LineGlossProfile,
     SerialSettings,
@@ -307,7 +313,12 @@ class Zgm1120:
         deadline = loop.time() + budget
         while True:
             left = max(0.0, deadline - loop.time())
-            line = await self._io.read_line(self.profile.reply_terminator, left)
+            try:
+                line = await self._io.read_line(self.profile.reply_terminator, left)
+            except DeviceTimeout:
+                raise DeviceTimeout(
+                    f"no reply on {self._io.port!r} within {budget:g} s", device=self.name
+                ) from None
             fields = line.split("|")
             if len(fields) >= 3 and fields[1].strip() == self.serial_number and fields[2] != tid:
                 self.stale_replies += 1
