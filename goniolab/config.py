@@ -220,6 +220,9 @@ class SpectroConfig(_Strict):
     exposure_us: Annotated[int, Field(strict=True, ge=1)] = 10000
     detector_cone_deg: Annotated[float, Field(strict=True, ge=0.0, lt=90.0)] = 6.0
     timeout_s: PositiveFloat = 2.0
+    #: the certified standards (goniolab/scan/standards.py), relative to this file's
+    #: directory, else the shipped configs/standards.toml
+    standards: str = "standards.toml"
 
 
 class GlossmeterConfig(_Strict):

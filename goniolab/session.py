@@ -42,6 +42,7 @@ from goniolab.scan.gloss import GlossLogger, predict_gloss
 from goniolab.scan.plans import BrdfPlan, GlossPlan
 from goniolab.scan.predict import Predictor
 from goniolab.scan.runner import ArmMotion, DryRun, PlanRefused, RunResult, ScanRunner, dry_run
+from goniolab.scan.standards import Standard
 from goniolab.store import RunRecord, RunStore
 
 __all__ = [
@@ -326,7 +327,15 @@ class ScanSession:
             park_deg=(g.park.theta_i_deg, g.park.theta_r_deg),
             specimen_hook=hook,
             point_colour=PointColour.from_config(cfg),
+            mirror_standard=self.standard("mirror") if plan.mirror_reference else None,
         )
+
+    def standard(self, name: str) -> Standard:
+        """The lab's certified standard ``name`` (``[spectro] standards``)."""
+        from goniolab.scan.standards import load_standards, standards_path
+
+        cfg = self.config
+        return load_standards(standards_path(cfg.source, cfg.spectro.standards)).get(name)
 
     async def run(self, runner: ScanRunner) -> RunResult:
         """Run to the end (done, aborted or failed: the arms are parked).

@@ -78,7 +78,10 @@ def format_summary(summary: dict[str, Any]) -> str:
         + ("" if summary["complete"] else " (incomplete)"),
     ]
     if summary.get("mirror_pct") is not None:
-        lines.append(f"  mirror reference: {summary['mirror_pct']:.3f} % (set to 100 %)")
+        lines.append(
+            f"  mirror reference: {summary['mirror_pct']:.3f} % of the instrument's reference "
+            "(divided out spectrally, times the mirror's certificate)"
+        )
     lines.append(f"  RMSE measured - predicted: {_fmt(summary['rmse_pct'], ' %', '.3f')}")
     mp, pp = summary.get("measured_peak"), summary.get("predicted_peak")
     for label, pk in (("measured ", mp), ("predicted", pp)):

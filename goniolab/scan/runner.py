@@ -74,6 +74,8 @@ from goniolab.scan.events import (
 from goniolab.scan.exposure import AutoExposure
 from goniolab.scan.plans import MIRROR_INDEX, BrdfPlan, PlanPoint
 from goniolab.scan.predict import Predictor
+from goniolab.scan.reference import SpectralReference
+from goniolab.scan.standards import Standard
 from goniolab.scan.summary import summarize_brdf
 from goniolab.store import RunStore
 
@@ -369,6 +371,7 @@ class ScanRunner:
         move_retries: int = 2,
         reconnect_backoff_s: float = 0.5,
         point_colour: PointColour | None = None,
+        mirror_standard: Standard | None = None,
     ) -> None:
         if reading_retries < 0:
             raise ValueError(f"reading_retries must be >= 0, got {reading_retries}")
@@ -394,6 +397,14 @@ class ScanRunner:
         self.move_retries = move_retries
         self.reconnect_backoff_s = reconnect_backoff_s
         self.point_colour = point_colour if point_colour is not None else PointColour()
+        if plan.mirror_reference and mirror_standard is None:
+            from goniolab.scan.standards import load_standards, standards_path
+
+            # the shipped certificate; its file is cited in every reading it references
+            mirror_standard = load_standards(standards_path("")).get("mirror")
+        #: the certified mirror the reference readings are divided by (docs/CALIBRATION.md)
+        self.mirror_standard = mirror_standard
+        self._reference: SpectralReference | None = None
         #: the last colour took under _INLINE_COLOUR_S: compute the next on the loop
         self._colour_inline = False
         if plan.mirror_reference and specimen_hook is None:
@@ -632,7 +643,7 @@ class ScanRunner:
                 )
 
     async def _colour_of(
-        self, reading: SpectroReading, p: PlanPoint, mirror_pct: float | None
+        self, reading: SpectroReading, p: PlanPoint, absolute: Sequence[float] | None
     ) -> tuple[dict[str, float] | None, str]:
         """The reading's colour (computed in a worker thread), or why there is none.
 
@@ -642,8 +653,9 @@ class ScanRunner:
         """
         from goniolab.colour.spectra import ColourError
 
-        mirror = None if p.index == MIRROR_INDEX or not self.plan.mirror_reference else mirror_pct
-        args = (reading.wavelengths_nm, reading.values, p.theta_r_deg, mirror)
+        # referenced to the certified mirror: the absolute spectrum (no further scaling)
+        spectrum = reading.values if absolute is None else tuple(absolute)
+        args = (reading.wavelengths_nm, spectrum, p.theta_r_deg, None)
         measured = self.point_colour.measured
         try:
             if self._colour_inline:
@@ -760,6 +772,26 @@ class ScanRunner:
             return None
         return math.fsum(vals) / len(vals)
 
+    def _load_reference(self) -> SpectralReference | None:
+        """The mirror reference of the run (its repeats averaged as spectra) once all its
+        readings are stored, else ``None``."""
+        if not self.plan.mirror_reference or self.mirror_standard is None:
+            return None
+        rows = [p for p in self.store.points(self.run_id) if p.index == MIRROR_INDEX]
+        if len(rows) < self.plan.repeats:
+            return None
+        readings = [
+            (
+                list(p.raw.get("wavelengths_nm") or ()),
+                list(p.raw.get("values") or ()),
+                float(p.raw.get("luminance_pct", p.luminance_pct)),
+            )
+            for p in rows
+        ]
+        return SpectralReference.from_readings(
+            self.mirror_standard, self.plan.theta_i_deg, readings, self.point_colour.settings
+        )
+
     # ------------------------------------------------------------------ run
     async def run(self) -> RunResult:
         """Take every reading of the plan not yet in the store; return the final state.
@@ -857,6 +889,7 @@ class ScanRunner:
                 "spectro",
             )
             self._mirror_pct = self._mirror_level()
+            self._reference = self._load_reference()
             eta.start(self.clock.now())
             for k, p in enumerate(todo):
                 await self._go_to(p)
@@ -893,8 +926,8 @@ class ScanRunner:
         """Read ``p`` (with retries), scale it by the mirror level, store it, publish it."""
         reading = await self._read_spectro(p)
         raw_pct = float(reading.luminance_pct)
-        value = raw_pct if p.index == MIRROR_INDEX else self._relative_to_mirror(raw_pct)
-        colour, colour_error = await self._colour_of(reading, p, self._mirror_pct)
+        value, absolute, reference = self._referenced(reading, p)
+        colour, colour_error = await self._colour_of(reading, p, absolute)
         ts = time.time()
         self.store.add_point(
             self.run_id,
@@ -912,6 +945,8 @@ class ScanRunner:
                 "values": list(reading.values),
                 "mirror_pct": self._mirror_pct,
                 "clock_s": self.clock.now(),
+                **({"reference": reference} if reference else {}),
+                **({"absolute_values": list(absolute)} if absolute is not None else {}),
             },
             timestamp=ts,
             colour=colour,
@@ -934,12 +969,33 @@ class ScanRunner:
             )
         )
 
-    def _relative_to_mirror(self, raw_pct: float) -> float:
-        """A sample reading in % of the mirror reference (once its readings are all
-        stored), else as read."""
-        if self._mirror_pct is None and self.plan.mirror_reference:
+    def _referenced(
+        self, reading: SpectroReading, p: PlanPoint
+    ) -> tuple[float, tuple[float, ...] | None, dict[str, Any]]:
+        """A sample reading referenced to the certified mirror (once the mirror's readings
+        are all stored; :class:`~goniolab.scan.reference.SpectralReference`):
+        ``(luminance %, absolute spectrum % or None, provenance)``; a mirror reading or a
+        run without reference as read."""
+        raw_pct = float(reading.luminance_pct)
+        if p.index == MIRROR_INDEX or not self.plan.mirror_reference:
+            return raw_pct, None, {}
+        if self._reference is None:
             self._mirror_pct = self._mirror_level()
-        return raw_pct if self._mirror_pct is None else 100.0 * raw_pct / self._mirror_pct
+            self._reference = self._load_reference()
+        if self._reference is None:
+            return raw_pct, None, {}
+        absolute, lum, info = self._reference.apply(reading.wavelengths_nm, reading.values, raw_pct)
+        if info["method"] != "spectral":
+            self.bus.publish(
+                InstrumentError(
+                    run_id=self.run_id,
+                    device="spectro",
+                    message=f"point {p.index}, repeat {p.repeat}: mirror reference applied "
+                    f"as a scalar: {info['method']}",
+                    fatal=False,
+                )
+            )
+        return lum, absolute, info
 
     def _publish_progress(self, eta_s: float) -> None:
         self.bus.publish(
