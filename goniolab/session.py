@@ -406,6 +406,7 @@ class ScanSession:
             run_id=run_id,
             bus=self.bus,
             move_timeout_s=cfg.goniometer.move_timeout_s,
+            standard=self.standard("black_glass"),
         )
         if started is not None:
             started(runner)

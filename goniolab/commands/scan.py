@@ -410,6 +410,17 @@ async def _execute_align(
     print(f"  sample tilt:              {result.sample_tilt_deg:+.3f} deg")
     print(f"  corrections (lamp, detector): {c[0]:+.3f}, {c[1]:+.3f} deg")
     print(f"  black-glass fit: {100 * result.standard_rms_rel:.2f} % rms")
+    fit = result.standard_fit
+    if fit:
+        print(
+            f"  zeros' 1-sigma: lamp {fit['lamp_zero_sigma_deg']:.3f}, detector "
+            f"{fit['detector_zero_sigma_deg']:.3f} deg; scale {fit['scale']:.3f} of certificate "
+            f"{result.standard.get('certificate', '-')}"
+        )
+        print(
+            f"  lamp - detector zero: fit {fit['fit_difference_deg']:+.3f} deg, peaks' "
+            f"midpoints (no Fresnel shape) {fit['geometric_difference_deg']:+.3f} deg"
+        )
     if write_config:
         print(f"  written to {config_path} [alignment]")
     return 0

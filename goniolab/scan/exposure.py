@@ -21,10 +21,39 @@ from dataclasses import dataclass
 
 from drivers.base import Spectrocolorimeter, SpectroReading
 
-__all__ = ["SATURATED", "AutoExposure"]
+__all__ = [
+    "NOISE_FLOOR_FRACTION",
+    "QUALITY_FLAGS",
+    "SATURATED",
+    "AutoExposure",
+    "reading_quality",
+]
 
 #: A peak fraction at or above this is a clipped channel.
 SATURATED = 0.999
+
+#: A strongest channel below this fraction of full scale is under the noise floor: with a
+#: 16-bit detector that is < 1300 counts, where dark-current shot noise and read noise
+#: (tens of counts, sim/instruments.py SpectroChain) make the weak channels' values
+#: meaningless (several % each) -- the reading is stored but flagged and left out of fits.
+NOISE_FLOOR_FRACTION = 0.02
+
+#: Per-reading quality flags (stored in each reading's ``raw["quality"]``).
+QUALITY_FLAGS: tuple[str, ...] = ("ok", "saturated", "under_noise_floor", "unknown")
+
+
+def reading_quality(reading: SpectroReading) -> str:
+    """``"saturated"`` (a clipped channel: the values understate the light),
+    ``"under_noise_floor"`` (:data:`NOISE_FLOOR_FRACTION`), ``"ok"``, or ``"unknown"`` when
+    the instrument reports no signal level."""
+    pf = reading.peak_fraction
+    if pf is None:
+        return "unknown"
+    if pf >= SATURATED:
+        return "saturated"
+    if pf < NOISE_FLOOR_FRACTION:
+        return "under_noise_floor"
+    return "ok"
 
 
 @dataclass(frozen=True, slots=True)

@@ -18,9 +18,19 @@ from goniolab.lab import draw_session
 from goniolab.optics.apertures import Cone
 from goniolab.optics.facet import cap_overlap_fraction
 from goniolab.optics.fresnel import fresnel
-from goniolab.scan.align import AlignPlan, fit_standard, half_max_midpoint
+from goniolab.scan.align import (
+    AlignGates,
+    AlignPlan,
+    AlignRefused,
+    StandardFit,
+    check_standard,
+    fit_standard,
+    fit_standard_full,
+    half_max_midpoint,
+)
 from goniolab.scan.exposure import AutoExposure
 from goniolab.scan.plans import PlanError
+from goniolab.store import RunStore
 
 
 def test_black_glass_fit_recovers_both_zero_offsets_from_synthetic_readings() -> None:
@@ -153,3 +163,87 @@ def test_align_on_the_twin_recovers_offsets_and_tilt_within_005_deg(
     )
     assert abs(c) > 1.0  # uncorrected, the peak would be off by this much
     assert abs(float(scan["peak_offset_deg"])) < 0.05  # type: ignore[arg-type]
+
+
+def _misplaced(monkeypatch: pytest.MonkeyPatch, instead: str) -> None:
+    """The operator puts ``instead`` where the black-glass standard belongs."""
+    from goniolab.lab import Lab
+
+    place = Lab._place_specimen
+
+    async def wrong(self: Lab, which: str) -> None:
+        await place(self, instead if which == "standard" else which)
+
+    monkeypatch.setattr(Lab, "_place_specimen", wrong)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("instead", "says"),
+    [("sample", "missing or misplaced"), ("mirror", "reads like a mirror")],
+)
+def test_align_refuses_a_missing_or_wrong_standard_and_writes_nothing(
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+    instead: str,
+    says: str,
+) -> None:
+    # issue 21: with the standard not placed, the alignment exited 0 and wrote zeros of
+    # +3.4 / +3.3 deg (truth -0.14 / +0.12); with the mirror, -39.9 deg
+    cfg_path = misaligned_config(tmp_path, 5)
+    before = cfg_path.read_text()
+    _misplaced(monkeypatch, instead)
+    code = main(["scan", "--config", str(cfg_path), "--plan", "align", "--time-scale", "0"])
+    err = capsys.readouterr().err
+    assert code == 1
+    assert "refused" in err and says in err, err
+    assert "certificate SIM-BG-0001" in err
+    assert cfg_path.read_text() == before  # nothing written
+    with RunStore(str(tmp_path / "runs.sqlite")) as store:
+        run = store.list_runs()[0]
+        assert run.status == "failed" and says in run.reason
+
+
+def test_check_standard_gates_name_what_failed() -> None:
+    peaks = [
+        {"specimen": "standard", "theta_i_deg": t, "amplitude_pct": 100 * float(
+            fresnel(math.cos(math.radians(t)), 1.567))}
+        for t in (20.0, 40.0, 60.0)
+    ]  # fmt: skip
+    good = StandardFit(0.1, -0.1, 1.0, 0.0, 0.003, 0.005, 0.006, 0.2)
+    check_standard(good, peaks, AlignGates(), n=1.567, certificate="C", saturated=0)
+    with pytest.raises(AlignRefused, match="3 black-glass readings saturated"):
+        check_standard(good, peaks, AlignGates(), n=1.567, certificate="C", saturated=3)
+    rough = StandardFit(0.1, -0.1, 1.0, 0.0, 0.043, 0.005, 0.006, 0.2)
+    with pytest.raises(AlignRefused, match=r"4\.30 % rms"):
+        check_standard(rough, peaks, AlignGates(), n=1.567, certificate="C", saturated=0)
+    vague = StandardFit(0.1, -0.1, 1.0, 0.0, 0.003, 0.2, 0.006, 0.2)
+    with pytest.raises(AlignRefused, match=r"uncertain to 0\.2 deg"):
+        check_standard(vague, peaks, AlignGates(), n=1.567, certificate="C", saturated=0)
+    skew = StandardFit(0.1, -0.1, 1.0, 0.0, 0.003, 0.005, 0.006, 0.5)
+    with pytest.raises(AlignRefused, match=r"midpoints at \+0\.500 deg"):
+        check_standard(skew, peaks, AlignGates(), n=1.567, certificate="C", saturated=0)
+    dim = [{**p, "amplitude_pct": 0.43 * p["amplitude_pct"]} for p in peaks]
+    with pytest.raises(AlignRefused, match="missing or misplaced"):
+        check_standard(good, dim, AlignGates(), n=1.567, certificate="C", saturated=0)
+
+
+def test_fit_reports_uncertainties_and_the_geometric_difference() -> None:
+    # noise-free closed form with a 0.3 % floor of noise: the zeros' sigma is small and the
+    # half-maximum midpoints give dL - dD without the Fresnel shape
+    rng = np.random.default_rng(7)
+    d_l, d_d = 0.2, -0.3
+    lamp, det, vals = [], [], []
+    for ti in (20.0, 40.0, 60.0):
+        for tr in np.arange(ti - 4.5, ti + 4.5001, 0.25):
+            gamma = math.radians(abs(tr + d_d - ti - d_l))
+            o = float(cap_overlap_fraction(np.array([gamma]), math.radians(3), math.radians(3))[0])
+            r = float(fresnel(math.cos(math.radians(ti + d_l)), 1.567))
+            lamp.append(ti)
+            det.append(float(tr))
+            vals.append(100 * r * o * (1 + 0.003 * rng.standard_normal()))
+    fit = fit_standard_full(lamp, det, vals, source=Cone(6.0), detector=Cone(6.0))
+    assert fit.scale == pytest.approx(1.0, abs=0.02)
+    assert 0 < fit.lamp_zero_sigma_deg < 0.05 and 0 < fit.detector_zero_sigma_deg < 0.05
+    assert fit.geometric_difference_deg == pytest.approx(d_l - d_d, abs=0.03)
