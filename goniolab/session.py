@@ -360,13 +360,15 @@ class ScanSession:
         self,
         plan: AlignPlan,
         *,
-        write_config: str | Path | None = None,
+        save_state: bool = True,
         started: Callable[[AlignRunner], None] | None = None,
     ) -> tuple[int, AlignResult]:
         """Run an alignment (:mod:`goniolab.scan.align`): home the arms if needed, measure
         the black-glass standard and the sample (swapped by the simulated lab, or by the
-        operator), store the readings and the result with a new ``align`` run, write
-        ``[alignment]`` into ``write_config`` when given, and park the arms. The lab's
+        operator), store the readings and the result with a new ``align`` run, save it to
+        the lab's alignment state file when ``save_state`` (beside the store,
+        :func:`goniolab.config.alignment_state_path`; the config file is never rewritten)
+        before the run is marked done, and park the arms. The lab's
         goniometer then corrects every move with the result (later scans of this session
         see the requested angles). ``started`` gets the runner before its first reading
         (the TUI keeps it to abort).
@@ -377,7 +379,7 @@ class ScanSession:
             The alignment failed (an instrument fault, no peak found; the run is marked
             ``failed`` with the reason) or was aborted (marked ``aborted``).
         """
-        from goniolab.config import write_alignment
+        from goniolab.config import write_alignment_state
 
         cfg = self.config
         model = await self.models.get(plan.sample)
@@ -408,6 +410,23 @@ class ScanSession:
             move_timeout_s=cfg.goniometer.move_timeout_s,
             standard=self.standard("black_glass"),
         )
+
+        def save(result: AlignResult) -> str:
+            if not save_state:
+                return ""
+            path = write_alignment_state(
+                cfg,
+                {
+                    "lamp_zero_deg": round(result.lamp_zero_deg, 4),
+                    "detector_zero_deg": round(result.detector_zero_deg, 4),
+                    "sample_tilt_deg": round(result.sample_tilt_deg, 4),
+                    "run": run_id,
+                },
+                note=f"goniolab scan --plan align, run {run_id}",
+            )
+            return str(path)
+
+        runner.persist = save
         if started is not None:
             started(runner)
         try:
@@ -422,17 +441,6 @@ class ScanSession:
         finally:
             with contextlib.suppress(DeviceError):
                 await self.lab.goniometer.park(home_timeout_s(cfg))
-        if write_config is not None:
-            write_alignment(
-                write_config,
-                {
-                    "lamp_zero_deg": round(result.lamp_zero_deg, 4),
-                    "detector_zero_deg": round(result.detector_zero_deg, 4),
-                    "sample_tilt_deg": round(result.sample_tilt_deg, 4),
-                    "run": run_id,
-                },
-                note=f"goniolab scan --plan align, run {run_id}",
-            )
         self.lab.goniometer.corrections_deg = result.corrections_deg()
         return run_id, result
 

@@ -9,8 +9,9 @@ Ctrl-C cancels at once (the arms are still parked, best effort).
 ``goniolab scan --plan align`` runs the alignment instead (:mod:`goniolab.scan.align`, via
 :meth:`goniolab.session.ScanSession.align`): the black-glass standard, then the sample, at
 two or more incidences; it prints the arms' zero offsets and the sample's tilt, stores them
-with the run and writes them into the config's ``[alignment]`` table
-(``--no-write-config`` keeps the file as it is), which corrects every later move.
+with the run and saves them to the lab's alignment state file beside the store (never the
+config file: :func:`goniolab.config.alignment_state_path`; ``--no-write-config`` stores them
+with the run only), whose values correct every later move.
 ``--auto-exposure`` adapts the spectro's exposure to each reading
 (:mod:`goniolab.scan.exposure`). ``--adaptive`` places the ``--theta-r`` angles where the
 predicted curve bends (:mod:`goniolab.scan.adaptive`): as many readings, the same sweep.
@@ -391,14 +392,12 @@ async def _execute_align(
         bar = ProgressBar(sys.stderr, session.clock_scale)
         report = asyncio.create_task(_report(session.bus.subscribe(), bar))
         try:
-            run_id, result = await session.align(
-                plan, write_config=config_path if write_config else None
-            )
+            run_id, result = await session.align(plan, save_state=write_config)
         finally:
             session.bus.close()
             await report
             bar.close()
-    payload = {"run_id": run_id, "state": "done", "config_written": write_config}
+    payload = {"run_id": run_id, "state": "done", "config_written": False}
     payload.update(result.as_dict())
     if json_out:
         print(json.dumps(payload, indent=2))
@@ -421,8 +420,12 @@ async def _execute_align(
             f"  lamp - detector zero: fit {fit['fit_difference_deg']:+.3f} deg, peaks' "
             f"midpoints (no Fresnel shape) {fit['geometric_difference_deg']:+.3f} deg"
         )
-    if write_config:
-        print(f"  written to {config_path} [alignment]")
+    if result.state_file:
+        print(
+            f"  saved to {result.state_file} (the lab's alignment state; {config_path} untouched)"
+        )
+    else:
+        print("  stored with the run only: later scans are not corrected")
     return 0
 
 
@@ -648,7 +651,7 @@ def register(subparsers: Any) -> None:
         default="sweep",
         help="sweep (--theta-r), e2194: the ASTM E2194/E2539, DIN 6175-2 multi-angle geometry, "
         "or align: find the arms' zero offsets and the sample's tilt (black-glass standard, "
-        "then the sample) and write [alignment]",
+        "then the sample) and save them to the lab's alignment state file",
     )
     from goniolab.scan.plans import DEFAULT_REPEATS  # light: stdlib and drivers.base
 
@@ -679,7 +682,8 @@ def register(subparsers: Any) -> None:
     p.add_argument(
         "--no-write-config",
         action="store_true",
-        help="--plan align: store the result with the run only, leave the config file as it is",
+        help="--plan align: store the result with the run only, not in the lab's alignment "
+        "state file (the config file is never rewritten)",
     )
     p.add_argument(
         "--adaptive",

@@ -183,6 +183,8 @@ class AlignResult:
     #: the black-glass fit and its gates' numbers (:class:`StandardFit`), the standard cited
     standard_fit: dict[str, float] = field(default_factory=dict)
     standard: dict[str, Any] = field(default_factory=dict)
+    #: where the result was saved (the lab's alignment state file), "" = with the run only
+    state_file: str = ""
 
     def corrections_deg(self) -> tuple[float, float]:
         """Added to requested angles before the arms move (``[alignment]``): the sample
@@ -206,6 +208,7 @@ class AlignResult:
             "peaks": self.peaks,
             "standard_fit": self.standard_fit,
             "standard": self.standard,
+            "state_file": self.state_file,
         }
 
 
@@ -467,6 +470,9 @@ class AlignRunner:
         self.standard = standard
         self.gates = gates or AlignGates()
         self._saturated = {"standard": 0, "sample": 0}
+        #: Saves a result before the run is marked done; returns where ("" = nowhere). A
+        #: failure fails the run (the result stays stored with it).
+        self.persist: Callable[[AlignResult], str] | None = None
         self._unknown_level = 0
         self._exposure_us = plan.exposure_us
         self._index = 0
@@ -697,6 +703,22 @@ class AlignRunner:
         finally:
             self.goniometer.corrections_deg = saved
         self.store.update_model(self.run_id, {"alignment": result.as_dict()})
+        if self.persist is not None:
+            try:
+                result.state_file = self.persist(result)
+            except Exception as exc:
+                reason = f"the result could not be saved: {exc}"
+                self.store.set_status(self.run_id, RunState.FAILED.value, reason)
+                self.finished = True
+                self.bus.publish(
+                    StateChanged(run_id=self.run_id, state=RunState.FAILED, reason=reason)
+                )
+                self.bus.publish(
+                    RunFinished(run_id=self.run_id, state=RunState.FAILED, reason=reason,
+                                summary=result.as_dict())
+                )  # fmt: skip
+                raise
+            self.store.update_model(self.run_id, {"alignment": result.as_dict()})
         self.store.set_status(self.run_id, RunState.DONE.value)
         self.bus.publish(StateChanged(run_id=self.run_id, state=RunState.DONE, reason=""))
         self.finished = True

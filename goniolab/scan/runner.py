@@ -86,6 +86,7 @@ __all__ = [
     "RunResult",
     "ScanRunner",
     "dry_run",
+    "reachable_range",
 ]
 
 #: Called with "mirror" before the mirror reference readings and "sample" after them;
@@ -128,14 +129,20 @@ class PlanRefused(Exception):
     """
 
     def __init__(
-        self, what: str, theta_i_deg: float, theta_r_deg: float, cause: DeviceError
+        self,
+        what: str,
+        theta_i_deg: float,
+        theta_r_deg: float,
+        cause: DeviceError,
+        reach: str = "",
     ) -> None:
         self.what = what
         self.theta_i_deg = theta_i_deg
         self.theta_r_deg = theta_r_deg
-        self.reason = cause.message
+        self.reason = cause.message + (f"; {reach}" if reach else "")
         super().__init__(
             f"{what} (theta_i={theta_i_deg:g} deg, theta_r={theta_r_deg:g} deg) is unsafe: {cause}"
+            + (f"; {reach}" if reach else "")
         )
 
     @property
@@ -226,6 +233,23 @@ class DryRun:
         return math.fsum(self.point_times_s) + self.park_s
 
 
+def reachable_range(goniometer: Goniometer) -> str:
+    """The requested angles the arms can reach once the alignment corrections are added
+    (``""`` without corrections): a sweep to a limit that an alignment moved is refused
+    with this range rather than failing mid-run."""
+    corr = getattr(goniometer, "corrections_deg", (0.0, 0.0))
+    if not any(corr):
+        return ""
+    parts = []
+    for axis, c, label in ((goniometer.lamp, corr[0], "theta_i"), (goniometer.detector, corr[1], "theta_r")):  # fmt: skip
+        lo, hi = axis.limits_deg
+        parts.append(f"{label} {lo - c:.3f}..{hi - c:.3f} deg")
+    return (
+        f"with the alignment corrections (lamp {corr[0]:+.3f}, detector {corr[1]:+.3f} deg) the "
+        f"arms reach {', '.join(parts)}"
+    )
+
+
 def dry_run(
     points: Sequence[PlanPoint],
     goniometer: Goniometer,
@@ -269,7 +293,8 @@ def dry_run(
         try:
             goniometer.check_geometry(*park_deg)
         except (LimitError, InterlockError) as exc:
-            raise PlanRefused("park position", *park_deg, exc) from exc
+            reach = reachable_range(goniometer) if isinstance(exc, LimitError) else ""
+            raise PlanRefused("park position", *park_deg, exc, reach) from exc
     times: list[float] = []
     pos = start_deg
     moves = 0
@@ -281,7 +306,8 @@ def dry_run(
                 goniometer.check_geometry(*target)
             except (LimitError, InterlockError) as exc:
                 what = "mirror reference" if p.index == MIRROR_INDEX else f"point {p.index}"
-                raise PlanRefused(what, *target, exc) from exc
+                reach = reachable_range(goniometer) if isinstance(exc, LimitError) else ""
+                raise PlanRefused(what, *target, exc, reach) from exc
             checked.add(target)
         t = reading_time_s
         if target != pos:

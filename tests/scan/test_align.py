@@ -136,6 +136,7 @@ def test_align_on_the_twin_recovers_offsets_and_tilt_within_005_deg(
     # prediction); seed 5 a large tilt (0.92 deg) and closes the loop with a scan;
     # bench/bench_align.py runs 20 sessions
     cfg_path = misaligned_config(tmp_path, seed)
+    before = cfg_path.read_text()
     truth = draw_session(load_lab_config(cfg_path))
     keys = ("lamp_zero_offset_deg", "detector_zero_offset_deg", "sample_tilt_deg")
     assert min(abs(truth[k]) for k in keys) > (0.75 if seed == 225 else 0.02)
@@ -148,10 +149,43 @@ def test_align_on_the_twin_recovers_offsets_and_tilt_within_005_deg(
         ("sample_tilt_deg", "sample_tilt_deg"),
     ):
         assert got[key] == pytest.approx(truth[true_key], abs=0.05), key
-    alignment = load_lab_config(cfg_path).alignment  # written into the config
+    # saved beside the store, never into the tracked config (issue 22)
+    assert cfg_path.read_text() == before
+    state = tmp_path / "lab.alignment.toml"
+    assert got["state_file"] == str(state) and state.is_file()
+    alignment = load_lab_config(cfg_path).alignment
+    assert alignment.loaded_from == str(state)
     assert alignment.lamp_zero_deg == pytest.approx(float(got["lamp_zero_deg"]), abs=1e-4)  # type: ignore[arg-type]
+    fit = got["standard_fit"]
+    assert isinstance(fit, dict)
+    # the geometric check (peaks' midpoints) agrees with the Fresnel fit's lamp - detector
+    assert abs(fit["geometric_difference_deg"] - fit["fit_difference_deg"]) < 0.05
+    assert fit["lamp_zero_sigma_deg"] < 0.05 and abs(fit["scale"] - 1) < 0.15
     if seed != 5:
+        # an alignment run plots and exports (issue 22: BrdfPlan.from_dict TypeError)
+        store = str(tmp_path / "runs.sqlite")
+        png, nc = tmp_path / "align.png", tmp_path / "align.nc"
+        assert main(["plot", "1", "--store", store, "-o", str(png)]) == 0
+        assert png.stat().st_size > 10_000
+        assert (
+            main(["runs", "export", "1", "--store", store, "--format", "netcdf", "-o", str(nc)])
+            == 0
+        )
+        import xarray as xr
+
+        with xr.open_dataset(nc) as ds:
+            assert ds.sizes["reading"] == got["readings"]
+            assert set(np.unique(ds["specimen"].values)) == {"standard", "sample"}
+            assert json.loads(ds.attrs["alignment_json"])["lamp_zero_deg"] == got["lamp_zero_deg"]
         return
+    # a sweep to the detector's limit (the README's 0:70:1) is refused up front with the
+    # range the corrected arms reach (it used to fail on theta_r 70.04 outside [0, 70])
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        code = main(["scan", "--config", str(cfg_path), "--theta-r", "0:70:1", "--time-scale", "0"])
+    assert code != 0
+    c_det = -(alignment.detector_zero_deg - alignment.sample_tilt_deg)
+    assert f"theta_r {0 - c_det:.3f}..{70 - c_det:.3f} deg" in err.getvalue(), err.getvalue()
     # the loop closes: a scan with the corrections finds the peak where the model puts it
     scan = run_json(
         ["scan", "--config", str(cfg_path), "--theta-r", "40:50:0.5", "--time-scale", "0", "--json"]
