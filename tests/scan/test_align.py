@@ -281,3 +281,17 @@ def test_fit_reports_uncertainties_and_the_geometric_difference() -> None:
     assert fit.scale == pytest.approx(1.0, abs=0.02)
     assert 0 < fit.lamp_zero_sigma_deg < 0.05 and 0 < fit.detector_zero_sigma_deg < 0.05
     assert fit.geometric_difference_deg == pytest.approx(d_l - d_d, abs=0.03)
+
+
+def test_config_rewrite_keeps_mode_and_symlink(tmp_path: Path) -> None:
+    # issue 23: temp file + os.replace turned a symlinked config into a plain file and a
+    # 0600 config (it may hold a database password) into a world-readable 0644 one
+    real = tmp_path / "real.toml"
+    real.write_text((configs_dir() / "lab-sim.toml").read_text())
+    real.chmod(0o600)
+    link = tmp_path / "lab.toml"
+    link.symlink_to(real)
+    write_alignment(link, {"lamp_zero_deg": 0.25, "run": 3})
+    assert link.is_symlink() and link.resolve() == real
+    assert (real.stat().st_mode & 0o777) == 0o600
+    assert load_lab_config(link).alignment.lamp_zero_deg == 0.25
