@@ -695,6 +695,11 @@ class SimSpectro(_SimLink):
         """One noisy luminance value at the arms' current actual geometry."""
         return (await self._expose()).luminance_pct
 
+    async def reading(self) -> SpectroReading:
+        """One reading (spectrum, luminance, signal level) at the arms' current actual
+        geometry, without passing the fault injector (the wire device has its own)."""
+        return await self._expose()
+
     def _spectral(self, theta_i_deg: float, theta_r_deg: float) -> NDArray[np.float64]:
         """Flux fraction per wavelength at an effective geometry (blocking)."""
         spectral = getattr(self.model, "spectral_fraction", None)

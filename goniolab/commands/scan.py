@@ -693,8 +693,11 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument(
         "--auto-exposure",
-        action="store_true",
-        help="adapt the spectro's exposure to each reading (no saturation, no drowning)",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="adapt the spectro's exposure to each reading from its reported signal level "
+        "(no saturation, no drowning; the default: at a fixed 10 ms a colour is noise); "
+        "--no-auto-exposure keeps --exposure-us fixed",
     )
     allow_negative_angles(p)  # "--theta-r -40:-30:5" is a lamp-side range, not an option
     p.set_defaults(func=_cmd_scan)

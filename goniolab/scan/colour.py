@@ -23,6 +23,7 @@ import numpy as np
 from goniolab.colour.spectra import ColourSettings, ColourValues, spectrum_to_colour
 from goniolab.colour.spectral import Scale, reflectance_factor_scale
 from goniolab.config import LabConfig
+from goniolab.scan.exposure import EXCLUDED_QUALITY, quality_of_raw
 from goniolab.store import PointRow, PredictedColour
 
 __all__ = ["NOISE_FLOOR_PCT", "PointColour", "colour_rows", "compare_rows", "flop_of_rows"]
@@ -112,7 +113,11 @@ def colour_rows(
     rows: list[dict[str, Any]] = []
     for idx in sorted(by_index):
         pts = by_index[idx]
-        cols = [p.colour for p in pts if p.colour is not None]
+        cols = [
+            p.colour
+            for p in pts
+            if p.colour is not None and quality_of_raw(p.raw) not in EXCLUDED_QUALITY
+        ]
         row: dict[str, Any] = {
             "index": idx,
             "theta_r_deg": pts[0].theta_r_deg,

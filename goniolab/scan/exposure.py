@@ -22,10 +22,12 @@ from dataclasses import dataclass
 from drivers.base import Spectrocolorimeter, SpectroReading
 
 __all__ = [
+    "EXCLUDED_QUALITY",
     "NOISE_FLOOR_FRACTION",
     "QUALITY_FLAGS",
     "SATURATED",
     "AutoExposure",
+    "quality_of_raw",
     "reading_quality",
 ]
 
@@ -40,6 +42,15 @@ NOISE_FLOOR_FRACTION = 0.02
 
 #: Per-reading quality flags (stored in each reading's ``raw["quality"]``).
 QUALITY_FLAGS: tuple[str, ...] = ("ok", "saturated", "under_noise_floor", "unknown")
+
+#: Flags whose readings are stored and exported but left out of averages and fits.
+EXCLUDED_QUALITY: frozenset[str] = frozenset({"saturated", "under_noise_floor"})
+
+
+def quality_of_raw(raw: dict[str, object]) -> str:
+    """The stored flag of a reading's ``raw`` (``"unknown"`` for a store that predates it)."""
+    q = raw.get("quality")
+    return q if isinstance(q, str) else "unknown"
 
 
 def reading_quality(reading: SpectroReading) -> str:

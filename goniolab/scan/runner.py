@@ -46,6 +46,7 @@ from typing import Any, TypeVar
 
 from drivers.base import (
     DeviceError,
+    DeviceFault,
     DeviceTimeout,
     Disconnected,
     Goniometer,
@@ -71,7 +72,12 @@ from goniolab.scan.events import (
     RunState,
     StateChanged,
 )
-from goniolab.scan.exposure import AutoExposure
+from goniolab.scan.exposure import (
+    EXCLUDED_QUALITY,
+    AutoExposure,
+    quality_of_raw,
+    reading_quality,
+)
 from goniolab.scan.plans import MIRROR_INDEX, BrdfPlan, PlanPoint
 from goniolab.scan.predict import Predictor
 from goniolab.scan.reference import SpectralReference
@@ -806,6 +812,16 @@ class ScanRunner:
         rows = [p for p in self.store.points(self.run_id) if p.index == MIRROR_INDEX]
         if len(rows) < self.plan.repeats:
             return None
+        usable = [p for p in rows if quality_of_raw(p.raw) not in EXCLUDED_QUALITY]
+        if not usable:
+            flags = sorted({quality_of_raw(p.raw) for p in rows})
+            raise DeviceFault(
+                f"every mirror reference reading is flagged ({', '.join(flags)}): the "
+                "reference cannot be used"
+                + ("" if self.plan.auto_exposure else "; --auto-exposure adapts the exposure"),
+                device="spectro",
+            )
+        rows = usable
         readings = [
             (
                 list(p.raw.get("wavelengths_nm") or ()),
@@ -953,6 +969,20 @@ class ScanRunner:
         reading = await self._read_spectro(p)
         raw_pct = float(reading.luminance_pct)
         value, absolute, reference = self._referenced(reading, p)
+        quality = reading_quality(reading)
+        if quality in EXCLUDED_QUALITY:
+            self.bus.publish(
+                InstrumentError(
+                    run_id=self.run_id,
+                    device="spectro",
+                    message=f"point {p.index}, repeat {p.repeat} (theta_r {p.theta_r_deg:g} "
+                    f"deg): reading {quality.replace('_', ' ')} at {reading.exposure_us} us "
+                    "(stored, flagged, left out of averages and fits"
+                    + ("" if self.plan.auto_exposure else "; --auto-exposure adapts the exposure")
+                    + ")",
+                    fatal=False,
+                )
+            )
         colour, colour_error = await self._colour_of(reading, p, absolute)
         ts = time.time()
         self.store.add_point(
@@ -970,6 +1000,8 @@ class ScanRunner:
                 "wavelengths_nm": list(reading.wavelengths_nm),
                 "values": list(reading.values),
                 "mirror_pct": self._mirror_pct,
+                "peak_fraction": reading.peak_fraction,
+                "quality": quality,
                 "clock_s": self.clock.now(),
                 **({"reference": reference} if reference else {}),
                 **({"absolute_values": list(absolute)} if absolute is not None else {}),

@@ -26,6 +26,7 @@ def test_builtin_profiles_load_with_their_kinds() -> None:
         "oriental-az": StepperProfile,
         "applied-motion-mdx": StepperProfile,
         "stil-ruby": StilProfile,
+        "stil-ruby-level": StilProfile,
         "zgm1120": ZgmProfile,
         "line-gloss-example": LineGlossProfile,
     }

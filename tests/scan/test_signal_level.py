@@ -1,0 +1,90 @@
+"""Signal level from the instrument's own data, per-reading quality, the wire spectrum
+(issue 21, items 2, 4 and 5), on the twin in-process and on the wire."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from drivers.profiles import load_stil_profile
+from goniolab.cli import main
+from goniolab.config import configs_dir
+from goniolab.store import RunStore
+from tests.scan.test_integration import lab_config
+
+
+def realistic(tmp_path: Path, base: str, body: str = "red", name: str = "lab.toml") -> Path:
+    """A shipped sim config with the realistic twin, an aligned session and ``body``."""
+    cfg = lab_config(tmp_path, base=base, twin="realistic", name=name)
+    text = cfg.read_text()
+    text = text.replace('mode = "realistic"', f'mode = "realistic"\nbody = "{body}"', 1)
+    for key in ("lamp_zero_range_deg", "detector_zero_range_deg", "sample_tilt_range_deg"):
+        text = text.replace(f"# {key} = 0.5", f"{key} = 0.0")
+    cfg.write_text(text)
+    return cfg
+
+
+def scan(cfg: Path, store: Path, *extra: str) -> tuple[int, list[object]]:
+    code = main(["scan", "--config", str(cfg), "--time-scale", "0", "--json",
+                 "--store", str(store), *extra])  # fmt: skip
+    with RunStore(str(store)) as s:
+        return code, list(s.points(s.list_runs()[0].id))
+
+
+def test_the_level_profile_parses_the_signal_level() -> None:
+    # the simulator's protocol (UNCONFIRMED for a real Ruby): the level rides on the Y line
+    p = load_stil_profile(configs_dir() / "profiles" / "stil-ruby-level.toml")
+    line = p.reply_measure[0].format(luminance_pct=12.3456, peak_fraction=0.421)
+    assert line == "Y=12.3456 PEAK=0.4210"
+    assert p.reply_measure[0].format(luminance_pct=1.0, peak_fraction=-1) == "Y=1.0000 PEAK=-1.0000"
+
+
+@pytest.mark.wire
+@pytest.mark.slow
+def test_colour_over_the_wire_is_the_twins_spectrum(tmp_path: Path) -> None:
+    # issue 21: over the wire the STIL built a grey spectrum from the luminance (solid red
+    # a* 0.1 over the wire, 42.3 in-process); now the wire carries the twin's own spectrum
+    # and its signal level, so auto-exposure works there too
+    args = ("--theta-r", "20,30", "--repeats", "3")
+    wire = realistic(tmp_path, "lab-sim-wire.toml", name="wire.toml")
+    inproc = realistic(tmp_path, "lab-sim.toml", name="inproc.toml")
+    code_w, pts_w = scan(wire, tmp_path / "w.sqlite", *args)
+    code_i, pts_i = scan(inproc, tmp_path / "i.sqlite", *args)
+    assert code_w == 0 and code_i == 0
+    a_w = np.mean([p.colour["a"] for p in pts_w if p.index >= 0])  # type: ignore[attr-defined]
+    a_i = np.mean([p.colour["a"] for p in pts_i if p.index >= 0])  # type: ignore[attr-defined]
+    assert a_i > 30.0  # a red
+    assert a_w == pytest.approx(a_i, abs=2.0)
+    for p in pts_w:
+        assert p.raw["peak_fraction"] is not None and p.raw["quality"] == "ok"  # type: ignore[attr-defined]
+    # auto-exposure (the default) left the fixed 10 ms for these dark diffuse geometries
+    assert {p.raw["exposure_us"] for p in pts_w} != {10_000}  # type: ignore[attr-defined]
+
+
+@pytest.mark.parametrize(
+    "base", ["lab-sim.toml", pytest.param("lab-sim-wire.toml", marks=pytest.mark.wire)]
+)
+def test_a_saturated_mirror_reference_is_refused_not_scaled(
+    tmp_path: Path, base: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # issue 21: --mirror-reference at a fixed exposure over the wire gave a mirror level of
+    # 13 % (clipped) and every reading 6x too high; the clipped readings are now flagged
+    # and the reference refused, in-process and over the wire
+    cfg = realistic(tmp_path, base, body="white")
+    code, pts = scan(cfg, tmp_path / "s.sqlite", "--theta-r", "30", "--repeats", "1",
+                     "--mirror-reference", "--no-auto-exposure")  # fmt: skip
+    err = capsys.readouterr().err
+    assert code != 0
+    assert "every mirror reference reading is flagged (saturated)" in err
+    mirror = [p for p in pts if p.index < 0]  # type: ignore[attr-defined]
+    assert mirror and all(p.raw["quality"] == "saturated" for p in mirror)  # type: ignore[attr-defined]
+    # with auto-exposure (the default) the same reference is read unclipped and used
+    code, pts = scan(cfg, tmp_path / "t.sqlite", "--theta-r", "30", "--repeats", "1",
+                     "--mirror-reference")  # fmt: skip
+    assert code == 0
+    ref = next(p for p in pts if p.index == 0).raw["reference"]  # type: ignore[attr-defined]
+    assert ref["method"] == "spectral"
+    # the mirror reads its certified ~89.8 % of a perfect mirror (stray light aside)
+    assert ref["reference_luminance_pct"] == pytest.approx(ref["certified_luminance_pct"], rel=0.02)
