@@ -121,3 +121,32 @@ def test_mirror_reference_keeps_the_colour_of_the_realistic_twin(tmp_path: Path)
     assert p.raw["reference"]["certificate"] == "SIM-MIR-0001"
     assert p.raw["reference"]["method"] == "spectral"
     json.dumps(p.raw)  # the provenance is plain JSON
+
+
+def test_luminance_prediction_includes_the_paint_body_like_the_colour() -> None:
+    # issue 21: the luminance prediction ignored the paint body while the predicted spectrum
+    # (hence the predicted colour) included it: white at theta_r 0 predicted 0.000 %.
+    # The body term of the predicted luminance is now the predicted spectrum's: off the
+    # specular peak (where the body dominates) the luminance is Y of the predicted spectrum.
+    # (At the peak the coat term stays the model's own luminance, what the ideal twin reads;
+    # the spectral surface term differs there: 2.78 vs 3.10 % at 45/45 for sample:white.)
+    from goniolab.colour.spectra import xyz_weights
+    from goniolab.config import load_lab_config
+    from goniolab.models import model_for
+    from goniolab.scan.predict import Predictor
+
+    cfg = load_lab_config(configs_dir() / "lab-sim.toml")
+    model = model_for("sample:white", n=1.55, model="facet")
+    pred = Predictor.from_config(model, cfg)
+    tr = [0.0, 20.0, 60.0]
+    lum = pred.predict_sync(45.0, tr)
+    colours = pred.predict_colour_sync(45.0, tr)
+    assert colours is not None
+    assert pred.spectral is not None
+    w_y = xyz_weights(pred.spectral.wavelengths_nm, ColourSettings())[1]
+    y_of_spectra = np.array([np.asarray(c.spectrum_pct) @ w_y / 100.0 for c in colours])
+    assert lum == pytest.approx(y_of_spectra, rel=1e-4)
+    # off the specular peak a white paint's body dominates: far above the coat's reading
+    assert lum[0] > 0.1
+    coat = model.luminance_pct(45.0, np.asarray(tr), source=pred.source, detector=pred.detector)
+    assert lum[0] > 10 * float(coat[0])
