@@ -119,6 +119,8 @@ class LabSection(_Strict):
     start_sim_servers: bool = False
     time_scale: NonNegFloat = 1.0
     store: str = ""
+    #: how long a scan waits for a lost instrument link (a controller or sim-server restart)
+    reconnect_window_s: Annotated[float, Field(strict=False, ge=0.0, le=3600.0)] = 30.0
 
     @model_validator(mode="after")
     def _servers_need_drivers(self) -> LabSection:

@@ -328,6 +328,7 @@ class ScanSession:
             specimen_hook=hook,
             point_colour=PointColour.from_config(cfg),
             mirror_standard=self.standard("mirror") if plan.mirror_reference else None,
+            reconnect_window_s=cfg.lab.reconnect_window_s,
         )
 
     def standard(self, name: str) -> Standard:

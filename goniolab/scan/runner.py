@@ -377,7 +377,13 @@ class ScanRunner:
         many times, each retry reported as a non-fatal ``InstrumentError``.
     reconnect_backoff_s
         Lab-clock wait before reopening a lost spectro or arm link (doubles with each
-        attempt).
+        attempt, at most 2 s).
+    reconnect_window_s
+        A lost link (:class:`drivers.base.Disconnected`: a controller or sim server
+        restarting) is reopened again and again, the scan waiting and saying so, for up to
+        this many lab-clock seconds since it was lost (a restart takes 7-20 s); the
+        operation then continues where it was (the reading or move not yet stored is taken
+        again: no point lost or repeated). Losses do not count against the retries.
     """
 
     def __init__(
@@ -404,6 +410,7 @@ class ScanRunner:
         reconnect_backoff_s: float = 0.5,
         point_colour: PointColour | None = None,
         mirror_standard: Standard | None = None,
+        reconnect_window_s: float = 30.0,
     ) -> None:
         if reading_retries < 0:
             raise ValueError(f"reading_retries must be >= 0, got {reading_retries}")
@@ -428,6 +435,9 @@ class ScanRunner:
         self.reading_retries = reading_retries
         self.move_retries = move_retries
         self.reconnect_backoff_s = reconnect_backoff_s
+        if not (math.isfinite(reconnect_window_s) and reconnect_window_s >= 0):
+            raise ValueError(f"reconnect_window_s must be >= 0, got {reconnect_window_s}")
+        self.reconnect_window_s = reconnect_window_s
         self.point_colour = point_colour if point_colour is not None else PointColour()
         if plan.mirror_reference and mirror_standard is None:
             from goniolab.scan.standards import load_standards, standards_path
@@ -751,31 +761,58 @@ class ScanRunner:
         :class:`ProtocolError`, :class:`Disconnected`: then ``reconnect(attempt)`` first) up
         to ``retries`` times, each retry published as a non-fatal :class:`InstrumentError`
         saying ``what`` was being done; the last failure propagates (and fails the run)."""
-        for attempt in range(retries + 1):
+        attempt = 0
+        lost_since: float | None = None
+        reconnects = 0
+        while True:
             try:
                 return await op()
             except (DeviceTimeout, ProtocolError, Disconnected) as exc:
+                lost = isinstance(exc, Disconnected)
+                now = self.clock.now()
+                if lost:
+                    lost_since = now if lost_since is None else lost_since
+                    away_s = now - lost_since
+                    if reconnects and away_s >= self.reconnect_window_s:
+                        raise Disconnected(
+                            f"{exc.message} (link away {away_s:.3g} s, longer than the "
+                            f"reconnect window of {self.reconnect_window_s:g} s)",
+                            device=exc.device or device,
+                        ) from exc
+                    note = (
+                        f"reconnecting, link lost {away_s:.3g} s ago, waiting up to "
+                        f"{self.reconnect_window_s:g} s"
+                        if reconnects
+                        else f"retry {attempt + 1} of {retries}, reconnecting"
+                    )
+                    self.bus.publish(
+                        InstrumentError(
+                            run_id=self.run_id,
+                            device=exc.device or device,
+                            message=f"{exc} ({what}: {note})",
+                            fatal=False,
+                        )
+                    )
+                    await reconnect(reconnects)
+                    reconnects += 1
+                    continue
                 if attempt == retries:
                     raise
-                lost = isinstance(exc, Disconnected)
                 self.bus.publish(
                     InstrumentError(
                         run_id=self.run_id,
                         device=exc.device or device,
-                        message=f"{exc} ({what}: retry {attempt + 1} of {retries}"
-                        f"{', reconnecting' if lost else ''})",
+                        message=f"{exc} ({what}: retry {attempt + 1} of {retries})",
                         fatal=False,
                     )
                 )
-                if lost:
-                    await reconnect(attempt)
-        raise AssertionError("unreachable")  # pragma: no cover - the loop returns or raises
+                attempt += 1
 
     async def _reconnect_arms(self, attempt: int) -> None:
         """Reopen both arms' links after a lost one (on the wire they share a server, a
         dropped link may take both) after ``reconnect_backoff_s`` (doubling) of lab clock;
         a failed reopen is reported and the next attempt finds the link closed."""
-        await self.clock.sleep(min(8.0, self.reconnect_backoff_s * 2**attempt))
+        await self.clock.sleep(min(2.0, self.reconnect_backoff_s * 2**attempt))
         for axis in (self.goniometer.lamp, self.goniometer.detector):
             with contextlib.suppress(DeviceError):
                 await axis.close()
@@ -791,7 +828,7 @@ class ScanRunner:
         reopen is reported; the next attempt finds the link closed and tries again."""
         with contextlib.suppress(DeviceError):
             await self.spectro.close()
-        await self.clock.sleep(min(8.0, self.reconnect_backoff_s * 2**attempt))
+        await self.clock.sleep(min(2.0, self.reconnect_backoff_s * 2**attempt))
         try:
             await self.spectro.connect()
             await self.spectro.set_exposure_us(self._exposure_us)  # the plan's, or auto's
