@@ -157,10 +157,14 @@ def run_colour(store: RunStore, rec: RunRecord) -> list[dict[str, Any]]:
     """Per-geometry measured and predicted colour of a BRDF run ([] for gloss runs)."""
     if rec.kind != "brdf":
         return []
-    from goniolab.scan.colour import colour_rows
+    from goniolab.scan.colour import PointColour, colour_rows
 
     theta_i = float(rec.plan.get("theta_i_deg", 45.0))
-    return colour_rows(store.points(rec.id), store.predicted_colours(rec.id), theta_i)
+    try:
+        pc: PointColour | None = PointColour.from_snapshot(rec.config)
+    except (TypeError, ValueError, AttributeError):
+        pc = None  # a damaged snapshot: repeats averaged as L*a*b*
+    return colour_rows(store.points(rec.id), store.predicted_colours(rec.id), theta_i, pc)
 
 
 def _f(v: Any, fmt: str = "6.1f") -> str:
@@ -171,13 +175,15 @@ def colour_text(rows: list[dict[str, Any]]) -> list[str]:
     """Lines of the colour table (one per geometry) printed by ``runs show/colour``."""
     from goniolab.scan.colour import flop_of_rows
 
-    out = ["  theta_r  aspec     L*     a*     b*     C*      h   pred L*  a*     b*    dE00"]
+    out = [
+        "  theta_r  aspec     L*     a*     b*     C*      h   pred L*  a*     b*    dE00  rep dE00"
+    ]
     for r in rows:
         out.append(
             f"  {r['theta_r_deg']:7.2f} {r['aspecular_deg']:6.1f} {_f(r.get('L'))} "
             f"{_f(r.get('a'))} {_f(r.get('b'))} {_f(r.get('C'))} {_f(r.get('h_deg'))}   "
             f"{_f(r.get('predicted_L'))} {_f(r.get('predicted_a'))} {_f(r.get('predicted_b'))}"
-            f" {_f(r.get('dE2000'), '6.2f')}"
+            f" {_f(r.get('dE2000'), '6.2f')}  {_f(r.get('dE00_repeat_mean'), '7.3f')}"
         )
     fi = flop_of_rows(rows)
     fi_p = flop_of_rows(rows, "predicted_L")

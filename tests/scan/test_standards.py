@@ -150,3 +150,41 @@ def test_luminance_prediction_includes_the_paint_body_like_the_colour() -> None:
     assert lum[0] > 0.1
     coat = model.luminance_pct(45.0, np.asarray(tr), source=pred.source, detector=pred.detector)
     assert lum[0] > 10 * float(coat[0])
+
+
+def _row(index: int, repeat: int, level_pct: float, quality: str = "ok") -> object:
+    from goniolab.store import PointRow
+
+    pc = _PC
+    wl = WL.tolist()
+    v = [level_pct] * WL.size
+    lab = pc.measured(wl, v, 30.0).as_dict()
+    return PointRow(index, repeat, 45.0, 30.0, 45.0, 30.0, level_pct,
+                    {"wavelengths_nm": wl, "values": v, "quality": quality}, 0.0, lab)  # fmt: skip
+
+
+from goniolab.scan.colour import PointColour, colour_rows  # noqa: E402
+
+_PC = PointColour(ColourSettings(), "mirror", 6.0)
+
+
+def test_repeats_are_averaged_as_spectra_with_their_repeatability() -> None:
+    # issue 21: repeats were averaged in L*a*b*; L* is not linear in the spectrum, so the
+    # colour of the mean spectrum (flat 51 %) differs from the mean of L*(50 %), L*(52 %)
+    rows = [_row(0, 0, 50.0), _row(0, 1, 52.0), _row(0, 2, 99.0, quality="saturated")]
+    (row,) = colour_rows(rows, {}, 45.0, _PC)  # type: ignore[arg-type]
+    truth = _PC.measured(WL.tolist(), [51.0] * WL.size, 30.0)
+    assert row["averaged"] == "spectra" and row["n"] == 2  # the saturated one left out
+    assert (row["L"], row["a"], row["b"]) == pytest.approx(truth.lab, abs=1e-9)
+    l50 = _PC.measured(WL.tolist(), [50.0] * WL.size, 30.0).L
+    l52 = _PC.measured(WL.tolist(), [52.0] * WL.size, 30.0).L
+    assert row["L"] != pytest.approx((l50 + l52) / 2, abs=1e-4)
+    # the saturated repeat is left out; the sd is between the two good ones
+    assert row["sd_L"] == pytest.approx(float(np.std([l50, l52], ddof=1)), rel=1e-9)
+    de = [float(delta_e(_PC.measured(WL.tolist(), [x] * WL.size, 30.0).lab, truth.lab))
+          for x in (50.0, 52.0)]  # fmt: skip
+    assert row["dE00_repeat_mean"] == pytest.approx(np.mean(de), rel=1e-9)
+    assert row["dE00_repeat_max"] == pytest.approx(max(de), rel=1e-9)
+    # without the settings: L*a*b* averaged, said so
+    (plain,) = colour_rows(rows, {}, 45.0)  # type: ignore[arg-type]
+    assert plain["averaged"] == "lab" and plain["L"] == pytest.approx((l50 + l52) / 2)
