@@ -227,6 +227,8 @@ class SpectroConfig(_Strict):
     #: the certified standards (goniolab/scan/standards.py), relative to this file's
     #: directory, else the shipped configs/standards.toml
     standards: str = "standards.toml"
+    #: a run warns when the newest `goniolab calibrate` record is older than this
+    calibration_max_age_h: Annotated[float, Field(strict=False, gt=0.0)] = 24.0
 
 
 class GlossmeterConfig(_Strict):

@@ -337,7 +337,7 @@ def run_dataset(store: RunStore, run_id: int) -> xr.Dataset:
     rec = store.get_run(run_id)
     if rec.kind == "gloss":
         return _gloss_run_dataset(store, rec)
-    if rec.kind == "align":
+    if rec.kind in ("align", "calibration"):
         return _align_run_dataset(store, rec)
     return _brdf_run_dataset(store, rec)
 
@@ -373,6 +373,7 @@ def _align_run_dataset(store: RunStore, rec: RunRecord) -> xr.Dataset:
         **_run_attrs(store, rec),
         "stored_readings": len(pts),
         "alignment_json": _dumps(rec.model.get("alignment", {})),
+        "calibration_json": _dumps(rec.model.get("calibration", {})),
     }
     return ds
 

@@ -67,7 +67,7 @@ def plot_dataset(ds: xr.Dataset, *, out: str | Path | None = None, log: bool = F
     if ds.attrs.get("kind") == "gloss":
         fig = Figure(figsize=(8.0, 4.5), layout="constrained")
         _gloss(fig, ds)
-    elif ds.attrs.get("kind") == "align":
+    elif ds.attrs.get("kind") in ("align", "calibration"):
         fig = Figure(figsize=(10.0, 4.5), layout="constrained")
         _align(fig, ds)
     else:
@@ -192,8 +192,9 @@ def _align(fig: Figure, ds: xr.Dataset) -> None:
     import json
 
     spec = ds["specimen"].values
-    for k, specimen in enumerate(("standard", "sample")):
-        ax = fig.add_subplot(1, 2, k + 1)
+    names = [s for s in ("standard", "sample") if s in spec] or list(dict.fromkeys(spec))
+    for k, specimen in enumerate(names):
+        ax = fig.add_subplot(1, max(len(names), 1), k + 1)
         sel = spec == specimen
         ti = ds["theta_i_deg"].values[sel]
         tr = ds["theta_r_deg"].values[sel]
@@ -208,7 +209,8 @@ def _align(fig: Figure, ds: xr.Dataset) -> None:
         ax.set_yscale("log" if (lum > 0).any() else "linear")
         ax.set_xlabel("detector arm (deg)")
         ax.set_ylabel("luminance (% of a perfect mirror)")
-        ax.set_title("black-glass standard" if specimen == "standard" else "sample", fontsize=10)
+        ax.set_title("black-glass standard" if specimen == "standard" else str(specimen),
+                     fontsize=10)  # fmt: skip
         ax.grid(alpha=0.3)
         if sel.any():
             ax.legend(fontsize=8)

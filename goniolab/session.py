@@ -301,6 +301,11 @@ class ScanSession:
         plan, cfg = scan.plan, self.config
         hook = self._specimen_hook() if plan.mirror_reference else None
         self.lab.put_sample(scan.model, plan.sample)
+        from goniolab.scan.calibrate import calibration_notices, latest_calibration
+
+        cite, notices = calibration_notices(
+            latest_calibration(self.store), max_age_h=cfg.spectro.calibration_max_age_h
+        )
         run_id = scan.run_id
         if run_id is None:
             run_id = self.store.create_run(
@@ -308,7 +313,7 @@ class ScanSession:
                 plan=plan.to_dict(),
                 config=config_snapshot(with_sample(cfg, plan.sample)),
                 sample=plan.sample,
-                model=scan.predictor.describe(),
+                model={**scan.predictor.describe(), "calibration": cite},
                 version=__version__,
             )
         g = cfg.goniometer
@@ -329,6 +334,7 @@ class ScanSession:
             point_colour=PointColour.from_config(cfg),
             mirror_standard=self.standard("mirror") if plan.mirror_reference else None,
             reconnect_window_s=cfg.lab.reconnect_window_s,
+            notices=notices,
         )
 
     def standard(self, name: str) -> Standard:

@@ -411,6 +411,7 @@ class ScanRunner:
         point_colour: PointColour | None = None,
         mirror_standard: Standard | None = None,
         reconnect_window_s: float = 30.0,
+        notices: Sequence[str] = (),
     ) -> None:
         if reading_retries < 0:
             raise ValueError(f"reading_retries must be >= 0, got {reading_retries}")
@@ -438,6 +439,9 @@ class ScanRunner:
         if not (math.isfinite(reconnect_window_s) and reconnect_window_s >= 0):
             raise ValueError(f"reconnect_window_s must be >= 0, got {reconnect_window_s}")
         self.reconnect_window_s = reconnect_window_s
+        #: warnings published (non-fatal) when the run starts: the calibration's age, a
+        #: missed check standard (:func:`goniolab.scan.calibrate.calibration_notices`)
+        self.notices = tuple(notices)
         self.point_colour = point_colour if point_colour is not None else PointColour()
         if plan.mirror_reference and mirror_standard is None:
             from goniolab.scan.standards import load_standards, standards_path
@@ -900,6 +904,10 @@ class ScanRunner:
                 sample=self.plan.sample,
             )
         )
+        for note in self.notices:
+            self.bus.publish(
+                InstrumentError(run_id=self.run_id, device="calibration", message=note, fatal=False)
+            )
         self._set_state(RunState.RUNNING)
         self._publish_progress(eta.total_s)
         predict_task = asyncio.create_task(self._predict_all(), name=f"predict-run-{self.run_id}")
