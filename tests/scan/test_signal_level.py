@@ -88,3 +88,22 @@ def test_a_saturated_mirror_reference_is_refused_not_scaled(
     assert ref["method"] == "spectral"
     # the mirror reads its certified ~89.8 % of a perfect mirror (stray light aside)
     assert ref["reference_luminance_pct"] == pytest.approx(ref["certified_luminance_pct"], rel=0.02)
+
+
+def test_the_twins_stray_light_grows_with_the_flux() -> None:
+    # noise-free chain (no shot/read noise, no flicker, no dark): a channel that receives
+    # nothing reads the floor plus stray_rel x the mean light of the others
+    from sim.instruments import SpectroChain
+
+    chain = SpectroChain(read_noise_counts=0.0, dark_counts_per_s=0.0, flicker_pct=0.0,
+                         electrons_per_count=1e9, full_scale_pct=100.0)  # fmt: skip
+    rng = np.random.default_rng(0)
+    dark = int(np.argmax(chain.gain()))  # the most sensitive channel stays unlit
+    for level in (0.0, 0.2, 0.5):
+        f = np.full(41, level)
+        f[dark] = 0.0
+        values, peak = chain.read(f, 10_000, rng)
+        assert peak < 0.999
+        want = chain.stray_pct + chain.stray_rel * 100 * level * 40 / 41
+        # counts are whole numbers: ~650 per % in that channel
+        assert values[dark] == pytest.approx(want, abs=1e-3)
