@@ -176,6 +176,8 @@ def point_detail(ev: PointMeasured, predicted_pct: float | None) -> str:
     text = f"theta_r={ev.theta_r_deg:g} L={ev.luminance_pct:.3f} %"
     if predicted_pct is not None:
         text += f" pred {predicted_pct:.3f} % res {ev.luminance_pct - predicted_pct:+.3f}"
+    if ev.quality in ("saturated", "under_noise_floor"):
+        text += f" [{ev.quality.replace('_', ' ').upper()}]"
     return text
 
 

@@ -1069,6 +1069,7 @@ class ScanRunner:
                 measured_theta_r_deg=self._measured_deg[1],
                 predicted_pct=self._predicted.get(p.index),
                 lab=None if colour is None else (colour["L"], colour["a"], colour["b"]),
+                quality=quality,
             )
         )
 

@@ -130,6 +130,8 @@ class Comparison:
     predicted_lab: dict[int, tuple[float, float, float]] = field(default_factory=dict)
     #: The plan point of the last reading with a colour (the swatch shows it).
     last_colour_index: int | None = None
+    #: readings flagged saturated / under the noise floor (kept off the curve), by flag
+    flagged: dict[str, int] = field(default_factory=dict)
 
     def clear(self, *, run_id: int = 0, sample: str = "") -> None:
         """Forget the curve and start collecting for ``run_id``.
@@ -144,6 +146,7 @@ class Comparison:
         self.lab.clear()
         self.predicted_lab.clear()
         self.last_colour_index = None
+        self.flagged.clear()
 
     def add_measured(self, ev: PointMeasured) -> None:
         """Record one reading (one repeat of plan point ``ev.index``).
@@ -152,6 +155,10 @@ class Comparison:
         of the curve and are skipped.
         """
         if ev.index < 0:
+            return
+        if ev.quality in ("saturated", "under_noise_floor"):
+            # shown (the runner's warning toast), counted, never averaged into the curve
+            self.flagged[ev.quality] = self.flagged.get(ev.quality, 0) + 1
             return
         self.readings.setdefault(ev.index, []).append(ev.luminance_pct)
         self.theta_r_deg.setdefault(ev.index, ev.theta_r_deg)

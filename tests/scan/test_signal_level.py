@@ -80,6 +80,13 @@ def test_a_saturated_mirror_reference_is_refused_not_scaled(
     assert "every mirror reference reading is flagged (saturated)" in err
     mirror = [p for p in pts if p.index < 0]  # type: ignore[attr-defined]
     assert mirror and all(p.raw["quality"] == "saturated" for p in mirror)  # type: ignore[attr-defined]
+    # the flag and the level are exported with the reading
+    out = tmp_path / "run.csv"
+    assert main(["runs", "export", "1", "--store", str(tmp_path / "s.sqlite"), "-o", str(out)]) == 0
+    head, first = out.read_text().splitlines()[:2]
+    cols = dict(zip(head.split(","), first.split(","), strict=True))
+    assert cols["index"] == "-1" and cols["quality"] == "saturated"
+    assert float(cols["peak_fraction"]) >= 0.999
     # with auto-exposure (the default) the same reference is read unclipped and used
     code, pts = scan(cfg, tmp_path / "t.sqlite", "--theta-r", "30", "--repeats", "1",
                      "--mirror-reference")  # fmt: skip
@@ -107,3 +114,19 @@ def test_the_twins_stray_light_grows_with_the_flux() -> None:
         want = chain.stray_pct + chain.stray_rel * 100 * level * 40 / 41
         # counts are whole numbers: ~650 per % in that channel
         assert values[dark] == pytest.approx(want, abs=1e-3)
+
+
+def test_a_flagged_reading_is_shown_and_kept_off_the_live_curve() -> None:
+    from goniolab.scan.events import PointMeasured
+    from goniolab.tui.comparison import Comparison
+
+    c = Comparison()
+    kw = {"run_id": 1, "timestamp": 0.0, "theta_i_deg": 45.0, "theta_r_deg": 45.0,
+          "measured_theta_i_deg": 45.0, "measured_theta_r_deg": 45.0}  # fmt: skip
+    c.add_measured(PointMeasured(index=0, repeat=0, luminance_pct=3.0, quality="ok", **kw))
+    c.add_measured(PointMeasured(index=0, repeat=1, luminance_pct=0.5, quality="saturated", **kw))
+    assert c.readings == {0: [3.0]} and c.flagged == {"saturated": 1}
+    from goniolab.commands.scan import point_detail
+
+    bad = PointMeasured(index=0, repeat=1, luminance_pct=0.5, quality="saturated", **kw)
+    assert point_detail(bad, None).endswith("[SATURATED]")
