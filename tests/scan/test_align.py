@@ -295,3 +295,31 @@ def test_config_rewrite_keeps_mode_and_symlink(tmp_path: Path) -> None:
     assert link.is_symlink() and link.resolve() == real
     assert (real.stat().st_mode & 0o777) == 0o600
     assert load_lab_config(link).alignment.lamp_zero_deg == 0.25
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "base", ["lab-sim.toml", pytest.param("lab-sim-wire.toml", marks=pytest.mark.wire)]
+)
+def test_align_refuses_a_saturated_standard_in_process_and_on_the_wire(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], base: str
+) -> None:
+    # issue 21: aligning over the wire saturated the black glass at 60 deg and was accepted
+    # (the wire reported no signal level). A spectro whose full scale is 0.1 % at 10 ms
+    # (2 % at the shortest exposure) clips the glass's 5-10 % peaks whatever the exposure:
+    # the level (now on the wire too) flags them and the alignment is refused
+    from tests.scan.test_integration import lab_config
+
+    cfg = lab_config(tmp_path, base=base, twin="realistic")
+    text = cfg.read_text().replace(
+        'mode = "realistic"', 'mode = "realistic"\nfull_scale_pct = 0.1', 1
+    )
+    text = text.replace('store = ""', f'store = "{tmp_path / "runs.sqlite"}"')
+    cfg.write_text(text)
+    before = cfg.read_text()
+    code = main(["scan", "--config", str(cfg), "--plan", "align", "--align-theta-i", "20,60",
+                 "--time-scale", "0"])  # fmt: skip
+    err = capsys.readouterr().err
+    assert code == 1
+    assert "black-glass readings saturated the spectro even at the shortest exposure" in err, err
+    assert cfg.read_text() == before and not (tmp_path / "lab.alignment.toml").exists()
