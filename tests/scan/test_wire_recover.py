@@ -7,6 +7,7 @@ no reading."""
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -33,8 +34,9 @@ def test_scan_reconnects_the_spectro_and_stores_every_reading(
     assert code == 0, err
     s = json.loads(out)
     assert s["state"] == "done" and s["readings"] == 11
-    # the drop was reported and the port reopened while the scan went on
-    assert "(point 9, repeat 0: retry 1 of 2, reconnecting)" in err
+    # the drop was reported and the port reopened while the scan went on (which point it
+    # hits depends on the wire's timing since the STIL fence added an operation per reading)
+    assert re.search(r"\(point \d+, repeat 0: retry 1 of 2, reconnecting\)", err), err
     with RunStore(store) as st:
         points = st.points(s["run_id"])
         assert [p.index for p in points] == list(range(11))
