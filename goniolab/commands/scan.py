@@ -595,6 +595,12 @@ def _cmd_resume(args: argparse.Namespace) -> int:
             rec = store.get_run(args.run)
         except StoreError as exc:
             raise UserError(str(exc)) from exc
+        if rec.kind in ("align", "calibration"):
+            what = "an alignment" if rec.kind == "align" else "a calibration"
+            raise UserError(
+                f"run {rec.id} is {what}: it cannot be resumed, run it again "
+                f"({'scan --plan align' if rec.kind == 'align' else 'calibrate'})"
+            )
         from goniolab.session import resume_target
 
         config_path = resume_target(rec, args.config, store.count_points(rec.id))

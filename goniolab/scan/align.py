@@ -690,7 +690,7 @@ class AlignRunner:
         except Exception as exc:
             # an instrument fault or a defect: the run is recorded as failed with the reason
             # and the failure published (a UI waiting for the run's end sees it), then raised
-            reason = str(exc) if isinstance(exc, DeviceError) else (
+            reason = str(exc) if isinstance(exc, DeviceError | AlignRefused) else (
                 f"internal error: {type(exc).__name__}: {exc}"
             )  # fmt: skip
             self.store.set_status(self.run_id, RunState.FAILED.value, reason)

@@ -236,7 +236,7 @@ def test_align_refuses_a_missing_or_wrong_standard_and_writes_nothing(
     assert cfg_path.read_text() == before  # nothing written
     with RunStore(str(tmp_path / "runs.sqlite")) as store:
         run = store.list_runs()[0]
-        assert run.status == "failed" and says in run.reason
+        assert run.status == "failed" and run.reason.startswith("refused: ") and says in run.reason
 
 
 def test_check_standard_gates_name_what_failed() -> None:

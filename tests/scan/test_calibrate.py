@@ -87,3 +87,21 @@ def test_a_check_standard_off_its_certificate_is_reported_by_later_runs(tmp_path
     assert code == 0
     assert "check standard (black_glass, certificate SIM-BG-0001) missed its certificate" in err
     assert np.isfinite(want)
+
+
+def test_a_calibration_run_exports_and_is_not_resumed(tmp_path: Path) -> None:
+    cfg = _config(tmp_path)
+    code, rec, _ = _json(["calibrate", "--config", str(cfg), "--time-scale", "0", "--json"])
+    assert code == 0
+    store = str(tmp_path / "runs.sqlite")
+    out = tmp_path / "cal.nc"
+    assert main(["runs", "export", str(rec["run_id"]), "--store", store, "-o", str(out)]) == 0
+    import xarray as xr
+
+    with xr.open_dataset(out) as ds:
+        assert ds.sizes["reading"] == 6  # 3 mirror + 3 check readings
+        assert json.loads(ds.attrs["calibration_json"])["check"]["ok"] is True
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        code = main(["scan", "resume", str(rec["run_id"]), "--store", store])
+    assert code == 2 and "is a calibration: it cannot be resumed" in err.getvalue()
