@@ -286,6 +286,7 @@ def build_sim_instruments(
             read_noise_counts=t.read_noise_counts,
             stray_pct=t.stray_pct,
             flicker_pct=t.flicker_pct,
+            s_weight=t.s_weight,
         )
         if realistic
         else None

@@ -922,6 +922,27 @@ class FlatSpecimen:
         """Noise-free luminance in % of a perfect mirror."""
         return _luminance_pct(self, theta_i_deg, theta_r_deg, source, detector)
 
+    def spectral_fraction_sp(
+        self,
+        theta_i_deg: float,
+        theta_r_deg: float,
+        *,
+        source: Aperture = Cone(6.0),  # noqa: B008
+        detector: Aperture = Cone(6.0),  # noqa: B008
+    ) -> tuple[FloatArray, FloatArray]:
+        """The reading of fully s- and of fully p-polarised light (their mean is
+        :meth:`spectral_fraction`): the glass's
+        Fresnel ``R_s``, ``R_p`` (Born & Wolf sec. 1.5.2); the mirror's table is taken
+        as unpolarising (both parts equal)."""
+        total = self.spectral_fraction(theta_i_deg, theta_r_deg, source=source, detector=detector)
+        if self.n is None:
+            return total, total
+        from goniolab.optics.fresnel import fresnel_dielectric_sp
+
+        r_s, r_p = fresnel_dielectric_sp(math.cos(math.radians(theta_i_deg)), self.n)
+        r = 0.5 * (float(r_s) + float(r_p))
+        return total * float(r_s) / r, total * float(r_p) / r
+
 
 _TRUTHS: dict[tuple[object, ...], TruthOptics] = {}
 _TRUTHS_LOCK = threading.Lock()

@@ -130,3 +130,24 @@ def test_a_flagged_reading_is_shown_and_kept_off_the_live_curve() -> None:
 
     bad = PointMeasured(index=0, repeat=1, luminance_pct=0.5, quality="saturated", **kw)
     assert point_detail(bad, None).endswith("[SATURATED]")
+
+
+def test_the_twins_polarisation_sensitivity_weights_the_glass_s_and_p() -> None:
+    # a detector answering 60 % to s- and 40 % to p-polarised light reads the black glass
+    # at 60 deg as 0.6 R_s + 0.4 R_p (Fresnel, n = 1.567) where an insensitive one reads
+    # the mean; the (unpolarising) Al mirror table reads the same either way
+    import math
+
+    from goniolab.optics.fresnel import fresnel_dielectric_sp
+    from sim.instruments import SimSpectro, SpectroChain
+    from sim.truth import FlatSpecimen
+
+    r_s, r_p = (float(x) for x in fresnel_dielectric_sp(math.cos(math.radians(60.0)), 1.567))
+    for w in (0.5, 0.6):
+        spectro = SimSpectro(FlatSpecimen(n=1.567, name="black glass"), None, None, None,  # type: ignore[arg-type]
+                             chain=SpectroChain(s_weight=w))  # fmt: skip
+        f = spectro._spectral(60.0, 60.0)
+        assert f == pytest.approx(np.full(41, w * r_s + (1 - w) * r_p), rel=1e-9)
+        spectro.model = FlatSpecimen()
+        mirror = spectro._spectral(60.0, 60.0)
+        assert mirror == pytest.approx(FlatSpecimen().reflectance(60.0), rel=1e-9)
