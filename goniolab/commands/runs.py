@@ -67,6 +67,10 @@ def run_summary(store: RunStore, rec: RunRecord) -> dict[str, Any]:
         except PlanError as exc:
             raise UserError(f"store {store.location}: run {rec.id}: {exc}") from exc
         return summarize_brdf(plan, store.points(rec.id), store.predictions(rec.id))
+    if rec.kind in ("align", "calibration"):
+        # the result is the run's record (what the alignment found, the calibration's check)
+        key = "alignment" if rec.kind == "align" else "calibration"
+        return {"readings": store.count_points(rec.id), key: rec.model.get(key)}
     from goniolab.scan.plans import gloss_statistics
 
     rows = store.gloss_readings(rec.id)
@@ -111,7 +115,7 @@ def interrupted(store: RunStore, r: RunRecord) -> bool:
 
 
 def _brief(store: RunStore, r: RunRecord) -> dict[str, Any]:
-    n = store.count_points(r.id) if r.kind == "brdf" else len(store.gloss_readings(r.id))
+    n = store.count_points(r.id) if r.kind != "gloss" else len(store.gloss_readings(r.id))
     return {
         "id": r.id,
         "kind": r.kind,
@@ -222,6 +226,8 @@ def _cmd_show(args: argparse.Namespace) -> int:
             if any("L" in r for r in colour):
                 print("  colour (reflectance factor, per geometry):")
                 print("\n".join(colour_text(colour)))
+        elif rec.kind in ("align", "calibration"):
+            print(f"  readings: {summary['readings']} (the result: the model's {rec.kind} record)")
         else:
             predicted = rec.model.get("predicted_gu") or {}
             for angle, st in summary["statistics"].items():

@@ -105,3 +105,20 @@ def test_a_calibration_run_exports_and_is_not_resumed(tmp_path: Path) -> None:
     with contextlib.redirect_stderr(err):
         code = main(["scan", "resume", str(rec["run_id"]), "--store", store])
     assert code == 2 and "is a calibration: it cannot be resumed" in err.getvalue()
+
+
+def test_runs_list_and_show_describe_a_calibration_run(tmp_path: Path) -> None:
+    cfg = _config(tmp_path)
+    code, rec, _ = _json(["calibrate", "--config", str(cfg), "--time-scale", "0", "--json"])
+    assert code == 0
+    store = str(tmp_path / "runs.sqlite")
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        assert main(["runs", "list", "--store", store, "--json"]) == 0
+    doc = json.loads(out.getvalue())
+    row = (doc["runs"] if isinstance(doc, dict) else doc)[0]
+    assert row["kind"] == "calibration" and row["readings"] == 6
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        assert main(["runs", "show", str(rec["run_id"]), "--store", store]) == 0
+    assert "readings: 6 (the result: the model's calibration record)" in out.getvalue()
