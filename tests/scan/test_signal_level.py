@@ -151,3 +151,28 @@ def test_the_twins_polarisation_sensitivity_weights_the_glass_s_and_p() -> None:
         spectro.model = FlatSpecimen()
         mirror = spectro._spectral(60.0, 60.0)
         assert mirror == pytest.approx(FlatSpecimen().reflectance(60.0), rel=1e-9)
+
+
+@pytest.mark.parametrize(("theta", "sigma"), [(0.0, 0.2), (60.0, 0.05), (80.0, 0.2), (85.0, 0.3)])
+def test_smith_shadowing_matches_its_defining_integral(theta: float, sigma: float) -> None:
+    # Smith (1967): Lambda = (1/mu) int_mu^inf (q - mu) p(q) dq, mu = cot(theta), p the
+    # Gaussian slope density of rms sigma; G1 = 1 / (1 + Lambda). Integrated numerically.
+    import math
+
+    from scipy.integrate import quad
+
+    from sim.truth import smith_shadowing
+
+    g = float(smith_shadowing(theta, sigma))
+    if theta == 0.0:
+        assert g == 1.0
+        return
+    mu = 1.0 / math.tan(math.radians(theta))
+
+    def p(q: float) -> float:
+        return math.exp(-0.5 * (q / sigma) ** 2) / (sigma * math.sqrt(2 * math.pi))
+
+    lam = quad(lambda q: (q - mu) * p(q), mu, math.inf)[0] / mu
+    assert g == pytest.approx(1.0 / (1.0 + lam), rel=1e-9)
+    if theta == 80.0:
+        assert g < 0.9  # a rough coat shadows itself at grazing incidence
