@@ -26,7 +26,7 @@ from typing import Any
 from drivers.profiles import StilProfile, ZgmProfile, template_regex
 from drivers.timing import Clock
 from sim.faults import Fault, FaultInjector
-from sim.instruments import SPECTRUM_WAVELENGTHS_NM, SimGlossmeter, SimSpectro
+from sim.instruments import SimGlossmeter, SimSpectro
 from sim.wire.zgm import ZgmProtocol
 
 __all__ = ["MAX_LINE_BYTES", "MAX_PENDING_LINES", "StilPtyDevice", "ZgmPtyDevice"]
@@ -355,19 +355,21 @@ class StilPtyDevice(PtyDevice):
         )
 
     async def _measure_lines(self) -> list[str]:
-        from sim.instruments import spectrum_for_luminance
-
-        lum = await self.spectro.read_luminance_pct()
-        values = spectrum_for_luminance(lum)
-        wl = SPECTRUM_WAVELENGTHS_NM
+        """The twin's own reading (its spectrum, not one synthesised from the luminance:
+        issue 21 found colour over the wire grey), and its signal level for a profile whose
+        reply carries ``{peak_fraction}`` (-1 when the twin has no detector model)."""
+        reading = await self.spectro.reading()
+        values = reading.values
+        wl = reading.wavelengths_nm
         fields: dict[str, Any] = {
-            "luminance_pct": lum,
+            "luminance_pct": reading.luminance_pct,
             "start_nm": int(wl[0]),
             "step_nm": int(wl[1] - wl[0]),
             "count": len(values),
-            "values": ",".join(f"{v:.4f}" for v in values),
+            "values": ",".join(f"{v:.6g}" for v in values),
             "exposure_us": self.spectro.exposure_us,
             "ident": "STIL RUBY",
+            "peak_fraction": -1 if reading.peak_fraction is None else reading.peak_fraction,
         }
         return [t.format(**fields) for t in self.profile.reply_measure]
 
