@@ -161,6 +161,21 @@ class FileClaims:
         """Nothing to do: each claim is released by the end of its ``with`` block."""
 
 
+def _lock_row(conn: Any, run_id: int, busy: str) -> None:
+    """Lock the run's ``run_claims`` row on ``conn`` (a connection of the claim's own);
+    :class:`RunBusy` saying ``busy`` when another connection holds it. ``conn`` is closed
+    when the lock is not taken."""
+    psycopg = psycopg_module()
+    try:
+        conn.execute("SELECT run_id FROM run_claims WHERE run_id = %s FOR UPDATE NOWAIT", (run_id,))
+    except psycopg.errors.LockNotAvailable:
+        conn.close()
+        raise RunBusy(busy) from None
+    except BaseException:
+        conn.close()
+        raise
+
+
 class PgClaims:
     """The claims of a PostgreSQL store: row locks on ``run_claims``, one connection each.
 
@@ -207,16 +222,8 @@ class PgClaims:
             raise StoreError(
                 f"{where}: cannot claim run {run_id}: {str(exc).split('cannot connect: ', 1)[-1]}"
             ) from None
-        try:
-            conn.execute(
-                "SELECT run_id FROM run_claims WHERE run_id = %s FOR UPDATE NOWAIT", (run_id,)
-            )
-        except psycopg.errors.LockNotAvailable:
-            conn.close()
-            raise RunBusy(
-                f"{where}: run {run_id} is being measured by another goniolab process; "
-                "stop that one first"
-            ) from None
+        busy = f"{where}: run {run_id} is being measured by another goniolab process"
+        _lock_row(conn, run_id, busy + "; stop that one first")
         self._held[run_id] = conn
         try:
             yield
@@ -244,17 +251,9 @@ class PgClaims:
             conn.close()
         new = self.db.connect(autocommit=False)
         try:
-            new.execute(
-                "SELECT run_id FROM run_claims WHERE run_id = %s FOR UPDATE NOWAIT", (run_id,)
-            )
-        except psycopg.errors.LockNotAvailable:
-            new.close()
-            raise RunBusy(
-                f"store {self.db.location}: run {run_id} was taken by another goniolab process "
-                "while the database was away"
-            ) from None
+            busy = f"store {self.db.location}: run {run_id} was taken by another goniolab"
+            _lock_row(new, run_id, busy + " process while the database was away")
         except psycopg.Error as exc:
-            new.close()
             raise StoreUnavailable(f"store {self.db.location}: {self.db.why(exc)}") from None
         self._held[run_id] = new
 

@@ -30,6 +30,12 @@ class Result:
         self.description = description
         self.rowcount = rowcount
 
+    @classmethod
+    def of(cls, cursor: Any) -> Result:
+        """The rows of a DB-API cursor that has just run a statement."""
+        rows = cursor.fetchall() if cursor.description is not None else []
+        return cls(rows, cursor.description, cursor.rowcount)
+
     def fetchone(self) -> Any:
         return self.rows[0] if self.rows else None
 

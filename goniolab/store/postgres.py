@@ -143,9 +143,7 @@ class PgConnection(Connection):
         timer.daemon = True
         timer.start()
         try:
-            cur = run()
-            rows = cur.fetchall() if cur.description is not None else []
-            return Result(rows, cur.description, cur.rowcount)
+            return Result.of(run())
         except psycopg.IntegrityError:
             raise
         except (psycopg.OperationalError, psycopg.InterfaceError) as exc:

@@ -38,13 +38,15 @@ __all__ = ["PG_SCHEMA", "PG_SCHEMA_LOCK", "SCHEMA_VERSION", "SQLITE_SCHEMA", "up
 #: 2: run identity (uuid, operator, notes, tags, sample_id), added to older stores on open.
 SCHEMA_VERSION = 2
 
-SQLITE_SCHEMA = """
+#: The tables, written once for both backends (``{serial}``: an auto-incremented id,
+#: ``{run_ref}``: a run id column, ``{real}``: an 8-byte float).
+_TABLES = """
 CREATE TABLE IF NOT EXISTS meta (
     key TEXT PRIMARY KEY,
     value TEXT NOT NULL
 );
 CREATE TABLE IF NOT EXISTS runs (
-    id INTEGER PRIMARY KEY AUTOINCREMENT,
+    id {serial},
     kind TEXT NOT NULL,
     plan_json TEXT NOT NULL,
     config_json TEXT NOT NULL,
@@ -53,47 +55,51 @@ CREATE TABLE IF NOT EXISTS runs (
     version TEXT NOT NULL,
     status TEXT NOT NULL,
     reason TEXT NOT NULL DEFAULT '',
-    created_at REAL NOT NULL,
-    updated_at REAL NOT NULL,
-    finished_at REAL
+    created_at {real} NOT NULL,
+    updated_at {real} NOT NULL,
+    finished_at {real}
 );
 CREATE TABLE IF NOT EXISTS points (
-    id INTEGER PRIMARY KEY AUTOINCREMENT,
-    run_id INTEGER NOT NULL REFERENCES runs(id),
+    id {serial},
+    run_id {run_ref} NOT NULL REFERENCES runs(id),
     idx INTEGER NOT NULL,
     repeat INTEGER NOT NULL,
-    theta_i_deg REAL NOT NULL,
-    theta_r_deg REAL NOT NULL,
-    measured_theta_i_deg REAL NOT NULL,
-    measured_theta_r_deg REAL NOT NULL,
-    luminance_pct REAL NOT NULL,
+    theta_i_deg {real} NOT NULL,
+    theta_r_deg {real} NOT NULL,
+    measured_theta_i_deg {real} NOT NULL,
+    measured_theta_r_deg {real} NOT NULL,
+    luminance_pct {real} NOT NULL,
     raw_json TEXT NOT NULL,
-    timestamp REAL NOT NULL,
+    timestamp {real} NOT NULL,
     UNIQUE (run_id, idx, repeat)
 );
 CREATE TABLE IF NOT EXISTS predictions (
-    run_id INTEGER NOT NULL REFERENCES runs(id),
+    run_id {run_ref} NOT NULL REFERENCES runs(id),
     idx INTEGER NOT NULL,
-    theta_i_deg REAL NOT NULL,
-    theta_r_deg REAL NOT NULL,
-    predicted_pct REAL NOT NULL,
+    theta_i_deg {real} NOT NULL,
+    theta_r_deg {real} NOT NULL,
+    predicted_pct {real} NOT NULL,
     PRIMARY KEY (run_id, idx)
 );
 CREATE TABLE IF NOT EXISTS gloss_readings (
-    id INTEGER PRIMARY KEY AUTOINCREMENT,
-    run_id INTEGER NOT NULL REFERENCES runs(id),
+    id {serial},
+    run_id {run_ref} NOT NULL REFERENCES runs(id),
     seq INTEGER NOT NULL,
-    g20_gu REAL,
-    g60_gu REAL,
-    g85_gu REAL,
-    temperature_c REAL,
+    g20_gu {real},
+    g60_gu {real},
+    g85_gu {real},
+    temperature_c {real},
     predicted_json TEXT,
     raw TEXT NOT NULL,
-    timestamp REAL NOT NULL,
+    timestamp {real} NOT NULL,
     UNIQUE (run_id, seq)
 );
-CREATE INDEX IF NOT EXISTS points_run ON points(run_id, idx, repeat);
 """
+#: The SQLite tables (REAL is an 8-byte float there) and the index of the readings.
+SQLITE_SCHEMA = (
+    _TABLES.format(serial="INTEGER PRIMARY KEY AUTOINCREMENT", run_ref="INTEGER", real="REAL")
+    + "CREATE INDEX IF NOT EXISTS points_run ON points(run_id, idx, repeat);\n"
+)
 
 #: Colour columns (issue 11), added to stores created before them by ``ALTER TABLE``:
 #: measured CIE XYZ / L*a*b* / L*C*h per point (:data:`~goniolab.store.records.COLOUR_KEYS`
@@ -136,64 +142,13 @@ _ADDED_INDEXES = (
 
 #: The same tables in PostgreSQL (``DOUBLE PRECISION`` where SQLite's REAL is 8 bytes),
 #: plus ``run_claims``: one row per claimed run, row-locked while a runner holds it.
-PG_SCHEMA = """
-CREATE TABLE IF NOT EXISTS meta (
-    key TEXT PRIMARY KEY,
-    value TEXT NOT NULL
-);
-CREATE TABLE IF NOT EXISTS runs (
-    id BIGSERIAL PRIMARY KEY,
-    kind TEXT NOT NULL,
-    plan_json TEXT NOT NULL,
-    config_json TEXT NOT NULL,
-    sample TEXT NOT NULL,
-    model_json TEXT NOT NULL,
-    version TEXT NOT NULL,
-    status TEXT NOT NULL,
-    reason TEXT NOT NULL DEFAULT '',
-    created_at DOUBLE PRECISION NOT NULL,
-    updated_at DOUBLE PRECISION NOT NULL,
-    finished_at DOUBLE PRECISION
-);
-CREATE TABLE IF NOT EXISTS points (
-    id BIGSERIAL PRIMARY KEY,
-    run_id BIGINT NOT NULL REFERENCES runs(id),
-    idx INTEGER NOT NULL,
-    repeat INTEGER NOT NULL,
-    theta_i_deg DOUBLE PRECISION NOT NULL,
-    theta_r_deg DOUBLE PRECISION NOT NULL,
-    measured_theta_i_deg DOUBLE PRECISION NOT NULL,
-    measured_theta_r_deg DOUBLE PRECISION NOT NULL,
-    luminance_pct DOUBLE PRECISION NOT NULL,
-    raw_json TEXT NOT NULL,
-    timestamp DOUBLE PRECISION NOT NULL,
-    UNIQUE (run_id, idx, repeat)
-);
-CREATE TABLE IF NOT EXISTS predictions (
-    run_id BIGINT NOT NULL REFERENCES runs(id),
-    idx INTEGER NOT NULL,
-    theta_i_deg DOUBLE PRECISION NOT NULL,
-    theta_r_deg DOUBLE PRECISION NOT NULL,
-    predicted_pct DOUBLE PRECISION NOT NULL,
-    PRIMARY KEY (run_id, idx)
-);
-CREATE TABLE IF NOT EXISTS gloss_readings (
-    id BIGSERIAL PRIMARY KEY,
-    run_id BIGINT NOT NULL REFERENCES runs(id),
-    seq INTEGER NOT NULL,
-    g20_gu DOUBLE PRECISION,
-    g60_gu DOUBLE PRECISION,
-    g85_gu DOUBLE PRECISION,
-    temperature_c DOUBLE PRECISION,
-    predicted_json TEXT,
-    raw TEXT NOT NULL,
-    timestamp DOUBLE PRECISION NOT NULL,
-    UNIQUE (run_id, seq)
-);
-CREATE TABLE IF NOT EXISTS run_claims (
+PG_SCHEMA = (
+    _TABLES.format(serial="BIGSERIAL PRIMARY KEY", run_ref="BIGINT", real="DOUBLE PRECISION")
+    + """CREATE TABLE IF NOT EXISTS run_claims (
     run_id BIGINT PRIMARY KEY REFERENCES runs(id)
 );
 """
+)
 #: Advisory-lock key serialising schema creation by concurrent first users of a database.
 PG_SCHEMA_LOCK = 0x60_1010_AB
 

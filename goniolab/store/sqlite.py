@@ -59,9 +59,7 @@ class SqliteConnection(Connection):
 
     def _run(self, run: Callable[[], Any]) -> Result:
         try:
-            cur = run()
-            rows = cur.fetchall() if cur.description is not None else []
-            return Result(rows, cur.description, cur.rowcount)
+            return Result.of(run())
         except sqlite3.IntegrityError:
             raise
         except sqlite3.OperationalError as exc:
