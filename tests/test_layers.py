@@ -121,3 +121,36 @@ def test_no_module_of_a_split_room_is_over_800_lines(room: str) -> None:
     }
     big = {name: n for name, n in lines.items() if n > MAX_MODULE_LINES}
     assert big == {}, big
+
+
+def _names_from(path: Path, package: str) -> list[tuple[int, str, str]]:
+    """``(line, module, name)`` of every ``from package[.x] import name`` in ``path``."""
+    tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+    return [
+        (node.lineno, node.module, alias.name)
+        for node in ast.walk(tree)
+        if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module
+        if _hit(node.module, (package,))
+        for alias in node.names
+    ]
+
+
+def test_the_store_is_used_through_its_public_names() -> None:
+    """Outside goniolab/store, a name comes from ``goniolab.store`` and is in its
+    ``__all__`` (no ``_private`` name of one of its modules, no reach into a module that
+    the package does not export from), so the rooms inside may move."""
+    import goniolab.store as store
+
+    outside = [
+        f
+        for top in ("goniolab", "drivers", "sim", "tests", "bench")
+        for f in sorted((ROOT / top).rglob("*.py"))
+        if not f.is_relative_to(ROOT / "goniolab" / "store")
+    ]
+    bad = [
+        f"{f.relative_to(ROOT)}:{line}: from {mod} import {name}"
+        for f in outside
+        for line, mod, name in _names_from(f, "goniolab.store")
+        if mod != "goniolab.store" or name not in store.__all__
+    ]
+    assert bad == [], "\n".join(bad)
