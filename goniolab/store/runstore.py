@@ -85,6 +85,16 @@ class RunStore(ReadingTables):
         The file cannot be opened or created; the message names the file and the reason
         (a directory, a read-only location, not an SQLite store, ...).
 
+    Attributes
+    ----------
+    location
+        How the store names itself in messages (a path, or the URL without its password).
+    is_postgres
+        Whether the store is a PostgreSQL database.
+    db
+        The connection (:class:`~goniolab.store.connection.Connection`: ``execute``,
+        ``transaction()``), for SQL the methods do not cover (``runs migrate``, benches).
+
     Notes
     -----
     One store may be used from several threads (each statement holds the connection's
