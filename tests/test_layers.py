@@ -31,7 +31,11 @@ FORBIDDEN: dict[str, tuple[str, ...]] = {
         "goniolab.lab", "goniolab.commands", "goniolab.tui", "textual",
     ),
     "goniolab/scan": ("sim", "goniolab.session", "goniolab.commands", "goniolab.tui", "textual"),
-    "goniolab/store.py": ("sim", "goniolab.commands", "goniolab.tui", "textual"),
+    "goniolab/store": (
+        "sim", "drivers", "goniolab.commands", "goniolab.api", "goniolab.tui", "textual",
+        "goniolab.session", "goniolab.scan", "goniolab.lab", "goniolab.export",
+        "goniolab.datasets",
+    ),
     "goniolab/session.py": ("sim", "goniolab.commands", "goniolab.tui", "textual"),
     "goniolab/commands": ("sim", "goniolab.tui", "textual"),
     "goniolab/tui": ("sim", "goniolab.commands"),
@@ -100,3 +104,53 @@ def test_the_checker_sees_imports_inside_functions(tmp_path: Path) -> None:
     probe = tmp_path / "probe.py"
     probe.write_text("def f():\n    from sim.motion import SimMotor\n    import textual.app\n")
     assert imports_of(probe) == [(2, "sim.motion"), (3, "textual.app")]
+
+
+#: The most lines a module of these rooms may have (issue 24: rooms of one job each).
+MAX_MODULE_LINES = 800
+#: Rooms held to :data:`MAX_MODULE_LINES` (more join as they are split along their seams).
+SIZED_ROOMS = ("goniolab/store", "goniolab/export.py")
+
+
+@pytest.mark.parametrize("room", SIZED_ROOMS)
+def test_no_module_of_a_split_room_is_over_800_lines(room: str) -> None:
+    files = _files(room)
+    assert files, f"{room} has no Python files: the table is out of date"
+    lines = {
+        str(f.relative_to(ROOT)): len(f.read_text(encoding="utf-8").splitlines()) for f in files
+    }
+    big = {name: n for name, n in lines.items() if n > MAX_MODULE_LINES}
+    assert big == {}, big
+
+
+def _names_from(path: Path, package: str) -> list[tuple[int, str, str]]:
+    """``(line, module, name)`` of every ``from package[.x] import name`` in ``path``."""
+    tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+    return [
+        (node.lineno, node.module, alias.name)
+        for node in ast.walk(tree)
+        if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module
+        if _hit(node.module, (package,))
+        for alias in node.names
+    ]
+
+
+def test_the_store_is_used_through_its_public_names() -> None:
+    """Outside goniolab/store, a name comes from ``goniolab.store`` and is in its
+    ``__all__`` (no ``_private`` name of one of its modules, no reach into a module that
+    the package does not export from), so the rooms inside may move."""
+    import goniolab.store as store
+
+    outside = [
+        f
+        for top in ("goniolab", "drivers", "sim", "tests", "bench")
+        for f in sorted((ROOT / top).rglob("*.py"))
+        if not f.is_relative_to(ROOT / "goniolab" / "store")
+    ]
+    bad = [
+        f"{f.relative_to(ROOT)}:{line}: from {mod} import {name}"
+        for f in outside
+        for line, mod, name in _names_from(f, "goniolab.store")
+        if mod != "goniolab.store" or name not in store.__all__
+    ]
+    assert bad == [], "\n".join(bad)
