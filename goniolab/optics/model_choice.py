@@ -80,7 +80,6 @@ from goniolab.optics.rayleigh_rice import RayleighRiceModel
 
 __all__ = [
     "FACET_MIN_G",
-    "MODEL_NAMES",
     "RR_MAX_G",
     "RR_MAX_SDQ",
     "AutoModel",
@@ -90,9 +89,9 @@ __all__ = [
     "rayleigh_g",
 ]
 
+#: The models the rule chooses from (each a name of :mod:`goniolab.model_registry`, which
+#: lists the names ``--model`` accepts; tests/test_model_registry.py keeps them registered).
 ModelName = Literal["facet", "kirchhoff", "rayleigh-rice"]
-#: Names accepted by ``--model``.
-MODEL_NAMES: tuple[str, ...] = ("auto", "facet", "kirchhoff", "rayleigh-rice")
 #: Rayleigh-Rice when g is at most this ...
 RR_MAX_G: float = 0.15
 #: ... and the rms gradient at most this.
