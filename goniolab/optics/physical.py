@@ -87,12 +87,12 @@ from goniolab.optics.apertures import (
     Rect,
     solid_angle_sr,
 )
-from goniolab.optics.facet import (
+from goniolab.optics.facet import FacetModel
+from goniolab.optics.facet_apertures import (
     SPLIT_SOURCE_RINGS,
-    FacetModel,
-    _clipped_source_parts,
-    _cone_table,
-    _reaches_horizon,
+    clipped_source_parts,
+    cone_table,
+    reaches_horizon,
 )
 from goniolab.optics.fresnel import fresnel
 from goniolab.optics.heightmap import HeightMap
@@ -806,7 +806,7 @@ class PhysicalOpticsModel:
                 theta_i_deg, lam_um, wox, woy, p, tr, source, receptor, shadow
             )
         if isinstance(source, Cone) and isinstance(receptor, Cone):
-            table, g0, g1, o_in, _ = _cone_table(
+            table, g0, g1, o_in, _ = cone_table(
                 math.radians(source.half_angle_deg), math.radians(receptor.half_angle_deg)
             )
             dirs = np.stack([-np.sin(tr), np.zeros_like(tr), np.cos(tr)], axis=-1)
@@ -836,12 +836,12 @@ class PhysicalOpticsModel:
     def _split_source(self, theta_i_deg: float, source: Aperture) -> bool:
         """Whether a source cone is summed over sub-cones (:meth:`_clipped_cone_sums`): when it
         reaches the horizon, and, when the diffuse sums carry Smith's G2, from where the facet
-        model splits it too (:data:`goniolab.optics.facet.SPLIT_SOURCE_RINGS`), so that G2 is
+        model splits it too (:data:`goniolab.optics.facet_apertures.SPLIT_SOURCE_RINGS`), so that G2 is
         that of each source direction (at grazing incidence it varies several-fold across a
         6 deg cone)."""
         if not isinstance(source, Cone) or source.half_angle_deg == 0.0:
             return False
-        if _reaches_horizon(theta_i_deg, source):
+        if reaches_horizon(theta_i_deg, source):
             return True
         edge = min(e for e, _ in SPLIT_SOURCE_RINGS)
         return self._g2_per_source and theta_i_deg + source.half_angle_deg >= edge
@@ -861,7 +861,7 @@ class PhysicalOpticsModel:
         """Diffuse cone sums over the source's sub-cones (:meth:`_split_source`), clipped at
         the horizon when the cone reaches it.
 
-        The source is split as in the facet model (:func:`_clipped_source_parts`: sub-cones
+        The source is split as in the facet model (:func:`clipped_source_parts`: sub-cones
         of the part above the horizon, shares over the whole cone). The scattered diffuse
         pattern is that of the nominal incidence, carried over the source (zeroth order in
         the source direction): a sub-cone centred at polar angle ``theta_i + delta`` and
@@ -876,7 +876,7 @@ class PhysicalOpticsModel:
         fn = CK.cone_cells_numba if self.backend == "numba" else CK.cone_cells_numpy
         out = np.zeros(tr.size)
         ti = math.radians(theta_i_deg)
-        for c, sub, share in _clipped_source_parts(theta_i_deg, source):
+        for c, sub, share in clipped_source_parts(theta_i_deg, source):
             delta = math.acos(min(1.0, float(c[2]))) - ti
             phi = math.atan2(float(c[1]), float(c[0]))
             cp, sp = math.cos(phi), math.sin(phi)
@@ -884,7 +884,7 @@ class PhysicalOpticsModel:
             x1, y1 = cp * d[:, 0] + sp * d[:, 1], -sp * d[:, 0] + cp * d[:, 1]
             cd, sd = math.cos(delta), math.sin(delta)
             dirs = np.stack([cd * x1 + sd * d[:, 2], y1, -sd * x1 + cd * d[:, 2]], axis=-1)
-            table, g0, g1, o_in, _ = _cone_table(math.radians(sub.half_angle_deg), a_d)
+            table, g0, g1, o_in, _ = cone_table(math.radians(sub.half_angle_deg), a_d)
             part = fn(wox, woy, p, np.ascontiguousarray(dirs), table, g0, g1, o_in)
             g2 = self._diffuse_g2(np.broadcast_to(c, d.shape), d, lam_um) if shadow else 1.0
             out += share * np.asarray(part, dtype=np.float64) * g2
@@ -1094,7 +1094,7 @@ class PhysicalOpticsModel:
 
     def _check_apertures(self, theta_i_deg: float, source: Aperture, receptor: Aperture) -> None:
         self._reach(source, receptor)
-        if isinstance(source, Rect) and _reaches_horizon(theta_i_deg, source):
+        if isinstance(source, Rect) and reaches_horizon(theta_i_deg, source):
             raise ValueError(
                 f"source rectangle of half width {0.5 * source.in_plane_deg:g} deg at "
                 f"theta_i_deg = {theta_i_deg:g} reaches the horizon (theta_i + half width "
@@ -1250,7 +1250,7 @@ class PhysicalOpticsModel:
         powers, coh = self._cell_powers(ti, [lam], [b], os)
         _, _, _, ok = self._geometry(ti, lam, b, os)
         wox, woy = self._wo_axes(ti, lam, b, os)
-        table, g0, g1, o_in, _ = _cone_table(0.0, a_d)
+        table, g0, g1, o_in, _ = cone_table(0.0, a_d)
         fn = CK.cone_cells_numba if self.backend == "numba" else CK.cone_cells_numpy
         d = np.ascontiguousarray(wo[None, :])
         flux = float(fn(wox, woy, powers[0], d, table, g0, g1, o_in)[0])
