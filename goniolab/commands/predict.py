@@ -252,9 +252,9 @@ def _cmd_stats(args: argparse.Namespace) -> int:
     regime: dict[str, Any] = {}
     try:
         from goniolab.optics.model_choice import choose_model
-        from goniolab.optics.physical import _Shared
+        from goniolab.optics.shared_map import SharedMap
 
-        ms = _Shared(hm, 1024, 0.25).stats
+        ms = SharedMap(hm, 1024, 0.25).stats
         lam = 550.0 if args.wavelength_nm is None else float(args.wavelength_nm)
         for t in (20, 60, 85):
             regime[f"{t}"] = choose_model(ms, t, lam).as_dict()

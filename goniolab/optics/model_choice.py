@@ -72,11 +72,11 @@ from goniolab.optics.physical import (
     MapStats,
     PhysicalOpticsModel,
     Progress,
-    _Shared,
 )
 from goniolab.optics.provenance import Provenance
 from goniolab.optics.psd import DEFAULT_TAPER, DEFAULT_TILE
 from goniolab.optics.rayleigh_rice import RayleighRiceModel
+from goniolab.optics.shared_map import SharedMap
 
 __all__ = [
     "FACET_MIN_G",
@@ -183,8 +183,8 @@ class AutoModel:
         self.n = facet.n
         self.masking = bool(masking)
         self.wavelength_nm = float(wavelength_nm)
-        shared = _Shared(hm, tile, taper)
-        shared._facets[(facet.n, facet.masking)] = facet
+        shared = SharedMap(hm, tile, taper)
+        shared.adopt_facet(facet)
         opts: dict[str, Any] = {
             "n": facet.n,
             "wavelength_nm": wavelength_nm,
