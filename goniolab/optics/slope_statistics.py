@@ -26,7 +26,7 @@ from numpy.typing import ArrayLike, NDArray
 from goniolab.optics.facet_backends import check_slope_range
 from goniolab.optics.surface import Surface
 
-__all__ = ["SlopeStatistics", "bilinear"]
+__all__ = ["SlopeStatistics", "bilinear", "cell_bilinear"]
 
 FloatArray = NDArray[np.float64]
 
@@ -38,6 +38,24 @@ _KDE_MAX_NODES = 2048
 _LAMBDA_MAX_FACETS = 1 << 17
 _LAMBDA_THETA_STEP_DEG = 0.5
 _LAMBDA_PHI_STEP_DEG = 5.0
+
+
+def cell_bilinear(
+    grid: FloatArray,
+    i: NDArray[np.int64],
+    j: NDArray[np.int64],
+    fx: FloatArray,
+    fy: FloatArray,
+) -> FloatArray:
+    """Bilinear interpolation in the cell ``[i, i + 1] x [j, j + 1]`` of ``grid`` at the
+    fractions ``(fx, fy)`` of its sides."""
+    out: FloatArray = (
+        grid[i, j] * (1 - fx) * (1 - fy)
+        + grid[i + 1, j] * fx * (1 - fy)
+        + grid[i, j + 1] * (1 - fx) * fy
+        + grid[i + 1, j + 1] * fx * fy
+    )
+    return out
 
 
 def bilinear(
@@ -52,14 +70,7 @@ def bilinear(
     x, y = np.where(inside, x, 0.0), np.where(inside, y, 0.0)
     i = np.minimum(np.floor(x).astype(np.int64), n_p - 2)
     j = np.minimum(np.floor(y).astype(np.int64), n_q - 2)
-    fx, fy = x - i, y - j
-    v = (
-        dens[i, j] * (1 - fx) * (1 - fy)
-        + dens[i + 1, j] * fx * (1 - fy)
-        + dens[i, j + 1] * (1 - fx) * fy
-        + dens[i + 1, j + 1] * fx * fy
-    )
-    out: FloatArray = np.where(inside, v, 0.0)
+    out: FloatArray = np.where(inside, cell_bilinear(dens, i, j, x - i, y - j), 0.0)
     return out
 
 
@@ -219,13 +230,7 @@ class SlopeStatistics:
         y = np.clip(ph_deg / _LAMBDA_PHI_STEP_DEG, 0.0, table.shape[1] - 1.0)
         i = np.minimum(np.floor(x).astype(np.int64), table.shape[0] - 2)
         j = np.minimum(np.floor(y).astype(np.int64), table.shape[1] - 2)
-        fx, fy = x - i, y - j
-        t = (
-            table[i, j] * (1 - fx) * (1 - fy)
-            + table[i + 1, j] * fx * (1 - fy)
-            + table[i, j + 1] * (1 - fx) * fy
-            + table[i + 1, j + 1] * fx * fy
-        )
+        t = cell_bilinear(table, i, j, x - i, y - j)
         with np.errstate(divide="ignore", invalid="ignore"):
             lam = np.where(cz > 0, t / np.where(cz > 0, cz, 1.0) - 1.0, np.inf)
         out: FloatArray = np.maximum(lam, 0.0)
