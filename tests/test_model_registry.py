@@ -19,6 +19,8 @@ from goniolab.config import load_lab_config
 from goniolab.errors import UserError
 from goniolab.model_registry import ModelOptions, ScatteringModel
 from goniolab.models import model_for
+from goniolab.optics.apertures import ISO2813_BLACK_GLASS_N, ISO2813_RECEPTOR, solid_angle_sr
+from goniolab.optics.fresnel import fresnel_dielectric
 from goniolab.optics.heightmap import HeightMap
 from goniolab.optics.models import ReflectanceModel
 
@@ -37,16 +39,28 @@ class Lambertian:
     def brdf_inplane(self, theta_i_deg: float, theta_r_deg: Any) -> Any:
         return np.full(np.shape(theta_r_deg), self.albedo / math.pi)
 
-    def luminance_pct(self, theta_i_deg: float, theta_r_deg: Any, *, source: Any = None,
-                      detector: Any = None) -> Any:  # fmt: skip
-        raise NotImplementedError
+    def reflected_fraction(
+        self, theta_i_deg: float, theta_r_deg: float, source: Any, receptor: Any
+    ) -> float:
+        # f cos(theta_r) over a small receptor: (albedo / pi) x its solid angle x cos
+        return (
+            self.albedo / math.pi * solid_angle_sr(receptor) * math.cos(math.radians(theta_r_deg))
+        )
 
-    def reflected_fraction(self, theta_i_deg: float, theta_r_deg: float, source: Any,
-                           receptor: Any) -> float:  # fmt: skip
-        raise NotImplementedError
+    def luminance_pct(
+        self, theta_i_deg: float, theta_r_deg: Any, *, source: Any = None, detector: Any = None
+    ) -> Any:
+        tr = np.asarray(theta_r_deg, dtype=np.float64)
+        return 100.0 * self.albedo / math.pi * solid_angle_sr(detector) * np.cos(np.radians(tr))
 
     def gloss(self, angles_deg: Sequence[int] = (20, 60, 85)) -> dict[int, float]:
-        return dict.fromkeys(angles_deg, 0.0)
+        # ISO 2813: the sample's flux into the receptor over the black glass standard's
+        out = {}
+        for t in angles_deg:
+            rec = ISO2813_RECEPTOR[int(t)]
+            std = float(fresnel_dielectric(math.cos(math.radians(t)), ISO2813_BLACK_GLASS_N))
+            out[int(t)] = 100.0 * self.reflected_fraction(t, t, None, rec) / std
+        return out
 
 
 def build_lambertian(hm: HeightMap | None, options: ModelOptions) -> ReflectanceModel:
@@ -145,3 +159,20 @@ def test_names_are_unique_and_lower_case(toy: ScatteringModel) -> None:
         model_registry.register(toy)
     with pytest.raises(ValueError, match="lower case"):
         model_registry.register(ScatteringModel("Toy", build_lambertian, "", ""))
+
+
+def test_the_notebook_api_gets_an_in_memory_map_model_the_one_way(toy: ScatteringModel) -> None:
+    from goniolab import api
+
+    # a map in memory goes through model_for like a file: the registry's models ...
+    flat = HeightMap(np.zeros((8, 8)), 1.0, 1.0, "memory")
+    ds = api.predict_gloss(flat, model="toy-lambert")
+    # ISO 2813: 100 x the flux into the 60 deg receptor over the black glass standard's
+    omega = solid_angle_sr(ISO2813_RECEPTOR[60])
+    black = float(fresnel_dielectric(math.cos(math.radians(60)), ISO2813_BLACK_GLASS_N))
+    expected = 100.0 * (1.0 / math.pi) * omega * 0.5 / black
+    assert float(ds["gloss_gu"].sel(geometry_deg=60)) == pytest.approx(expected, rel=1e-12)
+    # ... and the same refusal of heights that overflow when squared (1e200 um)
+    huge = HeightMap(np.full((8, 8), 1e200), 1.0, 1.0, "huge")
+    with pytest.raises(UserError, match=r"huge: heights up to 1e\+200 um overflow"):
+        api.predict_gloss(huge, model="facet")
