@@ -8,6 +8,7 @@ even on a code path no test runs.
 from __future__ import annotations
 
 import ast
+import sys
 from pathlib import Path
 
 import pytest
@@ -154,3 +155,53 @@ def test_the_store_is_used_through_its_public_names() -> None:
         if mod != "goniolab.store" or name not in store.__all__
     ]
     assert bad == [], "\n".join(bad)
+
+
+#: what goniolab/optics may import besides the standard library and itself: the numerics,
+#: colour-science (the CIE tables of goniolab/optics/spectral.py, imported on use) and the
+#: stdlib-only lazy-export helper of the package's __init__ (goniolab/_lazy.py)
+OPTICS_MAY_IMPORT = ("numpy", "scipy", "numba", "colour", "goniolab.optics", "goniolab._lazy")
+
+#: most lines of one module in a room (issue 24: one job per module)
+MAX_MODULE_LINES = 800
+
+
+def test_optics_imports_only_numerics_and_itself() -> None:
+    bad = [
+        f"{f.relative_to(ROOT)}:{line}: imports {mod}"
+        for f in _files("goniolab/optics")
+        for line, mod in imports_of(f)
+        if mod.split(".")[0] not in sys.stdlib_module_names and not _hit(mod, OPTICS_MAY_IMPORT)
+    ]
+    assert bad == [], "\n".join(bad)
+
+
+def test_optics_uses_no_relative_imports() -> None:
+    # imports_of reads absolute imports only: a relative one would slip past the rules above
+    bad = [
+        f"{f.relative_to(ROOT)}:{node.lineno}"
+        for f in _files("goniolab/optics")
+        for node in ast.walk(ast.parse(f.read_text(encoding="utf-8")))
+        if isinstance(node, ast.ImportFrom) and node.level > 0
+    ]
+    assert bad == [], bad
+
+
+def test_no_optics_module_is_over_800_lines() -> None:
+    long = {
+        str(f.relative_to(ROOT)): n
+        for f in _files("goniolab/optics")
+        if (n := len(f.read_text(encoding="utf-8").splitlines())) > MAX_MODULE_LINES
+    }
+    assert long == {}, long
+
+
+def test_the_optics_checker_catches_a_foreign_import(tmp_path: Path) -> None:
+    probe = tmp_path / "probe.py"
+    probe.write_text("import math\nimport numpy as np\nfrom goniolab.config import LabConfig\n")
+    found = [
+        m
+        for _, m in imports_of(probe)
+        if m.split(".")[0] not in sys.stdlib_module_names and not _hit(m, OPTICS_MAY_IMPORT)
+    ]
+    assert found == ["goniolab.config"]
