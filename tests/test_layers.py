@@ -100,3 +100,32 @@ def test_the_checker_sees_imports_inside_functions(tmp_path: Path) -> None:
     probe = tmp_path / "probe.py"
     probe.write_text("def f():\n    from sim.motion import SimMotor\n    import textual.app\n")
     assert imports_of(probe) == [(2, "sim.motion"), (3, "textual.app")]
+
+
+#: rooms whose modules stay under :data:`MAX_MODULE_LINES` lines (issue 24: rooms of one job)
+SIZED_ROOMS = ("drivers",)
+MAX_MODULE_LINES = 800
+
+
+def oversized(files: list[Path]) -> dict[str, int]:
+    """``{file: lines}`` of the files longer than :data:`MAX_MODULE_LINES` lines."""
+    out: dict[str, int] = {}
+    for f in files:
+        n = len(f.read_text(encoding="utf-8").splitlines())
+        if n > MAX_MODULE_LINES:
+            out[str(f.relative_to(ROOT)) if f.is_relative_to(ROOT) else f.name] = n
+    return out
+
+
+@pytest.mark.parametrize("room", SIZED_ROOMS)
+def test_no_module_is_over_the_size_limit(room: str) -> None:
+    files = _files(room)
+    assert files, f"{room} has no Python files: the table is out of date"
+    assert oversized(files) == {}, f"modules over {MAX_MODULE_LINES} lines"
+
+
+def test_the_size_check_sees_a_long_module(tmp_path: Path) -> None:
+    long, short = tmp_path / "long.py", tmp_path / "short.py"
+    long.write_text("x = 1\n" * (MAX_MODULE_LINES + 1))
+    short.write_text("x = 1\n" * MAX_MODULE_LINES)
+    assert oversized([long, short]) == {"long.py": MAX_MODULE_LINES + 1}

@@ -146,35 +146,50 @@ def load_profile(name_or_path: str | Path) -> Profile:
 def load_profile_of_kind(
     name_or_path: str | Path, kind: str, schema: type[ProfileFile] | None = None
 ) -> Any:
-    """Load a profile that must be of ``kind``, validated by ``schema`` (default: the
-    schema :data:`PROFILE_KINDS` holds for ``kind``).
+    """Load a profile that must be of ``kind``.
+
+    A kind :data:`PROFILE_KINDS` knows is validated by its own schema (the file is first
+    validated as what it says it is, then its kind is compared); a new kind brings its
+    ``schema`` (a protocol's ``profile_schema``, :mod:`drivers.protocols`).
 
     Raises
     ------
     ProfileError
         As :func:`load_profile`, and when the file's ``kind`` is another one.
+    ValueError
+        ``kind`` is unknown and no ``schema`` is given.
     """
-    schema = schema or PROFILE_KINDS.get(kind)
-    if schema is None:
-        raise ValueError(f"no schema for profile kind {kind!r} (known: {sorted(PROFILE_KINDS)})")
     path = profile_path(name_or_path)
-    data = _read(path)
-    found = data.get("kind")
-    if found is None:
-        raise profile_error(path, "kind", "missing")
-    if found != kind:
-        raise profile_error(path, "kind", f"expected {kind!r}, got {short_repr(found)}")
-    return _validate(path, data, schema)
+    if kind in PROFILE_KINDS:
+        profile: Any = load_profile(path)
+    elif schema is None:
+        raise ValueError(f"no schema for profile kind {kind!r} (known: {sorted(PROFILE_KINDS)})")
+    else:
+        data = _read(path)
+        found = data.get("kind")
+        if found is None:
+            raise profile_error(path, "kind", "missing")
+        if found != kind:
+            raise profile_error(path, "kind", f"expected {kind!r}, got {short_repr(found)}")
+        return _validate(path, data, schema)
+    if profile.kind != kind:
+        raise profile_error(profile.path, "kind", f"expected {kind!r}, got {profile.kind!r}")
+    return profile
 
+
+#: The ``kind`` of each built-in profile class.
+_KIND_OF: dict[type, str] = {
+    StepperProfile: "modbus-stepper",
+    StilProfile: "stil-spectro",
+    ZgmProfile: "zgm1120",
+    LineGlossProfile: "line-gloss",
+}
 
 _P = TypeVar("_P", StepperProfile, StilProfile, ZgmProfile, LineGlossProfile)
 
 
 def _typed(name_or_path: str | Path, cls: type[_P]) -> _P:
-    profile = load_profile(name_or_path)
-    if not isinstance(profile, cls):
-        expected = cls.__dataclass_fields__["kind"].default
-        raise profile_error(profile.path, "kind", f"expected {expected!r}, got {profile.kind!r}")
+    profile: _P = load_profile_of_kind(name_or_path, _KIND_OF[cls])
     return profile
 
 
