@@ -612,6 +612,7 @@ class _ScanCall:
     location: str | Path
     time_scale: float | None
     progress: bool
+    meta: Any = None  # goniolab.store.RunMeta: operator, sample id, notes, tags
 
 
 def _scan_call(
@@ -626,6 +627,7 @@ def _scan_call(
     store: str | Path | None,
     time_scale: float | None,
     progress: bool,
+    identity: dict[str, Any] | None = None,
 ) -> _ScanCall:
     from goniolab.config import load_lab_config
     from goniolab.scan.plans import BrdfPlan, PlanError
@@ -643,7 +645,16 @@ def _scan_call(
     except PlanError as exc:
         raise UserError(f"run_scan: {exc}") from None
     location = resolve_store_path(None if store is None else str(store), cfg.lab.store)
-    return _ScanCall(str(Path(config).resolve()), plan, location, time_scale, progress)
+    from goniolab.store import RunMeta
+
+    i = identity or {}
+    meta = RunMeta(
+        operator=i.get("operator") or "",
+        sample_id=i.get("sample_id") or "",
+        notes=i.get("notes") or "",
+        tags=tuple(dict.fromkeys(t for t in (i.get("tags") or ()) if t)),
+    )
+    return _ScanCall(str(Path(config).resolve()), plan, location, time_scale, progress, meta)
 
 
 async def _scan_in_this_thread(call: _ScanCall, control: _ScanControl | None = None) -> Run:
@@ -657,7 +668,13 @@ async def _scan_in_this_thread(call: _ScanCall, control: _ScanControl | None = N
     try:
         with rs:
             run_id = await _scan(
-                call.config_path, call.plan, rs, call.time_scale, call.progress, control
+                call.config_path,
+                call.plan,
+                rs,
+                call.time_scale,
+                call.progress,
+                control,
+                meta=call.meta,
             )
     except DeviceError as exc:
         raise UserError(f"instrument error: {exc}", exit_code=1) from exc
@@ -676,6 +693,10 @@ def run_scan(
     store: str | Path | None = None,
     time_scale: float | None = None,
     progress: bool = True,
+    operator: str | None = None,
+    sample_id: str | None = None,
+    notes: str | None = None,
+    tags: Sequence[str] = (),
 ) -> Run:
     """Run an in-plane scan in one call (blocking) and return the stored :class:`Run`.
 
@@ -701,6 +722,10 @@ def run_scan(
     progress
         Show a progress bar (``tqdm.auto``: a widget in a notebook, a text bar on stderr in
         a terminal; never on stdout).
+    operator, sample_id, notes, tags
+        The run's identity (who measures, the physical sample's id, free text, tags),
+        stored with the run beside its UUID; the config's ``[run]`` table fills what is
+        left out. Change it later with :meth:`Run.annotate`.
 
     Returns
     -------
@@ -719,6 +744,7 @@ def run_scan(
         store=store,
         time_scale=time_scale,
         progress=progress,
+        identity={"operator": operator, "sample_id": sample_id, "notes": notes, "tags": tags},
     )
     control = _ScanControl()
     return _run_blocking(_scan_in_this_thread(call, control), control)
@@ -736,6 +762,10 @@ async def run_scan_async(
     store: str | Path | None = None,
     time_scale: float | None = None,
     progress: bool = True,
+    operator: str | None = None,
+    sample_id: str | None = None,
+    notes: str | None = None,
+    tags: Sequence[str] = (),
 ) -> Run:
     """:func:`run_scan` as a coroutine on the caller's event loop: ``run = await
     gl.run_scan_async(...)`` in a notebook cell (the kernel stays responsive to other
@@ -751,6 +781,7 @@ async def run_scan_async(
         store=store,
         time_scale=time_scale,
         progress=progress,
+        identity={"operator": operator, "sample_id": sample_id, "notes": notes, "tags": tags},
     )
     return await _scan_in_this_thread(call)
 
@@ -762,6 +793,8 @@ async def _scan(
     time_scale: float | None,
     progress: bool,
     control: _ScanControl | None = None,
+    *,
+    meta: Any = None,
 ) -> int:
     from goniolab.config import load_lab_config
     from goniolab.scan.events import Progress
@@ -771,7 +804,7 @@ async def _scan(
     cfg = load_lab_config(config_path)
     async with ScanSession.open(cfg, store, sample=plan.sample, time_scale=time_scale) as session:
         try:
-            runner = session.start(await session.prepare(plan))
+            runner = session.start(await session.prepare(plan), meta=meta)
         except PlanRefused as exc:
             raise UserError(f"plan refused (no arm moved): {exc}") from exc
         run_id = runner.run_id

@@ -136,7 +136,11 @@ async def _session(args: argparse.Namespace, store: RunStore, plan: GlossPlan) -
                 models=SampleModels(args.n),
             )
         mode = args.mode or ("push" if _pushes(args.protocol) and not args.config else "measure")
-        logger = await session.start(plan, mode=mode, interval_s=args.interval)
+        from goniolab.commands.scan import run_meta_args
+
+        logger = await session.start(
+            plan, mode=mode, interval_s=args.interval, meta=run_meta_args(args)
+        )
         from goniolab.commands.scan import announce_store
 
         announce_store(store, logger.run_id)
@@ -258,6 +262,9 @@ def register(subparsers: Any) -> None:
         "--n", type=float, default=1.55, help="refractive index for --sample (no config)"
     )
     pl.add_argument("--count", type=int, default=0, help="readings to take (0 = until Ctrl-C)")
+    from goniolab.commands.scan import add_run_meta_args
+
+    add_run_meta_args(pl)  # --operator, --sample-id, --note, --tag (run identity)
     pl.add_argument(
         "--angles", type=int, nargs="+", default=[20, 60, 85], help="geometries (20 60 85)"
     )

@@ -41,8 +41,8 @@ from goniolab.scan.events import (
 )
 from goniolab.tui.comparison import Comparison
 from goniolab.tui.palette import ScanCommands
-from goniolab.tui.screens import RunsScreen
-from goniolab.tui.view_model import ArmState, Backend, ScanSetup
+from goniolab.tui.screens import RunIdentityScreen, RunsScreen
+from goniolab.tui.view_model import ArmState, Backend, RunIdentity, ScanSetup
 from goniolab.tui.widgets import ComparisonPanel, GlossLog, ScanForm, StatusLine, StatusPanel
 
 __all__ = ["GonioApp", "alignment_note"]
@@ -96,6 +96,7 @@ _LAB_ACTIONS = frozenset(
         "cycle_plot",
         "browse_runs",
         "toggle_form",
+        "run_identity",
         "blur",
     }
 )
@@ -139,6 +140,7 @@ class GonioApp(App[int]):
         Binding("c", "cycle_plot", "Colour plot"),
         Binding("r", "browse_runs", "Runs"),
         Binding("f", "toggle_form", "Form/plot"),
+        Binding("i", "run_identity", "Identity"),
         Binding("q", "quit", "Quit"),
         Binding("escape", "blur", "Leave field", show=False),
     ]
@@ -263,6 +265,18 @@ class GonioApp(App[int]):
                 if tiny
                 else ""
             )
+
+    def action_run_identity(self) -> None:
+        """Ask for the operator, physical sample id, notes and tags of the next runs."""
+
+        def chosen(identity: RunIdentity | None) -> None:
+            if identity is None:
+                return
+            self.backend.run_identity = identity
+            said = identity.describe() or "cleared (the config's [run] table applies)"
+            self.notify(f"next runs: {said}", title="Run identity", timeout=5)
+
+        self.push_screen(RunIdentityScreen(self.backend.run_identity), chosen)
 
     def action_toggle_form(self) -> None:
         """Under 120 columns: show the setup form and instrument panel instead of the

@@ -39,9 +39,9 @@ from goniolab.scan.plans import DEFAULT_REPEATS, BrdfPlan, GlossPlan, PlanError
 from goniolab.scan.predict import Predictor
 from goniolab.scan.runner import PlanRefused, ScanRunner
 from goniolab.session import GlossSession, ScanSession, check_sample
-from goniolab.store import RunStore, StoreError, resolve_store_path
+from goniolab.store import RunMeta, RunStore, StoreError, resolve_store_path
 from goniolab.surfaces.samples import sample_names
-from goniolab.tui.view_model import ArmState, RunSummary, ScanSetup, StoredRun
+from goniolab.tui.view_model import ArmState, RunIdentity, RunSummary, ScanSetup, StoredRun
 
 __all__ = ["SessionBackend"]
 
@@ -106,9 +106,17 @@ class SessionBackend:
         self._align_runner: AlignRunner | None = None
         self._task: asyncio.Task[None] | None = None
         self._gloss_task: asyncio.Task[None] | None = None
-        self._gloss_runs: dict[str, int] = {}
+        self._gloss_runs: dict[tuple[str, RunIdentity], int] = {}
         self._scan_sample = ""
+        #: Stored with every run started from now on (key i in the TUI).
+        self.run_identity = RunIdentity()
         self._closed = False
+
+    def _run_meta(self) -> RunMeta:
+        """:attr:`run_identity` as the store's run metadata (the config's ``[run]`` table
+        fills what it leaves empty: ScanSession.start / GlossSession.create_run)."""
+        i = self.run_identity
+        return RunMeta(operator=i.operator, sample_id=i.sample_id, notes=i.notes, tags=i.tags)
 
     # ------------------------------------------------------------------ lifecycle
     @property
@@ -245,7 +253,7 @@ class SessionBackend:
         if self.running:  # started meanwhile (the model was built in a thread)
             raise UserError("a scan is already running")
         self._scan_sample = setup.sample
-        self._runner = runner = session.start(scan)
+        self._runner = runner = session.start(scan, meta=self._run_meta())
         self._task = asyncio.get_running_loop().create_task(
             self._run(session, runner), name=f"tui-run-{runner.run_id}"
         )
@@ -370,9 +378,12 @@ class SessionBackend:
             if not self.running:  # a scan's sample stays under them
                 session.lab.put_sample(prediction.model, sample)
         plan = GlossPlan(count=1, angles_deg=GLOSS_ANGLES_DEG, sample=sample)
-        run_id = self._gloss_runs.get(sample)
+        key = (sample, self.run_identity)  # a new identity starts a new gloss run
+        run_id = self._gloss_runs.get(key)
         if run_id is None:
-            run_id = self._gloss_runs[sample] = self.gloss.create_run(plan, prediction)
+            run_id = self._gloss_runs[key] = self.gloss.create_run(
+                plan, prediction, meta=self._run_meta()
+            )
         logger = self.gloss.logger(plan, run_id, prediction)
 
         async def _one() -> None:

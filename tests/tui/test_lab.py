@@ -562,3 +562,36 @@ async def test_an_internal_error_fails_the_alignment_on_screen(
         assert (
             run.status == "failed" and run.reason == "internal error: ZeroDivisionError: a defect"
         )
+
+
+async def test_run_identity_dialog_is_stored_with_the_next_runs(tmp_path: Path) -> None:
+    """Issue 22 item 4: operator, physical sample id, notes and tags from the TUI (key i)
+    are stored with the next scan and gloss run; Esc leaves them unchanged."""
+    app = make_app(tmp_path)
+    async with app.run_test(size=SIZE) as pilot:
+        await wait_until(pilot, lambda: app.ready.is_set())
+        await pilot.press("i")
+        await pilot.pause()
+        for field, text in (("operator", "ada"), ("sample_id", "LIMS-7"),
+                            ("notes", "2nd coat"), ("tags", "q3, wet, q3")):  # fmt: skip
+            app.screen.query_one(f"#{field}", Input).value = text
+        app.screen.query_one("#tags", Input).focus()
+        await pilot.press("enter")
+        await pilot.pause()
+        assert app.backend.run_identity.tags == ("q3", "wet")
+        await pilot.press("i")
+        await pilot.pause()
+        app.screen.query_one("#operator", Input).value = "mallory"
+        await pilot.press("escape")  # cancelled: unchanged
+        await pilot.pause()
+        assert app.backend.run_identity.operator == "ada"
+        await pilot.press("s")
+        await wait_until(pilot, lambda: app.run_state is RunState.DONE, max_turns=20000)
+        await pilot.press("g")
+        await wait_until(pilot, lambda: len(app.comparison.gloss) >= 1, max_turns=20000)
+    with RunStore(tmp_path / "runs.sqlite", readonly=True) as s:
+        runs = [s.get_run(r) for r in (1, 2)]
+    assert {r.kind for r in runs} == {"brdf", "gloss"}
+    for r in runs:
+        assert (r.operator, r.sample_id, r.notes, r.tags) == ("ada", "LIMS-7", "2nd coat",
+                                                              ("q3", "wet"))  # fmt: skip
