@@ -83,14 +83,10 @@ class ZgmFile(ProfileFile):
 
     def profile(self, path: Path) -> ZgmProfile:
         return ZgmProfile(
-            name=self.name,
-            path=path,
-            description=self.description,
-            serial=self.serial,
+            **self.common_fields(path),
             reply_terminator=self.reply_terminator,
             timeout_s=self.timeout_s,
             led_argument=self.led_argument,
-            unconfirmed=tuple(self.unconfirmed),
         )
 
 
@@ -133,15 +129,11 @@ class LineGlossFile(ProfileFile):
 
     def profile(self, path: Path) -> LineGlossProfile:
         return LineGlossProfile(
-            name=self.name,
-            path=path,
-            description=self.description,
-            serial=self.serial,
+            **self.common_fields(path),
             pattern=re.compile(self.pattern),
             overflow_tokens=tuple(self.overflow_tokens),
             trigger=self.trigger,
             line_terminator=self.line_terminator,
             encoding=self.encoding,
             timeout_s=self.timeout_s,
-            unconfirmed=tuple(self.unconfirmed),
         )

@@ -163,6 +163,16 @@ class ProfileFile(Section):
                 )
         return checked
 
+    def common_fields(self, path: Path) -> dict[str, Any]:
+        """The fields every profile object has, for its constructor."""
+        return {
+            "name": self.name,
+            "path": path,
+            "description": self.description,
+            "serial": self.serial,
+            "unconfirmed": tuple(self.unconfirmed),
+        }
+
     def profile(self, path: Path) -> Any:
         """The frozen profile object this file describes (each kind of file defines it)."""
         raise NotImplementedError(f"{type(self).__name__} does not build a profile")

@@ -290,11 +290,8 @@ class StepperFile(ProfileFile):
         addresses = {k: v - base for k, v in numbers if v is not None}
         speed, accel = self.units.counts_per_step()
         return StepperProfile(
-            name=self.name,
-            path=path,
-            description=self.description,
+            **self.common_fields(path),
             move_style=self.move_style,
-            serial=self.serial,
             registers=dataclasses.replace(self.registers, **addresses),
             status_bits=self.status_bits,
             speed_counts_per_step_s=speed,
@@ -302,7 +299,6 @@ class StepperFile(ProfileFile):
             input_bits=self.input_bits,
             direct_data=self.direct_data,
             opcodes=self.opcodes,
-            unconfirmed=tuple(self.unconfirmed),
             single_register_fields=tuple(self.single_register_fields),
         )
 

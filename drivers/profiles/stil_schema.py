@@ -264,10 +264,7 @@ class StilFile(ProfileFile):
 
     def profile(self, path: Path) -> StilProfile:
         return StilProfile(
-            name=self.name,
-            path=path,
-            description=self.description,
-            serial=self.serial,
+            **self.common_fields(path),
             command_terminator=self.command_terminator,
             reply_terminator=self.reply_terminator,
             encoding=self.encoding,
@@ -282,5 +279,4 @@ class StilFile(ProfileFile):
             reply_set_exposure=self.replies.set_exposure,
             reply_measure=tuple(self.replies.measure),
             reply_error=self.replies.error,
-            unconfirmed=tuple(self.unconfirmed),
         )
