@@ -154,3 +154,51 @@ def test_the_docs_list_the_registered_protocols() -> None:
     assert m, "docs/ARCHITECTURE.md lacks the protocols:begin/end markers"
     expected = protocol_table_markdown()
     assert m.group(1).strip() == expected, f"paste into docs/ARCHITECTURE.md:\n{expected}"
+
+
+async def test_the_lab_builds_and_connects_the_toy_driver(
+    tmp_path: Path, acme: ProtocolEntry
+) -> None:
+    """A lab config naming the toy protocol gets its driver: connecting it sends the
+    doc's WAKE line (with the line-gloss-example profile's CRLF) down the port."""
+    import os
+    import select
+    import tty
+
+    from goniolab.lab import Lab
+    from goniolab.optics.analytic import AnalyticModel
+
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    try:
+        path = write_config(tmp_path, f'protocol = "acme"\nport = "{os.ttyname(slave)}"')
+        lab = Lab.from_config(
+            path, model=AnalyticModel("ggx", alpha=0.08, n=1.55), instruments=("glossmeter",)
+        )
+        async with lab:
+            assert type(lab.glossmeter).__name__ == "AcmeGlossmeter"
+            ready, _, _ = select.select([master], [], [], 5.0)
+            assert ready, "the driver wrote nothing within 5 s"
+            assert os.read(master, 64) == b"WAKE\r\n"
+    finally:
+        os.close(master)
+        os.close(slave)
+
+
+@pytest.mark.parametrize(
+    ("table", "key", "known"),
+    [
+        ("goniometer.lamp", "goniometer.lamp.protocol", "'modbus'"),
+        ("spectro", "spectro.protocol", "'stil'"),
+        ("glossmeter", "glossmeter.protocol", "'zgm1120', 'line'"),
+    ],
+)
+def test_every_device_protocol_is_checked_against_its_table(
+    tmp_path: Path, table: str, key: str, known: str
+) -> None:
+    path = tmp_path / "lab.toml"
+    path.write_text(f'[{table}]\nprotocol = "nope"\n', encoding="utf-8")
+    with pytest.raises(ConfigError) as info:
+        load_lab_config(path)
+    assert info.value.key == key
+    assert info.value.reason.endswith(f"protocol 'nope' (known: {known})")
