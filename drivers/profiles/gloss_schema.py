@@ -34,8 +34,8 @@ from drivers.profiles.schema_common import (
     ProfileFile,
     SerialSettings,
     Text,
+    written_in,
 )
-from drivers.toml_schema import KeyedValueError, short_repr
 
 __all__ = ["LineGlossFile", "LineGlossProfile", "ZgmFile", "ZgmProfile"]
 
@@ -117,14 +117,7 @@ class LineGlossFile(ProfileFile):
 
     @model_validator(mode="after")
     def _speaks_its_encoding(self) -> LineGlossFile:
-        for key in ("trigger", "line_terminator"):
-            text = getattr(self, key)
-            try:
-                text.encode(self.encoding)
-            except UnicodeError:
-                raise KeyedValueError(
-                    key, f"{short_repr(text)} cannot be written in {self.encoding}"
-                ) from None
+        written_in(self.encoding, {k: getattr(self, k) for k in ("trigger", "line_terminator")})
         return self
 
     def profile(self, path: Path) -> LineGlossProfile:

@@ -54,6 +54,7 @@ __all__ = [
     "profile_error",
     "profile_path",
     "table",
+    "written_in",
 ]
 
 
@@ -78,6 +79,23 @@ def profile_path(name_or_path: str | Path) -> Path:
     if isinstance(name_or_path, Path) or text.endswith(".toml") or "/" in text or "\\" in text:
         return Path(name_or_path)
     return PROFILES_DIR / f"{text}.toml"
+
+
+def written_in(encoding: str, texts: dict[str, str]) -> None:
+    """Check that every text (by its dotted key) can be written in ``encoding``.
+
+    Raises
+    ------
+    KeyedValueError
+        The first text that cannot, naming its key.
+    """
+    for key, text in texts.items():
+        try:
+            text.encode(encoding)
+        except UnicodeError:
+            raise KeyedValueError(
+                key, f"{short_repr(text)} cannot be written in {encoding}"
+            ) from None
 
 
 def profile_error(path: Path, key: str, reason: str) -> ProfileError:

@@ -40,6 +40,7 @@ from drivers.profiles.schema_common import (
     Section,
     SerialSettings,
     Text,
+    written_in,
 )
 from drivers.toml_schema import KeyedValueError, short_repr
 
@@ -243,13 +244,7 @@ class StilFile(ProfileFile):
             "replies.error": r.error,
             **{f"replies.measure[{i}]": line for i, line in enumerate(r.measure)},
         }
-        for key, text in {**texts, **replies}.items():
-            try:
-                text.encode(self.encoding)
-            except UnicodeError:
-                raise KeyedValueError(
-                    key, f"{short_repr(text)} cannot be written in {self.encoding}"
-                ) from None
+        written_in(self.encoding, {**texts, **replies})
         fields: dict[str, dict[str, Any]] = {
             "commands.set_exposure": exposure,
             "replies.identify": _IDENT,
