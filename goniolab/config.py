@@ -71,10 +71,12 @@ __all__ = [
     "SimConfig",
     "SpectroConfig",
     "TwinConfig",
+    "alignment_state_path",
     "configs_dir",
     "load_lab_config",
     "resolve_profile",
     "write_alignment",
+    "write_alignment_state",
 ]
 
 
@@ -149,6 +151,8 @@ class LabSection(_Strict):
     start_sim_servers: bool = False
     time_scale: NonNegFloat = 1.0
     store: str = ""
+    #: how long a scan waits for a lost instrument link (a controller or sim-server restart)
+    reconnect_window_s: Annotated[float, Field(strict=False, ge=0.0, le=3600.0)] = 30.0
 
     @model_validator(mode="after")
     def _servers_need_drivers(self) -> LabSection:
@@ -261,6 +265,11 @@ class SpectroConfig(_Strict):
     exposure_us: Annotated[int, Field(strict=True, ge=1)] = 10000
     detector_cone_deg: Annotated[float, Field(strict=True, ge=0.0, lt=90.0)] = 6.0
     timeout_s: TimeoutS = 2.0
+    #: the certified standards (goniolab/scan/standards.py), relative to this file's
+    #: directory, else the shipped configs/standards.toml
+    standards: str = "standards.toml"
+    #: a run warns when the newest `goniolab calibrate` record is older than this
+    calibration_max_age_h: Annotated[float, Field(strict=False, gt=0.0)] = 24.0
 
     @model_validator(mode="before")
     @classmethod
@@ -358,6 +367,8 @@ class TwinConfig(_Strict):
     read_noise_counts: Annotated[float, Field(strict=True, ge=0.0, le=1000.0)] = 5.0
     stray_pct: Annotated[float, Field(strict=True, ge=0.0, le=1.0)] = 0.002
     flicker_pct: Annotated[float, Field(strict=True, ge=0.0, le=10.0)] = 0.3
+    # share of the spectro's response to s-polarised light (0.5: insensitive)
+    s_weight: Annotated[float, Field(strict=True, ge=0.4, le=0.6)] = 0.5
     # the arms and the sample seating, drawn per session (uniform in +/- range)
     backlash_deg: Annotated[float, Field(strict=True, ge=0.0, le=1.0)] = 0.02
     lamp_zero_range_deg: Annotated[float, Field(strict=True, ge=0.0, le=5.0)] = 0.5
@@ -445,6 +456,12 @@ class AlignmentConfig(_Strict):
     detector_zero_deg: Annotated[float, Field(strict=True, ge=-5.0, le=5.0)] = 0.0
     sample_tilt_deg: Annotated[float, Field(strict=True, ge=-5.0, le=5.0)] = 0.0
     run: Annotated[int, Field(strict=True, ge=0)] = 0
+    #: Where ``scan --plan align`` keeps its result (a per-lab state file, never the tracked
+    #: config): relative to the config's directory; "" = beside the store
+    #: (:func:`alignment_state_path`). Its values replace the three above when it exists.
+    state_file: str = ""
+    #: Set by the loader: the state file the values came from ("" = this config).
+    loaded_from: str = ""
 
     def corrections_deg(self) -> tuple[float, float]:
         """``(lamp, detector)`` added to requested angles before the arms move."""
@@ -554,7 +571,7 @@ def load_lab_config(path: str | Path) -> LabConfig:
     cfg, profiles = _resolve_profiles(cfg, p)
     _register_checks(cfg, p, profiles)
     _exposure_check(cfg, p, profiles["spectro.profile"])
-    return cfg
+    return _with_alignment_state(cfg)
 
 
 #: The reason given for a TOML file nested deeper than the parser's recursion allows.
@@ -762,7 +779,6 @@ def write_alignment(path: str | Path, values: dict[str, float | int], *, note: s
     ConfigError
         The file cannot be read or written, or the values are out of range.
     """
-    import os
     import re
 
     p = Path(path)
@@ -782,9 +798,117 @@ def write_alignment(path: str | Path, values: dict[str, float | int], *, note: s
     except ValidationError as exc:
         key, reason = first_issue(exc)
         raise ConfigError(p, f"alignment.{key}", reason) from None
-    tmp = p.with_name(p.name + f".{os.getpid()}.tmp")
+    _replace_text(p, new, key="alignment")
+
+
+# --------------------------------------------------------------------------- alignment state
+#: The keys an alignment state file carries in its ``[alignment]`` table.
+_STATE_KEYS = ("lamp_zero_deg", "detector_zero_deg", "sample_tilt_deg", "run")
+
+
+def alignment_state_path(cfg: LabConfig) -> Path:
+    """The per-lab alignment state file of a config (issue 22: never the tracked config).
+
+    ``[alignment] state_file`` relative to the config's directory when set; otherwise
+    ``<config stem>.alignment.toml`` beside the store (``[lab] store``: its directory for an
+    SQLite file, resolved against the config's directory; the user data directory for the
+    default store or a PostgreSQL one).
+    """
+    import platformdirs
+
+    base = Path(cfg.source).resolve().parent if cfg.source else Path.cwd()
+    if cfg.alignment.state_file:
+        p = Path(cfg.alignment.state_file).expanduser()
+        return p if p.is_absolute() else base / p
+    stem = Path(cfg.source).stem if cfg.source else "lab"
+    store = cfg.lab.store
+    if store and "://" not in store and "=" not in store:
+        sp = Path(store).expanduser()
+        return (sp if sp.is_absolute() else base / sp).parent / f"{stem}.alignment.toml"
+    return Path(platformdirs.user_data_dir("goniolab", appauthor=False)) / f"{stem}.alignment.toml"
+
+
+def _with_alignment_state(cfg: LabConfig) -> LabConfig:
+    """``cfg`` with the values of its alignment state file (if there is one), which cites it.
+
+    Raises
+    ------
+    ConfigError
+        The state file exists but is unreadable or holds out-of-range values (naming it).
+    """
+    path = alignment_state_path(cfg)
+    if not path.is_file():
+        return cfg
     try:
-        tmp.write_text(new, encoding="utf-8")
-        os.replace(tmp, p)
+        data = read_toml(path, what="alignment state file")
+    except TomlFileError as exc:
+        raise ConfigError(path, "", exc.reason) from None
+    table = data.get("alignment")
+    if not isinstance(table, dict):
+        raise ConfigError(path, "alignment", "the state file has no [alignment] table")
+    values = {k: table[k] for k in _STATE_KEYS if k in table}
+    try:
+        AlignmentConfig.model_validate(values)
+    except ValidationError as exc:
+        key, reason = first_issue(exc)
+        raise ConfigError(path, f"alignment.{key}", reason) from None
+    update = {**values, "loaded_from": str(path)}
+    return cfg.model_copy(update={"alignment": cfg.alignment.model_copy(update=update)})
+
+
+def write_alignment_state(
+    cfg: LabConfig, values: dict[str, float | int], *, note: str = ""
+) -> Path:
+    """Write the alignment result to the config's state file (:func:`alignment_state_path`);
+    the config file itself is not touched. Validated first; written atomically (a temp file
+    beside it, then ``os.replace``), an existing file's mode kept. Returns the path.
+
+    Raises
+    ------
+    ConfigError
+        Out-of-range values (nothing written) or the file cannot be written.
+    """
+
+    path = alignment_state_path(cfg)
+    try:
+        AlignmentConfig.model_validate(values)
+    except ValidationError as exc:
+        key, reason = first_issue(exc)
+        raise ConfigError(path, f"alignment.{key}", reason) from None
+    lines = [
+        "# goniolab alignment state: written by `goniolab scan --plan align`, read with the",
+        f"# lab config {Path(cfg.source).resolve() if cfg.source else '(none)'}. Not a config.",
+    ]
+    if note:
+        lines.append(f"# {note}")
+    lines.append("[alignment]")
+    for key, value in values.items():
+        lines.append(f"{key} = {value:.4f}" if isinstance(value, float) else f"{key} = {value}")
+    _replace_text(path, "\n".join(lines) + "\n", key="alignment")
+    return path
+
+
+def _replace_text(path: Path, text: str, *, key: str) -> None:
+    """Replace ``path``'s content atomically, keeping what the file is: a symlink's target is
+    replaced (the link stays), and the mode (and owner, where permitted) of an existing file
+    are kept (issue 23: a config holding a password must not become world-readable)."""
+    import contextlib
+    import os
+
+    target = path.resolve() if path.is_symlink() else path
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        st = target.stat() if target.exists() else None
+        tmp = target.with_name(target.name + f".{os.getpid()}.tmp")
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        if st is not None:
+            os.chmod(tmp, st.st_mode & 0o7777)
+            with contextlib.suppress(OSError, AttributeError):
+                os.chown(tmp, st.st_uid, st.st_gid)
+        else:
+            os.chmod(tmp, 0o644)
+        os.replace(tmp, target)
     except OSError as exc:
-        raise ConfigError(p, "alignment", f"cannot write the config: {exc}") from None
+        raise ConfigError(path, key, f"cannot write {path}: {exc}") from None

@@ -272,6 +272,9 @@ _POINT_FIELDS = (
     "predicted_a_star",
     "predicted_b_star",
     "colour_error",
+    # issue 21 (measure): the reading's quality flag and signal level, from its raw record
+    "quality",
+    "peak_fraction",
     "timestamp",
 )
 _GLOSS_FIELDS = (
@@ -1816,6 +1819,10 @@ class RunStore:
                 "luminance_pct": p.luminance_pct,
                 "predicted_pct": preds.get(p.index),
                 **colour_cols(p),
+                # issue 21 (measure): ok / saturated / under_noise_floor / unknown ("" = a
+                # reading stored before the flags), the signal level it was judged by
+                "quality": str(p.raw.get("quality", "")),
+                "peak_fraction": p.raw.get("peak_fraction"),
                 "timestamp": p.timestamp,
             }
             for p in self.points(run_id)

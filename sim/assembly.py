@@ -34,7 +34,6 @@ from goniolab.optics.models import ReflectanceModel
 from sim.faults import FaultInjector, FaultSpec
 from sim.instruments import (
     GlossDrift,
-    MirrorModel,
     SimAxis,
     SimGlossmeter,
     SimSpectro,
@@ -239,6 +238,7 @@ def build_sim_instruments(
             read_noise_counts=t.read_noise_counts,
             stray_pct=t.stray_pct,
             flicker_pct=t.flicker_pct,
+            s_weight=t.s_weight,
         )
         if realistic
         else None
@@ -454,8 +454,9 @@ class SimLab:
         """Put the reference mirror (``"mirror"``), the ISO 2813 black-glass
         standard (``"standard"``, n = 1.567, flat) or the sample under the instruments.
         The references lie on the reference seat (no tilt); the sample has this session's
-        tilt. The ideal twin reads :class:`sim.instruments.MirrorModel` or the sample model; the
-        realistic one a protected-aluminium mirror, the black glass or the sample's truth.
+        tilt. Both twins read a protected-aluminium mirror (88-92 %, as certified in
+        ``configs/standards.toml``) or the black glass; the ideal twin the sample model, the
+        realistic one the sample's truth.
         ``goniolab.lab.Lab`` hands it on as ``lab.place_specimen``."""
         realistic = self.instruments.truth is not None
         # references sit on the reference seat (no tilt); the sample has this session's
@@ -463,7 +464,8 @@ class SimLab:
             self.instruments.session["sample_tilt_deg"] if which == "sample" else 0.0
         )
         if which == "mirror":
-            self.instruments.spectro.model = FlatSpecimen() if realistic else MirrorModel()
+            # both twins: the certified protected-Al mirror of configs/standards.toml (88-92 %)
+            self.instruments.spectro.model = FlatSpecimen()
         elif which == "standard":
             self.instruments.spectro.model = FlatSpecimen(n=1.567, name="black glass")
         elif which == "sample":

@@ -85,6 +85,8 @@ TEMPLATE_FIELDS: dict[str, str] = {
     "count": r"\d+",
     "luminance_pct": r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?",
     "values": r"[-+0-9.eE]+(?:,[-+0-9.eE]+)*",
+    # counts of the strongest channel over full scale (1 = saturated); -1: not reported
+    "peak_fraction": r"-1|[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?",
 }
 
 
@@ -159,6 +161,7 @@ _MEASURE: dict[str, Any] = {
     "step_nm": 5,
     "count": 12,
     "values": ",".join(f"{v:.4f}" for v in range(1, 13)),
+    "peak_fraction": 0.4210,
 }
 
 

@@ -76,6 +76,10 @@ def run_summary(store: RunStore, rec: RunRecord) -> dict[str, Any]:
             return summarize_brdf(plan, store.points(rec.id), store.predictions(rec.id))
         except StoreError as exc:
             raise UserError(str(exc)) from exc
+    if rec.kind in ("align", "calibration"):
+        # the result is the run's record (what the alignment found, the calibration's check)
+        key = "alignment" if rec.kind == "align" else "calibration"
+        return {"readings": store.count_points(rec.id), key: rec.model.get(key)}
     from goniolab.scan.plans import gloss_statistics
 
     rows = store.gloss_readings(rec.id)
@@ -208,10 +212,14 @@ def run_colour(store: RunStore, rec: RunRecord) -> list[dict[str, Any]]:
     """Per-geometry measured and predicted colour of a BRDF run ([] for gloss runs)."""
     if rec.kind != "brdf":
         return []
-    from goniolab.scan.colour import colour_rows
+    from goniolab.scan.colour import PointColour, colour_rows
 
     theta_i = float(rec.plan.get("theta_i_deg", 45.0))
-    return colour_rows(store.points(rec.id), store.predicted_colours(rec.id), theta_i)
+    try:
+        pc: PointColour | None = PointColour.from_snapshot(rec.config)
+    except (TypeError, ValueError, AttributeError):
+        pc = None  # a damaged snapshot: repeats averaged as L*a*b*
+    return colour_rows(store.points(rec.id), store.predicted_colours(rec.id), theta_i, pc)
 
 
 def _f(v: Any, fmt: str = "6.1f") -> str:
@@ -227,7 +235,7 @@ def colour_text(rows: list[dict[str, Any]], theta_i_deg: float = 45.0) -> list[s
 
     out = [
         "  theta_r  aspec     L*     a*     b*     C*      h |  pred L*     a*     b* |"
-        "    dL*    dC*    dH*  dE*ab   dE94   dE00"
+        "    dL*    dC*    dH*  dE*ab   dE94   dE00  rep dE00"
     ]
     for r in rows:
         d: dict[str, Any] = {}
@@ -242,6 +250,7 @@ def colour_text(rows: list[dict[str, Any]], theta_i_deg: float = 45.0) -> list[s
             + "".join(
                 f" {_f(d.get(k), '6.2f')}" for k in ("dL", "dC", "dH", "dE76", "dE94", "dE00")
             )
+            + f"  {_f(r.get('dE00_repeat_mean'), '7.3f')}"
         )
     fi = flop_of_rows(rows, theta_i_deg)
     fi_p = flop_of_rows(rows, theta_i_deg, "predicted_L")
@@ -293,6 +302,8 @@ def _cmd_show(args: argparse.Namespace) -> int:
                 print("  colour (reflectance factor, per geometry):")
                 theta_i = float(rec.plan.get("theta_i_deg", 45.0))
                 print("\n".join(colour_text(colour, theta_i)))
+        elif rec.kind in ("align", "calibration"):
+            print(f"  readings: {summary['readings']} (the result: the model's {rec.kind} record)")
         else:
             predicted = rec.model.get("predicted_gu") or {}
             for angle, st in summary["statistics"].items():

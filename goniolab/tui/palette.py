@@ -16,7 +16,7 @@ SCAN_COMMANDS: tuple[tuple[str, str, str], ...] = (
     (
         "Align arms and sample",
         "align",
-        "Arm zero offsets and sample tilt from the data, into [alignment] (a)",
+        "Arm zero offsets and sample tilt from the data, saved beside the store (a, twice)",
     ),
     ("Read glossmeter", "read_gloss", "One 20/60/85 reading beside the prediction (g)"),
     ("Home the arms", "home", "Reset the arms' alarms and home them again (h)"),

@@ -261,8 +261,8 @@ class SessionBackend:
 
     async def align(self, sample: str) -> int:
         """Start ``scan --plan align`` for ``sample`` in a task (the CLI's default plan,
-        :class:`~goniolab.scan.align.AlignPlan`); ``[alignment]`` is written into the
-        config file and the arms correct every later move. Return the run id once the
+        :class:`~goniolab.scan.align.AlignPlan`); the result is saved to the lab's
+        alignment state file (never the config file) and the arms correct every later move. Return the run id once the
         run is stored."""
         session = self._require_open()
         if self.running:
@@ -293,7 +293,7 @@ class SessionBackend:
     ) -> None:
         """Run the alignment; a failure after the run was stored becomes events."""
         try:
-            await session.align(plan, write_config=self.config_path, started=on_start)
+            await session.align(plan, save_state=True, started=on_start)
         except Exception as exc:
             runner = self._align_runner
             if runner is None or runner.plan is not plan:

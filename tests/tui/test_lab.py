@@ -490,7 +490,7 @@ async def test_a_aligns_the_sim_lab_writes_alignment_and_corrects_the_arms(
     monkeypatch.setattr(app, "notify", record)
     async with app.run_test(size=SIZE) as pilot:
         await wait_until(pilot, app.ready.is_set)
-        await pilot.press("a")
+        await pilot.press("a", "a")  # the second confirms
         await wait_until(pilot, held.is_set, max_turns=100_000)
         await pilot.press("x")
         release.set()
@@ -498,7 +498,7 @@ async def test_a_aligns_the_sim_lab_writes_alignment_and_corrects_the_arms(
         assert 3 <= app.progress[0] < 104
         assert "[alignment]" not in path.read_text()
         await wait_until(pilot, lambda: not backend.running)
-        await pilot.press("a")
+        await pilot.press("a", "a")  # the second confirms
         await wait_until(
             pilot,
             lambda: app.run_id == 2 and app.run_state is RunState.DONE and not backend.running,
@@ -506,7 +506,11 @@ async def test_a_aligns_the_sim_lab_writes_alignment_and_corrects_the_arms(
         )
         assert app.comparison.n_readings == 0
         assert any("run 2: lamp zero -0.4" in m for m in shown)
+        # saved beside the store, the tracked config untouched (issue 22)
+        assert path.read_text() == text
+        assert any(f"saved to {tmp_path / 'lab.alignment.toml'}" in m for m in shown)
         got = load_lab_config(path).alignment
+        assert got.loaded_from == str(tmp_path / "lab.alignment.toml")
         assert got.run == 2
         assert got.lamp_zero_deg == pytest.approx(-0.4, abs=0.02)
         assert got.detector_zero_deg == pytest.approx(0.2, abs=0.02)
@@ -551,7 +555,7 @@ async def test_an_internal_error_fails_the_alignment_on_screen(
     backend, app = align_app(path)
     async with app.run_test(size=SIZE) as pilot:
         await wait_until(pilot, app.ready.is_set)
-        await pilot.press("a")
+        await pilot.press("a", "a")  # the second confirms
         await wait_until(pilot, lambda: app.run_state is RunState.FAILED, max_turns=20_000)
         await wait_until(pilot, lambda: not backend.running)
         messages = [n.message for n in app._notifications]

@@ -135,10 +135,11 @@ class ScriptedBackend:
         return run_id
 
     #: What the scripted alignment "finds" (its RunFinished summary).
-    ALIGNMENT: ClassVar[dict[str, float]] = {
+    ALIGNMENT: ClassVar[dict[str, object]] = {
         "lamp_zero_deg": 0.125,
         "detector_zero_deg": -0.25,
         "sample_tilt_deg": 0.5,
+        "state_file": "/srv/lab/lab.alignment.toml",
     }
 
     async def align(self, sample: str) -> int:
