@@ -225,7 +225,7 @@ class Lab:
             self.clock = SimClock(self.time_scale)
             self._sim = SimLab(cfg, self._model, self.clock, truth)
             self.sims = self._sim.instruments
-            self.place_specimen = self._sim.place_specimen
+            self.place_specimen = self._place_specimen
         if cfg.lab.mode == "sim":
             assert self.sims is not None
             self._goniometer = self._two_arms(self.sims.lamp, self.sims.detector)
@@ -266,6 +266,14 @@ class Lab:
         ideal twin and a real lab."""
         if self._sim is not None:
             await self._sim.prepare_sample(spec)
+
+    async def _place_specimen(self, which: str) -> None:
+        """Simulated lab: put ``"mirror"``, ``"standard"`` or ``"sample"`` under the
+        instruments (:meth:`sim.assembly.SimLab.place_specimen`); handed out as
+        ``lab.place_specimen`` only when the lab is simulated."""
+        if self._sim is None:
+            raise RuntimeError("place_specimen needs the simulated lab")
+        await self._sim.place_specimen(which)
 
     def put_sample(self, model: ReflectanceModel, spec: str = "") -> None:
         """Simulated lab: the instruments measure the sample ``spec`` (predicted by
