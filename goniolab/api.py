@@ -628,6 +628,7 @@ def _scan_call(
     time_scale: float | None,
     progress: bool,
     identity: dict[str, Any] | None = None,
+    auto_exposure: bool = True,
 ) -> _ScanCall:
     from goniolab.config import load_lab_config
     from goniolab.scan.plans import BrdfPlan, PlanError
@@ -641,6 +642,7 @@ def _scan_call(
             dwell_s=float(dwell_s),
             exposure_us=cfg.spectro.exposure_us if exposure_us is None else int(exposure_us),
             sample=sample or cfg.sample.map,
+            auto_exposure=bool(auto_exposure),
         )
     except PlanError as exc:
         raise UserError(f"run_scan: {exc}") from None
@@ -697,6 +699,7 @@ def run_scan(
     sample_id: str | None = None,
     notes: str | None = None,
     tags: Sequence[str] = (),
+    auto_exposure: bool = True,
 ) -> Run:
     """Run an in-plane scan in one call (blocking) and return the stored :class:`Run`.
 
@@ -722,6 +725,9 @@ def run_scan(
     progress
         Show a progress bar (``tqdm.auto``: a widget in a notebook, a text bar on stderr in
         a terminal; never on stdout).
+    auto_exposure
+        Choose each reading's exposure from the instrument's signal level (the default,
+        as ``goniolab scan``); ``False`` keeps ``exposure_us``.
     operator, sample_id, notes, tags
         The run's identity (who measures, the physical sample's id, free text, tags),
         stored with the run beside its UUID; the config's ``[run]`` table fills what is
@@ -745,6 +751,7 @@ def run_scan(
         time_scale=time_scale,
         progress=progress,
         identity={"operator": operator, "sample_id": sample_id, "notes": notes, "tags": tags},
+        auto_exposure=auto_exposure,
     )
     control = _ScanControl()
     return _run_blocking(_scan_in_this_thread(call, control), control)
@@ -766,6 +773,7 @@ async def run_scan_async(
     sample_id: str | None = None,
     notes: str | None = None,
     tags: Sequence[str] = (),
+    auto_exposure: bool = True,
 ) -> Run:
     """:func:`run_scan` as a coroutine on the caller's event loop: ``run = await
     gl.run_scan_async(...)`` in a notebook cell (the kernel stays responsive to other
@@ -782,6 +790,7 @@ async def run_scan_async(
         time_scale=time_scale,
         progress=progress,
         identity={"operator": operator, "sample_id": sample_id, "notes": notes, "tags": tags},
+        auto_exposure=auto_exposure,
     )
     return await _scan_in_this_thread(call)
 
