@@ -174,7 +174,7 @@ def _model(
     model: str = "auto",
     wavelength_nm: float | None = None,
 ) -> ReflectanceModel:
-    from goniolab.models import build_model, model_for
+    from goniolab.models import model_for
 
     options: dict[str, Any] = {
         "slope_method": slope_method,
@@ -185,15 +185,7 @@ def _model(
     }
     if isinstance(surface, str | Path):
         return model_for(surface, n=n, step_um=step_um, **options)
-    from goniolab.models import MODEL_NAMES
-
-    if model not in MODEL_NAMES:
-        raise UserError(f"unknown model {model!r}; use one of {', '.join(MODEL_NAMES)}")
-    hm = _heightmap(surface, step_um)
-    try:
-        return build_model(hm, n=n, **options)
-    except ValueError as exc:
-        raise UserError(f"{hm.source}: {exc}") from None
+    return model_for(_heightmap(surface, step_um), n=n, **options)
 
 
 def _angles(theta_r_deg: str | Sequence[float] | np.ndarray) -> np.ndarray:

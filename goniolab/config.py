@@ -53,6 +53,7 @@ import goniolab
 from drivers.protocols import GLOSSMETERS, SPECTROS, STEPPERS, ProtocolTable
 from drivers.toml_schema import TomlFileError, first_issue, read_toml
 from goniolab.errors import ConfigError
+from goniolab.model_registry import DEFAULT_MODEL, model_names
 
 __all__ = [
     "INT32_MAX",
@@ -163,13 +164,13 @@ class LabSection(_Strict):
 
 class SampleConfig(_Strict):
     """``[sample]``: the height map (path or ``sample:NAME``), refractive index, and the
-    reflectance model that predicts it (:func:`goniolab.models.model_for`: ``facet``,
-    ``kirchhoff``, ``rayleigh-rice`` or ``auto``, the default) with its optional wavelength
+    reflectance model that predicts it (:func:`goniolab.models.model_for`: a name of
+    :mod:`goniolab.model_registry`, ``auto`` by default) with its optional wavelength
     (nm; unset: 550 nm for BRDF curves, ISO 2813 weighting for gloss)."""
 
     map: str = "sample:wittmann-3"
     n: Annotated[float, Field(strict=True, gt=1.0, lt=4.0, allow_inf_nan=False)] = 1.55
-    model: Literal["auto", "facet", "kirchhoff", "rayleigh-rice"] = "auto"
+    model: str = DEFAULT_MODEL
     wavelength_nm: (
         Annotated[float, Field(strict=True, ge=100.0, le=20000.0, allow_inf_nan=False)] | None
     ) = None
@@ -179,6 +180,14 @@ class SampleConfig(_Strict):
     def _names_a_map(cls, v: str) -> str:
         if not v.strip():
             raise ValueError("empty: name a height-map file or sample:NAME")
+        return v
+
+    @field_validator("model")
+    @classmethod
+    def _registered_model(cls, v: str) -> str:
+        names = [repr(name) for name in model_names()]
+        if v not in model_names():
+            raise ValueError(f"Input should be {', '.join(names[:-1])} or {names[-1]}")
         return v
 
 

@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from goniolab.errors import UserError
+from goniolab.model_registry import model_names
 
 __all__ = ["register", "toml_text"]
 
@@ -324,7 +325,7 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument(
         "--model",
-        choices=("auto", "facet", "kirchhoff", "rayleigh-rice"),
+        choices=model_names(),
         default=None,
         help="coat-surface model (default: the one the run was predicted with)",
     )

@@ -349,7 +349,7 @@ def _cmd_colour(args: argparse.Namespace) -> int:
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
-    from goniolab.export import FORMATS, export_run, format_for_path
+    from goniolab.export import EXPORTERS, export_run, resolve_format
 
     fmt = args.format
     if args.json and not args.output:
@@ -360,11 +360,14 @@ def _cmd_export(args: argparse.Namespace) -> int:
                 f"give -o FILE to write {fmt} (then --json reports what was written)"
             )
         fmt = "json"
-    if fmt is None:
-        fmt = (format_for_path(args.output) if args.output else None) or "csv"
-    if fmt in ("netcdf", "parquet") and not args.output:
+    try:
+        fmt = resolve_format(fmt, args.output)
+    except ValueError as exc:  # issue 27: `-o run.xlsx` wrote CSV silently
+        raise UserError(f"runs export: {exc}") from None
+    if EXPORTERS[fmt].binary and not args.output:
         raise UserError(
-            f"runs export --format {fmt}: a binary format needs -o FILE (e.g. -o run{FORMATS[fmt]})"
+            f"runs export --format {fmt}: a binary format needs -o FILE "
+            f"(e.g. -o run{EXPORTERS[fmt].suffix})"
         )
     from goniolab.store import StoreError
 
@@ -559,21 +562,28 @@ def register(subparsers: Any) -> None:
 
     register_runs_spectra(sub, common)
 
+    from goniolab.export import EXPORTERS
+
     pe = sub.add_parser(
         "export",
         parents=[common],
         help="export one run: CSV/JSON (one row per reading), netCDF or Parquet",
-        description="Export one run. CSV and JSON go to stdout unless -o FILE; netCDF "
-        "(xarray + h5netcdf, CF-style units, the run's metadata as attributes) and Parquet "
-        "(pyarrow, the run record in the schema metadata) need -o FILE. Timestamps are "
-        "ISO 8601 UTC.",
+        description="Export one run. Text formats go to stdout unless -o FILE; binary ones "
+        "need -o FILE. Formats: "
+        + "; ".join(
+            f"{e.name} ({'/'.join(e.suffixes)}{', needs -o' if e.binary else ''}): {e.description}"
+            for e in EXPORTERS.values()
+        )
+        + ". A suffix no format has is refused unless --format is given.",
     )
     pe.add_argument("run", type=int, metavar="RUN")
     pe.add_argument(
         "--format",
-        choices=("csv", "json", "netcdf", "parquet"),
+        choices=tuple(EXPORTERS),
         default=None,
-        help="file format (default: from the -o suffix .csv/.json/.nc/.parquet, else csv)",
+        help="file format (default: from the -o suffix "
+        + "/".join(e.suffix for e in EXPORTERS.values())
+        + ", else csv)",
     )
     pe.add_argument("-o", "--output", help="write to FILE instead of stdout")
     pe.add_argument(

@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Any, TextIO, TypeVar
 from goniolab import jsonout
 from goniolab.commands._angles import allow_negative_angles
 from goniolab.errors import UserError
+from goniolab.model_registry import model_names
 
 if TYPE_CHECKING:  # loaded when a scan runs, not at --help (tests/test_startup.py)
     import asyncio
@@ -702,7 +703,6 @@ def resume_config(rec: Any, config_arg: str | None, use_current: bool) -> LabCon
     from pydantic import ValidationError
 
     from goniolab.config import LabConfig, load_lab_config
-    from goniolab.models import MODEL_NAMES
     from goniolab.session import with_sample
 
     snap = dict(rec.config)
@@ -713,7 +713,7 @@ def resume_config(rec: Any, config_arg: str | None, use_current: bool) -> LabCon
         # what the run's own command line set (its sample, a --model) is no config change
         live = with_sample(live, rec.sample)
         started_with = rec.model.get("model_name")
-        if started_with in MODEL_NAMES:
+        if started_with in model_names():
             s = live.sample.model_copy(update={"model": started_with})
             live = live.model_copy(update={"sample": s})
     stored: LabConfig | None = None
@@ -782,8 +782,6 @@ def _cmd_resume(args: argparse.Namespace) -> int:
         cfg = resume_config(rec, args.config, args.use_current_config)
         # the run goes on with the model it started with (a `scan --model` override included),
         # so the predictions still to compute are that model's, not the config's
-        from goniolab.models import MODEL_NAMES
-
         started_with = rec.model.get("model_name")
         print(
             f"goniolab: resuming run {rec.id}: {store.count_points(rec.id)} readings stored",
@@ -797,7 +795,7 @@ def _cmd_resume(args: argparse.Namespace) -> int:
                 plan=None,
                 run_id=rec.id,
                 json_out=args.json,
-                model=started_with if started_with in MODEL_NAMES else None,
+                model=started_with if started_with in model_names() else None,
                 config=cfg,
             )
         )
@@ -855,7 +853,7 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument(
         "--model",
-        choices=("auto", "facet", "kirchhoff", "rayleigh-rice"),
+        choices=model_names(),
         default=None,
         help="prediction model (default: config [sample] model, itself default auto)",
     )

@@ -151,11 +151,11 @@ class Predictor:
 def model_name(model: ReflectanceModel) -> str:
     """The :func:`goniolab.models.model_for` name of ``model`` (``facet``, ``kirchhoff``,
     ``rayleigh-rice``, ``auto``), else its class name."""
-    from goniolab.models import MODEL_NAMES
+    from goniolab.model_registry import model_names
     from goniolab.optics.facet import FacetModel
 
     kind = getattr(model, "kind", None)
-    if isinstance(kind, str) and kind in MODEL_NAMES:
+    if isinstance(kind, str) and kind in model_names():
         return kind
     return "facet" if isinstance(model, FacetModel) else type(model).__name__
 
