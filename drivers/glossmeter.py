@@ -53,6 +53,7 @@ from drivers.base import (
     GLOSS_ANGLES_DEG,
     DeviceFault,
     DeviceTimeout,
+    Glossmeter,
     GlossReading,
     ProtocolError,
 )
@@ -568,32 +569,33 @@ def open_glossmeter(
     baudrate: int | None = None,
     timeout_s: float | None = None,
     name: str = "glossmeter",
-) -> Zgm1120 | LineGlossmeter:
-    """Build (not connect) a glossmeter driver for ``protocol`` ``"zgm1120"`` or ``"line"``.
+) -> Glossmeter:
+    """Build (not connect) the glossmeter driver of ``protocol``, a name in
+    :data:`drivers.protocols.GLOSSMETERS` (``"zgm1120"``, ``"line"``, or one registered
+    since).
 
     ``profile`` ``None`` selects the protocol's built-in profile (``zgm1120`` /
-    ``line-gloss-example``).
+    ``line-gloss-example``). ``serial_number`` goes to the drivers whose entry lists it
+    among its ``options`` (the ZGM1120).
 
     Raises
     ------
     ValueError
-        Unknown protocol.
+        Unknown protocol (the message lists the known ones).
     """
-    if protocol == "zgm1120":
-        return Zgm1120(
-            name,
-            port=port,
-            serial_number=serial_number,
-            profile=profile or "zgm1120",
-            baudrate=baudrate,
-            timeout_s=timeout_s,
-        )
-    if protocol == "line":
-        return LineGlossmeter(
-            name,
-            port=port,
-            profile=profile or "line-gloss-example",
-            baudrate=baudrate,
-            timeout_s=timeout_s,
-        )
-    raise ValueError(f"{name}: unknown glossmeter protocol {protocol!r} (use 'zgm1120' or 'line')")
+    from drivers.protocols import GLOSSMETERS
+
+    try:
+        entry = GLOSSMETERS[protocol]
+    except ValueError as exc:
+        raise ValueError(f"{name}: {exc}") from None
+    options = {"serial_number": serial_number}
+    driver: Glossmeter = entry.driver_class()(
+        name,
+        port=port,
+        profile=profile or entry.default_profile,
+        baudrate=baudrate,
+        timeout_s=timeout_s,
+        **{key: options[key] for key in entry.options},
+    )
+    return driver

@@ -39,11 +39,20 @@ import math
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 
 import goniolab
+from drivers.protocols import GLOSSMETERS, SPECTROS, STEPPERS, ProtocolTable
 from drivers.toml_schema import TomlFileError, first_issue, read_toml
-from goniolab.errors import UserError
+from goniolab.errors import ConfigError
 from goniolab.model_registry import DEFAULT_MODEL, model_names
 
 __all__ = [
@@ -70,17 +79,6 @@ __all__ = [
     "write_alignment",
     "write_alignment_state",
 ]
-
-
-class ConfigError(UserError):
-    """A lab config file is unreadable or invalid; the message names file, key and reason."""
-
-    def __init__(self, path: str | Path, key: str, reason: str) -> None:
-        self.path = str(path)
-        self.key = key
-        self.reason = reason
-        where = f"{self.path}: {key}: " if key else f"{self.path}: "
-        super().__init__(where + reason, exit_code=2)
 
 
 def configs_dir() -> Path:
@@ -117,6 +115,33 @@ TimeoutS = Annotated[float, Field(strict=True, gt=0.0, le=3600.0, allow_inf_nan=
 #: could be held by an obstacle (or the other arm, min_separation 10 deg) unnoticed, and
 #: ``stall_tolerance_deg = 1e9`` switched stall detection off (issue 23, Low).
 STALL_TOLERANCE_MAX_DEG = 5.0
+
+
+def _known_protocol(table: ProtocolTable) -> AfterValidator:
+    """A ``protocol`` key: a name in the device's protocol table (:mod:`drivers.protocols`,
+    read when the file is validated, so a protocol registered since is known)."""
+
+    def check(name: str) -> str:
+        if name not in table:
+            known = ", ".join(repr(n) for n in table.names())
+            raise ValueError(f"unknown {table.device} protocol {name!r} (known: {known})")
+        return name
+
+    return AfterValidator(check)
+
+
+def _protocol_profile(data: Any, table: ProtocolTable, default: str) -> Any:
+    """A device section without ``profile`` gets the built-in profile of its protocol."""
+    if isinstance(data, dict) and "profile" not in data:
+        name = data.get("protocol", default)
+        if isinstance(name, str) and name in table:
+            return {**data, "profile": table[name].default_profile}
+    return data
+
+
+StepperProtocol = Annotated[str, Field(strict=True), _known_protocol(STEPPERS)]
+SpectroProtocol = Annotated[str, Field(strict=True), _known_protocol(SPECTROS)]
+GlossmeterProtocol = Annotated[str, Field(strict=True), _known_protocol(GLOSSMETERS)]
 
 
 class LabSection(_Strict):
@@ -176,6 +201,7 @@ class ParkConfig(_Strict):
 class AxisConfig(_Strict):
     """``[goniometer.lamp]`` / ``[goniometer.detector]``: one Modbus stepper arm."""
 
+    protocol: StepperProtocol = "modbus"
     profile: str = "oriental-az"
     transport: Literal["tcp", "rtu"] = "tcp"
     host: str = "127.0.0.1"
@@ -204,6 +230,11 @@ class AxisConfig(_Strict):
         if lo < -180.0 or hi > 180.0:
             raise ValueError(f"limits must lie within [-180, 180] deg, got [{lo:g}, {hi:g}]")
         return v
+
+    @model_validator(mode="before")
+    @classmethod
+    def _default_profile(cls, data: Any) -> Any:
+        return _protocol_profile(data, STEPPERS, "modbus")
 
     @model_validator(mode="after")
     def _rtu_needs_port(self) -> AxisConfig:
@@ -236,6 +267,7 @@ class GoniometerConfig(_Strict):
 class SpectroConfig(_Strict):
     """``[spectro]``: STIL spectro-colorimeter on a serial port."""
 
+    protocol: SpectroProtocol = "stil"
     profile: str = "stil-ruby"
     port: str = "/tmp/goniolab-sim/spectro"
     baudrate: Annotated[int, Field(strict=True, ge=300, le=4_000_000)] = 115200
@@ -248,16 +280,28 @@ class SpectroConfig(_Strict):
     #: a run warns when the newest `goniolab calibrate` record is older than this
     calibration_max_age_h: Annotated[float, Field(strict=False, gt=0.0)] = 24.0
 
+    @model_validator(mode="before")
+    @classmethod
+    def _default_profile(cls, data: Any) -> Any:
+        return _protocol_profile(data, SPECTROS, "stil")
+
 
 class GlossmeterConfig(_Strict):
-    """``[glossmeter]``: ZGM1120 (or a line-printing meter) on a serial port."""
+    """``[glossmeter]``: a glossmeter on a serial port; ``protocol`` is a name in
+    :data:`drivers.protocols.GLOSSMETERS` (ZGM1120, a line-printing meter, ...), and
+    ``profile`` defaults to that protocol's built-in profile."""
 
-    protocol: Literal["zgm1120", "line"] = "zgm1120"
+    protocol: GlossmeterProtocol = "zgm1120"
     profile: str = "zgm1120"
     port: str = "/tmp/goniolab-sim/gloss"
     serial_number: str = "401120999"
     baudrate: Annotated[int, Field(strict=True, ge=300, le=4_000_000)] = 9600
     timeout_s: TimeoutS = 2.0
+
+    @model_validator(mode="before")
+    @classmethod
+    def _default_profile(cls, data: Any) -> Any:
+        return _protocol_profile(data, GLOSSMETERS, "zgm1120")
 
 
 class FaultsConfig(_Strict):
@@ -462,15 +506,20 @@ class LabConfig(_Strict):
     #: The file this config came from ("" when built in code).
     source: str = Field(default="", exclude=True)
 
+    def sample_map(self) -> str:
+        """``[sample] map``, with a relative file path taken relative to the config file."""
+        spec = self.sample.map
+        if spec.startswith("sample:") or not self.source:
+            return spec
+        p = Path(spec).expanduser()
+        if not p.is_absolute():
+            candidate = Path(self.source).resolve().parent / p
+            if candidate.exists():
+                return str(candidate)
+        return spec
+
 
 # --------------------------------------------------------------------------- loading
-_PROFILE_KEYS: tuple[tuple[str, str, str], ...] = (
-    ("goniometer.lamp.profile", "modbus-stepper", "load_stepper_profile"),
-    ("goniometer.detector.profile", "modbus-stepper", "load_stepper_profile"),
-    ("spectro.profile", "stil-spectro", "load_stil_profile"),
-)
-
-
 def resolve_profile(name: str, *, relative_to: Path | None = None) -> Path:
     """The file a profile name or path refers to.
 
@@ -616,29 +665,30 @@ def _cross_checks(cfg: LabConfig, path: Path) -> None:
 def _resolve_profiles(cfg: LabConfig, path: Path) -> tuple[LabConfig, dict[str, Any]]:
     """Load every profile the config names; the config with resolved paths, and the
     loaded profiles by config key."""
-    import drivers.profiles as dp  # drivers never import goniolab: this direction is allowed
-    from drivers.base import ProfileError
+    from drivers.base import ProfileError  # drivers never import goniolab: this way is allowed
 
     base = path.resolve().parent
     resolved: dict[str, str] = {}
     loaded: dict[str, Any] = {}
-    keys = list(_PROFILE_KEYS)
-    if cfg.glossmeter.protocol == "zgm1120":
-        keys.append(("glossmeter.profile", "zgm1120", "load_zgm_profile"))
-    else:
-        keys.append(("glossmeter.profile", "line-gloss", "load_line_gloss_profile"))
-    for key, kind, loader in keys:
+    g = cfg.goniometer
+    # each profile is read by the protocol that speaks it (drivers.protocols)
+    keys = (
+        ("goniometer.lamp.profile", STEPPERS[g.lamp.protocol]),
+        ("goniometer.detector.profile", STEPPERS[g.detector.protocol]),
+        ("spectro.profile", SPECTROS[cfg.spectro.protocol]),
+        ("glossmeter.profile", GLOSSMETERS[cfg.glossmeter.protocol]),
+    )
+    for key, entry in keys:
         name = _get(cfg.model_dump(), key)
         target = resolve_profile(str(name), relative_to=base)
         try:
-            loaded[key] = getattr(dp, loader)(target)
+            loaded[key] = entry.load_profile(target)
         except ProfileError as exc:
             reason = str(exc)
             if "key 'kind'" in reason:
-                reason = f"profile {target} is not a {kind!r} profile ({reason})"
+                reason = f"profile {target} is not a {entry.profile_kind!r} profile ({reason})"
             raise ConfigError(path, key, reason) from None
         resolved[key] = str(target)
-    g = cfg.goniometer
     resolved_cfg = cfg.model_copy(
         update={
             "goniometer": g.model_copy(

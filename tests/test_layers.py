@@ -101,6 +101,21 @@ def test_only_the_lab_wiring_imports_the_simulator() -> None:
     assert bad == [], "\n".join(bad)
 
 
+#: what the doors take from the simulator: the twin as ``sim/assembly.py`` assembles it, and
+#: the wire server it runs (the lab only chooses; it builds no simulated device itself)
+SIM_DOOR_MODULES = ("sim.assembly", "sim.wire")
+
+
+def test_the_lab_takes_the_twin_as_sim_assembles_it() -> None:
+    bad = [
+        f"{name}:{line}: imports {mod}"
+        for name in sorted(SIM_DOORS)
+        for line, mod in imports_of(ROOT / name)
+        if _hit(mod, ("sim",)) and not _hit(mod, SIM_DOOR_MODULES)
+    ]
+    assert bad == [], "\n".join(bad)
+
+
 def test_the_checker_sees_imports_inside_functions(tmp_path: Path) -> None:
     probe = tmp_path / "probe.py"
     probe.write_text("def f():\n    from sim.motion import SimMotor\n    import textual.app\n")
@@ -110,7 +125,7 @@ def test_the_checker_sees_imports_inside_functions(tmp_path: Path) -> None:
 #: The most lines a module of these rooms may have (issue 24: rooms of one job each).
 MAX_MODULE_LINES = 800
 #: Rooms held to :data:`MAX_MODULE_LINES` (more join as they are split along their seams).
-SIZED_ROOMS = ("goniolab/store", "goniolab/export.py")
+SIZED_ROOMS = ("goniolab/store", "goniolab/export.py", "drivers")
 
 
 @pytest.mark.parametrize("room", SIZED_ROOMS)
