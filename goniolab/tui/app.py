@@ -204,6 +204,8 @@ class GonioApp(App[int]):
         self.run_id = 0
         self.run_kind = "brdf"  # of run_id: "brdf" or "align"
         self.progress: tuple[int, int, float] = (0, 0, math.nan)
+        #: which model computes the current run's prediction (shown in the run line)
+        self.prediction_note = ""
         self.events_seen = 0
         self.ready = asyncio.Event()
         self._redraw_pending = False
@@ -546,6 +548,8 @@ class GonioApp(App[int]):
                 theta_i_deg=float(ev.plan.get("theta_i_deg", 45.0)),
             )
             self.progress = (0, ev.total_points, math.nan)
+            self.prediction_note = ""
+            self._load_prediction_models(ev.run_id)
             self.hide_banner()
             self.schedule_redraw()
         elif isinstance(ev, StateChanged | Progress | RunFinished) and ev.run_id != self.run_id:
@@ -614,7 +618,25 @@ class GonioApp(App[int]):
             text += f"  {done}/{total}"
             if math.isfinite(eta_s) and self.run_state is RunState.RUNNING:
                 text += f"  ETA {eta_s:.0f} s"
+        if self.prediction_note and self.run_kind == "brdf":
+            text += f"  (predicted by {self.prediction_note})"
         self.query_one(StatusPanel).show_run(text)
+
+    @work(thread=True, group="provenance")
+    def _load_prediction_models(self, run_id: int) -> None:
+        """Read which model computes the run's prediction (its stored record) off the
+        event loop, then show it in the run line (issue 20)."""
+        try:
+            note = self.backend.prediction_models(run_id)
+        except Exception:  # the run line then names no model; the store says it elsewhere
+            return
+        self.call_from_thread(self._show_prediction_models, run_id, note)
+
+    def _show_prediction_models(self, run_id: int, note: str) -> None:
+        if run_id == self.run_id:
+            self.prediction_note = note
+            with contextlib.suppress(NoMatches):
+                self.show_run_line()
 
     @property
     def redraw_pending(self) -> bool:

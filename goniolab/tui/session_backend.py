@@ -402,6 +402,17 @@ class SessionBackend:
         )
 
     # ------------------------------------------------------------------ store
+    def prediction_models(self, run_id: int) -> str:
+        """Which model computes the run's predicted curve, from its stored record
+        (``computed_by``, :meth:`goniolab.scan.predict.Predictor.provenance`)."""
+        with RunStore(self.store_path, readonly=True) as store:
+            computed_by = store.get_run(run_id).model.get("computed_by") or {}
+        if len(computed_by) == 1:
+            return str(next(iter(computed_by)))
+        return ", ".join(
+            f"{m} {min(a):g}-{max(a):g} deg" for m, a in sorted(computed_by.items()) if a
+        )
+
     def list_runs(self) -> list[RunSummary]:
         """Stored runs, newest first (own read-only connection: safe from a worker thread)."""
         with RunStore(self.store_path, readonly=True) as store:

@@ -244,3 +244,8 @@ class Backend(Protocol):
     def load_run(self, run_id: int) -> StoredRun:
         """One stored run's readings, predictions and gloss (blocking: thread worker)."""
         ...
+
+    def prediction_models(self, run_id: int) -> str:
+        """Which model computes run ``run_id``'s predicted curve (``"facet"``, or
+        ``"facet 0-38 deg, kirchhoff 40-70 deg"``), "" when unknown (blocking: thread)."""
+        ...

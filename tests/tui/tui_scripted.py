@@ -106,6 +106,9 @@ class ScriptedBackend:
     def sample_names(self) -> list[str]:
         return ["flat", "wittmann-1", "wittmann-3"]
 
+    def prediction_models(self, run_id: int) -> str:
+        return "scripted-gaussian"
+
     def default_setup(self) -> ScanSetup:
         return ScanSetup("sample:wittmann-3", 20.0, 10.0, 30.0, 2.0, 3)
 
