@@ -42,7 +42,8 @@ async def one(
     from goniolab.scan.plans import BrdfPlan
     from goniolab.session import ScanSession
     from goniolab.store import RunStore
-    from sim.instruments import _y_weights, effective_angles
+    from sim.instruments import effective_angles
+    from sim.spectro_chain import y_weights
 
     cfg_path = tmp / f"{sample}-{seed}.toml"
     cfg_path.write_text(config_text(sample, seed, tmp / f"{sample}-{seed}.sqlite"))
@@ -76,7 +77,7 @@ async def one(
                     lamp_zero_offset_deg=drawn["lamp_zero_offset_deg"],
                     detector_zero_offset_deg=drawn["detector_zero_offset_deg"],
                 )  # fmt: skip
-                return float(np.dot(_y_weights(), 100.0 * spectro._spectral(ti, tr) + stray))
+                return float(np.dot(y_weights(), 100.0 * spectro._spectral(ti, tr) + stray))
 
             truth = np.array(await asyncio.to_thread(lambda: [truth_at(d) for d in dense]))
             peak = float(truth.max())

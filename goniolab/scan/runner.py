@@ -24,11 +24,12 @@ exactly the missing readings.
 The runner publishes events on an :class:`~goniolab.scan.events.EventBus`
 (``publish`` never waits on a subscriber) and never imports a UI.
 
-Before any motion, :func:`dry_run` checks every geometry with
-``Goniometer.check_geometry`` (soft limits + arm-separation interlock) and estimates the run
-time from the trapezoidal motion model (:func:`drivers.timing.trapezoid_duration_s`,
-Biagiotti & Melchiorri sec. 3.2) plus dwell and reading time and the final park move
-(a home search is controller-specific and not estimated).
+Before any motion, :func:`~goniolab.scan.dryrun.dry_run` checks every geometry and estimates
+the run time. This module holds the state machine, the run loop, the storing of each reading
+(through a store outage) and the end of a run (park, summary, record); the rest lives in one
+room each: the dry run and the time left in :mod:`goniolab.scan.dryrun`, the arm moves and the
+retries through transient faults in :mod:`goniolab.scan.moves`, the reading path (spectro
+read, mirror reference, colour) in :mod:`goniolab.scan.readings`.
 
 One runner at a time measures a run: :meth:`ScanRunner.run` holds
 :meth:`goniolab.store.RunStore.claim_run` (a lock the kernel drops when the process dies).
@@ -42,26 +43,21 @@ import math
 import time
 from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, TypeVar
+from typing import Any
 
-from drivers.base import (
-    DeviceError,
-    DeviceFault,
-    DeviceTimeout,
-    Disconnected,
-    Goniometer,
-    InterlockError,
-    LimitError,
-    ProtocolError,
-    Spectrocolorimeter,
-    SpectroReading,
-)
-from drivers.timing import Clock, trapezoid_duration_s
-from goniolab.config import GoniometerConfig
+from drivers.base import DeviceError, Goniometer, Spectrocolorimeter
+from drivers.timing import Clock
 from goniolab.scan.alarm import failure_reason
 from goniolab.scan.colour import PointColour
+from goniolab.scan.dryrun import (
+    ArmMotion,
+    DryRun,
+    PlanRefused,
+    RunEta,
+    dry_run,
+    reachable_range,
+)
 from goniolab.scan.events import (
-    ArmsMoved,
     ColourPredicted,
     EventBus,
     InstrumentError,
@@ -73,16 +69,12 @@ from goniolab.scan.events import (
     RunState,
     StateChanged,
 )
-from goniolab.scan.exposure import (
-    EXCLUDED_QUALITY,
-    AutoExposure,
-    quality_of_raw,
-    reading_quality,
-)
+from goniolab.scan.exposure import EXCLUDED_QUALITY, AutoExposure, reading_quality
+from goniolab.scan.moves import Aborted, describe_error
 from goniolab.scan.plans import MIRROR_INDEX, BrdfPlan, PlanPoint
 from goniolab.scan.predict import Predictor
+from goniolab.scan.readings import SpectroReadings
 from goniolab.scan.reference import SpectralReference
-from goniolab.scan.sanity import check_reading
 from goniolab.scan.standards import Standard
 from goniolab.scan.summary import summarize_brdf
 from goniolab.store import RunStore, StoreError, StoreUnavailable
@@ -101,231 +93,6 @@ __all__ = [
 #: returns once the operator (or the simulated lab) has swapped the specimen.
 SpecimenHook = Callable[[str], Awaitable[None]]
 
-_T = TypeVar("_T")
-
-#: A reading's colour computed in less than this (once colour-science is loaded, ~0.1 ms)
-#: is computed on the event loop next time; longer ones go to a worker thread.
-_INLINE_COLOUR_S = 1e-3
-
-
-def _timed(fn: Callable[..., _T], *args: Any) -> tuple[_T, float]:
-    """``fn(*args)`` and the seconds it took."""
-    t0 = time.perf_counter()
-    return fn(*args), time.perf_counter() - t0
-
-
-def _describe(exc: BaseException) -> str:
-    """``Type: message`` of an unexpected error (``struct.error: argument out of range``),
-    the message alone for a :class:`~drivers.base.DeviceError` (it names its device)."""
-    if isinstance(exc, DeviceError):
-        return str(exc)
-    kind = type(exc)
-    name = (
-        kind.__qualname__
-        if kind.__module__ == "builtins"
-        else f"{kind.__module__}.{kind.__qualname__}"
-    )
-    text = str(exc)
-    return f"{name}: {text}" if text else name
-
-
-class PlanRefused(Exception):
-    """The dry run found a geometry the goniometer must not reach (names point and reason).
-
-    ``what`` is ``"park position"``, ``"mirror reference"`` or ``"point N"``; ``cause``
-    the goniometer's refusal (soft limits or arm-separation interlock).
-    """
-
-    def __init__(
-        self,
-        what: str,
-        theta_i_deg: float,
-        theta_r_deg: float,
-        cause: DeviceError,
-        reach: str = "",
-    ) -> None:
-        self.what = what
-        self.theta_i_deg = theta_i_deg
-        self.theta_r_deg = theta_r_deg
-        self.reason = cause.message + (f"; {reach}" if reach else "")
-        super().__init__(
-            f"{what} (theta_i={theta_i_deg:g} deg, theta_r={theta_r_deg:g} deg) is unsafe: {cause}"
-            + (f"; {reach}" if reach else "")
-        )
-
-    @property
-    def out_of_reach(self) -> str:
-        """The refusal as a form error: the geometry first, then the reason."""
-        where = "the park position: " if self.what == "park position" else ""
-        return (
-            f"{where}theta_i {self.theta_i_deg:g} deg, theta_r {self.theta_r_deg:g} deg is "
-            f"out of the goniometer's reach: {self.reason}"
-        )
-
-
-class _Aborted(Exception):
-    """An abort ends the run's readings; ``reason`` says where it arrived."""
-
-    def __init__(self, during: str = "") -> None:
-        super().__init__(during)
-        self.reason = "aborted by the operator" + (f" {during}" if during else "")
-
-
-@dataclass(slots=True)
-class _Eta:
-    """Time left in a run: the dry-run estimate of the readings still to take (and of the
-    final park move), stretched by how much slower than estimated the run has been so far
-    (bus latency, polling, commits)."""
-
-    point_times_s: list[float]
-    park_s: float
-    t_start_s: float = 0.0
-    estimated_done_s: float = 0.0
-
-    @property
-    def total_s(self) -> float:
-        """The dry run's estimate of the whole rest of the run."""
-        return math.fsum(self.point_times_s) + self.park_s
-
-    def start(self, now_s: float) -> None:
-        """The first reading is about to be taken (lab clock)."""
-        self.t_start_s = now_s
-
-    def left_after(self, k: int, now_s: float) -> float:
-        """Estimated lab-clock seconds left once reading ``k`` (0-based) is stored."""
-        self.estimated_done_s += self.point_times_s[k]
-        elapsed_s = now_s - self.t_start_s
-        slowdown = elapsed_s / self.estimated_done_s if self.estimated_done_s > 0 else 1.0
-        return (math.fsum(self.point_times_s[k + 1 :]) + self.park_s) * max(1.0, slowdown)
-
-
-@dataclass(frozen=True, slots=True)
-class ArmMotion:
-    """Speed and acceleration of both arms (config ``[goniometer.lamp|detector]``)."""
-
-    lamp_speed_deg_s: float
-    lamp_accel_deg_s2: float
-    detector_speed_deg_s: float
-    detector_accel_deg_s2: float
-
-    @classmethod
-    def from_config(cls, goniometer: GoniometerConfig) -> ArmMotion:
-        """The arms' speeds and accelerations of a lab config's ``[goniometer]``."""
-        lamp, det = goniometer.lamp, goniometer.detector
-        return cls(lamp.speed_deg_s, lamp.accel_deg_s2, det.speed_deg_s, det.accel_deg_s2)
-
-    def move_time_s(self, start: tuple[float, float], target: tuple[float, float]) -> float:
-        """Time of a two-arm move; the arms move together, so the slower arm sets it."""
-        t_lamp = trapezoid_duration_s(
-            target[0] - start[0], self.lamp_speed_deg_s, self.lamp_accel_deg_s2
-        )
-        t_det = trapezoid_duration_s(
-            target[1] - start[1], self.detector_speed_deg_s, self.detector_accel_deg_s2
-        )
-        return max(t_lamp, t_det)
-
-
-@dataclass(frozen=True, slots=True)
-class DryRun:
-    """Result of :func:`dry_run`: every reading's estimated duration and the total."""
-
-    n_readings: int
-    n_moves: int
-    point_times_s: tuple[float, ...]
-    #: The move from the last geometry to the park position that ends the run.
-    park_s: float = 0.0
-
-    @property
-    def eta_s(self) -> float:
-        """Estimated run time in seconds of lab clock, the final park move included."""
-        return math.fsum(self.point_times_s) + self.park_s
-
-
-def reachable_range(goniometer: Goniometer) -> str:
-    """The requested angles the arms can reach once the alignment corrections are added
-    (``""`` without corrections): a sweep to a limit that an alignment moved is refused
-    with this range rather than failing mid-run."""
-    corr = getattr(goniometer, "corrections_deg", (0.0, 0.0))
-    if not any(corr):
-        return ""
-    parts = []
-    for axis, c, label in ((goniometer.lamp, corr[0], "theta_i"), (goniometer.detector, corr[1], "theta_r")):  # fmt: skip
-        lo, hi = axis.limits_deg
-        parts.append(f"{label} {lo - c:.3f}..{hi - c:.3f} deg")
-    return (
-        f"with the alignment corrections (lamp {corr[0]:+.3f}, detector {corr[1]:+.3f} deg) the "
-        f"arms reach {', '.join(parts)}"
-    )
-
-
-def dry_run(
-    points: Sequence[PlanPoint],
-    goniometer: Goniometer,
-    motion: ArmMotion,
-    *,
-    start_deg: tuple[float, float],
-    dwell_s: float,
-    reading_time_s: float,
-    park_deg: tuple[float, float] | None = None,
-) -> DryRun:
-    """Check every geometry before any motion and estimate the run time.
-
-    Parameters
-    ----------
-    points
-        The readings still to take, in order.
-    goniometer
-        Its ``check_geometry`` raises :class:`~drivers.base.LimitError` or
-        :class:`~drivers.base.InterlockError` for an unsafe geometry; nothing moves.
-    motion
-        Arm speeds and accelerations for the trapezoidal move times.
-    start_deg
-        Arm positions (theta_i, theta_r) before the first move.
-    dwell_s, reading_time_s
-        Settling time after each move and time of one reading (exposure + transfer).
-    park_deg
-        The park geometry, checked too (a fault or an abort drives there).
-
-    Returns
-    -------
-    DryRun
-        Per-reading time: move (first repeat of a geometry only) + dwell + reading; and
-        the final move to ``park_deg`` (0 without one).
-
-    Raises
-    ------
-    PlanRefused
-        Naming the first unsafe point, its geometry and the goniometer's reason.
-    """
-    if park_deg is not None:
-        try:
-            goniometer.check_geometry(*park_deg)
-        except (LimitError, InterlockError) as exc:
-            reach = reachable_range(goniometer) if isinstance(exc, LimitError) else ""
-            raise PlanRefused("park position", *park_deg, exc, reach) from exc
-    times: list[float] = []
-    pos = start_deg
-    moves = 0
-    checked: set[tuple[float, float]] = set()
-    for p in points:
-        target = (p.theta_i_deg, p.theta_r_deg)
-        if target not in checked:
-            try:
-                goniometer.check_geometry(*target)
-            except (LimitError, InterlockError) as exc:
-                what = "mirror reference" if p.index == MIRROR_INDEX else f"point {p.index}"
-                reach = reachable_range(goniometer) if isinstance(exc, LimitError) else ""
-                raise PlanRefused(what, *target, exc, reach) from exc
-            checked.add(target)
-        t = reading_time_s
-        if target != pos:
-            t += motion.move_time_s(pos, target) + dwell_s
-            moves += 1
-            pos = target
-        times.append(t)
-    park_s = 0.0 if park_deg is None else motion.move_time_s(pos, park_deg)
-    return DryRun(n_readings=len(points), n_moves=moves, point_times_s=tuple(times), park_s=park_s)
-
 
 @dataclass(slots=True)
 class RunResult:
@@ -337,7 +104,7 @@ class RunResult:
     summary: dict[str, Any] = field(default_factory=dict)
 
 
-class ScanRunner:
+class ScanRunner(SpectroReadings):
     """Run (or continue) one stored BRDF scan.
 
     Parameters
@@ -457,7 +224,7 @@ class ScanRunner:
         #: the certified mirror the reference readings are divided by (docs/CALIBRATION.md)
         self.mirror_standard = mirror_standard
         self._reference: SpectralReference | None = None
-        #: the last colour took under _INLINE_COLOUR_S: compute the next on the loop
+        #: the last colour took under INLINE_COLOUR_S: compute the next on the loop
         self._colour_inline = False
         if plan.mirror_reference and specimen_hook is None:
             raise ValueError("a plan with a mirror reference needs a specimen_hook")
@@ -537,127 +304,6 @@ class ScanRunner:
             self._verify_position = True
         return True
 
-    async def _abortable(self, aw: Awaitable[_T], during: str) -> _T:
-        """Await ``aw`` unless :meth:`abort` is called first: then cancel it and raise
-        :class:`_Aborted` saying ``during`` what."""
-        work = asyncio.ensure_future(aw)
-        aborted = asyncio.ensure_future(self._abort_event.wait())
-        try:
-            await asyncio.wait({work, aborted}, return_when=asyncio.FIRST_COMPLETED)
-        finally:
-            aborted.cancel()
-            if not work.done():  # an abort, or a cancellation from outside
-                work.cancel()
-                with contextlib.suppress(asyncio.CancelledError, DeviceError):
-                    await work
-        if work.cancelled():
-            raise _Aborted(during)
-        return work.result()
-
-    async def _move(self, target: tuple[float, float]) -> None:
-        """Move to ``target``; a move that meets a transient fault (an arm's timeout or
-        garbled frame, or a lost link: then the arms' connections are reopened first) is
-        made again from where the arms stopped, up to ``move_retries`` times (see
-        :meth:`_retry`). The goniometer stops both arms on any error and plans every move
-        from the positions it reads, so a retry keeps the interlock."""
-        self.bus.publish(
-            ArmsMoved(run_id=self.run_id, theta_i_deg=target[0], theta_r_deg=target[1], moving=True)
-        )
-        self._target = None  # somewhere between two geometries until the move is done
-        measured = await self._retry(
-            f"moving to theta_i={target[0]:g}, theta_r={target[1]:g} deg",
-            lambda: self._abortable(
-                self.goniometer.move_to(target[0], target[1], self.move_timeout_s),
-                "during a move",
-            ),
-            self._reconnect_arms,
-            self.move_retries,
-            "goniometer",
-        )
-        self._measured_deg = (float(measured[0]), float(measured[1]))
-        self._target = target
-        self.bus.publish(
-            ArmsMoved(
-                run_id=self.run_id,
-                theta_i_deg=self._measured_deg[0],
-                theta_r_deg=self._measured_deg[1],
-                moving=False,
-            )
-        )
-
-    async def _ensure_position(self, target: tuple[float, float]) -> bool:
-        """Move to ``target`` if needed; return True when a move happened."""
-        if self._target != target:
-            await self._move(target)
-            return True
-        if self._verify_position:
-            self._verify_position = False
-            ti, tr = await self._arm_positions("checking the arm positions")
-            if (
-                abs(ti - target[0]) > self.position_tolerance_deg
-                or abs(tr - target[1]) > self.position_tolerance_deg
-            ):
-                await self._move(target)
-                return True
-            self._measured_deg = (float(ti), float(tr))
-        return False
-
-    async def _arm_positions(self, what: str) -> tuple[float, float]:
-        """Both arms' positions, read again after a transient fault (see :meth:`_retry`)."""
-        return await self._retry(
-            what, self.goniometer.positions_deg, self._reconnect_arms, self.move_retries,
-            "goniometer",
-        )  # fmt: skip
-
-    async def _arms_homed(self) -> bool:
-        lamp = await self.goniometer.lamp.status()
-        det = await self.goniometer.detector.status()
-        return lamp.homed and det.homed
-
-    async def _ensure_homed(self) -> None:
-        homed = await self._retry(
-            "reading the arms' status", self._arms_homed, self._reconnect_arms,
-            self.move_retries, "goniometer",
-        )  # fmt: skip
-        if not homed:  # the goniometer plans homing from where the arms stand: a retry is safe
-            await self._retry(
-                "homing", lambda: self.goniometer.home(self.home_timeout_s),
-                self._reconnect_arms, self.move_retries, "goniometer",
-            )  # fmt: skip
-
-    async def _park(self) -> str:
-        """Stop and park the arms, best effort (each step retried after a transient fault,
-        :meth:`_retry`); returns "" or what went wrong.
-
-        After an interrupted homing the arms are only stopped: their positions are not
-        referenced, so no move is made.
-        """
-        problems: list[str] = []
-        # a timeout, a garbled frame or a lost link (reopened first) is tried again, as in
-        # a move: a link that dropped just before the end must not leave the arms unparked
-        try:
-            await self._retry(
-                "stopping the arms", self.goniometer.stop, self._reconnect_arms,
-                self.move_retries, "goniometer",
-            )  # fmt: skip
-        except Exception as exc:  # best effort: any failure is reported, never raised
-            problems.append(f"stopping the arms failed: {_describe(exc)}")
-        if self._homing_interrupted:
-            self._target = None
-            problems.append("homing interrupted: arms stopped, not parked; home them before use")
-            return "; ".join(problems)
-        try:
-            await self._retry(
-                "parking the arms", lambda: self.goniometer.park(self.home_timeout_s),
-                self._reconnect_arms, self.move_retries, "goniometer",
-            )  # fmt: skip
-        except Exception as exc:  # a bug or a dead link must not leave the run 'running'
-            problems.append(
-                f"parking failed: {_describe(exc)}; arms not parked: check them before use"
-            )
-        self._target = None
-        return "; ".join(problems)
-
     async def _predict_all(self) -> None:
         """Predict every geometry not yet predicted, chunk by chunk, in worker threads."""
         if self.predictor is None:
@@ -707,195 +353,6 @@ class ScanRunner:
                         run_id=self.run_id, index=i, theta_r_deg=tr, lab=(c.L, c.a, c.b)
                     )
                 )
-
-    async def _colour_of(
-        self, reading: SpectroReading, p: PlanPoint, absolute: Sequence[float] | None
-    ) -> tuple[dict[str, float] | None, str]:
-        """The reading's colour (computed in a worker thread), or why there is none.
-
-        A spectrum colour cannot be computed from (wrong length, NaN, negative values, a grid
-        short of 380-780 nm) is reported as a non-fatal instrument error; the reading is
-        stored all the same, without colour.
-        """
-        from goniolab.colour.spectra import ColourError
-
-        # referenced to the certified mirror: the absolute spectrum (no further scaling)
-        spectrum = reading.values if absolute is None else tuple(absolute)
-        args = (reading.wavelengths_nm, spectrum, p.theta_r_deg, None)
-        measured = self.point_colour.measured
-        try:
-            if self._colour_inline:
-                # a few hundred multiply-adds once colour-science is loaded: a worker
-                # thread's hand-off would cost more than the work (issue 13: the sequencer's
-                # overhead per reading); a spectrum that takes longer sends it back
-                values, took_s = _timed(measured, *args)
-            else:
-                values, took_s = await asyncio.to_thread(lambda: _timed(measured, *args))
-            self._colour_inline = took_s < _INLINE_COLOUR_S
-        except (ColourError, ValueError) as exc:
-            self.bus.publish(
-                InstrumentError(
-                    run_id=self.run_id,
-                    device="spectro",
-                    message=f"point {p.index}, repeat {p.repeat}: no colour: {exc} "
-                    "(reading stored without colour)",
-                    fatal=False,
-                )
-            )
-            return None, str(exc)
-        return values.as_dict(), ""
-
-    async def _read_spectro(self, p: PlanPoint) -> SpectroReading:
-        """One spectro reading, taken again after a transient fault (timeout, garbled reply,
-        an implausible value (:mod:`goniolab.scan.sanity`), a lost link: then the port is
-        reopened first) up to ``reading_retries`` times; each retry is reported, nothing is
-        stored twice."""
-
-        async def read() -> SpectroReading:
-            if self.plan.auto_exposure:
-                reading, self._exposure_us = await self._auto.read(self.spectro, self._exposure_us)
-            else:
-                reading = await self.spectro.measure()
-            return check_reading(reading)  # an implausible Y is read again, never stored
-
-        reading = await self._retry(
-            f"point {p.index}, repeat {p.repeat}", read, self._reconnect_spectro,
-            self.reading_retries, "spectro",
-        )  # fmt: skip
-        if reading.stale_lines:  # a late or repeated answer was dropped: say so
-            self.bus.publish(
-                InstrumentError(
-                    run_id=self.run_id,
-                    device="spectro",
-                    message=f"point {p.index}, repeat {p.repeat}: dropped {reading.stale_lines} "
-                    "reply line(s) of an earlier request (a late or repeated answer); the "
-                    "reading kept is the answer to this point's own request",
-                    fatal=False,
-                )
-            )
-        return reading
-
-    async def _retry(
-        self,
-        what: str,
-        op: Callable[[], Awaitable[_T]],
-        reconnect: Callable[[int], Awaitable[None]],
-        retries: int,
-        device: str,
-    ) -> _T:
-        """``await op()``, again after a transient fault (:class:`DeviceTimeout`,
-        :class:`ProtocolError`, :class:`Disconnected`: then ``reconnect(attempt)`` first) up
-        to ``retries`` times, each retry published as a non-fatal :class:`InstrumentError`
-        saying ``what`` was being done; the last failure propagates (and fails the run)."""
-        attempt = 0
-        lost_since: float | None = None
-        reconnects = 0
-        while True:
-            try:
-                return await op()
-            except (DeviceTimeout, ProtocolError, Disconnected) as exc:
-                lost = isinstance(exc, Disconnected)
-                now = self.clock.now()
-                if lost:
-                    lost_since = now if lost_since is None else lost_since
-                    away_s = now - lost_since
-                    if reconnects and away_s >= self.reconnect_window_s:
-                        raise Disconnected(
-                            f"{exc.message} (link away {away_s:.3g} s, longer than the "
-                            f"reconnect window of {self.reconnect_window_s:g} s)",
-                            device=exc.device or device,
-                        ) from exc
-                    note = (
-                        f"reconnecting, link lost {away_s:.3g} s ago, waiting up to "
-                        f"{self.reconnect_window_s:g} s"
-                        if reconnects
-                        else f"retry {attempt + 1} of {retries}, reconnecting"
-                    )
-                    self.bus.publish(
-                        InstrumentError(
-                            run_id=self.run_id,
-                            device=exc.device or device,
-                            message=f"{exc} ({what}: {note})",
-                            fatal=False,
-                        )
-                    )
-                    await reconnect(reconnects)
-                    reconnects += 1
-                    continue
-                if attempt == retries:
-                    raise
-                self.bus.publish(
-                    InstrumentError(
-                        run_id=self.run_id,
-                        device=exc.device or device,
-                        message=f"{exc} ({what}: retry {attempt + 1} of {retries})",
-                        fatal=False,
-                    )
-                )
-                attempt += 1
-
-    async def _reconnect_arms(self, attempt: int) -> None:
-        """Reopen both arms' links after a lost one (on the wire they share a server, a
-        dropped link may take both) after ``reconnect_backoff_s`` (doubling) of lab clock;
-        a failed reopen is reported and the next attempt finds the link closed."""
-        await self.clock.sleep(min(2.0, self.reconnect_backoff_s * 2**attempt))
-        for axis in (self.goniometer.lamp, self.goniometer.detector):
-            with contextlib.suppress(DeviceError):
-                await axis.close()
-            try:
-                await axis.connect()
-            except DeviceError as exc:
-                self.bus.publish(InstrumentError.reconnect_failed(self.run_id, exc, "goniometer"))
-
-    async def _reconnect_spectro(self, attempt: int) -> None:
-        """Close the spectro's link, wait (``reconnect_backoff_s``, doubling with each
-        attempt, on the lab clock), reopen it and set the exposure again (the plan's, or the
-        one auto-exposure arrived at). A failed
-        reopen is reported; the next attempt finds the link closed and tries again."""
-        with contextlib.suppress(DeviceError):
-            await self.spectro.close()
-        await self.clock.sleep(min(2.0, self.reconnect_backoff_s * 2**attempt))
-        try:
-            await self.spectro.connect()
-            await self.spectro.set_exposure_us(self._exposure_us)  # the plan's, or auto's
-        except DeviceError as exc:
-            self.bus.publish(InstrumentError.reconnect_failed(self.run_id, exc, "spectro"))
-
-    def _mirror_level(self) -> float | None:
-        vals = [p.luminance_pct for p in self.store.points(self.run_id) if p.index == MIRROR_INDEX]
-        if len(vals) < self.plan.repeats:
-            return None
-        return math.fsum(vals) / len(vals)
-
-    def _load_reference(self) -> SpectralReference | None:
-        """The mirror reference of the run (its repeats averaged as spectra) once all its
-        readings are stored, else ``None``."""
-        if not self.plan.mirror_reference or self.mirror_standard is None:
-            return None
-        rows = [p for p in self.store.points(self.run_id) if p.index == MIRROR_INDEX]
-        if len(rows) < self.plan.repeats:
-            return None
-        usable = [p for p in rows if quality_of_raw(p.raw) not in EXCLUDED_QUALITY]
-        if not usable:
-            flags = sorted({quality_of_raw(p.raw) for p in rows})
-            raise DeviceFault(
-                f"every mirror reference reading is flagged ({', '.join(flags)}): the "
-                "reference cannot be used"
-                + ("" if self.plan.auto_exposure else "; --auto-exposure adapts the exposure"),
-                device="spectro",
-            )
-        rows = usable
-        readings = [
-            (
-                list(p.raw.get("wavelengths_nm") or ()),
-                list(p.raw.get("values") or ()),
-                float(p.raw.get("luminance_pct", p.luminance_pct)),
-            )
-            for p in rows
-        ]
-        return SpectralReference.from_readings(
-            self.mirror_standard, self.plan.theta_i_deg, readings, self.point_colour.settings
-        )
 
     # ------------------------------------------------------------------ run
     async def run(self) -> RunResult:
@@ -966,7 +423,9 @@ class ScanRunner:
             # say they are not) and the run failed and resumable, then let the error surface.
             predict_task.cancel()
             colour_task.cancel()
-            why = await self._park_and_record(RunState.FAILED, f"internal error: {_describe(exc)}")
+            why = await self._park_and_record(
+                RunState.FAILED, f"internal error: {describe_error(exc)}"
+            )
             self.bus.publish(
                 RunFinished(run_id=self.run_id, state=RunState.FAILED, reason=why, summary={})
             )
@@ -983,7 +442,7 @@ class ScanRunner:
                 await finish
             raise
 
-    async def _dry_run(self, todo: Sequence[PlanPoint]) -> _Eta:
+    async def _dry_run(self, todo: Sequence[PlanPoint]) -> RunEta:
         """:func:`dry_run` of ``todo`` from where the arms stand (raises PlanRefused)."""
         start_deg = await self._arm_positions("reading the arm positions")
         check = dry_run(
@@ -995,15 +454,15 @@ class ScanRunner:
             reading_time_s=self.reading_time_s,
             park_deg=self.park_deg,
         )
-        return _Eta(list(check.point_times_s), check.park_s)
+        return RunEta(list(check.point_times_s), check.park_s)
 
-    async def _measure(self, todo: Sequence[PlanPoint], eta: _Eta) -> tuple[RunState, str]:
+    async def _measure(self, todo: Sequence[PlanPoint], eta: RunEta) -> tuple[RunState, str]:
         """Home if needed, then take the readings of ``todo`` in order, each stored before
         the next; an abort ends the loop with its reason. A DeviceError propagates."""
         try:
             try:
                 await self._abortable(self._ensure_homed(), "during homing")
-            except _Aborted:
+            except Aborted:
                 self._homing_interrupted = True
                 raise
             await self._retry(
@@ -1021,7 +480,7 @@ class ScanRunner:
                 await self._take_reading(p)
                 self._publish_progress(eta.left_after(k, self.clock.now()))
             state, reason = RunState.DONE, ""
-        except _Aborted as stop:
+        except Aborted as stop:
             state, reason = RunState.ABORTED, stop.reason
             if self._abort_by:
                 reason = reason.replace("by the operator", f"by {self._abort_by}", 1)
@@ -1036,11 +495,11 @@ class ScanRunner:
 
         Raises
         ------
-        _Aborted
+        Aborted
             With the reason, when an abort arrives (a move is stopped where it is).
         """
         if not await self._checkpoint():
-            raise _Aborted("")
+            raise Aborted("")
         want = "mirror" if p.index == MIRROR_INDEX else "sample"
         if want != self._specimen:
             assert self.specimen_hook is not None
@@ -1113,34 +572,6 @@ class ScanRunner:
             )
         )
 
-    def _referenced(
-        self, reading: SpectroReading, p: PlanPoint
-    ) -> tuple[float, tuple[float, ...] | None, dict[str, Any]]:
-        """A sample reading referenced to the certified mirror (once the mirror's readings
-        are all stored; :class:`~goniolab.scan.reference.SpectralReference`):
-        ``(luminance %, absolute spectrum % or None, provenance)``; a mirror reading or a
-        run without reference as read."""
-        raw_pct = float(reading.luminance_pct)
-        if p.index == MIRROR_INDEX or not self.plan.mirror_reference:
-            return raw_pct, None, {}
-        if self._reference is None:
-            self._mirror_pct = self._mirror_level()
-            self._reference = self._load_reference()
-        if self._reference is None:
-            return raw_pct, None, {}
-        absolute, lum, info = self._reference.apply(reading.wavelengths_nm, reading.values, raw_pct)
-        if info["method"] != "spectral":
-            self.bus.publish(
-                InstrumentError(
-                    run_id=self.run_id,
-                    device="spectro",
-                    message=f"point {p.index}, repeat {p.repeat}: mirror reference applied "
-                    f"as a scalar: {info['method']}",
-                    fatal=False,
-                )
-            )
-        return lum, absolute, info
-
     async def _store_reading(self, p: PlanPoint, write: Callable[[], None]) -> None:
         """Commit reading ``p`` with ``write``. When the store cannot take it
         (:class:`~goniolab.store.StoreUnavailable`: a database down or frozen, a full disk,
@@ -1184,7 +615,7 @@ class ScanRunner:
             with contextlib.suppress(TimeoutError):
                 await asyncio.wait_for(self._abort_event.wait(), timeout=min(delay, left))
             if self._abort_requested:
-                raise _Aborted(
+                raise Aborted(
                     f"aborted while the store was unavailable ({last}); the reading at "
                     f"index {p.index}, repeat {p.repeat} was not stored"
                 )
@@ -1271,7 +702,7 @@ class ScanRunner:
             )
         except Exception as exc:  # every reading is stored: the run keeps its state
             summary = {}
-            problem = f"summary failed: {_describe(exc)}"
+            problem = f"summary failed: {describe_error(exc)}"
             reason = f"{reason}; {problem}" if reason else problem
         self._set_state(state, reason)
         self.bus.publish(

@@ -1,0 +1,213 @@
+"""The dry run of a scan: every geometry checked before any motion, and the run time estimated.
+
+:func:`dry_run` checks every geometry (and the park position) with
+``Goniometer.check_geometry`` (soft limits + arm-separation interlock), refusing the plan
+with :class:`PlanRefused` before anything moves, and estimates the run time from the
+trapezoidal motion model (:func:`drivers.timing.trapezoid_duration_s`, Biagiotti &
+Melchiorri sec. 3.2) plus dwell and reading time and the final park move (a home search is
+controller-specific and not estimated). :class:`RunEta` turns that estimate into the time
+left while the run goes on.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from drivers.base import DeviceError, Goniometer, InterlockError, LimitError
+from drivers.timing import trapezoid_duration_s
+from goniolab.config import GoniometerConfig
+from goniolab.scan.plans import MIRROR_INDEX, PlanPoint
+
+__all__ = ["ArmMotion", "DryRun", "PlanRefused", "RunEta", "dry_run", "reachable_range"]
+
+
+class PlanRefused(Exception):
+    """The dry run found a geometry the goniometer must not reach (names point and reason).
+
+    ``what`` is ``"park position"``, ``"mirror reference"`` or ``"point N"``; ``cause``
+    the goniometer's refusal (soft limits or arm-separation interlock).
+    """
+
+    def __init__(
+        self,
+        what: str,
+        theta_i_deg: float,
+        theta_r_deg: float,
+        cause: DeviceError,
+        reach: str = "",
+    ) -> None:
+        self.what = what
+        self.theta_i_deg = theta_i_deg
+        self.theta_r_deg = theta_r_deg
+        self.reason = cause.message + (f"; {reach}" if reach else "")
+        super().__init__(
+            f"{what} (theta_i={theta_i_deg:g} deg, theta_r={theta_r_deg:g} deg) is unsafe: {cause}"
+            + (f"; {reach}" if reach else "")
+        )
+
+    @property
+    def out_of_reach(self) -> str:
+        """The refusal as a form error: the geometry first, then the reason."""
+        where = "the park position: " if self.what == "park position" else ""
+        return (
+            f"{where}theta_i {self.theta_i_deg:g} deg, theta_r {self.theta_r_deg:g} deg is "
+            f"out of the goniometer's reach: {self.reason}"
+        )
+
+
+@dataclass(slots=True)
+class RunEta:
+    """Time left in a run: the dry-run estimate of the readings still to take (and of the
+    final park move), stretched by how much slower than estimated the run has been so far
+    (bus latency, polling, commits)."""
+
+    point_times_s: list[float]
+    park_s: float
+    t_start_s: float = 0.0
+    estimated_done_s: float = 0.0
+
+    @property
+    def total_s(self) -> float:
+        """The dry run's estimate of the whole rest of the run."""
+        return math.fsum(self.point_times_s) + self.park_s
+
+    def start(self, now_s: float) -> None:
+        """The first reading is about to be taken (lab clock)."""
+        self.t_start_s = now_s
+
+    def left_after(self, k: int, now_s: float) -> float:
+        """Estimated lab-clock seconds left once reading ``k`` (0-based) is stored."""
+        self.estimated_done_s += self.point_times_s[k]
+        elapsed_s = now_s - self.t_start_s
+        slowdown = elapsed_s / self.estimated_done_s if self.estimated_done_s > 0 else 1.0
+        return (math.fsum(self.point_times_s[k + 1 :]) + self.park_s) * max(1.0, slowdown)
+
+
+@dataclass(frozen=True, slots=True)
+class ArmMotion:
+    """Speed and acceleration of both arms (config ``[goniometer.lamp|detector]``)."""
+
+    lamp_speed_deg_s: float
+    lamp_accel_deg_s2: float
+    detector_speed_deg_s: float
+    detector_accel_deg_s2: float
+
+    @classmethod
+    def from_config(cls, goniometer: GoniometerConfig) -> ArmMotion:
+        """The arms' speeds and accelerations of a lab config's ``[goniometer]``."""
+        lamp, det = goniometer.lamp, goniometer.detector
+        return cls(lamp.speed_deg_s, lamp.accel_deg_s2, det.speed_deg_s, det.accel_deg_s2)
+
+    def move_time_s(self, start: tuple[float, float], target: tuple[float, float]) -> float:
+        """Time of a two-arm move; the arms move together, so the slower arm sets it."""
+        t_lamp = trapezoid_duration_s(
+            target[0] - start[0], self.lamp_speed_deg_s, self.lamp_accel_deg_s2
+        )
+        t_det = trapezoid_duration_s(
+            target[1] - start[1], self.detector_speed_deg_s, self.detector_accel_deg_s2
+        )
+        return max(t_lamp, t_det)
+
+
+@dataclass(frozen=True, slots=True)
+class DryRun:
+    """Result of :func:`dry_run`: every reading's estimated duration and the total."""
+
+    n_readings: int
+    n_moves: int
+    point_times_s: tuple[float, ...]
+    #: The move from the last geometry to the park position that ends the run.
+    park_s: float = 0.0
+
+    @property
+    def eta_s(self) -> float:
+        """Estimated run time in seconds of lab clock, the final park move included."""
+        return math.fsum(self.point_times_s) + self.park_s
+
+
+def reachable_range(goniometer: Goniometer) -> str:
+    """The requested angles the arms can reach once the alignment corrections are added
+    (``""`` without corrections): a sweep to a limit that an alignment moved is refused
+    with this range rather than failing mid-run."""
+    corr = getattr(goniometer, "corrections_deg", (0.0, 0.0))
+    if not any(corr):
+        return ""
+    parts = []
+    for axis, c, label in ((goniometer.lamp, corr[0], "theta_i"), (goniometer.detector, corr[1], "theta_r")):  # fmt: skip
+        lo, hi = axis.limits_deg
+        parts.append(f"{label} {lo - c:.3f}..{hi - c:.3f} deg")
+    return (
+        f"with the alignment corrections (lamp {corr[0]:+.3f}, detector {corr[1]:+.3f} deg) the "
+        f"arms reach {', '.join(parts)}"
+    )
+
+
+def dry_run(
+    points: Sequence[PlanPoint],
+    goniometer: Goniometer,
+    motion: ArmMotion,
+    *,
+    start_deg: tuple[float, float],
+    dwell_s: float,
+    reading_time_s: float,
+    park_deg: tuple[float, float] | None = None,
+) -> DryRun:
+    """Check every geometry before any motion and estimate the run time.
+
+    Parameters
+    ----------
+    points
+        The readings still to take, in order.
+    goniometer
+        Its ``check_geometry`` raises :class:`~drivers.base.LimitError` or
+        :class:`~drivers.base.InterlockError` for an unsafe geometry; nothing moves.
+    motion
+        Arm speeds and accelerations for the trapezoidal move times.
+    start_deg
+        Arm positions (theta_i, theta_r) before the first move.
+    dwell_s, reading_time_s
+        Settling time after each move and time of one reading (exposure + transfer).
+    park_deg
+        The park geometry, checked too (a fault or an abort drives there).
+
+    Returns
+    -------
+    DryRun
+        Per-reading time: move (first repeat of a geometry only) + dwell + reading; and
+        the final move to ``park_deg`` (0 without one).
+
+    Raises
+    ------
+    PlanRefused
+        Naming the first unsafe point, its geometry and the goniometer's reason.
+    """
+    if park_deg is not None:
+        try:
+            goniometer.check_geometry(*park_deg)
+        except (LimitError, InterlockError) as exc:
+            reach = reachable_range(goniometer) if isinstance(exc, LimitError) else ""
+            raise PlanRefused("park position", *park_deg, exc, reach) from exc
+    times: list[float] = []
+    pos = start_deg
+    moves = 0
+    checked: set[tuple[float, float]] = set()
+    for p in points:
+        target = (p.theta_i_deg, p.theta_r_deg)
+        if target not in checked:
+            try:
+                goniometer.check_geometry(*target)
+            except (LimitError, InterlockError) as exc:
+                what = "mirror reference" if p.index == MIRROR_INDEX else f"point {p.index}"
+                reach = reachable_range(goniometer) if isinstance(exc, LimitError) else ""
+                raise PlanRefused(what, *target, exc, reach) from exc
+            checked.add(target)
+        t = reading_time_s
+        if target != pos:
+            t += motion.move_time_s(pos, target) + dwell_s
+            moves += 1
+            pos = target
+        times.append(t)
+    park_s = 0.0 if park_deg is None else motion.move_time_s(pos, park_deg)
+    return DryRun(n_readings=len(points), n_moves=moves, point_times_s=tuple(times), park_s=park_s)
