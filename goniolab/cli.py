@@ -184,7 +184,7 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
         choices=("DEBUG", "INFO", "WARNING", "ERROR"),
         default="INFO",
         type=str.upper,
-        help="what goes into the log file (default INFO; the file: goniolab --version)",
+        help="what goes into the log file (the file: goniolab --version)",
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     names = sorted(
@@ -197,6 +197,9 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     for name in names:
         module = importlib.import_module(f"goniolab.commands.{name}")
         module.register(sub)
+    from goniolab.commands import _help
+
+    _help.apply(parser)  # examples and "(default: X)" in every command's --help
     return parser
 
 

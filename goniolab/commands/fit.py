@@ -21,6 +21,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from goniolab.commands._help import RUN_HELP
 from goniolab.errors import UserError
 
 __all__ = ["register", "toml_text"]
@@ -306,11 +307,11 @@ def register(subparsers: Any) -> None:
             "``", "'"
         ),
     )
-    p.add_argument("run", type=int, metavar="RUN")
+    p.add_argument("run", type=int, metavar="RUN", help=RUN_HELP)
     p.add_argument(
         "--store",
-        help="SQLite store file or postgresql:// URL (default: config [lab] store or the "
-        "user data dir)",
+        help="run store: SQLite file or postgresql:// URL (default: the config's [lab] store, "
+        "else goniolab.sqlite in the user data dir: goniolab --version)",
     )
     p.add_argument("--config", help="lab config TOML whose [lab] store to use")
     p.add_argument(
@@ -336,16 +337,16 @@ def register(subparsers: Any) -> None:
         type=float,
         default=10.0,
         metavar="DEG",
-        help="leave out geometries closer than this to specular (default 10 deg)",
+        help="leave out geometries closer than this to specular, deg",
     )
     p.add_argument(
         "--metric",
         choices=("lab", "de2000"),
         default="lab",
-        help="minimise dE*ab (lab, default: equal weights, calibrated uncertainties) or the "
+        help="minimise dE*ab (lab: equal weights, calibrated uncertainties) or the "
         "local dE2000 metric of each measured colour",
     )
-    p.add_argument("--step-nm", type=float, default=10.0, help="wavelength step (default 10)")
+    p.add_argument("--step-nm", type=float, default=10.0, help="wavelength step, nm")
     p.add_argument("--save", metavar="FILE.toml", help="write the fitted paint (--paint format)")
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.set_defaults(func=_cmd_fit_colour)

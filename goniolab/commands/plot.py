@@ -13,6 +13,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from goniolab.commands._help import RUN_HELP
 from goniolab.errors import UserError
 
 __all__ = ["register"]
@@ -52,10 +53,14 @@ def register(subparsers: Any) -> None:
         "predicted curve and the residuals (and L*, a*, b* against the aspecular angle when "
         "it has colour data); a gloss log's readings over time.",
     )
-    p.add_argument("run", type=int, metavar="RUN")
+    p.add_argument("run", type=int, metavar="RUN", help=RUN_HELP)
     p.add_argument("--out", "-o", help="output file .png, .svg or .pdf (default run-RUN.png)")
     p.add_argument("--log", action="store_true", help="luminance on a log axis")
-    p.add_argument("--store", help="run store (default: config [lab] store or user data dir)")
+    p.add_argument(
+        "--store",
+        help="run store: SQLite file or postgresql:// URL (default: the config's [lab] store, "
+        "else goniolab.sqlite in the user data dir: goniolab --version)",
+    )
     p.add_argument("--config", help="lab config TOML whose [lab] store to use")
     p.add_argument("--json", action="store_true", help="print what was written as JSON")
     p.set_defaults(func=_cmd_plot)

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from goniolab import jsonout
+from goniolab.commands._help import RUN_HELP
 from goniolab.errors import UserError
 from goniolab.textsafe import escaped_stdout
 
@@ -507,8 +508,8 @@ def register(subparsers: Any) -> None:
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument(
         "--store",
-        help="SQLite store file or postgresql:// URL (default: config [lab] store or the "
-        "user data dir)",
+        help="run store: SQLite file or postgresql:// URL (default: the config's [lab] store, "
+        "else goniolab.sqlite in the user data dir: goniolab --version)",
     )
     common.add_argument("--config", help="lab config TOML whose [lab] store to use")
     sub = p.add_subparsers(dest="runs_command", metavar="ACTION", required=True)
@@ -527,7 +528,7 @@ def register(subparsers: Any) -> None:
     pl.set_defaults(func=escaped_stdout(_cmd_list))  # stored names may hold escapes
 
     ps = sub.add_parser("show", parents=[common], help="show one run and its summary")
-    ps.add_argument("run", type=int, metavar="RUN")
+    ps.add_argument("run", type=int, metavar="RUN", help=RUN_HELP)
     ps.add_argument("--json", action="store_true", help="print JSON")
     ps.set_defaults(func=escaped_stdout(_cmd_show))
 
@@ -537,7 +538,7 @@ def register(subparsers: Any) -> None:
         help="measured vs predicted colour per geometry (dL*/dC*/dH*, dE76/94/2000, CMC, "
         "tolerances per angle, flop index, metamerism)",
     )
-    pc.add_argument("run", type=int, metavar="RUN")
+    pc.add_argument("run", type=int, metavar="RUN", help=RUN_HELP)
     pc.add_argument("--vs", type=int, metavar="RUN", help="compare with another run")
     pc.add_argument("--json", action="store_true", help="print JSON")
     from goniolab.commands._colour import add_runs_colour_options
@@ -557,7 +558,7 @@ def register(subparsers: Any) -> None:
         "(pyarrow, the run record in the schema metadata) need -o FILE. Timestamps are "
         "ISO 8601 UTC.",
     )
-    pe.add_argument("run", type=int, metavar="RUN")
+    pe.add_argument("run", type=int, metavar="RUN", help=RUN_HELP)
     pe.add_argument(
         "--format",
         choices=("csv", "json", "netcdf", "parquet"),
@@ -583,7 +584,13 @@ def register(subparsers: Any) -> None:
         "to date when it was copied before it finished), so the command can be re-run; a "
         "store is never migrated into itself.",
     )
-    pm.add_argument("--from", dest="source", required=True, metavar="STORE")
+    pm.add_argument(
+        "--from",
+        dest="source",
+        required=True,
+        metavar="STORE",
+        help="the SQLite store file to copy from",
+    )
     pm.add_argument("--json", action="store_true", help="print the id mapping as JSON")
     pm.set_defaults(func=_cmd_migrate)
 
@@ -592,7 +599,7 @@ def register(subparsers: Any) -> None:
         parents=[common],
         help="set a run's operator, physical sample id, notes and tags",
     )
-    pa.add_argument("run", type=int, metavar="RUN")
+    pa.add_argument("run", type=int, metavar="RUN", help=RUN_HELP)
     from goniolab.commands.scan import add_run_meta_args
 
     add_run_meta_args(pa)

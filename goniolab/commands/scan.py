@@ -781,10 +781,15 @@ def _cmd_resume(args: argparse.Namespace) -> int:
 def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--store",
-        help="run store: SQLite file or postgresql:// URL (default: config [lab] store or "
-        "the user data dir)",
+        help="run store: SQLite file or postgresql:// URL (default: the config's [lab] store, "
+        "else goniolab.sqlite in the user data dir: goniolab --version)",
     )
-    p.add_argument("--time-scale", type=float, default=None, help="sim clock scale (0 = instant)")
+    p.add_argument(
+        "--time-scale",
+        type=float,
+        default=None,
+        help="sim clock scale, 0 = instant, 1 = real time (default: the config's [lab] time_scale)",
+    )
     p.add_argument("--json", action="store_true", help="print only the summary JSON on stdout")
 
 
@@ -801,9 +806,11 @@ def register(subparsers: Any) -> None:
     p.add_argument(
         "--sample", help="sample:NAME or a height-map file (default: config [sample] map)"
     )
-    p.add_argument("--theta-i", type=float, default=45.0, help="incidence angle, deg (default 45)")
+    p.add_argument("--theta-i", type=float, default=45.0, help="incidence (lamp) angle, deg")
     p.add_argument(
-        "--theta-r", default=None, help='detector angles: "start:stop:step" or "a,b,c" (0:70:1)'
+        "--theta-r",
+        default=None,
+        help='detector angles, deg: "start:stop:step" or "a,b,c" (default: 0:70:1)',
     )
     p.add_argument(
         "--plan",
@@ -819,9 +826,9 @@ def register(subparsers: Any) -> None:
         "--repeats",
         type=int,
         default=DEFAULT_REPEATS,
-        help=f"readings per geometry (default {DEFAULT_REPEATS}, as in the TUI)",
+        help="readings per geometry (the TUI's default too)",
     )
-    p.add_argument("--dwell", type=float, default=0.0, help="settling time after a move, s")
+    p.add_argument("--dwell", type=float, default=0.0, help="settling time after each move, s")
     p.add_argument("--exposure-us", type=int, default=None, help="exposure, us (default: config)")
     p.add_argument(
         "--mirror-reference",
@@ -837,7 +844,7 @@ def register(subparsers: Any) -> None:
     p.add_argument(
         "--align-theta-i",
         default="20,40,60",
-        help="incidence angles of --plan align (two or more; default 20,40,60)",
+        help="incidence angles of --plan align, deg (two or more)",
     )
     p.add_argument(
         "--no-write-config",
@@ -861,7 +868,9 @@ def register(subparsers: Any) -> None:
     sub = p.add_subparsers(dest="scan_command", metavar="resume")
     pr = sub.add_parser("resume", help="continue an interrupted run (also after a crash)")
     _add_common(pr)
-    pr.add_argument("run", type=int, metavar="RUN")
+    pr.add_argument(
+        "run", type=int, metavar="RUN", help="the interrupted run's id (goniolab runs list)"
+    )
     pr.add_argument(
         "--config",
         help="lab config TOML compared with the run's stored config (default: the file the "
