@@ -136,11 +136,14 @@ class SampleConfig(_Strict):
     """``[sample]``: the height map (path or ``sample:NAME``), refractive index, and the
     reflectance model that predicts it (:func:`goniolab.models.model_for`: ``facet``,
     ``kirchhoff``, ``rayleigh-rice`` or ``auto``, the default) with its optional wavelength
-    (nm; unset: 550 nm for BRDF curves, ISO 2813 weighting for gloss)."""
+    (nm; unset: 550 nm for BRDF curves, ISO 2813 weighting for gloss). ``step_um`` is the
+    lateral step of a map file that carries none (a ``.npy`` without sidecar; ``scan
+    --step-um``)."""
 
     map: str = "sample:wittmann-3"
     n: Annotated[float, Field(strict=True, gt=1.0, lt=4.0, allow_inf_nan=False)] = 1.55
     model: Literal["auto", "facet", "kirchhoff", "rayleigh-rice"] = "auto"
+    step_um: PositiveFloat | None = None
     wavelength_nm: (
         Annotated[float, Field(strict=True, ge=100.0, le=20000.0, allow_inf_nan=False)] | None
     ) = None

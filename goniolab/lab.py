@@ -133,7 +133,7 @@ def sample_truth(cfg: LabConfig, spec: str | None = None) -> TruthOptics:
     spec = spec or _map_spec(cfg)
     src = cfg.source or "<config>"
     try:
-        hm = resolve_map(spec)
+        hm = resolve_map(spec, step_um=cfg.sample.step_um)
         body = _sample_body(spec, cfg.sim.twin.body)
         return truth_for(hm, n=cfg.sample.n, body=body, settings=twin_settings(cfg), name=spec)
     except (UserError, ValueError, OSError) as exc:
@@ -187,6 +187,7 @@ def sample_model(cfg: LabConfig) -> ReflectanceModel:
         model: ReflectanceModel = model_for(
             _map_spec(cfg),
             n=cfg.sample.n,
+            step_um=cfg.sample.step_um,
             model=cfg.sample.model,
             wavelength_nm=cfg.sample.wavelength_nm,
         )

@@ -382,13 +382,14 @@ async def _execute_align(
     plan: Any,
     json_out: bool,
     write_config: bool,
+    config: LabConfig | None = None,
 ) -> int:
     import asyncio
 
     from goniolab.config import load_lab_config
     from goniolab.session import ScanSession
 
-    cfg = load_lab_config(config_path)
+    cfg = config if config is not None else load_lab_config(config_path)
     async with ScanSession.open(
         cfg, store, sample=plan.sample, time_scale=time_scale, operator=_align_prompt
     ) as session:
@@ -495,6 +496,7 @@ def _cmd_scan(args: argparse.Namespace) -> int:
 
         check_sample(args.sample)
         sample = absolute_sample(args.sample)
+    cfg = _with_step(cfg, args, sample)
     if args.plan == "align":
         from goniolab.scan.align import AlignPlan
 
@@ -515,6 +517,7 @@ def _cmd_scan(args: argparse.Namespace) -> int:
                     plan=align_plan,
                     json_out=args.json,
                     write_config=not args.no_write_config,
+                    config=cfg,
                 )
             )
     theta_i, theta_r = args.theta_i, args.theta_r
@@ -552,8 +555,38 @@ def _cmd_scan(args: argparse.Namespace) -> int:
                 model=args.model,
                 adaptive=args.adaptive,
                 meta=run_meta_args(args),
+                config=cfg,
             )
         )
+
+
+def _with_step(cfg: LabConfig, args: argparse.Namespace, sample: str) -> LabConfig:
+    """``cfg`` with ``--step-um`` as ``[sample] step_um``, after the map was read once here,
+    so that a map without a lateral step (a ``.npy`` without sidecar) is one error naming
+    the map and the option, not the config (issue 27, item 6)."""
+    if args.step_um is not None:
+        if not args.step_um > 0 or args.step_um != args.step_um:
+            raise UserError(f"scan: --step-um must be > 0, got {args.step_um:g}")
+        cfg = cfg.model_copy(
+            update={"sample": cfg.sample.model_copy(update={"step_um": args.step_um})}
+        )
+    if sample.startswith("sample:"):
+        return cfg
+    from goniolab.surfaces.resolve import resolve_map
+
+    try:
+        resolve_map(sample if args.sample else _config_map(cfg), step_um=cfg.sample.step_um)
+    except UserError as exc:  # its text starts with the map's file name
+        if args.sample:
+            raise UserError(f"--sample {exc}") from None
+        raise UserError(f"{cfg.source}: sample.map: {exc} (or set [sample] step_um)") from None
+    return cfg
+
+
+def _config_map(cfg: LabConfig) -> str:
+    from goniolab.lab import _map_spec
+
+    return _map_spec(cfg)
 
 
 def _open(store_arg: str | None, config_store: str | None, *, create: bool = True) -> RunStore:
@@ -805,6 +838,14 @@ def register(subparsers: Any) -> None:
     p.add_argument("--config", help="lab config TOML (e.g. configs/lab-sim.toml)")
     p.add_argument(
         "--sample", help="sample:NAME or a height-map file (default: config [sample] map)"
+    )
+    p.add_argument(
+        "--step-um",
+        type=float,
+        default=None,
+        metavar="UM",
+        help="lateral step of a map file that carries none (a .npy without sidecar), um "
+        "(default: the config's [sample] step_um)",
     )
     p.add_argument("--theta-i", type=float, default=45.0, help="incidence (lamp) angle, deg")
     p.add_argument(

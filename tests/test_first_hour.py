@@ -1,0 +1,75 @@
+"""The first hour of a new user (issue 27, items 5-6): words that name the right thing.
+
+- a ``.npy`` map without a sidecar passed to ``scan`` is blamed on ``--sample`` (not the
+  config), and ``scan --step-um`` supplies the step (stored with the run's config);
+- the message names the sidecar as missing, not as the file that lacks a step;
+- a run kind reads with its article ("an alignment run", not "a align run").
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from goniolab.cli import main
+from goniolab.config import configs_dir
+from goniolab.store import RunStore
+
+CFG = str(configs_dir() / "lab-sim.toml")
+
+
+def _bare_npy(tmp_path: Path) -> Path:
+    path = tmp_path / "bare.npy"
+    rng = np.random.default_rng(3)
+    np.save(path, rng.normal(0.0, 0.05, (64, 64)))  # heights in um, no sidecar
+    return path
+
+
+def test_a_bare_npy_names_its_missing_sidecar(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = _bare_npy(tmp_path)
+    assert main(["predict", "stats", str(path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"goniolab: error: {path.name}: no lateral step in the file")
+    assert "it has no sidecar bare.npy.json" in err and "--step-um" in err
+    assert not (tmp_path / "bare.npy.json").exists()  # named as missing, not made
+
+
+def test_scan_of_a_bare_npy_blames_the_option_not_the_config(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = _bare_npy(tmp_path)
+    store = tmp_path / "s.sqlite"
+    args = ["scan", "--config", CFG, "--sample", str(path), "--store", str(store)]
+    assert main([*args, "--theta-r", "40:50:10", "--time-scale", "0"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"goniolab: error: --sample {path.name}: no lateral step"), err
+    assert "lab-sim.toml" not in err and "sample.map" not in err
+    assert "--step-um" in err
+    assert not store.exists() or RunStore(store).list_runs() == []
+
+
+@pytest.mark.slow
+def test_scan_step_um_supplies_the_step_and_is_stored(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = _bare_npy(tmp_path)
+    store = tmp_path / "s.sqlite"
+    args = ["scan", "--config", CFG, "--sample", str(path), "--store", str(store), "--json"]
+    assert main([*args, "--theta-r", "40:50:10", "--time-scale", "0", "--step-um", "0.5"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["state"] == "done" and summary["readings"] == 2
+    with RunStore(store) as s:
+        rec = s.get_run(summary["run_id"])
+    assert rec.config["sample"]["step_um"] == 0.5  # a resume rebuilds the same map
+
+
+def test_scan_step_um_must_be_positive(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = _bare_npy(tmp_path)
+    args = ["scan", "--config", CFG, "--sample", str(path), "--step-um", "-1"]
+    assert main([*args, "--store", str(tmp_path / "s")]) == 2
+    assert "--step-um must be > 0, got -1" in capsys.readouterr().err
