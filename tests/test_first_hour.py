@@ -73,3 +73,29 @@ def test_scan_step_um_must_be_positive(tmp_path: Path, capsys: pytest.CaptureFix
     args = ["scan", "--config", CFG, "--sample", str(path), "--step-um", "-1"]
     assert main([*args, "--store", str(tmp_path / "s")]) == 2
     assert "--step-um must be > 0, got -1" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("kind", "phrase"),
+    [("align", "an alignment run"), ("gloss", "a gloss run"), ("brdf", "a brdf run")],
+)
+def test_a_run_kind_reads_with_its_article(kind: str, phrase: str) -> None:
+    from goniolab.errors import a_run_of_kind
+
+    assert a_run_of_kind(kind) == phrase
+
+
+def test_scan_setup_errors_name_the_form_fields() -> None:
+    from goniolab.errors import UserError
+    from goniolab.tui.view_model import ScanSetup
+
+    def error(**kw: float) -> str:
+        base = dict(theta_i_deg=45.0, theta_r_start_deg=0.0, theta_r_stop_deg=70.0,
+                    theta_r_step_deg=1.0)  # fmt: skip
+        with pytest.raises(UserError) as exc:
+            ScanSetup(sample="sample:wittmann-3", repeats=1, **{**base, **kw}).validate()
+        return str(exc.value)
+
+    assert error(theta_r_stop_deg=-10.0) == "scan setup: θr to must be >= θr from, got -10 < 0"
+    assert error(theta_r_step_deg=0.0) == "scan setup: θr step must be > 0 deg, got 0"
+    assert "_deg" not in error(theta_i_deg=95.0)

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from goniolab.commands._help import RUN_HELP
-from goniolab.errors import UserError
+from goniolab.errors import UserError, a_run_of_kind
 
 __all__ = ["load_paint_file", "register_predict_colour"]
 
@@ -877,7 +877,7 @@ def cmd_runs_spectra(args: argparse.Namespace) -> int:
     with open_store(args.store, args.config) as store:
         rec = _get_run(store, args.run)
         if rec.kind != "brdf":
-            raise UserError(f"run {rec.id} is a {rec.kind} run: spectra need a scan (brdf) run")
+            raise UserError(f"run {rec.id} is {a_run_of_kind(rec.kind)}: spectra need a scan (brdf) run")
         tables = run_spectra_tables(store, rec, args.which)
     if not tables:
         raise UserError(f"run {rec.id} has no {args.which} spectra on one wavelength grid")

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 from goniolab import jsonout
 from goniolab.commands._help import RUN_HELP
-from goniolab.errors import UserError
+from goniolab.errors import UserError, a_run_of_kind
 from goniolab.textsafe import escaped_stdout
 
 if TYPE_CHECKING:  # sqlite3 and the plans load when a command runs, not at --help
@@ -316,7 +316,7 @@ def _cmd_colour(args: argparse.Namespace) -> int:
     with open_store(args.store, args.config) as store:
         rec = _get_run(store, args.run)
         if rec.kind != "brdf":
-            raise UserError(f"run {rec.id} is a {rec.kind} run: colour needs a scan (brdf) run")
+            raise UserError(f"run {rec.id} is {a_run_of_kind(rec.kind)}: colour needs a scan (brdf) run")
         other = None
         if args.vs is not None:
             other = _get_run(store, args.vs)

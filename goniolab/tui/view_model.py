@@ -27,6 +27,16 @@ from goniolab.scan.plans import PlanError, angle_range
 __all__ = ["ArmState", "Backend", "RunSummary", "ScanSetup", "StoredRun"]
 
 
+#: The setup form's label of each field: what an error names (not the attribute name).
+FIELD_LABELS = {
+    "theta_i_deg": "θi",
+    "theta_r_start_deg": "θr from",
+    "theta_r_stop_deg": "θr to",
+    "theta_r_step_deg": "θr step",
+    "repeats": "repeats",
+}
+
+
 @dataclass(frozen=True, slots=True)
 class ScanSetup:
     """The scan form: an in-plane BRDF scan at one incidence angle.
@@ -60,21 +70,19 @@ class ScanSetup:
         }
         for name, value in values.items():
             if not math.isfinite(value):
-                raise UserError(f"scan setup: {name} must be a finite number, got {value}")
+                raise UserError(
+                    f"scan setup: {FIELD_LABELS[name]} must be a finite number, got {value}"
+                )
         if not self.sample:
             raise UserError("scan setup: sample: choose a sample")
         if not 0.0 <= self.theta_i_deg < 90.0:
-            raise UserError(
-                f"scan setup: theta_i_deg must lie in [0, 90) deg, got {self.theta_i_deg}"
-            )
+            raise UserError(f"scan setup: θi must lie in [0, 90) deg, got {self.theta_i_deg:g}")
         if self.theta_r_step_deg <= 0.0:
-            raise UserError(
-                f"scan setup: theta_r_step_deg must be > 0 deg, got {self.theta_r_step_deg}"
-            )
+            raise UserError(f"scan setup: θr step must be > 0 deg, got {self.theta_r_step_deg:g}")
         if self.theta_r_stop_deg < self.theta_r_start_deg:
             raise UserError(
-                "scan setup: theta_r_stop_deg must be >= theta_r_start_deg, got "
-                f"{self.theta_r_stop_deg} < {self.theta_r_start_deg}"
+                "scan setup: θr to must be >= θr from, got "
+                f"{self.theta_r_stop_deg:g} < {self.theta_r_start_deg:g}"
             )
         if self.repeats < 1:
             raise UserError(f"scan setup: repeats must be >= 1, got {self.repeats}")
