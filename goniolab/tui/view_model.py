@@ -11,6 +11,7 @@ the backend's :class:`~goniolab.scan.events.EventBus`.
 from __future__ import annotations
 
 import math
+from collections.abc import Awaitable
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -215,9 +216,11 @@ class Backend(Protocol):
         """Lamp and detector arm status, read from the instrument."""
         ...
 
-    async def read_gloss(self, sample: str) -> None:
+    async def read_gloss(self, sample: str) -> Awaitable[None] | None:
         """Start one glossmeter reading (published as GlossRead with the prediction of
-        ``sample``). Raises UserError when one is already in progress."""
+        ``sample``); a request while one is under way is coalesced into the next reading,
+        never refused. Returns what completes once the reading is stored (None: at
+        once)."""
         ...
 
     def list_runs(self) -> list[RunSummary]:
