@@ -61,3 +61,52 @@ def test_twin_table_prediction_columns_are_the_codes(name: str) -> None:
             f"docs/TWIN.md {name}: {cell!r}, the code predicts {want.strip()!r}; regenerate "
             "with '.venv/bin/python bench/twin_model_error.py --write docs/TWIN.md'"
         )
+
+
+def _console_commands(text: str, heading: str) -> list[tuple[str, str]]:
+    """The ``$ .venv/bin/python -c "..."`` commands of the first console block under
+    ``heading`` with the lines each prints."""
+    section = text.split(heading, 1)[1]
+    block = re.search(r"```console\n(.*?)```", section, re.S)
+    assert block, heading
+    found = re.findall(r'\$ \.venv/bin/python -c "\n(.*?)"\n(.*?)(?=\$ |\Z)', block.group(1), re.S)
+    return [(code, out) for code, out in found]
+
+
+@pytest.mark.slow
+def test_wire_sim_serial_replies_are_the_simulators(tmp_path: Path) -> None:
+    """docs/WIRE_SIM.md's example replies of the spectro and the glossmeter are what a
+    freshly started simulator answers (the ZGM1120 example showed placeholders, the STIL
+    one the ideal model's 3.37 % where the twin reads 2.70 %)."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    text = (ROOT / "docs" / "WIRE_SIM.md").read_text()
+    commands = _console_commands(text, "## The serial devices")
+    assert len(commands) == 2
+    config = (ROOT / "configs" / "lab-sim-wire.toml").read_text()
+    config = re.sub(r"(?m)^port = 5020\b.*$", "port = 0", config)  # any free Modbus port
+    config = config.replace("/tmp/goniolab-sim/", f"{tmp_path}/")
+    (tmp_path / "wire.toml").write_text(config)
+    serve = subprocess.Popen(
+        [sys.executable, "-c", "import sys; from goniolab.cli import main; sys.exit(main())",
+         "sim", "serve", "--config", str(tmp_path / "wire.toml"), "--json", "--time-scale", "0"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        env={**os.environ, "GONIOLAB_LOG_DIR": str(tmp_path / "log")},
+    )  # fmt: skip
+    try:
+        assert serve.stdout is not None
+        endpoints = json.loads(serve.stdout.readline())["endpoints"]
+        assert endpoints["spectro"]["port"] == f"{tmp_path}/spectro"
+        for code, expected in commands:
+            done = subprocess.run(
+                [sys.executable, "-c", code.replace("/tmp/goniolab-sim/", f"{tmp_path}/")],
+                capture_output=True, text=True, timeout=60, check=False,
+            )  # fmt: skip
+            assert done.returncode == 0, done.stderr
+            assert done.stdout == expected, f"docs/WIRE_SIM.md is stale:\n{code}"
+    finally:
+        serve.terminate()
+        serve.wait(timeout=30)
