@@ -283,6 +283,30 @@ def _one_line_warnings(debug: bool = False) -> None:
     warnings.showwarning = show
 
 
+#: Refractive indices of dielectric coats (paints, plastics, glasses) lie in this range; a
+#: value outside it is most likely a typo (``--n 155`` for 1.55) and is said, not refused.
+DIELECTRIC_N_RANGE = (1.0, 3.0)
+
+
+def _warn_implausible(args: argparse.Namespace) -> None:
+    """Warn about an option that parses but is physically implausible (issue 27: ``--n 155``
+    gave G20 = 1166 GU without a word): a dielectric index (no k) outside 1.0-3.0."""
+    n = getattr(args, "n", None)
+    if isinstance(n, bool) or not isinstance(n, int | float | complex):
+        return
+    lo, hi = DIELECTRIC_N_RANGE
+    value = complex(n)
+    if value.imag == 0 and not lo <= value.real <= hi:
+        import warnings
+
+        warnings.warn(
+            f"--n {value.real:g} lies outside {lo:.1f}-{hi:.1f}, the refractive indices of "
+            "dielectric coats (a PU clear coat: 1.55; a metal takes n+kj): the prediction "
+            "uses it as given",
+            stacklevel=1,
+        )
+
+
 def _start_log(args: argparse.Namespace, argv: Sequence[str] | None) -> None:
     """Open the log file and record the command (passwords blanked by the log filter)."""
     from goniolab import __version__
@@ -368,6 +392,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         _quiet_library_logs(args.debug)
         _one_line_warnings(args.debug)
         _start_log(args, argv)
+        _warn_implausible(args)
         code: int = args.func(args)
         sys.stdout.flush()  # a closed pipe shows here, not in the interpreter's exit
     except BrokenPipeError:
