@@ -102,7 +102,10 @@ def format_summary(summary: dict[str, Any]) -> str:
 
 
 class ProgressBar:
-    """Scan progress with the ETA of the motion model.
+    """Scan progress with the ETA of the motion model (on an instant sim clock, scale 0,
+    from the measured wall time per reading instead: the motion model's lab time takes no
+    wall time there, and "ETA 0s" stood through 15-20 s of computing; "?" until a reading
+    has been timed).
 
     On a terminal a rich progress bar (redrawn in place; messages scroll above it); to a
     pipe or a file one plain line per 10 % (``[####......] 12/30 ETA 4s detail``), stable
@@ -117,6 +120,7 @@ class ProgressBar:
         self._last_pct = -1
         self._rich: Any = None
         self._task: Any = None
+        self._first: tuple[float, int] | None = None  # (monotonic s, done) of the first event
 
     def wall_s(self, lab_s: float) -> float:
         """Lab-clock seconds to wall seconds (a sim clock at scale 0 takes no wall time)."""
@@ -141,8 +145,24 @@ class ProgressBar:
         self._rich.start()
         self._task = self._rich.add_task("scan", total=total, eta="?", detail="")
 
+    def eta_wall_s(self, ev: Progress, now_s: float) -> float:
+        """Wall seconds left: the motion model's, or at clock scale 0 the measured rate's
+        (NaN, shown as "?", until a reading has been timed)."""
+        if self._first is None:
+            self._first = (now_s, ev.done)
+        if ev.total and ev.done >= ev.total:
+            return 0.0
+        if self.clock_scale > 0:
+            return self.wall_s(ev.eta_s)
+        t0, done0 = self._first
+        if ev.done <= done0:
+            return math.nan
+        return (now_s - t0) / (ev.done - done0) * (ev.total - ev.done)
+
     def update(self, ev: Progress, detail: str) -> None:
-        eta = format_eta(self.wall_s(ev.eta_s))
+        import time
+
+        eta = format_eta(self.eta_wall_s(ev, time.monotonic()))
         if self.tty:
             if self._rich is None:
                 self._start_rich(ev.total)
@@ -292,12 +312,14 @@ async def _execute(
             raise UserError(f"plan refused (no arm moved): {exc}") from exc
         clock_scale = session.clock_scale
         check = scan.check
-        wall = check.eta_s / clock_scale if clock_scale > 0 else 0.0
         lab_time = "" if clock_scale == 1.0 else f" ({check.eta_s:.2f} s of lab clock)"
+        # an instant sim clock takes no wall time for the lab's: the ETA comes from the
+        # readings as they are timed (ProgressBar)
+        eta = format_eta(check.eta_s / clock_scale) if clock_scale > 0 else "from the readings"
         homed = await session.homed()
         print(
             f"goniolab: {check.n_readings} readings, {check.n_moves} moves, "
-            f"ETA {format_eta(wall)}{lab_time}"
+            f"ETA {eta}{lab_time}"
             + ("" if homed else " after homing the arms (the home search is not estimated)"),
             file=sys.stderr,
         )
