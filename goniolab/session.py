@@ -594,8 +594,10 @@ class GlossSession:
         *,
         mode: str = "measure",
         interval_s: float = 0.0,
+        keep_running: bool = False,
     ) -> GlossLogger:
-        """The logger of ``plan`` into run ``run_id`` (call its ``run()``; ``stop()`` ends it)."""
+        """The logger of ``plan`` into run ``run_id`` (call its ``run()``; ``stop()`` ends it;
+        ``keep_running``: the run stays ``running`` after it, for more readings)."""
         return GlossLogger(
             meter=self.meter,
             store=self.store,
@@ -606,6 +608,7 @@ class GlossSession:
             predicted_gu=prediction.gloss_gu,
             mode=mode,
             interval_s=interval_s,
+            keep_running=keep_running,
         )
 
     async def start(

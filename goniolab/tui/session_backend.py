@@ -166,8 +166,20 @@ class SessionBackend:
                     task.cancel()
                 with contextlib.suppress(asyncio.CancelledError, Exception):
                     await task
+        self._end_gloss_runs()
         await self._stack.aclose()
         self.bus.close()
+
+    def _end_gloss_runs(self) -> None:
+        """The session's gloss runs stayed ``running`` while it took readings; they end
+        ``done`` with it (a run a reading failed keeps its failed state)."""
+        if self.gloss is None:
+            return
+        store = self.gloss.store
+        for run_id in self._gloss_runs.values():
+            with contextlib.suppress(StoreError):
+                if store.get_run(run_id).status == RunState.RUNNING.value:
+                    store.set_status(run_id, RunState.DONE.value)
 
     # ------------------------------------------------------------------ form
     def sample_names(self) -> list[str]:
@@ -411,7 +423,11 @@ class SessionBackend:
         run_id = self._gloss_runs.get(sample)
         if run_id is None:
             run_id = self._gloss_runs[sample] = self.gloss.create_run(plan, prediction)
-        await self.gloss.logger(plan, run_id, prediction).run()
+            # held while the app is open: another 'goniolab runs list' reads it as running,
+            # not interrupted (a run stored as running that nobody claims)
+            self._stack.enter_context(self.gloss.store.claim_run(run_id))
+        # the session's gloss run goes on until the app closes: "running", not "done"
+        await self.gloss.logger(plan, run_id, prediction, keep_running=True).run()
 
     # ------------------------------------------------------------------ status
     async def arm_states(self) -> tuple[ArmState, ArmState]:

@@ -597,3 +597,21 @@ async def test_autostart_takes_the_gloss_reading_before_the_scan(tmp_path: Path)
         (reading,) = store.gloss_readings(runs["gloss"].id)
         first_point = min(p.timestamp for p in store.points(runs["brdf"].id))
     assert reading.timestamp < first_point
+
+
+async def test_the_sessions_gloss_run_reads_running_until_the_app_closes(tmp_path: Path) -> None:
+    """issue 27: the TUI's gloss run (one per sample, a reading every few seconds) read
+    `done` after each reading while the session was still recording."""
+    backend = SessionBackend(sim_config(tmp_path), model=AnalyticModel("beckmann", alpha=ALPHA))
+    await backend.open()
+    try:
+        await asyncio.wait_for(await backend.read_gloss(backend.sample), timeout=60)
+        with RunStore(tmp_path / "runs.sqlite", readonly=True) as store:
+            (run,) = [r for r in store.list_runs() if r.kind == "gloss"]
+            assert run.status == RunState.RUNNING.value
+            assert store.is_claimed(run.id) is True  # running, not "interrupted"
+    finally:
+        await backend.close()
+    with RunStore(tmp_path / "runs.sqlite", readonly=True) as store:
+        assert store.get_run(run.id).status == RunState.DONE.value
+        assert len(store.gloss_readings(run.id)) == 1
