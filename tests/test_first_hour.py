@@ -168,3 +168,27 @@ def test_a_step_larger_than_the_correlation_length_is_warned_about(tmp_path: Pat
         warnings.simplefilter("error")
         resolve_map(smooth, step_um=1.0)
         resolve_map("sample:gaussian-s0.05", step_um=1.0)
+
+
+def test_runs_show_counts_an_alignment_runs_readings(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """issue 27: counts per run kind in every view; `runs show --json` said 0 readings for
+    an alignment run (its readings are points, not gloss readings)."""
+    store = tmp_path / "s.sqlite"
+    with RunStore(store) as s:
+        rid = s.create_run(kind="align", plan={"kind": "align", "theta_i_deg": [20.0]},
+                           config={}, sample="sample:x", model={}, version="9.9")  # fmt: skip
+        for k in range(5):
+            s.add_point(rid, index=k, repeat=0, theta_i_deg=20.0, theta_r_deg=18.0 + k,
+                        measured_theta_i_deg=20.0, measured_theta_r_deg=18.0 + k,
+                        luminance_pct=1.0, raw={}, timestamp=1.0e9 + k)  # fmt: skip
+        s.update_model(rid, {"alignment": {"lamp_zero_deg": -0.163, "sample_tilt_deg": 0.136}})
+        s.set_status(rid, "done")
+    assert main(["runs", "show", str(rid), "--store", str(store), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["summary"]["readings"] == 5
+    assert main(["runs", "show", str(rid), "--store", str(store)]) == 0
+    text = capsys.readouterr().out
+    assert "  readings: 5\n" in text and "lamp arm zero offset: -0.163 deg" in text
+    assert main(["runs", "list", "--store", str(store)]) == 0
+    assert "align  done                5" in capsys.readouterr().out

@@ -77,6 +77,10 @@ def run_summary(store: RunStore, rec: RunRecord) -> dict[str, Any]:
             return summarize_brdf(plan, store.points(rec.id), store.predictions(rec.id))
         except StoreError as exc:
             raise UserError(str(exc)) from exc
+    if rec.kind == "align":
+        # its readings are points (the peak searches); the result is in its model
+        result = rec.model.get("alignment") if isinstance(rec.model, dict) else None
+        return {"readings": store.count_readings(rec), "alignment": result}
     from goniolab.scan.plans import gloss_statistics
 
     rows = store.gloss_readings(rec.id)
@@ -294,6 +298,16 @@ def _cmd_show(args: argparse.Namespace) -> int:
                 print("  colour (reflectance factor, per geometry):")
                 theta_i = float(rec.plan.get("theta_i_deg", 45.0))
                 print("\n".join(colour_text(colour, theta_i)))
+        elif rec.kind == "align":
+            print(f"  readings: {summary['readings']}")
+            result = summary.get("alignment") or {}
+            for label, key in (
+                ("lamp arm zero offset", "lamp_zero_deg"),
+                ("detector arm zero offset", "detector_zero_deg"),
+                ("sample tilt", "sample_tilt_deg"),
+            ):
+                if isinstance(result.get(key), int | float):
+                    print(f"  {label}: {result[key]:+.3f} deg")
         else:
             predicted = rec.model.get("predicted_gu") or {}
             for angle, st in summary["statistics"].items():
@@ -316,7 +330,9 @@ def _cmd_colour(args: argparse.Namespace) -> int:
     with open_store(args.store, args.config) as store:
         rec = _get_run(store, args.run)
         if rec.kind != "brdf":
-            raise UserError(f"run {rec.id} is {a_run_of_kind(rec.kind)}: colour needs a scan (brdf) run")
+            raise UserError(
+                f"run {rec.id} is {a_run_of_kind(rec.kind)}: colour needs a scan (brdf) run"
+            )
         other = None
         if args.vs is not None:
             other = _get_run(store, args.vs)
