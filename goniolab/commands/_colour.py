@@ -877,7 +877,9 @@ def cmd_runs_spectra(args: argparse.Namespace) -> int:
     with open_store(args.store, args.config) as store:
         rec = _get_run(store, args.run)
         if rec.kind != "brdf":
-            raise UserError(f"run {rec.id} is {a_run_of_kind(rec.kind)}: spectra need a scan (brdf) run")
+            raise UserError(
+                f"run {rec.id} is {a_run_of_kind(rec.kind)}: spectra need a scan (brdf) run"
+            )
         tables = run_spectra_tables(store, rec, args.which)
     if not tables:
         raise UserError(f"run {rec.id} has no {args.which} spectra on one wavelength grid")

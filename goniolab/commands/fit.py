@@ -100,7 +100,9 @@ def _cmd_fit_colour(args: argparse.Namespace) -> int:
     with open_store(args.store, args.config) as store:
         rec = _get_run(store, args.run)
         if rec.kind != "brdf":
-            raise UserError(f"run {rec.id} is {a_run_of_kind(rec.kind)}: a colour fit needs a scan run")
+            raise UserError(
+                f"run {rec.id} is {a_run_of_kind(rec.kind)}: a colour fit needs a scan run"
+            )
         rows = run_colour(store, rec)
     coloured = [r for r in rows if "L" in r]
     if not coloured:
