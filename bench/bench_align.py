@@ -5,6 +5,11 @@ Each seed draws both arms' zero offsets and the sample tilt uniformly in +/-1 de
 its estimates are compared with the drawn truth (``goniolab.lab.draw_session``).
 
     .venv/bin/python bench/bench_align.py [--seeds 0:20] [--sample sample:wittmann-3]
+        [--s-weight 0.505]
+
+``--s-weight`` gives the twin's spectro a polarisation sensitivity (``[sim.twin] s_weight``:
+its share of response to s-polarised light); the black glass polarises, the fit's Fresnel
+curve does not know it, and both zeros move together.
 """
 
 from __future__ import annotations
@@ -31,14 +36,16 @@ def _cpu() -> float:
     return r.ru_utime + r.ru_stime
 
 
-def config_text(seed: int, sample: str, store: Path) -> str:
-    """configs/lab-sim.toml with ``seed``, ``sample`` and all three ranges at 1 deg."""
+def config_text(seed: int, sample: str, store: Path, s_weight: float = 0.5) -> str:
+    """configs/lab-sim.toml with ``seed``, ``sample``, all three ranges at 1 deg and the
+    spectro's ``s_weight``."""
     from goniolab.config import configs_dir
 
     text = (configs_dir() / "lab-sim.toml").read_text().replace("seed = 1", f"seed = {seed}")
     text = text.replace('map = "sample:wittmann-3"', f'map = "{sample}"')
     for key in ("lamp_zero_range_deg", "detector_zero_range_deg", "sample_tilt_range_deg"):
         text = text.replace(f"# {key} = 0.5", f"{key} = 1.0")
+    text = text.replace('mode = "realistic"', f'mode = "realistic"\ns_weight = {s_weight}', 1)
     return text.replace('store = ""', f'store = "{store}"')
 
 
@@ -46,6 +53,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", default="0:20", help="first:stop (stop excluded)")
     ap.add_argument("--sample", default="sample:wittmann-3")
+    ap.add_argument("--s-weight", type=float, default=0.5, help="spectro's s share (0.5)")
     args = ap.parse_args()
     from goniolab.cli import main as cli
     from goniolab.config import load_lab_config
@@ -56,7 +64,8 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         for seed in range(first, stop):
             cfg = Path(tmp) / f"lab{seed}.toml"
-            cfg.write_text(config_text(seed, args.sample, Path(tmp) / f"runs{seed}.sqlite"))
+            store = Path(tmp) / f"runs{seed}.sqlite"
+            cfg.write_text(config_text(seed, args.sample, store, args.s_weight))
             truth = draw_session(load_lab_config(cfg))
             out, c0 = io.StringIO(), _cpu()
             with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):

@@ -21,7 +21,7 @@ def build(path: Path, runs: int, points: int) -> None:
             kind = "gloss" if r % 5 == 4 else "brdf"
             rid = s.create_run(kind=kind, plan={}, config={"lab": {"name": "b"}},
                                sample=f"sample:{r}", model={}, version="b")  # fmt: skip
-            with s._tx() as db:
+            with s.db.transaction() as db:
                 if kind == "brdf":
                     db.executemany(
                         "INSERT INTO points(run_id, idx, repeat, theta_i_deg, theta_r_deg,"

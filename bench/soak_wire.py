@@ -101,6 +101,9 @@ async def soak(
     timeout_rate: float = 0.01,
     garble_rate: float = 0.01,
     disconnect_rate: float = 0.005,
+    late_rate: float = 0.0,
+    late_s: float = 1.5,
+    freeze_store_s: float = 0.0,
     arm_drops: bool = True,
     timeout_s: float = 1.0,
     workdir: Path,
@@ -124,9 +127,26 @@ async def soak(
     rss_samples: list[tuple[str, float]] = []
     messages: list[str] = []
 
+    frozen: dict[str, Any] = {"after_point": 2, "done": None}
+
+    def freeze_store() -> None:
+        """Hold the store's write lock from another connection for ``freeze_store_s``
+        (another program locking the file; past the store's busy timeout the scan pauses
+        with the arms parked and goes on once the store is back)."""
+        import sqlite3
+
+        con = sqlite3.connect(store_path, isolation_level=None)
+        try:
+            con.execute("BEGIN EXCLUSIVE")
+            time.sleep(freeze_store_s)
+            con.execute("COMMIT")
+        finally:
+            con.close()
+
     async def count_events() -> None:
         """Count retried / fatal instrument errors; sample the RSS every 100 gloss readings
-        and every 50 scan points (a leak grows with the count, warm-up does not)."""
+        and every 50 scan points (a leak grows with the count, warm-up does not); freeze the
+        store once the scan has stored a few points."""
         while (ev := await queue.get()) is not None:
             if isinstance(ev, InstrumentError):
                 events[f"{ev.device} {'fatal' if ev.fatal else 'retried'}"] += 1
@@ -136,10 +156,19 @@ async def soak(
                 events[kind] += 1
                 if events[kind] % (100 if kind == "gloss" else 50) == 0:
                     rss_samples.append((f"{kind} {events[kind]}", rss_mib()[0]))
+                if (
+                    kind == "point"
+                    and freeze_store_s > 0
+                    and frozen["done"] is None
+                    and events["point"] >= frozen["after_point"]
+                ):
+                    frozen["done"] = asyncio.get_running_loop().run_in_executor(None, freeze_store)
 
     counter = asyncio.create_task(count_events())
     out: dict[str, Any] = {"seed": seed, "rates": {"timeout": timeout_rate, "garble": garble_rate,
-                                                   "disconnect": disconnect_rate},
+                                                   "disconnect": disconnect_rate,
+                                                   "late": late_rate},
+                           "late_s": late_s, "freeze_store_s": freeze_store_s,
                            "arm_drops": arm_drops}  # fmt: skip
     with RunStore(store_path) as store:
         async with ScanSession.open(cfg, store, bus=bus) as session:
@@ -152,6 +181,8 @@ async def soak(
                 garble_rate=garble_rate,
                 disconnect_rate=disconnect_rate,
                 recover_after_s=0.5,
+                late_rate=late_rate,
+                late_s=late_s,
             )
             lab.sims.spectro.faults.spec = lab.sims.glossmeter.faults.spec = faults
             rss_start, _ = rss_mib()
@@ -189,7 +220,10 @@ async def soak(
                 "requested": points, "stored": stored_points, "lost": points - stored_points,
                 "state": r.state.value, "reason": r.reason,
                 "ms_per_point": round(1e3 * scan_s / max(stored_points, 1), 2),
+                **_geometry_check(store.points(r.run_id), _answered(session.lab)),
             }  # fmt: skip
+            if frozen["done"] is not None:
+                await frozen["done"]
             per_device = {
                 name: dict(getattr(lab.sims, name).faults.injected)
                 for name in ("lamp", "detector", "spectro", "glossmeter")
@@ -227,6 +261,35 @@ async def soak(
     return out
 
 
+def _answered(lab: Any) -> list[tuple[float, float, str]]:
+    """What the wire STIL answered, at which geometry (sim.wire.serial.StilPtyDevice)."""
+    stil = getattr(lab.server, "spectro", None) if lab.server is not None else None
+    return list(getattr(stil, "answered", []))
+
+
+def _geometry_check(points: Any, answered: list[tuple[float, float, str]]) -> dict[str, int]:
+    """Each stored reading against the STIL's answers: the answer carrying its value must
+    have been given at its geometry (within 1 deg: the twin's zero offsets and tilt), else
+    the reading is stored at the wrong angle (a late reply taken for the next request).
+    Readings whose value no answer carries are counted apart (a profile whose first reply
+    line is not the luminance cannot be checked this way)."""
+    by_value: dict[float, list[float]] = {}
+    for _ti, tr, line in answered:
+        try:
+            value = round(float(line.split("=", 1)[1].split()[0]), 4)
+        except (IndexError, ValueError):
+            continue
+        by_value.setdefault(value, []).append(tr)
+    off = unmatched = 0
+    for p in points:
+        angles = by_value.get(round(float(p.luminance_pct), 4))
+        if not angles:
+            unmatched += 1
+        elif min(abs(a - p.theta_r_deg) for a in angles) > 1.0:
+            off += 1
+    return {"readings_off_geometry": off, "readings_unmatched": unmatched}
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--readings", type=int, default=1000)
@@ -235,6 +298,16 @@ def main() -> int:
     ap.add_argument("--timeout-rate", type=float, default=0.01)
     ap.add_argument("--garble-rate", type=float, default=0.01)
     ap.add_argument("--disconnect-rate", type=float, default=0.005)
+    ap.add_argument(
+        "--late-rate", type=float, default=0.0, help="serial answers --late-s late (default 0)"
+    )
+    ap.add_argument("--late-s", type=float, default=1.5, help="how late, s (default 1.5)")
+    ap.add_argument(
+        "--freeze-store-s",
+        type=float,
+        default=0.0,
+        help="hold the store's write lock this long after the scan's 2nd point (default 0)",
+    )
     ap.add_argument(
         "--no-arm-drops",
         action="store_true",
@@ -252,6 +325,9 @@ def main() -> int:
                 timeout_rate=args.timeout_rate,
                 garble_rate=args.garble_rate,
                 disconnect_rate=args.disconnect_rate,
+                late_rate=args.late_rate,
+                late_s=args.late_s,
+                freeze_store_s=args.freeze_store_s,
                 arm_drops=not args.no_arm_drops,
                 workdir=Path(tmp),
             )
@@ -262,7 +338,12 @@ def main() -> int:
     else:
         for key, value in out.items():
             print(f"{key:20s} {value}")
-    bad = out["gloss"]["lost"] or out["scan"]["lost"] or out["runs_left_running"]
+    bad = (
+        out["gloss"]["lost"]
+        or out["scan"]["lost"]
+        or out["runs_left_running"]
+        or out["scan"]["readings_off_geometry"]
+    )
     return 1 if bad else 0
 
 

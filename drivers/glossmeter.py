@@ -41,6 +41,7 @@ line (truncated to 80 characters).
 
 from __future__ import annotations
 
+import asyncio
 import dataclasses
 import math
 import re
@@ -48,7 +49,14 @@ import string
 import time
 from collections.abc import AsyncGenerator, Sequence
 
-from drivers.base import GLOSS_ANGLES_DEG, DeviceFault, GlossReading, ProtocolError
+from drivers.base import (
+    GLOSS_ANGLES_DEG,
+    DeviceFault,
+    DeviceTimeout,
+    Glossmeter,
+    GlossReading,
+    ProtocolError,
+)
 from drivers.profiles import (
     LineGlossProfile,
     SerialSettings,
@@ -259,6 +267,8 @@ class Zgm1120:
         self.serial_number = serial_number
         self.profile = profile if isinstance(profile, ZgmProfile) else load_zgm_profile(profile)
         self.timeout_s = self.profile.timeout_s if timeout_s is None else float(timeout_s)
+        #: Lines with another transaction id dropped while waiting for a reply.
+        self.stale_replies = 0
         self._tid_index = _TID_CHARS.index(first_transaction_id[0]) * 26 + _TID_CHARS.index(
             first_transaction_id[1]
         )
@@ -289,16 +299,38 @@ class Zgm1120:
         await self._io.write(self.command(opcode, tid, *args))
         return tid
 
-    async def _reply(self, timeout_s: float | None = None) -> str:
-        return await self._io.read_line(
-            self.profile.reply_terminator, self.timeout_s if timeout_s is None else timeout_s
-        )
+    async def _reply(self, tid: str, timeout_s: float | None = None) -> str:
+        """The reply line carrying transaction id ``tid``, read within the timeout.
+
+        Lines of this meter (its serial number) carrying another transaction id are a
+        late answer to an earlier request, or an AutoSend push: they are dropped (counted
+        in :attr:`stale_replies`) and the reading goes on, so one late reply never shifts
+        the readings after it (issue 23: the mismatch used to fail every later request,
+        each reading the answer to the one before). Anything else is returned as is for
+        the caller's checks.
+        """
+        loop = asyncio.get_running_loop()
+        budget = self.timeout_s if timeout_s is None else timeout_s
+        deadline = loop.time() + budget
+        while True:
+            left = max(0.0, deadline - loop.time())
+            try:
+                line = await self._io.read_line(self.profile.reply_terminator, left)
+            except DeviceTimeout:
+                raise DeviceTimeout(
+                    f"no reply on {self._io.port!r} within {budget:g} s", device=self.name
+                ) from None
+            fields = line.split("|")
+            if len(fields) >= 3 and fields[1].strip() == self.serial_number and fields[2] != tid:
+                self.stale_replies += 1
+                continue
+            return line
 
     async def _transact(
         self, opcode: int, *args: int | str, timeout_s: float | None = None
     ) -> tuple[str, list[str]]:
         tid = await self._send(opcode, *args)
-        line = await self._reply(timeout_s)
+        line = await self._reply(tid, timeout_s)
         return line, _header(line, (opcode,), self.serial_number, tid, self.name)
 
     async def measure(
@@ -308,7 +340,7 @@ class Zgm1120:
         ``with_temperature`` the meter also measures its temperature (isTemp = 1)."""
         mask = angle_mask(angles_deg)
         tid = await self._send(OP_MEASURE, mask, 1, int(with_temperature))
-        line = await self._reply()
+        line = await self._reply(tid)
         return parse_zgm_measure(
             line,
             serial=self.serial_number,
@@ -537,32 +569,33 @@ def open_glossmeter(
     baudrate: int | None = None,
     timeout_s: float | None = None,
     name: str = "glossmeter",
-) -> Zgm1120 | LineGlossmeter:
-    """Build (not connect) a glossmeter driver for ``protocol`` ``"zgm1120"`` or ``"line"``.
+) -> Glossmeter:
+    """Build (not connect) the glossmeter driver of ``protocol``, a name in
+    :data:`drivers.protocols.GLOSSMETERS` (``"zgm1120"``, ``"line"``, or one registered
+    since).
 
     ``profile`` ``None`` selects the protocol's built-in profile (``zgm1120`` /
-    ``line-gloss-example``).
+    ``line-gloss-example``). ``serial_number`` goes to the drivers whose entry lists it
+    among its ``options`` (the ZGM1120).
 
     Raises
     ------
     ValueError
-        Unknown protocol.
+        Unknown protocol (the message lists the known ones).
     """
-    if protocol == "zgm1120":
-        return Zgm1120(
-            name,
-            port=port,
-            serial_number=serial_number,
-            profile=profile or "zgm1120",
-            baudrate=baudrate,
-            timeout_s=timeout_s,
-        )
-    if protocol == "line":
-        return LineGlossmeter(
-            name,
-            port=port,
-            profile=profile or "line-gloss-example",
-            baudrate=baudrate,
-            timeout_s=timeout_s,
-        )
-    raise ValueError(f"{name}: unknown glossmeter protocol {protocol!r} (use 'zgm1120' or 'line')")
+    from drivers.protocols import GLOSSMETERS
+
+    try:
+        entry = GLOSSMETERS[protocol]
+    except ValueError as exc:
+        raise ValueError(f"{name}: {exc}") from None
+    options = {"serial_number": serial_number}
+    driver: Glossmeter = entry.driver_class()(
+        name,
+        port=port,
+        profile=profile or entry.default_profile,
+        baudrate=baudrate,
+        timeout_s=timeout_s,
+        **{key: options[key] for key in entry.options},
+    )
+    return driver

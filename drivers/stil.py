@@ -308,7 +308,28 @@ class StilSpectro:
             exposure_us=self.exposure_us,
             timestamp=time.time(),
             stale_lines=stale,
+            peak_fraction=self._peak_fraction(own),
         )
+
+    def _peak_fraction(self, lines: list[str]) -> float | None:
+        """The signal level (``{peak_fraction}``, strongest channel over full scale) when the
+        profile's measure reply carries it (``stil-ruby-level``, UNCONFIRMED); ``None``
+        without the field or for ``-1`` (the instrument does not report it)."""
+        p = self.profile
+        if not any("{peak_fraction" in t for t in p.reply_measure):
+            return None
+        fields: dict[str, str] = {}
+        for template, line in zip(p.reply_measure, lines, strict=True):
+            fields.update(match_reply(p, template, line, self.name))
+        text = fields.get("peak_fraction")
+        if text is None:
+            return None
+        value = _float(text, "signal level", text, self.name)
+        if value == -1:
+            return None
+        if not 0.0 <= value <= 1.0:
+            raise ProtocolError(f"signal level {value} outside 0..1 (or -1)", device=self.name)
+        return value
 
     async def _fenced(self, lines: list[str]) -> list[str]:
         """Send the fence and read every line up to its echo; return ``lines`` plus the

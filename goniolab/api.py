@@ -174,7 +174,7 @@ def _model(
     model: str = "auto",
     wavelength_nm: float | None = None,
 ) -> ReflectanceModel:
-    from goniolab.models import build_model, model_for
+    from goniolab.models import model_for
 
     options: dict[str, Any] = {
         "slope_method": slope_method,
@@ -185,15 +185,7 @@ def _model(
     }
     if isinstance(surface, str | Path):
         return model_for(surface, n=n, step_um=step_um, **options)
-    from goniolab.models import MODEL_NAMES
-
-    if model not in MODEL_NAMES:
-        raise UserError(f"unknown model {model!r}; use one of {', '.join(MODEL_NAMES)}")
-    hm = _heightmap(surface, step_um)
-    try:
-        return build_model(hm, n=n, **options)
-    except ValueError as exc:
-        raise UserError(f"{hm.source}: {exc}") from None
+    return model_for(_heightmap(surface, step_um), n=n, **options)
 
 
 def _angles(theta_r_deg: str | Sequence[float] | np.ndarray) -> np.ndarray:
@@ -612,6 +604,7 @@ class _ScanCall:
     location: str | Path
     time_scale: float | None
     progress: bool
+    meta: Any = None  # goniolab.store.RunMeta: operator, sample id, notes, tags
 
 
 def _scan_call(
@@ -626,6 +619,8 @@ def _scan_call(
     store: str | Path | None,
     time_scale: float | None,
     progress: bool,
+    identity: dict[str, Any] | None = None,
+    auto_exposure: bool = True,
 ) -> _ScanCall:
     from goniolab.config import load_lab_config
     from goniolab.scan.plans import BrdfPlan, PlanError
@@ -639,11 +634,21 @@ def _scan_call(
             dwell_s=float(dwell_s),
             exposure_us=cfg.spectro.exposure_us if exposure_us is None else int(exposure_us),
             sample=sample or cfg.sample.map,
+            auto_exposure=bool(auto_exposure),
         )
     except PlanError as exc:
         raise UserError(f"run_scan: {exc}") from None
     location = resolve_store_path(None if store is None else str(store), cfg.lab.store)
-    return _ScanCall(str(Path(config).resolve()), plan, location, time_scale, progress)
+    from goniolab.store import RunMeta
+
+    i = identity or {}
+    meta = RunMeta(
+        operator=i.get("operator") or "",
+        sample_id=i.get("sample_id") or "",
+        notes=i.get("notes") or "",
+        tags=tuple(dict.fromkeys(t for t in (i.get("tags") or ()) if t)),
+    )
+    return _ScanCall(str(Path(config).resolve()), plan, location, time_scale, progress, meta)
 
 
 async def _scan_in_this_thread(call: _ScanCall, control: _ScanControl | None = None) -> Run:
@@ -657,7 +662,13 @@ async def _scan_in_this_thread(call: _ScanCall, control: _ScanControl | None = N
     try:
         with rs:
             run_id = await _scan(
-                call.config_path, call.plan, rs, call.time_scale, call.progress, control
+                call.config_path,
+                call.plan,
+                rs,
+                call.time_scale,
+                call.progress,
+                control,
+                meta=call.meta,
             )
     except DeviceError as exc:
         raise UserError(f"instrument error: {exc}", exit_code=1) from exc
@@ -676,6 +687,11 @@ def run_scan(
     store: str | Path | None = None,
     time_scale: float | None = None,
     progress: bool = True,
+    operator: str | None = None,
+    sample_id: str | None = None,
+    notes: str | None = None,
+    tags: Sequence[str] = (),
+    auto_exposure: bool = True,
 ) -> Run:
     """Run an in-plane scan in one call (blocking) and return the stored :class:`Run`.
 
@@ -701,6 +717,13 @@ def run_scan(
     progress
         Show a progress bar (``tqdm.auto``: a widget in a notebook, a text bar on stderr in
         a terminal; never on stdout).
+    auto_exposure
+        Choose each reading's exposure from the instrument's signal level (the default,
+        as ``goniolab scan``); ``False`` keeps ``exposure_us``.
+    operator, sample_id, notes, tags
+        The run's identity (who measures, the physical sample's id, free text, tags),
+        stored with the run beside its UUID; the config's ``[run]`` table fills what is
+        left out. Change it later with :meth:`Run.annotate`.
 
     Returns
     -------
@@ -719,6 +742,8 @@ def run_scan(
         store=store,
         time_scale=time_scale,
         progress=progress,
+        identity={"operator": operator, "sample_id": sample_id, "notes": notes, "tags": tags},
+        auto_exposure=auto_exposure,
     )
     control = _ScanControl()
     return _run_blocking(_scan_in_this_thread(call, control), control)
@@ -736,6 +761,11 @@ async def run_scan_async(
     store: str | Path | None = None,
     time_scale: float | None = None,
     progress: bool = True,
+    operator: str | None = None,
+    sample_id: str | None = None,
+    notes: str | None = None,
+    tags: Sequence[str] = (),
+    auto_exposure: bool = True,
 ) -> Run:
     """:func:`run_scan` as a coroutine on the caller's event loop: ``run = await
     gl.run_scan_async(...)`` in a notebook cell (the kernel stays responsive to other
@@ -751,6 +781,8 @@ async def run_scan_async(
         store=store,
         time_scale=time_scale,
         progress=progress,
+        identity={"operator": operator, "sample_id": sample_id, "notes": notes, "tags": tags},
+        auto_exposure=auto_exposure,
     )
     return await _scan_in_this_thread(call)
 
@@ -762,6 +794,8 @@ async def _scan(
     time_scale: float | None,
     progress: bool,
     control: _ScanControl | None = None,
+    *,
+    meta: Any = None,
 ) -> int:
     from goniolab.config import load_lab_config
     from goniolab.scan.events import Progress
@@ -771,7 +805,7 @@ async def _scan(
     cfg = load_lab_config(config_path)
     async with ScanSession.open(cfg, store, sample=plan.sample, time_scale=time_scale) as session:
         try:
-            runner = session.start(await session.prepare(plan))
+            runner = session.start(await session.prepare(plan), meta=meta)
         except PlanRefused as exc:
             raise UserError(f"plan refused (no arm moved): {exc}") from exc
         run_id = runner.run_id

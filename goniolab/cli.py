@@ -61,8 +61,18 @@ class _Parser(argparse.ArgumentParser):
     """argparse with goniolab's one-line errors (``goniolab: error: ...``, exit 2) and
     negative angle ranges taken as values; sub-command parsers are of the same class."""
 
-    #: The command line being parsed (set by :func:`main`), for the hints of :meth:`error`.
+    #: The command line the top-level parser is parsing, for the hints of :meth:`error`
+    #: (the sub-command parsers report errors without the whole line).
     argv: Sequence[str] = ()
+    #: Set on the top-level parser (:func:`build_parser`): its parse records the line.
+    top_level = False
+
+    def parse_known_args(  # type: ignore[override]
+        self, args: Sequence[str] | None = None, namespace: argparse.Namespace | None = None
+    ) -> tuple[argparse.Namespace, list[str]]:
+        if self.top_level:
+            _Parser.argv = list(sys.argv[1:] if args is None else args)
+        return super().parse_known_args(args, namespace)
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
@@ -173,6 +183,7 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
         description="Goniospectrophotometer and glossmeter control, with BRDF and gloss "
         "predicted from surface roughness (Wittmann et al. 2021).",
     )
+    parser.top_level = True
     parser.add_argument(
         "--version",
         action=_VersionAction,
@@ -384,7 +395,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     _one_blas_thread()
     try:
         parser = build_parser(_command_in(sys.argv[1:] if argv is None else argv))
-        _Parser.argv = list(sys.argv[1:] if argv is None else argv)
         args = parser.parse_args(argv)
         if not getattr(args, "func", None):
             parser.print_help()

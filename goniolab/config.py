@@ -39,11 +39,21 @@ import math
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 
 import goniolab
+from drivers.protocols import GLOSSMETERS, SPECTROS, STEPPERS, ProtocolTable
 from drivers.toml_schema import TomlFileError, first_issue, read_toml
-from goniolab.errors import UserError
+from goniolab.errors import ConfigError
+from goniolab.model_registry import DEFAULT_MODEL, model_names
 
 __all__ = [
     "INT32_MAX",
@@ -62,22 +72,13 @@ __all__ = [
     "SimConfig",
     "SpectroConfig",
     "TwinConfig",
+    "alignment_state_path",
     "configs_dir",
     "load_lab_config",
     "resolve_profile",
     "write_alignment",
+    "write_alignment_state",
 ]
-
-
-class ConfigError(UserError):
-    """A lab config file is unreadable or invalid; the message names file, key and reason."""
-
-    def __init__(self, path: str | Path, key: str, reason: str) -> None:
-        self.path = str(path)
-        self.key = key
-        self.reason = reason
-        where = f"{self.path}: {key}: " if key else f"{self.path}: "
-        super().__init__(where + reason, exit_code=2)
 
 
 def configs_dir() -> Path:
@@ -116,6 +117,33 @@ TimeoutS = Annotated[float, Field(strict=True, gt=0.0, le=3600.0, allow_inf_nan=
 STALL_TOLERANCE_MAX_DEG = 5.0
 
 
+def _known_protocol(table: ProtocolTable) -> AfterValidator:
+    """A ``protocol`` key: a name in the device's protocol table (:mod:`drivers.protocols`,
+    read when the file is validated, so a protocol registered since is known)."""
+
+    def check(name: str) -> str:
+        if name not in table:
+            known = ", ".join(repr(n) for n in table.names())
+            raise ValueError(f"unknown {table.device} protocol {name!r} (known: {known})")
+        return name
+
+    return AfterValidator(check)
+
+
+def _protocol_profile(data: Any, table: ProtocolTable, default: str) -> Any:
+    """A device section without ``profile`` gets the built-in profile of its protocol."""
+    if isinstance(data, dict) and "profile" not in data:
+        name = data.get("protocol", default)
+        if isinstance(name, str) and name in table:
+            return {**data, "profile": table[name].default_profile}
+    return data
+
+
+StepperProtocol = Annotated[str, Field(strict=True), _known_protocol(STEPPERS)]
+SpectroProtocol = Annotated[str, Field(strict=True), _known_protocol(SPECTROS)]
+GlossmeterProtocol = Annotated[str, Field(strict=True), _known_protocol(GLOSSMETERS)]
+
+
 class LabSection(_Strict):
     """``[lab]``: name, mode, sim-server switch, clock scale, store file."""
 
@@ -124,6 +152,8 @@ class LabSection(_Strict):
     start_sim_servers: bool = False
     time_scale: NonNegFloat = 1.0
     store: str = ""
+    #: how long a scan waits for a lost instrument link (a controller or sim-server restart)
+    reconnect_window_s: Annotated[float, Field(strict=False, ge=0.0, le=3600.0)] = 30.0
 
     @model_validator(mode="after")
     def _servers_need_drivers(self) -> LabSection:
@@ -134,15 +164,15 @@ class LabSection(_Strict):
 
 class SampleConfig(_Strict):
     """``[sample]``: the height map (path or ``sample:NAME``), refractive index, and the
-    reflectance model that predicts it (:func:`goniolab.models.model_for`: ``facet``,
-    ``kirchhoff``, ``rayleigh-rice`` or ``auto``, the default) with its optional wavelength
+    reflectance model that predicts it (:func:`goniolab.models.model_for`: a name of
+    :mod:`goniolab.model_registry`, ``auto`` by default) with its optional wavelength
     (nm; unset: 550 nm for BRDF curves, ISO 2813 weighting for gloss). ``step_um`` is the
     lateral step of a map file that carries none (a ``.npy`` without sidecar; ``scan
     --step-um``)."""
 
     map: str = "sample:wittmann-3"
     n: Annotated[float, Field(strict=True, gt=1.0, lt=4.0, allow_inf_nan=False)] = 1.55
-    model: Literal["auto", "facet", "kirchhoff", "rayleigh-rice"] = "auto"
+    model: str = DEFAULT_MODEL
     step_um: PositiveFloat | None = None
     wavelength_nm: (
         Annotated[float, Field(strict=True, ge=100.0, le=20000.0, allow_inf_nan=False)] | None
@@ -153,6 +183,14 @@ class SampleConfig(_Strict):
     def _names_a_map(cls, v: str) -> str:
         if not v.strip():
             raise ValueError("empty: name a height-map file or sample:NAME")
+        return v
+
+    @field_validator("model")
+    @classmethod
+    def _registered_model(cls, v: str) -> str:
+        names = [repr(name) for name in model_names()]
+        if v not in model_names():
+            raise ValueError(f"Input should be {', '.join(names[:-1])} or {names[-1]}")
         return v
 
 
@@ -166,6 +204,7 @@ class ParkConfig(_Strict):
 class AxisConfig(_Strict):
     """``[goniometer.lamp]`` / ``[goniometer.detector]``: one Modbus stepper arm."""
 
+    protocol: StepperProtocol = "modbus"
     profile: str = "oriental-az"
     transport: Literal["tcp", "rtu"] = "tcp"
     host: str = "127.0.0.1"
@@ -194,6 +233,11 @@ class AxisConfig(_Strict):
         if lo < -180.0 or hi > 180.0:
             raise ValueError(f"limits must lie within [-180, 180] deg, got [{lo:g}, {hi:g}]")
         return v
+
+    @model_validator(mode="before")
+    @classmethod
+    def _default_profile(cls, data: Any) -> Any:
+        return _protocol_profile(data, STEPPERS, "modbus")
 
     @model_validator(mode="after")
     def _rtu_needs_port(self) -> AxisConfig:
@@ -226,23 +270,41 @@ class GoniometerConfig(_Strict):
 class SpectroConfig(_Strict):
     """``[spectro]``: STIL spectro-colorimeter on a serial port."""
 
+    protocol: SpectroProtocol = "stil"
     profile: str = "stil-ruby"
     port: str = "/tmp/goniolab-sim/spectro"
     baudrate: Annotated[int, Field(strict=True, ge=300, le=4_000_000)] = 115200
     exposure_us: Annotated[int, Field(strict=True, ge=1)] = 10000
     detector_cone_deg: Annotated[float, Field(strict=True, ge=0.0, lt=90.0)] = 6.0
     timeout_s: TimeoutS = 2.0
+    #: the certified standards (goniolab/scan/standards.py), relative to this file's
+    #: directory, else the shipped configs/standards.toml
+    standards: str = "standards.toml"
+    #: a run warns when the newest `goniolab calibrate` record is older than this
+    calibration_max_age_h: Annotated[float, Field(strict=False, gt=0.0)] = 24.0
+
+    @model_validator(mode="before")
+    @classmethod
+    def _default_profile(cls, data: Any) -> Any:
+        return _protocol_profile(data, SPECTROS, "stil")
 
 
 class GlossmeterConfig(_Strict):
-    """``[glossmeter]``: ZGM1120 (or a line-printing meter) on a serial port."""
+    """``[glossmeter]``: a glossmeter on a serial port; ``protocol`` is a name in
+    :data:`drivers.protocols.GLOSSMETERS` (ZGM1120, a line-printing meter, ...), and
+    ``profile`` defaults to that protocol's built-in profile."""
 
-    protocol: Literal["zgm1120", "line"] = "zgm1120"
+    protocol: GlossmeterProtocol = "zgm1120"
     profile: str = "zgm1120"
     port: str = "/tmp/goniolab-sim/gloss"
     serial_number: str = "401120999"
     baudrate: Annotated[int, Field(strict=True, ge=300, le=4_000_000)] = 9600
     timeout_s: TimeoutS = 2.0
+
+    @model_validator(mode="before")
+    @classmethod
+    def _default_profile(cls, data: Any) -> Any:
+        return _protocol_profile(data, GLOSSMETERS, "zgm1120")
 
 
 class FaultsConfig(_Strict):
@@ -317,6 +379,8 @@ class TwinConfig(_Strict):
     read_noise_counts: Annotated[float, Field(strict=True, ge=0.0, le=1000.0)] = 5.0
     stray_pct: Annotated[float, Field(strict=True, ge=0.0, le=1.0)] = 0.002
     flicker_pct: Annotated[float, Field(strict=True, ge=0.0, le=10.0)] = 0.3
+    # share of the spectro's response to s-polarised light (0.5: insensitive)
+    s_weight: Annotated[float, Field(strict=True, ge=0.4, le=0.6)] = 0.5
     # the arms and the sample seating, drawn per session (uniform in +/- range)
     backlash_deg: Annotated[float, Field(strict=True, ge=0.0, le=1.0)] = 0.02
     lamp_zero_range_deg: Annotated[float, Field(strict=True, ge=0.0, le=5.0)] = 0.5
@@ -404,6 +468,12 @@ class AlignmentConfig(_Strict):
     detector_zero_deg: Annotated[float, Field(strict=True, ge=-5.0, le=5.0)] = 0.0
     sample_tilt_deg: Annotated[float, Field(strict=True, ge=-5.0, le=5.0)] = 0.0
     run: Annotated[int, Field(strict=True, ge=0)] = 0
+    #: Where ``scan --plan align`` keeps its result (a per-lab state file, never the tracked
+    #: config): relative to the config's directory; "" = beside the store
+    #: (:func:`alignment_state_path`). Its values replace the three above when it exists.
+    state_file: str = ""
+    #: Set by the loader: the state file the values came from ("" = this config).
+    loaded_from: str = ""
 
     def corrections_deg(self) -> tuple[float, float]:
         """``(lamp, detector)`` added to requested angles before the arms move."""
@@ -439,15 +509,20 @@ class LabConfig(_Strict):
     #: The file this config came from ("" when built in code).
     source: str = Field(default="", exclude=True)
 
+    def sample_map(self) -> str:
+        """``[sample] map``, with a relative file path taken relative to the config file."""
+        spec = self.sample.map
+        if spec.startswith("sample:") or not self.source:
+            return spec
+        p = Path(spec).expanduser()
+        if not p.is_absolute():
+            candidate = Path(self.source).resolve().parent / p
+            if candidate.exists():
+                return str(candidate)
+        return spec
+
 
 # --------------------------------------------------------------------------- loading
-_PROFILE_KEYS: tuple[tuple[str, str, str], ...] = (
-    ("goniometer.lamp.profile", "modbus-stepper", "load_stepper_profile"),
-    ("goniometer.detector.profile", "modbus-stepper", "load_stepper_profile"),
-    ("spectro.profile", "stil-spectro", "load_stil_profile"),
-)
-
-
 def resolve_profile(name: str, *, relative_to: Path | None = None) -> Path:
     """The file a profile name or path refers to.
 
@@ -509,7 +584,7 @@ def load_lab_config(path: str | Path) -> LabConfig:
     cfg, profiles = _resolve_profiles(cfg, p)
     _register_checks(cfg, p, profiles)
     _exposure_check(cfg, p, profiles["spectro.profile"])
-    return cfg
+    return _with_alignment_state(cfg)
 
 
 def did_you_mean_key(key: str, reason: str) -> str:
@@ -621,29 +696,30 @@ def _cross_checks(cfg: LabConfig, path: Path) -> None:
 def _resolve_profiles(cfg: LabConfig, path: Path) -> tuple[LabConfig, dict[str, Any]]:
     """Load every profile the config names; the config with resolved paths, and the
     loaded profiles by config key."""
-    import drivers.profiles as dp  # drivers never import goniolab: this direction is allowed
-    from drivers.base import ProfileError
+    from drivers.base import ProfileError  # drivers never import goniolab: this way is allowed
 
     base = path.resolve().parent
     resolved: dict[str, str] = {}
     loaded: dict[str, Any] = {}
-    keys = list(_PROFILE_KEYS)
-    if cfg.glossmeter.protocol == "zgm1120":
-        keys.append(("glossmeter.profile", "zgm1120", "load_zgm_profile"))
-    else:
-        keys.append(("glossmeter.profile", "line-gloss", "load_line_gloss_profile"))
-    for key, kind, loader in keys:
+    g = cfg.goniometer
+    # each profile is read by the protocol that speaks it (drivers.protocols)
+    keys = (
+        ("goniometer.lamp.profile", STEPPERS[g.lamp.protocol]),
+        ("goniometer.detector.profile", STEPPERS[g.detector.protocol]),
+        ("spectro.profile", SPECTROS[cfg.spectro.protocol]),
+        ("glossmeter.profile", GLOSSMETERS[cfg.glossmeter.protocol]),
+    )
+    for key, entry in keys:
         name = _get(cfg.model_dump(), key)
         target = resolve_profile(str(name), relative_to=base)
         try:
-            loaded[key] = getattr(dp, loader)(target)
+            loaded[key] = entry.load_profile(target)
         except ProfileError as exc:
             reason = str(exc)
             if "key 'kind'" in reason:
-                reason = f"profile {target} is not a {kind!r} profile ({reason})"
+                reason = f"profile {target} is not a {entry.profile_kind!r} profile ({reason})"
             raise ConfigError(path, key, reason) from None
         resolved[key] = str(target)
-    g = cfg.goniometer
     resolved_cfg = cfg.model_copy(
         update={
             "goniometer": g.model_copy(
@@ -743,7 +819,6 @@ def write_alignment(path: str | Path, values: dict[str, float | int], *, note: s
     ConfigError
         The file cannot be read or written, or the values are out of range.
     """
-    import os
     import re
 
     p = Path(path)
@@ -763,9 +838,117 @@ def write_alignment(path: str | Path, values: dict[str, float | int], *, note: s
     except ValidationError as exc:
         key, reason = first_issue(exc)
         raise ConfigError(p, f"alignment.{key}", reason) from None
-    tmp = p.with_name(p.name + f".{os.getpid()}.tmp")
+    _replace_text(p, new, key="alignment")
+
+
+# --------------------------------------------------------------------------- alignment state
+#: The keys an alignment state file carries in its ``[alignment]`` table.
+_STATE_KEYS = ("lamp_zero_deg", "detector_zero_deg", "sample_tilt_deg", "run")
+
+
+def alignment_state_path(cfg: LabConfig) -> Path:
+    """The per-lab alignment state file of a config (issue 22: never the tracked config).
+
+    ``[alignment] state_file`` relative to the config's directory when set; otherwise
+    ``<config stem>.alignment.toml`` beside the store (``[lab] store``: its directory for an
+    SQLite file, resolved against the config's directory; the user data directory for the
+    default store or a PostgreSQL one).
+    """
+    import platformdirs
+
+    base = Path(cfg.source).resolve().parent if cfg.source else Path.cwd()
+    if cfg.alignment.state_file:
+        p = Path(cfg.alignment.state_file).expanduser()
+        return p if p.is_absolute() else base / p
+    stem = Path(cfg.source).stem if cfg.source else "lab"
+    store = cfg.lab.store
+    if store and "://" not in store and "=" not in store:
+        sp = Path(store).expanduser()
+        return (sp if sp.is_absolute() else base / sp).parent / f"{stem}.alignment.toml"
+    return Path(platformdirs.user_data_dir("goniolab", appauthor=False)) / f"{stem}.alignment.toml"
+
+
+def _with_alignment_state(cfg: LabConfig) -> LabConfig:
+    """``cfg`` with the values of its alignment state file (if there is one), which cites it.
+
+    Raises
+    ------
+    ConfigError
+        The state file exists but is unreadable or holds out-of-range values (naming it).
+    """
+    path = alignment_state_path(cfg)
+    if not path.is_file():
+        return cfg
     try:
-        tmp.write_text(new, encoding="utf-8")
-        os.replace(tmp, p)
+        data = read_toml(path, what="alignment state file")
+    except TomlFileError as exc:
+        raise ConfigError(path, "", exc.reason) from None
+    table = data.get("alignment")
+    if not isinstance(table, dict):
+        raise ConfigError(path, "alignment", "the state file has no [alignment] table")
+    values = {k: table[k] for k in _STATE_KEYS if k in table}
+    try:
+        AlignmentConfig.model_validate(values)
+    except ValidationError as exc:
+        key, reason = first_issue(exc)
+        raise ConfigError(path, f"alignment.{key}", reason) from None
+    update = {**values, "loaded_from": str(path)}
+    return cfg.model_copy(update={"alignment": cfg.alignment.model_copy(update=update)})
+
+
+def write_alignment_state(
+    cfg: LabConfig, values: dict[str, float | int], *, note: str = ""
+) -> Path:
+    """Write the alignment result to the config's state file (:func:`alignment_state_path`);
+    the config file itself is not touched. Validated first; written atomically (a temp file
+    beside it, then ``os.replace``), an existing file's mode kept. Returns the path.
+
+    Raises
+    ------
+    ConfigError
+        Out-of-range values (nothing written) or the file cannot be written.
+    """
+
+    path = alignment_state_path(cfg)
+    try:
+        AlignmentConfig.model_validate(values)
+    except ValidationError as exc:
+        key, reason = first_issue(exc)
+        raise ConfigError(path, f"alignment.{key}", reason) from None
+    lines = [
+        "# goniolab alignment state: written by `goniolab scan --plan align`, read with the",
+        f"# lab config {Path(cfg.source).resolve() if cfg.source else '(none)'}. Not a config.",
+    ]
+    if note:
+        lines.append(f"# {note}")
+    lines.append("[alignment]")
+    for key, value in values.items():
+        lines.append(f"{key} = {value:.4f}" if isinstance(value, float) else f"{key} = {value}")
+    _replace_text(path, "\n".join(lines) + "\n", key="alignment")
+    return path
+
+
+def _replace_text(path: Path, text: str, *, key: str) -> None:
+    """Replace ``path``'s content atomically, keeping what the file is: a symlink's target is
+    replaced (the link stays), and the mode (and owner, where permitted) of an existing file
+    are kept (issue 23: a config holding a password must not become world-readable)."""
+    import contextlib
+    import os
+
+    target = path.resolve() if path.is_symlink() else path
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        st = target.stat() if target.exists() else None
+        tmp = target.with_name(target.name + f".{os.getpid()}.tmp")
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        if st is not None:
+            os.chmod(tmp, st.st_mode & 0o7777)
+            with contextlib.suppress(OSError, AttributeError):
+                os.chown(tmp, st.st_uid, st.st_gid)
+        else:
+            os.chmod(tmp, 0o644)
+        os.replace(tmp, target)
     except OSError as exc:
-        raise ConfigError(p, "alignment", f"cannot write the config: {exc}") from None
+        raise ConfigError(path, key, f"cannot write {path}: {exc}") from None

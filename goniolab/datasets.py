@@ -477,7 +477,45 @@ def run_dataset(store: RunStore, run_id: int) -> xr.Dataset:
     rec = store.get_run(run_id)
     if rec.kind == "gloss":
         return _gloss_run_dataset(store, rec)
+    if rec.kind in ("align", "calibration"):
+        return _align_run_dataset(store, rec)
     return _brdf_run_dataset(store, rec)
+
+
+def _align_run_dataset(store: RunStore, rec: RunRecord) -> xr.Dataset:
+    """An alignment run (``kind = align``, :mod:`goniolab.scan.align`): one row per reading
+    (dim ``reading``) with its geometry, luminance, specimen (standard or sample), sweep
+    phase (coarse or fine), exposure and quality flag; the result in ``alignment_json``."""
+    import xarray as xr
+
+    pts = store.points(rec.id)
+    text = {"specimen": "specimen under the instruments", "phase": "sweep (coarse or fine)",
+            "quality": "reading quality flag (ok, saturated, under_noise_floor, unknown)"}  # fmt: skip
+    data: dict[str, Any] = {
+        "time": ("reading", to_datetime64([p.timestamp for p in pts]),
+                 {"long_name": _LONG_NAMES["time"]}),
+        "theta_i_deg": ("reading", np.array([p.theta_i_deg for p in pts], dtype=np.float64),
+                        _attrs("theta_i_deg")),
+        "theta_r_deg": ("reading", np.array([p.theta_r_deg for p in pts], dtype=np.float64),
+                        _attrs("theta_r_deg")),
+        "luminance_pct": ("reading", np.array([p.luminance_pct for p in pts], dtype=np.float64),
+                          _attrs("luminance_pct")),
+        "exposure_us": ("reading", np.array([float(p.raw.get("exposure_us") or np.nan)
+                                             for p in pts]), {"long_name": "exposure", "units": "us"}),
+    }  # fmt: skip
+    for key, long_name in text.items():
+        data[key] = ("reading", np.array([str(p.raw.get(key, "")) for p in pts], dtype=str),
+                     {"long_name": long_name})  # fmt: skip
+    ds = xr.Dataset(
+        data, coords={"reading": ("reading", np.array([p.index for p in pts], dtype=np.int64))}
+    )
+    ds.attrs = {
+        **_run_attrs(store, rec),
+        "stored_readings": len(pts),
+        "alignment_json": _dumps(rec.model.get("alignment", {})),
+        "calibration_json": _dumps(rec.model.get("calibration", {})),
+    }
+    return ds
 
 
 def _brdf_run_dataset(store: RunStore, rec: RunRecord) -> xr.Dataset:

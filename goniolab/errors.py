@@ -7,7 +7,9 @@ translate them with :func:`as_user_error`.
 
 from __future__ import annotations
 
-__all__ = ["UserError", "a_run_of_kind"]
+from pathlib import Path
+
+__all__ = ["ConfigError", "UserError", "a_run_of_kind"]
 
 #: How a message names a run of each stored kind.
 _RUN_KINDS = {"align": "an alignment run"}
@@ -33,3 +35,18 @@ class UserError(Exception):
     def __init__(self, message: str, *, exit_code: int = 2) -> None:
         self.exit_code = exit_code
         super().__init__(message)
+
+
+class ConfigError(UserError):
+    """A lab config file is unreadable or invalid; the message names file, key and reason.
+
+    Raised by :mod:`goniolab.config` (and re-exported there) and by the twin's assembly
+    (:mod:`sim.assembly`), which may import this module but not the config's.
+    """
+
+    def __init__(self, path: str | Path, key: str, reason: str) -> None:
+        self.path = str(path)
+        self.key = key
+        self.reason = reason
+        where = f"{self.path}: {key}: " if key else f"{self.path}: "
+        super().__init__(where + reason, exit_code=2)

@@ -1,20 +1,34 @@
-"""Files others read: a stored run as CSV, JSON, netCDF or Parquet.
+"""Files others read: a stored run as CSV, JSON, netCDF or Parquet, one exporter per format.
 
-- **CSV**: one row per reading, ISO 8601 UTC timestamps, the columns of
-  :meth:`goniolab.store.RunStore.export_rows` (colour columns included when the store has
-  them).
-- **JSON**: ``{"run": {...}, "readings": [...]}``, the run record with ISO times beside
+The exporters are a registry (:data:`EXPORTERS`, :func:`register_exporter`), as height-map
+formats are (:mod:`goniolab.surfaces.registry`): ``goniolab runs export --format`` takes its
+choices and help from it, and a file suffix picks its exporter (:func:`resolve_format`); a
+suffix or a format no exporter has is refused, naming the ones there are.
+
+- **csv**: one row per reading (:func:`export_rows`: :data:`SCAN_COLUMNS` for a scan,
+  :data:`GLOSS_COLUMNS` for a gloss log, colour columns included), ISO 8601 UTC timestamps.
+- **json**: ``{"run": {...}, "readings": [...]}``, the run record with ISO times beside
   the Unix ones, readings as in the CSV.
-- **netCDF** (netCDF-4 through xarray + h5netcdf): the Dataset of
+- **netcdf** (netCDF-4 through xarray + h5netcdf): the Dataset of
   :func:`goniolab.datasets.run_dataset`, CF-style ``units`` on every variable and the run's
   metadata (plan, model, config snapshot, status, version) as global attributes.
-- **Parquet** (pyarrow): the CSV's table with typed columns (timestamps as
+- **parquet** (pyarrow): the CSV's table with typed columns (timestamps as
   ``timestamp[us, UTC]``) and the run record as JSON in the schema metadata under the key
   ``goniolab.run``.
 
 Every file is built in memory and replaced whole (:mod:`goniolab._atomic`): a full disk
 or a failed export leaves an existing file as it was. Each carries the run's UUID
 (``run_uuid`` column, ``uuid`` in the run record, ``run_uuid`` attribute).
+
+Importing this module is cheap (the CLI's parser reads the registry): numpy, pandas,
+xarray and pyarrow are imported by the writers that use them.
+
+Adding a format is one writer and its registration::
+
+    def _tsv_text(store: RunStore, run_id: int) -> str: ...
+
+    register_exporter(Exporter("tsv", (".tsv",), "tab-separated, one row per reading",
+                               text=_tsv_text))
 """
 
 from __future__ import annotations
@@ -22,79 +36,334 @@ from __future__ import annotations
 import csv
 import io
 import json
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from goniolab import jsonout
 from goniolab._atomic import atomic_write_bytes
-from goniolab.datasets import iso_utc
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
     import pandas as pd
 
-    from goniolab.store import RunStore
+    from goniolab.store import PointRow, RunStore
 
 __all__ = [
+    "EXPORTERS",
     "FORMATS",
+    "GLOSS_COLUMNS",
     "PARQUET_RUN_KEY",
+    "SCAN_COLUMNS",
+    "Exporter",
+    "export_rows",
     "export_rows_iso",
     "export_run",
     "format_for_path",
+    "register_exporter",
+    "resolve_format",
     "run_dataframe",
 ]
 
-#: Export formats and the file suffix each writes.
-FORMATS: dict[str, str] = {"csv": ".csv", "json": ".json", "netcdf": ".nc", "parquet": ".parquet"}
-#: Binary formats: they need ``-o FILE``.
-_BINARY = ("netcdf", "parquet")
+#: Columns of a scan export (one row per reading) and of a gloss export, in file order.
+SCAN_COLUMNS: tuple[str, ...] = (
+    "run_id",
+    "run_uuid",
+    "index",
+    "repeat",
+    "theta_i_deg",
+    "theta_r_deg",
+    "measured_theta_i_deg",
+    "measured_theta_r_deg",
+    "luminance_pct",
+    "predicted_pct",
+    "X",
+    "Y",
+    "Z",
+    "L_star",
+    "a_star",
+    "b_star",
+    "C_star",
+    "h_deg",
+    "predicted_L_star",
+    "predicted_a_star",
+    "predicted_b_star",
+    "colour_error",
+    # issue 21: the reading's quality flag and signal level, from its raw record
+    "quality",
+    "peak_fraction",
+    "timestamp",
+)
+GLOSS_COLUMNS: tuple[str, ...] = (
+    "run_id",
+    "run_uuid",
+    "seq",
+    "timestamp",
+    "g20_gu",
+    "g60_gu",
+    "g85_gu",
+    "temperature_c",
+    "predicted_g20_gu",
+    "predicted_g60_gu",
+    "predicted_g85_gu",
+)
 #: Schema-metadata key of the run record in a Parquet export.
 PARQUET_RUN_KEY = b"goniolab.run"
+
+#: A text format's writer: the file's text.
+TextWriter = Callable[["RunStore", int], str]
+#: A binary format's writer: writes the file (replaced whole).
+FileWriter = Callable[["RunStore", int, Path], None]
+
+
+@dataclass(frozen=True, slots=True)
+class Exporter:
+    """One export format.
+
+    Attributes
+    ----------
+    name
+        The ``--format`` name (lower case).
+    suffixes
+        The file suffixes that pick this format (lower case, with the dot); the first is
+        the one it is written with.
+    description
+        One line for the CLI help and the docs.
+    text
+        A text format's writer (to stdout or to a file).
+    to_file
+        A binary format's writer (it needs a file).
+    """
+
+    name: str
+    suffixes: tuple[str, ...]
+    description: str
+    text: TextWriter | None = None
+    to_file: FileWriter | None = None
+
+    @property
+    def suffix(self) -> str:
+        """The suffix a file of this format is written with."""
+        return self.suffixes[0]
+
+    @property
+    def binary(self) -> bool:
+        """Whether the format needs a file (it cannot go to stdout)."""
+        return self.text is None
+
+
+#: The export formats by name, in the order the CLI lists them.
+EXPORTERS: dict[str, Exporter] = {}
+#: Each format's file suffix (``{"csv": ".csv", ..., "netcdf": ".nc"}``), kept by
+#: :func:`register_exporter`.
+FORMATS: dict[str, str] = {}
+
+
+def register_exporter(exporter: Exporter) -> Exporter:
+    """Add an export format; returns it.
+
+    Raises
+    ------
+    ValueError
+        The name or a suffix is taken, a suffix is not ``.lowercase``, or the exporter has
+        not exactly one writer.
+    """
+    name = exporter.name
+    if not name or name != name.lower() or name in EXPORTERS:
+        raise ValueError(f"export format {name!r}: a new lower-case name is needed")
+    if (exporter.text is None) == (exporter.to_file is None):
+        raise ValueError(f"export format {name!r}: give exactly one of text= or to_file=")
+    if not exporter.suffixes:
+        raise ValueError(f"export format {name!r}: give at least one file suffix")
+    for suffix in exporter.suffixes:
+        if not suffix.startswith(".") or suffix != suffix.lower() or len(suffix) < 2:
+            raise ValueError(f"export format {name!r}: suffix {suffix!r} is not like '.csv'")
+        taken = format_for_path(f"x{suffix}")
+        if taken is not None:
+            raise ValueError(f"export format {name!r}: suffix {suffix} is {taken}'s")
+    EXPORTERS[name] = exporter
+    FORMATS[name] = exporter.suffix
+    return exporter
 
 
 def format_for_path(path: str | Path) -> str | None:
     """The export format a file suffix names (``.nc`` -> ``netcdf``), else ``None``."""
     suffix = Path(path).suffix.lower()
-    if suffix in (".nc", ".nc4", ".netcdf"):
-        return "netcdf"
-    if suffix in (".parquet", ".pq"):
-        return "parquet"
-    if suffix in (".csv", ".json"):
-        return suffix[1:]
-    return None
+    return next((e.name for e in EXPORTERS.values() if suffix in e.suffixes), None)
 
 
-def _run_doc(store: RunStore, run_id: int) -> dict[str, Any]:
-    rec = store.get_run(run_id)
-    doc = rec.as_dict()
-    for key in ("created_at", "updated_at", "finished_at"):
-        doc[f"{key}_iso"] = iso_utc(doc[key])
-    return doc
+def _known_suffixes() -> str:
+    return ", ".join(f"{'/'.join(e.suffixes)} ({e.name})" for e in EXPORTERS.values())
+
+
+def resolve_format(fmt: str | None, out: str | Path | None) -> str:
+    """The format to export in: ``fmt`` when given, else the one ``out``'s suffix names,
+    else ``csv`` (no file: text on stdout).
+
+    Raises
+    ------
+    ValueError
+        ``fmt`` is no export format; ``out`` has a suffix no exporter has (or none) and
+        ``fmt`` is not given; or ``out``'s suffix is another format's than ``fmt`` (a
+        Parquet file named ``.csv``). The message lists the known formats or suffixes.
+    """
+    if fmt is not None:
+        if fmt not in EXPORTERS:
+            raise ValueError(f"unknown export format {fmt!r} (known: {', '.join(EXPORTERS)})")
+        named = None if out is None else format_for_path(out)
+        if named is not None and named != fmt:
+            raise ValueError(
+                f"{out}: {Path(out or '').suffix} is the suffix of {named}, not of {fmt} "
+                f"(write {fmt} as {'/'.join(EXPORTERS[fmt].suffixes)})"
+            )
+        return fmt
+    if out is None:
+        return "csv"
+    named = format_for_path(out)
+    if named is None:
+        suffix = Path(out).suffix
+        raise ValueError(
+            f"{out}: {'the suffix ' + repr(suffix) if suffix else 'no suffix'} names no "
+            f"export format (known: {_known_suffixes()}); give the format explicitly"
+        )
+    return named
+
+
+def export_run(store: RunStore, run_id: int, fmt: str, out: str | Path | None = None) -> str:
+    """Export run ``run_id`` in ``fmt`` (a name of :data:`EXPORTERS`).
+
+    Parameters
+    ----------
+    store
+        An open store.
+    run_id
+        The run (``StoreError`` when it does not exist).
+    fmt
+        ``csv``, ``json``, ``netcdf``, ``parquet`` or a registered format.
+    out
+        The file to write; required for the binary formats (netCDF, Parquet). ``None``
+        returns the text of a text format instead.
+
+    Returns
+    -------
+    str
+        The text (a text format without ``out``) or ``""`` when a file was written.
+
+    Raises
+    ------
+    ValueError
+        Unknown format (the message lists the known ones), or a binary format without
+        ``out``.
+    OSError
+        The file cannot be written (an existing file is left as it was).
+    """
+    exporter = EXPORTERS.get(fmt)
+    if exporter is None:
+        raise ValueError(f"export format must be one of {', '.join(EXPORTERS)}, got {fmt!r}")
+    if exporter.to_file is not None:
+        if out is None:
+            raise ValueError(
+                f"{fmt} is a binary format: give an output file (-o run{exporter.suffix})"
+            )
+        exporter.to_file(store, run_id, Path(out))
+        return ""
+    assert exporter.text is not None
+    text = exporter.text(store, run_id)
+    if out is None:
+        return text
+    atomic_write_bytes(out, text.encode("utf-8"))
+    return ""
+
+
+# ---------------------------------------------------------------------- the rows
+
+
+def export_rows(store: RunStore, run_id: int) -> list[dict[str, Any]]:
+    """One flat dict per reading of ``run_id`` (points for scans, readings for gloss), with
+    the columns :data:`SCAN_COLUMNS` or :data:`GLOSS_COLUMNS`; timestamps in Unix seconds."""
+    run = store.get_run(run_id)
+    if run.kind == "gloss":
+        return [
+            {
+                "run_id": run_id,
+                "run_uuid": run.uuid,
+                "seq": g.seq,
+                "timestamp": g.timestamp,
+                "g20_gu": g.values_gu.get(20),
+                "g60_gu": g.values_gu.get(60),
+                "g85_gu": g.values_gu.get(85),
+                "temperature_c": g.temperature_c,
+                "predicted_g20_gu": None if g.predicted_gu is None else g.predicted_gu.get(20),
+                "predicted_g60_gu": None if g.predicted_gu is None else g.predicted_gu.get(60),
+                "predicted_g85_gu": None if g.predicted_gu is None else g.predicted_gu.get(85),
+            }
+            for g in store.gloss_readings(run_id)
+        ]
+    preds = store.predictions(run_id)
+    pcols = store.predicted_colours(run_id)
+
+    def colour_cols(p: PointRow) -> dict[str, Any]:
+        c = p.colour or {}
+        pc = pcols.get(p.index)
+        return {
+            "X": c.get("X"),
+            "Y": c.get("Y"),
+            "Z": c.get("Z"),
+            "L_star": c.get("L"),
+            "a_star": c.get("a"),
+            "b_star": c.get("b"),
+            "C_star": c.get("C"),
+            "h_deg": c.get("h_deg"),
+            "predicted_L_star": None if pc is None else pc.L,
+            "predicted_a_star": None if pc is None else pc.a,
+            "predicted_b_star": None if pc is None else pc.b,
+            "colour_error": p.colour_error,
+        }
+
+    return [
+        {
+            "run_id": run_id,
+            "run_uuid": run.uuid,
+            "index": p.index,
+            "repeat": p.repeat,
+            "theta_i_deg": p.theta_i_deg,
+            "theta_r_deg": p.theta_r_deg,
+            "measured_theta_i_deg": p.measured_theta_i_deg,
+            "measured_theta_r_deg": p.measured_theta_r_deg,
+            "luminance_pct": p.luminance_pct,
+            "predicted_pct": preds.get(p.index),
+            **colour_cols(p),
+            # ok / saturated / under_noise_floor / unknown ("" = a reading stored before
+            # the flags), and the signal level it was judged by
+            "quality": str(p.raw.get("quality", "")),
+            "peak_fraction": p.raw.get("peak_fraction"),
+            "timestamp": p.timestamp,
+        }
+        for p in store.points(run_id)
+    ]
+
+
+def _columns(store: RunStore, run_id: int) -> tuple[str, ...]:
+    return GLOSS_COLUMNS if store.get_run(run_id).kind == "gloss" else SCAN_COLUMNS
 
 
 def export_rows_iso(store: RunStore, run_id: int) -> list[dict[str, Any]]:
-    """:meth:`RunStore.export_rows` with each ``timestamp`` as ISO 8601 UTC text."""
-    rows = store.export_rows(run_id)
+    """:func:`export_rows` with each ``timestamp`` as ISO 8601 UTC text."""
+    from goniolab.datasets import iso_utc
+
+    rows = export_rows(store, run_id)
     for row in rows:
         if "timestamp" in row:
             row["timestamp"] = iso_utc(row["timestamp"])
     return rows
 
 
-def _fields(store: RunStore, run_id: int, rows: list[dict[str, Any]]) -> list[str]:
-    if rows:
-        return list(rows[0])
-    # no readings yet: the header alone (the store's own CSV knows the columns)
-    header = store.export(run_id, "csv").splitlines()
-    return header[0].split(",") if header else []
-
-
 def run_dataframe(store: RunStore, run_id: int) -> pd.DataFrame:
     """One row per reading as a pandas DataFrame; ``timestamp`` is ``datetime64[us, UTC]``."""
     import pandas as pd
 
-    rows = store.export_rows(run_id)
-    fields = _fields(store, run_id, rows)
-    df = pd.DataFrame.from_records(rows, columns=fields)
+    rows = export_rows(store, run_id)
+    df = pd.DataFrame.from_records(rows, columns=list(_columns(store, run_id)))
     if "timestamp" in df:
         df["timestamp"] = pd.to_datetime(df["timestamp"], unit="s", utc=True).astype(
             "datetime64[us, UTC]"
@@ -107,11 +376,23 @@ def run_dataframe(store: RunStore, run_id: int) -> pd.DataFrame:
     return df
 
 
+def _run_doc(store: RunStore, run_id: int) -> dict[str, Any]:
+    from goniolab.datasets import iso_utc
+
+    doc = store.get_run(run_id).as_dict()
+    for key in ("created_at", "updated_at", "finished_at"):
+        doc[f"{key}_iso"] = iso_utc(doc[key])
+    return doc
+
+
+# ---------------------------------------------------------------------- the writers
+
+
 def _csv_text(store: RunStore, run_id: int) -> str:
     rows = export_rows_iso(store, run_id)
     buf = io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=_fields(store, run_id, rows), lineterminator="\n")
-    writer.writeheader()
+    writer = csv.DictWriter(buf, fieldnames=list(_columns(store, run_id)), lineterminator="\n")
+    writer.writeheader()  # also for a run without readings yet
     writer.writerows(rows)
     return buf.getvalue()
 
@@ -121,55 +402,10 @@ def _json_text(store: RunStore, run_id: int) -> str:
     return jsonout.dumps(doc, indent=2, default=str) + "\n"  # no NaN/Infinity
 
 
-def export_run(store: RunStore, run_id: int, fmt: str, out: str | Path | None = None) -> str:
-    """Export run ``run_id`` in ``fmt`` (one of :data:`FORMATS`).
+def _write_netcdf(store: RunStore, run_id: int, out: Path) -> None:
+    from goniolab.datasets import run_dataset, write_netcdf
 
-    Parameters
-    ----------
-    store
-        An open store.
-    run_id
-        The run (``StoreError`` when it does not exist).
-    fmt
-        ``csv``, ``json``, ``netcdf`` or ``parquet``.
-    out
-        The file to write; required for the binary formats (netCDF, Parquet). ``None``
-        returns the CSV/JSON text instead.
-
-    Returns
-    -------
-    str
-        The text (CSV/JSON without ``out``) or ``""`` when a file was written.
-
-    Raises
-    ------
-    ValueError
-        Unknown format, or a binary format without ``out``.
-    OSError
-        The file cannot be written.
-    """
-    if fmt not in FORMATS:
-        raise ValueError(f"export format must be one of {', '.join(FORMATS)}, got {fmt!r}")
-    if fmt in _BINARY and out is None:
-        raise ValueError(f"{fmt} is a binary format: give an output file (-o run{FORMATS[fmt]})")
-    if fmt == "csv":
-        text = _csv_text(store, run_id)
-    elif fmt == "json":
-        text = _json_text(store, run_id)
-    elif fmt == "netcdf":
-        from goniolab.datasets import run_dataset, write_netcdf
-
-        assert out is not None
-        write_netcdf(run_dataset(store, run_id), out)
-        return ""
-    else:
-        assert out is not None
-        _write_parquet(store, run_id, Path(out))
-        return ""
-    if out is None:
-        return text
-    atomic_write_bytes(out, text.encode("utf-8"))
-    return ""
+    write_netcdf(run_dataset(store, run_id), out)
 
 
 def _write_parquet(store: RunStore, run_id: int, out: Path) -> None:
@@ -183,3 +419,25 @@ def _write_parquet(store: RunStore, run_id: int, out: Path) -> None:
     sink = pa.BufferOutputStream()  # in memory, then replaced whole (goniolab._atomic)
     pq.write_table(table.replace_schema_metadata(meta), sink)
     atomic_write_bytes(out, sink.getvalue().to_pybytes())
+
+
+register_exporter(
+    Exporter("csv", (".csv",), "one row per reading, ISO 8601 UTC timestamps", text=_csv_text)
+)
+register_exporter(Exporter("json", (".json",), "the run record and its readings", text=_json_text))
+register_exporter(
+    Exporter(
+        "netcdf",
+        (".nc", ".nc4", ".netcdf"),
+        "netCDF-4 (xarray + h5netcdf): CF-style units, the run's metadata as attributes",
+        to_file=_write_netcdf,
+    )
+)
+register_exporter(
+    Exporter(
+        "parquet",
+        (".parquet", ".pq"),
+        "Parquet (pyarrow): typed columns, the run record in the schema metadata",
+        to_file=_write_parquet,
+    )
+)

@@ -5,10 +5,11 @@ Every command, the lab and the TUI name a surface the same way (a height-map fil
 model that predicts it, cached per spec, file version and options. Errors become
 :class:`goniolab.errors.UserError` (exit code 2) naming the file or sample and the reason.
 
-Models (``model=``, the CLI's ``--model``): ``facet`` (geometric optics, Wittmann et al.),
-``kirchhoff`` (scalar Kirchhoff by FFT of the map's phase screen), ``rayleigh-rice``
-(first-order perturbation from the map's PSD) and ``auto`` (the default: per geometry, the
-regime rule of :mod:`goniolab.optics.model_choice`).
+Models (``model=``, the CLI's ``--model``) are the names of :mod:`goniolab.model_registry`:
+``facet`` (geometric optics, Wittmann et al.), ``kirchhoff`` (scalar Kirchhoff by FFT of the
+map's phase screen), ``rayleigh-rice`` (first-order perturbation from the map's PSD) and
+``auto`` (the default: per geometry, the regime rule of :mod:`goniolab.optics.model_choice`);
+the factories that build them from a map are here (:func:`build_facet` and its siblings).
 """
 
 from __future__ import annotations
@@ -18,7 +19,9 @@ import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from goniolab import model_registry
 from goniolab.errors import UserError
+from goniolab.model_registry import DEFAULT_MODEL, ModelOptions
 from goniolab.optics.facet import Backend, FacetModel, Weighting
 from goniolab.optics.heightmap import HeightMap
 from goniolab.optics.models import ReflectanceModel
@@ -30,16 +33,16 @@ if TYPE_CHECKING:
     from goniolab.colour.spectral import SpectralPredictor, SurfaceFactory
 
 __all__ = [
-    "MODEL_NAMES",
+    "build_auto",
+    "build_facet",
+    "build_kirchhoff",
     "build_model",
+    "build_rayleigh_rice",
     "model_for",
     "paint_for",
     "spectral_for",
     "surface_factory",
 ]
-
-#: Names accepted by ``model=`` / ``--model``.
-MODEL_NAMES: tuple[str, ...] = ("auto", "facet", "kirchhoff", "rayleigh-rice")
 
 
 def _spec_key(spec: str | Path) -> tuple[str, int, int]:
@@ -55,47 +58,94 @@ def _spec_key(spec: str | Path) -> tuple[str, int, int]:
     return str(path.resolve()), st.st_mtime_ns, st.st_size
 
 
+# ------------------------------------------------------- factories of goniolab.model_registry
+def _need_map(hm: HeightMap | None, name: str) -> HeightMap:
+    if hm is None:
+        raise ValueError(f"the {name} model needs a height map")
+    return hm
+
+
+def _wave_options(options: ModelOptions) -> dict[str, Any]:
+    """Wavelength, gloss weighting and masking of the wave-optics models: ``None`` is
+    550 nm for curves and ISO 2813's C x V(lambda) weighting for gloss."""
+    wl = options.wavelength_nm
+    return {
+        "wavelength_nm": 550.0 if wl is None else wl,
+        "gloss_weighting": "iso2813" if wl is None else "single",
+        "masking": options.masking,
+    }
+
+
+def build_facet(hm: HeightMap | None, options: ModelOptions) -> ReflectanceModel:
+    """The ``facet`` model: :class:`FacetModel` of the map's slopes."""
+    surface = Surface.from_heightmap(
+        _need_map(hm, "facet"),
+        slope_method=options.slope_method,  # type: ignore[arg-type]
+    )
+    return FacetModel(
+        surface,
+        n=options.n,
+        weighting=options.weighting,  # type: ignore[arg-type]
+        masking=options.masking,
+        backend=options.backend,  # type: ignore[arg-type]
+    )
+
+
+def build_auto(hm: HeightMap | None, options: ModelOptions) -> ReflectanceModel:
+    """The ``auto`` model (:class:`goniolab.optics.model_choice.AutoModel`) on the facet
+    model ``options.facet`` (built here when not given)."""
+    from goniolab.optics.model_choice import AutoModel
+
+    hm = _need_map(hm, "auto")
+    facet = options.facet if options.facet is not None else build_facet(hm, options)
+    assert isinstance(facet, FacetModel)
+    out: ReflectanceModel = AutoModel(hm, facet, **_wave_options(options))
+    return out
+
+
+def build_kirchhoff(hm: HeightMap | None, options: ModelOptions) -> ReflectanceModel:
+    """The ``kirchhoff`` model (:class:`goniolab.optics.kirchhoff.KirchhoffModel`)."""
+    from goniolab.optics.kirchhoff import KirchhoffModel
+
+    return KirchhoffModel(_need_map(hm, "kirchhoff"), n=options.n, **_wave_options(options))
+
+
+def build_rayleigh_rice(hm: HeightMap | None, options: ModelOptions) -> ReflectanceModel:
+    """The ``rayleigh-rice`` model (:class:`goniolab.optics.rayleigh_rice.RayleighRiceModel`)."""
+    from goniolab.optics.rayleigh_rice import RayleighRiceModel
+
+    hm = _need_map(hm, "rayleigh-rice")
+    return RayleighRiceModel(hm, n=options.n, **_wave_options(options))
+
+
 def build_model(
-    hm: HeightMap,
+    hm: HeightMap | None,
     *,
     n: complex | float = 1.55,
     slope_method: SlopeMethod = "forward",
     weighting: Weighting = "radiometric",
     masking: bool = True,
-    model: str = "auto",
+    model: str = DEFAULT_MODEL,
     wavelength_nm: float | None = None,
     facet: FacetModel | None = None,
     backend: Backend = "numba",
 ) -> ReflectanceModel:
-    """The ``model`` (one of :data:`MODEL_NAMES`) of a loaded height map, not cached
-    (:func:`model_for` caches by spec). ``facet``: the facet model ``auto`` falls back on,
-    if already built; ``backend``: that of the facet model (:class:`FacetModel`).
-    Raises ``ValueError`` for a map with no usable facets."""
-    if model == "facet" or (model == "auto" and facet is None):
-        surface = Surface.from_heightmap(hm, slope_method=slope_method)
-        facet = FacetModel(surface, n=n, weighting=weighting, masking=masking, backend=backend)
-        if model == "facet":
-            return facet
-    opts: dict[str, Any] = {
-        "wavelength_nm": 550.0 if wavelength_nm is None else wavelength_nm,
-        "gloss_weighting": "iso2813" if wavelength_nm is None else "single",
-        "masking": masking,
-    }
-    if model == "auto":
-        from goniolab.optics.model_choice import AutoModel
-
-        assert facet is not None
-        out: ReflectanceModel = AutoModel(hm, facet, **opts)
-        return out
-    if model == "kirchhoff":
-        from goniolab.optics.kirchhoff import KirchhoffModel
-
-        return KirchhoffModel(hm, n=n, **opts)
-    if model == "rayleigh-rice":
-        from goniolab.optics.rayleigh_rice import RayleighRiceModel
-
-        return RayleighRiceModel(hm, n=n, **opts)
-    raise ValueError(f"unknown model {model!r}; use one of {', '.join(MODEL_NAMES)}")
+    """The registered ``model`` (:mod:`goniolab.model_registry`) of a loaded height map,
+    not cached (:func:`model_for` caches by spec). ``facet``: the facet model of the map a
+    model that uses one (``auto``) shares, if already built; ``backend``: that of the facet
+    model (:class:`FacetModel`). Raises ``ValueError`` for an unknown model or a map with
+    no usable facets."""
+    entry = model_registry.get(model)
+    options = ModelOptions(
+        n=complex(n),
+        slope_method=slope_method,
+        weighting=weighting,
+        masking=bool(masking),
+        wavelength_nm=wavelength_nm,
+        backend=backend,
+        facet=facet if entry.uses_facet else None,
+    )
+    return entry.load()(hm if entry.needs_heightmap else None, options)
 
 
 #: Largest height or slope the models can square without overflowing double precision.
@@ -156,10 +206,13 @@ def _model(
     wavelength_nm: float | None,
     backend: Backend,
 ) -> Any:
-    hm = resolve_map(spec, step_um=step_um)
-    _check_numeric_range(spec, hm)
+    entry = model_registry.get(model)
+    hm = None
+    if entry.needs_heightmap:
+        hm = resolve_map(spec, step_um=step_um)
+        _check_numeric_range(spec, hm)
     facet = None
-    if model == "auto":
+    if entry.uses_facet:  # the facet model of the map, cached and shared
         facet = _model(
             key, spec, n, step_um, slope_method, weighting, masking, "facet", None, backend
         )
@@ -180,30 +233,34 @@ def _model(
 
 
 def model_for(
-    spec: str | Path,
+    spec: str | Path | HeightMap,
     *,
     n: complex | float = 1.55,
     step_um: float | None = None,
     slope_method: SlopeMethod = "forward",
     weighting: Weighting = "radiometric",
     masking: bool = True,
-    model: str = "auto",
+    model: str = DEFAULT_MODEL,
     wavelength_nm: float | None = None,
     backend: Backend = "numba",
 ) -> ReflectanceModel:
-    """The reflectance model of a height map (cached per spec, file version and options).
+    """The reflectance model of a surface: the one way every face gets a sample's model.
+
+    A file or ``sample:NAME`` is cached per spec, file version and options; a
+    :class:`HeightMap` already in memory (the notebook API's arrays) is modelled each call.
 
     Parameters
     ----------
     spec, step_um
-        As in :func:`resolve_map`.
+        As in :func:`resolve_map`, or a loaded :class:`HeightMap` (``step_um`` unused).
     n
         Refractive index; complex ``n + ik`` for conductors.
     slope_method, weighting, masking
         Passed to :meth:`Surface.from_heightmap` and :class:`FacetModel` (masking also to
         the physical-optics models).
     model
-        One of :data:`MODEL_NAMES`.
+        A name of :mod:`goniolab.model_registry` (``auto``, ``facet``, ``kirchhoff``,
+        ``rayleigh-rice`` and any registered since).
     wavelength_nm
         For the wave-optics models: the wavelength of every response, gloss included.
         ``None``: BRDF and goniometer responses at 550 nm, gloss weighted over wavelength by
@@ -219,14 +276,30 @@ def model_for(
         Bad spec or file (see :func:`resolve_map`), unknown model, or a map with no usable
         facets.
     """
-    if model not in MODEL_NAMES:
-        raise UserError(f"unknown model {model!r}; use one of {', '.join(MODEL_NAMES)}")
+    try:
+        model_registry.get(model)
+    except model_registry.UnknownModel as exc:
+        raise UserError(str(exc)) from None
     if wavelength_nm is not None and not (100.0 <= float(wavelength_nm) <= 20000.0):
         raise UserError(f"wavelength {wavelength_nm} nm: must be in [100, 20000] nm")
-    key = _spec_key(spec)
     wl = None if wavelength_nm is None else float(wavelength_nm)
+    options: dict[str, Any] = {
+        "slope_method": slope_method,
+        "weighting": weighting,
+        "masking": bool(masking),
+        "model": model,
+        "wavelength_nm": wl,
+        "backend": backend,
+    }
+    if isinstance(spec, HeightMap):
+        name = spec.source or "<height map>"
+        _check_numeric_range(name, spec)
+        try:
+            return build_model(spec, n=complex(n), **options)
+        except ValueError as exc:
+            raise UserError(one_line(f"{name}: {exc}")) from None
     out: ReflectanceModel = _model(
-        key,
+        _spec_key(spec),
         str(spec),
         complex(n),
         step_um,

@@ -67,6 +67,9 @@ def plot_dataset(ds: xr.Dataset, *, out: str | Path | None = None, log: bool = F
     if ds.attrs.get("kind") == "gloss":
         fig = Figure(figsize=(8.0, 4.5), layout="constrained")
         _gloss(fig, ds)
+    elif ds.attrs.get("kind") in ("align", "calibration"):
+        fig = Figure(figsize=(10.0, 4.5), layout="constrained")
+        _align(fig, ds)
     else:
         fig = Figure(figsize=(12.0 if colour else 8.0, 6.0), layout="constrained")
         _scan(fig, ds, log=log, colour=colour)
@@ -194,3 +197,42 @@ def _gloss(fig: Figure, ds: xr.Dataset) -> None:
     locator = AutoDateLocator()
     ax.xaxis.set_major_locator(locator)
     ax.xaxis.set_major_formatter(ConciseDateFormatter(locator))
+
+
+def _align(fig: Figure, ds: xr.Dataset) -> None:
+    """An alignment run: each specimen's detector sweeps per incidence (log scale: the
+    black glass's 5 % and the sample's peaks on one axis), saturated readings marked."""
+    import json
+
+    spec = ds["specimen"].values
+    names = [s for s in ("standard", "sample") if s in spec] or list(dict.fromkeys(spec))
+    for k, specimen in enumerate(names):
+        ax = fig.add_subplot(1, max(len(names), 1), k + 1)
+        sel = spec == specimen
+        ti = ds["theta_i_deg"].values[sel]
+        tr = ds["theta_r_deg"].values[sel]
+        lum = ds["luminance_pct"].values[sel]
+        bad = ds["quality"].values[sel] == "saturated"
+        for t in np.unique(ti):
+            m = ti == t
+            order = np.argsort(tr[m])
+            ax.plot(tr[m][order], lum[m][order], ".-", ms=3, lw=0.8, label=f"theta_i {t:g} deg")
+        if bad.any():
+            ax.plot(tr[bad], lum[bad], "x", color="red", label="saturated")
+        ax.set_yscale("log" if (lum > 0).any() else "linear")
+        ax.set_xlabel("detector arm (deg)")
+        ax.set_ylabel("luminance (% of a perfect mirror)")
+        ax.set_title("black-glass standard" if specimen == "standard" else str(specimen),
+                     fontsize=10)  # fmt: skip
+        ax.grid(alpha=0.3)
+        if sel.any():
+            ax.legend(fontsize=8)
+    result = json.loads(str(ds.attrs.get("alignment_json") or "{}"))
+    extra = ""
+    if result:
+        extra = (
+            f": lamp zero {result.get('lamp_zero_deg', float('nan')):+.3f}, detector zero "
+            f"{result.get('detector_zero_deg', float('nan')):+.3f}, tilt "
+            f"{result.get('sample_tilt_deg', float('nan')):+.3f} deg"
+        )
+    fig.suptitle(_title(ds) + extra, fontsize=10)

@@ -42,6 +42,7 @@ from goniolab.scan.gloss import GlossLogger, predict_gloss
 from goniolab.scan.plans import BrdfPlan, GlossPlan, PlanError
 from goniolab.scan.predict import Predictor
 from goniolab.scan.runner import ArmMotion, DryRun, PlanRefused, RunResult, ScanRunner, dry_run
+from goniolab.scan.standards import Standard
 from goniolab.store import RunMeta, RunRecord, RunStore
 
 __all__ = [
@@ -312,6 +313,11 @@ class ScanSession:
         plan, cfg = scan.plan, self.config
         hook = self._specimen_hook() if plan.mirror_reference else None
         self.lab.put_sample(scan.model, plan.sample)
+        from goniolab.scan.calibrate import calibration_notices, latest_calibration
+
+        cite, notices = calibration_notices(
+            latest_calibration(self.store), max_age_h=cfg.spectro.calibration_max_age_h
+        )
         run_id = scan.run_id
         if run_id is None:
             run_id = self.store.create_run(
@@ -319,7 +325,7 @@ class ScanSession:
                 plan=plan.to_dict(),
                 config=config_snapshot(with_sample(cfg, plan.sample)),
                 sample=plan.sample,
-                model=scan.predictor.describe(),
+                model={**scan.predictor.describe(), "calibration": cite},
                 version=__version__,
                 meta=config_meta(cfg, meta),
             )
@@ -339,7 +345,17 @@ class ScanSession:
             park_deg=(g.park.theta_i_deg, g.park.theta_r_deg),
             specimen_hook=hook,
             point_colour=PointColour.from_config(cfg),
+            mirror_standard=self.standard("mirror") if plan.mirror_reference else None,
+            reconnect_window_s=cfg.lab.reconnect_window_s,
+            notices=notices,
         )
+
+    def standard(self, name: str) -> Standard:
+        """The lab's certified standard ``name`` (``[spectro] standards``)."""
+        from goniolab.scan.standards import load_standards, standards_path
+
+        cfg = self.config
+        return load_standards(standards_path(cfg.source, cfg.spectro.standards)).get(name)
 
     async def run(self, runner: ScanRunner) -> RunResult:
         """Run to the end (done, aborted or failed: the arms are parked).
@@ -364,13 +380,15 @@ class ScanSession:
         self,
         plan: AlignPlan,
         *,
-        write_config: str | Path | None = None,
+        save_state: bool = True,
         started: Callable[[AlignRunner], None] | None = None,
     ) -> tuple[int, AlignResult]:
         """Run an alignment (:mod:`goniolab.scan.align`): home the arms if needed, measure
         the black-glass standard and the sample (swapped by the simulated lab, or by the
-        operator), store the readings and the result with a new ``align`` run, write
-        ``[alignment]`` into ``write_config`` when given, and park the arms. The lab's
+        operator), store the readings and the result with a new ``align`` run, save it to
+        the lab's alignment state file when ``save_state`` (beside the store,
+        :func:`goniolab.config.alignment_state_path`; the config file is never rewritten)
+        before the run is marked done, and park the arms. The lab's
         goniometer then corrects every move with the result (later scans of this session
         see the requested angles). ``started`` gets the runner before its first reading
         (the TUI keeps it to abort).
@@ -381,7 +399,7 @@ class ScanSession:
             The alignment failed (an instrument fault, no peak found; the run is marked
             ``failed`` with the reason) or was aborted (marked ``aborted``).
         """
-        from goniolab.config import write_alignment
+        from goniolab.config import write_alignment_state
         from goniolab.scan.align_reach import check_align_reach
 
         cfg = self.config
@@ -416,7 +434,25 @@ class ScanSession:
             run_id=run_id,
             bus=self.bus,
             move_timeout_s=cfg.goniometer.move_timeout_s,
+            standard=self.standard("black_glass"),
         )
+
+        def save(result: AlignResult) -> str:
+            if not save_state:
+                return ""
+            path = write_alignment_state(
+                cfg,
+                {
+                    "lamp_zero_deg": round(result.lamp_zero_deg, 4),
+                    "detector_zero_deg": round(result.detector_zero_deg, 4),
+                    "sample_tilt_deg": round(result.sample_tilt_deg, 4),
+                    "run": run_id,
+                },
+                note=f"goniolab scan --plan align, run {run_id}",
+            )
+            return str(path)
+
+        runner.persist = save
         if started is not None:
             started(runner)
         try:
@@ -431,17 +467,6 @@ class ScanSession:
         finally:
             with contextlib.suppress(DeviceError):
                 await self.lab.goniometer.park(home_timeout_s(cfg))
-        if write_config is not None:
-            write_alignment(
-                write_config,
-                {
-                    "lamp_zero_deg": round(result.lamp_zero_deg, 4),
-                    "detector_zero_deg": round(result.detector_zero_deg, 4),
-                    "sample_tilt_deg": round(result.sample_tilt_deg, 4),
-                    "run": run_id,
-                },
-                note=f"goniolab scan --plan align, run {run_id}",
-            )
         self.lab.goniometer.corrections_deg = result.corrections_deg()
         return run_id, result
 

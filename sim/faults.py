@@ -7,6 +7,13 @@ instruments turn a decision into the :mod:`drivers.base` error a real driver wou
 raise; the wire servers act it out on the bytes (no reply, corrupted reply, closed
 port), so the real drivers meet the same faults.
 
+A late reply (``late_rate``, ``late_s``): the device answers, but ``late_s`` seconds of wall
+time after the request, past the driver's timeout, and answers the requests behind it only
+after that (an instrument busy with a slow measurement). Only the serial devices (STIL,
+ZGM1120) act it out on the wire; in-process it changes nothing (a call has no timeout to
+miss), and the Modbus sim answers on time (Modbus TCP matches replies by transaction id;
+RTU's late replies are tested against a fake controller, tests/drivers).
+
 Two kinds of disconnect:
 
 * ``disconnect_after = N``: the device is gone for good after N operations (a cable cut).
@@ -40,6 +47,8 @@ class Fault(enum.Enum):
     DISCONNECT = "disconnect"
     #: The link drops, the device comes back after ``recover_after_s`` (a recoverable disconnect).
     DROP = "drop"
+    #: The answer comes ``late_s`` after the request (past the driver's timeout).
+    LATE = "late"
 
 
 @dataclass(frozen=True, slots=True)
@@ -59,6 +68,11 @@ class FaultSpec:
         ``recover_after_s`` later (a disconnect that recovers).
     recover_after_s
         Lab-clock seconds a dropped device stays unreachable (>= 0).
+    late_rate
+        Probability in [0, 1] that an answer comes ``late_s`` late (serial devices).
+    late_s
+        How late, in wall seconds (> 0): more than the driver's timeout to test its
+        resynchronisation.
     """
 
     timeout_rate: float = 0.0
@@ -66,17 +80,22 @@ class FaultSpec:
     disconnect_after: int = 0
     disconnect_rate: float = 0.0
     recover_after_s: float = 0.5
+    late_rate: float = 0.0
+    late_s: float = 1.5
 
     def __post_init__(self) -> None:
-        for name in ("timeout_rate", "garble_rate", "disconnect_rate"):
+        for name in ("timeout_rate", "garble_rate", "disconnect_rate", "late_rate"):
             v = getattr(self, name)
             if not 0.0 <= v <= 1.0:
                 raise ValueError(f"{name} must be in [0, 1], got {v}")
-        total = self.timeout_rate + self.garble_rate + self.disconnect_rate
+        total = self.timeout_rate + self.garble_rate + self.disconnect_rate + self.late_rate
         if total > 1.0:
             raise ValueError(
-                f"timeout_rate + garble_rate + disconnect_rate must be <= 1, got {total:g}"
+                "timeout_rate + garble_rate + disconnect_rate + late_rate must be <= 1, "
+                f"got {total:g}"
             )
+        if not (self.late_s > 0.0 and math.isfinite(self.late_s)):
+            raise ValueError(f"late_s must be finite and > 0, got {self.late_s}")
         if self.disconnect_after < 0:
             raise ValueError(f"disconnect_after must be >= 0, got {self.disconnect_after}")
         if not (self.recover_after_s >= 0.0 and math.isfinite(self.recover_after_s)):
@@ -86,7 +105,11 @@ class FaultSpec:
     def active(self) -> bool:
         """Any fault configured."""
         return bool(
-            self.timeout_rate or self.garble_rate or self.disconnect_after or self.disconnect_rate
+            self.timeout_rate
+            or self.garble_rate
+            or self.disconnect_after
+            or self.disconnect_rate
+            or self.late_rate
         )
 
 
@@ -140,6 +163,8 @@ class FaultInjector:
             return Fault.GARBLE
         if u < spec.timeout_rate + spec.garble_rate + spec.disconnect_rate:
             return Fault.DROP
+        if u < spec.timeout_rate + spec.garble_rate + spec.disconnect_rate + spec.late_rate:
+            return Fault.LATE
         return Fault.NONE
 
     def drop(self, now_s: float) -> None:

@@ -46,8 +46,10 @@ with physics the predictor does not share:
   ``F P22 / (4 cos ti cos ts cos^4 theta_h)`` (PHYSICS.md): the limits the tests check.
   It includes diffraction by features near the wavelength, the smooth-surface limit and
   the grazing-incidence behaviour the seed's sec. 5.4 (eq. 14) finds the facet model
-  missing, and none of masking or multiple reflections (on a dielectric these are small,
-  seed sec. 5.4).
+  missing; shadowing and masking by the coat's roughness are applied to each reading as
+  Smith's ``G1(ti) G1(tr)`` for the tile's rms slope in the plane (:func:`smith_shadowing`:
+  felt at grazing angles on rough coats); no multiple reflections (on a dielectric these
+  are small, seed sec. 5.4).
 
   ``q_z`` varies over a sweep; the FFT is done for bands of ``q_z`` whose phase error
   ``k dq Sq`` stays below ``band_phase_rad`` (at least ``min_band_dq``, at most 0.25
@@ -390,6 +392,13 @@ class TrueSurface:
         """Rms height of the tile."""
         return float(np.sqrt(np.mean(np.square(self.z_um, dtype=np.float64))))
 
+    @functools.cached_property
+    def slope_rms_x(self) -> float:
+        """Rms slope of the tile along x (the plane of incidence), by central differences."""
+        z = self.z_um.astype(np.float64)
+        dz = (np.roll(z, -1, axis=1) - np.roll(z, 1, axis=1)) / (2.0 * self.step_um)
+        return float(np.sqrt(np.mean(np.square(dz))))
+
     def profilometer_map(self) -> HeightMap:
         """What the profilometer measures: the tile low-passed to the map's band,
         resampled on the map's grid, plus the profilometer's noise (seeded)."""
@@ -553,6 +562,27 @@ class _Table:
                 t_o - t_d, math.radians(source.in_plane_deg), math.radians(detector.in_plane_deg)
             ) * _overlap_1d(b_o, math.radians(source.perp_deg), math.radians(detector.perp_deg))
         return float(np.sum(np.where(ok, p * fr * obliq * w, 0.0)))
+
+
+def smith_shadowing(theta_deg: float | FloatArray, slope_rms: float) -> FloatArray:
+    """Smith's shadowing (masking) function G1 of a Gaussian surface of rms slope
+    ``slope_rms`` in the plane, seen at ``theta_deg`` from the normal (B. G. Smith, IEEE
+    Trans. Antennas Propag. 15 (1967) 668; Walter et al., EGSR 2007, eq. 27)::
+
+        nu = cot(theta) / (sqrt(2) sigma),   Lambda = (exp(-nu^2) / (nu sqrt(pi)) - erfc(nu)) / 2
+        G1 = 1 / (1 + Lambda)
+
+    1 at normal incidence and for a smooth coat, falling at grazing angles for a rough one.
+    """
+    from scipy.special import erfc
+
+    t = np.radians(np.abs(np.asarray(theta_deg, dtype=np.float64)))
+    if slope_rms <= 0.0:
+        return np.ones_like(t)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        nu = 1.0 / np.tan(np.clip(t, 1e-9, math.pi / 2 - 1e-9)) / (math.sqrt(2.0) * slope_rms)
+        lam = 0.5 * (np.exp(-(nu**2)) / (nu * math.sqrt(math.pi)) - erfc(nu))
+    return np.asarray(1.0 / (1.0 + np.maximum(lam, 0.0)))
 
 
 def _overlap_1d(d: FloatArray, a: float, b: float) -> FloatArray:
@@ -826,6 +856,13 @@ class TruthOptics:
         :data:`SPECTRUM_WAVELENGTHS_NM` (surface + body), blocking."""
         tr = np.asarray([theta_r_deg], dtype=np.float64)
         surf = self._surface_at(theta_i_deg, tr, source, detector)[:, 0]
+        # shadowing and masking by the coat's own roughness (the Kirchhoff tables have
+        # none): Smith's G1 for the lamp and for the detector, felt at grazing angles on
+        # rough coats (issue 21: the twin must have what real samples have)
+        sigma = self.truth.slope_rms_x
+        surf = surf * float(
+            smith_shadowing(theta_i_deg, sigma) * smith_shadowing(theta_r_deg, sigma)
+        )
         wl = np.asarray(SPECTRUM_WAVELENGTHS_NM)
         spec = np.interp(wl, np.asarray(self.settings.wavelengths_nm), surf)
         body = self._body_fraction(theta_i_deg, tr, detector)[:, 0]
@@ -921,6 +958,27 @@ class FlatSpecimen:
     ) -> FloatArray:
         """Noise-free luminance in % of a perfect mirror."""
         return _luminance_pct(self, theta_i_deg, theta_r_deg, source, detector)
+
+    def spectral_fraction_sp(
+        self,
+        theta_i_deg: float,
+        theta_r_deg: float,
+        *,
+        source: Aperture = Cone(6.0),  # noqa: B008
+        detector: Aperture = Cone(6.0),  # noqa: B008
+    ) -> tuple[FloatArray, FloatArray]:
+        """The reading of fully s- and of fully p-polarised light (their mean is
+        :meth:`spectral_fraction`): the glass's
+        Fresnel ``R_s``, ``R_p`` (Born & Wolf sec. 1.5.2); the mirror's table is taken
+        as unpolarising (both parts equal)."""
+        total = self.spectral_fraction(theta_i_deg, theta_r_deg, source=source, detector=detector)
+        if self.n is None:
+            return total, total
+        from goniolab.optics.fresnel import fresnel_dielectric_sp
+
+        r_s, r_p = fresnel_dielectric_sp(math.cos(math.radians(theta_i_deg)), self.n)
+        r = 0.5 * (float(r_s) + float(r_p))
+        return total * float(r_s) / r, total * float(r_p) / r
 
 
 _TRUTHS: dict[tuple[object, ...], TruthOptics] = {}

@@ -171,3 +171,20 @@ def test_interrupting_a_scan_in_a_running_loop_aborts_it(tmp_path: Path) -> None
     rec = run.record
     assert rec.status == "aborted" and "aborted by the operator" in (rec.reason or "")
     assert 0 < run.to_xarray().attrs["stored_readings"] < 41
+
+
+def test_run_scan_stores_the_run_identity(tmp_path: Path) -> None:
+    # issue 22 item 4: operator, physical sample id, notes and tags from the notebook face
+    store = tmp_path / "runs.sqlite"
+    run = gl.run_scan(ROOT / "configs" / "lab-sim.toml", sample="sample:flat",
+                      theta_r_deg="40:50:5", time_scale=0, store=store, progress=False,
+                      operator="ada", sample_id="LIMS-9", notes="from a notebook",
+                      tags=["nb", "q4", "nb"])  # fmt: skip
+    record = run.record
+    assert (record.operator, record.sample_id, record.notes, record.tags) == (
+        "ada",
+        "LIMS-9",
+        "from a notebook",
+        ("nb", "q4"),
+    )
+    assert len(record.uuid) == 36

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import argparse
 import csv
 import datetime as dt
 import io
 import json
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -222,3 +224,117 @@ def test_export_to_a_full_disk_keeps_the_old_file(
         assert f"{out} is left as it was" in done.stderr
         assert out.read_bytes() == old
         assert sorted(p.name for p in disk.iterdir()) == ["filler", "filler-tail", out.name]
+
+
+# ---------------------------------------------------------------- the exporter registry
+
+
+@pytest.mark.parametrize("name", ["run.xlsx", "run", "run.csv.bak"])
+def test_a_suffix_no_exporter_has_is_refused_naming_the_known_ones(
+    store_file: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], name: str
+) -> None:
+    # issue 27: `runs export -o run.xlsx` wrote CSV into run.xlsx without a word
+    out = tmp_path / name
+    assert _export(store_file, 1, "-o", str(out)) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("goniolab: error: runs export: ") and err.count("\n") == 1
+    for suffix in (".csv", ".json", ".nc", ".parquet"):
+        assert suffix in err, suffix
+    assert not out.exists()
+
+
+def test_an_explicit_format_writes_to_any_name_but_not_to_another_formats_suffix(
+    store_file: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    named = tmp_path / "run.txt"  # --format says what it is: the name is the user's choice
+    assert _export(store_file, 1, "--format", "csv", "-o", str(named)) == 0
+    assert named.read_text().splitlines()[0].startswith("run_id,run_uuid,index,repeat,")
+    capsys.readouterr()
+    wrong = tmp_path / "run.parquet"  # a CSV file named as Parquet would not read back
+    assert _export(store_file, 1, "--format", "csv", "-o", str(wrong)) == 2
+    err = capsys.readouterr().err
+    assert "parquet" in err and err.count("\n") == 1 and not wrong.exists()
+    upper = tmp_path / "RUN.CSV"  # suffixes are matched whatever their case
+    assert _export(store_file, 1, "-o", str(upper)) == 0
+    assert upper.read_text() == named.read_text()
+
+
+def test_an_unknown_format_is_refused_by_the_parser_listing_the_registry(
+    store_file: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from goniolab.export import EXPORTERS
+
+    assert _export(store_file, 1, "--format", "xlsx") == 2
+    err = capsys.readouterr().err
+    assert "xlsx" in err and all(repr(name) in err for name in EXPORTERS)
+
+
+def _export_parser() -> argparse.ArgumentParser:
+    from goniolab.cli import build_parser
+
+    runs = next(
+        a
+        for a in build_parser()._subparsers._group_actions  # type: ignore[union-attr]
+    ).choices["runs"]
+    sub = next(a for a in runs._actions if isinstance(a, argparse._SubParsersAction))
+    parser: argparse.ArgumentParser = sub.choices["export"]
+    return parser
+
+
+def test_runs_export_choices_and_help_come_from_the_registry(
+    monkeypatch: pytest.MonkeyPatch, store_file: Path, tmp_path: Path
+) -> None:
+    """A format registered with ``register_exporter`` is a ``--format`` choice, named in
+    the help, picked by its suffix and written: one writer and its registration."""
+    import goniolab.export as ex
+
+    monkeypatch.setattr(ex, "EXPORTERS", dict(ex.EXPORTERS))
+    monkeypatch.setattr(ex, "FORMATS", dict(ex.FORMATS))
+
+    def tsv_text(store: Any, run_id: int) -> str:
+        rows = ex.export_rows(store, run_id)
+        return "".join("\t".join(str(r[c]) for c in ("index", "repeat")) + "\n" for r in rows)
+
+    ex.register_exporter(ex.Exporter("tsv", (".tsv",), "index and repeat, tab-separated",
+                                     text=tsv_text))  # fmt: skip
+    fmt_action = next(a for a in _export_parser()._actions if a.dest == "format")
+    assert list(fmt_action.choices or ()) == ["csv", "json", "netcdf", "parquet", "tsv"]
+    assert ".tsv" in (fmt_action.help or "") and ".parquet" in (fmt_action.help or "")
+    assert "index and repeat, tab-separated" in (_export_parser().description or "")
+    out = tmp_path / "run.tsv"
+    assert _export(store_file, 1, "-o", str(out)) == 0
+    # the 5 readings of tests/_runs.py: (k, r) for k in 0..2, r in 0..1 but (2, 1)
+    assert out.read_text() == "0\t0\n0\t1\n1\t0\n1\t1\n2\t0\n"
+    assert ex.FORMATS["tsv"] == ".tsv" and ex.format_for_path("a.TSV") == "tsv"
+
+
+def test_register_exporter_refuses_a_taken_name_or_suffix_and_a_writerless_format(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    import goniolab.export as ex
+
+    monkeypatch.setattr(ex, "EXPORTERS", dict(ex.EXPORTERS))
+    monkeypatch.setattr(ex, "FORMATS", dict(ex.FORMATS))
+    csv_writer = ex.EXPORTERS["csv"].text
+    bad = {
+        "csv is taken": ex.Exporter("csv", (".csv2",), "x", text=csv_writer),
+        ".nc is netcdf's": ex.Exporter("nc2", (".nc",), "x", text=csv_writer),
+        "no dot": ex.Exporter("x1", ("x1",), "x", text=csv_writer),
+        "no writer": ex.Exporter("x2", (".x2",), "x"),
+    }
+    for why, exporter in bad.items():
+        with pytest.raises(ValueError, match="export format"):
+            ex.register_exporter(exporter)
+        assert exporter.name not in ex.EXPORTERS or exporter.name == "csv", why
+    assert list(ex.EXPORTERS) == ["csv", "json", "netcdf", "parquet"]
+
+
+def test_export_run_in_the_library_names_the_known_formats(store_file: Path) -> None:
+    from goniolab.export import export_run
+    from goniolab.store import RunStore
+
+    with RunStore(store_file, readonly=True) as s:
+        with pytest.raises(ValueError, match="csv, json, netcdf, parquet, got 'xlsx'"):
+            export_run(s, 1, "xlsx")
+        with pytest.raises(ValueError, match=r"-o run\.parquet"):
+            export_run(s, 1, "parquet")

@@ -189,6 +189,6 @@ def test_runs_show_counts_an_alignment_runs_readings(
     assert json.loads(capsys.readouterr().out)["summary"]["readings"] == 5
     assert main(["runs", "show", str(rid), "--store", str(store)]) == 0
     text = capsys.readouterr().out
-    assert "  readings: 5\n" in text and "lamp arm zero offset: -0.163 deg" in text
+    assert "  readings: 5 " in text and "lamp arm zero offset: -0.163 deg" in text
     assert main(["runs", "list", "--store", str(store)]) == 0
     assert "align  done                5" in capsys.readouterr().out

@@ -8,6 +8,7 @@ even on a code path no test runs.
 from __future__ import annotations
 
 import ast
+import sys
 from pathlib import Path
 
 import pytest
@@ -31,7 +32,11 @@ FORBIDDEN: dict[str, tuple[str, ...]] = {
         "goniolab.lab", "goniolab.commands", "goniolab.tui", "textual",
     ),
     "goniolab/scan": ("sim", "goniolab.session", "goniolab.commands", "goniolab.tui", "textual"),
-    "goniolab/store.py": ("sim", "goniolab.commands", "goniolab.tui", "textual"),
+    "goniolab/store": (
+        "sim", "drivers", "goniolab.commands", "goniolab.api", "goniolab.tui", "textual",
+        "goniolab.session", "goniolab.scan", "goniolab.lab", "goniolab.export",
+        "goniolab.datasets",
+    ),
     "goniolab/session.py": ("sim", "goniolab.commands", "goniolab.tui", "textual"),
     "goniolab/commands": ("sim", "goniolab.tui", "textual"),
     "goniolab/tui": ("sim", "goniolab.commands"),
@@ -96,7 +101,122 @@ def test_only_the_lab_wiring_imports_the_simulator() -> None:
     assert bad == [], "\n".join(bad)
 
 
+#: what the doors take from the simulator: the twin as ``sim/assembly.py`` assembles it, and
+#: the wire server it runs (the lab only chooses; it builds no simulated device itself)
+SIM_DOOR_MODULES = ("sim.assembly", "sim.wire")
+
+
+def test_the_lab_takes_the_twin_as_sim_assembles_it() -> None:
+    bad = [
+        f"{name}:{line}: imports {mod}"
+        for name in sorted(SIM_DOORS)
+        for line, mod in imports_of(ROOT / name)
+        if _hit(mod, ("sim",)) and not _hit(mod, SIM_DOOR_MODULES)
+    ]
+    assert bad == [], "\n".join(bad)
+
+
 def test_the_checker_sees_imports_inside_functions(tmp_path: Path) -> None:
     probe = tmp_path / "probe.py"
     probe.write_text("def f():\n    from sim.motion import SimMotor\n    import textual.app\n")
     assert imports_of(probe) == [(2, "sim.motion"), (3, "textual.app")]
+
+
+#: The most lines a module of these rooms may have (issue 24: rooms of one job each).
+MAX_MODULE_LINES = 800
+#: Rooms held to :data:`MAX_MODULE_LINES` (more join as they are split along their seams).
+SIZED_ROOMS = ("goniolab/store", "goniolab/export.py", "drivers")
+
+
+@pytest.mark.parametrize("room", SIZED_ROOMS)
+def test_no_module_of_a_split_room_is_over_800_lines(room: str) -> None:
+    files = _files(room)
+    assert files, f"{room} has no Python files: the table is out of date"
+    lines = {
+        str(f.relative_to(ROOT)): len(f.read_text(encoding="utf-8").splitlines()) for f in files
+    }
+    big = {name: n for name, n in lines.items() if n > MAX_MODULE_LINES}
+    assert big == {}, big
+
+
+def _names_from(path: Path, package: str) -> list[tuple[int, str, str]]:
+    """``(line, module, name)`` of every ``from package[.x] import name`` in ``path``."""
+    tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+    return [
+        (node.lineno, node.module, alias.name)
+        for node in ast.walk(tree)
+        if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module
+        if _hit(node.module, (package,))
+        for alias in node.names
+    ]
+
+
+def test_the_store_is_used_through_its_public_names() -> None:
+    """Outside goniolab/store, a name comes from ``goniolab.store`` and is in its
+    ``__all__`` (no ``_private`` name of one of its modules, no reach into a module that
+    the package does not export from), so the rooms inside may move."""
+    import goniolab.store as store
+
+    outside = [
+        f
+        for top in ("goniolab", "drivers", "sim", "tests", "bench")
+        for f in sorted((ROOT / top).rglob("*.py"))
+        if not f.is_relative_to(ROOT / "goniolab" / "store")
+    ]
+    bad = [
+        f"{f.relative_to(ROOT)}:{line}: from {mod} import {name}"
+        for f in outside
+        for line, mod, name in _names_from(f, "goniolab.store")
+        if mod != "goniolab.store" or name not in store.__all__
+    ]
+    assert bad == [], "\n".join(bad)
+
+
+#: what goniolab/optics may import besides the standard library and itself: the numerics,
+#: colour-science (the CIE tables of goniolab/optics/spectral.py, imported on use) and the
+#: stdlib-only lazy-export helper of the package's __init__ (goniolab/_lazy.py)
+OPTICS_MAY_IMPORT = ("numpy", "scipy", "numba", "colour", "goniolab.optics", "goniolab._lazy")
+
+#: most lines of one module in a room (issue 24: one job per module)
+MAX_MODULE_LINES = 800
+
+
+def test_optics_imports_only_numerics_and_itself() -> None:
+    bad = [
+        f"{f.relative_to(ROOT)}:{line}: imports {mod}"
+        for f in _files("goniolab/optics")
+        for line, mod in imports_of(f)
+        if mod.split(".")[0] not in sys.stdlib_module_names and not _hit(mod, OPTICS_MAY_IMPORT)
+    ]
+    assert bad == [], "\n".join(bad)
+
+
+def test_optics_uses_no_relative_imports() -> None:
+    # imports_of reads absolute imports only: a relative one would slip past the rules above
+    bad = [
+        f"{f.relative_to(ROOT)}:{node.lineno}"
+        for f in _files("goniolab/optics")
+        for node in ast.walk(ast.parse(f.read_text(encoding="utf-8")))
+        if isinstance(node, ast.ImportFrom) and node.level > 0
+    ]
+    assert bad == [], bad
+
+
+def test_no_optics_module_is_over_800_lines() -> None:
+    long = {
+        str(f.relative_to(ROOT)): n
+        for f in _files("goniolab/optics")
+        if (n := len(f.read_text(encoding="utf-8").splitlines())) > MAX_MODULE_LINES
+    }
+    assert long == {}, long
+
+
+def test_the_optics_checker_catches_a_foreign_import(tmp_path: Path) -> None:
+    probe = tmp_path / "probe.py"
+    probe.write_text("import math\nimport numpy as np\nfrom goniolab.config import LabConfig\n")
+    found = [
+        m
+        for _, m in imports_of(probe)
+        if m.split(".")[0] not in sys.stdlib_module_names and not _hit(m, OPTICS_MAY_IMPORT)
+    ]
+    assert found == ["goniolab.config"]

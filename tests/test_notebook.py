@@ -15,7 +15,7 @@ from typing import Any
 
 import pytest
 
-from goniolab.store import RunStore
+from goniolab.store import RunStore, StoreError
 
 # a kernel starts in seconds, more on a loaded machine; each test runs whole scans in it
 pytestmark = pytest.mark.timeout(600)
@@ -140,10 +140,13 @@ def test_interrupting_the_kernel_aborts_the_scan(tmp_path: Path, call: str) -> N
         while time.monotonic() < deadline:  # interrupt once readings are being stored
             time.sleep(0.2)
             if store.exists():
-                with RunStore(store, readonly=True) as s:
-                    runs = s.list_runs()
-                    if runs and s.count_points(runs[0].id) >= 2:
-                        break
+                try:
+                    with RunStore(store, readonly=True) as s:
+                        runs = s.list_runs()
+                        if runs and s.count_points(runs[0].id) >= 2:
+                            break
+                except StoreError:  # the file exists, its tables not yet
+                    continue
         km.interrupt_kernel()
         while True:  # the cell ends (its result or the interruption)
             msg = kc.get_iopub_msg(timeout=120)

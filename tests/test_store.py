@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pytest
 
+from goniolab.export import export_run
 from goniolab.store import (
     RunBusy,
     RunStore,
@@ -101,17 +102,17 @@ def test_export_csv_one_row_per_reading_with_prediction(store_path: Path) -> Non
             for r in range(3):
                 _point(s, rid, i, r, 10.0 * i + r)
         s.add_predictions(rid, [(0, 45.0, 0.0, 1.5), (1, 45.0, 1.0, 11.5)])
-        text = s.export(rid, "csv")
+        text = export_run(s, rid, "csv")
         rows = list(csv.DictReader(io.StringIO(text)))
         assert len(rows) == 6
         assert [(r["index"], r["repeat"]) for r in rows[:3]] == [("0", "0"), ("0", "1"), ("0", "2")]
         assert float(rows[4]["luminance_pct"]) == 11.0
         assert float(rows[4]["theta_r_deg"]) == 1.0
         assert float(rows[4]["predicted_pct"]) == 11.5
-        doc = json.loads(s.export(rid, "json"))
+        doc = json.loads(export_run(s, rid, "json"))
         assert doc["run"]["id"] == rid and len(doc["readings"]) == 6
-        with pytest.raises(StoreError, match="csv"):
-            s.export(rid, "xlsx")
+        with pytest.raises(ValueError, match="csv"):
+            export_run(s, rid, "xlsx")
 
 
 def test_gloss_readings_are_sequenced(store_path: Path) -> None:
@@ -126,7 +127,7 @@ def test_gloss_readings_are_sequenced(store_path: Path) -> None:
         assert rows[0].values_gu == {20: 80.1, 60: 90.2, 85: None}
         assert rows[0].predicted_gu == {20: 81.0, 60: 91.0, 85: 97.0}
         assert rows[1].values_gu[20] is None and rows[1].predicted_gu is None
-        exported = list(csv.DictReader(io.StringIO(s.export(rid, "csv"))))
+        exported = list(csv.DictReader(io.StringIO(export_run(s, rid, "csv"))))
         assert [e["g60_gu"] for e in exported] == ["90.2", "90.4"]
 
 
@@ -194,7 +195,7 @@ def test_store_on_an_unwritable_directory(tmp_path: Path, monkeypatch: pytest.Mo
             return False
         return real_access(p, mode)
 
-    monkeypatch.setattr("goniolab.store.os.access", access)
+    monkeypatch.setattr("goniolab.store.sqlite.os.access", access)
     for target in (path, tmp_path / "ro" / "new.sqlite"):
         with pytest.raises(StoreError, match=f"directory {tmp_path / 'ro'} is not writable"):
             RunStore(target)
@@ -211,12 +212,12 @@ def store_path(tmp_path: Path) -> Path:
 def test_export_of_a_run_without_readings_has_the_header(store_path: Path) -> None:
     with RunStore(store_path) as s:
         rid = _run(s)
-        header = s.export(rid, "csv").splitlines()
+        header = export_run(s, rid, "csv").splitlines()
         assert header == [
             "run_id,run_uuid,index,repeat,theta_i_deg,theta_r_deg,measured_theta_i_deg,"
             "measured_theta_r_deg,luminance_pct,predicted_pct,X,Y,Z,L_star,a_star,b_star,"
             "C_star,h_deg,predicted_L_star,predicted_a_star,predicted_b_star,colour_error,"
-            "timestamp"
+            "quality,peak_fraction,timestamp"
         ]
 
 

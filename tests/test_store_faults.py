@@ -130,9 +130,9 @@ def test_a_store_that_stays_away_fails_the_run_parked(tmp_path: Path) -> None:
 def test_sqlite_locked_by_another_program_is_one_line(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    import goniolab.store as store_mod
+    import goniolab.store.sqlite as sqlite_mod
 
-    monkeypatch.setattr(store_mod, "_SQLITE_BUSY_S", 0.5)
+    monkeypatch.setattr(sqlite_mod, "BUSY_TIMEOUT_S", 0.5)
     path = tmp_path / "s.sqlite"
     with RunStore(path) as s:
         rid = s.create_run(kind="brdf", plan={}, config={}, sample="", model={}, version="t")
@@ -183,10 +183,10 @@ def test_frozen_postgres_mid_scan_pauses_and_resumes(
 ) -> None:
     # issue 23.4: the event loop blocked in psycopg for ever, Ctrl-C dead. The server is
     # frozen (SIGSTOP: its TCP connections stay open, nothing answers) after 3 readings.
-    import goniolab.store as store_mod
+    import goniolab.store.postgres as pg_mod
     from tests.pg_server import PLANTED_PASSWORD
 
-    monkeypatch.setattr(store_mod, "_PG_STATEMENT_TIMEOUT_S", 2.0)
+    monkeypatch.setattr(pg_mod, "STATEMENT_TIMEOUT_S", 2.0)
     monkeypatch.setenv("PGPASSWORD", PLANTED_PASSWORD)
     url = pg.create_db(f"frozen{os.getpid()}")
     cfg = sim_config(tmp_path)
@@ -219,10 +219,10 @@ def test_frozen_postgres_mid_scan_pauses_and_resumes(
 def test_frozen_postgres_write_is_bounded(pg: Any, monkeypatch: pytest.MonkeyPatch) -> None:
     """Without a runner: a write to a frozen server returns StoreUnavailable within the
     watchdog's time, and the store reconnects (with backoff) once the server is back."""
-    import goniolab.store as store_mod
+    import goniolab.store.postgres as pg_mod
     from tests.pg_server import PLANTED_PASSWORD
 
-    monkeypatch.setattr(store_mod, "_PG_STATEMENT_TIMEOUT_S", 1.0)
+    monkeypatch.setattr(pg_mod, "STATEMENT_TIMEOUT_S", 1.0)
     monkeypatch.setenv("PGPASSWORD", PLANTED_PASSWORD)
     url = pg.create_db(f"bounded{os.getpid()}")
     with RunStore(url) as s:
@@ -250,14 +250,15 @@ def test_frozen_postgres_write_is_bounded(pg: Any, monkeypatch: pytest.MonkeyPat
 
 def test_readme_states_the_store_timeouts() -> None:
     """The numbers the README gives are the code's."""
-    import goniolab.store as sm
+    import goniolab.store.postgres as pg_mod
+    import goniolab.store.sqlite as sqlite_mod
     from goniolab.scan.runner import ScanRunner
 
     text = " ".join((Path(__file__).resolve().parents[1] / "README.md").read_text().split())
     outage_min = ScanRunner.__init__.__kwdefaults__["store_outage_s"] / 60
-    assert f"connect ({sm._PG_CONNECT_TIMEOUT_S:g} s)" in text
-    assert f"statement ({sm._PG_STATEMENT_TIMEOUT_S:g} s, server side)" in text
-    assert f"locked by another program for more than {sm._SQLITE_BUSY_S:g} s" in text
+    assert f"connect ({pg_mod.CONNECT_TIMEOUT_S:g} s)" in text
+    assert f"statement ({pg_mod.STATEMENT_TIMEOUT_S:g} s, server side)" in text
+    assert f"locked by another program for more than {sqlite_mod.BUSY_TIMEOUT_S:g} s" in text
     assert f"fails in one line after {outage_min:g} minutes" in text
 
 

@@ -30,6 +30,10 @@ EXAMPLES: dict[str, list[str]] = {
         "goniolab predict gloss scan.sur --n 1.55       # its predicted G20/G60/G85",
         f"goniolab tui --config {_SIM} --autostart     # the simulated lab, live",
     ],
+    "calibrate": [
+        f"goniolab calibrate --config {_SIM}             # mirror and black glass vs certificates",
+        f"goniolab calibrate --config {_SIM} --theta 60 --repeats 5 --json",
+    ],
     "fit": [
         "goniolab fit colour 3                          # the paint of run 3's sample, fitted",
         "goniolab fit colour 3 --params body.ks_scale,coat.n --save fitted.toml",
@@ -124,6 +128,10 @@ EXAMPLES: dict[str, list[str]] = {
     "runs migrate": [
         "goniolab runs migrate --from lab-pc.sqlite --store postgresql://lab@dbhost/goniolab",
         "goniolab runs migrate --from lab-pc.sqlite --store shared.sqlite --json",
+    ],
+    "runs import": [
+        "goniolab runs import run1.json                 # a JSON export read back",
+        "goniolab runs import lab-a/*.json --store shared.sqlite --json",
     ],
     "runs annotate": [
         "goniolab runs annotate 1 --operator ana --sample-id P-0042",

@@ -23,6 +23,7 @@ from typing import Any
 
 from goniolab.commands._help import RUN_HELP
 from goniolab.errors import UserError, a_run_of_kind
+from goniolab.model_registry import model_names
 
 __all__ = ["register", "toml_text"]
 
@@ -327,7 +328,7 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument(
         "--model",
-        choices=("auto", "facet", "kirchhoff", "rayleigh-rice"),
+        choices=model_names(),
         default=None,
         help="coat-surface model (default: the one the run was predicted with)",
     )

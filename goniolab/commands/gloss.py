@@ -1,7 +1,8 @@
 """``goniolab gloss log``: log glossmeter readings into the run store.
 
 Either from a lab config (``--config FILE``: the configured glossmeter, real or simulated)
-or straight from a port (``--port PORT --protocol zgm1120|line``, no config). Each reading
+or straight from a port (``--port PORT --protocol NAME``, no config; the protocols are
+those of :data:`drivers.protocols.GLOSSMETERS`). Each reading
 is committed to the store with its timestamp, printed beside the model's ISO 2813 gloss
 when the sample has a height map, or printed as one JSON object per line with ``--json``
 (readings carry ``seq``; the last line holds the session's ``statistics``: n, mean and
@@ -95,6 +96,13 @@ def _open_meter_from_port(args: argparse.Namespace) -> Any:
     )
 
 
+def _pushes(protocol: str) -> bool:
+    """Whether a ``protocol``'s meter prints its readings on its own (drivers.protocols)."""
+    from drivers.protocols import GLOSSMETERS
+
+    return GLOSSMETERS[protocol].pushes_readings
+
+
 async def _session(args: argparse.Namespace, store: RunStore, plan: GlossPlan) -> GlossResult:
     import asyncio
     from contextlib import AsyncExitStack
@@ -127,8 +135,12 @@ async def _session(args: argparse.Namespace, store: RunStore, plan: GlossPlan) -
                 config={"port": args.port, "protocol": args.protocol, "baudrate": args.baudrate},
                 models=SampleModels(args.n),
             )
-        mode = args.mode or ("push" if args.protocol == "line" and not args.config else "measure")
-        logger = await session.start(plan, mode=mode, interval_s=args.interval)
+        mode = args.mode or ("push" if _pushes(args.protocol) and not args.config else "measure")
+        from goniolab.commands.scan import run_meta_args
+
+        logger = await session.start(
+            plan, mode=mode, interval_s=args.interval, meta=run_meta_args(args)
+        )
         from goniolab.commands.scan import announce_store
 
         announce_store(store, logger.run_id)
@@ -157,7 +169,12 @@ async def _session(args: argparse.Namespace, store: RunStore, plan: GlossPlan) -
 
 def _cmd_log(args: argparse.Namespace) -> int:
     if not args.config and not args.port:
-        raise UserError("gloss log: give --config FILE, or --port PORT --protocol zgm1120|line")
+        from drivers.protocols import GLOSSMETERS
+
+        raise UserError(
+            "gloss log: give --config FILE, or --port PORT --protocol "
+            + "|".join(GLOSSMETERS.names())
+        )
     from goniolab.scan.events import RunState
     from goniolab.scan.plans import GlossPlan, PlanError
     from goniolab.store import RunStore, StoreError, resolve_store_path
@@ -223,13 +240,19 @@ def _cmd_log(args: argparse.Namespace) -> int:
 
 def register(subparsers: Any) -> None:
     """Add ``gloss log``."""
+    from drivers.protocols import GLOSSMETERS  # the standard library only: cheap at --help
+
     p = subparsers.add_parser("gloss", help="glossmeter sessions (gloss log)")
     sub = p.add_subparsers(dest="gloss_command", metavar="ACTION", required=True)
     pl = sub.add_parser("log", help="log glossmeter readings into the store")
     pl.add_argument("--config", help="lab config TOML (uses its [glossmeter])")
     pl.add_argument("--port", help="serial port of the meter (without --config)")
-    pl.add_argument("--protocol", choices=("zgm1120", "line"), default="zgm1120",
-                    help="the meter's protocol (without --config)")  # fmt: skip
+    pl.add_argument(
+        "--protocol",
+        choices=GLOSSMETERS.names(),
+        default="zgm1120",
+        help=f"meter protocol (without --config): {GLOSSMETERS.help_text()}",
+    )
     pl.add_argument("--profile", default=None, help="protocol profile (default: the protocol's)")
     pl.add_argument("--serial-number", default="401120999", help="ZGM1120 serial number")
     pl.add_argument(
@@ -241,6 +264,9 @@ def register(subparsers: Any) -> None:
         "--n", type=float, default=1.55, help="refractive index for --sample (no config)"
     )
     pl.add_argument("--count", type=int, default=0, help="readings to take (0 = until Ctrl-C)")
+    from goniolab.commands.scan import add_run_meta_args
+
+    add_run_meta_args(pl)  # --operator, --sample-id, --note, --tag (run identity)
     pl.add_argument("--angles", type=int, nargs="+", default=[20, 60, 85], help="geometries, deg")
     pl.add_argument("--mode", choices=("measure", "push"), default=None,
                     help="ask for each reading, or take readings the meter pushes")  # fmt: skip

@@ -7,8 +7,8 @@ model (Wittmann et al. 2021; docs/PHYSICS.md) gives
 - ``stats``: Ra, Sq (nm), Sdq and the zero-slope histogram fraction h_r;
 - ``gloss``: ISO 2813 G20/G60/G85, the ASTM D4039 haze index, ASTM E430 haze and DOI and the
   ASTM D523 recommended geometry (:func:`goniolab.optics.gloss_standards.gloss_report`);
-- every command takes ``--model auto|facet|kirchhoff|rayleigh-rice`` (default ``auto``: per
-  geometry, the regime rule of :mod:`goniolab.optics.model_choice`) and ``--wavelength-nm``
+- every command takes ``--model`` (a name of :mod:`goniolab.model_registry`: ``auto``,
+  ``facet``, ``kirchhoff``, ``rayleigh-rice``; default ``auto``: per geometry, the regime rule of :mod:`goniolab.optics.model_choice`) and ``--wavelength-nm``
   (default: gloss weighted over wavelength by CIE C x V(lambda) as ISO 2813 does, BRDFs at
   550 nm); ``--json`` names the model that computed each reading under ``"model"`` (gloss)
   or ``"models"`` (one per angle of a curve), any hand-over to the facet model under
@@ -39,15 +39,13 @@ from typing import TYPE_CHECKING, Any
 
 from goniolab.commands._angles import allow_negative_angles
 from goniolab.errors import UserError
+from goniolab.model_registry import DEFAULT_MODEL, model_help, model_names
 
 if TYPE_CHECKING:  # numpy and the optics load when a command runs, not at --help
     import numpy as np
     from numpy.typing import NDArray
 
     from goniolab.optics.metrics import PeakMetrics
-
-#: ``--model`` choices (goniolab.models.MODEL_NAMES; literal here: no optics import at --help).
-MODEL_NAMES: tuple[str, ...] = ("auto", "facet", "kirchhoff", "rayleigh-rice")
 
 __all__ = ["parse_index", "register"]
 
@@ -168,7 +166,7 @@ def _require_finite(spec: str, out: dict[str, Any], cause: str) -> None:
 
 def _model_name(model: Any) -> str:
     kind = getattr(model, "kind", None)
-    return kind if isinstance(kind, str) and kind in MODEL_NAMES else "facet"
+    return kind if isinstance(kind, str) and kind in model_names() else "facet"
 
 
 def _gloss_models(model: Any, rep: Any) -> tuple[dict[str, Any], dict[str, Any], list[str]]:
@@ -255,9 +253,9 @@ def _cmd_stats(args: argparse.Namespace) -> int:
     regime: dict[str, Any] = {}
     try:
         from goniolab.optics.model_choice import choose_model
-        from goniolab.optics.physical import _Shared
+        from goniolab.optics.shared_map import SharedMap
 
-        ms = _Shared(hm, 1024, 0.25).stats
+        ms = SharedMap(hm, 1024, 0.25).stats
         lam = 550.0 if args.wavelength_nm is None else float(args.wavelength_nm)
         for t in (20, 60, 85):
             regime[f"{t}"] = choose_model(ms, t, lam).as_dict()
@@ -724,9 +722,9 @@ def _add_common(p: argparse.ArgumentParser, *, many: bool = False) -> None:
     )
     p.add_argument(
         "--model",
-        choices=MODEL_NAMES,
-        default="auto",
-        help="scattering model (auto: per geometry, by Sq/lambda, slope, correlation)",
+        choices=model_names(),
+        default=DEFAULT_MODEL,
+        help=model_help(),
     )
     p.add_argument(
         "--wavelength-nm",

@@ -77,10 +77,10 @@ def run_summary(store: RunStore, rec: RunRecord) -> dict[str, Any]:
             return summarize_brdf(plan, store.points(rec.id), store.predictions(rec.id))
         except StoreError as exc:
             raise UserError(str(exc)) from exc
-    if rec.kind == "align":
-        # its readings are points (the peak searches); the result is in its model
-        result = rec.model.get("alignment") if isinstance(rec.model, dict) else None
-        return {"readings": store.count_readings(rec), "alignment": result}
+    if rec.kind in ("align", "calibration"):
+        # the result is the run's record (what the alignment found, the calibration's check)
+        key = "alignment" if rec.kind == "align" else "calibration"
+        return {"readings": store.count_points(rec.id), key: rec.model.get(key)}
     from goniolab.scan.plans import gloss_statistics
 
     rows = store.gloss_readings(rec.id)
@@ -213,10 +213,14 @@ def run_colour(store: RunStore, rec: RunRecord) -> list[dict[str, Any]]:
     """Per-geometry measured and predicted colour of a BRDF run ([] for gloss runs)."""
     if rec.kind != "brdf":
         return []
-    from goniolab.scan.colour import colour_rows
+    from goniolab.scan.colour import PointColour, colour_rows
 
     theta_i = float(rec.plan.get("theta_i_deg", 45.0))
-    return colour_rows(store.points(rec.id), store.predicted_colours(rec.id), theta_i)
+    try:
+        pc: PointColour | None = PointColour.from_snapshot(rec.config)
+    except (TypeError, ValueError, AttributeError):
+        pc = None  # a damaged snapshot: repeats averaged as L*a*b*
+    return colour_rows(store.points(rec.id), store.predicted_colours(rec.id), theta_i, pc)
 
 
 def _f(v: Any, fmt: str = "6.1f") -> str:
@@ -232,7 +236,7 @@ def colour_text(rows: list[dict[str, Any]], theta_i_deg: float = 45.0) -> list[s
 
     out = [
         "  theta_r  aspec     L*     a*     b*     C*      h |  pred L*     a*     b* |"
-        "    dL*    dC*    dH*  dE*ab   dE94   dE00"
+        "    dL*    dC*    dH*  dE*ab   dE94   dE00  rep dE00"
     ]
     for r in rows:
         d: dict[str, Any] = {}
@@ -247,6 +251,7 @@ def colour_text(rows: list[dict[str, Any]], theta_i_deg: float = 45.0) -> list[s
             + "".join(
                 f" {_f(d.get(k), '6.2f')}" for k in ("dL", "dC", "dH", "dE76", "dE94", "dE00")
             )
+            + f"  {_f(r.get('dE00_repeat_mean'), '7.3f')}"
         )
     fi = flop_of_rows(rows, theta_i_deg)
     fi_p = flop_of_rows(rows, theta_i_deg, "predicted_L")
@@ -298,8 +303,8 @@ def _cmd_show(args: argparse.Namespace) -> int:
                 print("  colour (reflectance factor, per geometry):")
                 theta_i = float(rec.plan.get("theta_i_deg", 45.0))
                 print("\n".join(colour_text(colour, theta_i)))
-        elif rec.kind == "align":
-            print(f"  readings: {summary['readings']}")
+        elif rec.kind in ("align", "calibration"):
+            print(f"  readings: {summary['readings']} (the result: the model's {rec.kind} record)")
             result = summary.get("alignment") or {}
             for label, key in (
                 ("lamp arm zero offset", "lamp_zero_deg"),
@@ -355,7 +360,7 @@ def _cmd_colour(args: argparse.Namespace) -> int:
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
-    from goniolab.export import FORMATS, export_run, format_for_path
+    from goniolab.export import EXPORTERS, export_run, resolve_format
 
     fmt = args.format
     if args.json and not args.output:
@@ -366,11 +371,14 @@ def _cmd_export(args: argparse.Namespace) -> int:
                 f"give -o FILE to write {fmt} (then --json reports what was written)"
             )
         fmt = "json"
-    if fmt is None:
-        fmt = (format_for_path(args.output) if args.output else None) or "csv"
-    if fmt in ("netcdf", "parquet") and not args.output:
+    try:
+        fmt = resolve_format(fmt, args.output)
+    except ValueError as exc:  # issue 27: `-o run.xlsx` wrote CSV silently
+        raise UserError(f"runs export: {exc}") from None
+    if EXPORTERS[fmt].binary and not args.output:
         raise UserError(
-            f"runs export --format {fmt}: a binary format needs -o FILE (e.g. -o run{FORMATS[fmt]})"
+            f"runs export --format {fmt}: a binary format needs -o FILE "
+            f"(e.g. -o run{EXPORTERS[fmt].suffix})"
         )
     from goniolab.store import StoreError
 
@@ -408,6 +416,34 @@ def _same_store(src: RunStore, dst: RunStore) -> bool:
         except OSError:
             return False
     return False
+
+
+def _cmd_import(args: argparse.Namespace) -> int:
+    """Import JSON exports (matched by run UUID); one line per file, errors per file."""
+    from goniolab.store import RunStore, StoreError, import_json_export
+
+    target = store_path(args.store, args.config)
+    try:
+        dst = RunStore(target)
+    except StoreError as exc:
+        raise UserError(str(exc)) from exc
+    done: list[dict[str, Any]] = []
+    failed = 0
+    with dst:
+        for name in args.files:
+            try:
+                here, action, uuid = import_json_export(dst, name)
+            except StoreError as exc:
+                failed += 1
+                print(f"goniolab: error: runs import: {exc}", file=sys.stderr)
+                done.append({"file": name, "error": str(exc)})
+                continue
+            done.append({"file": name, "run_id": here, "uuid": uuid, "action": action})
+            if not args.json:
+                print(f"{name}: run {here} ({uuid}) {action}; no spectra in a JSON export")
+    if args.json:
+        print(json.dumps(done, indent=2))
+    return 2 if failed else 0
 
 
 def _cmd_migrate(args: argparse.Namespace) -> int:
@@ -565,21 +601,28 @@ def register(subparsers: Any) -> None:
 
     register_runs_spectra(sub, common)
 
+    from goniolab.export import EXPORTERS
+
     pe = sub.add_parser(
         "export",
         parents=[common],
         help="export one run: CSV/JSON (one row per reading), netCDF or Parquet",
-        description="Export one run. CSV and JSON go to stdout unless -o FILE; netCDF "
-        "(xarray + h5netcdf, CF-style units, the run's metadata as attributes) and Parquet "
-        "(pyarrow, the run record in the schema metadata) need -o FILE. Timestamps are "
-        "ISO 8601 UTC.",
+        description="Export one run. Text formats go to stdout unless -o FILE; binary ones "
+        "need -o FILE. Formats: "
+        + "; ".join(
+            f"{e.name} ({'/'.join(e.suffixes)}{', needs -o' if e.binary else ''}): {e.description}"
+            for e in EXPORTERS.values()
+        )
+        + ". A suffix no format has is refused unless --format is given.",
     )
     pe.add_argument("run", type=int, metavar="RUN", help=RUN_HELP)
     pe.add_argument(
         "--format",
-        choices=("csv", "json", "netcdf", "parquet"),
+        choices=tuple(EXPORTERS),
         default=None,
-        help="file format (default: from the -o suffix .csv/.json/.nc/.parquet, else csv)",
+        help="file format (default: from the -o suffix "
+        + "/".join(e.suffix for e in EXPORTERS.values())
+        + ", else csv)",
     )
     pe.add_argument("-o", "--output", help="write to FILE instead of stdout")
     pe.add_argument(
@@ -609,6 +652,20 @@ def register(subparsers: Any) -> None:
     )
     pm.add_argument("--json", action="store_true", help="print the id mapping as JSON")
     pm.set_defaults(func=_cmd_migrate)
+
+    pi = sub.add_parser(
+        "import",
+        parents=[common],
+        help="read runs exported with 'runs export --format json' back into a store",
+        description="Read runs exported with 'goniolab runs export RUN --format json' back "
+        "into the store chosen by --store/--config. A run keeps its UUID, creation time and "
+        "identity; one the store already holds is matched by its UUID (left as it is, or "
+        "brought up to date), never duplicated. A JSON export carries no spectra: an "
+        "imported scan has its luminance, colour and predictions, not its spectra.",
+    )
+    pi.add_argument("files", nargs="+", metavar="FILE", help="JSON export(s) of goniolab runs")
+    pi.add_argument("--json", action="store_true", help="print what was imported as JSON")
+    pi.set_defaults(func=_cmd_import)
 
     pa = sub.add_parser(
         "annotate",

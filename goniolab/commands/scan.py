@@ -9,8 +9,9 @@ Ctrl-C cancels at once (the arms are still parked, best effort).
 ``goniolab scan --plan align`` runs the alignment instead (:mod:`goniolab.scan.align`, via
 :meth:`goniolab.session.ScanSession.align`): the black-glass standard, then the sample, at
 two or more incidences; it prints the arms' zero offsets and the sample's tilt, stores them
-with the run and writes them into the config's ``[alignment]`` table
-(``--no-write-config`` keeps the file as it is), which corrects every later move.
+with the run and saves them to the lab's alignment state file beside the store (never the
+config file: :func:`goniolab.config.alignment_state_path`; ``--no-write-config`` stores them
+with the run only), whose values correct every later move.
 ``--auto-exposure`` adapts the spectro's exposure to each reading
 (:mod:`goniolab.scan.exposure`). ``--adaptive`` places the ``--theta-r`` angles where the
 predicted curve bends (:mod:`goniolab.scan.adaptive`): as many readings, the same sweep.
@@ -27,6 +28,7 @@ from typing import TYPE_CHECKING, Any, TextIO, TypeVar
 from goniolab import jsonout
 from goniolab.commands._angles import allow_negative_angles
 from goniolab.errors import UserError
+from goniolab.model_registry import model_names
 
 if TYPE_CHECKING:  # loaded when a scan runs, not at --help (tests/test_startup.py)
     import asyncio
@@ -79,7 +81,10 @@ def format_summary(summary: dict[str, Any]) -> str:
         + ("" if summary["complete"] else " (incomplete)"),
     ]
     if summary.get("mirror_pct") is not None:
-        lines.append(f"  mirror reference: {summary['mirror_pct']:.3f} % (set to 100 %)")
+        lines.append(
+            f"  mirror reference: {summary['mirror_pct']:.3f} % of the instrument's reference "
+            "(divided out spectrally, times the mirror's certificate)"
+        )
     lines.append(f"  RMSE measured - predicted: {_fmt(summary['rmse_pct'], ' %', '.3f')}")
     mp, pp = summary.get("measured_peak"), summary.get("predicted_peak")
     for label, pk in (("measured ", mp), ("predicted", pp)):
@@ -196,6 +201,8 @@ def point_detail(ev: PointMeasured, predicted_pct: float | None) -> str:
     text = f"theta_r={ev.theta_r_deg:g} L={ev.luminance_pct:.3f} %"
     if predicted_pct is not None:
         text += f" pred {predicted_pct:.3f} % res {ev.luminance_pct - predicted_pct:+.3f}"
+    if ev.quality in ("saturated", "under_noise_floor"):
+        text += f" [{ev.quality.replace('_', ' ').upper()}]"
     return text
 
 
@@ -418,14 +425,12 @@ async def _execute_align(
         bar = ProgressBar(sys.stderr, session.clock_scale)
         report = asyncio.create_task(_report(session.bus.subscribe(), bar))
         try:
-            run_id, result = await session.align(
-                plan, write_config=config_path if write_config else None
-            )
+            run_id, result = await session.align(plan, save_state=write_config)
         finally:
             session.bus.close()
             await report
             bar.close()
-    payload = {"run_id": run_id, "state": "done", "config_written": write_config}
+    payload = {"run_id": run_id, "state": "done", "config_written": False}
     payload.update(result.as_dict())
     if json_out:
         print(jsonout.dumps(payload, indent=2))
@@ -437,8 +442,23 @@ async def _execute_align(
     print(f"  sample tilt:              {result.sample_tilt_deg:+.3f} deg")
     print(f"  corrections (lamp, detector): {c[0]:+.3f}, {c[1]:+.3f} deg")
     print(f"  black-glass fit: {100 * result.standard_rms_rel:.2f} % rms")
-    if write_config:
-        print(f"  written to {config_path} [alignment]")
+    fit = result.standard_fit
+    if fit:
+        print(
+            f"  zeros' 1-sigma: lamp {fit['lamp_zero_sigma_deg']:.3f}, detector "
+            f"{fit['detector_zero_sigma_deg']:.3f} deg; scale {fit['scale']:.3f} of certificate "
+            f"{result.standard.get('certificate', '-')}"
+        )
+        print(
+            f"  lamp - detector zero: fit {fit['fit_difference_deg']:+.3f} deg, peaks' "
+            f"midpoints (no Fresnel shape) {fit['geometric_difference_deg']:+.3f} deg"
+        )
+    if result.state_file:
+        print(
+            f"  saved to {result.state_file} (the lab's alignment state; {config_path} untouched)"
+        )
+    else:
+        print("  stored with the run only: later scans are not corrected")
     return 0
 
 
@@ -606,9 +626,7 @@ def _with_step(cfg: LabConfig, args: argparse.Namespace, sample: str) -> LabConf
 
 
 def _config_map(cfg: LabConfig) -> str:
-    from goniolab.lab import _map_spec
-
-    return _map_spec(cfg)
+    return cfg.sample_map()
 
 
 def _open(store_arg: str | None, config_store: str | None, *, create: bool = True) -> RunStore:
@@ -738,7 +756,6 @@ def resume_config(rec: Any, config_arg: str | None, use_current: bool) -> LabCon
     from pydantic import ValidationError
 
     from goniolab.config import LabConfig, load_lab_config
-    from goniolab.models import MODEL_NAMES
     from goniolab.session import with_sample
 
     snap = dict(rec.config)
@@ -749,7 +766,7 @@ def resume_config(rec: Any, config_arg: str | None, use_current: bool) -> LabCon
         # what the run's own command line set (its sample, a --model) is no config change
         live = with_sample(live, rec.sample)
         started_with = rec.model.get("model_name")
-        if started_with in MODEL_NAMES:
+        if started_with in model_names():
             s = live.sample.model_copy(update={"model": started_with})
             live = live.model_copy(update={"sample": s})
     stored: LabConfig | None = None
@@ -806,14 +823,18 @@ def _cmd_resume(args: argparse.Namespace) -> int:
             rec = store.get_run(args.run)
         except StoreError as exc:
             raise UserError(str(exc)) from exc
+        if rec.kind in ("align", "calibration"):
+            what = "an alignment" if rec.kind == "align" else "a calibration"
+            raise UserError(
+                f"run {rec.id} is {what}: it cannot be resumed, run it again "
+                f"({'scan --plan align' if rec.kind == 'align' else 'calibrate'})"
+            )
         from goniolab.session import resume_target
 
         resume_target(rec, None, store.count_points(rec.id), need_file=False)
         cfg = resume_config(rec, args.config, args.use_current_config)
         # the run goes on with the model it started with (a `scan --model` override included),
         # so the predictions still to compute are that model's, not the config's
-        from goniolab.models import MODEL_NAMES
-
         started_with = rec.model.get("model_name")
         print(
             f"goniolab: resuming run {rec.id}: {store.count_points(rec.id)} readings stored",
@@ -827,7 +848,7 @@ def _cmd_resume(args: argparse.Namespace) -> int:
                 plan=None,
                 run_id=rec.id,
                 json_out=args.json,
-                model=started_with if started_with in MODEL_NAMES else None,
+                model=started_with if started_with in model_names() else None,
                 config=cfg,
             )
         )
@@ -881,7 +902,7 @@ def register(subparsers: Any) -> None:
         default="sweep",
         help="sweep (--theta-r), e2194: the ASTM E2194/E2539, DIN 6175-2 multi-angle geometry, "
         "or align: find the arms' zero offsets and the sample's tilt (black-glass standard, "
-        "then the sample) and write [alignment]",
+        "then the sample) and save them to the lab's alignment state file",
     )
     from goniolab.scan.plans import DEFAULT_REPEATS  # light: stdlib and drivers.base
 
@@ -900,7 +921,7 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument(
         "--model",
-        choices=("auto", "facet", "kirchhoff", "rayleigh-rice"),
+        choices=model_names(),
         default=None,
         help="prediction model (default: config [sample] model, itself default auto)",
     )
@@ -912,7 +933,8 @@ def register(subparsers: Any) -> None:
     p.add_argument(
         "--no-write-config",
         action="store_true",
-        help="--plan align: store the result with the run only, leave the config file as it is",
+        help="--plan align: store the result with the run only, not in the lab's alignment "
+        "state file (the config file is never rewritten)",
     )
     p.add_argument(
         "--adaptive",
@@ -922,8 +944,11 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument(
         "--auto-exposure",
-        action="store_true",
-        help="adapt the spectro's exposure to each reading (no saturation, no drowning)",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="adapt the spectro's exposure to each reading from its reported signal level "
+        "(no saturation, no drowning; the default: at a fixed 10 ms a colour is noise); "
+        "--no-auto-exposure keeps --exposure-us fixed",
     )
     add_run_meta_args(p)
     allow_negative_angles(p)  # "--theta-r -40:-30:5" is a lamp-side range, not an option

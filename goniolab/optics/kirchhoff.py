@@ -79,6 +79,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from goniolab.optics import _cell_kernels as CK
+from goniolab.optics.cell_apertures import CellBox
 from goniolab.optics.fresnel import fresnel
 from goniolab.optics.physical import (
     FACET_MIN_HANDOVER_G,
@@ -86,8 +87,7 @@ from goniolab.optics.physical import (
     RR_VALID_SDQ,
     FloatArray,
     PhysicalOpticsModel,
-    _Box,
-    _check_theta_i,
+    check_theta_i,
 )
 from goniolab.optics.psd import _pruned_fft2
 
@@ -152,7 +152,7 @@ class KirchhoffModel(PhysicalOpticsModel):
         self,
         theta_i_deg: float,
         lams_um: Sequence[float],
-        boxes: Sequence[_Box],
+        boxes: Sequence[CellBox],
         geo: Sequence[tuple[FloatArray, NDArray[np.bool_]]],
         os: tuple[int, int] = (1, 1),
     ) -> tuple[list[FloatArray], list[float]]:
@@ -164,7 +164,7 @@ class KirchhoffModel(PhysicalOpticsModel):
         ``U_d`` is the field minus the tile's mean field times the window's transform: the
         coherent beam is a delta in the specular direction (the lit spot is far larger than
         the map), kept out of the cells it would smear over and summed analytically
-        (:meth:`PhysicalOpticsModel._coherent_sums`).
+        (:func:`goniolab.optics.coherent_beam.coherent_sums`).
 
         Only the transform outputs the boxes read are formed: each Taylor term is transformed
         along the axis needing fewer outputs first (over the whole tile, contiguous), those
@@ -286,7 +286,7 @@ class KirchhoffModel(PhysicalOpticsModel):
         self,
         theta_i_deg: float,
         lams_um: Sequence[float],
-        boxes: Sequence[_Box],
+        boxes: Sequence[CellBox],
         os: tuple[int, int] = (1, 1),
     ) -> tuple[list[FloatArray], list[float]]:
         key = (
@@ -325,7 +325,7 @@ class KirchhoffModel(PhysicalOpticsModel):
 
     def _energy_scales_at(self, theta_i_deg: float, lams_um: Sequence[float]) -> list[float]:
         """Scalar energy conservation of the diffuse part, from
-        :data:`~goniolab.optics.physical.ENERGY_CHECK_FROM_DEG` on.
+        :data:`~goniolab.optics.energy_budget.ENERGY_CHECK_FROM_DEG` on.
 
         With a perfect reflector (``R = 1``) the scalar Kirchhoff diffuse flux over the
         hemisphere, ``D_1 = sum_cells |G|^2 |U_d|^2 / norm`` (with the diffuse shadowing),
@@ -336,7 +336,7 @@ class KirchhoffModel(PhysicalOpticsModel):
         whole Nyquist window once per incidence and wavelength set (cached,
         :meth:`PhysicalOpticsModel._energy_scales`)."""
         nx0, nx1, ny0, ny1 = self._nyquist()
-        box = _Box(nx0, nx1, ny0, ny1)
+        box = CellBox(nx0, nx1, ny0, ny1)
         geo = [self._geometry(theta_i_deg, lam, box) for lam in lams_um]
         raw, coh = self._raw_power(
             theta_i_deg, lams_um, [box] * len(lams_um), [(g[2], g[3]) for g in geo]
@@ -406,7 +406,7 @@ class KirchhoffModel(PhysicalOpticsModel):
 
     def coherent_factor(self, theta_i_deg: float) -> float:
         """``|sum W exp(-i v_z h)|^2 / (sum W)^2`` at specular, averaged over the tiles."""
-        ti = _check_theta_i(theta_i_deg)
+        ti = check_theta_i(theta_i_deg)
         t = self._shared.tiled
         v = 2.0 * (2.0 * math.pi / (self.wavelength_nm * 1e-3)) * math.cos(math.radians(ti))
         acc = 0.0
@@ -418,6 +418,6 @@ class KirchhoffModel(PhysicalOpticsModel):
 
     def specular_reflectance(self, theta_i_deg: float) -> float:
         """Coherent specular reflectance ``R(ti) |<exp(-i v_z h)>_W|^2`` (module docstring)."""
-        ti = _check_theta_i(theta_i_deg)
+        ti = check_theta_i(theta_i_deg)
         r = float(fresnel(math.cos(math.radians(ti)), self.n))
         return r * self.coherent_factor(ti)

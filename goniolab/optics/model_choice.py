@@ -72,15 +72,14 @@ from goniolab.optics.physical import (
     MapStats,
     PhysicalOpticsModel,
     Progress,
-    _Shared,
 )
 from goniolab.optics.provenance import Provenance
 from goniolab.optics.psd import DEFAULT_TAPER, DEFAULT_TILE
 from goniolab.optics.rayleigh_rice import RayleighRiceModel
+from goniolab.optics.shared_map import SharedMap
 
 __all__ = [
     "FACET_MIN_G",
-    "MODEL_NAMES",
     "RR_MAX_G",
     "RR_MAX_SDQ",
     "AutoModel",
@@ -90,9 +89,9 @@ __all__ = [
     "rayleigh_g",
 ]
 
+#: The models the rule chooses from (each a name of :mod:`goniolab.model_registry`, which
+#: lists the names ``--model`` accepts; tests/test_model_registry.py keeps them registered).
 ModelName = Literal["facet", "kirchhoff", "rayleigh-rice"]
-#: Names accepted by ``--model``.
-MODEL_NAMES: tuple[str, ...] = ("auto", "facet", "kirchhoff", "rayleigh-rice")
 #: Rayleigh-Rice when g is at most this ...
 RR_MAX_G: float = 0.15
 #: ... and the rms gradient at most this.
@@ -184,8 +183,8 @@ class AutoModel:
         self.n = facet.n
         self.masking = bool(masking)
         self.wavelength_nm = float(wavelength_nm)
-        shared = _Shared(hm, tile, taper)
-        shared._facets[(facet.n, facet.masking)] = facet
+        shared = SharedMap(hm, tile, taper)
+        shared.adopt_facet(facet)
         opts: dict[str, Any] = {
             "n": facet.n,
             "wavelength_nm": wavelength_nm,

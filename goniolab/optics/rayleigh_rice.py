@@ -25,7 +25,7 @@ tiles), on the same direction-cosine cells as the Kirchhoff model
 ``lambda^2 df_x df_y`` (energy: PHYSICS.md, "Energy"; zero-padded cells when the receptor
 needs a finer grid, :func:`goniolab.optics.psd.psd_region`). The coherent beam
 ``R exp(-(4 pi Sq cos t / lambda)^2)`` (Debye-Waller) is summed analytically over the source
-(:meth:`~goniolab.optics.physical.PhysicalOpticsModel._coherent_sums`). The PSD does not
+(:func:`~goniolab.optics.coherent_beam.coherent_sums`). The PSD does not
 depend on the wavelength or the angles: one FFT per tile serves every geometry and
 wavelength. Outside ``g <= RR_VALID_G``, ``Sdq <= RR_VALID_SDQ`` the Kirchhoff model of the
 same map answers, and the reading's provenance says so.
@@ -48,6 +48,7 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import ArrayLike
 
+from goniolab.optics.cell_apertures import CellBox
 from goniolab.optics.fresnel import fresnel
 from goniolab.optics.physical import (
     FACET_MIN_HANDOVER_G,
@@ -55,8 +56,7 @@ from goniolab.optics.physical import (
     RR_VALID_SDQ,
     FloatArray,
     PhysicalOpticsModel,
-    _Box,
-    _check_theta_i,
+    check_theta_i,
 )
 from goniolab.optics.psd import PSD2, psd2, psd_region
 
@@ -109,7 +109,7 @@ class RayleighRiceModel(PhysicalOpticsModel):
 
     def specular_reflectance(self, theta_i_deg: float) -> float:
         """``R(ti) exp(-g)``: the coherent specular beam (Debye-Waller)."""
-        ti = _check_theta_i(theta_i_deg)
+        ti = check_theta_i(theta_i_deg)
         r = float(fresnel(math.cos(math.radians(ti)), self.n))
         return r * math.exp(-self._g_at(ti, self.wavelength_nm * 1e-3))
 
@@ -120,7 +120,7 @@ class RayleighRiceModel(PhysicalOpticsModel):
         self,
         theta_i_deg: float,
         lams_um: Sequence[float],
-        boxes: Sequence[_Box],
+        boxes: Sequence[CellBox],
         os: tuple[int, int] = (1, 1),
     ) -> tuple[list[FloatArray], list[float]]:
         """Diffuse flux per cell, ``exp(-g)`` times the first-order BRDF times the cell's
@@ -150,7 +150,7 @@ class RayleighRiceModel(PhysicalOpticsModel):
         return out, coh
 
     def _energy_scales_at(self, theta_i_deg: float, lams_um: Sequence[float]) -> list[float]:
-        """From :data:`~goniolab.optics.physical.ENERGY_CHECK_FROM_DEG` on, the diffuse
+        """From :data:`~goniolab.optics.energy_budget.ENERGY_CHECK_FROM_DEG` on, the diffuse
         flux over the hemisphere, ``exp(-g) D`` (D the first-order total), is held to what
         the coherent beam leaves of the Fresnel reflectance, ``R(ti) (1 - exp(-g))``: the
         factor is ``min(1, R (1 - exp(-g)) / (exp(-g) D))``. (Below that angle
@@ -161,7 +161,7 @@ class RayleighRiceModel(PhysicalOpticsModel):
         ci = math.cos(math.radians(theta_i_deg))
         stride = 2 if max(t.nx_t, t.ny_t) > 256 else 1
         nx0, nx1, ny0, ny1 = self._nyquist()
-        box = _Box(nx0, nx1, ny0, ny1)
+        box = CellBox(nx0, nx1, ny0, ny1)
         ix, iy = box.ix[::stride], box.iy[::stride]
         pv = self.psd.psd_um4[np.ix_(iy % t.ny_t, ix % t.nx_t)] * stride * stride
         df2 = 1.0 / (t.nx_t * t.dx_um * t.ny_t * t.dy_um)
@@ -185,7 +185,7 @@ class RayleighRiceModel(PhysicalOpticsModel):
             out.append(min(1.0, room / (dw * d)) if d > 0.0 else 1.0)
         return out
 
-    def _psd_cells(self, box: _Box, os: tuple[int, int]) -> FloatArray:
+    def _psd_cells(self, box: CellBox, os: tuple[int, int]) -> FloatArray:
         t = self._shared.tiled
         ly, lx = os[1] * t.ny_t, os[0] * t.nx_t
         if os == (1, 1):

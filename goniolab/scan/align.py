@@ -63,18 +63,24 @@ from goniolab.scan.events import (
     RunState,
     StateChanged,
 )
-from goniolab.scan.exposure import AutoExposure
+from goniolab.scan.exposure import AutoExposure, reading_quality
 from goniolab.scan.plans import PlanError
 from goniolab.scan.predict import Predictor
+from goniolab.scan.standards import Standard
 from goniolab.store import RunStore
 
 __all__ = [
     "BLACK_GLASS_N",
     "AlignAborted",
+    "AlignGates",
     "AlignPlan",
+    "AlignRefused",
     "AlignResult",
     "AlignRunner",
+    "StandardFit",
+    "check_standard",
     "fit_standard",
+    "fit_standard_full",
     "half_max_midpoint",
 ]
 
@@ -87,6 +93,29 @@ SpecimenHook = Callable[[str], Awaitable[None]]
 
 class AlignAborted(RuntimeError):
     """The alignment was aborted (:meth:`AlignRunner.abort`) before its result."""
+
+
+class AlignRefused(RuntimeError):
+    """The standard's readings fail a quality gate (:class:`AlignGates`): a missing, wrong
+    or saturated standard, a fit that does not describe the data. Nothing is written."""
+
+
+@dataclass(frozen=True, slots=True)
+class AlignGates:
+    """What the black-glass readings must pass before their zeros are believed.
+
+    ``scale_tolerance``: the fitted scale ``k`` (reading / certified reading) within
+    ``1 +/- scale_tolerance`` (the instrument reports % of a perfect mirror, the standard's
+    certificate says what it reflects); ``max_rms_rel``: the fit's relative rms over the
+    readings above 10 % of the peak; ``max_sigma_deg``: the 1-sigma uncertainty of each
+    zero from the fit's covariance; ``max_geometric_gap_deg``: the fit's ``dL - dD`` against
+    the peaks' own half-maximum midpoints (a check that does not rest on the Fresnel shape).
+    """
+
+    scale_tolerance: float = 0.15
+    max_rms_rel: float = 0.02
+    max_sigma_deg: float = 0.05
+    max_geometric_gap_deg: float = 0.1
 
 
 @dataclass(frozen=True, slots=True)
@@ -151,6 +180,11 @@ class AlignResult:
     standard_rms_rel: float
     peaks: list[dict[str, Any]] = field(default_factory=list)
     readings: int = 0
+    #: the black-glass fit and its gates' numbers (:class:`StandardFit`), the standard cited
+    standard_fit: dict[str, float] = field(default_factory=dict)
+    standard: dict[str, Any] = field(default_factory=dict)
+    #: where the result was saved (the lab's alignment state file), "" = with the run only
+    state_file: str = ""
 
     def corrections_deg(self) -> tuple[float, float]:
         """Added to requested angles before the arms move (``[alignment]``): the sample
@@ -172,6 +206,9 @@ class AlignResult:
             "standard_rms_rel": self.standard_rms_rel,
             "readings": self.readings,
             "peaks": self.peaks,
+            "standard_fit": self.standard_fit,
+            "standard": self.standard,
+            "state_file": self.state_file,
         }
 
 
@@ -197,15 +234,51 @@ def half_max_midpoint(
 
 
 def _standard_model(
-    params: FloatArray, lamp: FloatArray, det: FloatArray, source: Cone, detector: Cone
+    params: FloatArray,
+    lamp: FloatArray,
+    det: FloatArray,
+    source: Cone,
+    detector: Cone,
+    n: float = BLACK_GLASS_N,
 ) -> FloatArray:
     d_l, d_d, k, floor = params
-    r = fresnel(np.cos(np.radians(lamp + d_l)), BLACK_GLASS_N)
+    r = fresnel(np.cos(np.radians(lamp + d_l)), n)
     gamma = np.radians(np.abs(det + d_d - lamp - d_l))
     o = cap_overlap_fraction(
         gamma, math.radians(source.half_angle_deg), math.radians(detector.half_angle_deg)
     )
     return np.asarray(k * 100.0 * r * o + floor)
+
+
+@dataclass(frozen=True, slots=True)
+class StandardFit:
+    """The black-glass fit: zeros (deg), scale ``k`` and stray floor (%), the relative rms
+    of the readings above 10 % of the peak, the zeros' 1-sigma uncertainties (deg) from
+    the covariance ``s^2 (J^T J)^-1`` (``s^2`` the reduced chi-square), and ``dL - dD``
+    from the peaks' half-maximum midpoints alone (the geometric check)."""
+
+    lamp_zero_deg: float
+    detector_zero_deg: float
+    scale: float
+    floor_pct: float
+    rms_rel: float
+    lamp_zero_sigma_deg: float
+    detector_zero_sigma_deg: float
+    geometric_difference_deg: float
+
+    def as_dict(self) -> dict[str, float]:
+        """JSON form."""
+        return {
+            "lamp_zero_deg": self.lamp_zero_deg,
+            "detector_zero_deg": self.detector_zero_deg,
+            "scale": self.scale,
+            "floor_pct": self.floor_pct,
+            "rms_rel": self.rms_rel,
+            "lamp_zero_sigma_deg": self.lamp_zero_sigma_deg,
+            "detector_zero_sigma_deg": self.detector_zero_sigma_deg,
+            "fit_difference_deg": self.lamp_zero_deg - self.detector_zero_deg,
+            "geometric_difference_deg": self.geometric_difference_deg,
+        }
 
 
 def fit_standard(
@@ -216,10 +289,27 @@ def fit_standard(
     source: Cone,
     detector: Cone,
 ) -> tuple[float, float, float]:
-    """Fit the black-glass readings: ``(lamp_zero_deg, detector_zero_deg, rms_rel)``.
+    """Fit the black-glass readings: ``(lamp_zero_deg, detector_zero_deg, rms_rel)``
+    (:func:`fit_standard_full`)."""
+    f = fit_standard_full(lamp_deg, det_deg, values_pct, source=source, detector=detector)
+    return f.lamp_zero_deg, f.detector_zero_deg, f.rms_rel
+
+
+def fit_standard_full(
+    lamp_deg: Sequence[float],
+    det_deg: Sequence[float],
+    values_pct: Sequence[float],
+    *,
+    source: Cone,
+    detector: Cone,
+    n: float = BLACK_GLASS_N,
+) -> StandardFit:
+    """Fit the black-glass readings (certified index ``n``).
 
     Weighted least squares (``scipy.optimize.least_squares``) of the closed-form reading
-    (module docstring) over all readings, 0.3 % relative plus 5e-4 % absolute sigma.
+    (module docstring) over all readings, 0.3 % relative plus 5e-4 % absolute sigma; the
+    parameter covariance is ``s^2 (J^T J)^-1`` at the solution (Press et al., *Numerical
+    Recipes*, 3rd ed., sec. 15.5), ``s^2`` the reduced chi-square.
     """
     from scipy.optimize import least_squares
 
@@ -238,16 +328,94 @@ def fit_standard(
     s0 = float(np.mean(shifts)) if shifts else 0.0
 
     def resid(p: FloatArray) -> FloatArray:
-        return np.asarray((_standard_model(p, lamp, det, source, detector) - y) / sigma)
+        return np.asarray((_standard_model(p, lamp, det, source, detector, n) - y) / sigma)
 
     fit = least_squares(
         resid, x0=np.array([0.0, -s0, 1.0, 0.0]), x_scale=np.array([0.1, 0.1, 0.1, 1e-3])
     )
     d_l, d_d = float(fit.x[0]), float(fit.x[1])
-    model = _standard_model(fit.x, lamp, det, source, detector)
+    model = _standard_model(fit.x, lamp, det, source, detector, n)
     big = y > 0.1 * y.max()
     rms = float(np.sqrt(np.mean(((model - y)[big] / y[big]) ** 2)))
-    return d_l, d_d, rms
+    dof = max(y.size - fit.x.size, 1)
+    s2 = float(np.sum(fit.fun**2)) / dof
+    try:
+        cov = np.linalg.inv(fit.jac.T @ fit.jac) * s2
+        sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    except np.linalg.LinAlgError:
+        sd = np.full(fit.x.size, math.inf)
+    return StandardFit(
+        lamp_zero_deg=d_l,
+        detector_zero_deg=d_d,
+        scale=float(fit.x[2]),
+        floor_pct=float(fit.x[3]),
+        rms_rel=rms,
+        lamp_zero_sigma_deg=float(sd[0]),
+        detector_zero_sigma_deg=float(sd[1]),
+        geometric_difference_deg=float(np.mean(shifts)) if shifts else math.nan,
+    )
+
+
+def check_standard(
+    fit: StandardFit,
+    peaks: Sequence[Mapping[str, Any]],
+    gates: AlignGates,
+    *,
+    n: float,
+    certificate: str,
+    saturated: int,
+) -> None:
+    """Refuse (:class:`AlignRefused`, saying which) a standard that is saturated, missing
+    (a sample or nothing), wrong (the mirror reads ~20x black glass), or a fit that does not
+    describe the readings; the message quotes the numbers against the certificate."""
+    if saturated:
+        raise AlignRefused(
+            f"refused: {saturated} black-glass readings saturated the spectro even at the "
+            "shortest exposure (the instrument reports a clipped channel): reduce the lamp "
+            "or check the spectro"
+        )
+    ratios = []
+    for pk in peaks:
+        want = 100.0 * float(fresnel(math.cos(math.radians(float(pk["theta_i_deg"]))), n))
+        ratios.append((float(pk["amplitude_pct"]) / want, pk, want))
+    worst = max(ratios, key=lambda r: abs(math.log(max(r[0], 1e-9))))
+    ratio, pk, want = worst
+    quote = (
+        f"peak {pk['amplitude_pct']:.3g} % at theta_i {pk['theta_i_deg']:g} deg where black "
+        f"glass n = {n:g} (certificate {certificate}) reads {want:.3g} %"
+    )
+    if ratio > 5.0:
+        raise AlignRefused(
+            f"refused: not the black-glass standard: {quote}; this reads like a mirror. "
+            "Place the black-glass standard"
+        )
+    if not (1.0 - gates.scale_tolerance <= ratio <= 1.0 + gates.scale_tolerance) or not (
+        1.0 - gates.scale_tolerance <= fit.scale <= 1.0 + gates.scale_tolerance
+    ):
+        raise AlignRefused(
+            f"refused: the black-glass standard is missing or misplaced: {quote} "
+            f"(fitted scale {fit.scale:.3g}, allowed 1 +/- {gates.scale_tolerance:g}). "
+            "Place the black-glass standard on the reference seat"
+        )
+    if fit.rms_rel > gates.max_rms_rel:
+        raise AlignRefused(
+            f"refused: the black-glass fit misses its readings by {100 * fit.rms_rel:.2f} % "
+            f"rms (allowed {100 * gates.max_rms_rel:g} %): not a clean flat standard?"
+        )
+    sig = max(fit.lamp_zero_sigma_deg, fit.detector_zero_sigma_deg)
+    if not sig <= gates.max_sigma_deg:
+        raise AlignRefused(
+            f"refused: the zeros are uncertain to {sig:.3g} deg (1 sigma; allowed "
+            f"{gates.max_sigma_deg:g} deg): add incidences or finer sweeps"
+        )
+    gap = abs(fit.lamp_zero_deg - fit.detector_zero_deg - fit.geometric_difference_deg)
+    if not gap <= gates.max_geometric_gap_deg:
+        raise AlignRefused(
+            f"refused: the fit puts dL - dD at "
+            f"{fit.lamp_zero_deg - fit.detector_zero_deg:+.3f} deg, the peaks' own midpoints "
+            f"at {fit.geometric_difference_deg:+.3f} deg (allowed gap "
+            f"{gates.max_geometric_gap_deg:g} deg)"
+        )
 
 
 class AlignRunner:
@@ -284,6 +452,8 @@ class AlignRunner:
         bus: EventBus,
         move_timeout_s: float = 30.0,
         exposure: AutoExposure | None = None,
+        standard: Standard | None = None,
+        gates: AlignGates | None = None,
     ) -> None:
         self.goniometer = goniometer
         self.spectro = spectro
@@ -296,6 +466,14 @@ class AlignRunner:
         self.bus = bus
         self.move_timeout_s = move_timeout_s
         self.exposure = exposure or AutoExposure()
+        #: the certified black glass (``configs/standards.toml [black_glass]``)
+        self.standard = standard
+        self.gates = gates or AlignGates()
+        self._saturated = {"standard": 0, "sample": 0}
+        #: Saves a result before the run is marked done; returns where ("" = nowhere). A
+        #: failure fails the run (the result stays stored with it).
+        self.persist: Callable[[AlignResult], str] | None = None
+        self._unknown_level = 0
         self._exposure_us = plan.exposure_us
         self._index = 0
         self._position: tuple[float, float] | None = None
@@ -335,6 +513,11 @@ class AlignRunner:
         await self._go(ti, tr)
         reading, self._exposure_us = await self.exposure.read(self.spectro, self._exposure_us)
         value = float(reading.luminance_pct)
+        quality = reading_quality(reading)
+        if quality == "saturated":
+            self._saturated[specimen] = self._saturated.get(specimen, 0) + 1
+        elif quality == "unknown":
+            self._unknown_level += 1
         ts = time.time()
         self.store.add_point(
             self.run_id,
@@ -350,6 +533,7 @@ class AlignRunner:
                 "phase": phase,
                 "exposure_us": reading.exposure_us,
                 "peak_fraction": reading.peak_fraction,
+                "quality": quality,
                 "clock_s": self.clock.now(),
             },
             timestamp=ts,
@@ -407,6 +591,19 @@ class AlignRunner:
             np.asarray([readings[x] for x in xs]),
         )
 
+    def _standard_index(self) -> tuple[float, dict[str, Any]]:
+        """The black glass's certified index and its citation."""
+        if self.standard is None:
+            return BLACK_GLASS_N, {"standard": "black_glass", "certificate": "none (ISO 2813 n)",
+                                   "n": BLACK_GLASS_N}  # fmt: skip
+        if self.standard.model != "fresnel":
+            raise AlignRefused(
+                f"refused: the alignment needs the black glass as a Fresnel model (n), the "
+                f"standard {self.standard.name!r} in {self.standard.source} is a "
+                f"{self.standard.model!r}"
+            )
+        return self.standard.n, self.standard.cite()
+
     async def run(self) -> AlignResult:
         """Measure and fit; the corrections of an earlier alignment are off meanwhile."""
         saved = self.goniometer.corrections_deg
@@ -432,9 +629,17 @@ class AlignRunner:
                 peaks.append({"specimen": "standard", "theta_i_deg": ti,
                               "peak_deg": half_max_midpoint(ft, fv),
                               "amplitude_pct": float(max(cv.max(), fv.max()))})  # fmt: skip
-            d_l, d_d, rms = fit_standard(
-                lamp, det, vals, source=self.predictor.source, detector=self.predictor.detector
-            )
+            n, cite = self._standard_index()
+            fit = fit_standard_full(
+                lamp, det, vals, source=self.predictor.source,
+                detector=self.predictor.detector, n=n,
+            )  # fmt: skip
+            check_standard(
+                fit, [pk for pk in peaks if pk["specimen"] == "standard"], self.gates,
+                n=n, certificate=str(cite.get("certificate", "none")),
+                saturated=self._saturated.get("standard", 0),
+            )  # fmt: skip
+            d_l, d_d, rms = fit.lamp_zero_deg, fit.detector_zero_deg, fit.rms_rel
             await self.place_specimen("sample")
             self._position = None
             taus: list[tuple[float, float]] = []
@@ -469,6 +674,8 @@ class AlignRunner:
                 standard_rms_rel=rms,
                 peaks=peaks,
                 readings=self._index,
+                standard_fit=fit.as_dict(),
+                standard={**cite, "signal_level_unknown_readings": self._unknown_level},
             )
         except AlignAborted as exc:
             self.store.set_status(self.run_id, RunState.ABORTED.value, str(exc))
@@ -483,7 +690,7 @@ class AlignRunner:
         except Exception as exc:
             # an instrument fault or a defect: the run is recorded as failed with the reason
             # and the failure published (a UI waiting for the run's end sees it), then raised
-            reason = str(exc) if isinstance(exc, DeviceError) else (
+            reason = str(exc) if isinstance(exc, DeviceError | AlignRefused) else (
                 f"internal error: {type(exc).__name__}: {exc}"
             )  # fmt: skip
             self.store.set_status(self.run_id, RunState.FAILED.value, reason)
@@ -496,6 +703,22 @@ class AlignRunner:
         finally:
             self.goniometer.corrections_deg = saved
         self.store.update_model(self.run_id, {"alignment": result.as_dict()})
+        if self.persist is not None:
+            try:
+                result.state_file = self.persist(result)
+            except Exception as exc:
+                reason = f"the result could not be saved: {exc}"
+                self.store.set_status(self.run_id, RunState.FAILED.value, reason)
+                self.finished = True
+                self.bus.publish(
+                    StateChanged(run_id=self.run_id, state=RunState.FAILED, reason=reason)
+                )
+                self.bus.publish(
+                    RunFinished(run_id=self.run_id, state=RunState.FAILED, reason=reason,
+                                summary=result.as_dict())
+                )  # fmt: skip
+                raise
+            self.store.update_model(self.run_id, {"alignment": result.as_dict()})
         self.store.set_status(self.run_id, RunState.DONE.value)
         self.bus.publish(StateChanged(run_id=self.run_id, state=RunState.DONE, reason=""))
         self.finished = True

@@ -23,6 +23,7 @@ import numpy as np
 from goniolab.colour.spectra import ColourSettings, ColourValues, spectrum_to_colour
 from goniolab.colour.spectral import Scale, reflectance_factor_scale
 from goniolab.config import LabConfig
+from goniolab.scan.exposure import EXCLUDED_QUALITY, quality_of_raw
 from goniolab.store import PointRow, PredictedColour
 
 __all__ = ["NOISE_FLOOR_PCT", "PointColour", "colour_rows", "compare_rows", "flop_of_rows"]
@@ -40,6 +41,22 @@ class PointColour:
     settings: ColourSettings = ColourSettings()  # noqa: RUF009 -- frozen dataclass, safe default
     scale: Scale = "diffuser"
     detector_cone_deg: float = 6.0
+
+    @classmethod
+    def from_snapshot(cls, config: Mapping[str, Any]) -> PointColour:
+        """From a run's stored config snapshot (its ``colour`` and ``spectro`` tables);
+        the defaults where a key is absent (a store that predates them)."""
+        c = config.get("colour") or {}
+        d = ColourSettings()
+        return cls(
+            ColourSettings(
+                str(c.get("illuminant", d.illuminant)),
+                str(c.get("observer", d.observer)),
+                "Integration" if c.get("method") == "Integration" else "ASTM E308",
+            ),
+            c.get("scale", "diffuser"),
+            float((config.get("spectro") or {}).get("detector_cone_deg", 6.0)),
+        )
 
     @classmethod
     def from_config(cls, config: LabConfig) -> PointColour:
@@ -95,13 +112,50 @@ def _mean(values: Sequence[float]) -> float:
     return float(np.mean(values)) if values else float("nan")
 
 
+def _spectrum_of(p: PointRow) -> tuple[tuple[float, ...], tuple[float, ...]] | None:
+    """A stored reading's grid and spectrum (the absolute one when referenced), or None."""
+    wl = p.raw.get("wavelengths_nm")
+    v = p.raw.get("absolute_values") or p.raw.get("values")
+    if not wl or not v or len(wl) != len(v):
+        return None
+    return tuple(float(x) for x in wl), tuple(float(x) for x in v)
+
+
+def _mean_spectrum_colour(
+    pts: Sequence[PointRow], point_colour: PointColour, theta_r_deg: float
+) -> tuple[float, float, float] | None:
+    """L*a*b* of the repeats' mean spectrum (the spectra averaged, then converted), or
+    None when a repeat has no spectrum or the grids differ."""
+    spectra = [_spectrum_of(p) for p in pts]
+    if not spectra or any(s is None for s in spectra):
+        return None
+    grids = {s[0] for s in spectra if s is not None}
+    if len(grids) != 1:
+        return None
+    mean = np.mean([s[1] for s in spectra if s is not None], axis=0)
+    try:
+        return point_colour.measured(next(iter(grids)), list(mean), theta_r_deg).lab
+    except ValueError:
+        return None
+
+
 def colour_rows(
     points: Sequence[PointRow],
     predicted: Mapping[int, PredictedColour],
     theta_i_deg: float,
+    point_colour: PointColour | None = None,
 ) -> list[dict[str, Any]]:
-    """Per geometry: measured L*a*b* (mean over repeats with colour), C*, h, the predicted
-    L*a*b* and dE*ab / dE94 / dE2000 between them, and the aspecular angle."""
+    """Per geometry: measured L*a*b*, C*, h, the predicted L*a*b* and dE*ab / dE94 / dE2000
+    between them, the aspecular angle, and the repeatability.
+
+    With ``point_colour`` (the run's colour settings) the repeats are averaged as spectra
+    (the mean spectrum converted once: ``averaged = "spectra"``); otherwise, or when a
+    repeat has no spectrum, as L*a*b* (``averaged = "lab"``). Readings flagged saturated
+    or under the noise floor are left out. With two or more repeats: ``sd_L``, ``sd_a``,
+    ``sd_b`` (sample standard deviations between repeats) and ``dE00_repeat_mean`` /
+    ``dE00_repeat_max`` (CIEDE2000 of each repeat from the row's colour), the
+    repeatability a lab compares with its instrument's (0.05 dE for a good one).
+    """
     from goniolab.colour.multiangle import aspecular_deg
     from goniolab.colour.spectra import delta_e
 
@@ -112,7 +166,10 @@ def colour_rows(
     rows: list[dict[str, Any]] = []
     for idx in sorted(by_index):
         pts = by_index[idx]
-        cols = [p.colour for p in pts if p.colour is not None]
+        good = [
+            p for p in pts if p.colour is not None and quality_of_raw(p.raw) not in EXCLUDED_QUALITY
+        ]
+        cols = [p.colour for p in good if p.colour is not None]
         row: dict[str, Any] = {
             "index": idx,
             "theta_r_deg": pts[0].theta_r_deg,
@@ -120,8 +177,25 @@ def colour_rows(
             "n": len(cols),
         }
         if cols:
-            lab = np.array([[c["L"], c["a"], c["b"]] for c in cols]).mean(axis=0)
+            each = np.array([[c["L"], c["a"], c["b"]] for c in cols])
+            from_spectra = (
+                None
+                if point_colour is None
+                else _mean_spectrum_colour(good, point_colour, pts[0].theta_r_deg)
+            )
+            lab = each.mean(axis=0) if from_spectra is None else np.asarray(from_spectra)
+            row["averaged"] = "lab" if from_spectra is None else "spectra"
             row.update(L=float(lab[0]), a=float(lab[1]), b=float(lab[2]))
+            if len(cols) > 1:
+                sd = each.std(axis=0, ddof=1)
+                de = np.atleast_1d(delta_e(each, np.broadcast_to(lab, each.shape), "CIE 2000"))
+                row.update(
+                    sd_L=float(sd[0]),
+                    sd_a=float(sd[1]),
+                    sd_b=float(sd[2]),
+                    dE00_repeat_mean=float(de.mean()),
+                    dE00_repeat_max=float(de.max()),
+                )
             row.update(
                 C=float(np.hypot(lab[1], lab[2])),
                 h_deg=float(np.degrees(np.arctan2(lab[2], lab[1])) % 360.0),

@@ -92,6 +92,9 @@ class PointMeasured(Event):
     #: Measured CIE L*a*b* of the reading's spectrum (``None``: no colour, see the
     #: InstrumentError published before it).
     lab: tuple[float, float, float] | None = None
+    #: The reading's quality flag (:func:`goniolab.scan.exposure.reading_quality`): a
+    #: ``saturated`` or ``under_noise_floor`` reading is stored but not averaged or fitted.
+    quality: str = "unknown"
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

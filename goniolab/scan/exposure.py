@@ -21,10 +21,50 @@ from dataclasses import dataclass
 
 from drivers.base import Spectrocolorimeter, SpectroReading
 
-__all__ = ["SATURATED", "AutoExposure"]
+__all__ = [
+    "EXCLUDED_QUALITY",
+    "NOISE_FLOOR_FRACTION",
+    "QUALITY_FLAGS",
+    "SATURATED",
+    "AutoExposure",
+    "quality_of_raw",
+    "reading_quality",
+]
 
 #: A peak fraction at or above this is a clipped channel.
 SATURATED = 0.999
+
+#: A strongest channel below this fraction of full scale is under the noise floor: with a
+#: 16-bit detector that is < 1300 counts, where dark-current shot noise and read noise
+#: (tens of counts, sim/instruments.py SpectroChain) make the weak channels' values
+#: meaningless (several % each) -- the reading is stored but flagged and left out of fits.
+NOISE_FLOOR_FRACTION = 0.02
+
+#: Per-reading quality flags (stored in each reading's ``raw["quality"]``).
+QUALITY_FLAGS: tuple[str, ...] = ("ok", "saturated", "under_noise_floor", "unknown")
+
+#: Flags whose readings are stored and exported but left out of averages and fits.
+EXCLUDED_QUALITY: frozenset[str] = frozenset({"saturated", "under_noise_floor"})
+
+
+def quality_of_raw(raw: dict[str, object]) -> str:
+    """The stored flag of a reading's ``raw`` (``"unknown"`` for a store that predates it)."""
+    q = raw.get("quality")
+    return q if isinstance(q, str) else "unknown"
+
+
+def reading_quality(reading: SpectroReading) -> str:
+    """``"saturated"`` (a clipped channel: the values understate the light),
+    ``"under_noise_floor"`` (:data:`NOISE_FLOOR_FRACTION`), ``"ok"``, or ``"unknown"`` when
+    the instrument reports no signal level."""
+    pf = reading.peak_fraction
+    if pf is None:
+        return "unknown"
+    if pf >= SATURATED:
+        return "saturated"
+    if pf < NOISE_FLOOR_FRACTION:
+        return "under_noise_floor"
+    return "ok"
 
 
 @dataclass(frozen=True, slots=True)

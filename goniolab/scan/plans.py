@@ -173,7 +173,8 @@ class BrdfPlan:
         Sample spec (``sample:NAME`` or a height-map path) used for the prediction.
     auto_exposure
         Adapt the exposure to each reading (:mod:`goniolab.scan.exposure`), starting from
-        ``exposure_us``.
+        ``exposure_us`` (the default: a spectro that reports its signal level is never left
+        saturated or under its noise floor; one that does not keeps ``exposure_us``).
     sampling
         How ``theta_r_deg`` was chosen: ``"uniform"`` (as given) or ``"adaptive"`` (placed
         where the predicted curve bends, :mod:`goniolab.scan.adaptive`); a record only.
@@ -186,7 +187,7 @@ class BrdfPlan:
     exposure_us: int = 10000
     mirror_reference: bool = False
     sample: str = ""
-    auto_exposure: bool = False
+    auto_exposure: bool = True
     sampling: str = "uniform"
 
     def __post_init__(self) -> None:

@@ -78,10 +78,24 @@ class Predictor:
         )
 
     def predict_sync(self, theta_i_deg: float, theta_r_deg: Sequence[float]) -> NDArray[np.float64]:
-        """Predicted luminance in % of a mirror at ``theta_r_deg`` (blocking; for threads)."""
+        """Predicted luminance in % of a mirror at ``theta_r_deg`` (blocking; for threads).
+
+        The coat surface's reading (``model.luminance_pct``) plus, with a spectral
+        prediction, the paint body's: ``sum_l W_Y(l) f_body(l)`` (the Y row of the
+        ASTM E308 weights of the ``[colour]`` settings, Y = 100 for R = 1, so Y in %), the same body
+        the predicted colour includes (issue 21: white at theta_r 0 predicted 0.000 %
+        against 0.23 % measured)."""
         tr = np.asarray(theta_r_deg, dtype=np.float64)
         out = self.model.luminance_pct(theta_i_deg, tr, source=self.source, detector=self.detector)
-        return np.asarray(out, dtype=np.float64).reshape(tr.shape)
+        lum = np.asarray(out, dtype=np.float64).reshape(tr.shape)
+        if self.spectral is not None:
+            from goniolab.colour.spectra import xyz_weights
+
+            settings = (self.point_colour or PointColour()).settings
+            y = np.asarray(xyz_weights(self.spectral.wavelengths_nm, settings)[1])
+            body = np.asarray(self.spectral.paint_fraction(theta_i_deg, tr), dtype=np.float64)
+            lum = lum + (body @ y).reshape(tr.shape)  # W_Y @ fraction is Y in %
+        return lum
 
     async def predict(
         self, theta_i_deg: float, theta_r_deg: Sequence[float]
@@ -137,11 +151,11 @@ class Predictor:
 def model_name(model: ReflectanceModel) -> str:
     """The :func:`goniolab.models.model_for` name of ``model`` (``facet``, ``kirchhoff``,
     ``rayleigh-rice``, ``auto``), else its class name."""
-    from goniolab.models import MODEL_NAMES
+    from goniolab.model_registry import model_names
     from goniolab.optics.facet import FacetModel
 
     kind = getattr(model, "kind", None)
-    if isinstance(kind, str) and kind in MODEL_NAMES:
+    if isinstance(kind, str) and kind in model_names():
         return kind
     return "facet" if isinstance(model, FacetModel) else type(model).__name__
 

@@ -46,6 +46,7 @@ from typing import Any, TypeVar
 
 from drivers.base import (
     DeviceError,
+    DeviceFault,
     DeviceTimeout,
     Disconnected,
     Goniometer,
@@ -72,10 +73,17 @@ from goniolab.scan.events import (
     RunState,
     StateChanged,
 )
-from goniolab.scan.exposure import AutoExposure
+from goniolab.scan.exposure import (
+    EXCLUDED_QUALITY,
+    AutoExposure,
+    quality_of_raw,
+    reading_quality,
+)
 from goniolab.scan.plans import MIRROR_INDEX, BrdfPlan, PlanPoint
 from goniolab.scan.predict import Predictor
+from goniolab.scan.reference import SpectralReference
 from goniolab.scan.sanity import check_reading
+from goniolab.scan.standards import Standard
 from goniolab.scan.summary import summarize_brdf
 from goniolab.store import RunStore, StoreError, StoreUnavailable
 
@@ -86,6 +94,7 @@ __all__ = [
     "RunResult",
     "ScanRunner",
     "dry_run",
+    "reachable_range",
 ]
 
 #: Called with "mirror" before the mirror reference readings and "sample" after them;
@@ -128,14 +137,20 @@ class PlanRefused(Exception):
     """
 
     def __init__(
-        self, what: str, theta_i_deg: float, theta_r_deg: float, cause: DeviceError
+        self,
+        what: str,
+        theta_i_deg: float,
+        theta_r_deg: float,
+        cause: DeviceError,
+        reach: str = "",
     ) -> None:
         self.what = what
         self.theta_i_deg = theta_i_deg
         self.theta_r_deg = theta_r_deg
-        self.reason = cause.message
+        self.reason = cause.message + (f"; {reach}" if reach else "")
         super().__init__(
             f"{what} (theta_i={theta_i_deg:g} deg, theta_r={theta_r_deg:g} deg) is unsafe: {cause}"
+            + (f"; {reach}" if reach else "")
         )
 
     @property
@@ -226,6 +241,23 @@ class DryRun:
         return math.fsum(self.point_times_s) + self.park_s
 
 
+def reachable_range(goniometer: Goniometer) -> str:
+    """The requested angles the arms can reach once the alignment corrections are added
+    (``""`` without corrections): a sweep to a limit that an alignment moved is refused
+    with this range rather than failing mid-run."""
+    corr = getattr(goniometer, "corrections_deg", (0.0, 0.0))
+    if not any(corr):
+        return ""
+    parts = []
+    for axis, c, label in ((goniometer.lamp, corr[0], "theta_i"), (goniometer.detector, corr[1], "theta_r")):  # fmt: skip
+        lo, hi = axis.limits_deg
+        parts.append(f"{label} {lo - c:.3f}..{hi - c:.3f} deg")
+    return (
+        f"with the alignment corrections (lamp {corr[0]:+.3f}, detector {corr[1]:+.3f} deg) the "
+        f"arms reach {', '.join(parts)}"
+    )
+
+
 def dry_run(
     points: Sequence[PlanPoint],
     goniometer: Goniometer,
@@ -269,7 +301,8 @@ def dry_run(
         try:
             goniometer.check_geometry(*park_deg)
         except (LimitError, InterlockError) as exc:
-            raise PlanRefused("park position", *park_deg, exc) from exc
+            reach = reachable_range(goniometer) if isinstance(exc, LimitError) else ""
+            raise PlanRefused("park position", *park_deg, exc, reach) from exc
     times: list[float] = []
     pos = start_deg
     moves = 0
@@ -281,7 +314,8 @@ def dry_run(
                 goniometer.check_geometry(*target)
             except (LimitError, InterlockError) as exc:
                 what = "mirror reference" if p.index == MIRROR_INDEX else f"point {p.index}"
-                raise PlanRefused(what, *target, exc) from exc
+                reach = reachable_range(goniometer) if isinstance(exc, LimitError) else ""
+                raise PlanRefused(what, *target, exc, reach) from exc
             checked.add(target)
         t = reading_time_s
         if target != pos:
@@ -345,7 +379,13 @@ class ScanRunner:
         many times, each retry reported as a non-fatal ``InstrumentError``.
     reconnect_backoff_s
         Lab-clock wait before reopening a lost spectro or arm link (doubles with each
-        attempt).
+        attempt, at most 2 s).
+    reconnect_window_s
+        A lost link (:class:`drivers.base.Disconnected`: a controller or sim server
+        restarting) is reopened again and again, the scan waiting and saying so, for up to
+        this many lab-clock seconds since it was lost (a restart takes 7-20 s); the
+        operation then continues where it was (the reading or move not yet stored is taken
+        again: no point lost or repeated). Losses do not count against the retries.
     """
 
     def __init__(
@@ -372,6 +412,9 @@ class ScanRunner:
         reconnect_backoff_s: float = 0.5,
         point_colour: PointColour | None = None,
         store_outage_s: float = 600.0,
+        mirror_standard: Standard | None = None,
+        reconnect_window_s: float = 30.0,
+        notices: Sequence[str] = (),
     ) -> None:
         if reading_retries < 0:
             raise ValueError(f"reading_retries must be >= 0, got {reading_retries}")
@@ -399,7 +442,21 @@ class ScanRunner:
         #: how long a run waits, paused with the arms parked, for a store that cannot take
         #: a reading (a database down, a full disk) before it fails
         self.store_outage_s = store_outage_s
+        if not (math.isfinite(reconnect_window_s) and reconnect_window_s >= 0):
+            raise ValueError(f"reconnect_window_s must be >= 0, got {reconnect_window_s}")
+        self.reconnect_window_s = reconnect_window_s
+        #: warnings published (non-fatal) when the run starts: the calibration's age, a
+        #: missed check standard (:func:`goniolab.scan.calibrate.calibration_notices`)
+        self.notices = tuple(notices)
         self.point_colour = point_colour if point_colour is not None else PointColour()
+        if plan.mirror_reference and mirror_standard is None:
+            from goniolab.scan.standards import load_standards, standards_path
+
+            # the shipped certificate; its file is cited in every reading it references
+            mirror_standard = load_standards(standards_path("")).get("mirror")
+        #: the certified mirror the reference readings are divided by (docs/CALIBRATION.md)
+        self.mirror_standard = mirror_standard
+        self._reference: SpectralReference | None = None
         #: the last colour took under _INLINE_COLOUR_S: compute the next on the loop
         self._colour_inline = False
         if plan.mirror_reference and specimen_hook is None:
@@ -652,7 +709,7 @@ class ScanRunner:
                 )
 
     async def _colour_of(
-        self, reading: SpectroReading, p: PlanPoint, mirror_pct: float | None
+        self, reading: SpectroReading, p: PlanPoint, absolute: Sequence[float] | None
     ) -> tuple[dict[str, float] | None, str]:
         """The reading's colour (computed in a worker thread), or why there is none.
 
@@ -662,8 +719,9 @@ class ScanRunner:
         """
         from goniolab.colour.spectra import ColourError
 
-        mirror = None if p.index == MIRROR_INDEX or not self.plan.mirror_reference else mirror_pct
-        args = (reading.wavelengths_nm, reading.values, p.theta_r_deg, mirror)
+        # referenced to the certified mirror: the absolute spectrum (no further scaling)
+        spectrum = reading.values if absolute is None else tuple(absolute)
+        args = (reading.wavelengths_nm, spectrum, p.theta_r_deg, None)
         measured = self.point_colour.measured
         try:
             if self._colour_inline:
@@ -729,31 +787,58 @@ class ScanRunner:
         :class:`ProtocolError`, :class:`Disconnected`: then ``reconnect(attempt)`` first) up
         to ``retries`` times, each retry published as a non-fatal :class:`InstrumentError`
         saying ``what`` was being done; the last failure propagates (and fails the run)."""
-        for attempt in range(retries + 1):
+        attempt = 0
+        lost_since: float | None = None
+        reconnects = 0
+        while True:
             try:
                 return await op()
             except (DeviceTimeout, ProtocolError, Disconnected) as exc:
+                lost = isinstance(exc, Disconnected)
+                now = self.clock.now()
+                if lost:
+                    lost_since = now if lost_since is None else lost_since
+                    away_s = now - lost_since
+                    if reconnects and away_s >= self.reconnect_window_s:
+                        raise Disconnected(
+                            f"{exc.message} (link away {away_s:.3g} s, longer than the "
+                            f"reconnect window of {self.reconnect_window_s:g} s)",
+                            device=exc.device or device,
+                        ) from exc
+                    note = (
+                        f"reconnecting, link lost {away_s:.3g} s ago, waiting up to "
+                        f"{self.reconnect_window_s:g} s"
+                        if reconnects
+                        else f"retry {attempt + 1} of {retries}, reconnecting"
+                    )
+                    self.bus.publish(
+                        InstrumentError(
+                            run_id=self.run_id,
+                            device=exc.device or device,
+                            message=f"{exc} ({what}: {note})",
+                            fatal=False,
+                        )
+                    )
+                    await reconnect(reconnects)
+                    reconnects += 1
+                    continue
                 if attempt == retries:
                     raise
-                lost = isinstance(exc, Disconnected)
                 self.bus.publish(
                     InstrumentError(
                         run_id=self.run_id,
                         device=exc.device or device,
-                        message=f"{exc} ({what}: retry {attempt + 1} of {retries}"
-                        f"{', reconnecting' if lost else ''})",
+                        message=f"{exc} ({what}: retry {attempt + 1} of {retries})",
                         fatal=False,
                     )
                 )
-                if lost:
-                    await reconnect(attempt)
-        raise AssertionError("unreachable")  # pragma: no cover - the loop returns or raises
+                attempt += 1
 
     async def _reconnect_arms(self, attempt: int) -> None:
         """Reopen both arms' links after a lost one (on the wire they share a server, a
         dropped link may take both) after ``reconnect_backoff_s`` (doubling) of lab clock;
         a failed reopen is reported and the next attempt finds the link closed."""
-        await self.clock.sleep(min(8.0, self.reconnect_backoff_s * 2**attempt))
+        await self.clock.sleep(min(2.0, self.reconnect_backoff_s * 2**attempt))
         for axis in (self.goniometer.lamp, self.goniometer.detector):
             with contextlib.suppress(DeviceError):
                 await axis.close()
@@ -769,7 +854,7 @@ class ScanRunner:
         reopen is reported; the next attempt finds the link closed and tries again."""
         with contextlib.suppress(DeviceError):
             await self.spectro.close()
-        await self.clock.sleep(min(8.0, self.reconnect_backoff_s * 2**attempt))
+        await self.clock.sleep(min(2.0, self.reconnect_backoff_s * 2**attempt))
         try:
             await self.spectro.connect()
             await self.spectro.set_exposure_us(self._exposure_us)  # the plan's, or auto's
@@ -781,6 +866,36 @@ class ScanRunner:
         if len(vals) < self.plan.repeats:
             return None
         return math.fsum(vals) / len(vals)
+
+    def _load_reference(self) -> SpectralReference | None:
+        """The mirror reference of the run (its repeats averaged as spectra) once all its
+        readings are stored, else ``None``."""
+        if not self.plan.mirror_reference or self.mirror_standard is None:
+            return None
+        rows = [p for p in self.store.points(self.run_id) if p.index == MIRROR_INDEX]
+        if len(rows) < self.plan.repeats:
+            return None
+        usable = [p for p in rows if quality_of_raw(p.raw) not in EXCLUDED_QUALITY]
+        if not usable:
+            flags = sorted({quality_of_raw(p.raw) for p in rows})
+            raise DeviceFault(
+                f"every mirror reference reading is flagged ({', '.join(flags)}): the "
+                "reference cannot be used"
+                + ("" if self.plan.auto_exposure else "; --auto-exposure adapts the exposure"),
+                device="spectro",
+            )
+        rows = usable
+        readings = [
+            (
+                list(p.raw.get("wavelengths_nm") or ()),
+                list(p.raw.get("values") or ()),
+                float(p.raw.get("luminance_pct", p.luminance_pct)),
+            )
+            for p in rows
+        ]
+        return SpectralReference.from_readings(
+            self.mirror_standard, self.plan.theta_i_deg, readings, self.point_colour.settings
+        )
 
     # ------------------------------------------------------------------ run
     async def run(self) -> RunResult:
@@ -811,6 +926,10 @@ class ScanRunner:
                 sample=self.plan.sample,
             )
         )
+        for note in self.notices:
+            self.bus.publish(
+                InstrumentError(run_id=self.run_id, device="calibration", message=note, fatal=False)
+            )
         self._set_state(RunState.RUNNING)
         self._publish_progress(eta.total_s)
         predict_task = asyncio.create_task(self._predict_all(), name=f"predict-run-{self.run_id}")
@@ -895,6 +1014,7 @@ class ScanRunner:
                 "spectro",
             )
             self._mirror_pct = self._mirror_level()
+            self._reference = self._load_reference()
             eta.start(self.clock.now())
             for k, p in enumerate(todo):
                 await self._go_to(p)
@@ -933,8 +1053,22 @@ class ScanRunner:
         """Read ``p`` (with retries), scale it by the mirror level, store it, publish it."""
         reading = await self._read_spectro(p)
         raw_pct = float(reading.luminance_pct)
-        value = raw_pct if p.index == MIRROR_INDEX else self._relative_to_mirror(raw_pct)
-        colour, colour_error = await self._colour_of(reading, p, self._mirror_pct)
+        value, absolute, reference = self._referenced(reading, p)
+        quality = reading_quality(reading)
+        if quality in EXCLUDED_QUALITY:
+            self.bus.publish(
+                InstrumentError(
+                    run_id=self.run_id,
+                    device="spectro",
+                    message=f"point {p.index}, repeat {p.repeat} (theta_r {p.theta_r_deg:g} "
+                    f"deg): reading {quality.replace('_', ' ')} at {reading.exposure_us} us "
+                    "(stored, flagged, left out of averages and fits"
+                    + ("" if self.plan.auto_exposure else "; --auto-exposure adapts the exposure")
+                    + ")",
+                    fatal=False,
+                )
+            )
+        colour, colour_error = await self._colour_of(reading, p, absolute)
         ts = time.time()
         await self._store_reading(p, lambda: self.store.add_point(
             self.run_id,
@@ -951,7 +1085,11 @@ class ScanRunner:
                 "wavelengths_nm": list(reading.wavelengths_nm),
                 "values": list(reading.values),
                 "mirror_pct": self._mirror_pct,
+                "peak_fraction": reading.peak_fraction,
+                "quality": quality,
                 "clock_s": self.clock.now(),
+                **({"reference": reference} if reference else {}),
+                **({"absolute_values": list(absolute)} if absolute is not None else {}),
             },
             timestamp=ts,
             colour=colour,
@@ -971,15 +1109,37 @@ class ScanRunner:
                 measured_theta_r_deg=self._measured_deg[1],
                 predicted_pct=self._predicted.get(p.index),
                 lab=None if colour is None else (colour["L"], colour["a"], colour["b"]),
+                quality=quality,
             )
         )
 
-    def _relative_to_mirror(self, raw_pct: float) -> float:
-        """A sample reading in % of the mirror reference (once its readings are all
-        stored), else as read."""
-        if self._mirror_pct is None and self.plan.mirror_reference:
+    def _referenced(
+        self, reading: SpectroReading, p: PlanPoint
+    ) -> tuple[float, tuple[float, ...] | None, dict[str, Any]]:
+        """A sample reading referenced to the certified mirror (once the mirror's readings
+        are all stored; :class:`~goniolab.scan.reference.SpectralReference`):
+        ``(luminance %, absolute spectrum % or None, provenance)``; a mirror reading or a
+        run without reference as read."""
+        raw_pct = float(reading.luminance_pct)
+        if p.index == MIRROR_INDEX or not self.plan.mirror_reference:
+            return raw_pct, None, {}
+        if self._reference is None:
             self._mirror_pct = self._mirror_level()
-        return raw_pct if self._mirror_pct is None else 100.0 * raw_pct / self._mirror_pct
+            self._reference = self._load_reference()
+        if self._reference is None:
+            return raw_pct, None, {}
+        absolute, lum, info = self._reference.apply(reading.wavelengths_nm, reading.values, raw_pct)
+        if info["method"] != "spectral":
+            self.bus.publish(
+                InstrumentError(
+                    run_id=self.run_id,
+                    device="spectro",
+                    message=f"point {p.index}, repeat {p.repeat}: mirror reference applied "
+                    f"as a scalar: {info['method']}",
+                    fatal=False,
+                )
+            )
+        return lum, absolute, info
 
     async def _store_reading(self, p: PlanPoint, write: Callable[[], None]) -> None:
         """Commit reading ``p`` with ``write``. When the store cannot take it

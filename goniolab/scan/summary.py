@@ -131,9 +131,16 @@ def summarize_brdf(
         (:func:`prediction_check`; all ``None`` unless both maxima lie inside the measured
         range and it contains the specular direction; ``peak_note`` then says why).
     """
+    from goniolab.scan.exposure import EXCLUDED_QUALITY, quality_of_raw
+
     by_index: dict[int, list[float]] = {}
     mirror: list[float] = []
+    flagged: dict[str, int] = {}
     for p in points:
+        q = quality_of_raw(p.raw)
+        if q in EXCLUDED_QUALITY:  # stored and exported, never averaged or fitted
+            flagged[q] = flagged.get(q, 0) + 1
+            continue
         if p.index == MIRROR_INDEX:
             mirror.append(p.luminance_pct)
         else:
@@ -168,6 +175,7 @@ def summarize_brdf(
         "planned_readings": n_planned,
         "complete": n_readings == n_planned,
         "mirror_pct": (math.fsum(mirror) / len(mirror)) if mirror else None,
+        "flagged_readings": flagged,
         "rmse_pct": math.sqrt(math.fsum(r * r for r in residuals) / len(residuals))
         if residuals
         else None,

@@ -41,8 +41,8 @@ from goniolab.scan.events import (
 )
 from goniolab.tui.comparison import Comparison
 from goniolab.tui.palette import ScanCommands
-from goniolab.tui.screens import RunsScreen
-from goniolab.tui.view_model import ArmState, Backend, ScanSetup
+from goniolab.tui.screens import RunIdentityScreen, RunsScreen
+from goniolab.tui.view_model import ArmState, Backend, RunIdentity, ScanSetup
 from goniolab.tui.widgets import ComparisonPanel, GlossLog, ScanForm, StatusLine, StatusPanel
 
 __all__ = ["GonioApp", "alignment_note"]
@@ -55,11 +55,20 @@ def alignment_note(run_id: int, summary: dict[str, object]) -> str:
         value = summary.get(key)
         return f"{value:+.3f} deg" if isinstance(value, int | float) else "?"
 
+    where = summary.get("state_file")
+    saved = (
+        f"saved to {where}, later moves corrected"
+        if isinstance(where, str) and where
+        else "stored with the run only, this session's moves corrected"
+    )
     return (
         f"run {run_id}: lamp zero {deg('lamp_zero_deg')}, detector zero "
-        f"{deg('detector_zero_deg')}, sample tilt {deg('sample_tilt_deg')}; "
-        "written to [alignment], later moves corrected"
+        f"{deg('detector_zero_deg')}, sample tilt {deg('sample_tilt_deg')}; {saved}"
     )
+
+
+#: Seconds within which a second ``a`` confirms an alignment.
+ALIGN_CONFIRM_S = 5.0
 
 
 #: After a hangup, once the lab is released, the process ends within this many seconds even
@@ -96,6 +105,7 @@ _LAB_ACTIONS = frozenset(
         "cycle_plot",
         "browse_runs",
         "toggle_form",
+        "run_identity",
         "blur",
     }
 )
@@ -139,6 +149,7 @@ class GonioApp(App[int]):
         Binding("c", "cycle_plot", "Colour plot"),
         Binding("r", "browse_runs", "Runs"),
         Binding("f", "toggle_form", "Form/plot"),
+        Binding("i", "run_identity", "Identity"),
         Binding("q", "quit", "Quit"),
         Binding("escape", "blur", "Leave field", show=False),
     ]
@@ -200,6 +211,7 @@ class GonioApp(App[int]):
         self._hung_up = False  # SIGHUP: the terminal is gone
         self._lab_released = False
         self._starting = False
+        self._align_asked_at = -math.inf  # when `a` last asked for its confirmation
         self._opening = False  # backend.open() or home() in progress
         self._gloss_polling = False
         self._error_toast_s: dict[str, float] = {}  # device -> time of its last error toast
@@ -263,6 +275,18 @@ class GonioApp(App[int]):
                 if tiny
                 else ""
             )
+
+    def action_run_identity(self) -> None:
+        """Ask for the operator, physical sample id, notes and tags of the next runs."""
+
+        def chosen(identity: RunIdentity | None) -> None:
+            if identity is None:
+                return
+            self.backend.run_identity = identity
+            said = identity.describe() or "cleared (the config's [run] table applies)"
+            self.notify(f"next runs: {said}", title="Run identity", timeout=5)
+
+        self.push_screen(RunIdentityScreen(self.backend.run_identity), chosen)
 
     def action_toggle_form(self) -> None:
         """Under 120 columns: show the setup form and instrument panel instead of the
@@ -657,9 +681,26 @@ class GonioApp(App[int]):
         self._start()
 
     def action_align(self) -> None:
-        """Align the arms and the sample from the data (key ``a``; ``scan --plan align``):
-        the black-glass standard, then the form's sample; the result is written into the
-        config's ``[alignment]`` and corrects every later move."""
+        """Align the arms and the sample from the data (key ``a``, pressed twice within
+        :data:`ALIGN_CONFIRM_S`; ``scan --plan align``): the black-glass standard, then the
+        form's sample; the result is saved to the lab's alignment state file (never the
+        config) and corrects every later move. Refused while a form field is being edited."""
+        if isinstance(self.focused, Input | Select):
+            self.notify(
+                "a form field is being edited: leave it (Esc) before aligning",
+                title="Align", severity="warning",
+            )  # fmt: skip
+            return
+        now = time.monotonic()
+        if now - self._align_asked_at > ALIGN_CONFIRM_S:
+            self._align_asked_at = now
+            self.notify(
+                "align the arms? It needs the black-glass standard on the reference seat, "
+                "then the sample, and replaces the lab's alignment: press a again to start",
+                title="Align", timeout=ALIGN_CONFIRM_S,
+            )  # fmt: skip
+            return
+        self._align_asked_at = -math.inf
         if not self.ready.is_set():
             self.notify("the lab is not ready (not homed)", title="Align", severity="warning")
             return

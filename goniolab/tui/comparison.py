@@ -147,6 +147,8 @@ class Comparison:
     last_colour_index: int | None = None
     #: The run's incidence (for the aspecular angles of the colour table).
     theta_i_deg: float = 45.0
+    #: readings flagged saturated / under the noise floor (kept off the curve), by flag
+    flagged: dict[str, int] = field(default_factory=dict)
 
     def clear(self, *, run_id: int = 0, sample: str = "", theta_i_deg: float = 45.0) -> None:
         """Forget the curve and start collecting for ``run_id``.
@@ -162,6 +164,7 @@ class Comparison:
         self.lab.clear()
         self.predicted_lab.clear()
         self.last_colour_index = None
+        self.flagged.clear()
 
     def add_measured(self, ev: PointMeasured) -> None:
         """Record one reading (one repeat of plan point ``ev.index``).
@@ -170,6 +173,10 @@ class Comparison:
         of the curve and are skipped.
         """
         if ev.index < 0:
+            return
+        if ev.quality in ("saturated", "under_noise_floor"):
+            # shown (the runner's warning toast), counted, never averaged into the curve
+            self.flagged[ev.quality] = self.flagged.get(ev.quality, 0) + 1
             return
         self.readings.setdefault(ev.index, []).append(ev.luminance_pct)
         self.theta_r_deg.setdefault(ev.index, ev.theta_r_deg)

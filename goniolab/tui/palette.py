@@ -16,7 +16,7 @@ SCAN_COMMANDS: tuple[tuple[str, str, str], ...] = (
     (
         "Align arms and sample",
         "align",
-        "Arm zero offsets and sample tilt from the data, into [alignment] (a)",
+        "Arm zero offsets and sample tilt from the data, saved beside the store (a, twice)",
     ),
     ("Read glossmeter", "read_gloss", "One 20/60/85 reading beside the prediction (g)"),
     ("Home the arms", "home", "Reset the arms' alarms and home them again (h)"),
@@ -24,6 +24,7 @@ SCAN_COMMANDS: tuple[tuple[str, str, str], ...] = (
     ("Cycle colour plot", "cycle_plot", "Main plot: luminance, L* or a*/b* vs angle (c)"),
     ("Browse stored runs", "browse_runs", "Reopen a stored run's comparison (r)"),
     ("Show form / plots", "toggle_form", "Under 120 columns: the setup form or the plots (f)"),
+    ("Run identity", "run_identity", "Operator, sample id, notes, tags of the next runs (i)"),
     ("Quit", "quit", "Leave goniolab (q)"),
 )
 

@@ -1,4 +1,5 @@
-"""The runs browser: list stored runs, reopen one and show its comparison and metrics."""
+"""The runs browser (list stored runs, reopen one and show its comparison and metrics)
+and the run-identity dialog (operator, physical sample id, notes, tags of the next runs)."""
 
 from __future__ import annotations
 
@@ -8,14 +9,63 @@ from typing import ClassVar
 from textual import work
 from textual.app import ComposeResult
 from textual.binding import Binding, BindingType
-from textual.screen import Screen
-from textual.widgets import DataTable, Footer, Header, Static
+from textual.containers import Vertical
+from textual.screen import ModalScreen, Screen
+from textual.widgets import DataTable, Footer, Header, Input, Label, Static
 
 from goniolab.tui.comparison import Comparison
-from goniolab.tui.view_model import Backend, RunSummary, StoredRun
+from goniolab.tui.view_model import Backend, RunIdentity, RunSummary, StoredRun
 from goniolab.tui.widgets import ComparisonPanel
 
-__all__ = ["RunsScreen"]
+__all__ = ["RunIdentityScreen", "RunsScreen"]
+
+
+class RunIdentityScreen(ModalScreen[RunIdentity | None]):
+    """Operator, physical sample id, notes and tags stored with the next runs (scans and
+    gloss readings); Enter saves, Esc leaves them as they were. Tags: comma-separated."""
+
+    BINDINGS: ClassVar[list[BindingType]] = [Binding("escape", "cancel", "Cancel")]
+    DEFAULT_CSS = """
+    RunIdentityScreen { align: center middle; }
+    RunIdentityScreen > Vertical {
+        width: 64; height: auto; border: round $primary; padding: 0 1; background: $surface;
+    }
+    RunIdentityScreen Input { margin: 0 0 1 0; }
+    """
+
+    def __init__(self, current: RunIdentity) -> None:
+        super().__init__()
+        self.current = current
+
+    def compose(self) -> ComposeResult:
+        c = self.current
+        with Vertical() as box:
+            box.border_title = "run identity (Enter saves, Esc cancels)"
+            yield Label("operator")
+            yield Input(c.operator, id="operator", placeholder="who measures")
+            yield Label("physical sample id")
+            yield Input(c.sample_id, id="sample_id", placeholder="label, LIMS number")
+            yield Label("notes")
+            yield Input(c.notes, id="notes", placeholder="free text")
+            yield Label("tags (comma-separated)")
+            yield Input(", ".join(c.tags), id="tags", placeholder="batch-7, wet")
+
+    def on_input_submitted(self) -> None:
+        def text(field: str) -> str:
+            return self.query_one(f"#{field}", Input).value.strip()
+
+        tags = tuple(dict.fromkeys(t.strip() for t in text("tags").split(",") if t.strip()))
+        self.dismiss(
+            RunIdentity(
+                operator=text("operator"),
+                sample_id=text("sample_id"),
+                notes=text("notes"),
+                tags=tags,
+            )
+        )
+
+    def action_cancel(self) -> None:
+        self.dismiss(None)
 
 
 class RunsScreen(Screen[None]):

@@ -39,9 +39,9 @@ from goniolab.scan.plans import DEFAULT_REPEATS, BrdfPlan, GlossPlan, PlanError
 from goniolab.scan.predict import Predictor
 from goniolab.scan.runner import PlanRefused, ScanRunner
 from goniolab.session import GlossSession, ScanSession, check_sample
-from goniolab.store import RunStore, StoreError, resolve_store_path
+from goniolab.store import RunMeta, RunStore, StoreError, resolve_store_path
 from goniolab.surfaces.samples import sample_names
-from goniolab.tui.view_model import ArmState, RunSummary, ScanSetup, StoredRun
+from goniolab.tui.view_model import ArmState, RunIdentity, RunSummary, ScanSetup, StoredRun
 
 __all__ = ["SessionBackend"]
 
@@ -110,9 +110,17 @@ class SessionBackend:
         # future of the one reading that serves them all (issue 27, item 7)
         self._gloss_next: str | None = None
         self._gloss_next_done: asyncio.Future[None] | None = None
-        self._gloss_runs: dict[str, int] = {}
+        self._gloss_runs: dict[tuple[str, RunIdentity], int] = {}
         self._scan_sample = ""
+        #: Stored with every run started from now on (key i in the TUI).
+        self.run_identity = RunIdentity()
         self._closed = False
+
+    def _run_meta(self) -> RunMeta:
+        """:attr:`run_identity` as the store's run metadata (the config's ``[run]`` table
+        fills what it leaves empty: ScanSession.start / GlossSession.create_run)."""
+        i = self.run_identity
+        return RunMeta(operator=i.operator, sample_id=i.sample_id, notes=i.notes, tags=i.tags)
 
     # ------------------------------------------------------------------ lifecycle
     @property
@@ -261,7 +269,7 @@ class SessionBackend:
         if self.running:  # started meanwhile (the model was built in a thread)
             raise UserError("a scan is already running")
         self._scan_sample = setup.sample
-        self._runner = runner = session.start(scan)
+        self._runner = runner = session.start(scan, meta=self._run_meta())
         self._task = asyncio.get_running_loop().create_task(
             self._run(session, runner), name=f"tui-run-{runner.run_id}"
         )
@@ -269,8 +277,8 @@ class SessionBackend:
 
     async def align(self, sample: str) -> int:
         """Start ``scan --plan align`` for ``sample`` in a task (the CLI's default plan,
-        :class:`~goniolab.scan.align.AlignPlan`); ``[alignment]`` is written into the
-        config file and the arms correct every later move. Return the run id once the
+        :class:`~goniolab.scan.align.AlignPlan`); the result is saved to the lab's
+        alignment state file (never the config file) and the arms correct every later move. Return the run id once the
         run is stored."""
         session = self._require_open()
         if self.running:
@@ -301,7 +309,7 @@ class SessionBackend:
     ) -> None:
         """Run the alignment; a failure after the run was stored becomes events."""
         try:
-            await session.align(plan, write_config=self.config_path, started=on_start)
+            await session.align(plan, save_state=True, started=on_start)
         except Exception as exc:
             runner = self._align_runner
             if runner is None or runner.plan is not plan:
@@ -420,9 +428,12 @@ class SessionBackend:
             if not self.running:  # a scan's sample stays under them
                 session.lab.put_sample(prediction.model, sample)
         plan = GlossPlan(count=1, angles_deg=GLOSS_ANGLES_DEG, sample=sample)
-        run_id = self._gloss_runs.get(sample)
+        key = (sample, self.run_identity)  # a new identity starts a new gloss run
+        run_id = self._gloss_runs.get(key)
         if run_id is None:
-            run_id = self._gloss_runs[sample] = self.gloss.create_run(plan, prediction)
+            run_id = self._gloss_runs[key] = self.gloss.create_run(
+                plan, prediction, meta=self._run_meta()
+            )
             # held while the app is open: another 'goniolab runs list' reads it as running,
             # not interrupted (a run stored as running that nobody claims)
             self._stack.enter_context(self.gloss.store.claim_run(run_id))

@@ -25,7 +25,29 @@ from goniolab.scan.events import (
 )
 from goniolab.scan.plans import PlanError, angle_range
 
-__all__ = ["ArmState", "Backend", "RunSummary", "ScanSetup", "StoredRun"]
+__all__ = ["ArmState", "Backend", "RunIdentity", "RunSummary", "ScanSetup", "StoredRun"]
+
+
+@dataclass(frozen=True, slots=True)
+class RunIdentity:
+    """Who measures which physical sample, with notes and tags: stored with every run the
+    TUI starts (scans and gloss logs) until changed (key ``i``); the config's ``[run]``
+    table fills what is left empty."""
+
+    operator: str = ""
+    sample_id: str = ""
+    notes: str = ""
+    tags: tuple[str, ...] = ()
+
+    def describe(self) -> str:
+        """One line for the user ("" when nothing is set)."""
+        parts = [
+            f"operator {self.operator}" if self.operator else "",
+            f"sample id {self.sample_id}" if self.sample_id else "",
+            f"tags {', '.join(self.tags)}" if self.tags else "",
+            "notes" if self.notes else "",
+        ]
+        return "; ".join(p for p in parts if p)
 
 
 #: The setup form's label of each field: what an error names (not the attribute name).
@@ -164,6 +186,9 @@ class Backend(Protocol):
         """Reset the arms' alarms and home the goniometer again (connecting first if
         :meth:`open` failed before the instruments were reached)."""
         ...
+
+    #: Stored with every run started from now on (scans, gloss logs).
+    run_identity: RunIdentity
 
     def sample_names(self) -> list[str]:
         """Built-in samples for the picker (without the ``sample:`` prefix)."""

@@ -364,6 +364,8 @@ class ModbusAxisServer:
                 fault = faults.decide()
                 if fault is Fault.DROP:
                     faults.drop(now)
+                elif fault is Fault.LATE:
+                    fault = Fault.NONE  # answered on time (sim.faults: late is serial-only)
             if fault is Fault.DISCONNECT:
                 return ExcCodes.GATEWAY_NO_RESPONSE
             if fault is not Fault.NONE:

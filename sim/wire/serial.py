@@ -26,7 +26,7 @@ from typing import Any
 from drivers.profiles import StilProfile, ZgmProfile, template_regex
 from drivers.timing import Clock
 from sim.faults import Fault, FaultInjector
-from sim.instruments import SPECTRUM_WAVELENGTHS_NM, SimGlossmeter, SimSpectro
+from sim.instruments import SimGlossmeter, SimSpectro
 from sim.wire.zgm import ZgmProtocol
 
 __all__ = ["MAX_LINE_BYTES", "MAX_PENDING_LINES", "StilPtyDevice", "ZgmPtyDevice"]
@@ -292,6 +292,8 @@ class StilPtyDevice(PtyDevice):
         self.clock = spectro.clock
         self.profile = profile
         self._exposure_re = template_regex(profile.cmd_set_exposure)
+        #: Every measurement answered: (effective theta_i, theta_r, the reply's first line).
+        self.answered: list[tuple[float, float, str]] = []
 
     def _reply(self, lines: list[str], fault: Fault) -> None:
         p = self.profile
@@ -334,8 +336,13 @@ class StilPtyDevice(PtyDevice):
                 lines = [p.reply_set_exposure.format(exposure_us=exposure)]
         elif text == p.cmd_measure:
             lines = await self._measure_lines()
+            # what was answered at which geometry (the soak checks each stored reading
+            # against it: a reading stored at the wrong angle cannot hide)
+            self.answered.append((*self.spectro.geometry_deg(), lines[0]))
         else:
             lines = self._error(1, f"unknown command {text[:40]}")
+        if fault is Fault.LATE:  # busy: the answer, and every command behind it, waits
+            await asyncio.sleep(self.faults.spec.late_s)
         self._reply(lines, fault)
 
     async def _handle_overlong(self) -> None:
@@ -348,19 +355,21 @@ class StilPtyDevice(PtyDevice):
         )
 
     async def _measure_lines(self) -> list[str]:
-        from sim.instruments import spectrum_for_luminance
-
-        lum = await self.spectro.read_luminance_pct()
-        values = spectrum_for_luminance(lum)
-        wl = SPECTRUM_WAVELENGTHS_NM
+        """The twin's own reading (its spectrum, not one synthesised from the luminance:
+        issue 21 found colour over the wire grey), and its signal level for a profile whose
+        reply carries ``{peak_fraction}`` (-1 when the twin has no detector model)."""
+        reading = await self.spectro.reading()
+        values = reading.values
+        wl = reading.wavelengths_nm
         fields: dict[str, Any] = {
-            "luminance_pct": lum,
+            "luminance_pct": reading.luminance_pct,
             "start_nm": int(wl[0]),
             "step_nm": int(wl[1] - wl[0]),
             "count": len(values),
-            "values": ",".join(f"{v:.4f}" for v in values),
+            "values": ",".join(f"{v:.6g}" for v in values),
             "exposure_us": self.spectro.exposure_us,
             "ident": "STIL RUBY",
+            "peak_fraction": -1 if reading.peak_fraction is None else reading.peak_fraction,
         }
         return [t.format(**fields) for t in self.profile.reply_measure]
 
@@ -415,6 +424,8 @@ class ZgmPtyDevice(PtyDevice):
         self._sync_autosend()
         if reply is None:
             return
+        if fault is Fault.LATE:  # busy: the answer, and every command behind it, waits
+            await asyncio.sleep(self.faults.spec.late_s)
         data = reply.encode("ascii")
         if fault is Fault.GARBLE:
             data = self.gloss.faults.garble(data)

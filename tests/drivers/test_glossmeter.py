@@ -11,7 +11,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from drivers.base import DeviceFault, Disconnected, Glossmeter, GlossReading, ProtocolError
+from drivers.base import (
+    DeviceFault,
+    DeviceTimeout,
+    Disconnected,
+    Glossmeter,
+    GlossReading,
+    ProtocolError,
+)
 from drivers.glossmeter import (
     LineGlossmeter,
     Zgm1120,
@@ -104,16 +111,30 @@ async def test_measure_with_temperature_sends_istemp_1(pty_pair: Any) -> None:
     assert reading.temperature_c == 25.0
 
 
-async def test_transaction_ids_advance_and_mismatch_is_protocol_error(pty_pair: Any) -> None:
-    meter = Zgm1120(port=pty_pair.path, first_transaction_id="az")
+async def test_transaction_ids_advance_and_a_stale_reply_is_skipped(pty_pair: Any) -> None:
+    # the transaction id is what ties a reply to its request (manual p. 12-13): a line
+    # with another id is a late answer to an earlier request and is skipped, counted; the
+    # reading is the one carrying this request's id (a mismatch used to fail the request,
+    # and with a late meter every later one, each reading the answer to the one before)
+    meter = Zgm1120(port=pty_pair.path, first_transaction_id="az", timeout_s=0.3)
     await meter.connect()
     fake = asyncio.create_task(exchange(pty_pair, b"1| 401120999|az|958|94|-1|-1|993|78|1|25\r\n"))
     await meter.measure()
     assert await fake == b"1| 401120999|az|7|1|0:"
-    fake = asyncio.create_task(exchange(pty_pair, b"1| 401120999|xx|958|94|-1|-1|993|78|1|25\r\n"))
-    with pytest.raises(ProtocolError, match="transaction id mismatch: sent 'ba'"):
-        await meter.measure()
+    late_then_own = (
+        b"1| 401120999|az|111|94|-1|-1|111|78|1|25\r\n"  # the late answer to 'az'
+        b"1| 401120999|ba|958|94|-1|-1|993|78|1|25\r\n"
+    )
+    fake = asyncio.create_task(exchange(pty_pair, late_then_own))
+    reading = await meter.measure()
     assert await fake == b"1| 401120999|ba|7|1|0:"
+    assert reading.values_gu[20] == 95.8 and meter.stale_replies == 1
+    # only a stale line: this request got no answer of its own
+    fake = asyncio.create_task(exchange(pty_pair, b"1| 401120999|xx|958|94|-1|-1|993|78|1|25\r\n"))
+    with pytest.raises(DeviceTimeout):
+        await meter.measure()
+    assert await fake == b"1| 401120999|bb|7|1|0:"
+    assert meter.stale_replies == 2
     await meter.close()
 
 

@@ -27,6 +27,7 @@ def test_builtin_profiles_load_with_their_kinds() -> None:
         "applied-motion-mdx": StepperProfile,
         "applied-motion-stq": StepperProfile,
         "stil-ruby": StilProfile,
+        "stil-ruby-level": StilProfile,
         "zgm1120": ZgmProfile,
         "line-gloss-example": LineGlossProfile,
     }

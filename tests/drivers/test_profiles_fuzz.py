@@ -106,7 +106,7 @@ def _assert_works(profile: Any) -> None:
         fields: dict[str, Any] = {
             "luminance_pct": 12.3456, "start_nm": 380, "step_nm": 5, "count": 3,
             "values": "1.0000,2.0000,3.0000", "exposure_us": profile.exposure_default_us,
-            "ident": "STIL RUBY",
+            "ident": "STIL RUBY", "peak_fraction": 0.5,
         }  # fmt: skip
         lines = [t.format(**fields) for t in profile.reply_measure]
         luminance, wavelengths, values = parse_measure_reply(profile, lines)

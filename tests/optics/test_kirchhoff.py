@@ -20,11 +20,11 @@ import numpy as np
 import pytest
 
 from goniolab.optics.apertures import Cone, Rect, integrate_brdf
+from goniolab.optics.cell_apertures import CellBox
 from goniolab.optics.facet import FacetModel
 from goniolab.optics.fresnel import fresnel, fresnel_dielectric
 from goniolab.optics.heightmap import HeightMap, fill_missing, level_plane
 from goniolab.optics.kirchhoff import KirchhoffModel, band_plan
-from goniolab.optics.physical import _Box
 from goniolab.optics.psd import TiledMap, psd2, schwartz_taper
 from goniolab.optics.rayleigh_rice import RayleighRiceModel, rr_q_factor
 from goniolab.optics.surface import Surface
@@ -253,7 +253,7 @@ def test_cell_fields_match_a_direct_sum_over_the_map(backend: str) -> None:
     t = model._shared.tiled
     assert (t.n_tiles, t.ny_t, t.nx_t) == (6, 32, 24)
     ti, lams = 30.0, [0.45, 0.65]
-    boxes = [_Box(-6, 8, -5, 5), _Box(3, 11, -15, -2)]  # the second misses specular
+    boxes = [CellBox(-6, 8, -5, 5), CellBox(3, 11, -15, -2)]  # the second misses specular
     geo = [model._geometry(ti, lam, b) for lam, b in zip(lams, boxes, strict=True)]
     raw, coh = model._raw_power(ti, lams, boxes, [(g[2], g[3]) for g in geo])
     vz_all = np.concatenate(

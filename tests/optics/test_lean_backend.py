@@ -18,7 +18,8 @@ import pytest
 from goniolab.optics import _kernels_numpy as KN
 from goniolab.optics import gloss_standards as gs
 from goniolab.optics.apertures import Cone
-from goniolab.optics.facet import LEAN_SLOPE_BIN, FacetModel
+from goniolab.optics.facet import FacetModel
+from goniolab.optics.facet_backends import LEAN_SLOPE_BIN
 from goniolab.optics.gloss_standards import gloss_report
 from goniolab.optics.heightmap import HeightMap
 from goniolab.optics.surface import Surface

@@ -14,8 +14,9 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from goniolab.optics import facet as facet_mod
-from goniolab.optics.facet import LEAN_SLOPE_BIN, FacetModel
+from goniolab.optics import facet_backends
+from goniolab.optics.facet import FacetModel
+from goniolab.optics.facet_backends import LEAN_SLOPE_BIN
 from goniolab.optics.heightmap import HeightMap
 from goniolab.optics.surface import Surface
 
@@ -52,9 +53,9 @@ def test_cells_are_the_occupied_slope_pairs(spike_um: float) -> None:
 def test_sparse_and_dense_counting_agree(monkeypatch: pytest.MonkeyPatch) -> None:
     surf = Surface.from_heightmap(_spiked(96, 0.0))  # a dense-sized range
     dense = _sorted(FacetModel(surf, backend="lean")._slope_cells)
-    monkeypatch.setattr(facet_mod, "_DENSE_MIN_CELLS", 0)
-    monkeypatch.setattr(facet_mod, "_DENSE_CELLS_PER_FACET", 0)
-    monkeypatch.setattr(facet_mod, "_CELL_BLOCK", 1000)  # several blocks merged
+    monkeypatch.setattr(facet_backends, "_DENSE_MIN_CELLS", 0)
+    monkeypatch.setattr(facet_backends, "_DENSE_CELLS_PER_FACET", 0)
+    monkeypatch.setattr(facet_backends, "_CELL_BLOCK", 1000)  # several blocks merged
     sparse = _sorted(FacetModel(surf, backend="lean")._slope_cells)
     np.testing.assert_array_equal(sparse, dense)
 

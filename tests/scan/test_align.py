@@ -18,9 +18,19 @@ from goniolab.lab import draw_session
 from goniolab.optics.apertures import Cone
 from goniolab.optics.facet import cap_overlap_fraction
 from goniolab.optics.fresnel import fresnel
-from goniolab.scan.align import AlignPlan, fit_standard, half_max_midpoint
+from goniolab.scan.align import (
+    AlignGates,
+    AlignPlan,
+    AlignRefused,
+    StandardFit,
+    check_standard,
+    fit_standard,
+    fit_standard_full,
+    half_max_midpoint,
+)
 from goniolab.scan.exposure import AutoExposure
 from goniolab.scan.plans import PlanError
+from goniolab.store import RunStore
 
 
 def test_black_glass_fit_recovers_both_zero_offsets_from_synthetic_readings() -> None:
@@ -126,6 +136,7 @@ def test_align_on_the_twin_recovers_offsets_and_tilt_within_005_deg(
     # prediction); seed 5 a large tilt (0.92 deg) and closes the loop with a scan;
     # bench/bench_align.py runs 20 sessions
     cfg_path = misaligned_config(tmp_path, seed)
+    before = cfg_path.read_text()
     truth = draw_session(load_lab_config(cfg_path))
     keys = ("lamp_zero_offset_deg", "detector_zero_offset_deg", "sample_tilt_deg")
     assert min(abs(truth[k]) for k in keys) > (0.75 if seed == 225 else 0.02)
@@ -138,10 +149,43 @@ def test_align_on_the_twin_recovers_offsets_and_tilt_within_005_deg(
         ("sample_tilt_deg", "sample_tilt_deg"),
     ):
         assert got[key] == pytest.approx(truth[true_key], abs=0.05), key
-    alignment = load_lab_config(cfg_path).alignment  # written into the config
+    # saved beside the store, never into the tracked config (issue 22)
+    assert cfg_path.read_text() == before
+    state = tmp_path / "lab.alignment.toml"
+    assert got["state_file"] == str(state) and state.is_file()
+    alignment = load_lab_config(cfg_path).alignment
+    assert alignment.loaded_from == str(state)
     assert alignment.lamp_zero_deg == pytest.approx(float(got["lamp_zero_deg"]), abs=1e-4)  # type: ignore[arg-type]
+    fit = got["standard_fit"]
+    assert isinstance(fit, dict)
+    # the geometric check (peaks' midpoints) agrees with the Fresnel fit's lamp - detector
+    assert abs(fit["geometric_difference_deg"] - fit["fit_difference_deg"]) < 0.05
+    assert fit["lamp_zero_sigma_deg"] < 0.05 and abs(fit["scale"] - 1) < 0.15
     if seed != 5:
+        # an alignment run plots and exports (issue 22: BrdfPlan.from_dict TypeError)
+        store = str(tmp_path / "runs.sqlite")
+        png, nc = tmp_path / "align.png", tmp_path / "align.nc"
+        assert main(["plot", "1", "--store", store, "-o", str(png)]) == 0
+        assert png.stat().st_size > 10_000
+        assert (
+            main(["runs", "export", "1", "--store", store, "--format", "netcdf", "-o", str(nc)])
+            == 0
+        )
+        import xarray as xr
+
+        with xr.open_dataset(nc) as ds:
+            assert ds.sizes["reading"] == got["readings"]
+            assert set(np.unique(ds["specimen"].values)) == {"standard", "sample"}
+            assert json.loads(ds.attrs["alignment_json"])["lamp_zero_deg"] == got["lamp_zero_deg"]
         return
+    # a sweep to the detector's limit (the README's 0:70:1) is refused up front with the
+    # range the corrected arms reach (it used to fail on theta_r 70.04 outside [0, 70])
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        code = main(["scan", "--config", str(cfg_path), "--theta-r", "0:70:1", "--time-scale", "0"])
+    assert code != 0
+    c_det = -(alignment.detector_zero_deg - alignment.sample_tilt_deg)
+    assert f"theta_r {0 - c_det:.3f}..{70 - c_det:.3f} deg" in err.getvalue(), err.getvalue()
     # the loop closes: a scan with the corrections finds the peak where the model puts it
     scan = run_json(
         ["scan", "--config", str(cfg_path), "--theta-r", "40:50:0.5", "--time-scale", "0", "--json"]
@@ -153,3 +197,129 @@ def test_align_on_the_twin_recovers_offsets_and_tilt_within_005_deg(
     )
     assert abs(c) > 1.0  # uncorrected, the peak would be off by this much
     assert abs(float(scan["peak_offset_deg"])) < 0.05  # type: ignore[arg-type]
+
+
+def _misplaced(monkeypatch: pytest.MonkeyPatch, instead: str) -> None:
+    """The operator puts ``instead`` where the black-glass standard belongs."""
+    from goniolab.lab import Lab
+
+    place = Lab._place_specimen
+
+    async def wrong(self: Lab, which: str) -> None:
+        await place(self, instead if which == "standard" else which)
+
+    monkeypatch.setattr(Lab, "_place_specimen", wrong)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("instead", "says"),
+    [("sample", "missing or misplaced"), ("mirror", "reads like a mirror")],
+)
+def test_align_refuses_a_missing_or_wrong_standard_and_writes_nothing(
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+    instead: str,
+    says: str,
+) -> None:
+    # issue 21: with the standard not placed, the alignment exited 0 and wrote zeros of
+    # +3.4 / +3.3 deg (truth -0.14 / +0.12); with the mirror, -39.9 deg
+    cfg_path = misaligned_config(tmp_path, 5)
+    before = cfg_path.read_text()
+    _misplaced(monkeypatch, instead)
+    code = main(["scan", "--config", str(cfg_path), "--plan", "align", "--time-scale", "0"])
+    err = capsys.readouterr().err
+    assert code == 1
+    assert "refused" in err and says in err, err
+    assert "certificate SIM-BG-0001" in err
+    assert cfg_path.read_text() == before  # nothing written
+    with RunStore(str(tmp_path / "runs.sqlite")) as store:
+        run = store.list_runs()[0]
+        assert run.status == "failed" and run.reason.startswith("refused: ") and says in run.reason
+
+
+def test_check_standard_gates_name_what_failed() -> None:
+    peaks = [
+        {"specimen": "standard", "theta_i_deg": t, "amplitude_pct": 100 * float(
+            fresnel(math.cos(math.radians(t)), 1.567))}
+        for t in (20.0, 40.0, 60.0)
+    ]  # fmt: skip
+    good = StandardFit(0.1, -0.1, 1.0, 0.0, 0.003, 0.005, 0.006, 0.2)
+    check_standard(good, peaks, AlignGates(), n=1.567, certificate="C", saturated=0)
+    with pytest.raises(AlignRefused, match="3 black-glass readings saturated"):
+        check_standard(good, peaks, AlignGates(), n=1.567, certificate="C", saturated=3)
+    rough = StandardFit(0.1, -0.1, 1.0, 0.0, 0.043, 0.005, 0.006, 0.2)
+    with pytest.raises(AlignRefused, match=r"4\.30 % rms"):
+        check_standard(rough, peaks, AlignGates(), n=1.567, certificate="C", saturated=0)
+    vague = StandardFit(0.1, -0.1, 1.0, 0.0, 0.003, 0.2, 0.006, 0.2)
+    with pytest.raises(AlignRefused, match=r"uncertain to 0\.2 deg"):
+        check_standard(vague, peaks, AlignGates(), n=1.567, certificate="C", saturated=0)
+    skew = StandardFit(0.1, -0.1, 1.0, 0.0, 0.003, 0.005, 0.006, 0.5)
+    with pytest.raises(AlignRefused, match=r"midpoints at \+0\.500 deg"):
+        check_standard(skew, peaks, AlignGates(), n=1.567, certificate="C", saturated=0)
+    dim = [{**p, "amplitude_pct": 0.43 * p["amplitude_pct"]} for p in peaks]
+    with pytest.raises(AlignRefused, match="missing or misplaced"):
+        check_standard(good, dim, AlignGates(), n=1.567, certificate="C", saturated=0)
+
+
+def test_fit_reports_uncertainties_and_the_geometric_difference() -> None:
+    # noise-free closed form with a 0.3 % floor of noise: the zeros' sigma is small and the
+    # half-maximum midpoints give dL - dD without the Fresnel shape
+    rng = np.random.default_rng(7)
+    d_l, d_d = 0.2, -0.3
+    lamp, det, vals = [], [], []
+    for ti in (20.0, 40.0, 60.0):
+        for tr in np.arange(ti - 4.5, ti + 4.5001, 0.25):
+            gamma = math.radians(abs(tr + d_d - ti - d_l))
+            o = float(cap_overlap_fraction(np.array([gamma]), math.radians(3), math.radians(3))[0])
+            r = float(fresnel(math.cos(math.radians(ti + d_l)), 1.567))
+            lamp.append(ti)
+            det.append(float(tr))
+            vals.append(100 * r * o * (1 + 0.003 * rng.standard_normal()))
+    fit = fit_standard_full(lamp, det, vals, source=Cone(6.0), detector=Cone(6.0))
+    assert fit.scale == pytest.approx(1.0, abs=0.02)
+    assert 0 < fit.lamp_zero_sigma_deg < 0.05 and 0 < fit.detector_zero_sigma_deg < 0.05
+    assert fit.geometric_difference_deg == pytest.approx(d_l - d_d, abs=0.03)
+
+
+def test_config_rewrite_keeps_mode_and_symlink(tmp_path: Path) -> None:
+    # issue 23: temp file + os.replace turned a symlinked config into a plain file and a
+    # 0600 config (it may hold a database password) into a world-readable 0644 one
+    real = tmp_path / "real.toml"
+    real.write_text((configs_dir() / "lab-sim.toml").read_text())
+    real.chmod(0o600)
+    link = tmp_path / "lab.toml"
+    link.symlink_to(real)
+    write_alignment(link, {"lamp_zero_deg": 0.25, "run": 3})
+    assert link.is_symlink() and link.resolve() == real
+    assert (real.stat().st_mode & 0o777) == 0o600
+    assert load_lab_config(link).alignment.lamp_zero_deg == 0.25
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "base", ["lab-sim.toml", pytest.param("lab-sim-wire.toml", marks=pytest.mark.wire)]
+)
+def test_align_refuses_a_saturated_standard_in_process_and_on_the_wire(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], base: str
+) -> None:
+    # issue 21: aligning over the wire saturated the black glass at 60 deg and was accepted
+    # (the wire reported no signal level). A spectro whose full scale is 0.1 % at 10 ms
+    # (2 % at the shortest exposure) clips the glass's 5-10 % peaks whatever the exposure:
+    # the level (now on the wire too) flags them and the alignment is refused
+    from tests.scan.test_integration import lab_config
+
+    cfg = lab_config(tmp_path, base=base, twin="realistic")
+    text = cfg.read_text().replace(
+        'mode = "realistic"', 'mode = "realistic"\nfull_scale_pct = 0.1', 1
+    )
+    text = text.replace('store = ""', f'store = "{tmp_path / "runs.sqlite"}"')
+    cfg.write_text(text)
+    before = cfg.read_text()
+    code = main(["scan", "--config", str(cfg), "--plan", "align", "--align-theta-i", "20,60",
+                 "--time-scale", "0"])  # fmt: skip
+    err = capsys.readouterr().err
+    assert code == 1
+    assert "black-glass readings saturated the spectro even at the shortest exposure" in err, err
+    assert cfg.read_text() == before and not (tmp_path / "lab.alignment.toml").exists()

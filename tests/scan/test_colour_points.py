@@ -11,6 +11,7 @@ import pytest
 
 from drivers.base import SpectroReading
 from goniolab.colour.spectra import ColourSettings
+from goniolab.export import export_rows
 from goniolab.scan.colour import PointColour
 from goniolab.scan.events import InstrumentError, PointMeasured
 from goniolab.scan.plans import BrdfPlan
@@ -41,7 +42,7 @@ async def test_each_point_stores_its_colour(fake_lab: FakeLab, store: RunStore) 
         assert abs(p.colour["a"]) < 0.01 and abs(p.colour["b"]) < 0.01
     measured = [e for e in events if isinstance(e, PointMeasured)]
     assert all(e.lab is not None for e in measured)
-    rows = store.export_rows(runner.run_id)
+    rows = export_rows(store, runner.run_id)
     assert pts[1].colour is not None and pts[1].colour["L"] > 20
     assert rows[1]["L_star"] == pytest.approx(pts[1].colour["L"])
 

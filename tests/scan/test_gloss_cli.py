@@ -55,3 +55,36 @@ def test_a_port_that_is_no_serial_device_is_one_line_with_exit_1(
     err = capsys.readouterr().err
     assert err.startswith("goniolab: error: instrument error: glossmeter: ")
     assert "'/dev/null'" in err and err.count("\n") == 1
+
+
+def test_gloss_log_records_the_run_identity(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # issue 22 item 4: a gloss session carries an operator, a physical sample id, notes
+    # and tags like a scan does, and runs list finds it by them
+    import json as _json
+
+    from goniolab.cli import main as cli_main
+    from goniolab.store import RunStore
+    from tests.scan.test_integration import lab_config
+
+    cfg = lab_config(tmp_path, sim={"noise_pct": "0.0"})
+    store = str(tmp_path / "s.sqlite")
+    argv = ["gloss", "log", "--config", str(cfg), "--count", "2", "--time-scale", "0",
+            "--store", store, "--operator", "ada", "--sample-id", "LIMS-42",
+            "--note", "second coat", "--tag", "panel", "--tag", "q3"]  # fmt: skip
+    assert cli_main(argv) == 0
+    capsys.readouterr()
+    with RunStore(store, readonly=True) as s:
+        run = s.get_run(1)
+        assert (run.kind, run.operator, run.sample_id, run.notes, run.tags) == (
+            "gloss",
+            "ada",
+            "LIMS-42",
+            "second coat",
+            ("panel", "q3"),
+        )
+    assert cli_main(["runs", "list", "--store", store, "--tag", "q3", "--json"]) == 0
+    assert [r["id"] for r in _json.loads(capsys.readouterr().out)] == [1]
+    assert cli_main(["runs", "list", "--store", store, "--operator", "bob", "--json"]) == 0
+    assert _json.loads(capsys.readouterr().out) == []

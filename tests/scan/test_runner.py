@@ -7,6 +7,7 @@ import threading
 from collections.abc import Callable
 from typing import Any, cast
 
+import numpy as np
 import pytest
 
 from drivers.base import DeviceError, DeviceTimeout, Goniometer, ProtocolError
@@ -26,7 +27,9 @@ from goniolab.scan.events import (
 from goniolab.scan.plans import MIRROR_INDEX, BrdfPlan, parse_angles
 from goniolab.scan.predict import Predictor
 from goniolab.scan.runner import ArmMotion, PlanRefused, ScanRunner, dry_run
+from goniolab.scan.standards import Standard
 from goniolab.store import RunStore
+from sim.truth import luminance_weights
 
 from .conftest import LOBE_AMPLITUDE_PCT, LOBE_SIGMA_DEG, FakeLab
 
@@ -273,12 +276,21 @@ async def test_mirror_reference_sets_the_100_percent_level(
 ) -> None:
     plan = BrdfPlan(45.0, (44.0, 45.0, 46.0), repeats=2, mirror_reference=True)
     runner, bus = make_runner(fake_lab, store, plan)
+    # a mirror certified flat at 90 %: the mirror reading (80 % of the instrument's own
+    # reference) is 90 % of a perfect mirror (issue 21: it used to count as 100 %)
+    runner.mirror_standard = Standard(
+        "mirror", "TEST-1", "2026-01-01", "table", 0.01,
+        wavelength_nm=(380.0, 780.0), reflectance_table=(0.9, 0.9),
+    )  # fmt: skip
     await drive(runner, bus, lambda ev: None)
     pts = {(p.index, p.repeat): p for p in store.points(runner.run_id)}
     assert pts[(MIRROR_INDEX, 0)].luminance_pct == 80.0
-    # sample reading = raw * 100 / mirror level (80 %)
-    assert pts[(1, 0)].luminance_pct == pytest.approx(LOBE_AMPLITUDE_PCT * 100.0 / 80.0, rel=1e-12)
+    # sample reading = raw / mirror level (80 %) x certified 90 %, channel by channel
+    assert pts[(1, 0)].luminance_pct == pytest.approx(LOBE_AMPLITUDE_PCT / 80.0 * 90.0, rel=1e-9)
     assert pts[(1, 0)].raw["luminance_pct"] == pytest.approx(LOBE_AMPLITUDE_PCT, rel=1e-12)
+    assert pts[(1, 0)].raw["absolute_values"] == pytest.approx([LOBE_AMPLITUDE_PCT / 80 * 90] * 41)
+    ref = pts[(1, 0)].raw["reference"]
+    assert (ref["certificate"], ref["method"]) == ("TEST-1", "spectral")
     assert fake_lab.spectro.specimen == "sample"
 
 
@@ -400,8 +412,15 @@ async def test_resume_after_a_crash_in_the_mirror_phase_puts_the_sample_back(
     await drive(runner, bus, lambda ev: None)
     pts = {(p.index, p.repeat): p for p in store.points(rid)}
     assert len(pts) == 8
-    # the sample's lobe at 45 deg, relative to the stored mirror level 80 %
-    assert pts[(1, 1)].luminance_pct == pytest.approx(LOBE_AMPLITUDE_PCT * 100.0 / 80.0, rel=1e-12)
+    # the sample's lobe at 45 deg, relative to the stored mirror level 80 %, times the
+    # certified mirror's luminance (these stored mirror readings carry no spectrum: the
+    # scalar fallback, said in the reading's provenance)
+    cert = runner.mirror_standard
+    assert cert is not None and cert.certificate == "SIM-MIR-0001"  # the shipped file
+    r = 0.88 + 0.04 * (np.arange(380.0, 781.0, 10.0) - 380.0) / 400.0
+    y_cert = 100 * float(np.dot(luminance_weights(), r))
+    assert pts[(1, 1)].luminance_pct == pytest.approx(LOBE_AMPLITUDE_PCT / 80.0 * y_cert, rel=1e-4)
+    assert pts[(1, 1)].raw["reference"]["method"].startswith("scalar (the reference readings")
     assert fake_lab.spectro.specimen == "sample"
 
 

@@ -131,9 +131,11 @@ async def test_a_lost_spectro_link_is_reopened_and_the_reading_taken_again(
     assert fake_lab.clock.now() - t0 >= 0.25
 
 
-async def test_a_spectro_that_stays_away_fails_the_run_after_the_retries(
+async def test_a_spectro_that_stays_away_fails_the_run_after_the_reconnect_window(
     fake_lab: FakeLab, store: RunStore
 ) -> None:
+    # issue 21: a restart takes 7-20 s, the old window (two retries, ~1.5 s) lost the scan;
+    # a link is now reopened for reconnect_window_s (30 s of lab clock) before the run fails
     async def measure() -> SpectroReading:
         raise Disconnected("port '/dev/ttyUSB1' closed", device="spectro")
 
@@ -143,14 +145,57 @@ async def test_a_spectro_that_stays_away_fails_the_run_after_the_retries(
     fake_lab.spectro.measure = measure  # type: ignore[method-assign]
     fake_lab.spectro.connect = connect  # type: ignore[method-assign]
     runner, bus = make_runner(fake_lab, store, BrdfPlan(45.0, (44.0, 45.0)))
+    t0 = fake_lab.clock.now()
     events = await drive(runner, bus, lambda ev: None)
     rec = store.get_run(runner.run_id)
     assert rec.status == "failed" and "closed" in rec.reason
+    assert "longer than the reconnect window of 30 s" in rec.reason
     assert store.count_points(runner.run_id) == 0
+    # reopened when lost 0, 0.5, 1.5, 3.5, ..., 29.5 s ago (backoff 0.5, 1, then 2 s): 17
+    # times; at 31.5 s the window is over
     reconnect_failures = [
         e for e in events if isinstance(e, InstrumentError) and "reconnect failed" in e.message
     ]
-    assert len(reconnect_failures) == 2  # reading_retries = 2
+    assert len(reconnect_failures) == 17
+    assert 30.0 <= fake_lab.clock.now() - t0 < 40.0
+
+
+async def test_a_controller_restart_of_20_s_is_waited_for_without_losing_a_point(
+    fake_lab: FakeLab, store: RunStore
+) -> None:
+    # the spectro's link drops at the third reading and the device is back 20 s later: the
+    # scan waits (saying so), reconnects and stores every point exactly once
+    spectro = fake_lab.spectro
+    real_measure = spectro.measure
+    state = {"n": 0, "back_at": None}
+
+    async def measure() -> SpectroReading:
+        state["n"] += 1
+        if state["n"] == 3:
+            state["back_at"] = fake_lab.clock.now() + 20.0
+        back = state["back_at"]
+        if back is not None and fake_lab.clock.now() < back:
+            raise Disconnected("controller restarting", device="spectro")
+        return await real_measure()
+
+    async def connect() -> None:
+        back = state["back_at"]
+        if back is not None and fake_lab.clock.now() < back:
+            raise Disconnected("connection refused", device="spectro")
+
+    spectro.measure = measure  # type: ignore[method-assign]
+    spectro.connect = connect  # type: ignore[method-assign]
+    plan = BrdfPlan(45.0, parse_angles("40:44:1"))
+    runner, bus = make_runner(fake_lab, store, plan)
+    t0 = fake_lab.clock.now()
+    events = await drive(runner, bus, lambda ev: None)
+    assert store.get_run(runner.run_id).status == "done"
+    assert [p.index for p in store.points(runner.run_id)] == [0, 1, 2, 3, 4]
+    assert fake_lab.clock.now() - t0 >= 20.0
+    waits = [e.message for e in events if isinstance(e, InstrumentError)]
+    assert any("waiting up to 30 s" in m for m in waits) and not any(
+        isinstance(e, InstrumentError) and e.fatal for e in events
+    )
 
 
 async def test_a_garbled_frame_during_a_move_makes_the_move_again(

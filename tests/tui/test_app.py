@@ -363,7 +363,7 @@ async def test_a_aligns_reports_the_result_and_keeps_its_readings_off_the_curve(
     app = GonioApp(backend, poll_hz=0)
     async with app.run_test(size=SIZE) as pilot:
         await wait_until(pilot, app.ready.is_set)
-        await pilot.press("a")
+        await pilot.press("a", "a")  # the second confirms
         await wait_until(pilot, lambda: app.run_state is RunState.RUNNING)
         assert backend.setups[-1].sample == "sample:wittmann-3"  # the form's sample
         await pilot.press("space")
@@ -375,7 +375,7 @@ async def test_a_aligns_reports_the_result_and_keeps_its_readings_off_the_curve(
         assert app.comparison.n_readings == 0  # the sweeps of the standard are no BRDF curve
         assert notes(app)[-1] == (
             "Align: run 1: lamp zero +0.125 deg, detector zero -0.250 deg, sample tilt "
-            "+0.500 deg; written to [alignment], later moves corrected"
+            "+0.500 deg; saved to /srv/lab/lab.alignment.toml, later moves corrected"
         )
         run_line = str(app.query_one(StatusPanel).query_one("#run-state", Static).render())
         assert "run 1 (align): done  3/3" in run_line
@@ -485,3 +485,27 @@ async def test_layout_follows_the_terminal_size() -> None:
         await pilot.pause()
         assert left.display and live.display and not note.display
         assert left.size.width == 50
+
+
+async def test_a_asks_for_confirmation_and_not_while_a_field_is_edited() -> None:
+    # issue 22: the single key a started an alignment, even while a form field had focus
+    backend = ScriptedBackend()
+    app = GonioApp(backend, poll_hz=0)
+    async with app.run_test(size=SIZE) as pilot:
+        await wait_until(pilot, app.ready.is_set)
+        await pilot.press("a")
+        assert "press a again to start" in notes(app)[-1]
+        assert backend.setups == []  # nothing started yet
+        app.query_one(ScanForm).query(Select).first().focus()
+        await pilot.pause()
+        await pilot.press("a")
+        assert notes(app)[-1] == (
+            "Align: a form field is being edited: leave it (Esc) before aligning"
+        )
+        assert backend.setups == []
+        await pilot.press("escape")
+        await pilot.press("a", "a")
+        await wait_until(pilot, lambda: app.run_state is RunState.RUNNING)
+        assert len(backend.setups) == 1
+        await backend.release(3)
+        await wait_until(pilot, lambda: app.run_state is RunState.DONE)

@@ -490,7 +490,7 @@ async def test_a_aligns_the_sim_lab_writes_alignment_and_corrects_the_arms(
     monkeypatch.setattr(app, "notify", record)
     async with app.run_test(size=SIZE) as pilot:
         await wait_until(pilot, app.ready.is_set)
-        await pilot.press("a")
+        await pilot.press("a", "a")  # the second confirms
         await wait_until(pilot, held.is_set, max_turns=100_000)
         await pilot.press("x")
         release.set()
@@ -498,7 +498,7 @@ async def test_a_aligns_the_sim_lab_writes_alignment_and_corrects_the_arms(
         assert 3 <= app.progress[0] < 104
         assert "[alignment]" not in path.read_text()
         await wait_until(pilot, lambda: not backend.running)
-        await pilot.press("a")
+        await pilot.press("a", "a")  # the second confirms
         await wait_until(
             pilot,
             lambda: app.run_id == 2 and app.run_state is RunState.DONE and not backend.running,
@@ -506,7 +506,11 @@ async def test_a_aligns_the_sim_lab_writes_alignment_and_corrects_the_arms(
         )
         assert app.comparison.n_readings == 0
         assert any("run 2: lamp zero -0.4" in m for m in shown)
+        # saved beside the store, the tracked config untouched (issue 22)
+        assert path.read_text() == text
+        assert any(f"saved to {tmp_path / 'lab.alignment.toml'}" in m for m in shown)
         got = load_lab_config(path).alignment
+        assert got.loaded_from == str(tmp_path / "lab.alignment.toml")
         assert got.run == 2
         assert got.lamp_zero_deg == pytest.approx(-0.4, abs=0.02)
         assert got.detector_zero_deg == pytest.approx(0.2, abs=0.02)
@@ -551,7 +555,7 @@ async def test_an_internal_error_fails_the_alignment_on_screen(
     backend, app = align_app(path)
     async with app.run_test(size=SIZE) as pilot:
         await wait_until(pilot, app.ready.is_set)
-        await pilot.press("a")
+        await pilot.press("a", "a")  # the second confirms
         await wait_until(pilot, lambda: app.run_state is RunState.FAILED, max_turns=20_000)
         await wait_until(pilot, lambda: not backend.running)
         messages = [n.message for n in app._notifications]
@@ -615,3 +619,36 @@ async def test_the_sessions_gloss_run_reads_running_until_the_app_closes(tmp_pat
     with RunStore(tmp_path / "runs.sqlite", readonly=True) as store:
         assert store.get_run(run.id).status == RunState.DONE.value
         assert len(store.gloss_readings(run.id)) == 1
+
+
+async def test_run_identity_dialog_is_stored_with_the_next_runs(tmp_path: Path) -> None:
+    """Issue 22 item 4: operator, physical sample id, notes and tags from the TUI (key i)
+    are stored with the next scan and gloss run; Esc leaves them unchanged."""
+    app = make_app(tmp_path)
+    async with app.run_test(size=SIZE) as pilot:
+        await wait_until(pilot, lambda: app.ready.is_set())
+        await pilot.press("i")
+        await pilot.pause()
+        for field, text in (("operator", "ada"), ("sample_id", "LIMS-7"),
+                            ("notes", "2nd coat"), ("tags", "q3, wet, q3")):  # fmt: skip
+            app.screen.query_one(f"#{field}", Input).value = text
+        app.screen.query_one("#tags", Input).focus()
+        await pilot.press("enter")
+        await pilot.pause()
+        assert app.backend.run_identity.tags == ("q3", "wet")
+        await pilot.press("i")
+        await pilot.pause()
+        app.screen.query_one("#operator", Input).value = "mallory"
+        await pilot.press("escape")  # cancelled: unchanged
+        await pilot.pause()
+        assert app.backend.run_identity.operator == "ada"
+        await pilot.press("s")
+        await wait_until(pilot, lambda: app.run_state is RunState.DONE, max_turns=20000)
+        await pilot.press("g")
+        await wait_until(pilot, lambda: len(app.comparison.gloss) >= 1, max_turns=20000)
+    with RunStore(tmp_path / "runs.sqlite", readonly=True) as s:
+        runs = [s.get_run(r) for r in (1, 2)]
+    assert {r.kind for r in runs} == {"brdf", "gloss"}
+    for r in runs:
+        assert (r.operator, r.sample_id, r.notes, r.tags) == ("ada", "LIMS-7", "2nd coat",
+                                                              ("q3", "wet"))  # fmt: skip

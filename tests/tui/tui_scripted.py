@@ -32,7 +32,7 @@ from goniolab.scan.events import (
     StateChanged,
 )
 from goniolab.tui.app import GonioApp
-from goniolab.tui.view_model import ArmState, RunSummary, ScanSetup, StoredRun
+from goniolab.tui.view_model import ArmState, RunIdentity, RunSummary, ScanSetup, StoredRun
 
 AMP_PCT = 40.0
 PEAK_DEG = 20.0
@@ -56,6 +56,7 @@ class ScriptedBackend:
         self, *, gated: bool = True, fail_open: bool = False, hold_open: bool = False
     ) -> None:
         self.bus = EventBus()
+        self.run_identity = RunIdentity()
         #: With ``hold_open``, open() (connect and home) returns only once this is set.
         self.homed = asyncio.Event()
         if not hold_open:
@@ -134,10 +135,11 @@ class ScriptedBackend:
         return run_id
 
     #: What the scripted alignment "finds" (its RunFinished summary).
-    ALIGNMENT: ClassVar[dict[str, float]] = {
+    ALIGNMENT: ClassVar[dict[str, object]] = {
         "lamp_zero_deg": 0.125,
         "detector_zero_deg": -0.25,
         "sample_tilt_deg": 0.5,
+        "state_file": "/srv/lab/lab.alignment.toml",
     }
 
     async def align(self, sample: str) -> int:

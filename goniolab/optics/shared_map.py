@@ -1,0 +1,179 @@
+"""What every physical-optics model of one height map shares: the map and its statistics.
+
+:class:`SharedMap` holds the levelled map cut into windowed tiles
+(:class:`goniolab.optics.psd.TiledMap`), the cache of FFT cell powers, the Smith masking
+model of a subsample of its slopes, the fallback facet models and the sibling wave models;
+:class:`MapStats` is the roughness the regime rule of
+:mod:`goniolab.optics.model_choice` reads (Sq, Sdq, correlation length, step, field).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections import OrderedDict
+from collections.abc import Callable
+from dataclasses import dataclass
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from goniolab.optics.facet import FacetModel
+from goniolab.optics.heightmap import HeightMap
+from goniolab.optics.psd import TiledMap
+from goniolab.optics.surface import Surface
+
+__all__ = ["MapStats", "SharedMap", "first_below"]
+
+FloatArray = NDArray[np.float64]
+
+#: Facets used for the Smith masking table (strided subsample of the map's slopes).
+_MASKING_FACETS: int = 1 << 17
+#: Rows of the levelled map per block when the roughness statistics are summed.
+_STATS_ROWS: int = 256
+#: Cached cell-power maps per shared map.
+_CACHE_SIZE: int = 24
+
+
+@dataclass(frozen=True)
+class MapStats:
+    """Roughness of the (levelled, windowed) map the physical models see.
+
+    ``sq_um``: rms height; ``sdq``: rms gradient ``sqrt(<p^2 + q^2>)``;
+    ``corr_length_um``: where the isotropic autocorrelation falls to 1/e;
+    ``step_um``: the larger lateral step; ``field_um``: the smaller tile side.
+    """
+
+    sq_um: float
+    sdq: float
+    corr_length_um: float
+    step_um: float
+    field_um: float
+
+
+class SharedMap:
+    """State shared by all models of one map: tiles, FFT-power cache, masking, fallback."""
+
+    def __init__(self, hm: HeightMap, tile: int, taper: float) -> None:
+        self.hm = hm
+        self.tiled = TiledMap.from_heightmap(hm, tile=tile, taper=taper)
+        self.cache: OrderedDict[tuple[Any, ...], Any] = OrderedDict()
+        self.lock = threading.Lock()
+        self._facets: dict[tuple[complex, bool], FacetModel] = {}
+        #: the other wave models of the same map, by (kind, n, wavelength, weighting, masking)
+        self.siblings: dict[tuple[Any, ...], Any] = {}
+
+    def cached(self, key: tuple[Any, ...], make: Callable[[], Any]) -> Any:
+        with self.lock:
+            if key in self.cache:
+                self.cache.move_to_end(key)
+                return self.cache[key]
+        value = make()
+        with self.lock:
+            self.cache[key] = value
+            while len(self.cache) > _CACHE_SIZE:
+                self.cache.popitem(last=False)
+        return value
+
+    @cached_property
+    def h_max_um(self) -> float:
+        """Largest |height - tile mean| over all tiles (bounds the Taylor terms)."""
+        out = 0.0
+        for k in range(self.tiled.n_tiles):
+            h, _ = self.tiled.tile(k)
+            out = max(out, float(np.max(np.abs(h))))
+        return out
+
+    @cached_property
+    def masking_model(self) -> FacetModel:
+        """A facet model of a strided subsample of the map's forward slopes (for Smith G2)."""
+        t = self.tiled
+        ny, nx = t.shape
+        stride = max(1, math.ceil(math.sqrt(ny * nx / _MASKING_FACETS)))
+        mx, my = (nx - 1) // stride, (ny - 1) // stride
+        rows = slice(None, None, stride)
+        p = (
+            t.levelled(rows, slice(1, None, stride))[:, :mx]
+            - t.levelled(rows, slice(0, nx - 1, stride))[:, :mx]
+        ) / t.dx_um
+        cols = slice(None, None, stride)
+        q = (
+            t.levelled(slice(1, None, stride), cols)[:my]
+            - t.levelled(slice(0, ny - 1, stride), cols)[:my]
+        ) / t.dy_um
+        m = min(p.shape[0], q.shape[0]), min(p.shape[1], q.shape[1])
+        surf = Surface(
+            p=p[: m[0], : m[1]].ravel().astype(np.float64),
+            q=q[: m[0], : m[1]].ravel().astype(np.float64),
+            dx_um=t.dx_um,
+            dy_um=t.dy_um,
+            source=t.source,
+        )
+        return FacetModel(surf, masking=True, backend="numpy")
+
+    def facet(self, n: complex, masking: bool) -> FacetModel:
+        """The facet model of the full map (fallback), built on first use."""
+        key = (n, masking)
+        with self.lock:
+            if key not in self._facets:
+                surf = self._facets_surface
+                self._facets[key] = FacetModel(surf, n=n, masking=masking)
+            return self._facets[key]
+
+    def adopt_facet(self, facet: FacetModel) -> None:
+        """Use ``facet`` (a facet model of this map) as the fallback of its index and
+        masking: the ``auto`` model shares the one it already built."""
+        with self.lock:
+            self._facets[(facet.n, facet.masking)] = facet
+
+    @cached_property
+    def _facets_surface(self) -> Surface:
+        return Surface.from_heightmap(self.hm)
+
+    @cached_property
+    def stats(self) -> MapStats:
+        t = self.tiled
+        ny, nx = t.shape
+        # sums over blocks of rows of the levelled map (float64): no copy of the whole map
+        blocks = [(r0, min(r0 + _STATS_ROWS, ny)) for r0 in range(0, ny, _STATS_ROWS)]
+        s1 = sp = sq2 = 0.0
+        for r0, r1 in blocks:  # one more row for the y differences
+            z = t.levelled(slice(r0, min(r1 + 1, ny)), slice(None)).astype(np.float64)
+            s1 += float(np.sum(z[: r1 - r0]))
+            sp += float(np.sum((np.diff(z[: r1 - r0], axis=1) / t.dx_um) ** 2))
+            sq2 += float(np.sum((np.diff(z, axis=0) / t.dy_um) ** 2))
+        mean = s1 / (ny * nx)
+        s2 = 0.0
+        for r0, r1 in blocks:
+            z = t.levelled(slice(r0, r1), slice(None)).astype(np.float64)
+            s2 += float(np.sum((z - mean) ** 2))
+        sq = math.sqrt(s2 / (ny * nx))
+        sdq = math.sqrt(sp / (ny * (nx - 1)) + sq2 / ((ny - 1) * nx))
+        # isotropic ACF along x and y from the first tile's periodogram (1/e crossing)
+        h, w = t.tile(0)
+        spec = np.abs(np.fft.rfft2((h * w).astype(np.float64))) ** 2
+        acf = np.fft.irfft2(spec, s=h.shape)
+        acf /= acf[0, 0] if acf[0, 0] > 0 else 1.0
+        lx = first_below(acf[0, : h.shape[1] // 2], math.exp(-1.0)) * t.dx_um
+        ly = first_below(acf[: h.shape[0] // 2, 0], math.exp(-1.0)) * t.dy_um
+        return MapStats(
+            sq_um=sq,
+            sdq=sdq,
+            corr_length_um=0.5 * (lx + ly),
+            step_um=max(t.dx_um, t.dy_um),
+            field_um=min(t.nx_t * t.dx_um, t.ny_t * t.dy_um),
+        )
+
+
+def first_below(a: FloatArray, level: float) -> float:
+    """Fractional index where ``a`` first drops below ``level`` (linear interpolation)."""
+    idx = np.nonzero(a < level)[0]
+    if idx.size == 0:
+        return float(a.size)
+    i = int(idx[0])
+    if i == 0:
+        return 0.0
+    a0, a1 = float(a[i - 1]), float(a[i])
+    return (i - 1) + (a0 - level) / (a0 - a1) if a0 != a1 else float(i)
