@@ -195,7 +195,7 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
         choices=("DEBUG", "INFO", "WARNING", "ERROR"),
         default="INFO",
         type=str.upper,
-        help="what goes into the log file (default INFO; the file: goniolab --version)",
+        help="what goes into the log file (the file: goniolab --version)",
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     names = sorted(
@@ -208,6 +208,9 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     for name in names:
         module = importlib.import_module(f"goniolab.commands.{name}")
         module.register(sub)
+    from goniolab.commands import _help
+
+    _help.apply(parser)  # examples and "(default: X)" in every command's --help
     return parser
 
 
@@ -289,6 +292,30 @@ def _one_line_warnings(debug: bool = False) -> None:
             print(f"goniolab: library warning ({origin}): {message}", file=sys.stderr)
 
     warnings.showwarning = show
+
+
+#: Refractive indices of dielectric coats (paints, plastics, glasses) lie in this range; a
+#: value outside it is most likely a typo (``--n 155`` for 1.55) and is said, not refused.
+DIELECTRIC_N_RANGE = (1.0, 3.0)
+
+
+def _warn_implausible(args: argparse.Namespace) -> None:
+    """Warn about an option that parses but is physically implausible (issue 27: ``--n 155``
+    gave G20 = 1166 GU without a word): a dielectric index (no k) outside 1.0-3.0."""
+    n = getattr(args, "n", None)
+    if isinstance(n, bool) or not isinstance(n, int | float | complex):
+        return
+    lo, hi = DIELECTRIC_N_RANGE
+    value = complex(n)
+    if value.imag == 0 and not lo <= value.real <= hi:
+        import warnings
+
+        warnings.warn(
+            f"--n {value.real:g} lies outside {lo:.1f}-{hi:.1f}, the refractive indices of "
+            "dielectric coats (a PU clear coat: 1.55; a metal takes n+kj): the prediction "
+            "uses it as given",
+            stacklevel=1,
+        )
 
 
 def _start_log(args: argparse.Namespace, argv: Sequence[str] | None) -> None:
@@ -375,6 +402,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         _quiet_library_logs(args.debug)
         _one_line_warnings(args.debug)
         _start_log(args, argv)
+        _warn_implausible(args)
         code: int = args.func(args)
         sys.stdout.flush()  # a closed pipe shows here, not in the interpreter's exit
     except BrokenPipeError:

@@ -166,11 +166,14 @@ class SampleConfig(_Strict):
     """``[sample]``: the height map (path or ``sample:NAME``), refractive index, and the
     reflectance model that predicts it (:func:`goniolab.models.model_for`: a name of
     :mod:`goniolab.model_registry`, ``auto`` by default) with its optional wavelength
-    (nm; unset: 550 nm for BRDF curves, ISO 2813 weighting for gloss)."""
+    (nm; unset: 550 nm for BRDF curves, ISO 2813 weighting for gloss). ``step_um`` is the
+    lateral step of a map file that carries none (a ``.npy`` without sidecar; ``scan
+    --step-um``)."""
 
     map: str = "sample:wittmann-3"
     n: Annotated[float, Field(strict=True, gt=1.0, lt=4.0, allow_inf_nan=False)] = 1.55
     model: str = DEFAULT_MODEL
+    step_um: PositiveFloat | None = None
     wavelength_nm: (
         Annotated[float, Field(strict=True, ge=100.0, le=20000.0, allow_inf_nan=False)] | None
     ) = None
@@ -573,7 +576,8 @@ def load_lab_config(path: str | Path) -> LabConfig:
     try:
         cfg = LabConfig.model_validate({**data, "source": str(p)})
     except ValidationError as exc:
-        raise ConfigError(p, *first_issue(exc)) from None
+        key, reason = first_issue(exc)
+        raise ConfigError(p, key, reason + did_you_mean_key(key, reason)) from None
     except RecursionError:
         raise ConfigError(p, "", TOO_DEEP) from None
     _cross_checks(cfg, p)
@@ -581,6 +585,33 @@ def load_lab_config(path: str | Path) -> LabConfig:
     _register_checks(cfg, p, profiles)
     _exposure_check(cfg, p, profiles["spectro.profile"])
     return _with_alignment_state(cfg)
+
+
+def did_you_mean_key(key: str, reason: str) -> str:
+    """``"; did you mean 'time_scale'?"`` for an unknown ``key`` close to a field of its
+    table in :class:`LabConfig` (difflib), else ``""`` (issue 27: config key typos)."""
+    import difflib
+    import typing
+
+    if not key or "unknown key" not in reason:
+        return ""
+    *tables, name = key.split(".")
+    model: Any = LabConfig
+    for part in tables:
+        field = model.model_fields.get(part)
+        if field is None:
+            return ""
+        inner = [
+            t
+            for t in (field.annotation, *typing.get_args(field.annotation))
+            if isinstance(t, type) and issubclass(t, BaseModel)
+        ]
+        if not inner:  # a free-form table (dict): no fixed names to suggest
+            return ""
+        model = inner[0]
+    names = [n for n in model.model_fields if n != "source"]
+    close = difflib.get_close_matches(name, names, n=1, cutoff=0.6)
+    return f"; did you mean {close[0]!r}?" if close else ""
 
 
 #: The reason given for a TOML file nested deeper than the parser's recursion allows.

@@ -9,7 +9,16 @@ from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["ConfigError", "UserError"]
+__all__ = ["ConfigError", "UserError", "a_run_of_kind"]
+
+#: How a message names a run of each stored kind.
+_RUN_KINDS = {"align": "an alignment run"}
+
+
+def a_run_of_kind(kind: str) -> str:
+    """``"an alignment run"`` for ``"align"``: a run kind with its article (issue 27:
+    "a align run")."""
+    return _RUN_KINDS.get(kind, f"{'an' if kind[:1] in 'aeiou' else 'a'} {kind} run")
 
 
 class UserError(Exception):

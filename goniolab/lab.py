@@ -83,6 +83,7 @@ def sample_model(cfg: LabConfig) -> ReflectanceModel:
         model: ReflectanceModel = model_for(
             cfg.sample_map(),
             n=cfg.sample.n,
+            step_um=cfg.sample.step_um,
             model=cfg.sample.model,
             wavelength_nm=cfg.sample.wavelength_nm,
         )

@@ -88,6 +88,19 @@ def _title(ds: xr.Dataset) -> str:
     return text
 
 
+def _predicted_label(ds: xr.Dataset) -> str:
+    """``predicted (kirchhoff model)``: the model the run was predicted with (its stored
+    ``model_name``; a run that names none says only ``predicted``, not a guess)."""
+    import json
+
+    try:
+        model = json.loads(str(ds.attrs.get("model_json") or "{}"))
+    except ValueError:
+        model = {}
+    name = model.get("model_name") or model.get("kind") if isinstance(model, dict) else None
+    return f"predicted ({name} model)" if name else "predicted"
+
+
 def _scan(fig: Figure, ds: xr.Dataset, *, log: bool, colour: bool) -> None:
     grid = fig.add_gridspec(2, 2 if colour else 1, height_ratios=(3, 1))
     ax = fig.add_subplot(grid[0, 0])
@@ -114,7 +127,7 @@ def _scan(fig: Figure, ds: xr.Dataset, *, log: bool, colour: bool) -> None:
         label=f"measured (mean of {reps}, +-1 sd)" if reps > 1 else "measured",
     )
     if np.isfinite(pred).any():
-        ax.plot(tr, pred, "-", color=_PREDICTED, lw=1.6, label="predicted (facet model)")
+        ax.plot(tr, pred, "-", color=_PREDICTED, lw=1.6, label=_predicted_label(ds))
     if log:
         ax.set_yscale("log")
     ax.set_ylabel("relative luminance (% of mirror)")

@@ -32,7 +32,7 @@ from drivers.base import DeviceError, Glossmeter
 from drivers.timing import Clock
 from goniolab import __version__
 from goniolab.config import LabConfig
-from goniolab.errors import UserError
+from goniolab.errors import UserError, a_run_of_kind
 from goniolab.lab import Lab
 from goniolab.optics.models import ReflectanceModel
 from goniolab.scan.align import AlignAborted, AlignPlan, AlignResult, AlignRunner
@@ -503,7 +503,7 @@ def resume_target(
         The run is no scan, is already done, or names no config file that still exists.
     """
     if rec.kind != "brdf":
-        raise UserError(f"run {rec.id} is a {rec.kind} run; only scans can be resumed")
+        raise UserError(f"run {rec.id} is {a_run_of_kind(rec.kind)}; only scans can be resumed")
     if rec.status == RunState.DONE.value:
         raise UserError(f"run {rec.id} is already done ({done_readings} readings)")
     if not need_file:
@@ -644,8 +644,10 @@ class GlossSession:
         *,
         mode: str = "measure",
         interval_s: float = 0.0,
+        keep_running: bool = False,
     ) -> GlossLogger:
-        """The logger of ``plan`` into run ``run_id`` (call its ``run()``; ``stop()`` ends it)."""
+        """The logger of ``plan`` into run ``run_id`` (call its ``run()``; ``stop()`` ends it;
+        ``keep_running``: the run stays ``running`` after it, for more readings)."""
         return GlossLogger(
             meter=self.meter,
             store=self.store,
@@ -657,6 +659,7 @@ class GlossSession:
             predicted_models=prediction.models,
             mode=mode,
             interval_s=interval_s,
+            keep_running=keep_running,
         )
 
     async def start(

@@ -119,7 +119,7 @@ def sample_truth(cfg: LabConfig, spec: str | None = None) -> TruthOptics:
     spec = spec or cfg.sample_map()
     src = cfg.source or "<config>"
     try:
-        hm = resolve_map(spec)
+        hm = resolve_map(spec, step_um=cfg.sample.step_um)
         body = _sample_body(spec, cfg.sim.twin.body)
         return truth_for(hm, n=cfg.sample.n, body=body, settings=twin_settings(cfg), name=spec)
     except (UserError, ValueError, OSError) as exc:

@@ -60,7 +60,7 @@ def test_the_figure_shows_the_stored_values(store_file: Path) -> None:
     main_ax, resid_ax = fig.axes[:2]
     assert main_ax.get_yscale() == "log"
     lines = {ln.get_label(): ln for ln in main_ax.get_lines()}
-    pred = lines["predicted (facet model)"]
+    pred = lines["predicted"]  # the run names no model: no name is made up
     np.testing.assert_array_equal(pred.get_xdata(), [40.0, 45.0, 50.0])
     np.testing.assert_array_equal(pred.get_ydata(), [1.0, 12.0, 3.0])
     # the error-bar markers sit at the repeat means (the last geometry has one reading)
@@ -69,6 +69,20 @@ def test_the_figure_shows_the_stored_values(store_file: Path) -> None:
     np.testing.assert_allclose(markers[0].get_ydata(), means)
     res = resid_ax.get_lines()[-1]
     np.testing.assert_allclose(res.get_ydata(), np.array(means) - [1.0, 12.0, 3.0])
+
+
+@pytest.mark.parametrize("name", ["kirchhoff", "facet", "auto"])
+def test_the_predicted_curve_names_the_runs_model(tmp_path: Path, name: str) -> None:
+    """issue 27: the label said "facet model" for every run, whatever model predicted it."""
+    from goniolab.datasets import run_dataset
+    from goniolab.plot import plot_dataset
+
+    with RunStore(make_store(tmp_path / "s.sqlite"), readonly=True) as s:
+        ds = run_dataset(s, 1)
+    ds.attrs["model_json"] = json.dumps({"model_name": name, "n": [1.55, 0.0]})
+    labels = [ln.get_label() for ln in plot_dataset(ds).axes[0].get_lines()]
+    assert f"predicted ({name} model)" in labels
+    assert not [t for t in labels if "model" in t and name not in t]
 
 
 def test_bad_suffix_is_one_line_error(

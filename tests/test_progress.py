@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import io
+import math
+
+import pytest
 
 from goniolab.commands.scan import ProgressBar
 from goniolab.scan.events import Progress
@@ -44,3 +47,17 @@ def test_a_pipe_gets_one_plain_line_per_ten_percent() -> None:
     assert lines[0].startswith("[#.") and " 1/30 ETA " in lines[0]
     assert " 12/30 ETA 9s " in lines[4]  # 18 s of lab clock at twice real time
     assert lines[-1] == f"[{'#' * 30}] 30/30 ETA 0s "
+
+
+def test_at_clock_scale_0_the_eta_is_the_measured_wall_rate() -> None:
+    """issue 27: at --time-scale 0 the motion model's ETA is 0 while the readings still take
+    wall time (15-20 s read "ETA 0s"): the ETA is the measured seconds per reading times
+    the readings left, "?" until one was timed, 0 at the end."""
+    bar = ProgressBar(io.StringIO(), clock_scale=0.0)
+    evs = [Progress(run_id=1, done=k, total=10, eta_s=0.0) for k in range(11)]
+    assert math.isnan(bar.eta_wall_s(evs[0], now_s=100.0))
+    assert bar.eta_wall_s(evs[2], now_s=104.0) == pytest.approx(2.0 * 8)  # 2 s per reading
+    assert bar.eta_wall_s(evs[5], now_s=105.0) == pytest.approx(1.0 * 5)
+    assert bar.eta_wall_s(evs[10], now_s=110.0) == 0.0
+    real_time = ProgressBar(io.StringIO(), clock_scale=2.0)
+    assert real_time.eta_wall_s(Progress(run_id=1, done=1, total=3, eta_s=18.0), 0.0) == 9.0

@@ -1,5 +1,7 @@
-"""The README's "Try it" examples are run, and their printed output compared (issue 27,
-item 4: docs that cannot go stale).
+"""The README's "Try it" examples and docs/TUTORIAL.md's steps are run, and their printed
+output compared (issue 27, item 4: docs that cannot go stale).
+
+Each file of :data:`DOCS` is run in a scratch directory of its own.
 
 A fenced ``sh`` block right after the line ``<!-- example: run -->`` is run with bash
 (``set -euo pipefail``) in one scratch directory shared by all such blocks, in order (a
@@ -10,6 +12,8 @@ on stdout, to the character. When a change moves a number, the test fails; regen
 outputs with::
 
     .venv/bin/python -m tests.test_readme_examples --update
+
+(every file of :data:`DOCS`; in a worktree put it first on the path: ``PYTHONPATH=$PWD``).
 """
 
 from __future__ import annotations
@@ -26,6 +30,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
+#: The files whose marked blocks are run and checked.
+DOCS = (README, ROOT / "docs" / "TUTORIAL.md")
 _BLOCK = re.compile(
     r"<!-- example: (?P<kind>run|output) -->\n```(?P<lang>\w*)\n(?P<body>.*?)```", re.S
 )
@@ -75,41 +81,44 @@ def run_examples(workdir: Path, found: list[Example]) -> list[str]:
         )  # fmt: skip
         if done.returncode != 0:
             raise AssertionError(
-                f"README example failed (exit {done.returncode}):\n{ex.script}\n"
+                f"example failed (exit {done.returncode}):\n{ex.script}\n"
                 f"stderr:\n{done.stderr[-3000:]}"
             )
         outputs.append(done.stdout)
     return outputs
 
 
-def test_readme_has_examples() -> None:
-    found = examples(README.read_text())
+@pytest.mark.parametrize("doc", DOCS, ids=lambda p: p.name)
+def test_doc_has_examples(doc: Path) -> None:
+    found = examples(doc.read_text())
     assert len(found) >= 2 and any(ex.expected is not None for ex in found)
 
 
 @pytest.mark.slow
-def test_readme_examples_run_and_print_what_the_readme_says(tmp_path: Path) -> None:
-    found = examples(README.read_text())
+@pytest.mark.parametrize("doc", DOCS, ids=lambda p: p.name)
+def test_doc_examples_run_and_print_what_the_doc_says(tmp_path: Path, doc: Path) -> None:
+    found = examples(doc.read_text())
     outputs = run_examples(tmp_path, found)
     for ex, out in zip(found, outputs, strict=True):
         if ex.expected is not None:
             assert out == ex.expected, (
-                f"README output is stale for:\n{ex.script}\nregenerate with "
+                f"{doc.name} output is stale for:\n{ex.script}\nregenerate with "
                 "'.venv/bin/python -m tests.test_readme_examples --update'"
             )
 
 
 def update() -> None:
-    """Rewrite the README's output blocks with what the run blocks print now."""
-    text = README.read_text()
-    found = examples(text)
-    with tempfile.TemporaryDirectory() as tmp:
-        outputs = run_examples(Path(tmp), found)
-    for ex, out in reversed(list(zip(found, outputs, strict=True))):
-        if ex.output_span is not None:
-            a, b = ex.output_span
-            text = text[:a] + out + text[b:]
-    README.write_text(text)
+    """Rewrite every doc's output blocks with what its run blocks print now."""
+    for doc in DOCS:
+        text = doc.read_text()
+        found = examples(text)
+        with tempfile.TemporaryDirectory() as tmp:
+            outputs = run_examples(Path(tmp), found)
+        for ex, out in reversed(list(zip(found, outputs, strict=True))):
+            if ex.output_span is not None:
+                a, b = ex.output_span
+                text = text[:a] + out + text[b:]
+        doc.write_text(text)
 
 
 if __name__ == "__main__":

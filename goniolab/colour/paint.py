@@ -558,6 +558,12 @@ def _short(value: Any, limit: int = 60) -> str:
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
+def _key(where: str, key: str) -> str:
+    """``paint.toml: body`` under a file, ``paint.body`` under a key (a file's name and the
+    key inside it are not one dotted word: ``paint.toml.body`` read as a key)."""
+    return f"{where}: {key}" if where.endswith(".toml") else f"{where}.{key}"
+
+
 def _known(table: Any, keys: set[str], where: str) -> None:
     if not isinstance(table, Mapping):
         raise PaintError(f"{where}: expected a table, got {_short(table)}")
@@ -583,11 +589,11 @@ def paint_from_dict(
     """
     _known(spec, {"coat", "body", "metallic", "pearl", "saunderson"}, where)
     try:
-        coat = dispersion_from_dict(spec.get("coat", 1.5), where=f"{where}.coat", tables=tables)
+        coat = dispersion_from_dict(spec.get("coat", 1.5), where=_key(where, "coat"), tables=tables)
         body = None
         if "body" in spec:
             b = spec["body"]
-            w = f"{where}.body"
+            w = _key(where, "body")
             _known(b, {"K", "S", "thickness_um", "substrate"}, w)
             body = PigmentLayer(
                 k_per_um=_spectrum(b.get("K", 0.0), f"{w}.K"),
@@ -598,7 +604,7 @@ def paint_from_dict(
         metallic = None
         if "metallic" in spec:
             m = spec["metallic"]
-            w = f"{where}.metallic"
+            w = _key(where, "metallic")
             _known(m, {"area_fraction", "spread_deg", "depth_um", "metal", "size_um"}, w)
             metal = (
                 dispersion_from_dict(m["metal"], where=f"{w}.metal", tables=tables)
@@ -615,7 +621,7 @@ def paint_from_dict(
         pearl = None
         if "pearl" in spec:
             p = spec["pearl"]
-            w = f"{where}.pearl"
+            w = _key(where, "pearl")
             _known(p, {"area_fraction", "spread_deg", "film_nm", "depth_um", "size_um"}, w)
             pearl = PearlFlakes(
                 area_fraction=_number(p, "area_fraction", w),
@@ -627,7 +633,7 @@ def paint_from_dict(
         form, k1, k2 = "directional", None, None
         if "saunderson" in spec:
             sd = spec["saunderson"]
-            w = f"{where}.saunderson"
+            w = _key(where, "saunderson")
             _known(sd, {"form", "k1", "k2"}, w)
             form = str(sd.get("form", "directional"))
             k1 = _number(sd, "k1", w) if "k1" in sd else None

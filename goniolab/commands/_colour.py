@@ -16,7 +16,8 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
-from goniolab.errors import UserError
+from goniolab.commands._help import RUN_HELP
+from goniolab.errors import UserError, a_run_of_kind
 
 __all__ = ["load_paint_file", "register_predict_colour"]
 
@@ -308,14 +309,12 @@ def _compare_doc(args: argparse.Namespace, measured: Any, predicted_lab: Any,
 
 
 def _add_colour_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--illuminant", default="D65", help="CIE illuminant (default D65)")
-    p.add_argument(
-        "--observer", default="10", help="10 (CIE 1964, default) or 2 (CIE 1931) degree observer"
-    )
+    p.add_argument("--illuminant", default="D65", help="CIE illuminant")
+    p.add_argument("--observer", default="10", help="10 (CIE 1964) or 2 (CIE 1931) degree observer")
     p.add_argument("--paint", metavar="FILE.toml", help="paint definition (else the sample's)")
-    p.add_argument("--step-nm", type=float, default=10.0, help="wavelength step (default 10)")
-    p.add_argument("--source-deg", type=float, default=6.0, help="lamp cone, full angle")
-    p.add_argument("--detector-deg", type=float, default=6.0, help="detector cone, full angle")
+    p.add_argument("--step-nm", type=float, default=10.0, help="wavelength step, nm")
+    p.add_argument("--source-deg", type=float, default=6.0, help="lamp cone, full angle, deg")
+    p.add_argument("--detector-deg", type=float, default=6.0, help="detector cone, full angle, deg")
 
 
 def register_predict_colour(sub: Any, add_common: Any) -> None:
@@ -325,7 +324,7 @@ def register_predict_colour(sub: Any, add_common: Any) -> None:
     )
     add_common(p)
     _add_colour_options(p)
-    p.add_argument("--theta-i", type=float, default=45.0, help="incidence (default 45)")
+    p.add_argument("--theta-i", type=float, default=45.0, help="incidence (lamp) angle, deg")
     p.add_argument(
         "--theta-r",
         default=None,
@@ -341,7 +340,7 @@ def register_predict_colour(sub: Any, add_common: Any) -> None:
         "--compare-unit",
         choices=("factor", "percent"),
         default="factor",
-        help="the --compare file's values: reflectance factors (default) or percent",
+        help="the --compare file's values: reflectance factors or percent",
     )
     p.add_argument(
         "--tolerance",
@@ -353,13 +352,13 @@ def register_predict_colour(sub: Any, add_common: Any) -> None:
         "--sparkle-pixel-um",
         type=float,
         default=15.0,
-        help="camera pixel on the sample for the sparkle prediction (default 15 um)",
+        help="camera pixel on the sample for the sparkle prediction, um",
     )
     p.add_argument(
         "--sparkle-lamp-deg",
         type=float,
         default=2.0,
-        help="angular diameter of the sparkle lamp (default 2 deg)",
+        help="angular diameter of the sparkle lamp, deg",
     )
     p.add_argument(
         "--spectra-out",
@@ -371,7 +370,7 @@ def register_predict_colour(sub: Any, add_common: Any) -> None:
         "--scale",
         choices=("diffuser", "mirror"),
         default="diffuser",
-        help="reflectance factor vs the perfect diffuser (default) or %% of the mirror",
+        help="mirror: %% of the mirror; diffuser: reflectance factor vs the perfect diffuser",
     )
     p.set_defaults(func=_cmd_predict_colour)
 
@@ -692,7 +691,7 @@ def add_runs_colour_options(p: argparse.ArgumentParser) -> None:
         "--tolerance",
         default="din6175-2",
         metavar="SET",
-        help="tolerance set: din6175-2 (default; goniolab limits in the DIN 6175-2 frame), "
+        help="tolerance set: din6175-2 (goniolab limits in the DIN 6175-2 frame), "
         "de00-1, or a FILE.toml with per-angle dE/dL/dC/dH limits",
     )
     p.add_argument(
@@ -878,7 +877,9 @@ def cmd_runs_spectra(args: argparse.Namespace) -> int:
     with open_store(args.store, args.config) as store:
         rec = _get_run(store, args.run)
         if rec.kind != "brdf":
-            raise UserError(f"run {rec.id} is a {rec.kind} run: spectra need a scan (brdf) run")
+            raise UserError(
+                f"run {rec.id} is {a_run_of_kind(rec.kind)}: spectra need a scan (brdf) run"
+            )
         tables = run_spectra_tables(store, rec, args.which)
     if not tables:
         raise UserError(f"run {rec.id} has no {args.which} spectra on one wavelength grid")
@@ -907,9 +908,14 @@ def register_runs_spectra(sub: Any, common: argparse.ArgumentParser) -> None:
         help="a scan's measured/predicted spectra as reflectance factors (CSV R_400.., "
         "Parquet, netCDF)",
     )
-    p.add_argument("run", type=int, metavar="RUN")
+    p.add_argument("run", type=int, metavar="RUN", help=RUN_HELP)
     p.add_argument("-o", "--output", required=True, metavar="FILE",
                    help="FILE.csv, FILE.parquet or FILE.nc")  # fmt: skip
-    p.add_argument("--which", choices=("measured", "predicted", "both"), default="both")
+    p.add_argument(
+        "--which",
+        choices=("measured", "predicted", "both"),
+        default="both",
+        help="which spectra to write",
+    )
     p.add_argument("--json", action="store_true", help="report what was written as JSON")
     p.set_defaults(func=cmd_runs_spectra)

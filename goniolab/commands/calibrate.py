@@ -92,9 +92,18 @@ def register(subparsers: Any) -> None:
         "when it is older than [spectro] calibration_max_age_h or its check missed.",
     )
     p.add_argument("--config", help="lab config TOML")
-    p.add_argument("--store", help="run store (default: config [lab] store)")
-    p.add_argument("--theta", type=float, default=45.0, help="specular angle, deg (45)")
-    p.add_argument("--repeats", type=int, default=3, help="readings per standard (3)")
-    p.add_argument("--time-scale", type=float, default=None, help="sim clock scale (0 = instant)")
+    p.add_argument(
+        "--store",
+        help="run store: SQLite file or postgresql:// URL (default: the config's [lab] store, "
+        "else goniolab.sqlite in the user data dir: goniolab --version)",
+    )
+    p.add_argument("--theta", type=float, default=45.0, help="specular angle, deg")
+    p.add_argument("--repeats", type=int, default=3, help="readings per standard")
+    p.add_argument(
+        "--time-scale",
+        type=float,
+        default=None,
+        help="sim clock scale, 0 = instant, 1 = real time (default: the config's [lab] time_scale)",
+    )
     p.add_argument("--json", action="store_true", help="print the record as JSON")
     p.set_defaults(func=_cmd)

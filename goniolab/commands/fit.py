@@ -21,7 +21,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from goniolab.errors import UserError
+from goniolab.commands._help import RUN_HELP
+from goniolab.errors import UserError, a_run_of_kind
 from goniolab.model_registry import model_names
 
 __all__ = ["register", "toml_text"]
@@ -100,7 +101,9 @@ def _cmd_fit_colour(args: argparse.Namespace) -> int:
     with open_store(args.store, args.config) as store:
         rec = _get_run(store, args.run)
         if rec.kind != "brdf":
-            raise UserError(f"run {rec.id} is a {rec.kind} run: a colour fit needs a scan run")
+            raise UserError(
+                f"run {rec.id} is {a_run_of_kind(rec.kind)}: a colour fit needs a scan run"
+            )
         rows = run_colour(store, rec)
     coloured = [r for r in rows if "L" in r]
     if not coloured:
@@ -307,11 +310,11 @@ def register(subparsers: Any) -> None:
             "``", "'"
         ),
     )
-    p.add_argument("run", type=int, metavar="RUN")
+    p.add_argument("run", type=int, metavar="RUN", help=RUN_HELP)
     p.add_argument(
         "--store",
-        help="SQLite store file or postgresql:// URL (default: config [lab] store or the "
-        "user data dir)",
+        help="run store: SQLite file or postgresql:// URL (default: the config's [lab] store, "
+        "else goniolab.sqlite in the user data dir: goniolab --version)",
     )
     p.add_argument("--config", help="lab config TOML whose [lab] store to use")
     p.add_argument(
@@ -337,16 +340,16 @@ def register(subparsers: Any) -> None:
         type=float,
         default=10.0,
         metavar="DEG",
-        help="leave out geometries closer than this to specular (default 10 deg)",
+        help="leave out geometries closer than this to specular, deg",
     )
     p.add_argument(
         "--metric",
         choices=("lab", "de2000"),
         default="lab",
-        help="minimise dE*ab (lab, default: equal weights, calibrated uncertainties) or the "
+        help="minimise dE*ab (lab: equal weights, calibrated uncertainties) or the "
         "local dE2000 metric of each measured colour",
     )
-    p.add_argument("--step-nm", type=float, default=10.0, help="wavelength step (default 10)")
+    p.add_argument("--step-nm", type=float, default=10.0, help="wavelength step, nm")
     p.add_argument("--save", metavar="FILE.toml", help="write the fitted paint (--paint format)")
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.set_defaults(func=_cmd_fit_colour)

@@ -257,7 +257,9 @@ def register(subparsers: Any) -> None:
     )
     pl.add_argument("--profile", default=None, help="protocol profile (default: the protocol's)")
     pl.add_argument("--serial-number", default="401120999", help="ZGM1120 serial number")
-    pl.add_argument("--baudrate", type=int, default=None, help="default: the profile's")
+    pl.add_argument(
+        "--baudrate", type=int, default=None, help="serial baud rate (default: the profile's)"
+    )
     pl.add_argument("--timeout", type=float, default=2.0, help="reply timeout, s")
     pl.add_argument("--sample", help="sample:NAME or height map: print the predicted gloss beside")
     pl.add_argument(
@@ -267,13 +269,16 @@ def register(subparsers: Any) -> None:
     from goniolab.commands.scan import add_run_meta_args
 
     add_run_meta_args(pl)  # --operator, --sample-id, --note, --tag (run identity)
-    pl.add_argument(
-        "--angles", type=int, nargs="+", default=[20, 60, 85], help="geometries (20 60 85)"
-    )
+    pl.add_argument("--angles", type=int, nargs="+", default=[20, 60, 85], help="geometries, deg")
     pl.add_argument("--mode", choices=("measure", "push"), default=None,
                     help="ask for each reading, or take readings the meter pushes")  # fmt: skip
     pl.add_argument("--interval", type=float, default=0.0, help="pause between readings, s")
-    pl.add_argument("--time-scale", type=float, default=None, help="sim clock scale (0 = instant)")
-    pl.add_argument("--store", help="SQLite run store")
+    pl.add_argument("--time-scale", type=float, default=None,
+                    help="sim clock scale, 0 = instant (default: the config's [lab] time_scale)")  # fmt: skip
+    pl.add_argument(
+        "--store",
+        help="run store: SQLite file or postgresql:// URL (default: the config's [lab] store, "
+        "else goniolab.sqlite in the user data dir: goniolab --version)",
+    )
     pl.add_argument("--json", action="store_true", help="one JSON object per reading on stdout")
     pl.set_defaults(func=_cmd_log)

@@ -1,4 +1,7 @@
-"""``goniolab plot RUN [--out run.png|svg|pdf] [--log]``: a picture of a stored run.
+"""``goniolab plot RUN --out run.png|svg|pdf [--log]``: a picture of a stored run.
+
+The file is written only where ``--out`` says (issue 27: a plot without ``--out`` wrote
+``run-RUN.png`` into the current directory unasked).
 
 A scan: measured points with error bars, the predicted curve and a residual panel (plus
 L*, a*, b* against the aspecular angle when the run has colour data); a gloss log: the
@@ -13,6 +16,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from goniolab.commands._help import RUN_HELP
 from goniolab.errors import UserError
 
 __all__ = ["register"]
@@ -22,7 +26,7 @@ def _cmd_plot(args: argparse.Namespace) -> int:
     from goniolab.commands.runs import _get_run, open_store
     from goniolab.plot import PLOT_FORMATS
 
-    out = Path(args.out) if args.out else Path(f"run-{args.run}.png")
+    out = Path(args.out)
     if out.suffix.lower() not in PLOT_FORMATS:
         raise UserError(f"--out {out}: the suffix picks the format: {', '.join(PLOT_FORMATS)}")
     if out.parent and not out.parent.is_dir():
@@ -52,10 +56,20 @@ def register(subparsers: Any) -> None:
         "predicted curve and the residuals (and L*, a*, b* against the aspecular angle when "
         "it has colour data); a gloss log's readings over time.",
     )
-    p.add_argument("run", type=int, metavar="RUN")
-    p.add_argument("--out", "-o", help="output file .png, .svg or .pdf (default run-RUN.png)")
+    p.add_argument("run", type=int, metavar="RUN", help=RUN_HELP)
+    p.add_argument(
+        "--out",
+        "-o",
+        required=True,
+        metavar="FILE",
+        help="the file to write: .png, .svg or .pdf (the suffix picks the format)",
+    )
     p.add_argument("--log", action="store_true", help="luminance on a log axis")
-    p.add_argument("--store", help="run store (default: config [lab] store or user data dir)")
+    p.add_argument(
+        "--store",
+        help="run store: SQLite file or postgresql:// URL (default: the config's [lab] store, "
+        "else goniolab.sqlite in the user data dir: goniolab --version)",
+    )
     p.add_argument("--config", help="lab config TOML whose [lab] store to use")
     p.add_argument("--json", action="store_true", help="print what was written as JSON")
     p.set_defaults(func=_cmd_plot)

@@ -1,4 +1,5 @@
-"""``goniolab predict stats|gloss|brdf|albedo MAP``: roughness, gloss and BRDF predicted from a map.
+"""``goniolab predict stats|gloss|brdf|albedo|colour MAP``: roughness, gloss, BRDF, albedo and colour
+predicted from a height map.
 
 MAP is a height-map file or ``sample:NAME`` (:func:`goniolab.surfaces.resolve_map`). The facet
 model (Wittmann et al. 2021; docs/PHYSICS.md) gives
@@ -695,16 +696,16 @@ def _add_common(p: argparse.ArgumentParser, *, many: bool = False) -> None:
         "--n",
         type=parse_index,
         default=complex(1.55),
-        help="refractive index, or n+kj for metals, e.g. 0.27+3.41j (default 1.55)",
+        help="refractive index, or n+kj for metals, e.g. 0.27+3.41j",
     )
     p.add_argument(
-        "--step-um", type=float, default=None, help="lateral step for files that carry none"
+        "--step-um", type=float, default=None, help="lateral step, um, of a file that carries none"
     )
     p.add_argument(
         "--slope-method",
         choices=("forward", "central", "plane8"),
         default="forward",
-        help="facet slopes from the map: forward differences (the seed's, default), central "
+        help="facet slopes from the map: forward differences (the seed's), central "
         "differences, or the least-squares plane through 3 x 3 points (smooths pixel noise)",
     )
     p.add_argument(
@@ -717,7 +718,7 @@ def _add_common(p: argparse.ArgumentParser, *, many: bool = False) -> None:
         "--masking",
         action=argparse.BooleanOptionalAction,
         default=True,
-        help="Smith masking-shadowing from the measured slopes (default on)",
+        help="Smith masking-shadowing from the measured slopes (default: on)",
     )
     p.add_argument(
         "--model",
@@ -768,15 +769,21 @@ def register(subparsers: Any) -> None:
     gloss.set_defaults(func=_cmd_gloss)
     brdf = sub.add_parser("brdf", help="in-plane BRDF and goniometer luminance")
     _add_common(brdf)
-    brdf.add_argument("--theta-i", type=float, default=45.0, help="lamp angle, deg (default 45)")
+    brdf.add_argument("--theta-i", type=float, default=45.0, help="incidence (lamp) angle, deg")
     brdf.add_argument(
         "--theta-r",
         default="0:70:1",
-        help="detector angles: start:stop:step (stop included) or a comma list, e.g. "
-        "-20:20:1 (default 0:70:1)",
+        help="detector angles: start:stop:step (stop included) or a comma list, e.g. -20:20:1",
     )
-    brdf.add_argument("--source-deg", type=float, default=None, help="lamp cone, full angle")
-    brdf.add_argument("--detector-deg", type=float, default=None, help="detector cone, full angle")
+    brdf.add_argument(
+        "--source-deg", type=float, default=None, help="lamp cone, full angle, deg (default: 6)"
+    )
+    brdf.add_argument(
+        "--detector-deg",
+        type=float,
+        default=None,
+        help="detector cone, full angle, deg (default: 6)",
+    )
     brdf.add_argument("--point", action="store_true", help="BRDF in the exact direction")
     brdf.add_argument("--out", metavar="FILE.nc", help="also write the curve as netCDF")
     allow_negative_angles(brdf)  # "--theta-r -20:20:1" is a range, not an option
@@ -789,7 +796,7 @@ def register(subparsers: Any) -> None:
     albedo.add_argument(
         "--theta-i",
         default="0,30,60,85",
-        help="lamp angles, deg: a comma list or start:stop:step (default 0,30,60,85; <= 89)",
+        help="incidence (lamp) angles, deg, each <= 89: a comma list or start:stop:step",
     )
     albedo.set_defaults(func=_cmd_albedo)
     from goniolab.commands._colour import register_predict_colour

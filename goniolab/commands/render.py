@@ -162,26 +162,28 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument("map", metavar="MAP", help="height-map file or sample:NAME")
     p.add_argument("--out", "-o", required=True, help="output PNG file")
-    p.add_argument("--size", type=int, default=512, help="image width = height in pixels")
-    p.add_argument("--lamps", type=int, choices=(1, 2), default=1, help="key lamp (+ fill)")
-    p.add_argument("--shape", choices=("panel", "sphere"), default="panel")
+    p.add_argument("--size", type=int, default=512, help="image width = height, pixels")
+    p.add_argument(
+        "--lamps", type=int, choices=(1, 2), default=1, help="1: the key lamp; 2: key and fill lamp"
+    )
+    p.add_argument("--shape", choices=("panel", "sphere"), default="panel", help="what is drawn")
     p.add_argument("--paint", metavar="FILE.toml", help="paint definition (else the sample's)")
     from goniolab.commands.predict import parse_index
 
     p.add_argument(
         "--n", type=parse_index, default=complex(1.55), help="coat index of a map without paint"
     )
-    p.add_argument("--step-um", type=float, default=None, help="lateral step for bare files")
-    p.add_argument("--illuminant", default="D65", help="CIE illuminant (default D65)")
-    p.add_argument("--observer", default="10", help="10 (CIE 1964, default) or 2 (CIE 1931)")
-    p.add_argument("--step-nm", type=float, default=10.0, help="wavelength step (default 10)")
     p.add_argument(
-        "--lamp-deg", type=float, default=6.0, help="lamps' angular diameter (default 6 deg)"
+        "--step-um", type=float, default=None, help="lateral step, um, of a file that carries none"
     )
+    p.add_argument("--illuminant", default="D65", help="CIE illuminant")
+    p.add_argument("--observer", default="10", help="10 (CIE 1964) or 2 (CIE 1931) degree observer")
+    p.add_argument("--step-nm", type=float, default=10.0, help="wavelength step, nm")
+    p.add_argument("--lamp-deg", type=float, default=6.0, help="lamps' angular diameter, deg")
     p.add_argument(
         "--exposure",
         default="auto",
-        help="auto (default): the largest exposure that lets at most 1%% of the pixels clip "
+        help="auto: the largest exposure that lets at most 1%% of the pixels clip "
         "to white; a number: 1 = a white diffuser lit along its normal is display white",
     )
     p.add_argument(

@@ -12,7 +12,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from goniolab import jsonout
-from goniolab.errors import UserError
+from goniolab.commands._help import RUN_HELP
+from goniolab.errors import UserError, a_run_of_kind
 from goniolab.textsafe import escaped_stdout
 
 if TYPE_CHECKING:  # sqlite3 and the plans load when a command runs, not at --help
@@ -304,6 +305,14 @@ def _cmd_show(args: argparse.Namespace) -> int:
                 print("\n".join(colour_text(colour, theta_i)))
         elif rec.kind in ("align", "calibration"):
             print(f"  readings: {summary['readings']} (the result: the model's {rec.kind} record)")
+            result = summary.get("alignment") or {}
+            for label, key in (
+                ("lamp arm zero offset", "lamp_zero_deg"),
+                ("detector arm zero offset", "detector_zero_deg"),
+                ("sample tilt", "sample_tilt_deg"),
+            ):
+                if isinstance(result.get(key), int | float):
+                    print(f"  {label}: {result[key]:+.3f} deg")
         else:
             predicted = rec.model.get("predicted_gu") or {}
             for angle, st in summary["statistics"].items():
@@ -326,7 +335,9 @@ def _cmd_colour(args: argparse.Namespace) -> int:
     with open_store(args.store, args.config) as store:
         rec = _get_run(store, args.run)
         if rec.kind != "brdf":
-            raise UserError(f"run {rec.id} is a {rec.kind} run: colour needs a scan (brdf) run")
+            raise UserError(
+                f"run {rec.id} is {a_run_of_kind(rec.kind)}: colour needs a scan (brdf) run"
+            )
         other = None
         if args.vs is not None:
             other = _get_run(store, args.vs)
@@ -549,8 +560,8 @@ def register(subparsers: Any) -> None:
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument(
         "--store",
-        help="SQLite store file or postgresql:// URL (default: config [lab] store or the "
-        "user data dir)",
+        help="run store: SQLite file or postgresql:// URL (default: the config's [lab] store, "
+        "else goniolab.sqlite in the user data dir: goniolab --version)",
     )
     common.add_argument("--config", help="lab config TOML whose [lab] store to use")
     sub = p.add_subparsers(dest="runs_command", metavar="ACTION", required=True)
@@ -569,7 +580,7 @@ def register(subparsers: Any) -> None:
     pl.set_defaults(func=escaped_stdout(_cmd_list))  # stored names may hold escapes
 
     ps = sub.add_parser("show", parents=[common], help="show one run and its summary")
-    ps.add_argument("run", type=int, metavar="RUN")
+    ps.add_argument("run", type=int, metavar="RUN", help=RUN_HELP)
     ps.add_argument("--json", action="store_true", help="print JSON")
     ps.set_defaults(func=escaped_stdout(_cmd_show))
 
@@ -579,7 +590,7 @@ def register(subparsers: Any) -> None:
         help="measured vs predicted colour per geometry (dL*/dC*/dH*, dE76/94/2000, CMC, "
         "tolerances per angle, flop index, metamerism)",
     )
-    pc.add_argument("run", type=int, metavar="RUN")
+    pc.add_argument("run", type=int, metavar="RUN", help=RUN_HELP)
     pc.add_argument("--vs", type=int, metavar="RUN", help="compare with another run")
     pc.add_argument("--json", action="store_true", help="print JSON")
     from goniolab.commands._colour import add_runs_colour_options
@@ -604,7 +615,7 @@ def register(subparsers: Any) -> None:
         )
         + ". A suffix no format has is refused unless --format is given.",
     )
-    pe.add_argument("run", type=int, metavar="RUN")
+    pe.add_argument("run", type=int, metavar="RUN", help=RUN_HELP)
     pe.add_argument(
         "--format",
         choices=tuple(EXPORTERS),
@@ -632,7 +643,13 @@ def register(subparsers: Any) -> None:
         "to date when it was copied before it finished), so the command can be re-run; a "
         "store is never migrated into itself.",
     )
-    pm.add_argument("--from", dest="source", required=True, metavar="STORE")
+    pm.add_argument(
+        "--from",
+        dest="source",
+        required=True,
+        metavar="STORE",
+        help="the SQLite store file to copy from",
+    )
     pm.add_argument("--json", action="store_true", help="print the id mapping as JSON")
     pm.set_defaults(func=_cmd_migrate)
 
@@ -655,7 +672,7 @@ def register(subparsers: Any) -> None:
         parents=[common],
         help="set a run's operator, physical sample id, notes and tags",
     )
-    pa.add_argument("run", type=int, metavar="RUN")
+    pa.add_argument("run", type=int, metavar="RUN", help=RUN_HELP)
     from goniolab.commands.scan import add_run_meta_args
 
     add_run_meta_args(pa)

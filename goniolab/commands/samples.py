@@ -91,21 +91,11 @@ def _cmd_save(args: argparse.Namespace) -> int:
     return 0
 
 
-EXAMPLES = """\
-examples:
-  goniolab samples                              # the built-in samples
-  goniolab samples save wittmann-3 scan.sur     # a Digital Surf file to try the commands on
-  goniolab samples save gaussian-s0.05 scan.sdf --size 1024 --step-um 0.5
-"""
-
-
 def register(subparsers: Any) -> None:
     """Add ``goniolab samples`` and ``goniolab samples save``."""
     p = subparsers.add_parser(
         "samples",
         help="list the built-in samples (sample:NAME), or save one as a height-map file",
-        epilog=EXAMPLES,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("--json", action="store_true", help="machine-readable output")
     p.set_defaults(func=_cmd_samples)
@@ -115,8 +105,6 @@ def register(subparsers: Any) -> None:
         help="write a built-in sample as a height-map file",
         description="Write a built-in sample as a height-map file in the format of the "
         "file's extension (or --format): .sur, .sdf, .gwy, .npy (+ .json sidecar), .csv, .txt.",
-        epilog=EXAMPLES,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     ps.add_argument("name", metavar="NAME", help="a name from 'goniolab samples'")
     ps.add_argument("file", metavar="FILE", help="where to write it")

@@ -107,7 +107,10 @@ def format_summary(summary: dict[str, Any]) -> str:
 
 
 class ProgressBar:
-    """Scan progress with the ETA of the motion model.
+    """Scan progress with the ETA of the motion model (on an instant sim clock, scale 0,
+    from the measured wall time per reading instead: the motion model's lab time takes no
+    wall time there, and "ETA 0s" stood through 15-20 s of computing; "?" until a reading
+    has been timed).
 
     On a terminal a rich progress bar (redrawn in place; messages scroll above it); to a
     pipe or a file one plain line per 10 % (``[####......] 12/30 ETA 4s detail``), stable
@@ -122,6 +125,7 @@ class ProgressBar:
         self._last_pct = -1
         self._rich: Any = None
         self._task: Any = None
+        self._first: tuple[float, int] | None = None  # (monotonic s, done) of the first event
 
     def wall_s(self, lab_s: float) -> float:
         """Lab-clock seconds to wall seconds (a sim clock at scale 0 takes no wall time)."""
@@ -146,8 +150,24 @@ class ProgressBar:
         self._rich.start()
         self._task = self._rich.add_task("scan", total=total, eta="?", detail="")
 
+    def eta_wall_s(self, ev: Progress, now_s: float) -> float:
+        """Wall seconds left: the motion model's, or at clock scale 0 the measured rate's
+        (NaN, shown as "?", until a reading has been timed)."""
+        if self._first is None:
+            self._first = (now_s, ev.done)
+        if ev.total and ev.done >= ev.total:
+            return 0.0
+        if self.clock_scale > 0:
+            return self.wall_s(ev.eta_s)
+        t0, done0 = self._first
+        if ev.done <= done0:
+            return math.nan
+        return (now_s - t0) / (ev.done - done0) * (ev.total - ev.done)
+
     def update(self, ev: Progress, detail: str) -> None:
-        eta = format_eta(self.wall_s(ev.eta_s))
+        import time
+
+        eta = format_eta(self.eta_wall_s(ev, time.monotonic()))
         if self.tty:
             if self._rich is None:
                 self._start_rich(ev.total)
@@ -299,12 +319,14 @@ async def _execute(
             raise UserError(f"plan refused (no arm moved): {exc}") from exc
         clock_scale = session.clock_scale
         check = scan.check
-        wall = check.eta_s / clock_scale if clock_scale > 0 else 0.0
         lab_time = "" if clock_scale == 1.0 else f" ({check.eta_s:.2f} s of lab clock)"
+        # an instant sim clock takes no wall time for the lab's: the ETA comes from the
+        # readings as they are timed (ProgressBar)
+        eta = format_eta(check.eta_s / clock_scale) if clock_scale > 0 else "from the readings"
         homed = await session.homed()
         print(
             f"goniolab: {check.n_readings} readings, {check.n_moves} moves, "
-            f"ETA {format_eta(wall)}{lab_time}"
+            f"ETA {eta}{lab_time}"
             + ("" if homed else " after homing the arms (the home search is not estimated)"),
             file=sys.stderr,
         )
@@ -389,13 +411,14 @@ async def _execute_align(
     plan: Any,
     json_out: bool,
     write_config: bool,
+    config: LabConfig | None = None,
 ) -> int:
     import asyncio
 
     from goniolab.config import load_lab_config
     from goniolab.session import ScanSession
 
-    cfg = load_lab_config(config_path)
+    cfg = config if config is not None else load_lab_config(config_path)
     async with ScanSession.open(
         cfg, store, sample=plan.sample, time_scale=time_scale, operator=_align_prompt
     ) as session:
@@ -515,6 +538,7 @@ def _cmd_scan(args: argparse.Namespace) -> int:
 
         check_sample(args.sample)
         sample = absolute_sample(args.sample)
+    cfg = _with_step(cfg, args, sample)
     if args.plan == "align":
         from goniolab.scan.align import AlignPlan
 
@@ -535,6 +559,7 @@ def _cmd_scan(args: argparse.Namespace) -> int:
                     plan=align_plan,
                     json_out=args.json,
                     write_config=not args.no_write_config,
+                    config=cfg,
                 )
             )
     theta_i, theta_r = args.theta_i, args.theta_r
@@ -572,8 +597,36 @@ def _cmd_scan(args: argparse.Namespace) -> int:
                 model=args.model,
                 adaptive=args.adaptive,
                 meta=run_meta_args(args),
+                config=cfg,
             )
         )
+
+
+def _with_step(cfg: LabConfig, args: argparse.Namespace, sample: str) -> LabConfig:
+    """``cfg`` with ``--step-um`` as ``[sample] step_um``, after the map was read once here,
+    so that a map without a lateral step (a ``.npy`` without sidecar) is one error naming
+    the map and the option, not the config (issue 27, item 6)."""
+    if args.step_um is not None:
+        if not args.step_um > 0 or args.step_um != args.step_um:
+            raise UserError(f"scan: --step-um must be > 0, got {args.step_um:g}")
+        cfg = cfg.model_copy(
+            update={"sample": cfg.sample.model_copy(update={"step_um": args.step_um})}
+        )
+    if sample.startswith("sample:"):
+        return cfg
+    from goniolab.surfaces.resolve import resolve_map
+
+    try:
+        resolve_map(sample if args.sample else _config_map(cfg), step_um=cfg.sample.step_um)
+    except UserError as exc:  # its text starts with the map's file name
+        if args.sample:
+            raise UserError(f"--sample {exc}") from None
+        raise UserError(f"{cfg.source}: sample.map: {exc} (or set [sample] step_um)") from None
+    return cfg
+
+
+def _config_map(cfg: LabConfig) -> str:
+    return cfg.sample_map()
 
 
 def _open(store_arg: str | None, config_store: str | None, *, create: bool = True) -> RunStore:
@@ -804,10 +857,15 @@ def _cmd_resume(args: argparse.Namespace) -> int:
 def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--store",
-        help="run store: SQLite file or postgresql:// URL (default: config [lab] store or "
-        "the user data dir)",
+        help="run store: SQLite file or postgresql:// URL (default: the config's [lab] store, "
+        "else goniolab.sqlite in the user data dir: goniolab --version)",
     )
-    p.add_argument("--time-scale", type=float, default=None, help="sim clock scale (0 = instant)")
+    p.add_argument(
+        "--time-scale",
+        type=float,
+        default=None,
+        help="sim clock scale, 0 = instant, 1 = real time (default: the config's [lab] time_scale)",
+    )
     p.add_argument("--json", action="store_true", help="print only the summary JSON on stdout")
 
 
@@ -824,9 +882,19 @@ def register(subparsers: Any) -> None:
     p.add_argument(
         "--sample", help="sample:NAME or a height-map file (default: config [sample] map)"
     )
-    p.add_argument("--theta-i", type=float, default=45.0, help="incidence angle, deg (default 45)")
     p.add_argument(
-        "--theta-r", default=None, help='detector angles: "start:stop:step" or "a,b,c" (0:70:1)'
+        "--step-um",
+        type=float,
+        default=None,
+        metavar="UM",
+        help="lateral step of a map file that carries none (a .npy without sidecar), um "
+        "(default: the config's [sample] step_um)",
+    )
+    p.add_argument("--theta-i", type=float, default=45.0, help="incidence (lamp) angle, deg")
+    p.add_argument(
+        "--theta-r",
+        default=None,
+        help='detector angles, deg: "start:stop:step" or "a,b,c" (default: 0:70:1)',
     )
     p.add_argument(
         "--plan",
@@ -842,9 +910,9 @@ def register(subparsers: Any) -> None:
         "--repeats",
         type=int,
         default=DEFAULT_REPEATS,
-        help=f"readings per geometry (default {DEFAULT_REPEATS}, as in the TUI)",
+        help="readings per geometry (the TUI's default too)",
     )
-    p.add_argument("--dwell", type=float, default=0.0, help="settling time after a move, s")
+    p.add_argument("--dwell", type=float, default=0.0, help="settling time after each move, s")
     p.add_argument("--exposure-us", type=int, default=None, help="exposure, us (default: config)")
     p.add_argument(
         "--mirror-reference",
@@ -860,7 +928,7 @@ def register(subparsers: Any) -> None:
     p.add_argument(
         "--align-theta-i",
         default="20,40,60",
-        help="incidence angles of --plan align (two or more; default 20,40,60)",
+        help="incidence angles of --plan align, deg (two or more)",
     )
     p.add_argument(
         "--no-write-config",
@@ -888,7 +956,9 @@ def register(subparsers: Any) -> None:
     sub = p.add_subparsers(dest="scan_command", metavar="resume")
     pr = sub.add_parser("resume", help="continue an interrupted run (also after a crash)")
     _add_common(pr)
-    pr.add_argument("run", type=int, metavar="RUN")
+    pr.add_argument(
+        "run", type=int, metavar="RUN", help="the interrupted run's id (goniolab runs list)"
+    )
     pr.add_argument(
         "--config",
         help="lab config TOML compared with the run's stored config (default: the file the "

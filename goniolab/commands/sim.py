@@ -42,7 +42,7 @@ def register(subparsers: Any) -> None:
         "--time-scale",
         type=float,
         default=None,
-        help="sim clock speed (0 = instant moves, 1 = real time); default from the config",
+        help="sim clock scale, 0 = instant, 1 = real time (default: the config's [lab] time_scale)",
     )
     serve.set_defaults(func=_cmd_serve)
     p.set_defaults(func=lambda args: _usage(p))

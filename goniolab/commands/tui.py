@@ -11,7 +11,32 @@ from typing import Any
 
 from goniolab.errors import UserError
 
-__all__ = ["register"]
+__all__ = ["DESCRIPTION", "KEYS", "register"]
+
+#: Every key of the app (goniolab.tui.app.GonioApp.BINDINGS; tests/test_help.py checks
+#: that none is left out), as ``tui --help`` lists them.
+KEYS = (
+    ("s", "start a scan with the form's sample, theta_i, theta_r range and repeats"),
+    ("space", "pause after the current reading, or resume"),
+    ("x", "abort the scan (arms parked, run stored as aborted)"),
+    ("a", "align the arms and the sample (scan --plan align); press twice, it asks first"),
+    ("g", "read the glossmeter (20/60/85 deg) beside the model's prediction"),
+    ("h", "home the arms again (after an alarm or a failed homing)"),
+    ("l", "side plot: residuals or log10 of both curves"),
+    ("c", "main plot: luminance, L* or a*/b* against theta_r"),
+    ("r", "browse stored runs (enter reopens one, esc back)"),
+    ("f", "under 120 columns: the setup form or the plots"),
+    ("i", "run identity: operator, sample id, notes, tags of the next runs"),
+    ("q", "quit (a running scan is aborted, arms parked)"),
+    ("ctrl+p", "command palette"),
+    ("escape", "leave a form field"),
+)
+
+DESCRIPTION = (
+    "Open the lab (simulated or real), home the goniometer and show scans live beside\n"
+    "the model's prediction. The screen needs 80 x 24 at least.\n\nkeys:\n"
+    + "\n".join(f"  {key:<7} {what}" for key, what in KEYS)
+)
 
 
 def register(sub: Any) -> None:
@@ -19,9 +44,7 @@ def register(sub: Any) -> None:
     p: argparse.ArgumentParser = sub.add_parser(
         "tui",
         help="interactive lab UI: scan setup, live measured-vs-predicted plots, gloss log",
-        description="Open the lab (simulated or real), home the goniometer and show scans "
-        "live beside the model's prediction. Keys: s start, space pause/resume, x abort, "
-        "g gloss reading, l residual/log view, r stored runs, q quit, ctrl+p commands.",
+        description=DESCRIPTION,
     )
     p.add_argument("--config", required=True, metavar="FILE", help="lab config TOML")
     p.add_argument(
@@ -29,16 +52,22 @@ def register(sub: Any) -> None:
         type=float,
         default=None,
         metavar="S",
-        help="sim clock scale (0 = instant, 1 = real time); default: [lab] time_scale",
+        help="sim clock scale, 0 = instant, 1 = real time (default: the config's [lab] time_scale)",
     )
     p.add_argument(
         "--sample",
         default=None,
         metavar="NAME",
         help="sample preselected for the prediction (built-in NAME, sample:NAME or a "
-        "height-map file); default: [sample] map",
+        "height-map file; default: the config's [sample] map)",
     )
-    p.add_argument("--store", default=None, metavar="FILE", help="run store (SQLite) file")
+    p.add_argument(
+        "--store",
+        default=None,
+        metavar="STORE",
+        help="run store: SQLite file or postgresql:// URL (default: the config's [lab] store, "
+        "else goniolab.sqlite in the user data dir: goniolab --version)",
+    )
     p.add_argument(
         "--autostart",
         action="store_true",
@@ -49,7 +78,7 @@ def register(sub: Any) -> None:
         type=float,
         default=0.0,
         metavar="S",
-        help="take a glossmeter reading every S seconds (0 = only on the g key); default 0",
+        help="take a glossmeter reading every S seconds (0 = only on the g key)",
     )
     p.set_defaults(func=_cmd_tui)
 

@@ -109,7 +109,11 @@ class GlossLogger:
         backoff_s: float = 0.5,
         max_backoff_s: float = 8.0,
         max_failures: int = 10,
+        keep_running: bool = False,
     ) -> None:
+        # keep_running: a log that goes on after this call (the TUI's one gloss run per
+        # sample) stays "running" when the call's readings are in; its owner ends it
+        self.keep_running = keep_running
         if mode not in ("measure", "push"):
             raise ValueError(f"gloss mode must be 'measure' or 'push', got {mode!r}")
         self.meter = meter
@@ -305,7 +309,8 @@ class GlossLogger:
             # run did not end the way it was meant to
             state, reason = RunState.ABORTED, f"stopped by {self._stop_by or 'the operator'}"
         try:
-            self.store.set_status(self.run_id, state.value, reason)
+            if not (self.keep_running and state is RunState.DONE):
+                self.store.set_status(self.run_id, state.value, reason)
         except StoreError as exc:  # the store is still away: say so, never a traceback
             self.bus.publish(
                 InstrumentError(

@@ -61,9 +61,7 @@ def _resolve_steps(
     arg = _steps_from_arg(name, step_um)
     if file_steps is None:
         if arg is None:
-            raise _fail(
-                name, f"no lateral step in {what}: pass step_um (--step-um on the command line)"
-            )
+            raise _fail(name, f"no lateral step in {what}: pass --step-um UM (step_um in Python)")
         return arg
     for value in file_steps:
         if not (math.isfinite(value) and value > 0.0):

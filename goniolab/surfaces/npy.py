@@ -72,7 +72,9 @@ def _read_npy(path: Path, opts: _ReadOptions) -> HeightMap:
         if z_um_per != 1.0:
             z = z * z_um_per
         meta.update(extra)
-    dx, dy = _resolve_steps(name, file_steps, opts.step_um, what=side.name)
+    # name the sidecar only when there is one (issue 27: the message named a missing file)
+    what = side.name if side.exists() else f"the file (it has no sidecar {side.name})"
+    dx, dy = _resolve_steps(name, file_steps, opts.step_um, what=what)
     hm = _make(name, z, dx, dy, meta)
     _warn_if_nm(hm)
     return hm

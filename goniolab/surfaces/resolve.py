@@ -14,7 +14,13 @@ from goniolab.errors import UserError
 from goniolab.optics.heightmap import HeightMap, HeightMapError
 from goniolab.surfaces.registry import load_heightmap
 
-__all__ = ["SAMPLE_PREFIX", "one_line", "resolve_map"]
+__all__ = ["SAMPLE_PREFIX", "CoarseStepWarning", "one_line", "resolve_map"]
+
+
+class CoarseStepWarning(UserWarning):
+    """A lateral step larger than the surface's correlation length: neighbouring points are
+    nearly uncorrelated, so slopes from differences are not the surface's."""
+
 
 #: Prefix of a built-in sample spec, e.g. ``sample:wittmann-3``.
 SAMPLE_PREFIX = "sample:"
@@ -40,7 +46,46 @@ def resolve_map(spec: str | Path, *, step_um: float | None = None) -> HeightMap:
     UserError
         Unknown sample (lists the known ones), unreadable or malformed file (names it).
     """
-    text = str(spec)
+    hm = _resolve(str(spec), step_um)
+    if step_um is not None:
+        _warn_if_coarse(hm, str(spec), step_um)
+    return hm
+
+
+def _warn_if_coarse(hm: HeightMap, name: str, step_um: float) -> None:
+    """Warn when neighbouring points of a map read at a step the user gave are nearly
+    uncorrelated: their lag-1 autocorrelation below 1/e means the step exceeds the
+    correlation length (the 1/e fall of the autocorrelation, docs/PHYSICS.md), and every
+    facet slope is a difference of unrelated heights (issue 27: ``--step-um 500`` passed
+    silently)."""
+    import math
+    import warnings
+
+    import numpy as np
+
+    z = np.asarray(hm.z_um, dtype=np.float64)
+    if z.ndim != 2 or min(z.shape) < 3:
+        return
+    z = np.nan_to_num(z - np.nanmean(z))
+    power = float(np.sum(z * z))
+    if not power > 0.0:
+        return
+    rho = min(
+        float(np.sum(z[:, :-1] * z[:, 1:])) / power,
+        float(np.sum(z[:-1, :] * z[1:, :])) / power,
+    )
+    if rho < math.exp(-1.0):
+        warnings.warn(
+            f"{name}: at --step-um {step_um:g} neighbouring points are nearly uncorrelated "
+            f"(lag-1 autocorrelation {rho:.2f} < 1/e): the step is larger than the surface's "
+            "correlation length, so its slopes (and the facet prediction) are not the "
+            "surface's; check the step",
+            CoarseStepWarning,
+            stacklevel=3,
+        )
+
+
+def _resolve(text: str, step_um: float | None) -> HeightMap:
     if text.startswith(SAMPLE_PREFIX):
         from goniolab.surfaces.samples import SampleError, make_sample
 

@@ -387,8 +387,7 @@ class GonioApp(App[int]):
             self._gloss_polling = True
             self.set_interval(self.gloss_every_s, self.action_read_gloss)
         if self.autostart and not rehome:
-            self.action_read_gloss()
-            self.action_start_scan()
+            self._gloss_then_scan()  # the README's order: a gloss reading, then the scan
         else:
             self.preview_prediction()
 
@@ -465,16 +464,33 @@ class GonioApp(App[int]):
 
     @work(group="gloss")
     async def _read_gloss(self) -> None:
+        await self._gloss_reading()
+
+    async def _gloss_reading(self) -> None:
+        """One glossmeter reading, awaited until stored (a request while one is under way
+        joins the next reading: the backend coalesces, never refuses)."""
         try:
             sample = self.query_one(ScanForm).read_sample()
         except NoMatches:  # shutting down (a gloss timer may still fire)
             return
         try:
-            await self.backend.read_gloss(sample)
+            stored = await self.backend.read_gloss(sample)
+            if stored is not None:
+                await stored
+        except asyncio.CancelledError:
+            raise
         except UserError as exc:
             self.notify(str(exc), title="Glossmeter", severity="warning")
         except (DeviceError, OSError) as exc:
             self.notify(str(exc), title="Glossmeter", severity="error", timeout=8)
+        except Exception as exc:
+            self.notify(f"{type(exc).__name__}: {exc}", title="Glossmeter", severity="error")
+
+    @work(group="autostart")
+    async def _gloss_then_scan(self) -> None:
+        """``--autostart``: the first gloss reading, then the form's scan."""
+        await self._gloss_reading()
+        self.action_start_scan()
 
     #: Sweeps with more points than this get no live preview (a typo like step 0.0001).
     PREVIEW_MAX_POINTS = 2000

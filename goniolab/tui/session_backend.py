@@ -106,6 +106,10 @@ class SessionBackend:
         self._align_runner: AlignRunner | None = None
         self._task: asyncio.Task[None] | None = None
         self._gloss_task: asyncio.Task[None] | None = None
+        # a request while a reading is under way: the sample of the newest one, and the
+        # future of the one reading that serves them all (issue 27, item 7)
+        self._gloss_next: str | None = None
+        self._gloss_next_done: asyncio.Future[None] | None = None
         self._gloss_runs: dict[tuple[str, RunIdentity], int] = {}
         self._scan_sample = ""
         #: Stored with every run started from now on (key i in the TUI).
@@ -170,8 +174,20 @@ class SessionBackend:
                     task.cancel()
                 with contextlib.suppress(asyncio.CancelledError, Exception):
                     await task
+        self._end_gloss_runs()
         await self._stack.aclose()
         self.bus.close()
+
+    def _end_gloss_runs(self) -> None:
+        """The session's gloss runs stayed ``running`` while it took readings; they end
+        ``done`` with it (a run a reading failed keeps its failed state)."""
+        if self.gloss is None:
+            return
+        store = self.gloss.store
+        for run_id in self._gloss_runs.values():
+            with contextlib.suppress(StoreError):
+                if store.get_run(run_id).status == RunState.RUNNING.value:
+                    store.set_status(run_id, RunState.DONE.value)
 
     # ------------------------------------------------------------------ form
     def sample_names(self) -> list[str]:
@@ -356,23 +372,57 @@ class SessionBackend:
         """A glossmeter reading is in progress."""
         return self._gloss_task is not None and not self._gloss_task.done()
 
-    async def read_gloss(self, sample: str) -> None:
-        """Take one glossmeter reading (20/60/85) in the background, logged in the store.
+    async def read_gloss(self, sample: str) -> asyncio.Future[None]:
+        """Take one glossmeter reading (20/60/85) in the background, logged in the store;
+        return a future that is done once it is stored (its exception: why it failed).
+
+        A request while a reading is under way (the ``g`` key while ``--gloss-every``
+        polls) is not refused: requests coalesce into one more reading right after the
+        current one, for the newest request's sample, and share its future.
 
         The readings of one TUI session go into one ``gloss`` run per sample; the
         prediction of ``sample`` (ISO 2813, :func:`goniolab.scan.gloss.predict_gloss`) is
         shown beside. During a scan the scan's sample lies under the instruments, so the
         reading is taken (and predicted) for that one.
         """
+        self._require_open()
+        loop = asyncio.get_running_loop()
+        if self.gloss_busy:
+            self._gloss_next = sample
+            if self._gloss_next_done is None:
+                self._gloss_next_done = loop.create_future()
+            return self._gloss_next_done
+        done: asyncio.Future[None] = loop.create_future()
+        self._gloss_task = loop.create_task(self._gloss_chain(sample, done), name="tui-gloss")
+        return done
+
+    async def _gloss_chain(self, sample: str, done: asyncio.Future[None]) -> None:
+        """Readings one after the other: this one, then a coalesced request, if any."""
+        while True:
+            try:
+                await self._one_gloss(sample)
+            except asyncio.CancelledError:
+                for fut in (done, self._gloss_next_done):
+                    if fut is not None and not fut.done():
+                        fut.cancel()
+                raise
+            except Exception as exc:
+                if not done.done():
+                    done.set_exception(exc)
+            else:
+                if not done.done():
+                    done.set_result(None)
+            if self._gloss_next is None or self._gloss_next_done is None or self._closed:
+                return
+            sample, done = self._gloss_next, self._gloss_next_done
+            self._gloss_next = self._gloss_next_done = None
+
+    async def _one_gloss(self, sample: str) -> None:
         session = self._require_open()
         assert self.gloss is not None
         if self.running:
             sample = self._scan_sample
-        if self.gloss_busy:
-            raise UserError("a glossmeter reading is already in progress")
         prediction = await self.gloss.predict(sample, GLOSS_ANGLES_DEG)
-        if self.gloss_busy:
-            raise UserError("a glossmeter reading is already in progress")
         if not self.running and prediction.model is not None:
             await session.lab.prepare_sample(sample)  # the realistic twin's truth, in a thread
             if not self.running:  # a scan's sample stays under them
@@ -384,12 +434,11 @@ class SessionBackend:
             run_id = self._gloss_runs[key] = self.gloss.create_run(
                 plan, prediction, meta=self._run_meta()
             )
-        logger = self.gloss.logger(plan, run_id, prediction)
-
-        async def _one() -> None:
-            await logger.run()
-
-        self._gloss_task = asyncio.get_running_loop().create_task(_one(), name="tui-gloss")
+            # held while the app is open: another 'goniolab runs list' reads it as running,
+            # not interrupted (a run stored as running that nobody claims)
+            self._stack.enter_context(self.gloss.store.claim_run(run_id))
+        # the session's gloss run goes on until the app closes: "running", not "done"
+        await self.gloss.logger(plan, run_id, prediction, keep_running=True).run()
 
     # ------------------------------------------------------------------ status
     async def arm_states(self) -> tuple[ArmState, ArmState]:

@@ -11,6 +11,7 @@ the backend's :class:`~goniolab.scan.events.EventBus`.
 from __future__ import annotations
 
 import math
+from collections.abc import Awaitable
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -49,6 +50,16 @@ class RunIdentity:
         return "; ".join(p for p in parts if p)
 
 
+#: The setup form's label of each field: what an error names (not the attribute name).
+FIELD_LABELS = {
+    "theta_i_deg": "θi",
+    "theta_r_start_deg": "θr from",
+    "theta_r_stop_deg": "θr to",
+    "theta_r_step_deg": "θr step",
+    "repeats": "repeats",
+}
+
+
 @dataclass(frozen=True, slots=True)
 class ScanSetup:
     """The scan form: an in-plane BRDF scan at one incidence angle.
@@ -82,21 +93,19 @@ class ScanSetup:
         }
         for name, value in values.items():
             if not math.isfinite(value):
-                raise UserError(f"scan setup: {name} must be a finite number, got {value}")
+                raise UserError(
+                    f"scan setup: {FIELD_LABELS[name]} must be a finite number, got {value}"
+                )
         if not self.sample:
             raise UserError("scan setup: sample: choose a sample")
         if not 0.0 <= self.theta_i_deg < 90.0:
-            raise UserError(
-                f"scan setup: theta_i_deg must lie in [0, 90) deg, got {self.theta_i_deg}"
-            )
+            raise UserError(f"scan setup: θi must lie in [0, 90) deg, got {self.theta_i_deg:g}")
         if self.theta_r_step_deg <= 0.0:
-            raise UserError(
-                f"scan setup: theta_r_step_deg must be > 0 deg, got {self.theta_r_step_deg}"
-            )
+            raise UserError(f"scan setup: θr step must be > 0 deg, got {self.theta_r_step_deg:g}")
         if self.theta_r_stop_deg < self.theta_r_start_deg:
             raise UserError(
-                "scan setup: theta_r_stop_deg must be >= theta_r_start_deg, got "
-                f"{self.theta_r_stop_deg} < {self.theta_r_start_deg}"
+                "scan setup: θr to must be >= θr from, got "
+                f"{self.theta_r_stop_deg:g} < {self.theta_r_start_deg:g}"
             )
         if self.repeats < 1:
             raise UserError(f"scan setup: repeats must be >= 1, got {self.repeats}")
@@ -232,9 +241,11 @@ class Backend(Protocol):
         """Lamp and detector arm status, read from the instrument."""
         ...
 
-    async def read_gloss(self, sample: str) -> None:
+    async def read_gloss(self, sample: str) -> Awaitable[None] | None:
         """Start one glossmeter reading (published as GlossRead with the prediction of
-        ``sample``). Raises UserError when one is already in progress."""
+        ``sample``); a request while one is under way is coalesced into the next reading,
+        never refused. Returns what completes once the reading is stored (None: at
+        once)."""
         ...
 
     def list_runs(self) -> list[RunSummary]:

@@ -97,10 +97,10 @@ def test_any_value_in_any_key_of_a_paint(tmp_path: Path, name: str) -> None:
     ("text", "needle"),
     [
         # each escaped as a traceback (AttributeError / TypeError) before the fuzz found it
-        ('body = "x"\n', "paint.toml.body: expected a table, got 'x'"),
-        ("metallic = true\n", "paint.toml.metallic: expected a table, got True"),
-        ("coat = false\n", "paint.toml.coat: expected a number or a table with a kind"),
-        ('coat = ""\n', "paint.toml.coat: expected a number or a table with a kind, got ''"),
+        ('body = "x"\n', "paint.toml: body: expected a table, got 'x'"),
+        ("metallic = true\n", "paint.toml: metallic: expected a table, got True"),
+        ("coat = false\n", "paint.toml: coat: expected a number or a table with a kind"),
+        ('coat = ""\n', "paint.toml: coat: expected a number or a table with a kind, got ''"),
         # loaded, then gave an infinite flake lobe
         ("coat = 1.2e16\n", "coat: index 1.2e+16..1.2e+16 over 380-780 nm is outside (1, 4]"),
         ("coat = 0.0\n", "coat: Constant gives an index with n <= 0"),

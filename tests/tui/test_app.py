@@ -165,7 +165,7 @@ async def test_bad_form_value_names_the_field() -> None:
         app.query_one("#theta_r_step_deg", Input).value = "0"
         await pilot.press("s")
         await wait_until(pilot, lambda: bool(notes(app)))
-        assert "theta_r_step_deg must be > 0 deg" in notes(app)[-1]
+        assert "θr step must be > 0 deg" in notes(app)[-1]
         assert backend.setups == []
 
 

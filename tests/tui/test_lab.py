@@ -568,6 +568,59 @@ async def test_an_internal_error_fails_the_alignment_on_screen(
         )
 
 
+async def test_gloss_requests_while_one_reads_are_coalesced_not_refused(tmp_path: Path) -> None:
+    """issue 27, item 7: under `make run` (a reading every 5 s) `g` was refused "already in
+    progress" most of the time. Requests during a reading join one more reading after it."""
+    backend = SessionBackend(sim_config(tmp_path), model=AnalyticModel("beckmann", alpha=ALPHA))
+    await backend.open()
+    try:
+        sample = backend.sample
+        first = await backend.read_gloss(sample)
+        second = await backend.read_gloss(sample)  # while the first is under way
+        third = await backend.read_gloss(sample)
+        assert second is third and first is not second
+        await asyncio.wait_for(asyncio.gather(first, second), timeout=60)
+        with RunStore(tmp_path / "runs.sqlite", readonly=True) as store:
+            (run,) = [r for r in store.list_runs() if r.kind == "gloss"]
+            assert len(store.gloss_readings(run.id)) == 2  # the first, and one for both others
+        assert not backend.gloss_busy
+        fourth = await backend.read_gloss(sample)  # idle again: a reading of its own
+        assert fourth is not second
+        await asyncio.wait_for(fourth, timeout=60)
+    finally:
+        await backend.close()
+
+
+async def test_autostart_takes_the_gloss_reading_before_the_scan(tmp_path: Path) -> None:
+    """The README: once homed, the app takes a gloss reading, then starts the form's scan."""
+    app = make_app(tmp_path, autostart=True)
+    async with app.run_test(size=SIZE) as pilot:
+        await wait_until(pilot, lambda: app.run_state is RunState.DONE, max_turns=20000)
+    with RunStore(tmp_path / "runs.sqlite", readonly=True) as store:
+        runs = {r.kind: r for r in store.list_runs()}
+        (reading,) = store.gloss_readings(runs["gloss"].id)
+        first_point = min(p.timestamp for p in store.points(runs["brdf"].id))
+    assert reading.timestamp < first_point
+
+
+async def test_the_sessions_gloss_run_reads_running_until_the_app_closes(tmp_path: Path) -> None:
+    """issue 27: the TUI's gloss run (one per sample, a reading every few seconds) read
+    `done` after each reading while the session was still recording."""
+    backend = SessionBackend(sim_config(tmp_path), model=AnalyticModel("beckmann", alpha=ALPHA))
+    await backend.open()
+    try:
+        await asyncio.wait_for(await backend.read_gloss(backend.sample), timeout=60)
+        with RunStore(tmp_path / "runs.sqlite", readonly=True) as store:
+            (run,) = [r for r in store.list_runs() if r.kind == "gloss"]
+            assert run.status == RunState.RUNNING.value
+            assert store.is_claimed(run.id) is True  # running, not "interrupted"
+    finally:
+        await backend.close()
+    with RunStore(tmp_path / "runs.sqlite", readonly=True) as store:
+        assert store.get_run(run.id).status == RunState.DONE.value
+        assert len(store.gloss_readings(run.id)) == 1
+
+
 async def test_run_identity_dialog_is_stored_with_the_next_runs(tmp_path: Path) -> None:
     """Issue 22 item 4: operator, physical sample id, notes and tags from the TUI (key i)
     are stored with the next scan and gloss run; Esc leaves them unchanged."""

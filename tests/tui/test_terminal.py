@@ -86,12 +86,13 @@ def test_goniolab_tui_runs_in_tmux(tmp_path: Path) -> None:
         screen = _wait_for_screen(
             fd,
             lambda: tmux("capture-pane", "-p", "-t", session),
-            r"run 1: (running|done)",
+            r"run 2: (running|done)",
             time.monotonic() + WAIT_S,
         )
         assert "goniolab — Simulated goniospectrophotometer (sim, sim clock x0)" in screen
         assert re.search(r"lamp\s+[-\d.]+\s+\w+\s+yes\s+ok", screen), screen  # homed, linked
-        assert re.search(r"run 1: (running|done)", screen), screen
+        assert re.search(r"run 2: (running|done)", screen), screen
+        # run 1 is the gloss log: --autostart takes the gloss reading before the scan
         assert "glossmeter log" in screen and "scan setup" in screen
         tmux("send-keys", "-t", session, "q")
         subprocess.run(["tmux", "-L", sock, "wait-for", f"{sock}-done"], check=True, timeout=60)
