@@ -88,6 +88,37 @@ def run_examples(workdir: Path, found: list[Example]) -> list[str]:
     return outputs
 
 
+_NUMBER = re.compile(r"[-+]?\d+(?:\.(\d+))?")
+
+
+def same_output(actual: str, expected: str) -> bool:
+    """The printed output matches the doc's: the words exactly, each number within 1 % or
+    two units of its last printed digit (integers exactly). The simulated lab's readings at an instant clock
+    move in the third or fourth digit with the machine's load (a reading's virtual time
+    depends on when worker threads finish; known, see the closing notes), so an exact
+    compare failed at random; a changed model or formula moves numbers far more."""
+    if _NUMBER.sub("#", actual) != _NUMBER.sub("#", expected):
+        return False
+    for a_m, e_m in zip(_NUMBER.finditer(actual), _NUMBER.finditer(expected), strict=True):
+        if e_m.group(1) is None:  # integers (counts, run ids, years) are exact
+            if a_m.group() != e_m.group():
+                return False
+            continue
+        a, e = float(a_m.group()), float(e_m.group())
+        if abs(a - e) > max(0.01 * abs(e), 2 * 10.0 ** -len(e_m.group(1))):
+            return False
+    return True
+
+
+def test_same_output_tolerates_the_last_digits_only() -> None:
+    assert same_output("RMSE 0.250 %\n", "RMSE 0.251 %\n")
+    assert not same_output("RMSE 0.260 %\n", "RMSE 0.251 %\n")
+    assert not same_output("G85 72.7 GU, kirchhoff\n", "G85 42.4 GU, kirchhoff\n")
+    assert not same_output("G85 42.4 GU, facet\n", "G85 42.4 GU, kirchhoff\n")
+    assert same_output("run 1: done\n", "run 1: done\n")
+    assert not same_output("run 2: done\n", "run 1: done\n")
+
+
 @pytest.mark.parametrize("doc", DOCS, ids=lambda p: p.name)
 def test_doc_has_examples(doc: Path) -> None:
     found = examples(doc.read_text())
@@ -101,7 +132,7 @@ def test_doc_examples_run_and_print_what_the_doc_says(tmp_path: Path, doc: Path)
     outputs = run_examples(tmp_path, found)
     for ex, out in zip(found, outputs, strict=True):
         if ex.expected is not None:
-            assert out == ex.expected, (
+            assert same_output(out, ex.expected), (
                 f"{doc.name} output is stale for:\n{ex.script}\nregenerate with "
                 "'.venv/bin/python -m tests.test_readme_examples --update'"
             )
