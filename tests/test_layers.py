@@ -21,20 +21,20 @@ FORBIDDEN: dict[str, tuple[str, ...]] = {
     "drivers": ("goniolab", "sim"),
     "goniolab/optics": (
         "sim", "drivers", "goniolab.surfaces", "goniolab.scan", "goniolab.store",
-        "goniolab.session", "goniolab.lab", "goniolab.commands", "goniolab.tui", "textual",
+        "goniolab.session", "goniolab.lab_wiring", "goniolab.commands", "goniolab.tui", "textual",
     ),
     "goniolab/colour": (
         "sim", "drivers", "goniolab.surfaces", "goniolab.scan", "goniolab.store",
-        "goniolab.session", "goniolab.lab", "goniolab.commands", "goniolab.tui", "textual",
+        "goniolab.session", "goniolab.lab_wiring", "goniolab.commands", "goniolab.tui", "textual",
     ),
     "goniolab/surfaces": (
         "sim", "drivers", "goniolab.scan", "goniolab.store", "goniolab.session",
-        "goniolab.lab", "goniolab.commands", "goniolab.tui", "textual",
+        "goniolab.lab_wiring", "goniolab.commands", "goniolab.tui", "textual",
     ),
     "goniolab/scan": ("sim", "goniolab.session", "goniolab.commands", "goniolab.tui", "textual"),
     "goniolab/store": (
         "sim", "drivers", "goniolab.commands", "goniolab.api", "goniolab.tui", "textual",
-        "goniolab.session", "goniolab.scan", "goniolab.lab", "goniolab.export",
+        "goniolab.session", "goniolab.scan", "goniolab.lab_wiring", "goniolab.export",
         "goniolab.datasets",
     ),
     "goniolab/session.py": ("sim", "goniolab.commands", "goniolab.tui", "textual"),
@@ -42,13 +42,13 @@ FORBIDDEN: dict[str, tuple[str, ...]] = {
     "goniolab/tui": ("sim", "goniolab.commands"),
     "goniolab/cli.py": ("sim", "goniolab.tui", "textual"),
     "sim": (
-        "goniolab.scan", "goniolab.session", "goniolab.store", "goniolab.lab",
+        "goniolab.scan", "goniolab.session", "goniolab.store", "goniolab.lab_wiring",
         "goniolab.commands", "goniolab.tui", "textual",
     ),
 }  # fmt: skip
 
 #: the only files of the application that may import the simulator
-SIM_DOORS = {"goniolab/lab.py", "goniolab/commands/sim.py"}
+SIM_DOORS = {"goniolab/lab_wiring.py", "goniolab/commands/sim.py"}
 
 #: file -> prefixes it may import although its room may not: the doors between rooms
 DOORS: dict[str, tuple[str, ...]] = {
@@ -173,7 +173,7 @@ def test_the_store_is_used_through_its_public_names() -> None:
 
 
 #: what goniolab/optics may import besides the standard library and itself: the numerics,
-#: colour-science (the CIE tables of goniolab/optics/spectral.py, imported on use) and the
+#: colour-science (the CIE tables of goniolab/optics/iso2813_weighting.py, imported on use) and the
 #: stdlib-only lazy-export helper of the package's __init__ (goniolab/_lazy.py)
 OPTICS_MAY_IMPORT = ("numpy", "scipy", "numba", "colour", "goniolab.optics", "goniolab._lazy")
 

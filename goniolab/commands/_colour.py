@@ -63,7 +63,7 @@ def _spectral(args: argparse.Namespace) -> Any:
     from goniolab.colour.dispersion import DispersionError
     from goniolab.colour.spectra import ColourError
     from goniolab.commands.predict import _model
-    from goniolab.models import spectral_for
+    from goniolab.model_cache import spectral_for
 
     model = _model(args)
     paint = load_paint_file(args.paint) if args.paint else None

@@ -91,8 +91,8 @@ def _settings_of(rec: Any) -> tuple[Any, str, float, float]:
 def _cmd_fit_colour(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from goniolab.colour.fit import FitError, fit_paint
     from goniolab.colour.paint import Paint
+    from goniolab.colour.paint_fit import FitError, fit_paint
     from goniolab.commands.runs import _get_run, open_store, run_colour
 
     if not (math.isfinite(args.min_aspecular) and args.min_aspecular >= 0):
@@ -121,7 +121,7 @@ def _cmd_fit_colour(args: argparse.Namespace) -> int:
 
         paint: Paint = load_paint_file(args.paint)
     else:
-        from goniolab.models import paint_for
+        from goniolab.model_cache import paint_for
 
         paint = paint_for(rec.sample or None)
     if paint.body is None and not paint.has_flakes and not args.params:
@@ -144,7 +144,7 @@ def _cmd_fit_colour(args: argparse.Namespace) -> int:
                 raise UserError(
                     f"run {rec.id} names no sample: its coat surface is unknown (use --no-surface)"
                 )
-            from goniolab.models import model_for, surface_factory
+            from goniolab.model_cache import model_for, surface_factory
 
             _say(args, f"building the coat-surface model of {rec.sample} ...")
             model_name = args.model or str(rec.model.get("model_name") or "auto")

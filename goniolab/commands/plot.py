@@ -20,7 +20,7 @@ __all__ = ["register"]
 
 def _cmd_plot(args: argparse.Namespace) -> int:
     from goniolab.commands.runs import _get_run, open_store
-    from goniolab.plot import PLOT_FORMATS
+    from goniolab.run_plots import PLOT_FORMATS
 
     out = Path(args.out) if args.out else Path(f"run-{args.run}.png")
     if out.suffix.lower() not in PLOT_FORMATS:
@@ -29,7 +29,7 @@ def _cmd_plot(args: argparse.Namespace) -> int:
         raise UserError(f"--out {out}: no such directory {out.parent}")
     with open_store(args.store, args.config) as store:
         rec = _get_run(store, args.run)
-        from goniolab.plot import plot_run
+        from goniolab.run_plots import plot_run
 
         try:
             plot_run(store, args.run, out=out, log=args.log)

@@ -57,9 +57,9 @@ def _cmd_render(args: argparse.Namespace) -> int:
         print(f"rendering {args.map} ({args.size}x{args.size}) ...", file=sys.stderr, flush=True)
     from goniolab.colour.dispersion import DispersionError
     from goniolab.colour.paint import PaintError
-    from goniolab.colour.render import render, tabulate_brdf
+    from goniolab.colour.paint_render import render, tabulate_brdf
     from goniolab.colour.spectra import ColourError, ColourSettings, standard_grid_nm
-    from goniolab.models import paint_for
+    from goniolab.model_cache import paint_for
     from goniolab.optics.surface import roughness_stats
     from goniolab.surfaces.resolve import resolve_map
 

@@ -80,7 +80,7 @@ from goniolab.scan.exposure import (
     reading_quality,
 )
 from goniolab.scan.plans import MIRROR_INDEX, BrdfPlan, PlanPoint
-from goniolab.scan.predict import Predictor
+from goniolab.scan.prediction import Predictor
 from goniolab.scan.reference import SpectralReference
 from goniolab.scan.sanity import check_reading
 from goniolab.scan.standards import Standard

@@ -23,7 +23,7 @@ import math
 import numpy as np
 import pytest
 
-from goniolab.models import build_model
+from goniolab.model_cache import build_model
 from goniolab.optics.apertures import (
     ISO2813_RECEPTOR,
     ISO2813_SOURCE,
