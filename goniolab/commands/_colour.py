@@ -774,7 +774,8 @@ def write_spectra(
         else:
             import xarray as xr
 
-            from goniolab.datasets import _LONG_NAMES, UNITS, write_netcdf
+            from goniolab.datasets import LONG_NAMES as _LONG_NAMES
+            from goniolab.datasets import UNITS, write_netcdf
 
             geom = np.arange(table.factors.shape[0])
             ds = xr.Dataset(
