@@ -12,9 +12,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 #: what every package imports on its way in: the ``goniolab`` package itself, its
-#: stdlib-only lazy re-export helper (goniolab/_lazy.py, PEP 562) and the version constant
+#: stdlib-only lazy re-export helper (goniolab/lazy_imports.py, PEP 562) and the version constant
 #: (goniolab/_version.py, one string)
-PACKAGE_ROOT = ("goniolab", "goniolab._lazy", "goniolab._version")
+PACKAGE_ROOT = ("goniolab", "goniolab.lazy_imports", "goniolab._version")
 
 _PROBE = """
 import importlib, json, pkgutil, sys

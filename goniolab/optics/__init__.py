@@ -33,7 +33,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from goniolab._lazy import lazy_exports
+from goniolab.lazy_imports import lazy_exports
 
 # Loaded at once: the function shares its name with its module, and a lazy name would be
 # shadowed by the submodule as soon as anything imports goniolab.optics.fresnel.

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from goniolab._lazy import lazy_exports
+from goniolab.lazy_imports import lazy_exports
 
 if TYPE_CHECKING:
     from goniolab.optics.heightmap import HeightMap, HeightMapError
