@@ -24,7 +24,7 @@ import asyncio
 import contextlib
 from collections.abc import AsyncIterator, Awaitable, Callable
 from contextlib import asynccontextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -171,6 +171,9 @@ class PreparedScan:
     check: DryRun
     model: ReflectanceModel
     predictor: Predictor
+    #: which model computes the prediction at each geometry, and its notes
+    #: (:meth:`goniolab.scan.prediction.Predictor.provenance`)
+    provenance: dict[str, Any] = field(default_factory=dict)
 
 
 class ScanSession:
@@ -271,7 +274,11 @@ class ScanSession:
         )
         model = await self.models.get(plan.sample)
         await self.lab.prepare_sample(plan.sample)  # the realistic twin's truth, in a thread
-        return PreparedScan(plan, run_id, check, model, Predictor.from_config(model, self.config))
+        predictor = Predictor.from_config(model, self.config)
+        provenance = await asyncio.to_thread(
+            predictor.provenance, plan.theta_i_deg, plan.theta_r_deg
+        )
+        return PreparedScan(plan, run_id, check, model, predictor, provenance)
 
     async def adaptive_plan(self, plan: BrdfPlan) -> BrdfPlan:
         """``plan`` with its detector angles placed where the predicted curve bends
@@ -325,7 +332,11 @@ class ScanSession:
                 plan=plan.to_dict(),
                 config=config_snapshot(with_sample(cfg, plan.sample)),
                 sample=plan.sample,
-                model={**scan.predictor.describe(), "calibration": cite},
+                model={
+                    **scan.predictor.describe(),
+                    "calibration": cite,
+                    **scan.provenance,
+                },
                 version=__version__,
                 meta=config_meta(cfg, meta),
             )
@@ -347,7 +358,8 @@ class ScanSession:
             point_colour=PointColour.from_config(cfg),
             mirror_standard=self.standard("mirror") if plan.mirror_reference else None,
             reconnect_window_s=cfg.lab.reconnect_window_s,
-            notices=notices,
+            # what the prediction cannot answer for is said when the run starts (issue 20)
+            notices=(*notices, *(f"prediction: {w}" for w in scan.provenance.get("warnings", []))),
         )
 
     def standard(self, name: str) -> Standard:
@@ -510,12 +522,20 @@ class GlossPrediction:
 
     model: ReflectanceModel | None
     gloss_gu: dict[int, float] | None
+    #: the model that computed each predicted gloss (``{60: "facet", 85: "kirchhoff"}``)
+    #: and the notes of those numbers (:func:`goniolab.optics.provenance.gloss_provenance_of`)
+    models: dict[int, str] = field(default_factory=dict)
+    warnings: tuple[str, ...] = ()
 
     def describe(self) -> dict[str, Any]:
         """The ``model`` column of a gloss run."""
         if self.model is None:
             return {}
-        return {"model": type(self.model).__name__, "predicted_gu": self.gloss_gu}
+        out: dict[str, Any] = {"model": type(self.model).__name__, "predicted_gu": self.gloss_gu}
+        if self.models:
+            out["computed_by"] = {str(a): m for a, m in self.models.items()}
+            out["warnings"] = list(self.warnings)
+        return out
 
 
 class GlossSession:
@@ -589,7 +609,12 @@ class GlossSession:
         if not sample or self.models is None:
             return GlossPrediction(None, None)
         model = await self.models.get(sample)
-        return GlossPrediction(model, await predict_gloss(model, angles_deg))
+        from goniolab.optics.provenance import gloss_provenance_of
+
+        gloss = await predict_gloss(model, angles_deg)
+        prov = await asyncio.to_thread(gloss_provenance_of, model, angles_deg)
+        notes = tuple(dict.fromkeys(f"G{a}: {n}" for a, p in prov.items() for n in p.notes))
+        return GlossPrediction(model, gloss, {a: p.model for a, p in prov.items()}, notes)
 
     def create_run(
         self, plan: GlossPlan, prediction: GlossPrediction, *, meta: RunMeta | None = None
@@ -629,6 +654,7 @@ class GlossSession:
             clock=self.clock,
             plan=plan,
             predicted_gu=prediction.gloss_gu,
+            predicted_models=prediction.models,
             mode=mode,
             interval_s=interval_s,
         )

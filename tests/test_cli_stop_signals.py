@@ -98,7 +98,14 @@ def test_a_signal_aborts_the_scan_and_parks(
 
 
 @pytest.mark.wire
-def test_sigterm_parks_the_arms_of_the_wire_lab(tmp_path: Path) -> None:
+@pytest.mark.parametrize(
+    "signals",
+    [[signal.SIGTERM], [signal.SIGHUP], [signal.SIGINT, signal.SIGINT]],
+    ids=["TERM", "HUP", "INT-twice"],
+)
+def test_a_signal_parks_the_arms_of_the_wire_lab(
+    tmp_path: Path, signals: list[signal.Signals]
+) -> None:
     from goniolab.config import load_lab_config
     from goniolab.lab_wiring import Lab
 
@@ -119,7 +126,9 @@ def test_sigterm_parks_the_arms_of_the_wire_lab(tmp_path: Path) -> None:
         proc = _start(_scan_args(client, store), err_path, tmp_path)
         try:
             _wait_for(proc, err_path, r"\] [1-9]\d*/\d+ ETA")
-            proc.send_signal(signal.SIGTERM)
+            for sig in signals:
+                proc.send_signal(sig)
+                time.sleep(0.05)
             code = _stopped(proc, err_path)
         finally:
             proc.kill()
@@ -144,10 +153,11 @@ def test_sigterm_parks_the_arms_of_the_wire_lab(tmp_path: Path) -> None:
         server.wait(timeout=30)
     with RunStore(store, readonly=True) as s:
         run = s.get_run(1)
-        assert run.status == "aborted" and "SIGTERM" in run.reason, run.reason
+        assert run.status == "aborted" and signals[0].name in run.reason, run.reason
 
 
-def test_sigterm_ends_a_gloss_log_as_aborted(tmp_path: Path) -> None:
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP], ids=["TERM", "HUP"])
+def test_a_signal_ends_a_gloss_log_as_aborted(tmp_path: Path, sig: signal.Signals) -> None:
     cfg = lab_config(tmp_path, sim=NOISELESS)
     store, err_path = tmp_path / "s.sqlite", tmp_path / "err.txt"
     proc = _start(
@@ -165,15 +175,15 @@ def test_sigterm_ends_a_gloss_log_as_aborted(tmp_path: Path) -> None:
                 with RunStore(store, readonly=True) as s:
                     if len(s.gloss_readings(1)) >= 2:
                         break
-        proc.send_signal(signal.SIGTERM)
+        proc.send_signal(sig)
         code = _stopped(proc, err_path)
     finally:
         proc.kill()
     with RunStore(store, readonly=True) as s:
         run = s.get_run(1)
         assert run.status == "aborted", (run.status, run.reason)
-        assert "stopped by SIGTERM" in run.reason
+        assert f"stopped by {sig.name}" in run.reason
     # a log ends as the operator's stop does (exit 0: every reading taken is stored), but
     # the stored run says it did not end as meant, and why
     assert code == 0, err_path.read_text()
-    assert "aborted (stopped by SIGTERM" in err_path.read_text()
+    assert f"aborted (stopped by {sig.name}" in err_path.read_text()

@@ -45,7 +45,8 @@ def format_reading(ev: GlossRead, seq: int) -> str:
     for angle, v in sorted(ev.values_gu.items()):
         txt = f"G{angle}     - GU" if v is None else f"G{angle} {v:6.1f} GU"
         if ev.predicted_gu is not None and angle in ev.predicted_gu:
-            txt += f" (pred {ev.predicted_gu[angle]:6.1f})"
+            by = ev.predicted_models.get(angle)
+            txt += f" (pred {ev.predicted_gu[angle]:6.1f}{', ' + by if by else ''})"
         parts.append(txt)
     if ev.temperature_c is not None:
         parts.append(f"{ev.temperature_c:.1f} degC")
@@ -64,6 +65,7 @@ def reading_json(ev: GlossRead, seq: int) -> str:
             "predicted_gu": None
             if ev.predicted_gu is None
             else {str(k): v for k, v in sorted(ev.predicted_gu.items())},
+            "predicted_models": {str(k): v for k, v in sorted(ev.predicted_models.items())},
             "temperature_c": ev.temperature_c,
         }
     )

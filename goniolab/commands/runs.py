@@ -407,6 +407,34 @@ def _same_store(src: RunStore, dst: RunStore) -> bool:
     return False
 
 
+def _cmd_import(args: argparse.Namespace) -> int:
+    """Import JSON exports (matched by run UUID); one line per file, errors per file."""
+    from goniolab.store import RunStore, StoreError, import_json_export
+
+    target = store_path(args.store, args.config)
+    try:
+        dst = RunStore(target)
+    except StoreError as exc:
+        raise UserError(str(exc)) from exc
+    done: list[dict[str, Any]] = []
+    failed = 0
+    with dst:
+        for name in args.files:
+            try:
+                here, action, uuid = import_json_export(dst, name)
+            except StoreError as exc:
+                failed += 1
+                print(f"goniolab: error: runs import: {exc}", file=sys.stderr)
+                done.append({"file": name, "error": str(exc)})
+                continue
+            done.append({"file": name, "run_id": here, "uuid": uuid, "action": action})
+            if not args.json:
+                print(f"{name}: run {here} ({uuid}) {action}; no spectra in a JSON export")
+    if args.json:
+        print(json.dumps(done, indent=2))
+    return 2 if failed else 0
+
+
 def _cmd_migrate(args: argparse.Namespace) -> int:
     """Copy every run of an SQLite store (or another store) into the target store, matched
     by run UUID: new runs are copied, partial copies brought up to date."""
@@ -607,6 +635,20 @@ def register(subparsers: Any) -> None:
     pm.add_argument("--from", dest="source", required=True, metavar="STORE")
     pm.add_argument("--json", action="store_true", help="print the id mapping as JSON")
     pm.set_defaults(func=_cmd_migrate)
+
+    pi = sub.add_parser(
+        "import",
+        parents=[common],
+        help="read runs exported with 'runs export --format json' back into a store",
+        description="Read runs exported with 'goniolab runs export RUN --format json' back "
+        "into the store chosen by --store/--config. A run keeps its UUID, creation time and "
+        "identity; one the store already holds is matched by its UUID (left as it is, or "
+        "brought up to date), never duplicated. A JSON export carries no spectra: an "
+        "imported scan has its luminance, colour and predictions, not its spectra.",
+    )
+    pi.add_argument("files", nargs="+", metavar="FILE", help="JSON export(s) of goniolab runs")
+    pi.add_argument("--json", action="store_true", help="print what was imported as JSON")
+    pi.set_defaults(func=_cmd_import)
 
     pa = sub.add_parser(
         "annotate",

@@ -128,6 +128,8 @@ class GlossRead(Event):
     values_gu: dict[int, float | None]
     predicted_gu: dict[int, float] | None
     temperature_c: float | None = None
+    #: the model that computed each predicted gloss (``{85: "kirchhoff"}``)
+    predicted_models: dict[int, str] = field(default_factory=dict)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -83,7 +83,7 @@ class GlossLogger:
         Lab clock (backoff waits and the measure interval run on it).
     plan
         Count and geometries.
-    predicted_gu
+    predicted_gu, predicted_models
         Model gloss per geometry, shown beside each reading (``None``: no height map).
     mode
         ``"measure"``: ask for each reading; ``"push"``: take the meter's pushed readings.
@@ -103,6 +103,7 @@ class GlossLogger:
         clock: Clock,
         plan: GlossPlan,
         predicted_gu: dict[int, float] | None = None,
+        predicted_models: dict[int, str] | None = None,
         mode: str = "measure",
         interval_s: float = 0.0,
         backoff_s: float = 0.5,
@@ -118,6 +119,8 @@ class GlossLogger:
         self.clock = clock
         self.plan = plan
         self.predicted_gu = predicted_gu
+        #: the model that computed each predicted gloss (shown beside it, issue 20)
+        self.predicted_models = dict(predicted_models or {})
         self.mode = mode
         self.interval_s = interval_s
         self.backoff_s = backoff_s
@@ -202,6 +205,7 @@ class GlossLogger:
                 values_gu=values,
                 predicted_gu=self.predicted_gu,
                 temperature_c=reading.temperature_c,
+                predicted_models=self.predicted_models,
             )
         )
 

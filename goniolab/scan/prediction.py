@@ -16,6 +16,7 @@ from __future__ import annotations
 import asyncio
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -146,6 +147,21 @@ class Predictor:
         if self.point_colour is not None:
             out["colour"] = self.point_colour.describe()
         return out
+
+    def provenance(self, theta_i_deg: float, theta_r_deg: Sequence[float]) -> dict[str, Any]:
+        """Which model computes the prediction at each geometry of a scan, and the notes
+        the user must see (issue 20: a number never carries another model's name):
+        ``{"computed_by": {model: [theta_r, ...]}, "warnings": [...]}``
+        (:func:`goniolab.optics.provenance.provenance_of`; blocking, call from a thread)."""
+        from goniolab.optics.provenance import provenance_of
+
+        computed_by: dict[str, list[float]] = {}
+        warnings: list[str] = []
+        for tr in sorted({float(t) for t in theta_r_deg}):
+            p = provenance_of(self.model, theta_i_deg, tr, self.source, self.detector)
+            computed_by.setdefault(p.model, []).append(tr)
+            warnings.extend(n for n in p.notes if n not in warnings)
+        return {"computed_by": computed_by, "warnings": warnings}
 
 
 def model_name(model: ReflectanceModel) -> str:

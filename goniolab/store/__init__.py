@@ -38,6 +38,7 @@ The rooms of the package, one job each:
 ``sqlite`` / ``postgres``  the two backends (timeouts, watchdog, reconnect)
 ``claims``                 one runner per run (filelock, PostgreSQL row locks)
 ``migrate``                ``runs migrate``: copy runs between stores by UUID
+``json_import``            ``runs import``: a JSON export read back (through migrate)
 ``exceptions``             :class:`StoreError` and its kinds
 =========================  ==============================================================
 
@@ -47,6 +48,7 @@ Exports (CSV, JSON, netCDF, Parquet) live with the exporters: :mod:`goniolab.exp
 from __future__ import annotations
 
 from goniolab.store.exceptions import RunBusy, StoreDamaged, StoreError, StoreUnavailable
+from goniolab.store.json_import import import_json_export
 from goniolab.store.records import (
     COLOUR_KEYS,
     GlossRow,
@@ -71,6 +73,7 @@ __all__ = [
     "StoreError",
     "StoreUnavailable",
     "default_store_path",
+    "import_json_export",
     "is_store_url",
     "legacy_uuid",
     "resolve_store_path",

@@ -569,7 +569,11 @@ class GonioApp(App[int]):
             self.progress = (ev.done, ev.total, ev.eta_s)
         elif isinstance(ev, GlossRead):
             self.comparison.add_gloss(ev)
-            self.query_one("#gloss-log", GlossLog).add_reading(ev)
+            log = self.query_one("#gloss-log", GlossLog)
+            log.add_reading(ev)
+            if ev.predicted_models:  # which model computed each predicted gloss (issue 20)
+                by = ", ".join(f"G{a} {m}" for a, m in sorted(ev.predicted_models.items()))
+                log.border_title = f"glossmeter log (predicted by {by})"
             self.schedule_redraw()
         elif isinstance(ev, InstrumentError):
             now_s = time.monotonic()

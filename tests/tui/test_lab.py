@@ -593,6 +593,9 @@ async def test_run_identity_dialog_is_stored_with_the_next_runs(tmp_path: Path) 
         await wait_until(pilot, lambda: app.run_state is RunState.DONE, max_turns=20000)
         await pilot.press("g")
         await wait_until(pilot, lambda: len(app.comparison.gloss) >= 1, max_turns=20000)
+        # the gloss log names the model of the predicted gloss (issue 20)
+        title = str(app.query_one("#gloss-log", GlossLog).border_title)
+        assert "predicted by G20 analytic-beckmann" in title, title
     with RunStore(tmp_path / "runs.sqlite", readonly=True) as s:
         runs = [s.get_run(r) for r in (1, 2)]
     assert {r.kind for r in runs} == {"brdf", "gloss"}

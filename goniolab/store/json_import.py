@@ -1,0 +1,172 @@
+"""``goniolab runs import FILE.json``: a run exported by ``runs export --format json`` read
+back into a store (issue 22: goniolab reads its own exports back).
+
+The export is loaded into a scratch SQLite store (the run with its own UUID, creation
+time and identity, its readings and the predictions they carry), then copied into the
+target with :func:`goniolab.store.migrate.copy_run`, the same path as ``runs migrate``: a
+run the target already holds (same UUID) is brought up to date, never duplicated.
+
+What a JSON export does not carry is not invented: a scan's spectra and its readings' raw
+records (the exposure, the signal level beside the quality flag) are not in it, so an
+imported run has its luminance, colour and predictions but no spectra; the import says so.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from goniolab.store.exceptions import StoreError
+from goniolab.store.records import COLOUR_KEYS, RunMeta
+from goniolab.store.runstore import RunStore
+
+__all__ = ["import_json_export"]
+
+#: Export column -> stored colour key (the export names L*, a*... with a _star suffix).
+_COLOUR_COLUMNS = {
+    "X": "X",
+    "Y": "Y",
+    "Z": "Z",
+    "L_star": "L",
+    "a_star": "a",
+    "b_star": "b",
+    "C_star": "C",
+    "h_deg": "h_deg",
+}
+
+
+def _number(v: Any) -> float | None:
+    return None if v is None else float(v)
+
+
+def _time(v: Any) -> float:
+    """Unix seconds from a number or an ISO 8601 time (how the JSON export writes them)."""
+    if isinstance(v, str):
+        from datetime import datetime
+
+        return datetime.fromisoformat(v).timestamp()
+    return float(v)
+
+
+def _load(path: Path) -> dict[str, Any]:
+    try:
+        doc = json.loads(path.read_text())
+    except OSError as exc:
+        raise StoreError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise StoreError(f"{path}: not a JSON file: {exc}") from None
+    if not (isinstance(doc, dict) and isinstance(doc.get("run"), dict)):
+        raise StoreError(
+            f"{path}: not a goniolab run export (expected 'run' and 'readings' from "
+            "'goniolab runs export --format json')"
+        )
+    run = doc["run"]
+    for key in ("uuid", "kind", "plan", "config", "sample", "model", "version", "status"):
+        if key not in run:
+            raise StoreError(f"{path}: run.{key}: missing (not a goniolab run export)")
+    if run["kind"] not in ("brdf", "gloss"):
+        raise StoreError(
+            f"{path}: run.kind: {run['kind']!r} runs are not imported from JSON (their "
+            "result lives in the store's record: use 'runs migrate' from the store)"
+        )
+    if not isinstance(doc.get("readings", []), list):
+        raise StoreError(f"{path}: readings: expected a list")
+    return doc
+
+
+def _fill(scratch: RunStore, doc: dict[str, Any], path: Path) -> int:
+    """Write the export's run and readings into ``scratch``; return the run's id there."""
+    run = doc["run"]
+    tags = run.get("tags") or ()
+    meta = RunMeta(
+        operator=str(run.get("operator") or ""),
+        sample_id=str(run.get("sample_id") or ""),
+        notes=str(run.get("notes") or ""),
+        tags=tuple(str(t) for t in tags),
+    )
+    run_id = scratch.create_run(
+        kind=run["kind"],
+        plan=run["plan"],
+        config=run["config"],
+        sample=str(run["sample"]),
+        model=run["model"],
+        version=str(run["version"]),
+        status=str(run["status"]),
+        meta=meta,
+    )
+    created = float(run.get("created_at") or 0.0)
+    updated = float(run.get("updated_at") or created)
+    scratch.db.execute(
+        "UPDATE runs SET uuid = ?, reason = ?, created_at = ?, updated_at = ? WHERE id = ?",
+        (str(run["uuid"]), str(run.get("reason") or ""), created, updated, run_id),
+    )
+    try:
+        if run["kind"] == "gloss":
+            for r in doc.get("readings", []):
+                pred = {a: r.get(f"predicted_g{a}_gu") for a in (20, 60, 85)}
+                scratch.add_gloss_reading(
+                    run_id,
+                    values_gu={a: _number(r.get(f"g{a}_gu")) for a in (20, 60, 85)},
+                    temperature_c=_number(r.get("temperature_c")),
+                    predicted_gu={a: float(v) for a, v in pred.items() if v is not None} or None,
+                    raw="",
+                    timestamp=_time(r["timestamp"]),
+                )
+            return run_id
+        predictions: dict[int, tuple[int, float, float, float]] = {}
+        for r in doc.get("readings", []):
+            colour = {
+                key: float(r[col]) for col, key in _COLOUR_COLUMNS.items() if r.get(col) is not None
+            }
+            scratch.add_point(
+                run_id,
+                index=int(r["index"]),
+                repeat=int(r["repeat"]),
+                theta_i_deg=float(r["theta_i_deg"]),
+                theta_r_deg=float(r["theta_r_deg"]),
+                measured_theta_i_deg=float(r["measured_theta_i_deg"]),
+                measured_theta_r_deg=float(r["measured_theta_r_deg"]),
+                luminance_pct=float(r["luminance_pct"]),
+                raw={"imported_from": path.name, "quality": r.get("quality") or ""},
+                timestamp=_time(r["timestamp"]),
+                colour=colour if len(colour) == len(COLOUR_KEYS) else None,
+                colour_error=str(r.get("colour_error") or ""),
+            )
+            pred = r.get("predicted_pct")
+            if pred is not None and math.isfinite(float(pred)):
+                i = int(r["index"])
+                predictions[i] = (i, float(r["theta_i_deg"]), float(r["theta_r_deg"]), float(pred))
+        if predictions:
+            scratch.add_predictions(run_id, sorted(predictions.values()))
+    except (KeyError, TypeError, ValueError) as exc:
+        raise StoreError(f"{path}: readings: a reading lacks or garbles {exc}") from None
+    return run_id
+
+
+def import_json_export(target: RunStore, path: str | Path) -> tuple[int, str, str]:
+    """Import the run of the JSON export ``path`` into ``target``.
+
+    Returns
+    -------
+    (run id in the target, action, uuid)
+        ``action`` is ``"copied"`` (new here), ``"updated"`` (the target held a partial
+        copy of the same run, now brought up to date) or ``"unchanged"``.
+
+    Raises
+    ------
+    StoreError
+        The file cannot be read, is not a goniolab run export, or the target refuses it;
+        the message names the file and the key.
+    """
+    p = Path(path)
+    doc = _load(p)
+    with (
+        tempfile.TemporaryDirectory(prefix="goniolab-import-") as tmp,
+        RunStore(Path(tmp) / "scratch.sqlite") as scratch,
+    ):
+        run_id = _fill(scratch, doc, p)
+        here, action = target.copy_run_from(scratch, run_id)
+    return here, action, str(doc["run"]["uuid"])
