@@ -37,7 +37,7 @@ async def one(
     sample: str, seed: int, counts: list[int], aligned: bool, tmp: Path, lo: float, hi: float
 ) -> list[str]:
     from goniolab.config import load_lab_config
-    from goniolab.lab import draw_session
+    from goniolab.lab_wiring import draw_session
     from goniolab.scan.adaptive import reconstruction_error
     from goniolab.scan.plans import BrdfPlan
     from goniolab.session import ScanSession

@@ -2,7 +2,7 @@
 
 Each seed draws both arms' zero offsets and the sample tilt uniformly in +/-1 deg
 (``[sim.twin] *_range_deg = 1.0``, 0.02 deg backlash); the plan runs at --time-scale 0 and
-its estimates are compared with the drawn truth (``goniolab.lab.draw_session``).
+its estimates are compared with the drawn truth (``goniolab.lab_wiring.draw_session``).
 
     .venv/bin/python bench/bench_align.py [--seeds 0:20] [--sample sample:wittmann-3]
         [--s-weight 0.505]
@@ -57,7 +57,7 @@ def main() -> None:
     args = ap.parse_args()
     from goniolab.cli import main as cli
     from goniolab.config import load_lab_config
-    from goniolab.lab import draw_session
+    from goniolab.lab_wiring import draw_session
 
     first, stop = (int(v) for v in args.seeds.split(":"))
     errors = []

@@ -28,7 +28,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from goniolab.models import model_for, spectral_for
+from goniolab.model_cache import model_for, spectral_for
 
 
 def _median_s(fn: Callable[[], object], repeats: int) -> float:

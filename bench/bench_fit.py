@@ -23,11 +23,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from goniolab.colour.fit import _Model, fit_paint, paint_with, parameter_values
 from goniolab.colour.multiangle import E2194_ASPECULAR_DEG, theta_r_for_aspecular
+from goniolab.colour.paint_fit import _Model, fit_paint, paint_with, parameter_values
 from goniolab.colour.spectra import ColourSettings, standard_grid_nm
 from goniolab.colour.spectral import SpectralPredictor
-from goniolab.models import paint_for
+from goniolab.model_cache import paint_for
 
 CASES: dict[str, dict[str, float]] = {
     "silver-metallic": {

@@ -153,7 +153,7 @@ async def _scan(
 
 async def _lab_scan(store_path: Path, points: int, repeats: int) -> tuple[float, float]:
     from goniolab.config import load_lab_config
-    from goniolab.lab import Lab
+    from goniolab.lab_wiring import Lab
 
     cfg = load_lab_config(ROOT / "configs" / "lab-sim.toml")
     async with Lab.from_config(cfg, time_scale=0.0) as lab:

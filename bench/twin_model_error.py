@@ -23,11 +23,11 @@ from typing import Any
 
 import numpy as np
 
-from goniolab.models import model_for
+from goniolab.model_cache import model_for
 from goniolab.optics.apertures import Cone
 from goniolab.optics.metrics import peak_metrics
 from goniolab.surfaces.resolve import resolve_map
-from goniolab.surfaces.samples import sample_info, sample_names
+from goniolab.surfaces.synthetic import sample_info, sample_names
 from sim.truth import TwinSettings, truth_for
 
 #: theta_i of the in-plane curve, deg; the cones' full angle, deg.

@@ -6,7 +6,7 @@ Each table (:data:`STEPPERS`, :data:`SPECTROS`, :data:`GLOSSMETERS`) maps a prot
 built-in default profile, the driver class that speaks it and, where the digital twin can
 serve it on the wire, the simulator that does. Everything that names a protocol reads this
 table: the config validation (:mod:`goniolab.config`), the CLI choices
-(``goniolab gloss log --protocol``), the lab's driver construction (:mod:`goniolab.lab`,
+(``goniolab gloss log --protocol``), the lab's driver construction (:mod:`goniolab.lab_wiring`,
 :func:`drivers.glossmeter.open_glossmeter`) and docs/ARCHITECTURE.md.
 
 This module imports only the standard library: the CLI reads the names while it builds its

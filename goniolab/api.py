@@ -174,7 +174,7 @@ def _model(
     model: str = "auto",
     wavelength_nm: float | None = None,
 ) -> ReflectanceModel:
-    from goniolab.models import model_for
+    from goniolab.model_cache import model_for
 
     options: dict[str, Any] = {
         "slope_method": slope_method,
@@ -245,7 +245,7 @@ def predict_brdf(
     model, wavelength_nm
         ``auto`` (default: the regime rule per geometry), ``facet``, ``kirchhoff`` or
         ``rayleigh-rice``, and the wave models' wavelength (see
-        :func:`goniolab.models.model_for`).
+        :func:`goniolab.model_cache.model_for`).
     masking
         Smith masking-shadowing from the measured slopes (default on: it keeps the facet
         model's albedo at most 1 up to grazing incidence).
@@ -259,7 +259,7 @@ def predict_brdf(
     """
     from goniolab.datasets import brdf_dataset
     from goniolab.optics.apertures import Cone, projected_solid_angle_sr
-    from goniolab.scan.predict import model_name
+    from goniolab.scan.prediction import model_name
 
     ti = float(theta_i_deg)
     if not (math.isfinite(ti) and 0.0 <= ti < 90.0):
@@ -445,7 +445,7 @@ class Run:
 
         In a notebook the figure shows inline as the cell's value (no ``%matplotlib
         inline`` needed: :func:`_show_figures_inline`)."""
-        from goniolab.plot import plot_run
+        from goniolab.run_plots import plot_run
 
         with _open_readonly(self.store) as s:
             fig = plot_run(s, self.id, out=out, log=log)
@@ -464,7 +464,7 @@ def _figure_png(fig: Any) -> bytes:
 def _show_figures_inline() -> None:
     """In IPython / Jupyter: display a matplotlib ``Figure`` as a PNG.
 
-    :mod:`goniolab.plot` builds figures without pyplot (no global state, Agg canvas), so
+    :mod:`goniolab.run_plots` builds figures without pyplot (no global state, Agg canvas), so
     the inline backend never registers its display formatter and a returned figure shows as
     ``<Figure size 800x600 with 2 Axes>`` (issue 22.2). This registers a PNG formatter for
     ``Figure`` with the running shell's display formatter (IPython's documented

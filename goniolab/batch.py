@@ -48,7 +48,7 @@ def _index_json(n: complex) -> float | list[float]:
 def gloss_row(spec: str, options: GlossOptions) -> dict[str, Any]:
     """The ``predict gloss --json`` object of one map, or ``{"map", "error"}`` when the map
     cannot be predicted (the message names the file and the reason). Runs in a worker."""
-    from goniolab.models import model_for
+    from goniolab.model_cache import model_for
     from goniolab.optics.facet import limit_threads
     from goniolab.optics.gloss_standards import gloss_report
 

@@ -358,7 +358,7 @@ def connect_lab(
     A :class:`bluesky.RunEngine` must exist (it owns the loop the devices live in).
     """
     from goniolab.config import load_lab_config
-    from goniolab.lab import Lab
+    from goniolab.lab_wiring import Lab
     from goniolab.scan.colour import PointColour
     from goniolab.session import home_timeout_s, with_sample
 

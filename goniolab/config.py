@@ -164,7 +164,7 @@ class LabSection(_Strict):
 
 class SampleConfig(_Strict):
     """``[sample]``: the height map (path or ``sample:NAME``), refractive index, and the
-    reflectance model that predicts it (:func:`goniolab.models.model_for`: a name of
+    reflectance model that predicts it (:func:`goniolab.model_cache.model_for`: a name of
     :mod:`goniolab.model_registry`, ``auto`` by default) with its optional wavelength
     (nm; unset: 550 nm for BRDF curves, ISO 2813 weighting for gloss). ``step_um`` is the
     lateral step of a map file that carries none (a ``.npy`` without sidecar; ``scan

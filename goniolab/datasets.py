@@ -30,6 +30,7 @@ if TYPE_CHECKING:  # pragma: no cover - typing only
     from goniolab.store import RunRecord, RunStore
 
 __all__ = [
+    "LONG_NAMES",
     "UNITS",
     "aspecular_of",
     "brdf_dataset",
@@ -97,7 +98,9 @@ UNITS: dict[str, str] = {
     "predicted_b_star": "1",
 }
 
-_LONG_NAMES: dict[str, str] = {
+#: CF ``long_name`` of every variable goniolab writes, by variable name (shared with the
+#: colour export of ``goniolab fit``/``render``).
+LONG_NAMES: dict[str, str] = {
     "theta_i_deg": "lamp (incidence) angle from the sample normal",
     "theta_r_deg": "detector angle from the sample normal (> 0 on the specular side)",
     "aspecular_deg": (
@@ -183,8 +186,8 @@ def _attrs(name: str, **extra: Any) -> dict[str, Any]:
     out: dict[str, Any] = {}
     if name in UNITS:
         out["units"] = UNITS[name]
-    if name in _LONG_NAMES:
-        out["long_name"] = _LONG_NAMES[name]
+    if name in LONG_NAMES:
+        out["long_name"] = LONG_NAMES[name]
     if name in _GLOSS_VARS:
         out["units_metadata"] = GLOSS_UNITS_METADATA
     out.update(extra)
@@ -263,7 +266,7 @@ def cf_dataset(ds: xr.Dataset, *, history: str | None = None) -> xr.Dataset:
     for name in list(out.variables):
         var = out[name]
         attrs = netcdf_attrs(var.attrs)
-        attrs.setdefault("long_name", _LONG_NAMES.get(str(name), str(name).replace("_", " ")))
+        attrs.setdefault("long_name", LONG_NAMES.get(str(name), str(name).replace("_", " ")))
         encoding = dict(var.encoding)
         if np.issubdtype(var.dtype, np.datetime64):
             attrs.pop("units", None)
@@ -493,7 +496,7 @@ def _align_run_dataset(store: RunStore, rec: RunRecord) -> xr.Dataset:
             "quality": "reading quality flag (ok, saturated, under_noise_floor, unknown)"}  # fmt: skip
     data: dict[str, Any] = {
         "time": ("reading", to_datetime64([p.timestamp for p in pts]),
-                 {"long_name": _LONG_NAMES["time"]}),
+                 {"long_name": LONG_NAMES["time"]}),
         "theta_i_deg": ("reading", np.array([p.theta_i_deg for p in pts], dtype=np.float64),
                         _attrs("theta_i_deg")),
         "theta_r_deg": ("reading", np.array([p.theta_r_deg for p in pts], dtype=np.float64),
@@ -575,7 +578,7 @@ def _brdf_run_dataset(store: RunStore, rec: RunRecord) -> xr.Dataset:
         "time": (
             dims,
             to_datetime64([t for row in times for t in row]).reshape(shape),
-            {"long_name": _LONG_NAMES["time"]},
+            {"long_name": LONG_NAMES["time"]},
         ),
         "luminance_mean_pct": ("theta_r_deg", mean, _attrs("luminance_mean_pct")),
         "luminance_std_pct": ("theta_r_deg", std, _attrs("luminance_std_pct")),
@@ -765,7 +768,7 @@ def _gloss_run_dataset(store: RunStore, rec: RunRecord) -> xr.Dataset:
         "time": (
             "reading",
             to_datetime64([g.timestamp for g in rows]),
-            {"long_name": _LONG_NAMES["time"]},
+            {"long_name": LONG_NAMES["time"]},
         ),
         "temperature_c": (
             "reading",

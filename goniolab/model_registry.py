@@ -2,7 +2,7 @@
 
 Every place that names a scattering model reads this table: the ``--model`` choices and
 help of ``goniolab predict``, ``scan`` and ``fit``, the validation of ``[sample] model`` in
-a lab config (:class:`goniolab.config.SampleConfig`), :func:`goniolab.models.model_for`
+a lab config (:class:`goniolab.config.SampleConfig`), :func:`goniolab.model_cache.model_for`
 (which builds the model) and the names a stored run or a result reports. The table is
 what :mod:`goniolab.surfaces.registry` is for height-map formats.
 
@@ -67,7 +67,7 @@ class ModelOptions:
         curves, gloss weighted over CIE C x V(lambda) as ISO 2813 does.
     facet
         The facet model of the same map and options when already built (a model whose
-        entry has ``uses_facet`` gets the cached one from :func:`goniolab.models.model_for`).
+        entry has ``uses_facet`` gets the cached one from :func:`goniolab.model_cache.model_for`).
     """
 
     n: complex = complex(1.55)
@@ -178,7 +178,7 @@ def model_help() -> str:
 register(
     ScatteringModel(
         "auto",
-        "goniolab.models:build_auto",
+        "goniolab.model_cache:build_auto",
         "per geometry, the model the regime rule picks from Sq/lambda, slope and "
         "correlation length (goniolab.optics.model_choice)",
         "everywhere the chosen model holds; each reading names the model that computed it",
@@ -188,7 +188,7 @@ register(
 register(
     ScatteringModel(
         "facet",
-        "goniolab.models:build_facet",
+        "goniolab.model_cache:build_facet",
         "geometric optics: every pixel a Fresnel mirror (Wittmann et al. 2021)",
         "rough surfaces, Rayleigh factor g >= 20 (no coherent beam, no diffraction)",
     )
@@ -196,7 +196,7 @@ register(
 register(
     ScatteringModel(
         "kirchhoff",
-        "goniolab.models:build_kirchhoff",
+        "goniolab.model_cache:build_kirchhoff",
         "scalar Kirchhoff, FFT of the map's phase screen (Beckmann-Spizzichino 1963)",
         "tangent-plane approximation: correlation length above lambda, the map's step "
         "sampling the phase screen (<= 1.2 rad rms per point)",
@@ -205,7 +205,7 @@ register(
 register(
     ScatteringModel(
         "rayleigh-rice",
-        "goniolab.models:build_rayleigh_rice",
+        "goniolab.model_cache:build_rayleigh_rice",
         "first-order perturbation from the map's PSD (Stover 2012, ch. 5)",
         "smooth surfaces: g <= 0.3 and rms slope Sdq <= 0.3",
     )

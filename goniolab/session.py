@@ -11,7 +11,7 @@ wire the same parts here, so a run started from either stores the same rows:
   stored as it is taken, the arms parked at the end, on an abort or a fault); a stored
   run that is not done is resumed the same way (:func:`resume_target`).
 * :class:`GlossSession`: the sample's ISO 2813 prediction, a ``gloss`` run in the store,
-  readings taken or received by :class:`~goniolab.scan.gloss.GlossLogger` (which
+  readings taken or received by :class:`~goniolab.scan.gloss_logger.GlossLogger` (which
   reconnects after a timeout or a lost link).
 
 No UI here: the callers show the :class:`~goniolab.scan.events.EventBus` events and turn the
@@ -33,14 +33,14 @@ from drivers.timing import Clock
 from goniolab import __version__
 from goniolab.config import LabConfig
 from goniolab.errors import UserError, a_run_of_kind
-from goniolab.lab import Lab
+from goniolab.lab_wiring import Lab
 from goniolab.optics.models import ReflectanceModel
 from goniolab.scan.align import AlignAborted, AlignPlan, AlignResult, AlignRunner
 from goniolab.scan.colour import PointColour
 from goniolab.scan.events import EventBus, RunState
-from goniolab.scan.gloss import GlossLogger, predict_gloss
+from goniolab.scan.gloss_logger import GlossLogger, predict_gloss
 from goniolab.scan.plans import BrdfPlan, GlossPlan, PlanError
-from goniolab.scan.predict import Predictor
+from goniolab.scan.prediction import Predictor
 from goniolab.scan.runner import ArmMotion, DryRun, PlanRefused, RunResult, ScanRunner, dry_run
 from goniolab.scan.standards import Standard
 from goniolab.store import RunMeta, RunRecord, RunStore
@@ -105,7 +105,7 @@ def check_sample(spec: str, *, option: str = "--sample", given: str = "") -> Non
     sample or no file."""
     arg = f"{option} {given or spec}"
     if spec.startswith("sample:"):
-        from goniolab.surfaces.samples import sample_names
+        from goniolab.surfaces.synthetic import sample_names
 
         name = spec.removeprefix("sample:")
         names = sample_names()
@@ -147,9 +147,9 @@ class SampleModels:
         return cls(s.n, {s.map: lab.model}, model=s.model, wavelength_nm=s.wavelength_nm)
 
     async def get(self, sample: str) -> ReflectanceModel:
-        """The model of ``sample`` (:func:`goniolab.models.model_for`, cached)."""
+        """The model of ``sample`` (:func:`goniolab.model_cache.model_for`, cached)."""
         if sample not in self._models:
-            from goniolab.models import model_for
+            from goniolab.model_cache import model_for
 
             self._models[sample] = await asyncio.to_thread(
                 model_for,
@@ -172,7 +172,7 @@ class PreparedScan:
     model: ReflectanceModel
     predictor: Predictor
     #: which model computes the prediction at each geometry, and its notes
-    #: (:meth:`goniolab.scan.predict.Predictor.provenance`)
+    #: (:meth:`goniolab.scan.prediction.Predictor.provenance`)
     provenance: dict[str, Any] = field(default_factory=dict)
 
 
@@ -182,7 +182,7 @@ class ScanSession:
     Parameters
     ----------
     lab
-        An open :class:`~goniolab.lab.Lab` with its goniometer and spectro.
+        An open :class:`~goniolab.lab_wiring.Lab` with its goniometer and spectro.
     store
         The run store.
     bus
@@ -320,7 +320,7 @@ class ScanSession:
         plan, cfg = scan.plan, self.config
         hook = self._specimen_hook() if plan.mirror_reference else None
         self.lab.put_sample(scan.model, plan.sample)
-        from goniolab.scan.calibrate import calibration_notices, latest_calibration
+        from goniolab.scan.calibration import calibration_notices, latest_calibration
 
         cite, notices = calibration_notices(
             latest_calibration(self.store), max_age_h=cfg.spectro.calibration_max_age_h

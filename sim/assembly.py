@@ -4,7 +4,7 @@
 (``[sim]``, ``[sim.faults]``, ``[sim.twin]``, seeded); :func:`build_sim_server` puts them on
 the endpoints the config's drivers use (:mod:`sim.wire`); :class:`SimLab` holds one
 simulated lab while it runs and swaps the specimen under its instruments (the sample's
-truth, the reference mirror, the black-glass standard). :mod:`goniolab.lab` only chooses
+truth, the reference mirror, the black-glass standard). :mod:`goniolab.lab_wiring` only chooses
 between this and the real drivers; ``goniolab sim serve`` serves it.
 
 The twin serves on the wire the protocols it registers here in the protocol tables of
@@ -98,7 +98,7 @@ def twin_settings(cfg: LabConfig) -> TwinSettings:
 def _sample_body(spec: str, default: str) -> str:
     """A library sample's ``body`` key (configs/samples.toml), else ``default``."""
     if spec.startswith("sample:"):
-        from goniolab.surfaces.samples import sample_info
+        from goniolab.surfaces.synthetic import sample_info
 
         body = sample_info(spec.removeprefix("sample:")).params.get("body", default)
         return str(body)
@@ -343,7 +343,7 @@ def build_sim_server(cfg: LabConfig, sims: SimInstruments) -> SimLabServer:
     Arms on ``transport = "tcp"`` are served by a Modbus TCP server on ``host:port``; arms
     on ``transport = "rtu"`` by a Modbus RTU server framed over TCP, which needs
     ``serial_port = "socket://host:port"``. Arms sharing an endpoint share one server
-    (one unit id each). Port 0 lets the kernel pick a free port (see ``goniolab.lab.Lab``).
+    (one unit id each). Port 0 lets the kernel pick a free port (see ``goniolab.lab_wiring.Lab``).
     Each device is served by the simulator its protocol registered
     (:mod:`drivers.protocols`).
 
@@ -457,7 +457,7 @@ class SimLab:
         tilt. Both twins read a protected-aluminium mirror (88-92 %, as certified in
         ``configs/standards.toml``) or the black glass; the ideal twin the sample model, the
         realistic one the sample's truth.
-        ``goniolab.lab.Lab`` hands it on as ``lab.place_specimen``."""
+        ``goniolab.lab_wiring.Lab`` hands it on as ``lab.place_specimen``."""
         realistic = self.instruments.truth is not None
         # references sit on the reference seat (no tilt); the sample has this session's
         self.instruments.spectro.sample_tilt_deg = (

@@ -3,7 +3,7 @@
 Each class implements the matching :mod:`drivers.base` Protocol, so the scan runner, the
 CLI and the contract tests use them exactly like the real drivers. The simulated
 goniometer is the project's own ``drivers.goniometer.TwoArmGoniometer(SimAxis, SimAxis)``
-(built by :mod:`goniolab.lab`, since :mod:`sim` imports only ``drivers.base``,
+(built by :mod:`goniolab.lab_wiring`, since :mod:`sim` imports only ``drivers.base``,
 ``drivers.profiles`` and ``goniolab.optics``): one interlock for real and simulated arms. Readings come from
 the physics: a :class:`goniolab.optics.models.ReflectanceModel` (normally the
 ``FacetModel`` of the sample's height map) evaluated at the geometry the arms *really*
@@ -12,7 +12,7 @@ sec. 5.2-5.3) name as the cause of the scatter on glossy samples -- through the
 configured source and detector cones. Model evaluation is CPU work and runs in a thread
 (:func:`asyncio.to_thread`) so the event loop never stalls.
 
-Two twins (config ``[sim.twin] mode``, :mod:`goniolab.lab`):
+Two twins (config ``[sim.twin] mode``, :mod:`goniolab.lab_wiring`):
 
 * **ideal**: the spectro and glossmeter read the prediction's own model, with a relative
   noise ``noise_pct``; nothing else (tests of the plumbing compare exactly).
@@ -21,7 +21,7 @@ Two twins (config ``[sim.twin] mode``, :mod:`goniolab.lab`):
   growing with the exposure, read noise, a 16-bit full scale that saturates, a stray-light
   floor, lamp flicker) and a glossmeter with :class:`GlossDrift` (calibration drift and
   warm-up temperature); the arms have backlash (:class:`SimAxis`), and zero offsets and a
-  sample tilt drawn per session (:func:`goniolab.lab.build_sim_instruments`).
+  sample tilt drawn per session (:func:`sim.assembly.build_sim_instruments`).
 
 Each instrument is a room of its own: :mod:`sim.twin_axis` (:class:`SimAxis`),
 :mod:`sim.twin_spectro` (:class:`SimSpectro`, :class:`MirrorModel`,

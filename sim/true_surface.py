@@ -164,7 +164,7 @@ def _highpass_field(
 
 
 def _is_periodic(hm: HeightMap) -> bool:
-    """The built-in samples are generated periodic (goniolab.surfaces.samples)."""
+    """The built-in samples are generated periodic (goniolab.surfaces.synthetic)."""
     return hm.meta.get("generator") == "goniolab.surfaces.samples"
 
 

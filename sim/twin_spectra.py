@@ -65,7 +65,7 @@ def luminance_weights(
     observer and D65 (PHYSICS.md), the glossmeter the 2 deg V(lambda) and illuminant C
     (ISO 2813). colour-science is imported here, lazily (it is slow to import).
     """
-    from goniolab._lazy import import_colour
+    from goniolab.lazy_imports import import_colour
 
     colour = import_colour()
 

@@ -17,8 +17,8 @@ def warm_caches() -> None:
     """Compile the facet, Kirchhoff and Rayleigh-Rice kernels on their usual paths and
     build the default twin's truth (both cached on disk)."""
     from goniolab.config import LabConfig
-    from goniolab.lab import sample_truth
-    from goniolab.models import model_for
+    from goniolab.lab_wiring import sample_truth
+    from goniolab.model_cache import model_for
 
     tr = np.arange(0.0, 71.0, 1.0)
     for spec, kind, masking in (

@@ -30,7 +30,7 @@ def engine() -> Any:
 
 
 def test_inplane_scan_documents(engine: Any, tmp_path: Path) -> None:
-    from goniolab.models import model_for
+    from goniolab.model_cache import model_for
     from goniolab.optics.apertures import Cone
     from tests.twin_configs import ideal_config
 

@@ -107,7 +107,7 @@ def test_a_signal_parks_the_arms_of_the_wire_lab(
     tmp_path: Path, signals: list[signal.Signals]
 ) -> None:
     from goniolab.config import load_lab_config
-    from goniolab.lab import Lab
+    from goniolab.lab_wiring import Lab
 
     served = lab_config(tmp_path, base="lab-sim-wire.toml", sim=NOISELESS, name="served.toml")
     client = tmp_path / "client.toml"

@@ -37,7 +37,7 @@ from goniolab.config import (
     TwinConfig,
     load_lab_config,
 )
-from goniolab.lab import build_sim_instruments, draw_session, sample_truth, twin_settings
+from goniolab.lab_wiring import build_sim_instruments, draw_session, sample_truth, twin_settings
 from tests._fuzz import fuzz_settings, toml_value
 from tests.sim.lobe import LobeModel
 

@@ -43,7 +43,7 @@ def _twin_rows() -> dict[str, list[str]]:
 
 
 def test_twin_table_covers_every_sample() -> None:
-    from goniolab.surfaces.samples import sample_names
+    from goniolab.surfaces.synthetic import sample_names
 
     assert set(_twin_rows()) == set(sample_names())
 

@@ -12,9 +12,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 #: what every package imports on its way in: the ``goniolab`` package itself, its
-#: stdlib-only lazy re-export helper (goniolab/_lazy.py, PEP 562) and the version constant
+#: stdlib-only lazy re-export helper (goniolab/lazy_imports.py, PEP 562) and the version constant
 #: (goniolab/_version.py, one string)
-PACKAGE_ROOT = ("goniolab", "goniolab._lazy", "goniolab._version")
+PACKAGE_ROOT = ("goniolab", "goniolab.lazy_imports", "goniolab._version")
 
 _PROBE = """
 import importlib, json, pkgutil, sys
@@ -76,7 +76,7 @@ def test_drivers_import_no_goniolab_or_sim() -> None:
 
 def test_sim_imports_only_physics_and_surfaces_from_goniolab() -> None:
     imported, modules = loaded_after_importing(["sim"])
-    assert "sim.wire.lab" in imported and "sim.instruments" in imported
+    assert "sim.wire.lab_server" in imported and "sim.instruments" in imported
     allowed = ("goniolab.optics", "goniolab.colour", "goniolab.surfaces", "goniolab.errors")
     bad = offenders(modules, ("goniolab", "textual"), allowed)
     assert [m for m in bad if m not in PACKAGE_ROOT] == [], bad
@@ -100,7 +100,7 @@ def test_textual_only_under_tui() -> None:
     imported, modules = loaded_after_importing(
         ["goniolab", "drivers", "sim"], skip=("goniolab.tui", "goniolab.__main__")
     )
-    assert "goniolab.lab" in imported and "goniolab.commands.sim" in imported
+    assert "goniolab.lab_wiring" in imported and "goniolab.commands.sim" in imported
     assert offenders(modules, ("textual", "textual_plot", "goniolab.tui")) == []
 
 

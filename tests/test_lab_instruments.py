@@ -9,7 +9,7 @@ import pytest
 
 from drivers.base import Disconnected
 from goniolab.config import configs_dir, load_lab_config
-from goniolab.lab import INSTRUMENTS, Lab
+from goniolab.lab_wiring import INSTRUMENTS, Lab
 from goniolab.optics.analytic import AnalyticModel
 from tests.twin_configs import ideal, ideal_config
 

@@ -21,20 +21,20 @@ FORBIDDEN: dict[str, tuple[str, ...]] = {
     "drivers": ("goniolab", "sim"),
     "goniolab/optics": (
         "sim", "drivers", "goniolab.surfaces", "goniolab.scan", "goniolab.store",
-        "goniolab.session", "goniolab.lab", "goniolab.commands", "goniolab.tui", "textual",
+        "goniolab.session", "goniolab.lab_wiring", "goniolab.commands", "goniolab.tui", "textual",
     ),
     "goniolab/colour": (
         "sim", "drivers", "goniolab.surfaces", "goniolab.scan", "goniolab.store",
-        "goniolab.session", "goniolab.lab", "goniolab.commands", "goniolab.tui", "textual",
+        "goniolab.session", "goniolab.lab_wiring", "goniolab.commands", "goniolab.tui", "textual",
     ),
     "goniolab/surfaces": (
         "sim", "drivers", "goniolab.scan", "goniolab.store", "goniolab.session",
-        "goniolab.lab", "goniolab.commands", "goniolab.tui", "textual",
+        "goniolab.lab_wiring", "goniolab.commands", "goniolab.tui", "textual",
     ),
     "goniolab/scan": ("sim", "goniolab.session", "goniolab.commands", "goniolab.tui", "textual"),
     "goniolab/store": (
         "sim", "drivers", "goniolab.commands", "goniolab.api", "goniolab.tui", "textual",
-        "goniolab.session", "goniolab.scan", "goniolab.lab", "goniolab.export",
+        "goniolab.session", "goniolab.scan", "goniolab.lab_wiring", "goniolab.export",
         "goniolab.datasets",
     ),
     "goniolab/session.py": ("sim", "goniolab.commands", "goniolab.tui", "textual"),
@@ -42,13 +42,13 @@ FORBIDDEN: dict[str, tuple[str, ...]] = {
     "goniolab/tui": ("sim", "goniolab.commands"),
     "goniolab/cli.py": ("sim", "goniolab.tui", "textual"),
     "sim": (
-        "goniolab.scan", "goniolab.session", "goniolab.store", "goniolab.lab",
+        "goniolab.scan", "goniolab.session", "goniolab.store", "goniolab.lab_wiring",
         "goniolab.commands", "goniolab.tui", "textual",
     ),
 }  # fmt: skip
 
 #: the only files of the application that may import the simulator
-SIM_DOORS = {"goniolab/lab.py", "goniolab/commands/sim.py"}
+SIM_DOORS = {"goniolab/lab_wiring.py", "goniolab/commands/sim.py"}
 
 #: file -> prefixes it may import although its room may not: the doors between rooms
 DOORS: dict[str, tuple[str, ...]] = {
@@ -173,9 +173,16 @@ def test_the_store_is_used_through_its_public_names() -> None:
 
 
 #: what goniolab/optics may import besides the standard library and itself: the numerics,
-#: colour-science (the CIE tables of goniolab/optics/spectral.py, imported on use) and the
-#: stdlib-only lazy-export helper of the package's __init__ (goniolab/_lazy.py)
-OPTICS_MAY_IMPORT = ("numpy", "scipy", "numba", "colour", "goniolab.optics", "goniolab._lazy")
+#: colour-science (the CIE tables of goniolab/optics/iso2813_weighting.py, imported on use) and the
+#: stdlib-only lazy-export helper of the package's __init__ (goniolab/lazy_imports.py)
+OPTICS_MAY_IMPORT = (
+    "numpy",
+    "scipy",
+    "numba",
+    "colour",
+    "goniolab.optics",
+    "goniolab.lazy_imports",
+)
 
 #: most lines of one module in a room (issue 24: one job per module)
 MAX_MODULE_LINES = 800
@@ -220,3 +227,170 @@ def test_the_optics_checker_catches_a_foreign_import(tmp_path: Path) -> None:
         if m.split(".")[0] not in sys.stdlib_module_names and not _hit(m, OPTICS_MAY_IMPORT)
     ]
     assert found == ["goniolab.config"]
+
+
+# --------------------------------------------------------------------- names between modules
+#: The packages whose module names are unique and whose ``_private`` names stay home (issue 24).
+NAMED_ROOMS = ("goniolab", "drivers", "sim")
+
+
+def repeated_module_names(paths: list[str]) -> dict[str, list[str]]:
+    """Basename -> the paths sharing it, for every basename used twice (``__init__.py`` aside).
+
+    ``goniolab/commands/<name>.py`` take part: a sub-command is found by its module name, so a
+    library module may not wear a sub-command's name either.
+    """
+    by_name: dict[str, list[str]] = {}
+    for path in paths:
+        name = path.rsplit("/", 1)[-1]
+        if name != "__init__.py":
+            by_name.setdefault(name, []).append(path)
+    return {name: sorted(where) for name, where in by_name.items() if len(where) > 1}
+
+
+def _named_room_files() -> list[Path]:
+    return [f for room in NAMED_ROOMS for f in sorted((ROOT / room).rglob("*.py"))]
+
+
+def test_no_module_name_is_used_twice() -> None:
+    paths = [f.relative_to(ROOT).as_posix() for f in _named_room_files()]
+    assert len(paths) > 100, "the rooms were not found"
+    assert repeated_module_names(paths) == {}
+
+
+def test_the_name_checker_catches_a_repeat() -> None:
+    paths = ["goniolab/__init__.py", "sim/__init__.py", "goniolab/commands/fit.py"]
+    paths += ["goniolab/optics/fit.py", "goniolab/optics/psd.py", "sim/wire/modbus.py"]
+    assert repeated_module_names(paths) == {
+        "fit.py": ["goniolab/commands/fit.py", "goniolab/optics/fit.py"]
+    }
+
+
+#: ``file: module.name`` -> why it may import another module's ``_private`` name. The
+#: sub-commands share a few helpers of their neighbours; commands/* are being edited by another
+#: engineer this round (help texts), so their helpers become public names after that merge.
+PRIVATE_IMPORT_EXCEPTIONS: dict[str, str] = {
+    "goniolab/commands/_colour.py: goniolab.commands.predict._model": "the model of --sample/--map",
+    "goniolab/commands/_colour.py: goniolab.commands.runs._get_run": "a run by id, one error",
+    "goniolab/commands/fit.py: goniolab.commands.runs._get_run": "a run by id, one error",
+    "goniolab/commands/plot.py: goniolab.commands.runs._get_run": "a run by id, one error",
+    "goniolab/commands/calibrate.py: goniolab.commands.scan._open": "the store of --store/config",
+    "goniolab/commands/calibrate.py: goniolab.commands.scan._specimen_prompt": "the operator",
+}
+
+
+def _private(name: str) -> bool:
+    return name.startswith("_") and not (name.startswith("__") and name.endswith("__"))
+
+
+def _is_module(dotted: str) -> bool:
+    base = ROOT.joinpath(*dotted.split("."))
+    return base.with_suffix(".py").is_file() or (base / "__init__.py").is_file()
+
+
+def _inside(package: str, parent: str) -> bool:
+    return package == parent or package.startswith(parent + ".")
+
+
+def private_imports(path: Path, module: str) -> list[tuple[int, str]]:
+    """``(line, module.name)`` of every ``_private`` name of another module that ``path``
+    (the module ``module``) imports or reads as an attribute of an imported module.
+
+    A private *module* (``goniolab/optics/_kernels.py``, ``goniolab/surfaces/_common.py``) is
+    its package's internals: modules inside that package may import it and its names, modules
+    outside may not.
+    """
+    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+    tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+    out: list[tuple[int, str]] = []
+    bound: dict[str, str] = {}  # local name -> the module of ours it is bound to
+
+    def private_path(line: int, dotted: str) -> None:
+        parts = dotted.split(".")
+        for i, part in enumerate(parts):
+            if _private(part) and not _inside(package, ".".join(parts[:i])):
+                out.append((line, dotted))
+                return
+
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            if node.module.split(".")[0] not in NAMED_ROOMS:
+                continue
+            private_path(node.lineno, node.module)
+            for alias in node.names:
+                target = f"{node.module}.{alias.name}"
+                if _is_module(target):
+                    bound[alias.asname or alias.name] = target
+                    private_path(node.lineno, target)
+                elif _private(alias.name) and node.module != module:
+                    out.append((node.lineno, target))
+        elif isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.name.split(".")[0] in NAMED_ROOMS:
+                    private_path(node.lineno, alias.name)
+                    top = alias.name.split(".")[0]
+                    bound[alias.asname or top] = alias.name if alias.asname else top
+    for node in ast.walk(tree):
+        if not (isinstance(node, ast.Attribute) and _private(node.attr)):
+            continue
+        chain: list[str] = []
+        value: ast.expr = node.value
+        while isinstance(value, ast.Attribute):
+            chain.append(value.attr)
+            value = value.value
+        if not (isinstance(value, ast.Name) and value.id in bound):
+            continue
+        owner = ".".join([bound[value.id], *reversed(chain)])
+        if not _is_module(owner) or owner == module:
+            continue
+        target = f"{owner}.{node.attr}"
+        if _is_module(target):
+            private_path(node.lineno, target)
+        else:
+            out.append((node.lineno, target))
+    return sorted(set(out))
+
+
+def _dotted(path: Path) -> str:
+    parts = path.relative_to(ROOT).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def test_no_module_imports_another_modules_private_name() -> None:
+    found = {
+        f"{f.relative_to(ROOT).as_posix()}: {target}": line
+        for f in _named_room_files()
+        for line, target in private_imports(f, _dotted(f))
+    }
+    bad = [f"{where} (line {line})" for where, line in found.items()]
+    bad = [b for b in bad if b.split(" (line")[0] not in PRIVATE_IMPORT_EXCEPTIONS]
+    assert bad == [], "\n".join(bad)
+    stale = sorted(set(PRIVATE_IMPORT_EXCEPTIONS) - set(found))
+    assert stale == [], f"exceptions no longer needed (remove them): {stale}"
+    assert len(PRIVATE_IMPORT_EXCEPTIONS) <= 6, "a handful of exceptions, no more"
+
+
+def test_the_private_import_checker_catches_each_form(tmp_path: Path) -> None:
+    probe = tmp_path / "probe.py"
+    probe.write_text(
+        "from goniolab.optics.psd import _helper, psd2\n"  # a private name of another module
+        "from goniolab.optics import _kernels\n"  # a private module, from outside its package
+        "import goniolab.optics.heightmap as hm\n"
+        "hm._secret\n"  # a private attribute of an imported module
+        "from goniolab.surfaces._common import ReadOptions\n"  # inside a private module
+        "from goniolab.probe import _own\n"  # its own private name: fine
+        "from goniolab.__init__ import __doc__\n"  # a dunder: fine
+    )
+    assert private_imports(probe, "goniolab.probe") == [
+        (1, "goniolab.optics.psd._helper"),
+        (2, "goniolab.optics._kernels"),
+        (4, "goniolab.optics.heightmap._secret"),
+        (5, "goniolab.surfaces._common"),
+    ]
+    # inside the package, its private module is its own business
+    assert private_imports(probe, "goniolab.optics.probe") == [
+        (1, "goniolab.optics.psd._helper"),
+        (4, "goniolab.optics.heightmap._secret"),
+        (5, "goniolab.surfaces._common"),
+        (6, "goniolab.probe._own"),  # now another module's
+    ]

@@ -1,6 +1,6 @@
 """The registry of scattering models (goniolab/model_registry.py) is the one list of model
 names: a model registered in a test appears in the CLI's ``--model`` choices and help, is
-accepted by ``[sample] model`` and is built by :func:`goniolab.models.model_for`; the names
+accepted by ``[sample] model`` and is built by :func:`goniolab.model_cache.model_for`; the names
 the ``auto`` rule picks and the ``kind`` of every built-in model are registered."""
 
 from __future__ import annotations
@@ -17,8 +17,8 @@ from goniolab import model_registry
 from goniolab.cli import build_parser
 from goniolab.config import load_lab_config
 from goniolab.errors import UserError
+from goniolab.model_cache import model_for
 from goniolab.model_registry import ModelOptions, ScatteringModel
-from goniolab.models import model_for
 from goniolab.optics.apertures import ISO2813_BLACK_GLASS_N, ISO2813_RECEPTOR, solid_angle_sr
 from goniolab.optics.fresnel import fresnel_dielectric
 from goniolab.optics.heightmap import HeightMap

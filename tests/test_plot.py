@@ -53,7 +53,7 @@ def test_pdf_of_a_gloss_log(store_file: Path, tmp_path: Path) -> None:
 
 
 def test_the_figure_shows_the_stored_values(store_file: Path) -> None:
-    from goniolab.plot import plot_run
+    from goniolab.run_plots import plot_run
 
     with RunStore(store_file, readonly=True) as s:
         fig = plot_run(s, 1, log=True)
@@ -75,7 +75,7 @@ def test_the_figure_shows_the_stored_values(store_file: Path) -> None:
 def test_the_predicted_curve_names_the_runs_model(tmp_path: Path, name: str) -> None:
     """issue 27: the label said "facet model" for every run, whatever model predicted it."""
     from goniolab.datasets import run_dataset
-    from goniolab.plot import plot_dataset
+    from goniolab.run_plots import plot_dataset
 
     with RunStore(make_store(tmp_path / "s.sqlite"), readonly=True) as s:
         ds = run_dataset(s, 1)
@@ -127,7 +127,7 @@ def _colour_store(path: Path) -> Path:
 
 def test_colour_per_point_reaches_the_dataset_and_the_plot(tmp_path: Path) -> None:
     from goniolab.datasets import run_dataset
-    from goniolab.plot import plot_dataset
+    from goniolab.run_plots import plot_dataset
 
     with RunStore(_colour_store(tmp_path / "c.sqlite"), readonly=True) as s:
         ds = run_dataset(s, 1)

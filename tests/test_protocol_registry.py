@@ -111,7 +111,7 @@ def test_the_toy_protocol_builds_its_driver(acme: ProtocolEntry) -> None:
 
 def test_the_wire_twin_refuses_a_protocol_it_does_not_serve(acme: ProtocolEntry) -> None:
     from drivers.timing import SimClock
-    from goniolab.lab import build_sim_instruments, build_sim_server
+    from goniolab.lab_wiring import build_sim_instruments, build_sim_server
     from goniolab.optics.analytic import AnalyticModel
 
     cfg = LabConfig.model_validate(
@@ -165,7 +165,7 @@ async def test_the_lab_builds_and_connects_the_toy_driver(
     import select
     import tty
 
-    from goniolab.lab import Lab
+    from goniolab.lab_wiring import Lab
     from goniolab.optics.analytic import AnalyticModel
 
     master, slave = os.openpty()

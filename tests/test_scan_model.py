@@ -11,7 +11,7 @@ import pytest
 
 from goniolab.cli import main
 from goniolab.config import configs_dir, load_lab_config
-from goniolab.models import model_for
+from goniolab.model_cache import model_for
 from goniolab.optics.apertures import Cone
 from goniolab.store import RunStore
 

@@ -131,8 +131,8 @@ class ColourError(ValueError):
 
 def colour_module() -> Any:
     """colour-science, imported on first use with its optional-dependency notices silenced
-    and its plotting package deferred (:func:`goniolab._lazy.import_colour`)."""
-    from goniolab._lazy import import_colour
+    and its plotting package deferred (:func:`goniolab.lazy_imports.import_colour`)."""
+    from goniolab.lazy_imports import import_colour
 
     return import_colour()
 

@@ -64,7 +64,7 @@ def _spectral(args: argparse.Namespace) -> Any:
     from goniolab.colour.dispersion import DispersionError
     from goniolab.colour.spectra import ColourError
     from goniolab.commands.predict import _model
-    from goniolab.models import spectral_for
+    from goniolab.model_cache import spectral_for
 
     model = _model(args)
     paint = load_paint_file(args.paint) if args.paint else None
@@ -773,7 +773,8 @@ def write_spectra(
         else:
             import xarray as xr
 
-            from goniolab.datasets import _LONG_NAMES, UNITS, write_netcdf
+            from goniolab.datasets import LONG_NAMES as _LONG_NAMES
+            from goniolab.datasets import UNITS, write_netcdf
 
             geom = np.arange(table.factors.shape[0])
             ds = xr.Dataset(

@@ -1,6 +1,6 @@
 """``goniolab calibrate --config LAB``: the reference mirror and a check standard read
 against their certificates, stored as a calibration record that later runs cite
-(:mod:`goniolab.scan.calibrate`, docs/CALIBRATION.md)."""
+(:mod:`goniolab.scan.calibration`, docs/CALIBRATION.md)."""
 
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ async def _execute(args: argparse.Namespace) -> int:
     from goniolab import __version__
     from goniolab.commands.scan import _open, _specimen_prompt
     from goniolab.config import load_lab_config
-    from goniolab.scan.calibrate import CalibrationRefused, run_calibration
+    from goniolab.scan.calibration import CalibrationRefused, run_calibration
     from goniolab.scan.colour import PointColour
     from goniolab.scan.events import RunState
     from goniolab.session import ScanSession, config_snapshot, home_timeout_s

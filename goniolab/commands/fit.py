@@ -5,7 +5,7 @@ The run's measured L*a*b* per geometry (mean over repeats; geometries closer tha
 surface, not the paint, sets the colour) are fitted with the model the run was predicted
 with -- its sample's coat surface model (``--model`` to choose another, ``--no-surface``
 for the paint alone) over the sample's paint (``--paint FILE.toml`` for another start) --
-through :func:`goniolab.colour.fit.fit_paint`: K/S of the body, the flake populations'
+through :func:`goniolab.colour.paint_fit.fit_paint`: K/S of the body, the flake populations'
 area and spread (and a pearl's film), and the coat index, each with its 1-sigma
 uncertainty, and the residual dE2000 per geometry. ``--save FILE.toml`` writes the fitted
 paint in the format ``--paint`` reads (``goniolab predict colour MAP --paint FILE.toml``).
@@ -92,8 +92,8 @@ def _settings_of(rec: Any) -> tuple[Any, str, float, float]:
 def _cmd_fit_colour(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from goniolab.colour.fit import FitError, fit_paint
     from goniolab.colour.paint import Paint
+    from goniolab.colour.paint_fit import FitError, fit_paint
     from goniolab.commands.runs import _get_run, open_store, run_colour
 
     if not (math.isfinite(args.min_aspecular) and args.min_aspecular >= 0):
@@ -124,7 +124,7 @@ def _cmd_fit_colour(args: argparse.Namespace) -> int:
 
         paint: Paint = load_paint_file(args.paint)
     else:
-        from goniolab.models import paint_for
+        from goniolab.model_cache import paint_for
 
         paint = paint_for(rec.sample or None)
     if paint.body is None and not paint.has_flakes and not args.params:
@@ -147,7 +147,7 @@ def _cmd_fit_colour(args: argparse.Namespace) -> int:
                 raise UserError(
                     f"run {rec.id} names no sample: its coat surface is unknown (use --no-surface)"
                 )
-            from goniolab.models import model_for, surface_factory
+            from goniolab.model_cache import model_for, surface_factory
 
             _say(args, f"building the coat-surface model of {rec.sample} ...")
             model_name = args.model or str(rec.model.get("model_name") or "auto")

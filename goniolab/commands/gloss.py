@@ -27,7 +27,7 @@ if TYPE_CHECKING:  # loaded when a session runs, not at --help (tests/test_start
     import asyncio
 
     from goniolab.scan.events import GlossRead
-    from goniolab.scan.gloss import GlossResult
+    from goniolab.scan.gloss_logger import GlossResult
     from goniolab.scan.plans import GlossPlan
     from goniolab.store import RunStore
 

@@ -21,7 +21,7 @@ __all__ = ["register"]
 def _cmd_reset_alarm(args: argparse.Namespace) -> int:
     from goniolab.commands.scan import run_lab
     from goniolab.config import load_lab_config
-    from goniolab.lab import Lab
+    from goniolab.lab_wiring import Lab
     from goniolab.scan.alarm import reset_alarms
 
     if not args.config:

@@ -5,7 +5,7 @@ The file is written only where ``--out`` says (issue 27: a plot without ``--out`
 
 A scan: measured points with error bars, the predicted curve and a residual panel (plus
 L*, a*, b* against the aspecular angle when the run has colour data); a gloss log: the
-readings over time beside the predictions. See :mod:`goniolab.plot`.
+readings over time beside the predictions. See :mod:`goniolab.run_plots`.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ __all__ = ["register"]
 
 def _cmd_plot(args: argparse.Namespace) -> int:
     from goniolab.commands.runs import _get_run, open_store
-    from goniolab.plot import PLOT_FORMATS
+    from goniolab.run_plots import PLOT_FORMATS
 
     out = Path(args.out)
     if out.suffix.lower() not in PLOT_FORMATS:
@@ -33,7 +33,7 @@ def _cmd_plot(args: argparse.Namespace) -> int:
         raise UserError(f"--out {out}: no such directory {out.parent}")
     with open_store(args.store, args.config) as store:
         rec = _get_run(store, args.run)
-        from goniolab.plot import plot_run
+        from goniolab.run_plots import plot_run
 
         try:
             plot_run(store, args.run, out=out, log=args.log)

@@ -112,7 +112,7 @@ def _is_auto(obj: Any) -> bool:
 
 
 def _model(args: argparse.Namespace) -> Any:
-    from goniolab.models import model_for
+    from goniolab.model_cache import model_for
 
     if args.wavelength_nm is not None and not (
         math.isfinite(args.wavelength_nm) and 100.0 <= args.wavelength_nm <= 20000.0

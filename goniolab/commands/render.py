@@ -2,7 +2,7 @@
 
 A curved panel (or a sphere) lit by one or two lamps, every pixel the predicted spectral BRDF
 (coat gloss from the map's rms slope + the paint beneath) integrated with the illuminant and
-observer, shown in sRGB (:mod:`goniolab.colour.render`). A metallic darkens away from its
+observer, shown in sRGB (:mod:`goniolab.colour.paint_render`). A metallic darkens away from its
 highlight (flop); a solid keeps its lightness apart from the lamp's cos(theta_i).
 """
 
@@ -57,9 +57,9 @@ def _cmd_render(args: argparse.Namespace) -> int:
         print(f"rendering {args.map} ({args.size}x{args.size}) ...", file=sys.stderr, flush=True)
     from goniolab.colour.dispersion import DispersionError
     from goniolab.colour.paint import PaintError
-    from goniolab.colour.render import render, tabulate_brdf
+    from goniolab.colour.paint_render import render, tabulate_brdf
     from goniolab.colour.spectra import ColourError, ColourSettings, standard_grid_nm
-    from goniolab.models import paint_for
+    from goniolab.model_cache import paint_for
     from goniolab.optics.surface import roughness_stats
     from goniolab.surfaces.resolve import resolve_map
 

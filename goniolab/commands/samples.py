@@ -16,7 +16,7 @@ __all__ = ["register"]
 
 
 def _cmd_samples(args: argparse.Namespace) -> int:
-    from goniolab.surfaces.samples import SampleError, sample_info, sample_names
+    from goniolab.surfaces.synthetic import SampleError, sample_info, sample_names
 
     try:
         infos = [sample_info(name) for name in sample_names()]
@@ -56,7 +56,7 @@ def _cmd_save(args: argparse.Namespace) -> int:
 
     from goniolab.optics.heightmap import HeightMapError
     from goniolab.surfaces.registry import save_heightmap
-    from goniolab.surfaces.samples import SampleError, make_sample
+    from goniolab.surfaces.synthetic import SampleError, make_sample
 
     name = args.name.removeprefix("sample:")
     try:

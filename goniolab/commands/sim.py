@@ -67,7 +67,7 @@ async def _serve(config_path: str, time_scale: float | None, as_json: bool) -> i
 
     from drivers.timing import SimClock
     from goniolab.config import load_lab_config
-    from goniolab.lab import build_sim_instruments, build_sim_server, sample_model
+    from goniolab.lab_wiring import build_sim_instruments, build_sim_server, sample_model
 
     cfg = load_lab_config(config_path)
     scale = cfg.lab.time_scale if time_scale is None else time_scale

@@ -10,7 +10,7 @@ with the eq. 4 sign and eq. 10 angles fixed and the radiometric facet weight add
 integrated over each instrument's aperture (:mod:`~goniolab.optics.apertures`, Mihalik
 eqs. 15-17; :mod:`~goniolab.optics.gloss_standards`, ISO 2813 / ASTM D523 / D4039 / E430).
 Analytic comparison models (Beckmann, GGX, Cook-Torrance, Ward) and fits to readings are in
-:mod:`~goniolab.optics.analytic` and :mod:`~goniolab.optics.fit`.
+:mod:`~goniolab.optics.analytic` and :mod:`~goniolab.optics.analytic_fit`.
 
 No I/O except height-map files, no drivers, no UI: numpy, scipy and numba only.
 
@@ -33,7 +33,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from goniolab._lazy import lazy_exports
+from goniolab.lazy_imports import lazy_exports
 
 # Loaded at once: the function shares its name with its module, and a lazy name would be
 # shadowed by the submodule as soon as anything imports goniolab.optics.fresnel.
@@ -41,6 +41,7 @@ from goniolab.optics.fresnel import fresnel
 
 if TYPE_CHECKING:
     from goniolab.optics.analytic import AnalyticModel
+    from goniolab.optics.analytic_fit import FitResult, fit_to_curve, fit_to_gloss
     from goniolab.optics.apertures import (
         GONIO_CONE,
         ISO2813_BLACK_GLASS_N,
@@ -52,7 +53,6 @@ if TYPE_CHECKING:
         integrate_brdf,
     )
     from goniolab.optics.facet import FacetModel, HemisphereBRDF
-    from goniolab.optics.fit import FitResult, fit_to_curve, fit_to_gloss
     from goniolab.optics.fresnel import fresnel_conductor, fresnel_dielectric
     from goniolab.optics.gloss_standards import GlossReport, d523_recommended_angle, gloss_report
     from goniolab.optics.heightmap import (
@@ -77,7 +77,7 @@ _LAZY: dict[str, str] = {
     "Aperture": "goniolab.optics.apertures",
     "Cone": "goniolab.optics.apertures",
     "FacetModel": "goniolab.optics.facet",
-    "FitResult": "goniolab.optics.fit",
+    "FitResult": "goniolab.optics.analytic_fit",
     "GONIO_CONE": "goniolab.optics.apertures",
     "GlossReport": "goniolab.optics.gloss_standards",
     "HeightMap": "goniolab.optics.heightmap",
@@ -94,8 +94,8 @@ _LAZY: dict[str, str] = {
     "Surface": "goniolab.optics.surface",
     "d523_recommended_angle": "goniolab.optics.gloss_standards",
     "fill_missing": "goniolab.optics.heightmap",
-    "fit_to_curve": "goniolab.optics.fit",
-    "fit_to_gloss": "goniolab.optics.fit",
+    "fit_to_curve": "goniolab.optics.analytic_fit",
+    "fit_to_gloss": "goniolab.optics.analytic_fit",
     "fresnel_conductor": "goniolab.optics.fresnel",
     "fresnel_dielectric": "goniolab.optics.fresnel",
     "gloss_report": "goniolab.optics.gloss_standards",

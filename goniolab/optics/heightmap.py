@@ -29,8 +29,10 @@ __all__ = [
     "HeightMap",
     "HeightMapError",
     "fill_missing",
+    "heightmap_error",
     "level_plane",
     "plane_fit",
+    "plane_fit_and_completeness",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -41,7 +43,8 @@ class HeightMapError(ValueError):
     """A height map or height-map file is unusable; the message names the file and why."""
 
 
-def _fail(source: str | Path, problem: str) -> HeightMapError:
+def heightmap_error(source: str | Path, problem: str) -> HeightMapError:
+    """A :class:`HeightMapError` naming the file (its name, not its full path) and the problem."""
     return HeightMapError(f"{Path(source).name if isinstance(source, Path) else source}: {problem}")
 
 
@@ -79,7 +82,7 @@ class HeightMap:
     def __post_init__(self) -> None:
         src = self.source
         if np.iscomplexobj(self.z_um):
-            raise _fail(src, "heights must be real, got a complex array")
+            raise heightmap_error(src, "heights must be real, got a complex array")
         given = self.z_um
         if (
             isinstance(given, np.ndarray)
@@ -93,14 +96,16 @@ class HeightMap:
             try:
                 z = np.array(given, dtype=np.float64, copy=True)
             except (TypeError, ValueError) as exc:
-                raise _fail(src, f"heights are not numeric: {exc}") from None
+                raise heightmap_error(src, f"heights are not numeric: {exc}") from None
         if z.ndim != 2:
-            raise _fail(src, f"heights must be a 2-D array, got {z.ndim}-D shape {z.shape}")
+            raise heightmap_error(
+                src, f"heights must be a 2-D array, got {z.ndim}-D shape {z.shape}"
+            )
         if z.size == 0:
-            raise _fail(src, f"height map has zero points (shape {z.shape})")
+            raise heightmap_error(src, f"height map has zero points (shape {z.shape})")
         # one fast reduction; only a non-finite sum (NaN, inf or overflow) needs the scan
         if not math.isfinite(float(np.sum(z))) and np.isinf(z).any():
-            raise _fail(src, "heights contain inf (use NaN for missing points)")
+            raise heightmap_error(src, "heights contain inf (use NaN for missing points)")
         z.setflags(write=False)
         object.__setattr__(self, "z_um", z)
         for name in ("dx_um", "dy_um"):
@@ -108,18 +113,20 @@ class HeightMap:
             try:
                 step = float(value)
             except (TypeError, ValueError):
-                raise _fail(src, f"{name} must be a number, got {value!r}") from None
+                raise heightmap_error(src, f"{name} must be a number, got {value!r}") from None
             if not (math.isfinite(step) and step > 0.0):
-                raise _fail(src, f"{name} must be finite and > 0, got {step!r}")
+                raise heightmap_error(src, f"{name} must be finite and > 0, got {step!r}")
             object.__setattr__(self, name, step)
         if not isinstance(self.meta, Mapping):
-            raise _fail(
+            raise heightmap_error(
                 src, f"meta must be a mapping of str to str, got {type(self.meta).__name__}"
             )
         meta = dict(self.meta)
         for key, value in meta.items():
             if not isinstance(key, str) or not isinstance(value, str):
-                raise _fail(src, f"meta entries must be str -> str, got {key!r}: {value!r}")
+                raise heightmap_error(
+                    src, f"meta entries must be str -> str, got {key!r}: {value!r}"
+                )
         object.__setattr__(self, "meta", meta)
 
     @property
@@ -169,11 +176,11 @@ def plane_fit(hm: HeightMap) -> tuple[float, float, float]:
     HeightMapError
         If the map has no valid point.
     """
-    a, b, c, _ = _plane(hm)
+    a, b, c, _ = plane_fit_and_completeness(hm)
     return a, b, c
 
 
-def _plane(hm: HeightMap) -> tuple[float, float, float, bool]:
+def plane_fit_and_completeness(hm: HeightMap) -> tuple[float, float, float, bool]:
     """:func:`plane_fit` and whether the map has no missing point."""
     z = hm.z_um
     ny, nx = z.shape
@@ -190,7 +197,7 @@ def _plane(hm: HeightMap) -> tuple[float, float, float, bool]:
         return a, b, c, True
     valid = ~np.isnan(z)
     if not valid.any():
-        raise _fail(hm.source, "cannot level: no valid points")
+        raise heightmap_error(hm.source, "cannot level: no valid points")
     zz = np.where(valid, z, 0.0)
     v = valid.astype(np.float64)
     vc, vr = v.sum(axis=0), v.sum(axis=1)
@@ -268,7 +275,7 @@ def fill_missing(hm: HeightMap, method: Literal["nearest", "mean"] = "nearest") 
     z = hm.z_um
     missing = np.isnan(z)
     if missing.all():
-        raise _fail(hm.source, "cannot fill missing points: no valid points")
+        raise heightmap_error(hm.source, "cannot fill missing points: no valid points")
     if not missing.any():
         return hm
     if method == "mean":
@@ -279,7 +286,9 @@ def fill_missing(hm: HeightMap, method: Literal["nearest", "mean"] = "nearest") 
         _, (ii, jj) = ndimage.distance_transform_edt(missing, return_indices=True)
         filled = z[ii, jj]
     else:
-        raise _fail(hm.source, f"unknown fill method {method!r} (use 'nearest' or 'mean')")
+        raise heightmap_error(
+            hm.source, f"unknown fill method {method!r} (use 'nearest' or 'mean')"
+        )
     return hm.replace(z_um=filled)
 
 

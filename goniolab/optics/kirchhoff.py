@@ -89,7 +89,7 @@ from goniolab.optics.physical import (
     PhysicalOpticsModel,
     check_theta_i,
 )
-from goniolab.optics.psd import _pruned_fft2
+from goniolab.optics.psd import pruned_fft2
 
 __all__ = ["DEFAULT_TAYLOR_TOL", "KirchhoffModel", "band_plan"]
 
@@ -168,7 +168,7 @@ class KirchhoffModel(PhysicalOpticsModel):
 
         Only the transform outputs the boxes read are formed: each Taylor term is transformed
         along the axis needing fewer outputs first (over the whole tile, contiguous), those
-        outputs kept, then along the other axis (``_pruned_fft2``; zero-padded to ``os``
+        outputs kept, then along the other axis (``pruned_fft2``; zero-padded to ``os``
         times the tile when the receptor needs a finer grid); a band's terms are then
         summed per cell by Horner's scheme in one pass per wavelength
         (:func:`goniolab.optics._cell_kernels.kirchhoff_band_numba`).
@@ -242,7 +242,7 @@ class KirchhoffModel(PhysicalOpticsModel):
                 spec = np.empty((order + 1, ky.size, kx.size), dtype=np.complex64)
                 dc = np.empty(order + 1, dtype=np.complex128)
                 for n_term in range(order + 1):
-                    dc[n_term] = _pruned_fft2(term, ky, kx, y_first, spec[n_term], lengths)
+                    dc[n_term] = pruned_fft2(term, ky, kx, y_first, spec[n_term], lengths)
                     if n_term < order:
                         term *= u
                     done += 1

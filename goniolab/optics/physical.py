@@ -50,7 +50,7 @@ Wavelength and index per call (for the colour and spectral code): a model is bui
 a sibling model for another index (real or complex ``n + ik``) and wavelength that shares
 the tiled map, its FFT caches and its fallback facet model, so a spectral loop costs no
 re-levelling. ``gloss()`` weights over wavelength as ISO 2813 does (CIE illuminant C x
-V(lambda), :func:`goniolab.optics.spectral.iso2813_weights`) unless
+V(lambda), :func:`goniolab.optics.iso2813_weighting.iso2813_weights`) unless
 ``gloss_weighting="single"``; the goniometer responses and BRDFs use ``wavelength_nm``.
 
 References
@@ -272,7 +272,7 @@ class PhysicalOpticsModel(EnergyBudget, CellApertures):
     def _lams_for_gloss(self) -> tuple[FloatArray, FloatArray]:
         if self.gloss_weighting == "single":
             return np.array([self.wavelength_nm]), np.array([1.0])
-        from goniolab.optics.spectral import iso2813_weights
+        from goniolab.optics.iso2813_weighting import iso2813_weights
 
         return iso2813_weights()
 

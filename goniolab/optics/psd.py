@@ -48,6 +48,7 @@ __all__ = [
     "DEFAULT_TILE",
     "PSD2",
     "TiledMap",
+    "pruned_fft2",
     "psd2",
     "psd_region",
     "schwartz_taper",
@@ -293,7 +294,7 @@ def _dft_last(a: NDArray[np.complex64], idx: NDArray[np.int64], length: int) -> 
     return result
 
 
-def _pruned_fft2(
+def pruned_fft2(
     term: NDArray[np.complex64],
     ky: NDArray[np.int64],
     kx: NDArray[np.int64],
@@ -347,7 +348,7 @@ def psd_region(
         term = (w * h).astype(np.complex64)
         if y_first:
             term = np.ascontiguousarray(term.T)
-        _pruned_fft2(term, ky, kx, y_first, spec, lengths)
+        pruned_fft2(term, ky, kx, y_first, spec, lengths)
         acc += np.abs(spec).astype(np.float64) ** 2
     out: FloatArray = acc * tiled.dx_um * tiled.dy_um / (tiled.sum_w2 * tiled.n_tiles)
     return out

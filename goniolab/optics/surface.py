@@ -29,7 +29,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from goniolab.optics.heightmap import HeightMap, _plane, level_plane
+from goniolab.optics.heightmap import HeightMap, level_plane, plane_fit_and_completeness
 
 __all__ = [
     "RoughnessStats",
@@ -61,7 +61,7 @@ def _forward_blocks(
     if ny < 2 or nx < 2:
         return None
     if level:
-        a, b, c, complete = _plane(hm)
+        a, b, c, complete = plane_fit_and_completeness(hm)
     else:
         a = b = c = 0.0
         complete = math.isfinite(float(np.sum(z)))

@@ -65,7 +65,7 @@ from goniolab.scan.events import (
 )
 from goniolab.scan.exposure import AutoExposure, reading_quality
 from goniolab.scan.plans import PlanError
-from goniolab.scan.predict import Predictor
+from goniolab.scan.prediction import Predictor
 from goniolab.scan.standards import Standard
 from goniolab.store import RunStore
 

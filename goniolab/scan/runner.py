@@ -72,7 +72,7 @@ from goniolab.scan.events import (
 from goniolab.scan.exposure import EXCLUDED_QUALITY, AutoExposure, reading_quality
 from goniolab.scan.moves import Aborted, describe_error
 from goniolab.scan.plans import MIRROR_INDEX, BrdfPlan, PlanPoint
-from goniolab.scan.predict import Predictor
+from goniolab.scan.prediction import Predictor
 from goniolab.scan.readings import SpectroReadings
 from goniolab.scan.reference import SpectralReference
 from goniolab.scan.standards import Standard
@@ -213,7 +213,7 @@ class ScanRunner(SpectroReadings):
             raise ValueError(f"reconnect_window_s must be >= 0, got {reconnect_window_s}")
         self.reconnect_window_s = reconnect_window_s
         #: warnings published (non-fatal) when the run starts: the calibration's age, a
-        #: missed check standard (:func:`goniolab.scan.calibrate.calibration_notices`)
+        #: missed check standard (:func:`goniolab.scan.calibration.calibration_notices`)
         self.notices = tuple(notices)
         self.point_colour = point_colour if point_colour is not None else PointColour()
         if plan.mirror_reference and mirror_standard is None:

@@ -3,7 +3,7 @@
 One module per file format (:mod:`~goniolab.surfaces.npy`, :mod:`~goniolab.surfaces.text`,
 :mod:`~goniolab.surfaces.sdf`, :mod:`~goniolab.surfaces.sur`, :mod:`~goniolab.surfaces.gwy`),
 chosen by suffix in :mod:`~goniolab.surfaces.registry`; the synthetic library of
-:mod:`~goniolab.surfaces.samples`; :func:`resolve_map` for a spec naming either. The maths
+:mod:`~goniolab.surfaces.synthetic`; :func:`resolve_map` for a spec naming either. The maths
 on a map (levelling, slopes, statistics) lives in :mod:`goniolab.optics`.
 
 The names below load from their modules on first use (PEP 562), so listing the sample
@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from goniolab._lazy import lazy_exports
+from goniolab.lazy_imports import lazy_exports
 
 if TYPE_CHECKING:
     from goniolab.optics.heightmap import HeightMap, HeightMapError

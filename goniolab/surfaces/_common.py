@@ -2,7 +2,7 @@
 
 Size limits: a reader checks what a header declares against the file's size and against
 :func:`max_map_points` (``GONIOLAB_MAX_MAP_POINTS``, default 8192 x 8192 points) *before*
-allocating anything, and inflates compressed data (:func:`_inflate`) in bounded steps that
+allocating anything, and inflates compressed data (:func:`inflate`) in bounded steps that
 stop as soon as a stream gives more than it claims, so a decompression bomb or a header
 that lies fails with one clear error in milliseconds.
 """
@@ -22,31 +22,56 @@ from goniolab.optics.heightmap import (
     HeightMap,
     HeightMapError,
     StepArg,
-    _fail,
+    heightmap_error,
     owning_base,
 )
 
+__all__ = [
+    "DEFAULT_MAX_MAP_POINTS",
+    "MAX_MAP_POINTS_ENV",
+    "ZLIB_MAX_RATIO",
+    "ReadOptions",
+    "check_file_size",
+    "check_points",
+    "cstr",
+    "decode_text",
+    "inflate",
+    "make_heightmap",
+    "max_map_points",
+    "quantise",
+    "resolve_steps",
+    "snap",
+    "steps_from_arg",
+    "truncated_error",
+    "um_per_unit",
+]
 
-def _steps_from_arg(name: str, step_um: StepArg) -> tuple[float, float] | None:
+
+def steps_from_arg(name: str, step_um: StepArg) -> tuple[float, float] | None:
+    """The ``step_um`` argument of a reader as ``(dx_um, dy_um)``, or None when not given."""
     if step_um is None:
         return None
     if isinstance(step_um, tuple):
         if len(step_um) != 2:
-            raise _fail(name, f"step_um must be a number or (dx_um, dy_um), got {step_um!r}")
+            raise heightmap_error(
+                name, f"step_um must be a number or (dx_um, dy_um), got {step_um!r}"
+            )
         dx, dy = step_um
     else:
         dx = dy = step_um
     try:
         dx_f, dy_f = float(dx), float(dy)
     except (TypeError, ValueError):
-        raise _fail(name, f"step_um must be a number or (dx_um, dy_um), got {step_um!r}") from None
+        raise heightmap_error(
+            name, f"step_um must be a number or (dx_um, dy_um), got {step_um!r}"
+        ) from None
     for value in (dx_f, dy_f):
         if not (math.isfinite(value) and value > 0.0):
-            raise _fail(name, f"step_um must be finite and > 0, got {step_um!r}")
+            raise heightmap_error(name, f"step_um must be finite and > 0, got {step_um!r}")
     return dx_f, dy_f
 
 
-def _resolve_steps(
+def resolve_steps(
     name: str,
     file_steps: tuple[float, float] | None,
     step_um: StepArg,
@@ -58,16 +83,20 @@ def _resolve_steps(
     The file's steps win; ``step_um`` fills in when the file carries none. A ``step_um``
     that contradicts the file is an error rather than a silent choice.
     """
-    arg = _steps_from_arg(name, step_um)
+    arg = steps_from_arg(name, step_um)
     if file_steps is None:
         if arg is None:
-            raise _fail(name, f"no lateral step in {what}: pass --step-um UM (step_um in Python)")
+            raise heightmap_error(
+                name, f"no lateral step in {what}: pass --step-um UM (step_um in Python)"
+            )
         return arg
     for value in file_steps:
         if not (math.isfinite(value) and value > 0.0):
-            raise _fail(name, f"lateral step in {what} must be finite and > 0, got {value!r}")
+            raise heightmap_error(
+                name, f"lateral step in {what} must be finite and > 0, got {value!r}"
+            )
     if arg is not None and not np.allclose(arg, file_steps, rtol=1e-9, atol=0.0):
-        raise _fail(
+        raise heightmap_error(
             name,
             f"step_um={step_um!r} contradicts the step in {what} "
             f"(dx_um={file_steps[0]!r}, dy_um={file_steps[1]!r})",
@@ -75,12 +104,15 @@ def _resolve_steps(
     return file_steps
 
 
-def _make(
+def make_heightmap(
     name: str, z_um: ArrayLike, dx_um: float, dy_um: float, meta: dict[str, str]
 ) -> HeightMap:
+    """A :class:`HeightMap` of a reader's heights, taking a fresh array without a copy."""
     z = np.asarray(z_um, dtype=np.float64)
     if not math.isfinite(float(np.sum(z))) and np.isinf(z).any():
-        raise _fail(name, "heights overflow to infinity after scaling: implausible z scale")
+        raise heightmap_error(
+            name, "heights overflow to infinity after scaling: implausible z scale"
+        )
     if z.flags.c_contiguous:
         base = None if z.flags.owndata else owning_base(z)
         if base is not None:
@@ -103,15 +135,16 @@ _UM_PER_UNIT: dict[str, float] = {
 }
 
 
-def _um_per(name: str, unit: str, what: str) -> float:
+def um_per_unit(name: str, unit: str, what: str) -> float:
+    """Micrometres per length ``unit`` of a header (m, mm, um, nm, pm, Angstrom)."""
     key = unit.strip().replace("\u00b5", "u").replace("\u03bc", "u").replace("&#181;", "u")
     key = key.lower()
     if key not in _UM_PER_UNIT:
-        raise _fail(name, f"unknown {what} unit {unit!r} (known: m, mm, um, nm, pm, A)")
+        raise heightmap_error(name, f"unknown {what} unit {unit!r} (known: m, mm, um, nm, pm, A)")
     return _UM_PER_UNIT[key]
 
 
-def _snap(value: float) -> float:
+def snap(value: float) -> float:
     """Undo the last-digit noise of a unit conversion (e.g. 0.1e-6 m * 1e6 -> 0.1 um)."""
     return float(f"{value:.15g}")
 
@@ -122,16 +155,17 @@ def _mib(n_bytes: int) -> str:
     return f"{n_bytes / (1024 * 1024):.3g} MiB"
 
 
-def _truncated(name: str, ny: int, nx: int, item: int, have: int) -> HeightMapError:
+def truncated_error(name: str, ny: int, nx: int, item: int, have: int) -> HeightMapError:
+    """The error of a file with fewer data bytes than its header declares."""
     need = ny * nx * item
-    return _fail(
+    return heightmap_error(
         name,
         f"truncated: header says {nx}x{ny} points of {item} bytes ({_mib(need)}) "
         f"but file has {_mib(max(have, 0))} of data",
     )
 
 
-def _quantise(
+def quantise(
     z_um: FloatArray, n_max: int, *, offset: bool
 ) -> tuple[NDArray[np.int64], float, float]:
     """Map heights to integers ``0..n_max`` (or ``-n_max..n_max`` without offset).
@@ -163,19 +197,23 @@ def _quantise(
     return raw, step, off
 
 
-def _decode_text(raw: bytes) -> str:
+def decode_text(raw: bytes) -> str:
+    """A header's text: UTF-8 (with or without BOM), else latin-1."""
     try:
         return raw.decode("utf-8-sig")
     except UnicodeDecodeError:
         return raw.decode("latin-1")
 
 
-def _cstr(value: bytes) -> str:
+def cstr(value: bytes) -> str:
+    """A NUL-terminated latin-1 header field as a stripped string."""
     return value.split(b"\0", 1)[0].decode("latin-1").strip()
 
 
 @dataclass(frozen=True)
-class _ReadOptions:
+class ReadOptions:
+    """What a caller of :func:`~goniolab.surfaces.load_heightmap` asks of every reader."""
+
     step_um: StepArg
     missing_value: float | None
 
@@ -213,31 +251,31 @@ def max_map_points() -> int:
     return value
 
 
-def _check_points(name: str, nx: int, ny: int, *, what: str = "header declares") -> None:
+def check_points(name: str, nx: int, ny: int, *, what: str = "header declares") -> None:
     """Refuse a map larger than :func:`max_map_points` before anything is allocated."""
     limit = max_map_points()
     if nx * ny > limit:
-        raise _fail(
+        raise heightmap_error(
             name,
             f"{what} {nx}x{ny} = {nx * ny} points, more than the limit of {limit} "
             f"(set {MAX_MAP_POINTS_ENV} to read larger maps)",
         )
 
 
-def _check_file_size(name: str, size: int, bytes_per_point: int, what: str) -> None:
+def check_file_size(name: str, size: int, bytes_per_point: int, what: str) -> None:
     """Refuse a file larger than a map of :func:`max_map_points` points can need
     (``bytes_per_point`` per point plus 1 MiB of headers), before reading it."""
     limit = max_map_points()
     most = limit * bytes_per_point + (1 << 20)
     if size > most:
-        raise _fail(
+        raise heightmap_error(
             name,
             f"{what} of {_mib(size)} is more than a map within the limit of {limit} points "
             f"needs ({_mib(most)}; set {MAX_MAP_POINTS_ENV} to read larger maps)",
         )
 
 
-def _inflate(name: str, stream: bytes, raw_len: int, what: str) -> bytes:
+def inflate(name: str, stream: bytes, raw_len: int, what: str) -> bytes:
     """Decompress one zlib ``stream`` that must give exactly ``raw_len`` bytes.
 
     The claim is checked against the stream's size first (:data:`ZLIB_MAX_RATIO`), then the
@@ -245,7 +283,7 @@ def _inflate(name: str, stream: bytes, raw_len: int, what: str) -> bytes:
     more than claimed, so a decompression bomb costs at most ``raw_len`` bytes.
     """
     if raw_len > ZLIB_MAX_RATIO * len(stream) + 64:
-        raise _fail(
+        raise heightmap_error(
             name,
             f"{what} claims {_mib(raw_len)} from {_mib(len(stream))} of zlib data, more than "
             f"zlib can expand ({ZLIB_MAX_RATIO}:1): corrupt or malicious",
@@ -257,12 +295,12 @@ def _inflate(name: str, stream: bytes, raw_len: int, what: str) -> bytes:
         while True:
             out += d.decompress(data, min(_INFLATE_STEP, raw_len - len(out) + 1))
             if len(out) > raw_len:
-                raise _fail(name, f"{what} gives more than the {_mib(raw_len)} it claims")
+                raise heightmap_error(name, f"{what} gives more than the {_mib(raw_len)} it claims")
             data = d.unconsumed_tail
             if d.eof or not data:
                 break
     except zlib.error as exc:
-        raise _fail(name, f"{what} is corrupt: {exc}") from None
+        raise heightmap_error(name, f"{what} is corrupt: {exc}") from None
     if len(out) != raw_len:
-        raise _fail(name, f"{what} gave {len(out)} bytes, expected {raw_len}")
+        raise heightmap_error(name, f"{what} gave {len(out)} bytes, expected {raw_len}")
     return bytes(out)

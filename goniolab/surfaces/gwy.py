@@ -11,16 +11,18 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from goniolab.optics.heightmap import HeightMap, HeightMapError, _fail
+from goniolab.optics.heightmap import HeightMap, HeightMapError, heightmap_error
 from goniolab.surfaces._common import (
-    _check_file_size,
-    _check_points,
-    _make,
-    _ReadOptions,
-    _resolve_steps,
-    _snap,
-    _um_per,
+    ReadOptions,
+    check_file_size,
+    check_points,
+    make_heightmap,
+    resolve_steps,
+    snap,
+    um_per_unit,
 )
+
+__all__ = ["read_gwy", "write_gwy"]
 
 
 class _GwyParser:
@@ -42,7 +44,7 @@ class _GwyParser:
         self.buf = buf
 
     def _err(self, pos: int, what: str) -> HeightMapError:
-        return _fail(self.name, f"corrupt or truncated .gwy at byte {pos}: {what}")
+        return heightmap_error(self.name, f"corrupt or truncated .gwy at byte {pos}: {what}")
 
     def cstring(self, pos: int, end: int) -> tuple[str, int]:
         stop = self.buf.find(b"\0", pos, end)
@@ -116,12 +118,12 @@ def _gwy_field(name: str, container: Mapping[str, Any], key: str) -> dict[str, A
     xres, yres = field_obj.get("xres"), field_obj.get("yres")
     data = field_obj.get("data")
     if not isinstance(xres, int) or not isinstance(yres, int) or not isinstance(data, np.ndarray):
-        raise _fail(name, f"{key}: GwyDataField lacks xres/yres/data")
+        raise heightmap_error(name, f"{key}: GwyDataField lacks xres/yres/data")
     if xres <= 0 or yres <= 0:
-        raise _fail(name, f"{key}: zero points ({xres}x{yres})")
-    _check_points(name, xres, yres, what=f"{key} declares")
+        raise heightmap_error(name, f"{key}: zero points ({xres}x{yres})")
+    check_points(name, xres, yres, what=f"{key} declares")
     if data.dtype != np.float64 or data.size != xres * yres:
-        raise _fail(name, f"{key}: data has {data.size} values, expected {xres}x{yres}")
+        raise heightmap_error(name, f"{key}: data has {data.size} values, expected {xres}x{yres}")
     return field_obj
 
 
@@ -132,17 +134,20 @@ def _gwy_unit(field_obj: Mapping[str, Any], key: str) -> str:
     return ""
 
 
-def _read_gwy(path: Path, opts: _ReadOptions) -> HeightMap:
+def read_gwy(path: Path, opts: ReadOptions) -> HeightMap:
+    """Read the first data field (and its mask) of a Gwyddion ``.gwy`` file."""
     name = path.name
     # a map and its mask, float64 each, plus 1 MiB of metadata (checked before reading)
-    _check_file_size(name, path.stat().st_size, 16, "Gwyddion file")
+    check_file_size(name, path.stat().st_size, 16, "Gwyddion file")
     buf = path.read_bytes()
     if buf[:4] != b"GWYP":
-        raise _fail(name, f"not a Gwyddion .gwy file: first bytes {buf[:4]!r}, expected b'GWYP'")
+        raise heightmap_error(
+            name, f"not a Gwyddion .gwy file: first bytes {buf[:4]!r}, expected b'GWYP'"
+        )
     parser = _GwyParser(name, buf)
     top, _ = parser.obj(4, len(buf))
     if top["__type__"] != "GwyContainer":
-        raise _fail(name, f"top object is {top['__type__']!r}, expected GwyContainer")
+        raise heightmap_error(name, f"top object is {top['__type__']!r}, expected GwyContainer")
     channels = sorted(int(k[1:-5]) for k in top if re.fullmatch(r"/\d{1,9}/data", k) is not None)
     field_obj = None
     channel = -1
@@ -151,21 +156,21 @@ def _read_gwy(path: Path, opts: _ReadOptions) -> HeightMap:
         if field_obj is not None:
             break
     if field_obj is None:
-        raise _fail(name, "no GwyDataField (/N/data) in the container")
+        raise heightmap_error(name, "no GwyDataField (/N/data) in the container")
     xres, yres = field_obj["xres"], field_obj["yres"]
     z = np.array(field_obj["data"], dtype=np.float64).reshape(yres, xres)
     z_unit = _gwy_unit(field_obj, "si_unit_z") or "m"
     xy_unit = _gwy_unit(field_obj, "si_unit_xy") or "m"
     z[np.isinf(z)] = np.nan
-    z = z * _um_per(name, z_unit, "z")
-    xy_um = _um_per(name, xy_unit, "lateral")
+    z = z * um_per_unit(name, z_unit, "z")
+    xy_um = um_per_unit(name, xy_unit, "lateral")
     xreal, yreal = field_obj.get("xreal", 1.0), field_obj.get("yreal", 1.0)
     if not all(isinstance(v, float) and math.isfinite(v) and v > 0 for v in (xreal, yreal)):
-        raise _fail(name, f"xreal/yreal must be finite and > 0, got {xreal!r}, {yreal!r}")
+        raise heightmap_error(name, f"xreal/yreal must be finite and > 0, got {xreal!r}, {yreal!r}")
     mask_obj = _gwy_field(name, top, f"/{channel}/mask")
     if mask_obj is not None:
         if (mask_obj["xres"], mask_obj["yres"]) != (xres, yres):
-            raise _fail(name, f"/{channel}/mask shape differs from the data")
+            raise heightmap_error(name, f"/{channel}/mask shape differs from the data")
         z[np.asarray(mask_obj["data"]).reshape(yres, xres) > 0.5] = np.nan
     meta = {"format": "gwy", "channel": str(channel)}
     title = top.get(f"/{channel}/data/title")
@@ -176,13 +181,14 @@ def _read_gwy(path: Path, opts: _ReadOptions) -> HeightMap:
         for key, value in gmeta.items():
             if key != "__type__" and isinstance(value, (str, bytes)):
                 meta[key] = value if isinstance(value, str) else value.decode("latin-1")
-    dx = _snap(xreal * xy_um / xres)
-    dy = _snap(yreal * xy_um / yres)
-    dx, dy = _resolve_steps(name, (dx, dy), opts.step_um)
-    return _make(name, z, dx, dy, meta)
+    dx = snap(xreal * xy_um / xres)
+    dy = snap(yreal * xy_um / yres)
+    dx, dy = resolve_steps(name, (dx, dy), opts.step_um)
+    return make_heightmap(name, z, dx, dy, meta)
 
 
-def _write_gwy(hm: HeightMap, path: Path) -> None:
+def write_gwy(hm: HeightMap, path: Path) -> None:
+    """Write ``hm`` as a Gwyddion ``.gwy`` file (missing points as a mask)."""
     from gwyfile.objects import GwyContainer, GwyDataField, GwySIUnit
 
     ny, nx = hm.shape

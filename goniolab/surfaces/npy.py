@@ -10,23 +10,26 @@ from pathlib import Path
 
 import numpy as np
 
-from goniolab.optics.heightmap import HeightMap, HeightMapError, _fail
+from goniolab.optics.heightmap import HeightMap, HeightMapError, heightmap_error
 from goniolab.surfaces._common import (
-    _check_points,
-    _make,
-    _ReadOptions,
-    _resolve_steps,
-    _snap,
-    _truncated,
-    _um_per,
+    ReadOptions,
+    check_points,
+    make_heightmap,
+    resolve_steps,
+    snap,
+    truncated_error,
+    um_per_unit,
 )
+
+__all__ = ["read_npy", "write_npy"]
 
 
 def _sidecar(path: Path) -> Path:
     return path.with_name(path.name + ".json")
 
 
-def _read_npy(path: Path, opts: _ReadOptions) -> HeightMap:
+def read_npy(path: Path, opts: ReadOptions) -> HeightMap:
+    """Read a ``.npy`` height map and its JSON step sidecar."""
     name = path.name
     size = path.stat().st_size
     try:
@@ -39,15 +42,17 @@ def _read_npy(path: Path, opts: _ReadOptions) -> HeightMap:
             else:
                 raise ValueError(f"unsupported .npy version {version}")
             if dtype.hasobject or dtype.kind not in "iuf":
-                raise _fail(name, f"heights must be a real numeric array, got dtype {dtype}")
+                raise heightmap_error(
+                    name, f"heights must be a real numeric array, got dtype {dtype}"
+                )
             if len(shape) != 2:
-                raise _fail(name, f"heights must be a 2-D array, got shape {shape}")
+                raise heightmap_error(name, f"heights must be a 2-D array, got shape {shape}")
             if shape[0] * shape[1] == 0:
-                raise _fail(name, f"height map has zero points (shape {shape})")
-            _check_points(name, shape[1], shape[0], what="array header declares")
+                raise heightmap_error(name, f"height map has zero points (shape {shape})")
+            check_points(name, shape[1], shape[0], what="array header declares")
             have = size - f.tell()
             if shape[0] * shape[1] * dtype.itemsize > have:
-                raise _truncated(name, shape[0], shape[1], dtype.itemsize, have)
+                raise truncated_error(name, shape[0], shape[1], dtype.itemsize, have)
             f.seek(0)
             arr = np.load(f, allow_pickle=False)
     except HeightMapError:
@@ -60,7 +65,7 @@ def _read_npy(path: Path, opts: _ReadOptions) -> HeightMap:
         OverflowError,
         tokenize.TokenError,  # numpy tokenises the header dict to repair old files
     ) as exc:
-        raise _fail(name, f"not a readable .npy file: {exc}") from None
+        raise heightmap_error(name, f"not a readable .npy file: {exc}") from None
     z = np.asarray(arr).astype(np.float64, copy=False)  # a float64 file is read once, no copy
     if not np.isfinite(np.sum(z)):
         z[np.isinf(z)] = np.nan
@@ -74,8 +79,8 @@ def _read_npy(path: Path, opts: _ReadOptions) -> HeightMap:
         meta.update(extra)
     # name the sidecar only when there is one (issue 27: the message named a missing file)
     what = side.name if side.exists() else f"the file (it has no sidecar {side.name})"
-    dx, dy = _resolve_steps(name, file_steps, opts.step_um, what=what)
-    hm = _make(name, z, dx, dy, meta)
+    dx, dy = resolve_steps(name, file_steps, opts.step_um, what=what)
+    hm = make_heightmap(name, z, dx, dy, meta)
     _warn_if_nm(hm)
     return hm
 
@@ -94,7 +99,7 @@ def _read_sidecar(side: Path, name: str) -> tuple[tuple[float, float], float, di
     """
 
     def bad(reason: str) -> HeightMapError:
-        return _fail(side.name, f"bad sidecar for {name}: {reason}")
+        return heightmap_error(side.name, f"bad sidecar for {name}: {reason}")
 
     try:
         info = json.loads(side.read_text(encoding="utf-8"))
@@ -129,14 +134,14 @@ def _read_sidecar(side: Path, name: str) -> tuple[tuple[float, float], float, di
     unit = info.get("z_unit", "um")
     if not isinstance(unit, str):
         raise bad(f'z_unit must be a unit name like "nm", got {unit!r}')
-    um_per = _um_per(side.name, unit, "z")
+    um_per = um_per_unit(side.name, unit, "z")
     extra = info.get("meta", {})
     if not isinstance(extra, dict):
         raise bad("meta must be an object of text values")
     meta = {str(k): str(v) for k, v in extra.items()}
     if unit != "um" or scale != 1.0:
         meta["z_stored_unit"] = f"{scale:g} {unit}" if scale != 1.0 else unit
-    return (dx, dy), _snap(scale * um_per), meta
+    return (dx, dy), snap(scale * um_per), meta
 
 
 #: A map whose heights look like nanometres read as micrometres (rms slope and rms height
@@ -198,7 +203,8 @@ class HeightUnitsWarning(UserWarning):
     """Heights that look like they are in the wrong unit (nm read as um)."""
 
 
-def _write_npy(hm: HeightMap, path: Path) -> None:
+def write_npy(hm: HeightMap, path: Path) -> None:
+    """Write ``hm`` as ``.npy`` heights and a JSON step sidecar."""
     np.save(path, np.asarray(hm.z_um, dtype=np.float64), allow_pickle=False)
     info = {"dx_um": hm.dx_um, "dy_um": hm.dy_um, "meta": hm.meta}
     _sidecar(path).write_text(json.dumps(info, indent=1, sort_keys=True) + "\n", encoding="utf-8")

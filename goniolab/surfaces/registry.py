@@ -74,42 +74,42 @@ from pathlib import Path
 
 import numpy as np
 
-from goniolab.optics.heightmap import HeightMap, HeightMapError, _fail
+from goniolab.optics.heightmap import HeightMap, HeightMapError, heightmap_error
 from goniolab.surfaces._common import (
+    ReadOptions,
     StepArg,
-    _ReadOptions,
-    _steps_from_arg,
+    steps_from_arg,
 )
-from goniolab.surfaces.gwy import _read_gwy, _write_gwy
-from goniolab.surfaces.npy import _read_npy, _write_npy
-from goniolab.surfaces.sdf import _read_sdf, _write_sdf_ascii, _write_sdf_binary
-from goniolab.surfaces.sur import _read_sur, _write_sur
-from goniolab.surfaces.text import _read_text, _write_text
+from goniolab.surfaces.gwy import read_gwy, write_gwy
+from goniolab.surfaces.npy import read_npy, write_npy
+from goniolab.surfaces.sdf import read_sdf, write_sdf_ascii, write_sdf_binary
+from goniolab.surfaces.sur import read_sur, write_sur
+from goniolab.surfaces.text import read_text_map, write_text_map
 
 __all__ = ["load_heightmap", "save_heightmap"]
 
-Reader = Callable[[Path, _ReadOptions], HeightMap]
+Reader = Callable[[Path, ReadOptions], HeightMap]
 Writer = Callable[[HeightMap, Path], None]
 
 _READERS: dict[str, Reader] = {
-    "npy": _read_npy,
-    "csv": _read_text,
-    "txt": _read_text,
-    "sdf": _read_sdf,
-    "sur": _read_sur,
-    "gwy": _read_gwy,
+    "npy": read_npy,
+    "csv": read_text_map,
+    "txt": read_text_map,
+    "sdf": read_sdf,
+    "sur": read_sur,
+    "gwy": read_gwy,
 }
 _WRITERS: dict[str, Writer] = {
-    "npy": _write_npy,
-    "csv": lambda hm, p: _write_text(hm, p, ","),
-    "txt": lambda hm, p: _write_text(hm, p, "\t"),
-    "sdf": lambda hm, p: _write_sdf_binary(hm, p, 7),
-    "sdf-int16": lambda hm, p: _write_sdf_binary(hm, p, 5),
-    "sdf-int32": lambda hm, p: _write_sdf_binary(hm, p, 6),
-    "sdf-ascii": _write_sdf_ascii,
-    "sur": lambda hm, p: _write_sur(hm, p, 32),
-    "sur-int16": lambda hm, p: _write_sur(hm, p, 16),
-    "gwy": _write_gwy,
+    "npy": write_npy,
+    "csv": lambda hm, p: write_text_map(hm, p, ","),
+    "txt": lambda hm, p: write_text_map(hm, p, "\t"),
+    "sdf": lambda hm, p: write_sdf_binary(hm, p, 7),
+    "sdf-int16": lambda hm, p: write_sdf_binary(hm, p, 5),
+    "sdf-int32": lambda hm, p: write_sdf_binary(hm, p, 6),
+    "sdf-ascii": write_sdf_ascii,
+    "sur": lambda hm, p: write_sur(hm, p, 32),
+    "sur-int16": lambda hm, p: write_sur(hm, p, 16),
+    "gwy": write_gwy,
 }
 _ALIASES: dict[str, str] = {
     "csv": "csv",
@@ -137,12 +137,16 @@ def _format_for(path: Path, fmt: str | None, table: Mapping[str, object]) -> str
         if table is _READERS:
             key = _READ_ALIASES.get(key, key)
         if key not in table:
-            raise _fail(path.name, f"unknown height-map format {fmt!r} (known: {sorted(table)})")
+            raise heightmap_error(
+                path.name, f"unknown height-map format {fmt!r} (known: {sorted(table)})"
+            )
         return key
     ext = path.suffix.lower().lstrip(".")
     if ext not in _ALIASES:
         known = sorted("." + e for e in _ALIASES if e != "text")
-        raise _fail(path.name, f"unknown height-map extension {path.suffix!r} (known: {known})")
+        raise heightmap_error(
+            path.name, f"unknown height-map extension {path.suffix!r} (known: {known})"
+        )
     return _ALIASES[ext]
 
 
@@ -183,21 +187,21 @@ def load_heightmap(
     """
     p = Path(path)
     kind = _format_for(p, fmt, _READERS)
-    _steps_from_arg(p.name, step_um)
+    steps_from_arg(p.name, step_um)
     if missing_value is not None and not math.isfinite(missing_value):
-        raise _fail(p.name, f"missing_value must be finite, got {missing_value!r}")
+        raise heightmap_error(p.name, f"missing_value must be finite, got {missing_value!r}")
     if not p.exists():
-        raise _fail(p.name, f"no such file ({p})")
+        raise heightmap_error(p.name, f"no such file ({p})")
     if p.is_dir():
-        raise _fail(p.name, f"is a directory, not a height-map file ({p})")
+        raise heightmap_error(p.name, f"is a directory, not a height-map file ({p})")
     try:
-        # an absurd scale in a header overflows to inf, which _make reports: no warnings
+        # an absurd scale in a header overflows to inf, which make_heightmap reports: no warnings
         with np.errstate(over="ignore", invalid="ignore"):
-            return _READERS[kind](p, _ReadOptions(step_um, missing_value))
+            return _READERS[kind](p, ReadOptions(step_um, missing_value))
     except HeightMapError:
         raise
     except OSError as exc:
-        raise _fail(p.name, f"cannot read: {exc.strerror or exc}") from None
+        raise heightmap_error(p.name, f"cannot read: {exc.strerror or exc}") from None
 
 
 def save_heightmap(hm: HeightMap, path: str | Path, *, fmt: str | None = None) -> None:
@@ -230,4 +234,4 @@ def save_heightmap(hm: HeightMap, path: str | Path, *, fmt: str | None = None) -
         with np.errstate(over="ignore", invalid="ignore"):  # float32 overflow is checked
             _WRITERS[kind](hm, p)
     except OSError as exc:
-        raise _fail(p.name, f"cannot write: {exc.strerror or exc}") from None
+        raise heightmap_error(p.name, f"cannot write: {exc.strerror or exc}") from None

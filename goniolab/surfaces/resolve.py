@@ -2,7 +2,7 @@
 
 Every command, the lab and the TUI name a surface the same way: a path to a height-map file
 (any format :func:`goniolab.surfaces.load_heightmap` reads) or ``sample:NAME`` for a
-built-in synthetic sample (:mod:`goniolab.surfaces.samples`). Errors become :class:`goniolab.errors.UserError`
+built-in synthetic sample (:mod:`goniolab.surfaces.synthetic`). Errors become :class:`goniolab.errors.UserError`
 (exit code 2) with one line naming the file or sample and the reason.
 """
 
@@ -87,7 +87,7 @@ def _warn_if_coarse(hm: HeightMap, name: str, step_um: float) -> None:
 
 def _resolve(text: str, step_um: float | None) -> HeightMap:
     if text.startswith(SAMPLE_PREFIX):
-        from goniolab.surfaces.samples import SampleError, make_sample
+        from goniolab.surfaces.synthetic import SampleError, make_sample
 
         try:
             return make_sample(text[len(SAMPLE_PREFIX) :], step_um=step_um)

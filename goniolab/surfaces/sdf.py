@@ -11,19 +11,21 @@ from typing import Any
 
 import numpy as np
 
-from goniolab.optics.heightmap import HeightMap, HeightMapError, _fail
+from goniolab.optics.heightmap import HeightMap, HeightMapError, heightmap_error
 from goniolab.surfaces._common import (
-    _check_file_size,
-    _check_points,
-    _cstr,
-    _decode_text,
-    _make,
-    _quantise,
-    _ReadOptions,
-    _resolve_steps,
-    _snap,
-    _truncated,
+    ReadOptions,
+    check_file_size,
+    check_points,
+    cstr,
+    decode_text,
+    make_heightmap,
+    quantise,
+    resolve_steps,
+    snap,
+    truncated_error,
 )
+
+__all__ = ["read_sdf", "write_sdf_ascii", "write_sdf_binary"]
 
 # DataType codes, as in Gwyddion modules/file/sdfile.c (SDFDataType) and ISO 25178-71.
 _SDF_DTYPES: dict[int, np.dtype[Any]] = {
@@ -49,50 +51,55 @@ _SDF_REQUIRED = ("NumPoints", "NumProfiles", "Xscale", "Yscale", "Zscale", "Data
 def _sdf_check(name: str, info: Mapping[str, Any]) -> tuple[int, int, float, float, float]:
     nx, ny = int(info["NumPoints"]), int(info["NumProfiles"])
     if nx <= 0 or ny <= 0:
-        raise _fail(name, f"zero points: NumPoints={nx}, NumProfiles={ny}")
+        raise heightmap_error(name, f"zero points: NumPoints={nx}, NumProfiles={ny}")
     for key in ("Xscale", "Yscale", "Zscale"):
         value = float(info[key])
         if not (math.isfinite(value) and value > 0.0):
-            raise _fail(name, f"{key} must be finite and > 0 (metres), got {value!r}")
+            raise heightmap_error(name, f"{key} must be finite and > 0 (metres), got {value!r}")
     if int(info.get("Compression", 0)) != 0:
-        raise _fail(name, f"compressed SDF not supported (Compression={info['Compression']})")
+        raise heightmap_error(
+            name, f"compressed SDF not supported (Compression={info['Compression']})"
+        )
     if int(info.get("CheckType", 0)) != 0:
-        raise _fail(name, f"SDF checksums not supported (CheckType={info['CheckType']})")
+        raise heightmap_error(name, f"SDF checksums not supported (CheckType={info['CheckType']})")
     if int(info["DataType"]) not in _SDF_DTYPES:
-        raise _fail(name, f"unknown SDF DataType {info['DataType']} (known: 0..7)")
+        raise heightmap_error(name, f"unknown SDF DataType {info['DataType']} (known: 0..7)")
     return (
         nx,
         ny,
-        _snap(float(info["Xscale"]) * 1e6),
-        _snap(float(info["Yscale"]) * 1e6),
+        snap(float(info["Xscale"]) * 1e6),
+        snap(float(info["Yscale"]) * 1e6),
         float(info["Zscale"]) * 1e6,
     )
 
 
-def _read_sdf(path: Path, opts: _ReadOptions) -> HeightMap:
+def read_sdf(path: Path, opts: ReadOptions) -> HeightMap:
+    """Read an ISO 25178-71 SDF file, ASCII or binary (told apart by its first bytes)."""
     name = path.name
     size = path.stat().st_size
     with path.open("rb") as f:
         head = f.read(_SDF_BIN_HEADER.size)
         magic = head[:8]
         if magic not in _SDF_MAGICS:
-            raise _fail(name, f"not an SDF file: first bytes {magic!r}, expected aISO-1.0/bISO-1.0")
+            raise heightmap_error(
+                name, f"not an SDF file: first bytes {magic!r}, expected aISO-1.0/bISO-1.0"
+            )
         if magic[:1] == b"b":
             if len(head) == _SDF_BIN_HEADER.size:
                 nx, ny = struct.unpack_from("<HH", head, 42)
                 if nx > 0 and ny > 0:
-                    _check_points(name, nx, ny)  # before the data is read
+                    check_points(name, nx, ny)  # before the data is read
                     # read only what the header declares (at most 8 bytes a point)
                     return _read_sdf_binary(name, head + f.read(nx * ny * 8), opts)
             return _read_sdf_binary(name, head + f.read(), opts)
-        _check_file_size(name, size, _TEXT_BYTES_PER_POINT, "ASCII SDF file")
+        check_file_size(name, size, _TEXT_BYTES_PER_POINT, "ASCII SDF file")
         raw = head + f.read()
     return _read_sdf_ascii(name, raw, opts)
 
 
-def _read_sdf_binary(name: str, raw: bytes, opts: _ReadOptions) -> HeightMap:
+def _read_sdf_binary(name: str, raw: bytes, opts: ReadOptions) -> HeightMap:
     if len(raw) < _SDF_BIN_HEADER.size:
-        raise _fail(
+        raise heightmap_error(
             name,
             f"truncated: binary SDF header needs {_SDF_BIN_HEADER.size} bytes, file has {len(raw)}",
         )
@@ -114,12 +121,12 @@ def _read_sdf_binary(name: str, raw: bytes, opts: _ReadOptions) -> HeightMap:
     ]
     info = dict(zip(keys, fields, strict=True))
     nx, ny, dx_um, dy_um, zscale_um = _sdf_check(name, info)
-    _check_points(name, nx, ny)
+    check_points(name, nx, ny)
     code = int(info["DataType"])
     dtype = _SDF_DTYPES[code]
     have = len(raw) - _SDF_BIN_HEADER.size
     if nx * ny * dtype.itemsize > have:
-        raise _truncated(name, ny, nx, dtype.itemsize, have)
+        raise truncated_error(name, ny, nx, dtype.itemsize, have)
     data = np.frombuffer(raw, dtype=dtype, count=nx * ny, offset=_SDF_BIN_HEADER.size)
     z = data.astype(np.float64).reshape(ny, nx)
     if code in _SDF_INVALID:
@@ -128,18 +135,18 @@ def _read_sdf_binary(name: str, raw: bytes, opts: _ReadOptions) -> HeightMap:
     z = z * zscale_um
     meta = {
         "format": "sdf-binary",
-        "manufacturer": _cstr(info["ManufacID"]),
-        "create_date": _cstr(info["CreateDate"]),
+        "manufacturer": cstr(info["ManufacID"]),
+        "create_date": cstr(info["CreateDate"]),
         "sdf_data_type": str(code),
     }
     if dtype.kind in "iu":
         meta["z_step_um"] = repr(zscale_um)
-    dx, dy = _resolve_steps(name, (dx_um, dy_um), opts.step_um)
-    return _make(name, z, dx, dy, meta)
+    dx, dy = resolve_steps(name, (dx_um, dy_um), opts.step_um)
+    return make_heightmap(name, z, dx, dy, meta)
 
 
-def _read_sdf_ascii(name: str, raw: bytes, opts: _ReadOptions) -> HeightMap:
-    text = _decode_text(raw)
+def _read_sdf_ascii(name: str, raw: bytes, opts: ReadOptions) -> HeightMap:
+    text = decode_text(raw)
     lines = text.splitlines()
     info: dict[str, str] = {}
     i = 1
@@ -149,30 +156,32 @@ def _read_sdf_ascii(name: str, raw: bytes, opts: _ReadOptions) -> HeightMap:
         if not line or line.startswith(";"):
             continue
         if "=" not in line:
-            raise _fail(name, f"SDF header line {i}: expected 'Key = value', got {line[:40]!r}")
+            raise heightmap_error(
+                name, f"SDF header line {i}: expected 'Key = value', got {line[:40]!r}"
+            )
         key, value = line.split("=", 1)
         info[key.strip()] = value.strip()
     if i >= len(lines):
-        raise _fail(name, "truncated: no '*' line ends the SDF header")
+        raise heightmap_error(name, "truncated: no '*' line ends the SDF header")
     missing = [k for k in _SDF_REQUIRED if k not in info]
     if missing:
-        raise _fail(name, f"SDF header lacks {', '.join(missing)}")
+        raise heightmap_error(name, f"SDF header lacks {', '.join(missing)}")
     try:
         nx, ny, dx_um, dy_um, zscale_um = _sdf_check(name, info)
     except ValueError as exc:
         if isinstance(exc, HeightMapError):
             raise
-        raise _fail(name, f"bad SDF header value: {exc}") from None
-    _check_points(name, nx, ny)
+        raise heightmap_error(name, f"bad SDF header value: {exc}") from None
+    check_points(name, nx, ny)
     start = i + 1
     end = start
     while end < len(lines) and lines[end].strip() != "*":
         end += 1
     if end >= len(lines):
-        raise _fail(name, "truncated: no '*' line ends the SDF data section")
+        raise heightmap_error(name, "truncated: no '*' line ends the SDF data section")
     tokens = " ".join(lines[start:end]).split()
     if len(tokens) != nx * ny:
-        raise _fail(
+        raise heightmap_error(
             name,
             f"header says {nx}x{ny} = {nx * ny} points but the data section has {len(tokens)}",
         )
@@ -184,7 +193,9 @@ def _read_sdf_ascii(name: str, raw: bytes, opts: _ReadOptions) -> HeightMap:
         try:
             values[k] = float(token)
         except ValueError:
-            raise _fail(name, f"SDF data value #{k + 1} is not a number: {token[:40]!r}") from None
+            raise heightmap_error(
+                name, f"SDF data value #{k + 1} is not a number: {token[:40]!r}"
+            ) from None
     z = values.reshape(ny, nx)
     z[np.isinf(z)] = np.nan
     z = z * zscale_um
@@ -198,15 +209,16 @@ def _read_sdf_ascii(name: str, raw: bytes, opts: _ReadOptions) -> HeightMap:
         if "=" in line and line.strip() != "*":
             key, value = line.split("=", 1)
             meta[key.strip()] = value.strip()
-    dx, dy = _resolve_steps(name, (dx_um, dy_um), opts.step_um)
-    return _make(name, z, dx, dy, meta)
+    dx, dy = resolve_steps(name, (dx_um, dy_um), opts.step_um)
+    return make_heightmap(name, z, dx, dy, meta)
 
 
 def _sdf_date() -> str:
     return time.strftime("%d%m%Y%H%M", time.gmtime())
 
 
-def _write_sdf_ascii(hm: HeightMap, path: Path) -> None:
+def write_sdf_ascii(hm: HeightMap, path: Path) -> None:
+    """Write ``hm`` as an ASCII SDF file."""
     ny, nx = hm.shape
     date = _sdf_date()
     head = [
@@ -234,10 +246,13 @@ def _trailer_safe(key: str, value: str) -> bool:
     return not any(c in s for s in (key, value) for c in "\n\r*=") and bool(key.strip())
 
 
-def _write_sdf_binary(hm: HeightMap, path: Path, code: int) -> None:
+def write_sdf_binary(hm: HeightMap, path: Path, code: int) -> None:
+    """Write ``hm`` as a binary SDF file with data type ``code``."""
     ny, nx = hm.shape
     if nx > 0xFFFF or ny > 0xFFFF:
-        raise _fail(path.name, f"binary SDF holds at most 65535x65535 points, map is {nx}x{ny}")
+        raise heightmap_error(
+            path.name, f"binary SDF holds at most 65535x65535 points, map is {nx}x{ny}"
+        )
     z = np.asarray(hm.z_um)
     if code == 7:
         zscale_m = 1e-6  # data in micrometres: 1e-6 * 1e6 == 1.0 exactly, lossless
@@ -245,7 +260,7 @@ def _write_sdf_binary(hm: HeightMap, path: Path, code: int) -> None:
         data = z.astype("<f8")
     else:
         n_max = 2**15 - 2 if code == 5 else 2**31 - 2
-        ints, step_um, _ = _quantise(z, n_max, offset=False)
+        ints, step_um, _ = quantise(z, n_max, offset=False)
         zscale_m = step_um * 1e-6
         # the reader multiplies by Zscale * 1e6: quantise with exactly that factor
         scale_um = zscale_m * 1e6

@@ -10,18 +10,20 @@ from typing import Any
 
 import numpy as np
 
-from goniolab.optics.heightmap import HeightMap, _fail
+from goniolab.optics.heightmap import HeightMap, heightmap_error
 from goniolab.surfaces._common import (
-    _check_points,
-    _cstr,
-    _inflate,
-    _make,
-    _quantise,
-    _ReadOptions,
-    _resolve_steps,
-    _truncated,
-    _um_per,
+    ReadOptions,
+    check_points,
+    cstr,
+    inflate,
+    make_heightmap,
+    quantise,
+    resolve_steps,
+    truncated_error,
+    um_per_unit,
 )
+
+__all__ = ["read_sur", "write_sur"]
 
 _SUR_HEADER_SIZE = 512
 # (name, struct code, byte offset) of the fields goniolab reads and writes; offsets from
@@ -103,49 +105,54 @@ def _sur_unpack(raw: bytes) -> dict[str, Any]:
     }
 
 
-def _read_sur(path: Path, opts: _ReadOptions) -> HeightMap:
+def read_sur(path: Path, opts: ReadOptions) -> HeightMap:
+    """Read a Digital Surf ``.sur`` file, plain or DSCOMPRESSED."""
     name = path.name
     with path.open("rb") as f:
         head = f.read(_SUR_HEADER_SIZE)
         magic = head[:12]
         if magic not in (b"DIGITAL SURF", b"DSCOMPRESSED"):
-            raise _fail(name, f"not a Digital Surf file: first bytes {magic!r}")
+            raise heightmap_error(name, f"not a Digital Surf file: first bytes {magic!r}")
         if len(head) < _SUR_HEADER_SIZE:
-            raise _fail(
+            raise heightmap_error(
                 name, f"truncated: header needs {_SUR_HEADER_SIZE} bytes, file has {len(head)}"
             )
         h = _sur_unpack(head)
         nx, ny = int(h["xres"]), int(h["yres"])
         if nx > 0 and ny > 0:
-            _check_points(name, nx, ny)  # before the data is read, let alone inflated
+            check_points(name, nx, ny)  # before the data is read, let alone inflated
         f.seek(0)
         raw = f.read()  # one buffer, not head + rest (a copy of the file)
     h = _sur_unpack(raw)
     if h["format"] != 0:
-        raise _fail(name, f"Digital Surf format {h['format']} (Macintosh byte order) not supported")
+        raise heightmap_error(
+            name, f"Digital Surf format {h['format']} (Macintosh byte order) not supported"
+        )
     if h["object_type"] not in (1, 2):
-        raise _fail(
+        raise heightmap_error(
             name, f"object type {h['object_type']} is not a profile (1) or surface (2) height map"
         )
     nx, ny = int(h["xres"]), int(h["yres"])
     if nx <= 0 or ny <= 0:
-        raise _fail(name, f"zero points: header says {nx}x{ny}")
+        raise heightmap_error(name, f"zero points: header says {nx}x{ny}")
     if h["n_points"] != nx * ny:
-        raise _fail(name, f"header total points {h['n_points']} != {nx}x{ny}")
+        raise heightmap_error(name, f"header total points {h['n_points']} != {nx}x{ny}")
     if h["point_size"] not in (16, 32):
-        raise _fail(name, f"unsupported point size {h['point_size']} bits (16 or 32)")
+        raise heightmap_error(name, f"unsupported point size {h['point_size']} bits (16 or 32)")
     item = h["point_size"] // 8
     for key in ("dx", "dy", "dz", "z_offset"):
         if not math.isfinite(h[key]):
-            raise _fail(name, f"header {key} is not finite ({h[key]!r})")
+            raise heightmap_error(name, f"header {key} is not finite ({h[key]!r})")
     if h["dx"] == 0.0 or h["dy"] == 0.0 or h["dz"] == 0.0:
-        raise _fail(name, f"zero spacing in header (dx={h['dx']}, dy={h['dy']}, dz={h['dz']})")
-    dx_um = abs(h["dx"]) * _um_per(name, _cstr(h["dx_unit"]), "x step")
-    dy_um = abs(h["dy"]) * _um_per(name, _cstr(h["dy_unit"]), "y step")
-    z_um_per = _um_per(name, _cstr(h["dz_unit"]), "z step")
+        raise heightmap_error(
+            name, f"zero spacing in header (dx={h['dx']}, dy={h['dy']}, dz={h['dz']})"
+        )
+    dx_um = abs(h["dx"]) * um_per_unit(name, cstr(h["dx_unit"]), "x step")
+    dy_um = abs(h["dy"]) * um_per_unit(name, cstr(h["dy_unit"]), "y step")
+    z_um_per = um_per_unit(name, cstr(h["dz_unit"]), "z step")
     start = _SUR_HEADER_SIZE + h["comment_size"] + h["private_size"]
     if start > len(raw):
-        raise _fail(
+        raise heightmap_error(
             name,
             f"truncated: comment and private zones end at byte {start}, file has {len(raw)}",
         )
@@ -157,7 +164,7 @@ def _read_sur(path: Path, opts: _ReadOptions) -> HeightMap:
     else:
         body = memoryview(raw)[start : start + need]  # no copy of the data
         if len(body) < need:
-            raise _truncated(name, ny, nx, item, len(raw) - start)
+            raise truncated_error(name, ny, nx, item, len(raw) - start)
     ints = np.frombuffer(body, dtype="<i2" if item == 2 else "<i4", count=nx * ny)
     ints = ints.reshape(ny, nx)
     z = ints.astype(np.float64)  # scaled in place: one float64 array, no temporaries
@@ -175,8 +182,8 @@ def _read_sur(path: Path, opts: _ReadOptions) -> HeightMap:
             z = z[::-1, :]
     meta = {
         "format": "sur",
-        "object_name": _cstr(h["object_name"]),
-        "operator_name": _cstr(h["operator_name"]),
+        "object_name": cstr(h["object_name"]),
+        "operator_name": cstr(h["operator_name"]),
         "acquisition": _SUR_ACQUISITION.get(h["acquisition"], str(h["acquisition"])),
         "z_step_um": repr(abs(float(h["dz"]) * z_um_per)),
     }
@@ -189,35 +196,35 @@ def _read_sur(path: Path, opts: _ReadOptions) -> HeightMap:
         math.isclose(a, b, rel_tol=1e-6) for a, b in zip(exact, (dx_um, dy_um), strict=True)
     ):
         dx_um, dy_um = exact  # goniolab's own full-precision steps (header floats are float32)
-    dx, dy = _resolve_steps(name, (dx_um, dy_um), opts.step_um)
-    return _make(name, z, dx, dy, meta)
+    dx, dy = resolve_steps(name, (dx_um, dy_um), opts.step_um)
+    return make_heightmap(name, z, dx, dy, meta)
 
 
 def _sur_decompress(name: str, raw: bytes, start: int, need: int) -> bytes:
     """DSCOMPRESSED data: uint32 stream count, (raw length, zipped length) uint32 pairs,
     then the zlib streams (RosettaSciIO rsciio/digitalsurf/_api.py, ``_unpack_data``)."""
     if start + 4 > len(raw):
-        raise _fail(name, "truncated: compressed SUR stream directory missing")
+        raise heightmap_error(name, "truncated: compressed SUR stream directory missing")
     (count,) = struct.unpack_from("<I", raw, start)
     if not 1 <= count <= 1024:
-        raise _fail(name, f"compressed SUR: implausible stream count {count}")
+        raise heightmap_error(name, f"compressed SUR: implausible stream count {count}")
     pos = start + 4
     if pos + 8 * count > len(raw):
-        raise _fail(name, "truncated: compressed SUR stream directory cut short")
+        raise heightmap_error(name, "truncated: compressed SUR stream directory cut short")
     sizes = [struct.unpack_from("<II", raw, pos + 8 * k) for k in range(count)]
     pos += 8 * count
     total = sum(raw_len for raw_len, _ in sizes)
     if total != need:
-        raise _fail(
+        raise heightmap_error(
             name, f"compressed SUR stream directory claims {total} bytes, header implies {need}"
         )
     out = bytearray()
     for k, (raw_len, zip_len) in enumerate(sizes, 1):
         chunk = raw[pos : pos + zip_len]
         if len(chunk) < zip_len:
-            raise _fail(name, f"truncated: compressed SUR stream needs {zip_len} bytes")
+            raise heightmap_error(name, f"truncated: compressed SUR stream needs {zip_len} bytes")
         pos += zip_len
-        out += _inflate(name, chunk, raw_len, f"compressed SUR stream {k} of {count}")
+        out += inflate(name, chunk, raw_len, f"compressed SUR stream {k} of {count}")
     return bytes(out)
 
 
@@ -246,13 +253,16 @@ def _sur_parse_comment(comment: str, meta: dict[str, str]) -> tuple[float, float
     return None
 
 
-def _write_sur(hm: HeightMap, path: Path, bits: int) -> None:
+def write_sur(hm: HeightMap, path: Path, bits: int) -> None:
+    """Write ``hm`` as a Digital Surf ``.sur`` file of ``bits``-bit integers."""
     ny, nx = hm.shape
     n_max = 2 ** (bits - 1) - 16
-    ints, step_um, off_um = _quantise(np.asarray(hm.z_um), n_max, offset=True)
+    ints, step_um, off_um = quantise(np.asarray(hm.z_um), n_max, offset=True)
     for what, value in (("dx_um", hm.dx_um), ("dy_um", hm.dy_um), ("z", step_um), ("z", off_um)):
         if not np.isfinite(np.float32(value)) or (value != 0.0 and np.float32(value) == 0.0):
-            raise _fail(path.name, f"{what} = {value!r} does not fit the float32 .sur header")
+            raise heightmap_error(
+                path.name, f"{what} = {value!r} does not fit the float32 .sur header"
+            )
     missing = np.isnan(hm.z_um)
     ints[missing] = -2  # non-measured value: zmin - 2 with zmin = 0
     comment_lines = [f"$goniolab.dx_um = {hm.dx_um!r}", f"$goniolab.dy_um = {hm.dy_um!r}"]

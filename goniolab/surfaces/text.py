@@ -10,17 +10,19 @@ from pathlib import Path
 
 import numpy as np
 
-from goniolab.optics.heightmap import HeightMap, _fail
+from goniolab.optics.heightmap import HeightMap, heightmap_error
 from goniolab.surfaces._common import (
-    _check_file_size,
-    _check_points,
-    _decode_text,
-    _make,
-    _ReadOptions,
-    _resolve_steps,
-    _um_per,
+    ReadOptions,
+    check_file_size,
+    check_points,
+    decode_text,
+    make_heightmap,
     max_map_points,
+    resolve_steps,
+    um_per_unit,
 )
+
+__all__ = ["read_text_map", "write_text_map"]
 
 #: Most bytes a point of a text map may take (digits, sign, exponent, separators), for the
 #: file-size bound checked before the file is read.
@@ -61,7 +63,7 @@ def _parse_row(
         try:
             value = float(token)
         except ValueError:
-            raise _fail(
+            raise heightmap_error(
                 name, f"line {lineno}, column {col}: non-numeric cell {token[:40]!r}"
             ) from None
         if not math.isfinite(value) or (missing_value is not None and value == missing_value):
@@ -70,11 +72,12 @@ def _parse_row(
     return out
 
 
-def _read_text(path: Path, opts: _ReadOptions) -> HeightMap:
+def read_text_map(path: Path, opts: ReadOptions) -> HeightMap:
+    """Read a text matrix of heights (rows = y, columns = x)."""
     name = path.name
-    _check_file_size(name, path.stat().st_size, _TEXT_BYTES_PER_POINT, "text file")
+    check_file_size(name, path.stat().st_size, _TEXT_BYTES_PER_POINT, "text file")
     limit = max_map_points()
-    text = _decode_text(path.read_bytes())
+    text = decode_text(path.read_bytes())
     header: dict[str, str] = {}
     rows: list[list[float]] = []
     delim: str | None = None
@@ -94,26 +97,28 @@ def _read_text(path: Path, opts: _ReadOptions) -> HeightMap:
                     try:
                         missing_value = float(parsed[1])
                     except ValueError:
-                        raise _fail(name, f"bad missing_value {parsed[1]!r}") from None
+                        raise heightmap_error(name, f"bad missing_value {parsed[1]!r}") from None
             continue
         if not rows:
             delim = _sniff_delimiter(stripped)
         row = _parse_row(name, lineno, stripped if delim is None else line, delim, missing_value)
         if rows and len(row) != width:
-            raise _fail(name, f"ragged rows: line {lineno} has {len(row)} values, expected {width}")
+            raise heightmap_error(
+                name, f"ragged rows: line {lineno} has {len(row)} values, expected {width}"
+            )
         width = len(row)
         rows.append(row)
         if width * len(rows) > limit:
-            _check_points(name, width, len(rows), what=f"the data up to line {lineno} holds")
+            check_points(name, width, len(rows), what=f"the data up to line {lineno} holds")
     if not rows:
-        raise _fail(name, "zero points: no data rows")
+        raise heightmap_error(name, "zero points: no data rows")
     z = np.array(rows, dtype=np.float64)
     ny, nx = z.shape
 
     z_unit = header.get("z_unit", header.get("value units", "um"))
-    z = z * _um_per(name, z_unit, "z")
+    z = z * um_per_unit(name, z_unit, "z")
     file_steps = _text_steps(name, header, nx, ny)
-    dx, dy = _resolve_steps(name, file_steps, opts.step_um, what="the file header")
+    dx, dy = resolve_steps(name, file_steps, opts.step_um, what="the file header")
     meta = {"format": "text", "z_unit_in_file": z_unit}
     for key, value in header.items():
         if key.startswith("meta."):
@@ -123,7 +128,7 @@ def _read_text(path: Path, opts: _ReadOptions) -> HeightMap:
                 meta[key[5:]] = value
         elif key == "channel":
             meta["channel"] = value
-    return _make(name, z, dx, dy, meta)
+    return make_heightmap(name, z, dx, dy, meta)
 
 
 def _float_key(name: str, header: Mapping[str, str], key: str) -> float | None:
@@ -132,7 +137,7 @@ def _float_key(name: str, header: Mapping[str, str], key: str) -> float | None:
     try:
         return float(header[key])
     except ValueError:
-        raise _fail(name, f"header {key} = {header[key]!r} is not a number") from None
+        raise heightmap_error(name, f"header {key} = {header[key]!r} is not a number") from None
 
 
 def _text_steps(
@@ -147,12 +152,16 @@ def _text_steps(
         for key, n in (("width", nx), ("height", ny)):
             match = _GWY_EXTENT.match(header.get(key, ""))
             if match is None:
-                raise _fail(name, f"cannot read Gwyddion header {key}: {header.get(key)!r}")
+                raise heightmap_error(
+                    name, f"cannot read Gwyddion header {key}: {header.get(key)!r}"
+                )
             try:
                 extent = float(match.group(1))
             except ValueError:
-                raise _fail(name, f"cannot read Gwyddion header {key}: {header[key]!r}") from None
-            extents.append(extent * _um_per(name, match.group(2), "lateral") / n)
+                raise heightmap_error(
+                    name, f"cannot read Gwyddion header {key}: {header[key]!r}"
+                ) from None
+            extents.append(extent * um_per_unit(name, match.group(2), "lateral") / n)
         return extents[0], extents[1]
     dx = dx if dx is not None else step
     dy = dy if dy is not None else (step if step is not None else dx)
@@ -163,7 +172,8 @@ def _text_steps(
     return dx, dy
 
 
-def _write_text(hm: HeightMap, path: Path, delimiter: str) -> None:
+def write_text_map(hm: HeightMap, path: Path, delimiter: str) -> None:
+    """Write ``hm`` as a text matrix with ``delimiter`` between columns."""
     lines = [
         "# goniolab height map (rows = y, columns = x; nan = missing point)",
         f"# dx_um = {hm.dx_um!r}",

@@ -1,7 +1,7 @@
 """The TUI's :class:`~goniolab.tui.view_model.Backend` over :mod:`goniolab.session`.
 
 The same sessions as ``goniolab scan`` and ``goniolab gloss log`` (a real or simulated
-:class:`~goniolab.lab.Lab`): :class:`~goniolab.session.ScanSession` for BRDF scans and
+:class:`~goniolab.lab_wiring.Lab`): :class:`~goniolab.session.ScanSession` for BRDF scans and
 :class:`~goniolab.session.GlossSession` for glossmeter readings, every reading committed
 to the :class:`~goniolab.store.RunStore` as it is taken, so a run started here stores the
 same rows as one started from the CLI (and ``goniolab scan resume`` continues it). All
@@ -36,11 +36,11 @@ from goniolab.scan.events import (
     RunState,
 )
 from goniolab.scan.plans import DEFAULT_REPEATS, BrdfPlan, GlossPlan, PlanError
-from goniolab.scan.predict import Predictor
+from goniolab.scan.prediction import Predictor
 from goniolab.scan.runner import PlanRefused, ScanRunner
 from goniolab.session import GlossSession, ScanSession, check_sample
 from goniolab.store import RunMeta, RunStore, StoreError, resolve_store_path
-from goniolab.surfaces.samples import sample_names
+from goniolab.surfaces.synthetic import sample_names
 from goniolab.tui.view_model import ArmState, RunIdentity, RunSummary, ScanSetup, StoredRun
 
 __all__ = ["SessionBackend"]
@@ -71,7 +71,7 @@ class SessionBackend:
         Run store file overriding ``[lab] store``.
     model
         Reflectance model of the configured sample, instead of building it from
-        ``[sample] map`` (passed to :class:`~goniolab.lab.Lab`; tests use a cheap one).
+        ``[sample] map`` (passed to :class:`~goniolab.lab_wiring.Lab`; tests use a cheap one).
     align_plan
         The sweeps of the ``a`` key's alignment (default: ``scan --plan align``'s); its
         sample and exposure are the form's and the config's.
@@ -218,7 +218,7 @@ class SessionBackend:
 
     async def predict_curve(self, setup: ScanSetup) -> list[float]:
         """The prediction of ``setup.sample`` over the sweep (model built and evaluated in
-        worker threads, see :class:`~goniolab.scan.predict.Predictor`)."""
+        worker threads, see :class:`~goniolab.scan.prediction.Predictor`)."""
         setup.validate()
         model = await self.model(setup.sample)
         values = await asyncio.to_thread(
@@ -240,7 +240,7 @@ class SessionBackend:
 
     async def model(self, sample: str) -> ReflectanceModel:
         """The prediction model of ``sample``: the lab's own for the configured sample,
-        else :func:`goniolab.models.model_for` (built in a worker thread, cached)."""
+        else :func:`goniolab.model_cache.model_for` (built in a worker thread, cached)."""
         return await self._require_open().models.get(sample)
 
     async def start(self, setup: ScanSetup) -> int:
@@ -381,7 +381,7 @@ class SessionBackend:
         current one, for the newest request's sample, and share its future.
 
         The readings of one TUI session go into one ``gloss`` run per sample; the
-        prediction of ``sample`` (ISO 2813, :func:`goniolab.scan.gloss.predict_gloss`) is
+        prediction of ``sample`` (ISO 2813, :func:`goniolab.scan.gloss_logger.predict_gloss`) is
         shown beside. During a scan the scan's sample lies under the instruments, so the
         reading is taken (and predicted) for that one.
         """
@@ -453,7 +453,7 @@ class SessionBackend:
     # ------------------------------------------------------------------ store
     def prediction_models(self, run_id: int) -> str:
         """Which model computes the run's predicted curve, from its stored record
-        (``computed_by``, :meth:`goniolab.scan.predict.Predictor.provenance`)."""
+        (``computed_by``, :meth:`goniolab.scan.prediction.Predictor.provenance`)."""
         with RunStore(self.store_path, readonly=True) as store:
             computed_by = store.get_run(run_id).model.get("computed_by") or {}
         if len(computed_by) == 1:

@@ -5,7 +5,7 @@ browser (:class:`RunSummary`) and a stored run (:class:`StoredRun`). The app nev
 to drivers, the runner or the store directly: it calls a :class:`Backend` and consumes
 the backend's :class:`~goniolab.scan.events.EventBus`.
 :class:`goniolab.tui.session_backend.SessionBackend` implements it over a real or simulated
-:class:`~goniolab.lab.Lab`; tests may implement it with a scripted publisher.
+:class:`~goniolab.lab_wiring.Lab`; tests may implement it with a scripted publisher.
 """
 
 from __future__ import annotations

@@ -52,7 +52,7 @@ def _store(path: Path) -> Path:
 
 def test_run_dataset_netcdf_and_plot_follow_the_core(tmp_path: Path) -> None:
     from goniolab.datasets import run_dataset
-    from goniolab.plot import plot_dataset
+    from goniolab.run_plots import plot_dataset
 
     with RunStore(_store(tmp_path / "s.sqlite"), readonly=True) as s:
         ds = run_dataset(s, 1)

@@ -13,7 +13,9 @@ import numpy as np
 import pytest
 
 from goniolab.cli import main
-from goniolab.colour.fit import (
+from goniolab.colour.multiangle import E2194_ASPECULAR_DEG, theta_r_for_aspecular
+from goniolab.colour.paint import Paint, paint_from_dict, paint_to_dict
+from goniolab.colour.paint_fit import (
     FitError,
     _Model,
     default_parameters,
@@ -21,11 +23,9 @@ from goniolab.colour.fit import (
     paint_with,
     parameter_values,
 )
-from goniolab.colour.multiangle import E2194_ASPECULAR_DEG, theta_r_for_aspecular
-from goniolab.colour.paint import Paint, paint_from_dict, paint_to_dict
 from goniolab.colour.spectra import ColourSettings, delta_e, standard_grid_nm
 from goniolab.colour.spectral import SpectralPredictor
-from goniolab.models import paint_for
+from goniolab.model_cache import paint_for
 
 WL = standard_grid_nm(20.0)  # 21 wavelengths: fast
 TR = np.array([theta_r_for_aspecular(a) for a in E2194_ASPECULAR_DEG])
@@ -238,7 +238,7 @@ def test_fit_colour_command_bad_input(tmp_path: Path, capsys: pytest.CaptureFixt
 
 
 def test_de2000_metric_is_colour_sciences_de2000_for_small_differences() -> None:
-    from goniolab.colour.fit import de2000_metric
+    from goniolab.colour.paint_fit import de2000_metric
 
     rng = np.random.default_rng(5)
     lab = np.array([[36.8, 45.6, 25.5], [50.0, 0.0, 0.0], [40.0, 0.2, -0.3], [60.0, -20.0, -40.0]])
@@ -267,7 +267,7 @@ def test_fit_with_a_glossy_coat_surface_in_the_model() -> None:
     # a rough coat (Beckmann, alpha 0.1: its gloss reaches the 15 deg aspecular reading):
     # the surface term, tabulated over n once, matches the predictor's own evaluation, and
     # the fit of n through it recovers the truth made with the predictor itself
-    from goniolab.colour.fit import _SurfaceInN
+    from goniolab.colour.paint_fit import _SurfaceInN
     from goniolab.colour.spectral import SurfaceFactory
     from goniolab.optics.analytic import AnalyticModel
 

@@ -1,4 +1,4 @@
-"""colour-science without its plotting package until it is used (goniolab/_lazy.py)."""
+"""colour-science without its plotting package until it is used (goniolab/lazy_imports.py)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import sys
 
 CODE = """
 import sys
-from goniolab._lazy import import_colour
+from goniolab.lazy_imports import import_colour
 colour = import_colour()
 assert "matplotlib" not in sys.modules, "colour.plotting imported matplotlib"
 assert float(colour.SDS_ILLUMINANTS["D65"][560]) > 0  # the colour science is all there
@@ -30,7 +30,7 @@ def test_colour_imports_without_plotting_and_plotting_still_works() -> None:
 THREADS = """
 import threading
 import time
-from goniolab._lazy import import_colour
+from goniolab.lazy_imports import import_colour
 from sim.truth import luminance_weights
 
 got, errors = [], []

@@ -145,8 +145,8 @@ def test_paint_from_toml_tables_and_errors() -> None:
 
 
 def test_every_built_in_paint_builds() -> None:
-    from goniolab.models import paint_for
-    from goniolab.surfaces.samples import sample_info, sample_names
+    from goniolab.model_cache import paint_for
+    from goniolab.surfaces.synthetic import sample_info, sample_names
 
     painted = [n for n in sample_names() if "paint" in sample_info(n).params]
     assert painted == ["solid-red", "white", "silver-metallic", "pearl"]

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from goniolab.cli import main
-from goniolab.colour.render import (
+from goniolab.colour.paint_render import (
     PANEL_HALF_ANGLE_DEG,
     _directions,
     _rusinkiewicz,
@@ -26,7 +26,7 @@ from goniolab.colour.spectra import (
     xyz_to_colour,
 )
 from goniolab.colour.spectral import SpectralPredictor, reflectance_factor_scale
-from goniolab.models import paint_for
+from goniolab.model_cache import paint_for
 
 WL = standard_grid_nm(20.0)
 

@@ -14,9 +14,9 @@ import pytest
 
 from goniolab.cli import main
 from goniolab.colour.paint import MetallicFlakes, Paint, PaintError, paint_from_dict
-from goniolab.colour.render import render, tabulate_brdf
+from goniolab.colour.paint_render import render, tabulate_brdf
 from goniolab.colour.sparkle import expected_sparkles, graininess, sparkle_report
-from goniolab.models import paint_for
+from goniolab.model_cache import paint_for
 
 WL = np.linspace(380.0, 780.0, 21)
 

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from goniolab.lab import Lab
+from goniolab.lab_wiring import Lab
 from tests.contract.contract_support import MODEL, lab_toml
 
 

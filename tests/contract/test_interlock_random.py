@@ -19,7 +19,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from drivers.base import DeviceError
-from goniolab.lab import Lab
+from goniolab.lab_wiring import Lab
 from tests.contract.contract_support import MODEL, lab_toml
 
 pytestmark = pytest.mark.wire

@@ -12,8 +12,8 @@ from drivers.base import Disconnected
 from drivers.timing import SimClock
 from goniolab.config import configs_dir, load_lab_config
 from goniolab.errors import UserError
-from goniolab.lab import Lab
-from goniolab.models import model_for
+from goniolab.lab_wiring import Lab
+from goniolab.model_cache import model_for
 from goniolab.optics.apertures import Cone
 from sim.truth import luminance_weights
 from tests.twin_configs import ideal

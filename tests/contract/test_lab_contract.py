@@ -24,7 +24,7 @@ from drivers.base import (
 )
 from drivers.timing import SimClock
 from goniolab.config import ConfigError, load_lab_config
-from goniolab.lab import Lab, build_sim_instruments, build_sim_server
+from goniolab.lab_wiring import Lab, build_sim_instruments, build_sim_server
 from goniolab.optics.apertures import Cone
 from sim.motion import ALARM_OVERLOAD
 from sim.wire import SimLabServer

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from goniolab.optics.analytic import AnalyticModel
-from goniolab.optics.fit import fit_to_curve, fit_to_gloss
+from goniolab.optics.analytic_fit import fit_to_curve, fit_to_gloss
 
 #: Mihalik & Durikovic table 2: real 20/60/85 deg readings (GU).
 MIHALIK_READINGS = {

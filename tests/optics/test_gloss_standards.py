@@ -14,7 +14,7 @@ from goniolab.optics.gloss_standards import (
     gloss_report,
 )
 from goniolab.optics.surface import Surface
-from goniolab.surfaces.samples import make_sample
+from goniolab.surfaces.synthetic import make_sample
 
 
 def _flat(n: float) -> FacetModel:

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from goniolab.models import model_for
+from goniolab.model_cache import model_for
 from goniolab.optics.fresnel import fresnel_dielectric
 from goniolab.optics.model_choice import AutoModel, choose_model, rayleigh_g
 from goniolab.optics.physical import MapStats

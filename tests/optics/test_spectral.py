@@ -1,4 +1,4 @@
-"""The ISO 2813 spectral weights: CIE illuminant C x V(lambda) (goniolab/optics/spectral.py)."""
+"""The ISO 2813 spectral weights: CIE illuminant C x V(lambda) (goniolab/optics/iso2813_weighting.py)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import warnings
 
 import numpy as np
 
-from goniolab.optics.spectral import (
+from goniolab.optics.iso2813_weighting import (
     CIE_C_AT_WAVELENGTHS,
     CIE_V_AT_WAVELENGTHS,
     ISO2813_WAVELENGTHS_NM,
@@ -43,7 +43,7 @@ def test_weights_peak_near_555_nm_and_sum_to_one() -> None:
 
 def test_the_default_weights_do_not_import_colour_science() -> None:
     code = (
-        "import sys; from goniolab.optics.spectral import iso2813_weights; iso2813_weights(); "
+        "import sys; from goniolab.optics.iso2813_weighting import iso2813_weights; iso2813_weights(); "
         "print('colour' in sys.modules)"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)

@@ -14,7 +14,7 @@ import pytest
 from drivers.base import SpectroReading
 from goniolab.cli import main
 from goniolab.config import ConfigError, configs_dir, load_lab_config, write_alignment
-from goniolab.lab import draw_session
+from goniolab.lab_wiring import draw_session
 from goniolab.optics.apertures import Cone
 from goniolab.optics.facet import cap_overlap_fraction
 from goniolab.optics.fresnel import fresnel
@@ -201,7 +201,7 @@ def test_align_on_the_twin_recovers_offsets_and_tilt_within_005_deg(
 
 def _misplaced(monkeypatch: pytest.MonkeyPatch, instead: str) -> None:
     """The operator puts ``instead`` where the black-glass standard belongs."""
-    from goniolab.lab import Lab
+    from goniolab.lab_wiring import Lab
 
     place = Lab._place_specimen
 

@@ -15,7 +15,7 @@ import pytest
 from goniolab.cli import main
 from goniolab.config import configs_dir
 from goniolab.optics.fresnel import fresnel
-from goniolab.scan.calibrate import calibration_notices, latest_calibration
+from goniolab.scan.calibration import calibration_notices, latest_calibration
 from goniolab.store import RunStore
 
 

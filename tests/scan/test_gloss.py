@@ -9,7 +9,7 @@ import pytest
 from drivers.base import Disconnected, GlossReading, ProtocolError
 from drivers.timing import SimClock
 from goniolab.scan.events import EventBus, GlossRead, InstrumentError, RunState
-from goniolab.scan.gloss import GlossLogger, predict_gloss
+from goniolab.scan.gloss_logger import GlossLogger, predict_gloss
 from goniolab.scan.plans import GlossPlan
 from goniolab.store import RunStore
 

@@ -237,11 +237,11 @@ def test_gloss_log_from_the_sim_config(tmp_path: Path, capsys: pytest.CaptureFix
 
 async def test_fault_parks_the_arms_on_the_sim_lab(tmp_path: Path) -> None:
     from goniolab.config import load_lab_config
-    from goniolab.lab import Lab
+    from goniolab.lab_wiring import Lab
     from goniolab.optics.apertures import Cone
     from goniolab.scan.events import EventBus, RunState
     from goniolab.scan.plans import BrdfPlan, parse_angles
-    from goniolab.scan.predict import Predictor
+    from goniolab.scan.prediction import Predictor
     from goniolab.scan.runner import ArmMotion, ScanRunner
 
     cfg = load_lab_config(lab_config(tmp_path, faults={"detector_stall_at_deg": "47.2"}))

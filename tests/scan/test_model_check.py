@@ -8,7 +8,7 @@ import pytest
 
 from goniolab.cli import main
 from goniolab.config import configs_dir
-from goniolab.models import model_for
+from goniolab.model_cache import model_for
 from goniolab.optics.apertures import Cone
 from goniolab.scan.plans import BrdfPlan
 from goniolab.scan.summary import prediction_check, summarize_brdf

@@ -25,7 +25,7 @@ from goniolab.scan.events import (
     StateChanged,
 )
 from goniolab.scan.plans import MIRROR_INDEX, BrdfPlan, parse_angles
-from goniolab.scan.predict import Predictor
+from goniolab.scan.prediction import Predictor
 from goniolab.scan.runner import ArmMotion, PlanRefused, ScanRunner, dry_run
 from goniolab.scan.standards import Standard
 from goniolab.store import RunStore

@@ -132,8 +132,8 @@ def test_luminance_prediction_includes_the_paint_body_like_the_colour() -> None:
     # the spectral surface term differs there: 2.78 vs 3.10 % at 45/45 for sample:white.)
     from goniolab.colour.spectra import xyz_weights
     from goniolab.config import load_lab_config
-    from goniolab.models import model_for
-    from goniolab.scan.predict import Predictor
+    from goniolab.model_cache import model_for
+    from goniolab.scan.prediction import Predictor
 
     cfg = load_lab_config(configs_dir() / "lab-sim.toml")
     model = model_for("sample:white", n=1.55, model="facet")

@@ -15,7 +15,7 @@ from goniolab.optics.facet import FacetModel, cap_overlap_fraction
 from goniolab.optics.fresnel import fresnel
 from goniolab.optics.heightmap import HeightMap
 from goniolab.optics.surface import Surface
-from goniolab.surfaces.samples import make_sample
+from goniolab.surfaces.synthetic import make_sample
 from sim.truth import FlatSpecimen, TruthOptics, TwinSettings, body_reflectance, build_truth
 
 #: No sub-resolution roughness, profilometer noise or waviness: the tile is the map.
@@ -76,7 +76,7 @@ def test_a_slightly_rough_surface_loses_the_debye_waller_factor() -> None:
     # F exp(-(k q_z Sq)^2) (PHYSICS.md); its diffuse part spreads over ~lambda/2um, far
     # outside a 1 deg cone
     rng = np.random.default_rng(3)
-    from goniolab.surfaces.samples import _gaussian_field
+    from goniolab.surfaces.synthetic import _gaussian_field
 
     z = _gaussian_field(rng, (512, 512), 0.25, 2.0) * 0.02
     settings = TwinSettings(

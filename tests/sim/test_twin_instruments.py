@@ -11,7 +11,7 @@ import pytest
 
 from drivers.timing import SimClock
 from goniolab.config import ConfigError, configs_dir, load_lab_config
-from goniolab.lab import draw_session
+from goniolab.lab_wiring import draw_session
 from sim.instruments import (
     GlossDrift,
     SimAxis,

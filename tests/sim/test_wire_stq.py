@@ -13,7 +13,7 @@ from drivers.base import DeviceFault
 from drivers.modbus_stepper import ModbusStepperAxis
 from drivers.profiles import load_stepper_profile
 from drivers.timing import SimClock, trapezoid_duration_s
-from goniolab.lab import Lab
+from goniolab.lab_wiring import Lab
 from sim.instruments import SimAxis
 from sim.motion import ALARM_OVERLOAD, SimMotor
 from sim.wire import ModbusAxisServer, WireAxis

@@ -1,4 +1,4 @@
-"""The built-in synthetic sample library (goniolab/surfaces/samples.py, configs/samples.toml)."""
+"""The built-in synthetic sample library (goniolab/surfaces/synthetic.py, configs/samples.toml)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from scipy.stats import spearmanr
 
 from goniolab.optics.facet import FacetModel
 from goniolab.optics.surface import Surface, roughness_stats
-from goniolab.surfaces.samples import SampleError, make_sample, sample_info, sample_names
+from goniolab.surfaces.synthetic import SampleError, make_sample, sample_info, sample_names
 
 WITTMANN = [f"wittmann-{i}" for i in range(1, 9)]
 #: Wittmann et al. (2021) table 1: Ra (nm) and G60 (GU) of the eight PU coatings.
@@ -134,7 +134,7 @@ def test_a_sample_library_nested_too_deeply_is_one_clear_error(
 ) -> None:
     """A library file nested a thousand deep is a SampleError naming the file, not a
     RecursionError traceback (issue 10, defect 8)."""
-    import goniolab.surfaces.samples as samples_mod
+    import goniolab.surfaces.synthetic as samples_mod
 
     bad = tmp_path / "samples.toml"
     bad.write_text("x = " + "[" * 5000 + "]" * 5000 + "\n")

@@ -12,7 +12,7 @@ import pytest
 
 from goniolab.cli import main
 from goniolab.surfaces.registry import load_heightmap
-from goniolab.surfaces.samples import make_sample
+from goniolab.surfaces.synthetic import make_sample
 
 
 @pytest.mark.parametrize(

@@ -20,7 +20,7 @@ from textual.pilot import Pilot
 from textual.widgets import DataTable, Input, Select, Static
 
 from goniolab.config import load_lab_config
-from goniolab.models import model_for
+from goniolab.model_cache import model_for
 from goniolab.optics.analytic import AnalyticModel
 from goniolab.optics.apertures import Cone
 from goniolab.scan.align import AlignPlan

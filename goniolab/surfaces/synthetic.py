@@ -94,7 +94,7 @@ def _num(table: Mapping[str, Any], key: str, where: str, *, default: float | Non
 
 def _check_params(info: SampleInfo, where: str) -> None:
     p = info.params
-    # the paint table is checked where it is built (goniolab.models.paint_for: one error
+    # the paint table is checked where it is built (goniolab.model_cache.paint_for: one error
     # naming samples.NAME.paint.KEY); here only its shape, so `goniolab samples` stays light
     if "paint" in p and not isinstance(p["paint"], Mapping):
         raise SampleError(f"{SAMPLES_TOML}: {where}.paint must be a table")
@@ -330,6 +330,7 @@ def _make_cached(name: str, shape: tuple[int, int], step_um: float, seed: int) -
         "description": info.description,
         "n": str(info.n.real) if info.n.imag == 0 else str(info.n),
         "seed": str(seed),
+        # a stored tag (sim/truth.py reads it), kept from when this module was surfaces/samples.py
         "generator": "goniolab.surfaces.samples",
     }
     return HeightMap(z_um=z, dx_um=step_um, dy_um=step_um, source=f"sample:{name}", meta=meta)

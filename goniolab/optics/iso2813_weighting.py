@@ -54,7 +54,7 @@ def _weights(lams: tuple[float, ...]) -> tuple[NDArray[np.float64], NDArray[np.f
         c = np.asarray(CIE_C_AT_WAVELENGTHS)
         v = np.asarray(CIE_V_AT_WAVELENGTHS)
     else:  # another grid: colour-science's tables (a slow first import)
-        from goniolab._lazy import import_colour
+        from goniolab.lazy_imports import import_colour
 
         colour = import_colour()
         from colour.colorimetry import SDS_LEFS_PHOTOPIC

@@ -4,7 +4,7 @@
 
 * ``lab.goniometer`` (:class:`drivers.goniometer.TwoArmGoniometer`), ``lab.spectro``,
   ``lab.glossmeter``: objects implementing the :mod:`drivers.base` Protocols;
-* ``lab.model``: the reflectance model of ``[sample]`` (``goniolab.models.model_for``,
+* ``lab.model``: the reflectance model of ``[sample]`` (``goniolab.model_cache.model_for``,
   built in a worker thread), ``lab.source`` / ``lab.detector`` (the lamp and detector
   cones), ``lab.clock`` (the sim clock, or a real one), ``lab.config``.
 
@@ -77,7 +77,7 @@ def sample_model(cfg: LabConfig) -> ReflectanceModel:
     ConfigError
         The map cannot be resolved or loaded (names the config key ``sample.map``).
     """
-    from goniolab.models import model_for
+    from goniolab.model_cache import model_for
 
     try:
         model: ReflectanceModel = model_for(

@@ -64,7 +64,7 @@ class Predictor:
         """Predictions through a lab config's lamp cone (``[goniometer] source_cone_deg``)
         and detector cone (``[spectro] detector_cone_deg``), with the predicted colour of
         every geometry (the sample's paint, the config's ``[colour]``)."""
-        from goniolab.models import spectral_for
+        from goniolab.model_cache import spectral_for
 
         return cls(
             model,
@@ -165,7 +165,7 @@ class Predictor:
 
 
 def model_name(model: ReflectanceModel) -> str:
-    """The :func:`goniolab.models.model_for` name of ``model`` (``facet``, ``kirchhoff``,
+    """The :func:`goniolab.model_cache.model_for` name of ``model`` (``facet``, ``kirchhoff``,
     ``rayleigh-rice``, ``auto``), else its class name."""
     from goniolab.model_registry import model_names
     from goniolab.optics.facet import FacetModel

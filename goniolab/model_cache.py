@@ -328,7 +328,7 @@ def paint_for(spec: str | Path | None, n: complex | float = 1.55) -> Paint:
 
     text = "" if spec is None else str(spec)
     if text.startswith(SAMPLE_PREFIX):
-        from goniolab.surfaces.samples import SampleError, sample_info
+        from goniolab.surfaces.synthetic import SampleError, sample_info
 
         try:
             info = sample_info(text[len(SAMPLE_PREFIX) :])
