@@ -208,9 +208,9 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     for name in names:
         module = importlib.import_module(f"goniolab.commands.{name}")
         module.register(sub)
-    from goniolab.commands import _help
+    from goniolab.commands import apply_help
 
-    _help.apply(parser)  # examples and "(default: X)" in every command's --help
+    apply_help(parser)  # examples and "(default: X)" in every command's --help
     return parser
 
 

@@ -13,7 +13,7 @@ with physics the predictor does not share:
 
 * **Scalar Kirchhoff (tangent-plane) scattering** on the true tile, not the facet model,
   integrated over the instrument's apertures in direction-cosine space
-  (:mod:`sim.kirchhoff`: :class:`~sim.kirchhoff.OrderTable`, Smith's shadowing). This
+  (:mod:`sim.kirchhoff_orders`: :class:`~sim.kirchhoff_orders.OrderTable`, Smith's shadowing). This
   module chooses the q_z bands, builds and caches the tables and adds the body.
 
 * **The body**: light entering the clear coat (1 - F(ti)), reflected diffusely by the body
@@ -62,7 +62,7 @@ from goniolab.optics.apertures import (
 )
 from goniolab.optics.fresnel import fresnel
 from goniolab.optics.heightmap import HeightMap
-from sim.kirchhoff import OrderTable, gauss_blur, smith_shadowing
+from sim.kirchhoff_orders import OrderTable, gauss_blur, smith_shadowing
 from sim.true_surface import TrueSurface, TwinSettings, build_truth
 from sim.twin_spectra import (
     BODY_SPECTRA,

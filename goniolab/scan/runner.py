@@ -29,7 +29,7 @@ the run time. This module holds the state machine, the run loop, the storing of 
 (through a store outage) and the end of a run (park, summary, record); the rest lives in one
 room each: the dry run and the time left in :mod:`goniolab.scan.dryrun`, the arm moves and the
 retries through transient faults in :mod:`goniolab.scan.moves`, the reading path (spectro
-read, mirror reference, colour) in :mod:`goniolab.scan.readings`.
+read, mirror reference, colour) in :mod:`goniolab.scan.spectro_readings`.
 
 One runner at a time measures a run: :meth:`ScanRunner.run` holds
 :meth:`goniolab.store.RunStore.claim_run` (a lock the kernel drops when the process dies).
@@ -73,8 +73,8 @@ from goniolab.scan.exposure import EXCLUDED_QUALITY, AutoExposure, reading_quali
 from goniolab.scan.moves import Aborted, describe_error
 from goniolab.scan.plans import MIRROR_INDEX, BrdfPlan, PlanPoint
 from goniolab.scan.prediction import Predictor
-from goniolab.scan.readings import SpectroReadings
 from goniolab.scan.reference import SpectralReference
+from goniolab.scan.spectro_readings import SpectroReadings
 from goniolab.scan.standards import Standard
 from goniolab.scan.summary import summarize_brdf
 from goniolab.store import RunStore, StoreError, StoreUnavailable
