@@ -67,6 +67,10 @@ class RunEta:
     park_s: float
     t_start_s: float = 0.0
     estimated_done_s: float = 0.0
+    #: lab-clock seconds the run spent paused (not the run being slow: issue 27, the ETA
+    #: doubled after a pause) and when the current pause began (``None``: running)
+    paused_s: float = 0.0
+    paused_at_s: float | None = None
 
     @property
     def total_s(self) -> float:
@@ -77,10 +81,22 @@ class RunEta:
         """The first reading is about to be taken (lab clock)."""
         self.t_start_s = now_s
 
+    def pause(self, now_s: float) -> None:
+        """The run pauses (its time until :meth:`resume` is not the run's)."""
+        if self.paused_at_s is None:
+            self.paused_at_s = now_s
+
+    def resume(self, now_s: float) -> None:
+        """The run goes on after a pause."""
+        if self.paused_at_s is not None:
+            self.paused_s += max(0.0, now_s - self.paused_at_s)
+            self.paused_at_s = None
+
     def left_after(self, k: int, now_s: float) -> float:
-        """Estimated lab-clock seconds left once reading ``k`` (0-based) is stored."""
+        """Estimated lab-clock seconds left once reading ``k`` (0-based) is stored; the
+        time spent paused is left out of the run's pace."""
         self.estimated_done_s += self.point_times_s[k]
-        elapsed_s = now_s - self.t_start_s
+        elapsed_s = now_s - self.t_start_s - self.paused_s
         slowdown = elapsed_s / self.estimated_done_s if self.estimated_done_s > 0 else 1.0
         return (math.fsum(self.point_times_s[k + 1 :]) + self.park_s) * max(1.0, slowdown)
 

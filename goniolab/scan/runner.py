@@ -232,6 +232,8 @@ class ScanRunner(SpectroReadings):
         self._pause_requested = False
         self._abort_requested = False
         self._abort_by = ""
+        #: the run's ETA while its readings are taken (pauses are left out of its pace)
+        self._eta: RunEta | None = None
         self._wake = asyncio.Event()
         self._abort_event = asyncio.Event()
         self._homing_interrupted = False
@@ -295,9 +297,13 @@ class ScanRunner(SpectroReadings):
             return False
         if self._pause_requested:
             self._set_state(RunState.PAUSED)
+            if self._eta is not None:
+                self._eta.pause(self.clock.now())
             while self._pause_requested and not self._abort_requested:
                 self._wake.clear()
                 await self._wake.wait()
+            if self._eta is not None:
+                self._eta.resume(self.clock.now())
             if self._abort_requested:
                 return False
             self._set_state(RunState.RUNNING)
@@ -475,6 +481,7 @@ class ScanRunner(SpectroReadings):
             self._mirror_pct = self._mirror_level()
             self._reference = self._load_reference()
             eta.start(self.clock.now())
+            self._eta = eta
             for k, p in enumerate(todo):
                 await self._go_to(p)
                 await self._take_reading(p)
