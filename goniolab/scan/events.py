@@ -151,6 +151,17 @@ class InstrumentError(Event):
             fatal=False,
         )
 
+    @classmethod
+    def state_not_recorded(cls, run_id: int, state: RunState, exc: Exception) -> InstrumentError:
+        """The store could not take the run's new state (non-fatal: the run's own state
+        holds, and the store says the run was interrupted until it is written)."""
+        return cls(
+            run_id=run_id,
+            device="store",
+            message=f"the run's state ({state.value}) could not be recorded: {exc}",
+            fatal=False,
+        )
+
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class RunFinished(Event):

@@ -312,14 +312,7 @@ class GlossLogger:
             if not (self.keep_running and state is RunState.DONE):
                 self.store.set_status(self.run_id, state.value, reason)
         except StoreError as exc:  # the store is still away: say so, never a traceback
-            self.bus.publish(
-                InstrumentError(
-                    run_id=self.run_id,
-                    device="store",
-                    message=f"the run's state ({state.value}) could not be recorded: {exc}",
-                    fatal=False,
-                )
-            )
+            self.bus.publish(InstrumentError.state_not_recorded(self.run_id, state, exc))
         self.bus.publish(StateChanged(run_id=self.run_id, state=state, reason=reason))
         stats = gloss_statistics(self._values, self.plan.angles_deg)
         return GlossResult(

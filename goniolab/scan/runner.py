@@ -281,14 +281,7 @@ class ScanRunner(SpectroReadings):
         try:
             self.store.set_status(self.run_id, state.value, reason)
         except StoreError as exc:  # the store is down: say so, the run's own state holds
-            self.bus.publish(
-                InstrumentError(
-                    run_id=self.run_id,
-                    device="store",
-                    message=f"the run's state ({state.value}) could not be recorded: {exc}",
-                    fatal=False,
-                )
-            )
+            self.bus.publish(InstrumentError.state_not_recorded(self.run_id, state, exc))
         self.bus.publish(StateChanged(run_id=self.run_id, state=state, reason=reason))
 
     async def _checkpoint(self) -> bool:
