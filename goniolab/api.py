@@ -24,7 +24,7 @@ import concurrent.futures
 import math
 import sys
 from collections.abc import Coroutine, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
 
@@ -32,7 +32,7 @@ import numpy as np
 
 from goniolab.errors import UserError
 from goniolab.scan.plans import DEFAULT_REPEATS
-from goniolab.store import RunRecord, RunStore, StoreError, resolve_store_path
+from goniolab.store import RunMeta, RunRecord, RunStore, StoreError, resolve_store_path
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
     import pandas as pd
@@ -604,7 +604,7 @@ class _ScanCall:
     location: str | Path
     time_scale: float | None
     progress: bool
-    meta: Any = None  # goniolab.store.RunMeta: operator, sample id, notes, tags
+    meta: RunMeta = field(default_factory=RunMeta)  # operator, sample id, notes, tags
 
 
 def _scan_call(
@@ -619,7 +619,7 @@ def _scan_call(
     store: str | Path | None,
     time_scale: float | None,
     progress: bool,
-    identity: dict[str, Any] | None = None,
+    meta: RunMeta | None = None,
     auto_exposure: bool = True,
 ) -> _ScanCall:
     from goniolab.config import load_lab_config
@@ -639,16 +639,9 @@ def _scan_call(
     except PlanError as exc:
         raise UserError(f"run_scan: {exc}") from None
     location = resolve_store_path(None if store is None else str(store), cfg.lab.store)
-    from goniolab.store import RunMeta
-
-    i = identity or {}
-    meta = RunMeta(
-        operator=i.get("operator") or "",
-        sample_id=i.get("sample_id") or "",
-        notes=i.get("notes") or "",
-        tags=tuple(dict.fromkeys(t for t in (i.get("tags") or ()) if t)),
+    return _ScanCall(
+        str(Path(config).resolve()), plan, location, time_scale, progress, meta or RunMeta()
     )
-    return _ScanCall(str(Path(config).resolve()), plan, location, time_scale, progress, meta)
 
 
 async def _scan_in_this_thread(call: _ScanCall, control: _ScanControl | None = None) -> Run:
@@ -742,7 +735,7 @@ def run_scan(
         store=store,
         time_scale=time_scale,
         progress=progress,
-        identity={"operator": operator, "sample_id": sample_id, "notes": notes, "tags": tags},
+        meta=RunMeta.given(operator, sample_id, notes, tags),
         auto_exposure=auto_exposure,
     )
     control = _ScanControl()
@@ -781,7 +774,7 @@ async def run_scan_async(
         store=store,
         time_scale=time_scale,
         progress=progress,
-        identity={"operator": operator, "sample_id": sample_id, "notes": notes, "tags": tags},
+        meta=RunMeta.given(operator, sample_id, notes, tags),
         auto_exposure=auto_exposure,
     )
     return await _scan_in_this_thread(call)

@@ -677,12 +677,7 @@ def run_meta_args(args: argparse.Namespace) -> RunMeta:
     """The run metadata given on the command line (empty fields: not given)."""
     from goniolab.store import RunMeta
 
-    return RunMeta(
-        operator=args.operator or "",
-        sample_id=args.sample_id or "",
-        notes=args.note or "",
-        tags=tuple(dict.fromkeys(t for t in args.tag if t)),
-    )
+    return RunMeta.given(args.operator, args.sample_id, args.note, args.tag)
 
 
 def absolute_sample(spec: str) -> str:

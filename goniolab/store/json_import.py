@@ -80,12 +80,11 @@ def _load(path: Path) -> dict[str, Any]:
 def _fill(scratch: RunStore, doc: dict[str, Any], path: Path) -> int:
     """Write the export's run and readings into ``scratch``; return the run's id there."""
     run = doc["run"]
-    tags = run.get("tags") or ()
-    meta = RunMeta(
-        operator=str(run.get("operator") or ""),
-        sample_id=str(run.get("sample_id") or ""),
-        notes=str(run.get("notes") or ""),
-        tags=tuple(str(t) for t in tags),
+    meta = RunMeta.given(
+        str(run.get("operator") or ""),
+        str(run.get("sample_id") or ""),
+        str(run.get("notes") or ""),
+        run.get("tags") or (),
     )
     run_id = scratch.create_run(
         kind=run["kind"],

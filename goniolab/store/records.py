@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import json
 import uuid as uuidlib
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -188,6 +188,23 @@ class RunMeta:
     sample_id: str = ""
     notes: str = ""
     tags: tuple[str, ...] = field(default_factory=tuple)
+
+    @classmethod
+    def given(
+        cls,
+        operator: str | None = None,
+        sample_id: str | None = None,
+        notes: str | None = None,
+        tags: Iterable[str] = (),
+    ) -> RunMeta:
+        """From what a face was given (``None``: not given; tags: empty ones dropped, each
+        kept once, in order)."""
+        return cls(
+            operator=operator or "",
+            sample_id=sample_id or "",
+            notes=notes or "",
+            tags=tuple(dict.fromkeys(str(t) for t in tags if t)),
+        )
 
     def merged(self, other: RunMeta) -> RunMeta:
         """``other``'s non-empty fields over this one's (tags: both, in order, once each)."""
