@@ -124,19 +124,43 @@ def test_the_checker_sees_imports_inside_functions(tmp_path: Path) -> None:
 
 #: The most lines a module of these rooms may have (issue 24: rooms of one job each).
 MAX_MODULE_LINES = 800
-#: Rooms held to :data:`MAX_MODULE_LINES` (more join as they are split along their seams).
-SIZED_ROOMS = ("goniolab/store", "goniolab/export.py", "drivers", "goniolab/scan", "sim")
+#: Every room is held to :data:`MAX_MODULE_LINES`.
+SIZED_ROOMS = ("goniolab", "drivers", "sim")
+#: module -> why it may be longer for now. Temporary: each is split by another engineer this
+#: round; the lead removes its entry after merging that split (a stale entry fails the test).
+OVERSIZED_FOR_NOW: dict[str, str] = {
+    "goniolab/api.py": "split by app-predict/app-scan this round",
+    "goniolab/commands/scan.py": "split by app-predict/app-scan this round",
+    "goniolab/commands/_colour.py": "split by app-predict/app-scan this round",
+    "goniolab/commands/predict.py": "split by app-predict/app-scan this round",
+    "goniolab/datasets.py": "split by app-predict/app-scan this round",
+}
+
+
+def module_lines(room: str) -> dict[str, int]:
+    """``path -> number of lines`` of every module of ``room``."""
+    return {
+        f.relative_to(ROOT).as_posix(): len(f.read_text(encoding="utf-8").splitlines())
+        for f in _files(room)
+    }
 
 
 @pytest.mark.parametrize("room", SIZED_ROOMS)
 def test_no_module_of_a_split_room_is_over_800_lines(room: str) -> None:
-    files = _files(room)
-    assert files, f"{room} has no Python files: the table is out of date"
-    lines = {
-        str(f.relative_to(ROOT)): len(f.read_text(encoding="utf-8").splitlines()) for f in files
+    lines = module_lines(room)
+    assert len(lines) > 10, f"{room} has (almost) no Python files: the table is out of date"
+    big = {
+        name: n
+        for name, n in lines.items()
+        if n > MAX_MODULE_LINES and name not in OVERSIZED_FOR_NOW
     }
-    big = {name: n for name, n in lines.items() if n > MAX_MODULE_LINES}
     assert big == {}, big
+
+
+def test_the_oversized_exceptions_are_still_needed() -> None:
+    lines = {name: n for room in SIZED_ROOMS for name, n in module_lines(room).items()}
+    stale = sorted(n for n in OVERSIZED_FOR_NOW if lines.get(n, 0) <= MAX_MODULE_LINES)
+    assert stale == [], f"split since (or gone): remove from OVERSIZED_FOR_NOW: {stale}"
 
 
 def _names_from(path: Path, package: str) -> list[tuple[int, str, str]]:
@@ -184,9 +208,6 @@ OPTICS_MAY_IMPORT = (
     "goniolab.lazy_imports",
 )
 
-#: most lines of one module in a room (issue 24: one job per module)
-MAX_MODULE_LINES = 800
-
 
 def test_optics_imports_only_numerics_and_itself() -> None:
     bad = [
@@ -207,15 +228,6 @@ def test_optics_uses_no_relative_imports() -> None:
         if isinstance(node, ast.ImportFrom) and node.level > 0
     ]
     assert bad == [], bad
-
-
-def test_no_optics_module_is_over_800_lines() -> None:
-    long = {
-        str(f.relative_to(ROOT)): n
-        for f in _files("goniolab/optics")
-        if (n := len(f.read_text(encoding="utf-8").splitlines())) > MAX_MODULE_LINES
-    }
-    assert long == {}, long
 
 
 def test_the_optics_checker_catches_a_foreign_import(tmp_path: Path) -> None:
