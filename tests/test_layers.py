@@ -18,6 +18,7 @@ ROOT = Path(__file__).resolve().parents[1]
 #: room -> module prefixes its files may not import (the lab wiring and ``sim serve`` are
 #: the only doors from the application into the simulator).
 FORBIDDEN: dict[str, tuple[str, ...]] = {
+    "labtoml": ("goniolab", "drivers", "sim"),  # the one TOML loader, below every room
     "drivers": ("goniolab", "sim"),
     "goniolab/optics": (
         "sim", "drivers", "goniolab.surfaces", "goniolab.scan", "goniolab.store",
@@ -243,7 +244,7 @@ def test_the_optics_checker_catches_a_foreign_import(tmp_path: Path) -> None:
 
 # --------------------------------------------------------------------- names between modules
 #: The packages whose module names are unique and whose ``_private`` names stay home (issue 24).
-NAMED_ROOMS = ("goniolab", "drivers", "sim")
+NAMED_ROOMS = ("goniolab", "drivers", "sim", "labtoml")
 
 
 def repeated_module_names(paths: list[str]) -> dict[str, list[str]]:
@@ -406,3 +407,42 @@ def test_the_private_import_checker_catches_each_form(tmp_path: Path) -> None:
         (5, "goniolab.surfaces._common"),
         (6, "goniolab.probe._own"),  # now another module's
     ]
+
+
+# --------------------------------------------------------------------- one TOML loader
+#: The one module that parses TOML (issue 24: TOML was read three ways, each with its own
+#: words for the same error); every other module calls :func:`labtoml.read_toml` or
+#: :func:`labtoml.parse_toml`.
+TOML_LOADER = "labtoml/__init__.py"
+#: file -> why it may still import :mod:`tomllib` itself (temporary).
+TOMLLIB_EXCEPTIONS: dict[str, str] = {
+    # load_paint_file: labtoml.read_toml(path, what="paint file"), TomlFileError -> UserError
+    "goniolab/commands/_colour.py": "switched at merge",
+}
+
+
+def tomllib_importers() -> dict[str, int]:
+    """``path -> line`` of every module of the house that imports :mod:`tomllib`."""
+    found: dict[str, int] = {}
+    for room in NAMED_ROOMS:
+        for f in _files(room):
+            for line, mod in imports_of(f):
+                if _hit(mod, ("tomllib", "tomli", "toml")):
+                    found.setdefault(f.relative_to(ROOT).as_posix(), line)
+    return found
+
+
+def test_toml_is_parsed_by_the_one_loader() -> None:
+    found = tomllib_importers()
+    assert TOML_LOADER in found, "the loader no longer imports tomllib: the table is stale"
+    bad = sorted(f"{name}:{line}" for name, line in found.items() if name != TOML_LOADER)
+    bad = [b for b in bad if b.split(":")[0] not in TOMLLIB_EXCEPTIONS]
+    assert bad == [], "\n".join(bad)
+    stale = sorted(set(TOMLLIB_EXCEPTIONS) - set(found))
+    assert stale == [], f"exceptions no longer needed (remove them): {stale}"
+
+
+def test_the_toml_loader_imports_only_the_standard_library() -> None:
+    mods = [m for _, m in imports_of(ROOT / TOML_LOADER)]
+    assert "tomllib" in mods
+    assert [m for m in mods if m.split(".")[0] not in sys.stdlib_module_names] == []

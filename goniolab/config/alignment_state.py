@@ -7,9 +7,10 @@ from pathlib import Path
 
 from pydantic import ValidationError
 
-from drivers.toml_schema import TomlFileError, first_issue, read_toml
+from drivers.toml_schema import first_issue
 from goniolab.config.sections import AlignmentConfig, LabConfig
 from goniolab.errors import ConfigError
+from labtoml import TomlFileError, read_toml
 
 
 def write_alignment(path: str | Path, values: dict[str, float | int], *, note: str = "") -> None:

@@ -10,11 +10,12 @@ from pydantic import BaseModel, ValidationError
 
 import goniolab
 from drivers.protocols import GLOSSMETERS, SPECTROS, STEPPERS
-from drivers.toml_schema import TomlFileError, first_issue, read_toml
+from drivers.toml_schema import first_issue
 from goniolab.config.alignment_state import with_alignment_state
 from goniolab.config.checks import cross_checks, exposure_check, register_checks
 from goniolab.config.sections import LabConfig
 from goniolab.errors import ConfigError
+from labtoml import TomlFileError, read_toml
 
 
 def configs_dir() -> Path:
