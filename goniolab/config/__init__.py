@@ -22,7 +22,8 @@ Whatever would only fail at run time is refused at load:
   accepted where a float is expected);
 * safety limits have a floor: ``min_separation_deg`` >= :data:`MIN_SEPARATION_FLOOR_DEG`
   (0 would switch the arm interlock off) and >= half the sum of the lamp and detector
-  cones (closer, the detector would look into the lamp);
+  cones (closer, the detector would look into the lamp); the default arm limits, their
+  sanity and that floor are those of :mod:`drivers.arm_limits`, which the drivers check too;
 * every register value derived from an arm's settings fits its register with the arm's
   profile: positions ``limit_deg x steps_per_deg x gear_ratio`` in the int32 position
   register, speed and acceleration counts in theirs (int32, or 16 bits for a
@@ -40,6 +41,7 @@ The package's modules: :mod:`goniolab.config.sections` (the pydantic models),
 
 from __future__ import annotations
 
+from drivers.arm_limits import MIN_SEPARATION_FLOOR_DEG
 from goniolab.config.alignment_state import (
     alignment_state_path,
     write_alignment,
@@ -52,7 +54,6 @@ from goniolab.config.loader import (
     resolve_profile,
 )
 from goniolab.config.sections import (
-    MIN_SEPARATION_FLOOR_DEG,
     STALL_TOLERANCE_MAX_DEG,
     AlignmentConfig,
     AxisConfig,

@@ -15,6 +15,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+from drivers.arm_limits import outside_limits
 from goniolab.config.sections import AxisConfig, LabConfig
 from goniolab.errors import ConfigError
 
@@ -32,7 +33,7 @@ def cross_checks(cfg: LabConfig, path: Path) -> None:
         ("goniometer.park.theta_r_deg", g.park.theta_r_deg, g.detector),
     ):
         lo, hi = arm.limits_deg
-        if not lo <= value <= hi:
+        if outside_limits(value, arm.limits_deg):
             raise ConfigError(
                 path, key, f"{value:g} deg outside the arm limits [{lo:g}, {hi:g}] deg"
             )

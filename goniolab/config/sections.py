@@ -22,11 +22,15 @@ from pydantic import (
     model_validator,
 )
 
+from drivers.arm_limits import (
+    DEFAULT_MIN_SEPARATION_DEG,
+    DETECTOR_LIMITS_DEG,
+    LAMP_LIMITS_DEG,
+    limits_problem,
+    separation_floor_problem,
+)
 from drivers.protocols import GLOSSMETERS, SPECTROS, STEPPERS, ProtocolTable
 from goniolab.model_registry import DEFAULT_MODEL, model_names
-
-#: Smallest ``min_separation_deg`` a config may set: 0 would switch the interlock off.
-MIN_SEPARATION_FLOOR_DEG = 1.0
 
 
 class StrictSection(BaseModel):
@@ -149,7 +153,7 @@ class AxisConfig(StrictSection):
     parity: Literal["N", "E", "O"] = "E"
     steps_per_deg: PositiveFloat = 1000.0  # motor steps per degree of the motor shaft
     gear_ratio: PositiveFloat = 1.0  # motor turns per arm turn (1 = direct drive)
-    limits_deg: tuple[FiniteFloat, FiniteFloat] = (0.0, 85.0)
+    limits_deg: tuple[FiniteFloat, FiniteFloat] = LAMP_LIMITS_DEG
     speed_deg_s: PositiveFloat = 20.0
     accel_deg_s2: PositiveFloat = 40.0
     stall_tolerance_deg: Annotated[
@@ -160,11 +164,9 @@ class AxisConfig(StrictSection):
     @field_validator("limits_deg")
     @classmethod
     def _limits_increasing(cls, v: tuple[float, float]) -> tuple[float, float]:
-        lo, hi = v
-        if not lo < hi:
-            raise ValueError(f"lower limit {lo:g} must be below upper limit {hi:g}")
-        if lo < -180.0 or hi > 180.0:
-            raise ValueError(f"limits must lie within [-180, 180] deg, got [{lo:g}, {hi:g}]")
+        problem = limits_problem(v)  # drivers.arm_limits: the one place of the limits
+        if problem:
+            raise ValueError(problem)
         return v
 
     @model_validator(mode="before")
@@ -182,21 +184,19 @@ class AxisConfig(StrictSection):
 class GoniometerConfig(StrictSection):
     """``[goniometer]``: interlock, source cone, park, move timeout and the two arms."""
 
-    min_separation_deg: FiniteFloat = 10.0
+    min_separation_deg: FiniteFloat = DEFAULT_MIN_SEPARATION_DEG
     source_cone_deg: Annotated[float, Field(strict=True, ge=0.0, lt=90.0)] = 6.0
     park: ParkConfig = ParkConfig()
     move_timeout_s: TimeoutS = 30.0
-    lamp: AxisConfig = AxisConfig(unit_id=1, limits_deg=(0.0, 85.0))
-    detector: AxisConfig = AxisConfig(unit_id=2, limits_deg=(-85.0, 85.0))
+    lamp: AxisConfig = AxisConfig(unit_id=1, limits_deg=LAMP_LIMITS_DEG)
+    detector: AxisConfig = AxisConfig(unit_id=2, limits_deg=DETECTOR_LIMITS_DEG)
 
     @field_validator("min_separation_deg")
     @classmethod
     def _interlock_floor(cls, v: float) -> float:
-        if v < MIN_SEPARATION_FLOOR_DEG:
-            raise ValueError(
-                f"{v:g} deg is below the floor {MIN_SEPARATION_FLOOR_DEG:g} deg: the arm "
-                "interlock cannot be switched off"
-            )
+        problem = separation_floor_problem(v)  # drivers.arm_limits, as the driver checks
+        if problem:
+            raise ValueError(problem)
         return v
 
 
