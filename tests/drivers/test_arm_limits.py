@@ -146,3 +146,11 @@ def test_config_and_driver_refuse_the_same_limits(
     with pytest.raises(ValueError) as drv_err:
         ModbusStepperAxis("lamp", limits_deg=limits)
     assert str(drv_err.value) == f"lamp: limits_deg: {reason}"
+
+
+def test_the_architecture_doc_states_the_limits_of_the_module() -> None:
+    doc = (Path(__file__).resolve().parents[2] / "docs" / "ARCHITECTURE.md").read_text()
+    line = " ".join(doc[doc.index("`drivers/arm_limits.py`") :].split("\n")[:3])
+    (lamp_lo, lamp_hi), (det_lo, det_hi) = LAMP_LIMITS_DEG, DETECTOR_LIMITS_DEG
+    assert f"lamp {lamp_lo:g}..{lamp_hi:g} deg, detector {det_lo:g}..{det_hi:g} deg" in line
+    assert f"`min_separation_deg` >= {MIN_SEPARATION_FLOOR_DEG:g} deg" in line
