@@ -87,6 +87,9 @@ SCAN_COLUMNS: tuple[str, ...] = (
     "repeat",
     "theta_i_deg",
     "theta_r_deg",
+    # ASTM E2194 / DIN 6175-2: theta_i - theta_r (goniolab.colour.multiangle.aspecular_deg;
+    # 15 = theta_r 30 at theta_i 45, < 0 beyond the specular direction)
+    "aspecular_deg",
     "measured_theta_i_deg",
     "measured_theta_r_deg",
     "luminance_pct",
@@ -376,6 +379,7 @@ def _table(store: RunStore, run_id: int) -> _Table:
             "repeat": p.repeat,
             "theta_i_deg": p.theta_i_deg,
             "theta_r_deg": p.theta_r_deg,
+            "aspecular_deg": p.theta_i_deg - p.theta_r_deg,  # the core's, inline (cheap import)
             "measured_theta_i_deg": p.measured_theta_i_deg,
             "measured_theta_r_deg": p.measured_theta_r_deg,
             "luminance_pct": p.luminance_pct,
