@@ -570,9 +570,21 @@ def _spectrum_schema(schema: pa.Schema, spectra: RunSpectra) -> pa.Schema:
 
 
 register_exporter(
-    Exporter("csv", (".csv",), "one row per reading, ISO 8601 UTC timestamps", text=_csv_text)
+    Exporter(
+        "csv",
+        (".csv",),
+        "one row per reading, ISO 8601 UTC timestamps, spectra as R_<nm> columns",
+        text=_csv_text,
+    )
 )
-register_exporter(Exporter("json", (".json",), "the run record and its readings", text=_json_text))
+register_exporter(
+    Exporter(
+        "json",
+        (".json",),
+        "the run record, its readings and their spectra's provenance",
+        text=_json_text,
+    )
+)
 register_exporter(
     Exporter(
         "netcdf",
