@@ -10,8 +10,8 @@ spectrum becomes a reflectance factor as the runner turned it into its colour
   ``raw.absolute_values`` (% of a perfect mirror, ``v / m x R_cert``), with the standard
   and method in ``raw.reference``;
 - otherwise the reading as the spectro reports it (% of the instrument's own reference,
-  taken as a perfect mirror), divided by the run's mirror level where an older run stored
-  only that scalar;
+  taken as a perfect mirror; the run's scalar mirror level is not divided out, as the
+  runner does not: it counted the mirror as 100 %, docs/CALIBRATION.md step 3);
 
 then ``/ 100`` and, on the ``[colour] scale = "diffuser"`` (the default), divided by the
 perfect diffuser's reading through the detector cone, ``sin^2(a_d) cos(theta_r)``
@@ -197,11 +197,6 @@ def _reference_label(raw: Mapping[str, Any]) -> str:
     if isinstance(ref, Mapping) and ref.get("standard"):
         cert = f", certificate {ref['certificate']}" if ref.get("certificate") else ""
         return f"certified {ref['standard']}{cert} ({ref.get('method', 'method not recorded')})"
-    if raw.get("mirror_pct"):
-        return (
-            f"the run's mirror reading ({float(raw['mirror_pct']):.6g} % of the spectro's "
-            "reference, counted as a perfect mirror)"
-        )
     return INSTRUMENT_REFERENCE
 
 
@@ -213,21 +208,15 @@ def _standard_cite(raw: Mapping[str, Any]) -> dict[str, Any] | None:
     return {k: ref[k] for k in keep if k in ref}
 
 
-def _measured_fraction(
-    raw: Mapping[str, Any], n_wl: int, mirror_reference: bool
-) -> FloatArray | None:
-    """A reading's spectrum as a fraction of a perfect mirror, or None (none stored)."""
-    absolute = raw.get("absolute_values")
-    if absolute is not None and len(absolute) == n_wl:
-        return np.asarray(absolute, dtype=np.float64) / 100.0
-    values = raw.get("values")
+def _measured_fraction(raw: Mapping[str, Any], n_wl: int) -> FloatArray | None:
+    """A reading's spectrum as a fraction of a perfect mirror, or None (none stored): the
+    referenced spectrum when there is one, else the reading as reported -- the spectrum
+    the runner took the reading's colour from (:meth:`goniolab.scan.colour.PointColour.measured`,
+    :func:`goniolab.scan.colour.colour_rows`)."""
+    values = raw.get("absolute_values") or raw.get("values")
     if values is None or len(values) != n_wl:
         return None
-    r = np.asarray(values, dtype=np.float64) / 100.0
-    mirror = raw.get("mirror_pct")
-    if mirror_reference and mirror:
-        r = r * (100.0 / float(mirror))
-    return r
+    return np.asarray(values, dtype=np.float64) / 100.0
 
 
 def run_spectra(
@@ -258,7 +247,7 @@ def run_spectra(
     for p in rows:
         if not (0 <= p.index < n and 0 <= p.repeat < reps) or not grid:
             continue
-        r = _measured_fraction(p.raw, wl.size, plan.mirror_reference)
+        r = _measured_fraction(p.raw, wl.size)
         if r is None:
             continue
         measured[p.index, p.repeat, :] = r * scale[p.index]

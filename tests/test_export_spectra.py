@@ -173,8 +173,10 @@ def test_a_mirror_scale_run_is_labelled_a_fraction_of_the_mirror(tmp_path: Path)
 
 def _referenced_store(path: Path) -> tuple[Path, np.ndarray]:
     """A mirror-referenced run (plan.mirror_reference): one reading whose instrument
-    spectrum is flat 50 % and whose referenced spectrum (``absolute_values``) is known."""
-    plan = BrdfPlan(45.0, (30.0,), repeats=1, sample="sample:x", mirror_reference=True)
+    spectrum is flat 50 % and whose referenced spectrum (``absolute_values``) is known, and
+    one the reference could not be applied to (no ``absolute_values``: as the runner,
+    the export takes the reading as reported, the mirror level not divided out)."""
+    plan = BrdfPlan(45.0, (30.0, 20.0), repeats=1, sample="sample:x", mirror_reference=True)
     absolute_pct = 40.0 + 0.05 * (WL - 400.0)  # % of a perfect mirror
     ref = {"standard": "mirror", "certificate": "CERT-42", "certified_on": "2026-01-01",
            "model": "table", "file": "standards.toml", "method": "spectral"}  # fmt: skip
@@ -193,6 +195,10 @@ def _referenced_store(path: Path) -> tuple[Path, np.ndarray]:
                          "mirror_pct": 90.0, "reference": ref,
                          "absolute_values": list(absolute_pct)},
                     timestamp=2.0)  # fmt: skip
+        s.add_point(rid, index=1, repeat=0, theta_i_deg=45.0, theta_r_deg=20.0,
+                    measured_theta_i_deg=45.0, measured_theta_r_deg=20.0, luminance_pct=45.0,
+                    raw={"wavelengths_nm": list(WL), "values": [50.0] * WL.size,
+                         "mirror_pct": 90.0}, timestamp=3.0)  # fmt: skip
     return path, absolute_pct
 
 
@@ -210,6 +216,10 @@ def test_a_referenced_run_exports_the_referenced_spectrum_and_cites_the_certific
     np.testing.assert_allclose(_cells(sample, R_NAMES), absolute_pct / 100.0 * cone_scale,
                                rtol=RTOL)  # fmt: skip
     assert sample["spectrum_referenced_to"] == "certified mirror, certificate CERT-42 (spectral)"
+    unreferenced = next(r for r in rows if int(r["index"]) == 1)
+    scale_20 = float(PointColour(detector_cone_deg=CONE_DEG).factors([100.0], 20.0)[0])
+    np.testing.assert_allclose(_cells(unreferenced, R_NAMES), 0.5 * scale_20, rtol=RTOL)
+    assert "no certified standard" in unreferenced["spectrum_referenced_to"]
     sp = doc["spectra"]
     assert sp["standards"] == [{"standard": "mirror", "certificate": "CERT-42",
                                 "certified_on": "2026-01-01", "model": "table",
