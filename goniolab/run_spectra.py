@@ -35,6 +35,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
+    from goniolab.colour.exchange import MultiAngleSpectra
     from goniolab.store import PointRow, RunRecord, RunStore
 
 __all__ = [
@@ -43,6 +44,7 @@ __all__ = [
     "predicted_grid_nm",
     "run_reflectance_factors",
     "run_spectra",
+    "spectra_tables",
     "spectral_columns",
 ]
 
@@ -291,3 +293,74 @@ def run_reflectance_factors(
     """
     sp = run_spectra(store, run_id)
     return sp.wavelengths_nm, sp.measured, sp.predicted
+
+
+def spectra_tables(
+    store: RunStore, run_id: int, which: str = "both"
+) -> tuple[list[MultiAngleSpectra], dict[str, Any]]:
+    """A scan run's spectra as exchange tables and what a file of them says about itself.
+
+    Returns ``(tables, attrs)``: ``tables`` the ``measured`` spectra, one row per reading
+    with a complete spectrum, and/or (``which``: ``measured``, ``predicted``, ``both``) the
+    ``predicted`` ones, one row per geometry (:class:`goniolab.colour.exchange.MultiAngleSpectra`,
+    for :func:`goniolab.spectra_files.write_spectra_file`); ``attrs`` the run, its sample,
+    its ``[colour] scale``, the detector cone, what the spectra are relative to and
+    referenced to, the certified standards and the calibration it cites.
+
+    Raises
+    ------
+    ValueError
+        ``which`` is none of the three, or the run is not a scan.
+    """
+    from goniolab.colour.exchange import MultiAngleSpectra
+
+    if which not in ("measured", "predicted", "both"):
+        raise ValueError(f"which must be measured, predicted or both, got {which!r}")
+    rec = store.get_run(run_id)
+    sp = run_spectra(store, run_id)
+    theta_i = float(rec.plan.get("theta_i_deg", 45.0))
+    tr = np.asarray(rec.plan.get("theta_r_deg", []), dtype=np.float64)
+    out: list[MultiAngleSpectra] = []
+    measured = sp.measured
+    if which in ("measured", "both") and sp.wavelengths_nm.size:
+        n, reps, _ = measured.shape
+        keep = [
+            (k, r) for k in range(n) for r in range(reps) if np.all(np.isfinite(measured[k, r]))
+        ]
+        if keep:
+            out.append(
+                MultiAngleSpectra(
+                    sp.wavelengths_nm,
+                    np.full(len(keep), theta_i),
+                    np.array([tr[k] for k, _ in keep]),
+                    np.array([measured[k, r] for k, r in keep]),
+                    tuple("measured" for _ in keep),
+                    tuple(r for _, r in keep),
+                )
+            )
+    predicted, grid = sp.predicted, sp.predicted_wavelengths_nm
+    if which in ("predicted", "both") and predicted is not None and grid is not None:
+        keep_p = [k for k in range(predicted.shape[0]) if np.all(np.isfinite(predicted[k]))]
+        if keep_p:
+            out.append(
+                MultiAngleSpectra(
+                    grid,
+                    np.full(len(keep_p), theta_i),
+                    tr[keep_p],
+                    predicted[keep_p],
+                    tuple("predicted" for _ in keep_p),
+                    tuple(0 for _ in keep_p),
+                )
+            )
+    prov = sp.provenance()
+    attrs: dict[str, Any] = {
+        "run_id": rec.id,
+        "sample": rec.sample,
+        "colour_scale": sp.scale,
+        "detector_cone_deg": sp.detector_cone_deg,
+        "relative_to": prov["relative_to"],
+        "referenced_to": prov["referenced_to"],
+        "reference_standards": prov["standards"],
+        "calibration": prov["calibration"],
+    }
+    return out, attrs
