@@ -98,7 +98,7 @@ class RunSpectra:
     scale
         ``"diffuser"`` (reflectance factors) or ``"mirror"`` (fractions of the mirror).
     detector_cone_deg
-        The detector cone half angle the diffuser scale used.
+        The detector cone's full angle (its half angle ``a_d`` sets the diffuser scale).
     referenced_by
         Per ``(index, repeat)``, what the reading was referenced to (the certified standard
         and method, or :data:`INSTRUMENT_REFERENCE`).
@@ -125,11 +125,12 @@ class RunSpectra:
 
     @property
     def quantity(self) -> str:
-        return QUANTITY.get(self.scale, QUANTITY["diffuser"])
+        return QUANTITY.get(self.scale, f"spectral reading on an unknown scale {self.scale!r}")
 
     @property
     def relative_to(self) -> str:
-        return RELATIVE_TO.get(self.scale, RELATIVE_TO["diffuser"])
+        unknown = f"nothing: [colour] scale {self.scale!r} is unknown, the values are NaN"
+        return RELATIVE_TO.get(self.scale, unknown)
 
     def referenced_to(self) -> str:
         """One line: what the measured spectra were referenced to (all readings)."""
@@ -149,7 +150,7 @@ class RunSpectra:
             "standards": [dict(s) for s in self.standards],
             "calibration": dict(self.calibration),
             "wavelengths_nm": [float(w) for w in self.wavelengths_nm],
-            "columns": spectral_columns(self.wavelengths_nm),
+            "columns": spectral_columns(self.wavelengths_nm) if self.has_measured else [],
             "predicted_wavelengths_nm": (
                 None
                 if self.predicted_wavelengths_nm is None
