@@ -395,6 +395,10 @@ def _table(store: RunStore, run_id: int) -> _Table:
     ]
     if run.kind != "brdf":  # an alignment or calibration run: no spectra on a scan's grid
         return _Table(SCAN_COLUMNS, rows, None)
+    if not any(p.raw.get("values") for p in points) and not any(
+        pc.spectrum_pct for pc in pcols.values()
+    ):  # nothing spectral stored (an imported run, a luminance-only instrument)
+        return _Table(SCAN_COLUMNS, rows, None)
     from goniolab.run_spectra import run_spectra
 
     spectra = run_spectra(store, run_id, points)
