@@ -66,7 +66,7 @@ QUANTITY: dict[str, str] = {
 }
 #: A reading referenced by nothing but the spectro's own calibration.
 INSTRUMENT_REFERENCE = (
-    "the spectro's own reference, taken as a perfect mirror (no certified standard)"
+    "the spectro's own reference taken as a perfect mirror (no certified standard)"
 )
 
 
@@ -196,10 +196,14 @@ def factor_scale(rec: RunRecord, theta_r_deg: FloatArray) -> FloatArray:
 
 
 def _reference_label(raw: Mapping[str, Any]) -> str:
+    """What a reading was referenced to, in one CSV cell without commas (a naive
+    ``awk -F,`` of the export keeps its columns): ``certified mirror (certificate X;
+    spectral)`` or :data:`INSTRUMENT_REFERENCE`."""
     ref = raw.get("reference")
     if isinstance(ref, Mapping) and ref.get("standard"):
-        cert = f", certificate {ref['certificate']}" if ref.get("certificate") else ""
-        return f"certified {ref['standard']}{cert} ({ref.get('method', 'method not recorded')})"
+        parts = [f"certificate {ref['certificate']}"] if ref.get("certificate") else []
+        parts.append(str(ref.get("method", "method not recorded")))
+        return f"certified {ref['standard']} ({'; '.join(parts)})".replace(",", ";")
     return INSTRUMENT_REFERENCE
 
 

@@ -78,6 +78,7 @@ def test_csv_headers_are_exactly_r_nm_per_wavelength_and_give_back_the_spectra(
         np.testing.assert_allclose(_cells(row, P_NAMES), _predicted_truth(tr), rtol=RTOL)
         assert row["spectrum_relative_to"] == "perfect diffuser"
         assert "no certified standard" in row["spectrum_referenced_to"]
+        assert "," not in row["spectrum_referenced_to"]  # one cell for a naive awk -F,
 
 
 def test_the_csv_export_reads_back_as_a_compare_file(store: Path) -> None:
@@ -215,7 +216,7 @@ def test_a_referenced_run_exports_the_referenced_spectrum_and_cites_the_certific
     assert mirror["spectrum_referenced_to"] == ""
     np.testing.assert_allclose(_cells(sample, R_NAMES), absolute_pct / 100.0 * cone_scale,
                                rtol=RTOL)  # fmt: skip
-    assert sample["spectrum_referenced_to"] == "certified mirror, certificate CERT-42 (spectral)"
+    assert sample["spectrum_referenced_to"] == "certified mirror (certificate CERT-42; spectral)"
     unreferenced = next(r for r in rows if int(r["index"]) == 1)
     scale_20 = float(PointColour(detector_cone_deg=CONE_DEG).factors([100.0], 20.0)[0])
     np.testing.assert_allclose(_cells(unreferenced, R_NAMES), 0.5 * scale_20, rtol=RTOL)
