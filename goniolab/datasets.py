@@ -125,8 +125,8 @@ LONG_NAMES: dict[str, str] = {
     "predicted_pct": "model prediction of the relative luminance",
     "residual_pct": "mean measured minus predicted",
     "reflectance_pct": (
-        "spectral reading as the spectro reports it, % of its reference (the mirror), "
-        "before the mirror level and the detector-cone scale: not a reflectance factor"
+        "spectral reading as the spectro reports it, % of its own reference, before the "
+        "certified-mirror referencing and the detector-cone scale: not a reflectance factor"
     ),
     "reflectance_factor": (
         "measured spectral reflectance factor (1 = perfect reflecting diffuser, "
