@@ -134,7 +134,6 @@ OVERSIZED_FOR_NOW: dict[str, str] = {
     "goniolab/commands/scan.py": "split by app-predict/app-scan this round",
     "goniolab/commands/_colour.py": "split by app-predict/app-scan this round",
     "goniolab/commands/predict.py": "split by app-predict/app-scan this round",
-    "goniolab/datasets.py": "split by app-predict/app-scan this round",
 }
 
 
