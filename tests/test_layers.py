@@ -274,8 +274,6 @@ PRIVATE_IMPORT_EXCEPTIONS: dict[str, str] = {
     "goniolab/commands/_colour.py: goniolab.commands.runs._get_run": "a run by id, one error",
     "goniolab/commands/fit.py: goniolab.commands.runs._get_run": "a run by id, one error",
     "goniolab/commands/plot.py: goniolab.commands.runs._get_run": "a run by id, one error",
-    "goniolab/commands/calibrate.py: goniolab.commands.scan._open": "the store of --store/config",
-    "goniolab/commands/calibrate.py: goniolab.commands.scan._specimen_prompt": "the operator",
 }
 
 
