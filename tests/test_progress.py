@@ -7,7 +7,14 @@ import math
 
 import pytest
 
-from goniolab.progress import TerminalProgress
+from goniolab.progress import (
+    CallbackProgress,
+    NullProgress,
+    ProgressUpdate,
+    TerminalProgress,
+    auto_progress,
+    terminal_progress,
+)
 from goniolab.scan.events import Progress
 
 
@@ -61,3 +68,54 @@ def test_at_clock_scale_0_the_eta_is_the_measured_wall_rate() -> None:
     assert bar.eta_s(10, 10, None, now_s=110.0) == 0.0
     real_time = TerminalProgress(io.StringIO())
     assert real_time.eta_s(1, 3, 18.0 / 2.0, 0.0) == 9.0
+
+
+def test_a_batch_counts_its_steps_itself_with_a_measured_eta() -> None:
+    """``with terminal_progress(n, label) as p: p.advance()``: the API a batch of maps uses
+    (no done count, no ETA of its own: the measured pace gives it)."""
+    out = io.StringIO()
+    with terminal_progress(4, "maps", stream=out) as p:
+        p.message("goniolab: a.npy: no such file")
+        for name in ("a", "b", "c", "d"):
+            p.advance(detail=name)
+    lines = out.getvalue().splitlines()
+    assert lines[0] == "goniolab: a.npy: no such file"
+    assert [line.split("] ")[1].split(" ETA")[0] for line in lines[1:]] == [
+        "1/4", "2/4", "3/4", "4/4",
+    ]  # fmt: skip
+    assert " 1/4 ETA ? a" in lines[1]  # nothing timed yet after the first step
+    assert lines[-1].endswith("4/4 ETA 0s d")
+
+
+def test_the_callback_adapter_hands_over_every_update() -> None:
+    got: list[ProgressUpdate] = []
+    p = CallbackProgress(got.append, label="run 3")
+    p.start(2)
+    p.advance(1, eta_s=5.0, detail="theta_r=10")
+    p.message("goniolab: warning: spectro: retrying")
+    p.advance()  # one more: 2 of 2
+    p.finish()
+    assert [(u.kind, u.done, u.total) for u in got] == [
+        ("start", 0, 2), ("advance", 1, 2), ("message", 1, 2), ("advance", 2, 2),
+        ("finish", 2, 2),
+    ]  # fmt: skip
+    assert got[1].eta_s == 5.0 and got[1].detail == "theta_r=10" and got[1].label == "run 3"
+    assert got[2].text == "goniolab: warning: spectro: retrying"
+    assert got[3].eta_s == 0.0  # the end
+
+
+def test_outside_a_kernel_progress_goes_to_stderr_and_nothing_to_stdout(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    p = auto_progress(2)
+    assert isinstance(p, TerminalProgress) and not p.jupyter
+    p.advance()
+    p.advance()
+    p.finish()
+    out, err = capsys.readouterr()
+    assert out == "" and "2/2 ETA 0s" in err
+    silent = NullProgress()
+    silent.advance(1, total=1)
+    silent.message("x")
+    silent.finish()
+    assert capsys.readouterr() == ("", "")
