@@ -710,5 +710,7 @@ run_scan.__doc__ = (
     "scan then runs on its own loop in a worker thread, the store opened there). In a\n"
     "notebook, ``await run_scan_async(...)`` runs it on the notebook's loop instead.\n"
     "Interrupting the kernel aborts the scan (arms stopped and parked, the run stored\n"
-    "``aborted``) and returns that run.\n\n" + (run_scan_async.__doc__ or "").split("\n\n", 1)[1]
+    "``aborted``) and returns that run.\n\n"
+    # the parameters and result of run_scan_async (python -OO strips both docstrings)
+    + (run_scan_async.__doc__ or "\n\n").split("\n\n", 1)[1]
 )
