@@ -21,18 +21,20 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
+import contextvars
+import functools
 import math
 import sys
-from collections.abc import Coroutine, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Callable, Coroutine, Sequence
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any, ParamSpec, TypeVar
 
 import numpy as np
 
 from goniolab.errors import UserError
 from goniolab.scan.plans import DEFAULT_REPEATS
-from goniolab.store import RunMeta, RunRecord, RunStore, StoreError, resolve_store_path
+from goniolab.store import RunRecord, RunStore, StoreError, resolve_store_path
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
     import pandas as pd
@@ -54,6 +56,7 @@ __all__ = [
 ]
 
 _T = TypeVar("_T")
+_P = ParamSpec("_P")
 
 #: Default source and detector cones of the Wittmann goniometer (sec. 2.3), full angles.
 DEFAULT_CONE_DEG = 6.0
@@ -565,6 +568,12 @@ class _ScanControl:
         return True
 
 
+#: The control of the blocking :func:`run_scan` call that runs this scan (None: awaited).
+_CONTROL: contextvars.ContextVar[_ScanControl | None] = contextvars.ContextVar(
+    "goniolab_scan_control", default=None
+)
+
+
 def _run_blocking(coro: Coroutine[Any, Any, _T], control: _ScanControl | None = None) -> _T:
     """Run ``coro`` to completion from plain code or from a notebook.
 
@@ -578,12 +587,14 @@ def _run_blocking(coro: Coroutine[Any, Any, _T], control: _ScanControl | None = 
     aborts the scan through ``control``: the arms stop and park and the run is stored as
     aborted, as Ctrl-C does in ``goniolab scan``; this call then returns the aborted run.
     """
+    ctx = contextvars.copy_context()
+    ctx.run(_CONTROL.set, control)
     try:
         asyncio.get_running_loop()
     except RuntimeError:
-        return asyncio.run(coro)
+        return ctx.run(asyncio.run, coro)
     with concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="goniolab-scan") as pool:
-        future = pool.submit(asyncio.run, coro)
+        future = pool.submit(ctx.run, asyncio.run, coro)
         try:
             return future.result()
         except KeyboardInterrupt:
@@ -595,151 +606,15 @@ def _run_blocking(coro: Coroutine[Any, Any, _T], control: _ScanControl | None = 
             return future.result()
 
 
-@dataclass(frozen=True)
-class _ScanCall:
-    """A checked ``run_scan`` call: the plan, the config file and the store location."""
+def _blocking(scan: Callable[_P, Coroutine[Any, Any, Run]]) -> Callable[_P, Run]:
+    """The blocking face of the coroutine ``scan`` (same parameters, same result)."""
 
-    config_path: str
-    plan: Any
-    location: str | Path
-    time_scale: float | None
-    progress: bool
-    meta: RunMeta = field(default_factory=RunMeta)  # operator, sample id, notes, tags
+    @functools.wraps(scan)
+    def run(*args: _P.args, **kwargs: _P.kwargs) -> Run:
+        control = _ScanControl()
+        return _run_blocking(scan(*args, **kwargs), control)
 
-
-def _scan_call(
-    config: str | Path,
-    *,
-    sample: str | None,
-    theta_i_deg: float,
-    theta_r_deg: str | Sequence[float],
-    repeats: int,
-    dwell_s: float,
-    exposure_us: int | None,
-    store: str | Path | None,
-    time_scale: float | None,
-    progress: bool,
-    meta: RunMeta | None = None,
-    auto_exposure: bool = True,
-) -> _ScanCall:
-    from goniolab.config import load_lab_config
-    from goniolab.scan.plans import BrdfPlan, PlanError
-
-    cfg = load_lab_config(config)
-    try:
-        plan = BrdfPlan(
-            theta_i_deg=float(theta_i_deg),
-            theta_r_deg=tuple(float(v) for v in _angles(theta_r_deg)),
-            repeats=int(repeats),
-            dwell_s=float(dwell_s),
-            exposure_us=cfg.spectro.exposure_us if exposure_us is None else int(exposure_us),
-            sample=sample or cfg.sample.map,
-            auto_exposure=bool(auto_exposure),
-        )
-    except PlanError as exc:
-        raise UserError(f"run_scan: {exc}") from None
-    location = resolve_store_path(None if store is None else str(store), cfg.lab.store)
-    return _ScanCall(
-        str(Path(config).resolve()), plan, location, time_scale, progress, meta or RunMeta()
-    )
-
-
-async def _scan_in_this_thread(call: _ScanCall, control: _ScanControl | None = None) -> Run:
-    """Open the store in the running thread, scan, close the store."""
-    from drivers.base import DeviceError
-
-    try:
-        rs = RunStore(call.location)
-    except StoreError as exc:
-        raise UserError(str(exc)) from exc
-    try:
-        with rs:
-            run_id = await _scan(
-                call.config_path,
-                call.plan,
-                rs,
-                call.time_scale,
-                call.progress,
-                control,
-                meta=call.meta,
-            )
-    except DeviceError as exc:
-        raise UserError(f"instrument error: {exc}", exit_code=1) from exc
-    return Run(run_id, call.location)
-
-
-def run_scan(
-    config: str | Path,
-    *,
-    sample: str | None = None,
-    theta_i_deg: float = 45.0,
-    theta_r_deg: str | Sequence[float] = "0:70:1",
-    repeats: int = DEFAULT_REPEATS,
-    dwell_s: float = 0.0,
-    exposure_us: int | None = None,
-    store: str | Path | None = None,
-    time_scale: float | None = None,
-    progress: bool = True,
-    operator: str | None = None,
-    sample_id: str | None = None,
-    notes: str | None = None,
-    tags: Sequence[str] = (),
-    auto_exposure: bool = True,
-) -> Run:
-    """Run an in-plane scan in one call (blocking) and return the stored :class:`Run`.
-
-    Works from a script and from a notebook cell (whose event loop is already running:
-    the scan then runs on its own loop in a worker thread, the store opened there). In a
-    notebook, ``await run_scan_async(...)`` runs it on the notebook's loop instead.
-    Interrupting the kernel aborts the scan (arms stopped and parked, the run stored
-    ``aborted``) and returns that run.
-
-    Parameters
-    ----------
-    config
-        Lab config TOML (``configs/lab-sim.toml`` for the simulated lab).
-    sample
-        ``sample:NAME`` or a height-map path (default: the config's ``[sample] map``).
-    theta_i_deg, theta_r_deg, repeats, dwell_s, exposure_us
-        The plan, as ``goniolab scan`` takes it.
-    store
-        Run store file or ``postgresql://`` URL (default: config ``[lab] store``, else
-        the user data dir).
-    time_scale
-        Simulated lab only: clock scale (0 = no waiting).
-    progress
-        Show a progress bar (``tqdm.auto``: a widget in a notebook, a text bar on stderr in
-        a terminal; never on stdout).
-    auto_exposure
-        Choose each reading's exposure from the instrument's signal level (the default,
-        as ``goniolab scan``); ``False`` keeps ``exposure_us``.
-    operator, sample_id, notes, tags
-        The run's identity (who measures, the physical sample's id, free text, tags),
-        stored with the run beside its UUID; the config's ``[run]`` table fills what is
-        left out. Change it later with :meth:`Run.annotate`.
-
-    Returns
-    -------
-    Run
-        Also when the run ends ``failed``: its ``status`` and ``record.reason`` say why and
-        what was measured stays stored.
-    """
-    call = _scan_call(
-        config,
-        sample=sample,
-        theta_i_deg=theta_i_deg,
-        theta_r_deg=theta_r_deg,
-        repeats=repeats,
-        dwell_s=dwell_s,
-        exposure_us=exposure_us,
-        store=store,
-        time_scale=time_scale,
-        progress=progress,
-        meta=RunMeta.given(operator, sample_id, notes, tags),
-        auto_exposure=auto_exposure,
-    )
-    control = _ScanControl()
-    return _run_blocking(_scan_in_this_thread(call, control), control)
+    return run
 
 
 async def run_scan_async(
@@ -760,72 +635,82 @@ async def run_scan_async(
     tags: Sequence[str] = (),
     auto_exposure: bool = True,
 ) -> Run:
-    """:func:`run_scan` as a coroutine on the caller's event loop: ``run = await
-    gl.run_scan_async(...)`` in a notebook cell (the kernel stays responsive to other
-    cells' ``await``s; the model work runs in threads). Same parameters and result."""
-    call = _scan_call(
-        config,
-        sample=sample,
-        theta_i_deg=theta_i_deg,
-        theta_r_deg=theta_r_deg,
-        repeats=repeats,
-        dwell_s=dwell_s,
-        exposure_us=exposure_us,
-        store=store,
-        time_scale=time_scale,
-        progress=progress,
-        meta=RunMeta.given(operator, sample_id, notes, tags),
-        auto_exposure=auto_exposure,
-    )
-    return await _scan_in_this_thread(call)
+    """Run an in-plane scan and return the stored :class:`Run`: ``run = await
+    gl.run_scan_async(...)`` on the caller's event loop (a notebook cell: the kernel stays
+    responsive to other cells' ``await``s; the model work runs in threads).
+    :func:`run_scan` is the same call, blocking.
 
+    The use case is :func:`goniolab.app.lab_scan.scan` (the one ``goniolab scan`` runs):
+    the config is read once, the plan built by :func:`goniolab.app.lab_setup.brdf_plan`.
 
-async def _scan(
-    config_path: str,
-    plan: Any,
-    store: RunStore,
-    time_scale: float | None,
-    progress: bool,
-    control: _ScanControl | None = None,
-    *,
-    meta: Any = None,
-) -> int:
-    from goniolab.config import load_lab_config
-    from goniolab.scan.events import Progress
-    from goniolab.scan.runner import PlanRefused
-    from goniolab.session import ScanSession
+    Parameters
+    ----------
+    config
+        Lab config TOML (``configs/lab-sim.toml`` for the simulated lab).
+    sample
+        ``sample:NAME`` or a height-map path (default: the config's ``[sample] map``).
+    theta_i_deg, theta_r_deg, repeats, dwell_s, exposure_us
+        The plan, as ``goniolab scan`` takes it.
+    store
+        Run store file or ``postgresql://`` URL (default: config ``[lab] store``, else
+        the user data dir).
+    time_scale
+        Simulated lab only: clock scale (0 = no waiting).
+    progress
+        Show a progress bar (:func:`goniolab.progress.auto_progress`: rich's bar as an
+        output widget in a notebook, a text bar on stderr in a terminal; never on stdout).
+    auto_exposure
+        Choose each reading's exposure from the instrument's signal level (the default,
+        as ``goniolab scan``); ``False`` keeps ``exposure_us``.
+    operator, sample_id, notes, tags
+        The run's identity (who measures, the physical sample's id, free text, tags),
+        stored with the run beside its UUID; the config's ``[run]`` table fills what is
+        left out. Change it later with :meth:`Run.annotate`.
 
-    cfg = load_lab_config(config_path)
-    async with ScanSession.open(cfg, store, sample=plan.sample, time_scale=time_scale) as session:
-        try:
-            runner = session.start(await session.prepare(plan), meta=meta)
-        except PlanRefused as exc:
-            raise UserError(f"plan refused (no arm moved): {exc}") from exc
-        run_id = runner.run_id
+    Returns
+    -------
+    Run
+        Also when the run ends ``failed``: its ``status`` and ``record.reason`` say why and
+        what was measured stays stored.
+    """
+    from goniolab.app.lab_scan import scan
+    from goniolab.app.lab_setup import brdf_plan, load_config, open_store, run_meta
+    from goniolab.app.lab_setup import store_location as location_of
+    from goniolab.progress import auto_progress
+
+    cfg = load_config(config)
+    plan = brdf_plan(
+        cfg, sample=sample or cfg.sample.map, theta_i_deg=theta_i_deg, theta_r_deg=theta_r_deg,
+        repeats=repeats, dwell_s=dwell_s, exposure_us=exposure_us, auto_exposure=auto_exposure,
+        what="run_scan", angles_option="theta_r_deg",
+    )  # fmt: skip
+    location = location_of(store, cfg.lab.store)
+    control = _CONTROL.get()
+    reporter = auto_progress() if progress else None
+
+    def started(runner: Any) -> None:
+        if reporter is not None:
+            reporter.label = f"run {runner.run_id}"
         if control is not None:
             control.loop, control.runner = asyncio.get_running_loop(), runner
-        bus = session.bus
-        queue = bus.subscribe()
 
-        async def report() -> None:
-            if not progress:
-                while await queue.get() is not None:
-                    pass
-                return
-            # tqdm.auto: an ipywidgets bar in a Jupyter kernel, a text bar on stderr
-            # elsewhere (never stdout, so a script's output stays clean)
-            from tqdm.auto import tqdm
+    # opened in the running thread (an SQLite connection stays in the thread that made it)
+    with open_store(location) as rs:
+        out = await scan(
+            cfg, rs, plan, time_scale=time_scale, reporter=reporter, on_start=started,
+            meta=run_meta(operator, sample_id, notes, tags),
+        )  # fmt: skip
+    return Run(out.run_id, location)
 
-            with tqdm(total=len(plan.points()), desc=f"run {run_id}", unit="pt") as bar:
-                while (ev := await queue.get()) is not None:
-                    if isinstance(ev, Progress):
-                        bar.total = ev.total
-                        bar.update(ev.done - bar.n)
 
-        reporter = asyncio.create_task(report())
-        try:
-            await session.run(runner)
-        finally:
-            bus.close()
-            await reporter
-    return run_id
+run_scan = _blocking(run_scan_async)
+run_scan.__doc__ = (
+    "Run an in-plane scan in one call (blocking) and return the stored :class:`Run`.\n\n"
+    "Works from a script and from a notebook cell (whose event loop is already running: the\n"
+    "scan then runs on its own loop in a worker thread, the store opened there). In a\n"
+    "notebook, ``await run_scan_async(...)`` runs it on the notebook's loop instead.\n"
+    "Interrupting the kernel aborts the scan (arms stopped and parked, the run stored\n"
+    "``aborted``) and returns that run.\n\n"
+    # the parameters and result of run_scan_async (python -OO strips both docstrings)
+    + (run_scan_async.__doc__ or "\n\n").split("\n\n", 1)[1]
+)

@@ -130,8 +130,6 @@ SIZED_ROOMS = ("goniolab", "drivers", "sim")
 #: module -> why it may be longer for now. Temporary: each is split by another engineer this
 #: round; the lead removes its entry after merging that split (a stale entry fails the test).
 OVERSIZED_FOR_NOW: dict[str, str] = {
-    "goniolab/api.py": "split by app-predict/app-scan this round",
-    "goniolab/commands/scan.py": "split by app-predict/app-scan this round",
     "goniolab/commands/_colour.py": "split by app-predict/app-scan this round",
     "goniolab/commands/predict.py": "split by app-predict/app-scan this round",
 }
@@ -286,8 +284,6 @@ PRIVATE_IMPORT_EXCEPTIONS: dict[str, str] = {
     "goniolab/commands/_colour.py: goniolab.commands.runs._get_run": "a run by id, one error",
     "goniolab/commands/fit.py: goniolab.commands.runs._get_run": "a run by id, one error",
     "goniolab/commands/plot.py: goniolab.commands.runs._get_run": "a run by id, one error",
-    "goniolab/commands/calibrate.py: goniolab.commands.scan._open": "the store of --store/config",
-    "goniolab/commands/calibrate.py: goniolab.commands.scan._specimen_prompt": "the operator",
 }
 
 
@@ -406,6 +402,91 @@ def test_the_private_import_checker_catches_each_form(tmp_path: Path) -> None:
         (5, "goniolab.surfaces._common"),
         (6, "goniolab.probe._own"),  # now another module's
     ]
+
+
+# --------------------------------------------------------------------- faces over the use cases
+#: The faces of the use cases on a lab (issue 24): they parse, call goniolab.app and present.
+LAB_FACES = (
+    "goniolab/commands/scan.py", "goniolab/commands/gloss.py", "goniolab/commands/calibrate.py",
+    "goniolab/commands/lab.py", "goniolab/commands/sim.py", "goniolab/commands/tui.py",
+    "goniolab/batch.py", "goniolab/bluesky_lab.py", "goniolab/tui/session_backend.py",
+)  # fmt: skip
+#: What a face may not import itself: the application layer loads the config, opens the
+#: store, builds the plan and opens the session.
+FACE_FORBIDDEN = ("goniolab.config", "goniolab.store", "goniolab.scan.plans", "goniolab.session")
+#: ``file: module`` -> why that face imports it all the same.
+FACE_IMPORT_EXCEPTIONS: dict[str, str] = {
+    "goniolab/commands/scan.py: goniolab.scan.plans": "DEFAULT_REPEATS, the --repeats default "
+    "shown at --help (stdlib-light; the TUI's form shows the same)",
+    "goniolab/bluesky_lab.py: goniolab.scan.plans": "DEFAULT_REPEATS, inplane_scan's default "
+    "repeats (the plan itself is built by goniolab.app.lab_setup.brdf_plan)",
+    "goniolab/tui/session_backend.py: goniolab.session": "the TUI keeps one ScanSession and one "
+    "GlossSession open while it runs (pause, resume, abort, coalesced gloss readings on the "
+    "scan's lab): a long-lived session, not one use case",
+    "goniolab/tui/session_backend.py: goniolab.scan.plans": "DEFAULT_REPEATS for the form, "
+    "BrdfPlan.from_dict to replay a stored run, GlossPlan for one reading",
+    "goniolab/tui/session_backend.py: goniolab.store": "RunMeta of the identity dialog; "
+    "StoreError, a store failure during a run shown as an event",
+}
+#: The functions of goniolab/api.py that are a lab face (the rest of the notebook API is
+#: another face's: predictions and stored runs).
+API_LAB_FUNCTIONS = ("run_scan_async", "_run_blocking", "_blocking")
+
+
+def _runtime_imports(tree: ast.AST) -> list[tuple[int, str]]:
+    """Imports outside ``if TYPE_CHECKING:`` blocks (a type named in an annotation loads
+    nothing and uses nothing)."""
+    skip: set[int] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
+            skip |= {id(n) for stmt in node.body for n in ast.walk(stmt)}
+    out: list[tuple[int, str]] = []
+    for node in ast.walk(tree):
+        if id(node) in skip:
+            continue
+        if isinstance(node, ast.Import):
+            out += [(node.lineno, alias.name) for alias in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            out.append((node.lineno, node.module))
+    return out
+
+
+def face_imports(path: Path) -> list[tuple[int, str]]:
+    """``(line, module)`` of the forbidden modules a lab face imports at run time."""
+    tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+    return [(line, mod) for line, mod in _runtime_imports(tree) if _hit(mod, FACE_FORBIDDEN)]
+
+
+def test_lab_faces_leave_config_store_plans_and_session_to_the_app_layer() -> None:
+    found: dict[str, int] = {}
+    for name in LAB_FACES:
+        for line, mod in face_imports(ROOT / name):
+            top = next(p for p in FACE_FORBIDDEN if _hit(mod, (p,)))
+            found.setdefault(f"{name}: {top}", line)
+    api = ast.parse((ROOT / "goniolab" / "api.py").read_text(encoding="utf-8"))
+    for node in api.body:
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef) and (
+            node.name in API_LAB_FUNCTIONS
+        ):
+            for line, mod in _runtime_imports(node):
+                if _hit(mod, FACE_FORBIDDEN):
+                    found.setdefault(f"goniolab/api.py: {mod}", line)
+    bad = [f"{where} (line {line})" for where, line in found.items()
+           if where not in FACE_IMPORT_EXCEPTIONS]  # fmt: skip
+    assert bad == [], "\n".join(bad)
+    stale = sorted(set(FACE_IMPORT_EXCEPTIONS) - set(found))
+    assert stale == [], f"exceptions no longer needed (remove them): {stale}"
+
+
+def test_the_face_checker_sees_runtime_imports_only(tmp_path: Path) -> None:
+    probe = tmp_path / "probe.py"
+    probe.write_text(
+        "from typing import TYPE_CHECKING\n"
+        "if TYPE_CHECKING:\n    from goniolab.store import RunStore\n"
+        "def f():\n    from goniolab.config import load_lab_config\n"
+        "    import goniolab.session\n    from goniolab.app.lab_setup import open_store\n"
+    )
+    assert face_imports(probe) == [(5, "goniolab.config"), (6, "goniolab.session")]
 
 
 # --------------------------------------------------------------------- one TOML loader
