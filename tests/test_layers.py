@@ -479,3 +479,28 @@ def test_the_app_layer_and_its_faces_are_under_800_lines() -> None:
     files = [*_files("goniolab/app"), *(ROOT / f for f in NO_LAB_FACES), ROOT / "goniolab/api.py"]
     lines = {f.relative_to(ROOT).as_posix(): len(f.read_text().splitlines()) for f in files}
     assert {name: n for name, n in lines.items() if n > MAX_MODULE_LINES} == {}
+
+
+#: The app-layer modules of the use cases without a lab (the lab's join as they are merged).
+NO_LAB_APP = tuple(
+    f"goniolab/app/{name}.py"
+    for name in (
+        "predictions",
+        "colours",
+        "colour_fit",
+        "stored_runs",
+        "spectra_files",
+        "sample_maps",
+    )
+)
+
+
+def test_the_app_layer_imports_no_face() -> None:
+    faces = ("goniolab.commands", "goniolab.api", "goniolab.tui", "goniolab.cli", "textual", "sim")
+    bad = [
+        f"{name}:{line}: imports {mod}"
+        for name in NO_LAB_APP
+        for line, mod in imports_of(ROOT / name)
+        if _hit(mod, faces)
+    ]
+    assert bad == [], "\n".join(bad)
