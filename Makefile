@@ -32,16 +32,16 @@ run: $(RUN_STAMP)
 	$(BIN)/goniolab tui --config configs/lab-sim.toml --autostart --gloss-every 5
 
 check: $(DEV_STAMP)
-	$(BIN)/ruff check goniolab drivers sim tests bench
-	$(BIN)/ruff format --check goniolab drivers sim tests bench
+	$(BIN)/ruff check goniolab drivers sim labtoml tests bench
+	$(BIN)/ruff format --check goniolab drivers sim labtoml tests bench
 	$(BIN)/mypy
 
 test: check
 	$(BIN)/python -m pytest -n 2 -q
 
 format: $(DEV_STAMP)
-	$(BIN)/ruff check --fix goniolab drivers sim tests bench
-	$(BIN)/ruff format goniolab drivers sim tests bench
+	$(BIN)/ruff check --fix goniolab drivers sim labtoml tests bench
+	$(BIN)/ruff format goniolab drivers sim labtoml tests bench
 
 bench: $(RUN_STAMP)
 	$(BIN)/python bench/bench_optics.py

@@ -18,6 +18,7 @@ ROOT = Path(__file__).resolve().parents[1]
 #: room -> module prefixes its files may not import (the lab wiring and ``sim serve`` are
 #: the only doors from the application into the simulator).
 FORBIDDEN: dict[str, tuple[str, ...]] = {
+    "labtoml": ("goniolab", "drivers", "sim"),  # the one TOML loader, below every room
     "drivers": ("goniolab", "sim"),
     "goniolab/optics": (
         "sim", "drivers", "goniolab.surfaces", "goniolab.scan", "goniolab.store",
@@ -124,19 +125,40 @@ def test_the_checker_sees_imports_inside_functions(tmp_path: Path) -> None:
 
 #: The most lines a module of these rooms may have (issue 24: rooms of one job each).
 MAX_MODULE_LINES = 800
-#: Rooms held to :data:`MAX_MODULE_LINES` (more join as they are split along their seams).
-SIZED_ROOMS = ("goniolab/store", "goniolab/export.py", "drivers", "goniolab/scan", "sim")
+#: Every room is held to :data:`MAX_MODULE_LINES`.
+SIZED_ROOMS = ("goniolab", "drivers", "sim")
+#: module -> why it may be longer for now. Temporary: each is split by another engineer this
+#: round; the lead removes its entry after merging that split (a stale entry fails the test).
+OVERSIZED_FOR_NOW: dict[str, str] = {
+    "goniolab/commands/scan.py": "split by app-predict/app-scan this round",
+    "goniolab/datasets.py": "split by app-predict/app-scan this round",
+}
+
+
+def module_lines(room: str) -> dict[str, int]:
+    """``path -> number of lines`` of every module of ``room``."""
+    return {
+        f.relative_to(ROOT).as_posix(): len(f.read_text(encoding="utf-8").splitlines())
+        for f in _files(room)
+    }
 
 
 @pytest.mark.parametrize("room", SIZED_ROOMS)
 def test_no_module_of_a_split_room_is_over_800_lines(room: str) -> None:
-    files = _files(room)
-    assert files, f"{room} has no Python files: the table is out of date"
-    lines = {
-        str(f.relative_to(ROOT)): len(f.read_text(encoding="utf-8").splitlines()) for f in files
+    lines = module_lines(room)
+    assert len(lines) > 10, f"{room} has (almost) no Python files: the table is out of date"
+    big = {
+        name: n
+        for name, n in lines.items()
+        if n > MAX_MODULE_LINES and name not in OVERSIZED_FOR_NOW
     }
-    big = {name: n for name, n in lines.items() if n > MAX_MODULE_LINES}
     assert big == {}, big
+
+
+def test_the_oversized_exceptions_are_still_needed() -> None:
+    lines = {name: n for room in SIZED_ROOMS for name, n in module_lines(room).items()}
+    stale = sorted(n for n in OVERSIZED_FOR_NOW if lines.get(n, 0) <= MAX_MODULE_LINES)
+    assert stale == [], f"split since (or gone): remove from OVERSIZED_FOR_NOW: {stale}"
 
 
 def _names_from(path: Path, package: str) -> list[tuple[int, str, str]]:
@@ -184,9 +206,6 @@ OPTICS_MAY_IMPORT = (
     "goniolab.lazy_imports",
 )
 
-#: most lines of one module in a room (issue 24: one job per module)
-MAX_MODULE_LINES = 800
-
 
 def test_optics_imports_only_numerics_and_itself() -> None:
     bad = [
@@ -209,15 +228,6 @@ def test_optics_uses_no_relative_imports() -> None:
     assert bad == [], bad
 
 
-def test_no_optics_module_is_over_800_lines() -> None:
-    long = {
-        str(f.relative_to(ROOT)): n
-        for f in _files("goniolab/optics")
-        if (n := len(f.read_text(encoding="utf-8").splitlines())) > MAX_MODULE_LINES
-    }
-    assert long == {}, long
-
-
 def test_the_optics_checker_catches_a_foreign_import(tmp_path: Path) -> None:
     probe = tmp_path / "probe.py"
     probe.write_text("import math\nimport numpy as np\nfrom goniolab.config import LabConfig\n")
@@ -231,7 +241,7 @@ def test_the_optics_checker_catches_a_foreign_import(tmp_path: Path) -> None:
 
 # --------------------------------------------------------------------- names between modules
 #: The packages whose module names are unique and whose ``_private`` names stay home (issue 24).
-NAMED_ROOMS = ("goniolab", "drivers", "sim")
+NAMED_ROOMS = ("goniolab", "drivers", "sim", "labtoml")
 
 
 def repeated_module_names(paths: list[str]) -> dict[str, list[str]]:
@@ -392,6 +402,42 @@ def test_the_private_import_checker_catches_each_form(tmp_path: Path) -> None:
     ]
 
 
+# --------------------------------------------------------------------- one TOML loader
+#: The one module that parses TOML (issue 24: TOML was read three ways, each with its own
+#: words for the same error); every other module calls :func:`labtoml.read_toml` or
+#: :func:`labtoml.parse_toml`.
+TOML_LOADER = "labtoml/__init__.py"
+#: file -> why it may still import :mod:`tomllib` itself (temporary).
+TOMLLIB_EXCEPTIONS: dict[str, str] = {}
+
+
+def tomllib_importers() -> dict[str, int]:
+    """``path -> line`` of every module of the house that imports :mod:`tomllib`."""
+    found: dict[str, int] = {}
+    for room in NAMED_ROOMS:
+        for f in _files(room):
+            for line, mod in imports_of(f):
+                if _hit(mod, ("tomllib", "tomli", "toml")):
+                    found.setdefault(f.relative_to(ROOT).as_posix(), line)
+    return found
+
+
+def test_toml_is_parsed_by_the_one_loader() -> None:
+    found = tomllib_importers()
+    assert TOML_LOADER in found, "the loader no longer imports tomllib: the table is stale"
+    bad = sorted(f"{name}:{line}" for name, line in found.items() if name != TOML_LOADER)
+    bad = [b for b in bad if b.split(":")[0] not in TOMLLIB_EXCEPTIONS]
+    assert bad == [], "\n".join(bad)
+    stale = sorted(set(TOMLLIB_EXCEPTIONS) - set(found))
+    assert stale == [], f"exceptions no longer needed (remove them): {stale}"
+
+
+def test_the_toml_loader_imports_only_the_standard_library() -> None:
+    mods = [m for _, m in imports_of(ROOT / TOML_LOADER)]
+    assert "tomllib" in mods
+    assert [m for m in mods if m.split(".")[0] not in sys.stdlib_module_names] == []
+
+
 # --------------------------------------------------------------------- faces call the app layer
 #: The faces of the use cases without a lab (issue 24): they parse, call
 #: :mod:`goniolab.app` and present; none opens a store, loads a config or builds a plan.
@@ -473,12 +519,6 @@ def test_the_face_checker_sees_a_store_opened_in_a_function(tmp_path: Path) -> N
     found = _goniolab_imports(ast.parse(probe.read_text()).body)
     assert found == [(2, "goniolab.store"), (3, "goniolab.app"), (4, "goniolab.config")]
     assert [m for _, m in found if _hit(m, FACE_FORBIDDEN)] == ["goniolab.store", "goniolab.config"]
-
-
-def test_the_app_layer_and_its_faces_are_under_800_lines() -> None:
-    files = [*_files("goniolab/app"), *(ROOT / f for f in NO_LAB_FACES), ROOT / "goniolab/api.py"]
-    lines = {f.relative_to(ROOT).as_posix(): len(f.read_text().splitlines()) for f in files}
-    assert {name: n for name, n in lines.items() if n > MAX_MODULE_LINES} == {}
 
 
 #: The app-layer modules of the use cases without a lab (the lab's join as they are merged).

@@ -15,7 +15,6 @@ Named ``colours``: a module name is used once in the tree (``goniolab/scan/colou
 from __future__ import annotations
 
 import math
-import tomllib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -48,16 +47,13 @@ __all__ = [
 def load_paint_file(path: str) -> Any:
     """A :class:`goniolab.colour.paint.Paint` from a TOML file (``n,k`` tables beside it)."""
     from goniolab.colour.paint import PaintError, paint_from_dict
+    from labtoml import TomlFileError, read_toml
 
     p = Path(path)
     try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise UserError(f"{p}: cannot read: {exc.strerror}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise UserError(f"{p}: not valid TOML: {exc}") from None
-    except RecursionError:  # tomllib recurses once per nested array / inline table
-        raise UserError(f"{p}: arrays or tables nested too deeply to be a paint") from None
+        data = read_toml(p, what="paint file")
+    except TomlFileError as exc:
+        raise UserError(str(exc)) from None
     tables: dict[str, str] = {}
     metallic = data.get("metallic")
     metal = metallic.get("metal") if isinstance(metallic, dict) else None

@@ -36,7 +36,6 @@ References
 from __future__ import annotations
 
 import math
-import tomllib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -44,6 +43,7 @@ from typing import Any
 import numpy as np
 
 from goniolab.colour.difference import DIFFERENCE_METHODS, differences
+from labtoml import TomlFileError, parse_toml
 
 __all__ = [
     "BUILTIN_SETS",
@@ -322,9 +322,9 @@ def load_tolerance_set(name_or_path: str, text: str | None = None) -> ToleranceS
             "or a FILE.toml)"
         )
     try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ToleranceError(f"{name_or_path}: not valid TOML: {exc}") from None
+        doc = parse_toml(text, name_or_path, what="tolerance set")
+    except TomlFileError as exc:
+        raise ToleranceError(str(exc)) from None
     return tolerance_from_dict(doc, where=name_or_path)
 
 

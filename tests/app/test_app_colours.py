@@ -59,7 +59,7 @@ def test_colour_input_errors_are_one_line_each(tmp_path: Path) -> None:
         )
     bad = tmp_path / "paint.toml"
     bad.write_text("coat = [")
-    with pytest.raises(UserError, match=r"paint.toml: not valid TOML"):
+    with pytest.raises(UserError, match=r"paint.toml: TOML syntax error: "):
         load_paint_file(str(bad))
 
 
