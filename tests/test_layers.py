@@ -463,7 +463,7 @@ FACE_IMPORT_EXCEPTIONS: dict[str, str] = {
 #: (goniolab.app's scan use cases); the module-level imports they need are listed here.
 API_LAB_NAMES = {
     "_ScanControl", "_run_blocking", "_ScanCall", "_scan_call", "_scan_in_this_thread",
-    "run_scan", "run_scan_async", "_scan", "_angles",
+    "run_scan", "run_scan_async", "_scan", "_angles", "_blocking",
 }  # fmt: skip
 API_MODULE_IMPORT_EXCEPTIONS: dict[str, str] = {
     "goniolab.store": "run_scan opens its store (RunMeta, RunStore); Run.record's type",
