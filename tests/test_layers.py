@@ -131,7 +131,6 @@ SIZED_ROOMS = ("goniolab", "drivers", "sim")
 #: round; the lead removes its entry after merging that split (a stale entry fails the test).
 OVERSIZED_FOR_NOW: dict[str, str] = {
     "goniolab/commands/scan.py": "split by app-predict/app-scan this round",
-    "goniolab/datasets.py": "split by app-predict/app-scan this round",
 }
 
 
@@ -524,14 +523,7 @@ def test_the_face_checker_sees_a_store_opened_in_a_function(tmp_path: Path) -> N
 #: The app-layer modules of the use cases without a lab (the lab's join as they are merged).
 NO_LAB_APP = tuple(
     f"goniolab/app/{name}.py"
-    for name in (
-        "predictions",
-        "colours",
-        "colour_fit",
-        "stored_runs",
-        "spectra_files",
-        "sample_maps",
-    )
+    for name in ("predictions", "colours", "colour_fit", "stored_runs", "sample_maps")
 )
 
 

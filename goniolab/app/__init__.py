@@ -13,7 +13,7 @@ Modules (each imported on its own, so ``goniolab --help`` stays light):
 - :mod:`goniolab.app.colours`: predict colour, runs colour, render of the predicted paint;
   :mod:`goniolab.app.colour_fit`: fit colour;
 - :mod:`goniolab.app.stored_runs`: runs list / show / export / import / annotate / spectra
-  / migrate, plot of a run (:mod:`goniolab.app.spectra_files`: spectra files);
+  / migrate, plot of a run;
   :mod:`goniolab.app.sample_maps`: the built-in samples;
 - :mod:`goniolab.app.scan`: scan, align and resume on a lab, the gloss log, calibrate.
 """

@@ -208,7 +208,7 @@ def predict_colour(
     import numpy as np
 
     from goniolab.app.predictions import parse_angle_list
-    from goniolab.app.spectra_files import write_spectra
+    from goniolab.app.stored_runs import write_spectra
     from goniolab.colour.exchange import MultiAngleSpectra
     from goniolab.colour.multiangle import (
         E2194_ASPECULAR_DEG,

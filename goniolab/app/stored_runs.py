@@ -56,6 +56,7 @@ __all__ = [
     "summarize_run",
     "writable_store",
     "write_run_spectra",
+    "write_spectra",
 ]
 
 Location = Path | str
@@ -441,24 +442,33 @@ def write_run_spectra(
     config: str | Path | None = None,
 ) -> SpectraWritten:
     """Write a scan's ``measured``/``predicted``/``both`` spectra as reflectance factors
-    (:func:`goniolab.app.spectra_files.write_spectra`: CSV ``R_400..``, Parquet, netCDF)."""
-    from goniolab.app.spectra_files import run_spectra_tables, write_spectra
+    (:func:`goniolab.run_spectra.spectra_tables`, written by
+    :func:`goniolab.spectra_files.write_spectra_file`: CSV ``R_400..``, Parquet, netCDF)."""
+    from goniolab.run_spectra import spectra_tables
 
     with open_store(store, config) as s:
         rec = _scan_run(s, run_id, "spectra need a scan (brdf) run")
-        tables = run_spectra_tables(s, rec, which)
+        tables, attrs = spectra_tables(s, rec.id, which)
     if not tables:
         raise UserError(f"run {rec.id} has no {which} spectra on one wavelength grid")
-    cfg = rec.config if isinstance(rec.config, dict) else {}
-    attrs = {
-        "run_id": rec.id,
-        "sample": rec.sample,
-        "colour_scale": str((cfg.get("colour") or {}).get("scale", "diffuser")),
-        "detector_cone_deg": float((cfg.get("spectro") or {}).get("detector_cone_deg", 6.0)),
-    }
-    fmt = write_spectra(tables, str(output), attrs, mirror_scale=attrs["colour_scale"] == "mirror")
+    fmt = write_spectra(tables, output, attrs, mirror_scale=attrs["colour_scale"] == "mirror")
     rows = sum(t.factors.shape[0] for t in tables)
     return SpectraWritten(rec.id, rows, which, fmt, Path(output))
+
+
+def write_spectra(
+    tables: Sequence[Any], output: str | Path, attrs: dict[str, Any], *, mirror_scale: bool
+) -> str:
+    """:func:`goniolab.spectra_files.write_spectra_file`, its errors as :class:`UserError`
+    (a suffix no format has, a file that cannot be written); returns the format."""
+    from goniolab.spectra_files import write_spectra_file
+
+    try:
+        return write_spectra_file(tables, output, attrs, mirror_scale=mirror_scale)
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
+    except OSError as exc:
+        raise UserError(f"{output}: cannot write: {exc.strerror or exc}") from None
 
 
 # ----------------------------------------------------------------------- write: meta, import

@@ -568,9 +568,18 @@ class ScanRunner(SpectroReadings):
                 measured_theta_r_deg=self._measured_deg[1],
                 predicted_pct=self._predicted.get(p.index),
                 lab=None if colour is None else (colour["L"], colour["a"], colour["b"]),
+                xyz=None if colour is None else (colour["X"], colour["Y"], colour["Z"]),
+                white_xyz=None if colour is None else self._white_xyz(),
                 quality=quality,
             )
         )
+
+    def _white_xyz(self) -> tuple[float, float, float]:
+        """The white of the run's colour settings (what its L*a*b* is relative to)."""
+        from goniolab.colour.spectra import white_xyz
+
+        x, y, z = (float(v) for v in white_xyz(self.point_colour.settings))
+        return (x, y, z)
 
     async def _store_reading(self, p: PlanPoint, write: Callable[[], None]) -> None:
         """Commit reading ``p`` with ``write``. When the store cannot take it

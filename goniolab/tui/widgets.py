@@ -64,7 +64,8 @@ class ColourTable(DataTable[str]):
     """Per point: theta_r, the E2194 aspecular angle, measured L*a*b*, predicted L*, the
     signed dL*, dC*, dH* and dE00 (predicted - measured) and the verdict of the tolerance
     set at that aspecular angle (:data:`goniolab.colour.tolerance.BUILTIN_SETS`
-    ``din6175-2`` by default); a last row gives the overall verdict."""
+    ``din6175-2`` by default); a last row gives the overall verdict, with ``prov.`` beside
+    it for a provisional set (``din6175-2``'s limits are goniolab's, not the standard's)."""
 
     #: The tolerance set judged per angle (a :class:`goniolab.colour.tolerance.ToleranceSet`).
     tolerance_name = "din6175-2"
@@ -109,7 +110,9 @@ class ColourTable(DataTable[str]):
             )
         if overall["checked_angles"] and np.all(np.isfinite(d["dE00"])):
             verdict = "PASS" if overall["passed"] else "FAIL"
-            self.add_row("overall", "", "", "", "", "", "", "", "", tol.name[:6], verdict)
+            # a set whose limits are not confirmed says so beside its verdict
+            prov = "prov." if tol.provisional else ""
+            self.add_row("overall", "", "", "", "", "", "", "", prov, tol.name[:6], verdict)
 
 
 def fmt_num(value: float | None, digits: int = 2) -> str:

@@ -394,6 +394,7 @@ async def test_colour_columns_swatch_and_colour_plot(tmp_path: Path) -> None:
         assert table.row_count == 4  # three points and the din6175-2 overall verdict
         assert str(table.get_cell_at((3, 0))) == "overall"
         assert str(table.get_cell_at((3, 10))) in ("PASS", "FAIL")
+        assert str(table.get_cell_at((3, 8))) == "prov."  # din6175-2's limits: provisional
         assert str(table.get_cell_at((1, 2))) == f"{c.measured_lab[1, 0]:.1f}"
         # the E2194 aspecular angle (theta_i - theta_r) and dE00 against colour-science
         import colour
