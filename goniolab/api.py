@@ -23,7 +23,7 @@ import asyncio
 import concurrent.futures
 import contextvars
 import functools
-import math
+import json
 import sys
 from collections.abc import Callable, Coroutine, Sequence
 from dataclasses import dataclass
@@ -34,14 +34,13 @@ import numpy as np
 
 from goniolab.errors import UserError
 from goniolab.scan.plans import DEFAULT_REPEATS
-from goniolab.store import RunRecord, RunStore, StoreError, resolve_store_path
+from goniolab.store import RunRecord
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
     import pandas as pd
     import xarray as xr
 
-    from goniolab.optics.heightmap import HeightMap
-    from goniolab.optics.models import ReflectanceModel
+    from goniolab.app.predictions import SurfaceRequest
 
 __all__ = [
     "Run",
@@ -58,90 +57,8 @@ __all__ = [
 _T = TypeVar("_T")
 _P = ParamSpec("_P")
 
-#: Default source and detector cones of the Wittmann goniometer (sec. 2.3), full angles.
-DEFAULT_CONE_DEG = 6.0
-
 
 # --------------------------------------------------------------------------- surfaces
-def _heightmap(surface: Any, step_um: float | None = None) -> HeightMap:
-    from goniolab.optics.heightmap import HeightMap
-    from goniolab.surfaces.resolve import resolve_map
-
-    if isinstance(surface, HeightMap):
-        return surface
-    if isinstance(surface, str | Path):
-        return resolve_map(surface, step_um=step_um)
-    attrs = getattr(surface, "attrs", None)
-    if attrs is not None and getattr(surface, "ndim", 0) == 2:
-        return _dataarray_heightmap(surface)
-    raise UserError(
-        f"surface: expected a file path, sample:NAME or a load_surface() DataArray, "
-        f"got {type(surface).__name__}"
-    )
-
-
-#: Relative tolerance between a DataArray's coordinate steps and its dx_um/dy_um attributes
-#: (and between its own steps: the grid must be regular).
-_STEP_RTOL = 1e-6
-
-
-def _coordinate_step(da: Any, dim: str, attr: str) -> float:
-    """The lateral step along ``dim``: its coordinates' spacing, checked regular and
-    against the ``attr`` attribute when both exist.
-
-    After ``z.isel(x_um=slice(None, None, 2))`` or ``z.coarsen(x_um=2).mean()`` xarray keeps
-    the attributes (``dx_um = 1``) while the coordinates step by 2: the step from the
-    attribute silently gave the gloss of a map twice as steep (issue 22.10). The
-    coordinates are what xarray keeps right, so they decide; a disagreeing attribute is
-    refused rather than guessed over.
-    """
-    name = f"surface DataArray: {dim}"
-    given = da.attrs.get(attr)
-    coord = da.coords.get(dim)
-    if coord is None or coord.size < 2:
-        if given is None:
-            raise UserError(f"{name}: no coordinates and no {attr} attribute (use load_surface)")
-        step = float(given)
-    else:
-        diffs = np.diff(np.asarray(coord.values, dtype=np.float64))
-        step = float(np.mean(diffs))
-        if not (math.isfinite(step) and step > 0):
-            raise UserError(f"{name}: coordinates must increase (mean step {step:g} um)")
-        if float(np.max(np.abs(diffs - step))) > _STEP_RTOL * step:
-            raise UserError(
-                f"{name}: coordinates are not evenly spaced (steps {float(diffs.min()):g} to "
-                f"{float(diffs.max()):g} um): a height map needs a regular grid"
-            )
-        if given is not None and abs(float(given) - step) > _STEP_RTOL * step:
-            raise UserError(
-                f"{name}: coordinates step by {step:g} um but attrs['{attr}'] = {float(given):g}"
-                f" (after isel/coarsen/interp xarray keeps the old attribute): set "
-                f"attrs['{attr}'] = {step:g} or delete it"
-            )
-    if not (math.isfinite(step) and step > 0):
-        raise UserError(f"{name}: step {step:g} um must be positive")
-    return step
-
-
-def _dataarray_heightmap(da: Any) -> HeightMap:
-    from goniolab.optics.heightmap import HeightMap
-
-    dims = tuple(da.dims)
-    if set(dims) == {"y_um", "x_um"} and dims != ("y_um", "x_um"):
-        da = da.transpose("y_um", "x_um")  # rows are y, whatever order the user left
-    elif dims != ("y_um", "x_um"):
-        raise UserError(f"surface DataArray: dims {dims}, expected ('y_um', 'x_um')")
-    try:
-        return HeightMap(
-            np.asarray(da.values, dtype=np.float64),
-            _coordinate_step(da, "x_um", "dx_um"),
-            _coordinate_step(da, "y_um", "dy_um"),
-            source=str(da.attrs.get("source", "<DataArray>")),
-        )
-    except ValueError as exc:
-        raise UserError(f"surface DataArray: {exc}") from None
-
-
 def load_surface(path: str | Path, *, step_um: float | None = None) -> xr.DataArray:
     """A height map as a DataArray ``height_um`` with dims ``(y_um, x_um)``.
 
@@ -161,34 +78,10 @@ def load_surface(path: str | Path, *, step_um: float | None = None) -> xr.DataAr
         the steps from the coordinates (so ``isel``/``coarsen`` results work once
         ``dx_um``/``dy_um`` are set right or deleted; a disagreeing attribute is refused).
     """
+    from goniolab.app.predictions import heightmap_of
     from goniolab.datasets import heightmap_dataarray
 
-    return heightmap_dataarray(_heightmap(path, step_um))
-
-
-def _model(
-    surface: Any,
-    *,
-    n: complex | float,
-    step_um: float | None,
-    slope_method: str,
-    weighting: str,
-    masking: bool,
-    model: str = "auto",
-    wavelength_nm: float | None = None,
-) -> ReflectanceModel:
-    from goniolab.model_cache import model_for
-
-    options: dict[str, Any] = {
-        "slope_method": slope_method,
-        "weighting": weighting,
-        "masking": masking,
-        "model": model,
-        "wavelength_nm": wavelength_nm,
-    }
-    if isinstance(surface, str | Path):
-        return model_for(surface, n=n, step_um=step_um, **options)
-    return model_for(_heightmap(surface, step_um), n=n, **options)
+    return heightmap_dataarray(heightmap_of(path, step_um))
 
 
 def _angles(theta_r_deg: str | Sequence[float] | np.ndarray) -> np.ndarray:
@@ -201,25 +94,14 @@ def _angles(theta_r_deg: str | Sequence[float] | np.ndarray) -> np.ndarray:
         raise UserError(str(exc)) from None
 
 
-def _source_label(surface: Any) -> str:
-    if isinstance(surface, str | Path):
-        return str(surface)
-    return str(getattr(surface, "attrs", {}).get("source", getattr(surface, "source", "")))
-
-
-def _index_attr(n: complex | float) -> float | list[float]:
-    c = complex(n)
-    return c.real if c.imag == 0 else [c.real, c.imag]
-
-
 def predict_brdf(
     surface: Any,
     *,
     theta_i_deg: float = 45.0,
     theta_r_deg: str | Sequence[float] | np.ndarray = "0:70:1",
     n: complex | float = 1.55,
-    source_deg: float = DEFAULT_CONE_DEG,
-    detector_deg: float = DEFAULT_CONE_DEG,
+    source_deg: float | None = None,
+    detector_deg: float | None = None,
     point: bool = False,
     step_um: float | None = None,
     slope_method: str = "forward",
@@ -242,9 +124,11 @@ def predict_brdf(
     n
         Refractive index (complex ``n + ik`` for metals).
     source_deg, detector_deg
-        Full angles of the lamp and detector cones (the goniometer's apertures).
+        Full angles of the lamp and detector cones (the goniometer's apertures; default
+        6 deg each, the Wittmann goniometer's).
     point
-        The BRDF in the exact direction only (no apertures, no ``luminance_pct``).
+        The BRDF in the exact direction only (no apertures, no ``luminance_pct``; no cone
+        may then be given).
     model, wavelength_nm
         ``auto`` (default: the regime rule per geometry), ``facet``, ``kirchhoff`` or
         ``rayleigh-rice``, and the wave models' wavelength (see
@@ -260,52 +144,36 @@ def predict_brdf(
         ``brdf_sr`` (1/sr: luminance / 100 / projected solid angle of the detector, or the
         point BRDF with ``point=True``); coords ``theta_i_deg`` and ``aspecular_deg``.
     """
+    from goniolab.app.predictions import API_NAMES, index_json
+    from goniolab.app.predictions import predict_brdf as predict
     from goniolab.datasets import brdf_dataset
-    from goniolab.optics.apertures import Cone, projected_solid_angle_sr
-    from goniolab.scan.prediction import model_name
 
-    ti = float(theta_i_deg)
-    if not (math.isfinite(ti) and 0.0 <= ti < 90.0):
-        raise UserError(f"theta_i_deg {theta_i_deg}: must be in [0, 90) deg")
-    tr = _angles(theta_r_deg)
-    if np.any(np.abs(tr) >= 90.0):
-        raise UserError("theta_r_deg: angles must be in (-90, 90) deg")
-    refl = _model(
-        surface,
-        n=n,
-        step_um=step_um,
-        slope_method=slope_method,
-        weighting=weighting,
-        masking=masking,
-        model=model,
-        wavelength_nm=wavelength_nm,
+    req = _request(surface, n, step_um, slope_method, weighting, masking, model, wavelength_nm)
+    p = predict(
+        req,
+        theta_i_deg=theta_i_deg,
+        theta_r_deg=theta_r_deg,
+        source_deg=source_deg,
+        detector_deg=detector_deg,
+        point=point,
+        names=API_NAMES,
     )
     attrs: dict[str, Any] = {
-        "sample": _source_label(surface),
-        "n": _index_attr(n),
+        "sample": p.surface,
+        "n": index_json(p.n),
         "weighting": weighting,
         "slope_method": slope_method,
         "masking": int(masking),
-        "model": type(refl).__name__,
-        "model_name": model_name(refl),
+        "model": p.model_class,
+        "model_name": p.model_kind,
+        "computed_by": json.dumps(p.models),
+        "warnings": json.dumps(p.warnings),
     }
-    if point:
-        brdf = np.asarray(refl.brdf_inplane(ti, tr), dtype=np.float64)
-        return brdf_dataset(ti, tr, brdf, None, attrs={**attrs, "aperture": "none (point)"})
-    try:
-        src, det = Cone(float(source_deg)), Cone(float(detector_deg))
-    except ValueError as exc:
-        raise UserError(f"source_deg/detector_deg: {exc}") from None
-    if det.full_angle_deg == 0.0:
-        raise UserError("detector_deg 0 has no solid angle: use point=True for the BRDF")
-    try:
-        lum = np.asarray(refl.luminance_pct(ti, tr, source=src, detector=det), dtype=np.float64)
-    except ValueError as exc:
-        raise UserError(f"theta_i_deg {ti:g} / source_deg: {exc}") from None
-    om = np.array([projected_solid_angle_sr(det, float(t)) for t in tr])
-    brdf = np.where(om > 0, lum / 100.0 / np.where(om > 0, om, 1.0), 0.0)
-    attrs.update(source_cone_deg=src.full_angle_deg, detector_cone_deg=det.full_angle_deg)
-    return brdf_dataset(ti, tr, brdf, lum, attrs=attrs)
+    if p.luminance_pct is None:
+        attrs["aperture"] = "none (point)"
+    else:
+        attrs.update(source_cone_deg=p.source_deg, detector_cone_deg=p.detector_deg)
+    return brdf_dataset(p.theta_i_deg, p.theta_r_deg, p.brdf_sr, p.luminance_pct, attrs=attrs)
 
 
 def predict_gloss(
@@ -330,42 +198,39 @@ def predict_gloss(
         ``gloss_gu`` along ``geometry_deg`` (20, 60, 85), scalar ``haze_index``, ``doi``
         and the E430 readings; ``d523_recommended_angle_deg`` as an attribute.
     """
+    from goniolab.app.predictions import API_NAMES, index_json
+    from goniolab.app.predictions import predict_gloss as predict
     from goniolab.datasets import gloss_dataset
-    from goniolab.optics.gloss_standards import gloss_report
 
-    refl = _model(
-        surface,
-        n=n,
-        step_um=step_um,
-        slope_method=slope_method,
-        weighting=weighting,
-        masking=masking,
-        model=model,
-        wavelength_nm=wavelength_nm,
-    )
-    return gloss_dataset(
-        gloss_report(refl),
-        attrs={"sample": _source_label(surface), "n": _index_attr(n), "weighting": weighting},
-    )
+    req = _request(surface, n, step_um, slope_method, weighting, masking, model, wavelength_nm)
+    p = predict(req, names=API_NAMES)
+    attrs = {
+        "sample": p.surface,
+        "n": index_json(p.n),
+        "weighting": weighting,
+        "computed_by": json.dumps(p.computed_by),
+        "warnings": json.dumps(p.warnings),
+    }
+    return gloss_dataset(p.report, attrs=attrs)
+
+
+def _request(
+    surface: Any,
+    n: complex | float,
+    step_um: float | None,
+    slope_method: str,
+    weighting: str,
+    masking: bool,
+    model: str,
+    wavelength_nm: float | None,
+) -> SurfaceRequest:
+    from goniolab.app.predictions import SurfaceRequest as Request
+
+    return Request(surface, complex(n), step_um, slope_method, weighting, masking, model,
+                          wavelength_nm)  # fmt: skip
 
 
 # --------------------------------------------------------------------------- runs
-def _store_location(store: str | Path | None, config: str | Path | None = None) -> str | Path:
-    config_store = None
-    if config is not None:
-        from goniolab.config import load_lab_config
-
-        config_store = load_lab_config(config).lab.store
-    return resolve_store_path(None if store is None else str(store), config_store)
-
-
-def _open_readonly(location: str | Path) -> RunStore:
-    try:
-        return RunStore(location, readonly=True)
-    except StoreError as exc:
-        raise UserError(str(exc)) from exc
-
-
 @dataclass(frozen=True)
 class Run:
     """A stored run: its record and its data as xarray / pandas.
@@ -392,22 +257,20 @@ class Run:
     ) -> RunRecord:
         """Set the run's operator, physical sample id, notes or tags (``None`` keeps one;
         the config's ``[run]`` table gives a new run its defaults); returns the record."""
-        try:
-            with RunStore(self.store, create=False) as s:
-                return s.set_meta(
-                    self.id, operator=operator, sample_id=sample_id, notes=notes, tags=tags
-                )
-        except StoreError as exc:
-            raise UserError(str(exc)) from exc
+        from goniolab.app.stored_runs import annotate_run
+
+        return annotate_run(
+            self.id, store=self.store, operator=operator, sample_id=sample_id, notes=notes,
+            tags=tags,
+        )  # fmt: skip
 
     @property
     def record(self) -> RunRecord:
         """The run's row: kind, plan, config snapshot, sample, model, status, times."""
-        with _open_readonly(self.store) as s:
-            try:
-                return s.get_run(self.id)
-            except StoreError as exc:
-                raise UserError(str(exc)) from exc
+        from goniolab.app.stored_runs import get_run, open_store
+
+        with open_store(self.store) as s:
+            return get_run(s, self.id)
 
     @property
     def status(self) -> str:
@@ -417,41 +280,30 @@ class Run:
     def to_xarray(self) -> xr.Dataset:
         """Measured, predicted, residual (and colour) per point: see
         :func:`goniolab.datasets.run_dataset`."""
-        from goniolab.datasets import run_dataset
+        from goniolab.app.stored_runs import run_xarray
 
-        with _open_readonly(self.store) as s:
-            try:
-                return run_dataset(s, self.id)
-            except StoreError as exc:
-                raise UserError(str(exc)) from exc
+        return run_xarray(self.id, self.store)
 
     def to_dataframe(self) -> pd.DataFrame:
         """One row per reading (the CSV export's columns, ``timestamp`` as UTC datetimes)."""
-        from goniolab.export import run_dataframe
+        from goniolab.app.stored_runs import run_dataframe
 
-        with _open_readonly(self.store) as s:
-            try:
-                s.get_run(self.id)
-                return run_dataframe(s, self.id)
-            except StoreError as exc:
-                raise UserError(str(exc)) from exc
+        return run_dataframe(self.id, self.store)
 
     def summary(self) -> dict[str, Any]:
         """The summary ``goniolab runs show`` prints (RMSE, peaks, counts)."""
-        from goniolab.commands.runs import run_summary
+        from goniolab.app.stored_runs import summarize_run
 
-        with _open_readonly(self.store) as s:
-            return run_summary(s, self.record)
+        return summarize_run(self.id, self.store)
 
     def plot(self, out: str | Path | None = None, *, log: bool = False) -> Any:
         """The figure ``goniolab plot`` draws; saved to ``out`` when given.
 
         In a notebook the figure shows inline as the cell's value (no ``%matplotlib
         inline`` needed: :func:`_show_figures_inline`)."""
-        from goniolab.run_plots import plot_run
+        from goniolab.app.stored_runs import plot_run
 
-        with _open_readonly(self.store) as s:
-            fig = plot_run(s, self.id, out=out, log=log)
+        fig = plot_run(self.id, out, log=log, store=self.store).figure
         _show_figures_inline()
         return fig
 
@@ -503,7 +355,9 @@ def open_dataset(path: str | Path) -> xr.Dataset:
 
 def open_run(run_id: int, store: str | Path | None = None) -> Run:
     """Run ``run_id`` of the store (``None``: the default store, as the CLI's)."""
-    run = Run(int(run_id), _store_location(store))
+    from goniolab.app.stored_runs import store_path
+
+    run = Run(int(run_id), store_path(store))
     run.record  # noqa: B018 - fail here, with the store's message, when it does not exist
     return run
 
@@ -518,28 +372,24 @@ def open_runs(
     """
     import pandas as pd
 
-    from goniolab.commands.runs import interrupted
+    from goniolab.app.stored_runs import list_runs
 
-    location = _store_location(store, config)
-    rows: list[dict[str, Any]] = []
-    with _open_readonly(location) as s:
-        for r in s.list_runs(limit=limit):
-            rows.append(
-                {
-                    "id": r.id,
-                    "kind": r.kind,
-                    "status": r.status,
-                    "interrupted": interrupted(s, r),
-                    "sample": r.sample,
-                    "readings": s.count_points(r.id)
-                    if r.kind == "brdf"
-                    else len(s.gloss_readings(r.id)),
-                    "created_at": r.created_at,
-                    "finished_at": r.finished_at,
-                    "theta_i_deg": r.plan.get("theta_i_deg"),
-                    "reason": r.reason,
-                }
-            )
+    listing = list_runs(store, config, limit=limit, missing_ok=False)
+    rows = [
+        {
+            "id": b.record.id,
+            "kind": b.record.kind,
+            "status": b.record.status,
+            "interrupted": b.interrupted,
+            "sample": b.record.sample,
+            "readings": b.readings,
+            "created_at": b.record.created_at,
+            "finished_at": b.record.finished_at,
+            "theta_i_deg": b.record.plan.get("theta_i_deg"),
+            "reason": b.record.reason,
+        }
+        for b in listing.runs
+    ]
     columns = ["id", "kind", "status", "interrupted", "sample", "readings", "created_at",
                "finished_at", "theta_i_deg", "reason"]  # fmt: skip
     df = pd.DataFrame.from_records(rows, columns=columns)

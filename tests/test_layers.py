@@ -129,10 +129,7 @@ MAX_MODULE_LINES = 800
 SIZED_ROOMS = ("goniolab", "drivers", "sim")
 #: module -> why it may be longer for now. Temporary: each is split by another engineer this
 #: round; the lead removes its entry after merging that split (a stale entry fails the test).
-OVERSIZED_FOR_NOW: dict[str, str] = {
-    "goniolab/commands/_colour.py": "split by app-predict/app-scan this round",
-    "goniolab/commands/predict.py": "split by app-predict/app-scan this round",
-}
+OVERSIZED_FOR_NOW: dict[str, str] = {}
 
 
 def module_lines(room: str) -> dict[str, int]:
@@ -276,15 +273,9 @@ def test_the_name_checker_catches_a_repeat() -> None:
     }
 
 
-#: ``file: module.name`` -> why it may import another module's ``_private`` name. The
-#: sub-commands share a few helpers of their neighbours; commands/* are being edited by another
-#: engineer this round (help texts), so their helpers become public names after that merge.
-PRIVATE_IMPORT_EXCEPTIONS: dict[str, str] = {
-    "goniolab/commands/_colour.py: goniolab.commands.predict._model": "the model of --sample/--map",
-    "goniolab/commands/_colour.py: goniolab.commands.runs._get_run": "a run by id, one error",
-    "goniolab/commands/fit.py: goniolab.commands.runs._get_run": "a run by id, one error",
-    "goniolab/commands/plot.py: goniolab.commands.runs._get_run": "a run by id, one error",
-}
+#: ``file: module.name`` -> why it may import another module's ``_private`` name (none now:
+#: what the faces shared became public names of the application layer, goniolab/app/).
+PRIVATE_IMPORT_EXCEPTIONS: dict[str, str] = {}
 
 
 def _private(name: str) -> bool:
@@ -495,10 +486,7 @@ def test_the_face_checker_sees_runtime_imports_only(tmp_path: Path) -> None:
 #: :func:`labtoml.parse_toml`.
 TOML_LOADER = "labtoml/__init__.py"
 #: file -> why it may still import :mod:`tomllib` itself (temporary).
-TOMLLIB_EXCEPTIONS: dict[str, str] = {
-    # load_paint_file: labtoml.read_toml(path, what="paint file"), TomlFileError -> UserError
-    "goniolab/commands/_colour.py": "switched at merge",
-}
+TOMLLIB_EXCEPTIONS: dict[str, str] = {}
 
 
 def tomllib_importers() -> dict[str, int]:
@@ -526,3 +514,106 @@ def test_the_toml_loader_imports_only_the_standard_library() -> None:
     mods = [m for _, m in imports_of(ROOT / TOML_LOADER)]
     assert "tomllib" in mods
     assert [m for m in mods if m.split(".")[0] not in sys.stdlib_module_names] == []
+
+
+# --------------------------------------------------------------------- faces call the app layer
+#: The faces of the use cases without a lab (issue 24): they parse, call
+#: :mod:`goniolab.app` and present; none opens a store, loads a config or builds a plan.
+NO_LAB_FACES = tuple(
+    f"goniolab/commands/{name}.py"
+    for name in ("predict", "_colour", "runs", "plot", "render", "fit", "samples", "_surface_args")
+)
+#: What a face may not import: the store, the lab config, the plans (goniolab.app does that).
+NO_LAB_FORBIDDEN = ("goniolab.store", "goniolab.config", "goniolab.scan.plans")
+#: What a face may import from goniolab: the application layer, the one error family, its
+#: fellow faces, and presentation helpers (JSON/text output, netCDF of a prediction) and the
+#: registries whose names its options offer.
+NO_LAB_MAY_IMPORT = (
+    "goniolab.app", "goniolab.errors", "goniolab.commands", "goniolab.jsonout",
+    "goniolab.textsafe", "goniolab.datasets", "goniolab.model_registry", "goniolab.export",
+)  # fmt: skip
+#: ``file: module`` -> why that face imports it beyond :data:`NO_LAB_MAY_IMPORT`.
+NO_LAB_IMPORT_EXCEPTIONS: dict[str, str] = {
+    "goniolab/commands/runs.py: goniolab.colour.difference": "the colour table's dL*..dE00 columns",
+    "goniolab/commands/runs.py: goniolab.colour.multiangle": "the colour table's flop index line",
+}
+#: api.py's lab functions (run_scan and its helpers) belong to the other half of issue 24
+#: (goniolab.app's scan use cases); the module-level imports they need are listed here.
+API_LAB_NAMES = {
+    "_ScanControl", "_run_blocking", "_ScanCall", "_scan_call", "_scan_in_this_thread",
+    "run_scan", "run_scan_async", "_scan", "_angles", "_blocking",
+}  # fmt: skip
+API_MODULE_IMPORT_EXCEPTIONS: dict[str, str] = {
+    "goniolab.store": "run_scan opens its store (RunMeta, RunStore); Run.record's type",
+    "goniolab.scan.plans": "run_scan's default repeats (DEFAULT_REPEATS)",
+}
+
+
+def _goniolab_imports(nodes: list[ast.stmt]) -> list[tuple[int, str]]:
+    """``(line, module)`` of every goniolab import in ``nodes`` (functions included;
+    ``from goniolab import x`` as ``goniolab.x``)."""
+    out: list[tuple[int, str]] = []
+    for sub in (s for node in nodes for s in ast.walk(node)):
+        if isinstance(sub, ast.Import):
+            out += [(sub.lineno, a.name) for a in sub.names]
+        elif isinstance(sub, ast.ImportFrom) and sub.level == 0 and sub.module == "goniolab":
+            out += [(sub.lineno, f"goniolab.{a.name}") for a in sub.names]
+        elif isinstance(sub, ast.ImportFrom) and sub.level == 0 and sub.module:
+            out.append((sub.lineno, sub.module))
+    return [(line, mod) for line, mod in out if mod.split(".")[0] == "goniolab"]
+
+
+def test_the_faces_without_a_lab_import_the_app_layer_not_the_store() -> None:
+    bad: list[str] = []
+    seen: set[str] = set()
+    for name in NO_LAB_FACES:
+        tree = ast.parse((ROOT / name).read_text(encoding="utf-8"))
+        for line, mod in _goniolab_imports(tree.body):
+            key = f"{name}: {mod}"
+            if key in NO_LAB_IMPORT_EXCEPTIONS:
+                seen.add(key)
+            elif _hit(mod, NO_LAB_FORBIDDEN) or not _hit(mod, NO_LAB_MAY_IMPORT):
+                bad.append(f"{name}:{line}: imports {mod}")
+    assert bad == [], "\n".join(bad)
+    assert sorted(set(NO_LAB_IMPORT_EXCEPTIONS) - seen) == [], "exceptions no longer needed"
+    # the notebook face: every function but the lab's calls the app layer
+    tree = ast.parse((ROOT / "goniolab/api.py").read_text(encoding="utf-8"))
+    own = [n for n in tree.body if isinstance(n, ast.FunctionDef | ast.ClassDef)
+           and n.name not in API_LAB_NAMES]  # fmt: skip
+    bad = [f"api.py:{line}: imports {mod}" for line, mod in _goniolab_imports(own)
+           if _hit(mod, NO_LAB_FORBIDDEN) or _hit(mod, ("goniolab.commands",))]  # fmt: skip
+    top = [n for n in tree.body if isinstance(n, ast.Import | ast.ImportFrom)]
+    bad += [f"api.py:{line}: imports {mod}" for line, mod in _goniolab_imports(top)
+            if _hit(mod, NO_LAB_FORBIDDEN) and mod not in API_MODULE_IMPORT_EXCEPTIONS]  # fmt: skip
+    assert bad == [], "\n".join(bad)
+
+
+def test_the_face_checker_sees_a_store_opened_in_a_function(tmp_path: Path) -> None:
+    probe = tmp_path / "probe.py"
+    probe.write_text(
+        "def f():\n    from goniolab.store import RunStore\nimport goniolab.app\n"
+        "from goniolab import config\n"
+    )
+    found = _goniolab_imports(ast.parse(probe.read_text()).body)
+    assert found == [(2, "goniolab.store"), (3, "goniolab.app"), (4, "goniolab.config")]
+    assert [m for _, m in found if _hit(m, NO_LAB_FORBIDDEN)] == [
+        "goniolab.store",
+        "goniolab.config",
+    ]
+
+
+#: Every module of the application layer.
+APP_MODULES = tuple(
+    sorted(p.relative_to(ROOT).as_posix() for p in (ROOT / "goniolab" / "app").glob("*.py"))
+)
+
+
+def test_the_app_layer_imports_no_face() -> None:
+    faces = ("goniolab.commands", "goniolab.api", "goniolab.tui", "goniolab.cli", "textual", "sim")
+    bad = [
+        f"{name}:{line}: imports {mod}"
+        for name in APP_MODULES
+        for line, mod in imports_of(ROOT / name)
+        if _hit(mod, faces)
+    ]
+    assert bad == [], "\n".join(bad)
