@@ -368,3 +368,55 @@ def test_the_painted_body_is_the_twins_own_kubelka_munk() -> None:
     assert body_reflectance("silver-metallic") == pytest.approx(SILVER.diffuse_reflectance())
     with pytest.raises(ValueError, match="silver-metallic"):
         body_reflectance("no-such-paint")
+
+
+# ------------------------------------------------------------------ the pearl
+def test_a_quarter_wave_film_reflects_the_textbook_maximum() -> None:
+    # at normal incidence a film of optical thickness lambda/4 between n0 and n2 reflects
+    # ((n0 n2 - n1^2) / (n0 n2 + n1^2))^2 (Born & Wolf sec. 7.6.1); half-wave: the bare
+    # interface ((n0 - n2) / (n0 + n2))^2
+    from sim.twin_flakes import MICA_INDEX, _film_reflectance, rutile_index
+
+    n1 = rutile_index()
+    i550 = 17  # 550 nm on the 380..780 / 10 nm grid
+    for d_factor, want in (
+        (0.25, ((1.5 * MICA_INDEX - n1[i550] ** 2) / (1.5 * MICA_INDEX + n1[i550] ** 2)) ** 2),
+        (0.5, ((1.5 - MICA_INDEX) / (1.5 + MICA_INDEX)) ** 2),
+    ):
+        d_nm = d_factor * 550.0 / n1[i550]
+        r = _film_reflectance(np.array([1.0]), 1.5, n1, float(d_nm), MICA_INDEX)
+        assert r[i550] == pytest.approx(want, rel=1e-9)
+    assert n1[i550] == pytest.approx(2.648, abs=2e-3)  # DeVore 1951 at 550 nm
+
+
+@pytest.mark.slow
+def test_a_scan_of_the_pearl_is_coloured_and_meets_its_prediction(tmp_path: Path) -> None:
+    # before: the twin's pearl read a grey black body (C* 0.3, L* 16) against a blue-green
+    # C* 41 predicted at 15 deg aspecular
+    import goniolab.api as gl
+    from goniolab.store import RunStore
+
+    store = tmp_path / "s.sqlite"
+    run = gl.run_scan(
+        _aligned_config(tmp_path),
+        sample="sample:pearl",
+        theta_r_deg=[30.0, 20.0, 0.0],
+        store=store,
+        time_scale=0,
+        progress=False,
+    )
+    with RunStore(str(store)) as s:
+        pts = {p.theta_r_deg: p for p in s.points(run.id) if p.index >= 0}
+        pred = s.predictions(run.id)
+        pcol = s.predicted_colours(run.id)
+    for tr, rel in ((30.0, 0.15), (20.0, 0.15), (0.0, 0.3)):
+        # at 0.015 % (45 aspecular) the spectro's stray light (0.002 % + 1e-3 of the mean)
+        # is a tenth of the reading
+        p = pts[tr]
+        assert p.luminance_pct == pytest.approx(pred[p.index], rel=rel)
+    p15 = pts[30.0]
+    assert p15.colour is not None
+    c_pred = pcol[p15.index]
+    h_pred = math.degrees(math.atan2(c_pred.b, c_pred.a)) % 360
+    assert p15.colour["C"] > 30.0
+    assert abs(p15.colour["h_deg"] - h_pred) < 15.0  # rutile's dispersion turns it greener
