@@ -102,8 +102,8 @@ class TiledMap:
     """A levelled, gap-filled height map cut into equal windowed tiles (float32).
 
     The levelled heights are formed on demand, block by block (:meth:`levelled`,
-    :meth:`tile`), from the map's own float64 array and its best plane: a map without
-    missing points is not copied. A map with gaps is filled (nearest valid point) and
+    :meth:`tile`), from the map's own array (float64, or float32 as a float32 file is
+    read) and its best plane, in float64: a map without missing points is not copied. A map with gaps is filled (nearest valid point) and
     levelled once into a float32 copy (half the float64 map's size).
 
     Attributes
@@ -136,7 +136,8 @@ class TiledMap:
     sum_w2: float
     source: str
     filled: int
-    #: float64 heights with ``plane`` (a, b, c) still to subtract, or float32 levelled heights
+    #: the map's own heights (float64 or float32) with ``plane`` (a, b, c) still to
+    #: subtract (in float64), or float32 levelled heights
     #: (``plane`` None)
     _src: NDArray[np.float64] | NDArray[np.float32]
     _plane: tuple[float, float, float] | None
@@ -159,7 +160,7 @@ class TiledMap:
             hm = fill_missing(hm, "nearest")
             src, plane = np.asarray(level_plane(hm).z_um, dtype=np.float32), None
         else:
-            src, plane = np.asarray(hm.z_um, dtype=np.float64), plane_fit(hm)
+            src, plane = hm.z_um, plane_fit(hm)  # float64 or float32: not copied
         ys, nyt = tile_starts(ny, tile)
         xs, nxt = tile_starts(nx, tile)
         wy = schwartz_taper(nyt, taper).astype(np.float32)
