@@ -36,8 +36,11 @@ check: $(DEV_STAMP)
 	$(BIN)/ruff format --check goniolab drivers sim tests bench
 	$(BIN)/mypy
 
+# Two workers; worksteal lets an idle worker take half of the other's queue, and
+# tests/conftest.py starts the tests marked slow first on each worker (the long end-to-end
+# runs must not be the last ones left). --durations lists the slowest, to see one creep in.
 test: check
-	$(BIN)/python -m pytest -n 2 -q
+	$(BIN)/python -m pytest -n 2 --dist worksteal --durations=15 -q
 
 format: $(DEV_STAMP)
 	$(BIN)/ruff check --fix goniolab drivers sim tests bench

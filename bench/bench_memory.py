@@ -100,11 +100,12 @@ def run_in_pty(argv: list[str]) -> tuple[int, str, float, int]:
     seen, out = b"", b""
     status = None
     while status is None:
-        ready, _, _ = select.select([master, proc.stdout], [], [], 0.2)
+        out_fd = proc.stdout.fileno()
+        ready, _, _ = select.select([master, out_fd], [], [], 0.2)
         if master in ready:
             with contextlib.suppress(OSError):
                 seen += os.read(master, 65536)
-        if proc.stdout in ready:
+        if out_fd in ready:
             out += proc.stdout.read() or b""
         pid, st = os.waitpid(proc.pid, os.WNOHANG)
         if pid:
