@@ -40,7 +40,6 @@ def pytest_configure(config: pytest.Config) -> None:
 #: removed just drops out of this list's effect.
 MEASURED_SLOW = frozenset(
     {
-        "tests/tui/test_lab.py::test_autostart_takes_the_gloss_reading_before_the_scan",
         "tests/tui/test_lab.py::test_scan_on_the_sim_lab_measured_equals_predicted",
         "tests/tui/test_lab.py::test_pause_resume_abort_on_the_sim_lab",
         "tests/tui/test_lab.py::test_the_sim_lab_measures_the_sample_picked_in_the_form",
