@@ -9,8 +9,8 @@ every 0.2 s. It reports, from the launch:
 - when each stage line of the Makefile appeared (``goniolab: creating the virtual
   environment``, ``goniolab: installing goniolab ...``, ``goniolab: starting the TUI ...``)
   and how many lines pip printed meanwhile (what a newcomer watches);
-- ``first frame``: the TUI on screen ("opening the lab..." or its widgets);
-- ``lab widgets``: the scan form on screen (``scan setup``).
+- ``first frame``: the TUI on screen (its header, or "opening the lab...");
+- ``lab widgets``: the lab's widgets on screen (the glossmeter log).
 
 Then it quits the app (``q``) and removes the clone (``--keep`` keeps it). Needs git, make,
 tmux and python3 (3.11+) on the PATH; pip reaches the package index the machine is set up
@@ -28,6 +28,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 STAGES = (
@@ -36,6 +37,10 @@ STAGES = (
     ("start", "goniolab: starting the TUI"),
 )
 TIMEOUT_S = 900.0
+#: The TUI's first frame: its header, or the boot line while the lab's modules load.
+FIRST_FRAME = ("goniolab \u2014", "opening the lab")
+#: The lab's widgets: the glossmeter log's title (shown at every terminal size).
+LAB_WIDGETS = "glossmeter log"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -78,14 +83,11 @@ def main(argv: list[str] | None = None) -> int:
             for name, marker in STAGES:
                 if name not in seen and marker in text:
                     seen[name] = now
-            if (
-                "start" in seen
-                and first is None
-                and ("opening the lab" in pane or "scan setup" in pane)
-            ):
+            if "start" in seen and first is None and any(m in pane for m in FIRST_FRAME):
                 first = now
-            if "scan setup" in pane:
+            if "start" in seen and LAB_WIDGETS in pane:
                 lab = now
+                first = now if first is None else first
                 break
             if "make: ***" in text:
                 break
@@ -96,7 +98,7 @@ def main(argv: list[str] | None = None) -> int:
         subprocess.run(["tmux", "-L", sock, "kill-server"], check=False)
     lines = log.read_text(errors="replace").splitlines() if log.exists() else []
     pip_lines = sum(1 for line in lines if not line.startswith(("goniolab:", ".venv/", "python")))
-    out = {
+    out: dict[str, Any] = {
         "stages_s": {k: round(v, 1) for k, v in seen.items()},
         "pip_lines": pip_lines,
         "first_frame_s": None if first is None else round(first, 1),
