@@ -528,17 +528,20 @@ def _forward_stats(hm: HeightMap, bin_size: float) -> RoughnessStats | None:
     qb_all = np.empty((_BLOCK_ROWS, width))
     dev_all = np.empty((_BLOCK_ROWS + 1, nx))
     for r0, r1 in blocks:
+        # heights of rows r0 .. r1 (a float32 map's rows cast to float64 first)
+        zb = z[r0 : r1 + 1] if z.dtype == np.float64 else z[r0 : r1 + 1].astype(np.float64)
+        rows = r1 - r0
         # heights of rows r0 .. r1 - 1 (the last row is added after the loop)
-        dev = dev_all[: r1 - r0]
-        np.subtract(z[r0:r1], row_plane, out=dev)
+        dev = dev_all[:rows]
+        np.subtract(zb[:rows], row_plane, out=dev)
         dev -= (c * y_um[r0:r1])[:, None]
         s_abs += float(np.abs(dev).sum())
         s_sq += float(np.vdot(dev, dev))
-        pb, qb = pb_all[: r1 - r0], qb_all[: r1 - r0]
-        np.subtract(z[r0:r1, 1:], z[r0:r1, :-1], out=pb)
+        pb, qb = pb_all[:rows], qb_all[:rows]
+        np.subtract(zb[:rows, 1:], zb[:rows, :-1], out=pb)
         np.divide(pb, dx, out=pb)
         pb -= b
-        np.subtract(z[r0 + 1 : r1 + 1, :-1], z[r0:r1, :-1], out=qb)
+        np.subtract(zb[1 : rows + 1, :-1], zb[:rows, :-1], out=qb)
         np.divide(qb, dy, out=qb)
         qb -= c
         s_pp += float(np.vdot(pb, pb))

@@ -21,7 +21,7 @@ from goniolab.optics import surface as surface_mod
 from goniolab.optics.facet import FacetModel
 from goniolab.optics.facet_backends import facets_near, slope_cells
 from goniolab.optics.heightmap import HeightMap, level_plane
-from goniolab.optics.surface import MapSurface, Surface
+from goniolab.optics.surface import MapSurface, Surface, roughness_stats
 from goniolab.surfaces import resolve_map
 
 
@@ -121,6 +121,7 @@ def test_float32_npy_stays_float32_and_predicts_what_its_float64_copy_does(
     s32, s64 = Surface.from_heightmap(hm32), Surface.from_heightmap(hm64)
     np.testing.assert_array_equal(s32.p, s64.p)
     np.testing.assert_array_equal(s32.q, s64.q)
+    assert roughness_stats(hm32) == roughness_stats(hm64)
     m32 = model_for(a, backend="lean")
     m64 = model_for(b, backend="lean")
     assert m32.gloss() == m64.gloss()
