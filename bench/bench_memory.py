@@ -160,6 +160,7 @@ def measure(path: Path, command: str, map_bytes: int) -> dict[str, Any]:
             row["models"] = sorted(set(models)) if isinstance(models, list) else models
     if code != 0:
         row["tail"] = text.strip().splitlines()[-3:]
+    row["terminal"] = text
     return row
 
 
@@ -171,6 +172,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--maps", default="rough,smooth", help="maps: rough, smooth (default both)")
     ap.add_argument("--commands", default="gloss,brdf", help="commands: gloss, brdf (default both)")
     ap.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    ap.add_argument(
+        "--show", action="store_true", help="also print what the terminal showed (stderr)"
+    )
     args = ap.parse_args(argv)
     map_bytes = args.size * args.size * 4
     rows: list[dict[str, Any]] = []
@@ -194,6 +198,10 @@ def main(argv: list[str] | None = None) -> int:
                     )
                     if "tail" in row:
                         print("    " + "\n    ".join(row["tail"]), flush=True)
+                if args.show:
+                    shown = row["terminal"].split("{", 1)[0].replace("\r", "\n")
+                    print("    | " + "\n    | ".join(shown.strip().splitlines()), flush=True)
+                row.pop("terminal")
     if args.json:
         print(json.dumps(rows, indent=1))
     return 0 if all(r["target_met"] for r in rows) else 1

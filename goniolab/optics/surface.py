@@ -330,7 +330,8 @@ class MapSurface(Surface):
     the blocks, which equal the slopes of the levelled map
     (:func:`~goniolab.optics.heightmap.level_plane`) bit for bit. ``progress`` (settable,
     ``progress(done, total, what)``) hears of every block of a walk over a map of more
-    than :data:`STREAM_MIN_FACETS` facets.
+    than :data:`STREAM_MIN_FACETS` facets, as ``"facet slopes, pass N"`` (a gloss report
+    walks the map about a dozen times, a curve once or twice).
     """
 
     _hm: HeightMap
@@ -388,12 +389,16 @@ class MapSurface(Surface):
         rows = max(1, int(SLOPE_BLOCK_FACETS if facets is None else facets) // (nx - 1))
         total = ny - 1
         report = self.progress if self.n_facets > STREAM_MIN_FACETS else None
+        what = ""
+        if report is not None:
+            self.__dict__["_passes"] = self.__dict__.get("_passes", 0) + 1
+            what = f"facet slopes, pass {self.__dict__['_passes']}"
         for r0 in range(0, total, rows):
             r1 = min(r0 + rows, total)
             pb, qb = _forward_rows(self._hm, b, c, level, r0, r1)
             yield pb.reshape(-1), qb.reshape(-1)
             if report is not None:
-                report(r1, total, "facet slopes")
+                report(r1, total, what)
 
     def take(self, idx: NDArray[np.int64]) -> tuple[FloatArray, FloatArray]:
         if not self.streamed:
