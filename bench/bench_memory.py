@@ -199,8 +199,10 @@ def main(argv: list[str] | None = None) -> int:
                     if "tail" in row:
                         print("    " + "\n    ".join(row["tail"]), flush=True)
                 if args.show:
-                    shown = row["terminal"].split("{", 1)[0].replace("\r", "\n")
-                    print("    | " + "\n    | ".join(shown.strip().splitlines()), flush=True)
+                    # each terminal line as it was left (a progress line redraws after \r)
+                    shown = row["terminal"].split("{", 1)[0].replace("\r\n", "\n")
+                    lines = [ln.rsplit("\r", 1)[-1] for ln in shown.split("\n") if ln.strip()]
+                    print("    | " + "\n    | ".join(lines), flush=True)
                 row.pop("terminal")
     if args.json:
         print(json.dumps(rows, indent=1))

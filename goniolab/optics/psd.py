@@ -34,6 +34,7 @@ References
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Any
@@ -334,12 +335,17 @@ def pruned_fft2(
 
 
 def psd_region(
-    tiled: TiledMap, ky: NDArray[np.int64], kx: NDArray[np.int64], os: tuple[int, int]
+    tiled: TiledMap,
+    ky: NDArray[np.int64],
+    kx: NDArray[np.int64],
+    os: tuple[int, int],
+    progress: Callable[[int, int, str], None] | None = None,
 ) -> FloatArray:
     """The PSD (um^4) of :func:`psd2` at the cells ``(ky, kx)`` (non-negative indices) of
     the tile's transform zero-padded ``os = (os_x, os_y)`` times: the same windowed
     periodogram sampled on a grid of frequencies ``1 / (os n step)``, so that a sum over
-    the padded cells times their area ``df_x df_y / (os_x os_y)`` still gives Sq^2."""
+    the padded cells times their area ``df_x df_y / (os_x os_y)`` still gives Sq^2.
+    ``progress(done, total, what)`` hears of each tile of a map of several."""
     acc = np.zeros((ky.size, kx.size))
     spec = np.empty((ky.size, kx.size), dtype=np.complex64)
     lengths = (os[1] * tiled.ny_t, os[0] * tiled.nx_t)
@@ -351,5 +357,7 @@ def psd_region(
             term = np.ascontiguousarray(term.T)
         pruned_fft2(term, ky, kx, y_first, spec, lengths)
         acc += np.abs(spec).astype(np.float64) ** 2
+        if progress is not None and tiled.n_tiles > 1:
+            progress(k + 1, tiled.n_tiles, "rayleigh-rice PSD tiles")
     out: FloatArray = acc * tiled.dx_um * tiled.dy_um / (tiled.sum_w2 * tiled.n_tiles)
     return out

@@ -138,3 +138,16 @@ def test_auto_model_and_its_facet_model_read_the_map_once(tmp_path: Path) -> Non
     assert isinstance(surf, MapSurface)
     assert surf._hm is model.kirchhoff._shared.hm  # type: ignore[attr-defined]
     assert resolve_map(path) is surf._hm  # held: the same map, not a second read
+
+
+def test_rayleigh_rice_reports_its_psd_tiles_and_reads_the_same() -> None:
+    from goniolab.optics.rayleigh_rice import RayleighRiceModel
+
+    z = _rough(128) * 0.05  # Sq 5 nm: the Rayleigh-Rice regime
+    hm = HeightMap(z_um=z, dx_um=0.5, dy_um=0.5)
+    seen: list[tuple[int, int, str]] = []
+    quiet = RayleighRiceModel(hm, tile=64).gloss()
+    heard = RayleighRiceModel(hm, tile=64, progress=lambda d, t, w: seen.append((d, t, w))).gloss()
+    assert heard == quiet
+    assert seen and {w for _, _, w in seen} == {"rayleigh-rice PSD tiles"}
+    assert {t for _, t, _ in seen} == {4} and (4, 4, "rayleigh-rice PSD tiles") in seen
