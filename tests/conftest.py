@@ -63,6 +63,19 @@ MEASURED_SLOW = frozenset(
         "tests/colour/test_cli_colour.py::test_flop_of_the_built_in_paints",
         "tests/drivers/test_stil.py::test_perfect_reflecting_diffuser_is_white",
         "tests/surfaces/test_samples_save.py::test_a_saved_file_predicts_as_the_sample_does",
+        "tests/test_cli_alarm.py::test_an_alarm_before_a_scan_is_cleared_from_the_cli",
+        "tests/test_cli_stop_signals.py::test_a_signal_parks_the_arms_of_the_wire_lab",
+        "tests/test_cli_stop_signals.py::test_a_signal_ends_a_gloss_log_as_aborted",
+        "tests/test_cli_stop_signals.py::test_a_signal_aborts_the_scan_and_parks",
+        "tests/test_batch.py::test_dask_workers_get_absolute_paths",
+        "tests/test_api.py::test_interrupting_a_scan_in_a_running_loop_aborts_it",
+        "tests/test_api.py::test_the_readme_example_runs",
+        "tests/test_notebook.py::test_run_scan_in_a_kernel_with_postgresql",
+        "tests/test_notebook.py::test_run_scan_in_a_kernel_with_sqlite",
+        "tests/test_notebook.py::test_interrupting_the_kernel_aborts_the_scan",
+        "tests/test_store_pg.py::test_two_scans_write_at_once",
+        "tests/test_store_pg.py::test_kill_9_mid_scan_then_resume",
+        "tests/test_provenance_faces.py::test_gloss_and_scan_runs_name_their_models",
     }
 )
 
