@@ -63,6 +63,8 @@ MEASURED_SLOW = frozenset(
         "tests/colour/test_cli_colour.py::test_flop_of_the_built_in_paints",
         "tests/drivers/test_stil.py::test_perfect_reflecting_diffuser_is_white",
         "tests/surfaces/test_samples_save.py::test_a_saved_file_predicts_as_the_sample_does",
+        "tests/contract/test_interlock_random.py::test_random_concurrent_moves_keep_the_arms_apart",
+        "tests/contract/test_lab.py::test_shipped_sim_lab_reads_the_sample_model",
         "tests/test_cli_alarm.py::test_an_alarm_before_a_scan_is_cleared_from_the_cli",
         "tests/test_cli_stop_signals.py::test_a_signal_parks_the_arms_of_the_wire_lab",
         "tests/test_cli_stop_signals.py::test_a_signal_ends_a_gloss_log_as_aborted",
