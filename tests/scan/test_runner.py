@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import math
 import threading
 from collections.abc import Callable
 from typing import Any, cast
@@ -10,8 +11,9 @@ from typing import Any, cast
 import numpy as np
 import pytest
 
-from drivers.base import DeviceError, DeviceTimeout, Goniometer, ProtocolError
+from drivers.base import DeviceError, DeviceTimeout, Goniometer, ProtocolError, SpectroReading
 from goniolab.optics.apertures import Cone
+from goniolab.scan.eta import WallTime
 from goniolab.scan.events import (
     ArmsMoved,
     Event,
@@ -57,7 +59,9 @@ def make_runner(
         goniometer=as_goniometer(lab), spectro=lab.spectro, clock=lab.clock, plan=plan, store=store,
         run_id=run_id, bus=bus, motion=MOTION,
         predictor=Predictor(lab.model, Cone(6.0), Cone(6.0)),
-        park_deg=lab.goniometer.park_deg, **{"specimen_hook": specimen, **kw},  # type: ignore[arg-type]
+        park_deg=lab.goniometer.park_deg,
+        # the ETA measured on the instant lab clock: its seconds are the fake instruments'
+        **{"specimen_hook": specimen, "wall": WallTime(lab.clock.now, 1.0), **kw},  # type: ignore[arg-type]
     )  # fmt: skip
     return runner, bus
 
@@ -358,6 +362,31 @@ async def test_eta_stretches_by_the_observed_slowdown(fake_lab: FakeLab, store: 
     # before any reading: the plain estimate 4 x 0.01 s; then the remaining readings at
     # the observed 0.04 s each: 3 x 0.04, 2 x 0.04, 1 x 0.04, 0
     assert etas == pytest.approx([0.04, 0.12, 0.08, 0.04, 0.0], abs=1e-9)
+
+
+async def test_at_an_instant_clock_the_eta_is_the_readings_computing(
+    fake_lab: FakeLab, store: RunStore
+) -> None:
+    """issue 27: at --time-scale 0 the lab's sleeps take no wall time, and the ETA read
+    "0 s" through the 15-20 s of the twin's computing. Here each reading computes 0.4 s of
+    wall time (a fake wall clock), everything else none: the ETA is "?" (NaN) before a
+    reading was timed, then 0.4 s per reading left."""
+    g = fake_lab.goniometer
+    g.lamp.homed = g.detector.homed = True
+    wall = [0.0]
+    measure = fake_lab.spectro.measure
+
+    async def computing_measure() -> SpectroReading:
+        wall[0] += 0.4
+        return await measure()
+
+    fake_lab.spectro.measure = computing_measure  # type: ignore[method-assign]
+    plan = BrdfPlan(45.0, parse_angles("10:40:10"), repeats=2, dwell_s=0.5)
+    runner, bus = make_runner(fake_lab, store, plan, wall=WallTime(lambda: wall[0], 0.0))
+    events = await drive(runner, bus, lambda ev: None)
+    etas = [e.eta_s for e in events if isinstance(e, Progress)]
+    assert math.isnan(etas[0])
+    assert etas[1:] == pytest.approx([0.4 * (7 - k) for k in range(8)], abs=1e-9)
 
 
 async def test_unexpected_error_parks_marks_failed_and_surfaces(
