@@ -9,8 +9,8 @@ known; the dwell's and the exposure's lab seconds; 1 for "other"), fitted robust
 latest parts measured. Before a part kind was measured its prior is the model's lab seconds
 converted to wall seconds by the clock's scale (``x / scale``); at an instant sim
 clock (scale 0) a sleep takes no wall time, so moves and dwells start at 0 s and a reading,
-whose wall time is then the computing alone, is unknown (NaN, shown as "?") until one was
-timed. The estimate therefore converges to the run's real pace whatever the clock: the
+whose wall time is then the computing alone, is unknown (NaN, shown as "?") until two
+were timed. The estimate therefore converges to the run's real pace whatever the clock: the
 slow arm, the bus latency, the twin's computing at ``--time-scale 0``.
 
 Time is wall time (:class:`WallTime`), what the user waits: :class:`~goniolab.scan.events.
@@ -65,6 +65,9 @@ class WallTime:
         return cls(time.monotonic, 1.0 / scale if scale > 0 else 0.0)
 
 
+#: A first part this many times slower than its prior (plus 1 s) is taken as a warm-up.
+WARM_UP_FACTOR = 10.0
+
 #: How many of the latest parts of a kind its rate is fitted to: the run's recent pace.
 WINDOW = 32
 
@@ -95,8 +98,11 @@ class PartRate:
     the :func:`trimmed_mean` of the parts' excess ``w - b x``, so a one-off slow part (a
     warm-up, a hiccup of the machine) does not set the pace. With one size only, ``b`` is the prior slope (a
     constant overhead per part on top of the model), or without a prior the time is in
-    proportion to the size. Before any part was measured: ``prior_per_x * x``, NaN when
-    the prior is unknown (``None``).
+    proportion to the size. Before any part was measured: ``prior_per_x * x``, also after
+    one part that took far longer than its prior (a warm-up: the first reading of a run
+    took 3-5 s of model set-up and JIT compilation, the next ones 0.02 s, and alone it
+    said "ETA 65 s" for a run 8 s from its end); without a prior (``None``) NaN until two
+    parts were measured.
     """
 
     prior_per_x: float | None
@@ -132,10 +138,20 @@ class PartRate:
             return
         self._line = (trimmed_mean([w - b * x for x, w in pts]), b)
 
+    def _warm_up(self) -> bool:
+        """The only part measured took over ``WARM_UP_FACTOR`` times its prior plus 1 s:
+        a warm-up (the model's set-up, JIT compilation), not the run's pace."""
+        assert self.prior_per_x is not None
+        x, w = self.samples[0]
+        return w > WARM_UP_FACTOR * self.prior_per_x * x + 1.0
+
     def predict(self, x: float) -> float:
         """Wall seconds of a part of size ``x`` (>= 0; NaN: not known yet)."""
-        if not self.samples:
-            return math.nan if self.prior_per_x is None else self.prior_per_x * x
+        if self.prior_per_x is None:
+            if len(self.samples) < 2:
+                return math.nan  # one part alone may be the run's warm-up: not a pace yet
+        elif not self.samples or (len(self.samples) == 1 and self._warm_up()):
+            return self.prior_per_x * x
         a, b = self._line
         if b is None:
             return a * x
