@@ -252,7 +252,7 @@ def resolve_format(fmt: str | None, out: str | Path | None) -> str:
         suffix = Path(out).suffix
         raise ValueError(
             f"{out}: {'the suffix ' + repr(suffix) if suffix else 'no suffix'} names no "
-            f"export format (known: {_known_suffixes()}); give the format explicitly"
+            f"export format (known: {_known_suffixes()}); pass --format csv|json|netcdf|parquet (format= in Python)"
         )
     return named
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import math
 from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -79,11 +80,12 @@ def point_detail(ev: PointMeasured, predicted_pct: float | None) -> str:
     return text
 
 
-async def report_events(queue: asyncio.Queue[Any], reporter: Reporter, clock_scale: float) -> None:
+async def report_events(queue: asyncio.Queue[Any], reporter: Reporter) -> None:
     """Feed a run's events to ``reporter`` until the bus closes: each
-    :class:`~goniolab.scan.events.Progress` as a step (its lab-clock ETA in wall seconds;
-    on an instant sim clock, scale 0, no ETA: the reporter measures the pace), the last
-    reading as the detail, instrument faults and warnings as messages."""
+    :class:`~goniolab.scan.events.Progress` as a step (its ETA, already wall seconds
+    measured from the run's own rates, :class:`goniolab.scan.eta.EtaEstimator`; NaN while
+    not known: the reporter then measures the pace), the last reading as the detail,
+    instrument faults and warnings as messages."""
     from goniolab.scan.events import (
         InstrumentError,
         PointMeasured,
@@ -105,7 +107,7 @@ async def report_events(queue: asyncio.Queue[Any], reporter: Reporter, clock_sca
             if not started:
                 reporter.start(ev.total)
                 started = True
-            eta = ev.eta_s / clock_scale if clock_scale > 0 else None
+            eta = ev.eta_s if math.isfinite(ev.eta_s) else None
             reporter.advance(ev.done, total=ev.total, eta_s=eta, detail=detail)
         elif isinstance(ev, InstrumentError):
             reporter.message(
@@ -123,9 +125,7 @@ async def _reporting(session: Any, reporter: Reporter | None) -> AsyncIterator[N
 
     task = None
     if reporter is not None:
-        task = asyncio.create_task(
-            report_events(session.bus.subscribe(), reporter, session.clock_scale)
-        )
+        task = asyncio.create_task(report_events(session.bus.subscribe(), reporter))
     try:
         yield
     finally:

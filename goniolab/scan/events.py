@@ -124,6 +124,11 @@ class ColourPredicted(Event):
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Progress(Event):
+    """How far a run is: ``done`` of ``total`` readings, ``eta_s`` the wall seconds left
+    (what the user waits, from the measured rates of moves, dwells and readings:
+    :class:`goniolab.scan.eta.EtaEstimator`; NaN while not known, at an instant sim clock
+    before a reading was timed)."""
+
     done: int
     total: int
     eta_s: float

@@ -181,8 +181,10 @@ def test_calibrate_and_align_store_their_runs(tmp_path: Path) -> None:
         assert store.get_run(out.run_id).kind == "align"
         assert store.get_run(out.run_id).status == "done"
     assert out.as_dict()["state"] == "done" and out.result.state_file == ""
-    assert out.result.readings == len(store_points := [u for u in updates if u.kind == "advance"])
-    assert store_points and store_points[-1].done == store_points[-1].total
+    # one step per reading, after the run's opening 0 of N (before any reading)
+    store_points = [u for u in updates if u.kind == "advance" and u.done]
+    assert [u.done for u in store_points] == list(range(1, out.result.readings + 1))
+    assert store_points[-1].done == store_points[-1].total
 
 
 def test_gloss_log_stores_its_readings(tmp_path: Path) -> None:
@@ -215,3 +217,41 @@ def test_the_store_error_is_one_user_error(tmp_path: Path) -> None:
         lab_setup.open_store(tmp_path / "missing.sqlite", create=False)
     assert "missing.sqlite" in str(info.value) and info.value.exit_code == 2
     assert isinstance(lab_setup.open_store(tmp_path / "s.sqlite"), RunStore)
+
+
+def test_the_reporter_gets_the_runs_wall_eta_as_it_is() -> None:
+    """issue 27: ``Progress.eta_s`` is already wall seconds measured from the run's own
+    rates (goniolab.scan.eta); the CLI divided it again by the clock scale (a tenth of the
+    real time at --time-scale 10). NaN (not known yet) reaches the reporter as None."""
+    import asyncio
+    import math as _math
+
+    from goniolab.app.lab_scan import report_events
+    from goniolab.scan.events import Progress
+
+    class Seen:
+        def __init__(self) -> None:
+            self.etas: list[float | None] = []
+
+        def start(self, total: int, label: str = "") -> None:
+            pass
+
+        def advance(self, done=None, *, total=None, eta_s=None, detail=""):  # type: ignore[no-untyped-def]
+            self.etas.append(eta_s)
+
+        def message(self, text: str) -> None:
+            pass
+
+        def finish(self) -> None:
+            pass
+
+    async def feed() -> list[float | None]:
+        queue: asyncio.Queue[object] = asyncio.Queue()
+        for done, eta in ((0, _math.nan), (1, 12.5), (2, 6.0)):
+            queue.put_nowait(Progress(run_id=1, done=done, total=3, eta_s=eta))
+        queue.put_nowait(None)
+        seen = Seen()
+        await report_events(queue, seen)  # type: ignore[arg-type]
+        return seen.etas
+
+    assert asyncio.run(feed()) == [None, 12.5, 6.0]
