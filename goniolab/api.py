@@ -528,7 +528,7 @@ async def run_scan_async(
     from goniolab.app.lab_setup import store_location as location_of
     from goniolab.progress import auto_progress
 
-    cfg = load_config(config)
+    cfg = load_config(config, store)
     plan = brdf_plan(
         cfg, sample=sample or cfg.sample.map, theta_i_deg=theta_i_deg, theta_r_deg=theta_r_deg,
         repeats=repeats, dwell_s=dwell_s, exposure_us=exposure_us, auto_exposure=auto_exposure,

@@ -58,12 +58,13 @@ def quiet(text: str) -> None:
 
 
 # --------------------------------------------------------------------------- config, store
-def load_config(path: str | Path) -> LabConfig:
+def load_config(path: str | Path, store: str | Path | None = None) -> LabConfig:
     """The lab config of ``path``, validated (:func:`goniolab.config.load_lab_config`): the
-    one place a use case reads it, once per use case."""
+    one place a use case reads it, once per use case. ``store`` (``--store``) replaces
+    ``[lab] store``, so the alignment state is the one beside the store the run uses."""
     import goniolab.config
 
-    return goniolab.config.load_lab_config(path)
+    return goniolab.config.load_lab_config(path, store=store)
 
 
 def with_model(cfg: LabConfig, model: str | None) -> LabConfig:

@@ -21,7 +21,7 @@ def _cmd(args: argparse.Namespace) -> int:
     from goniolab.app.lab_setup import load_config, open_store, stderr_notify
     from goniolab.commands.scan import run_lab, specimen_prompt
 
-    cfg = load_config(args.config)
+    cfg = load_config(args.config, args.store)
     with open_store(args.store, cfg.lab.store) as store:
         out = run_lab(
             calibrate(

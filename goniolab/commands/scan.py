@@ -315,7 +315,7 @@ def _cmd_scan(args: argparse.Namespace) -> int:
         raise UserError("scan: --config FILE is required (e.g. configs/lab-sim.toml)")
     from goniolab.app import lab_scan, lab_setup
 
-    cfg = lab_setup.load_config(args.config)
+    cfg = lab_setup.load_config(args.config, args.store)
     theta_r_given = args.theta_r is not None
     sample = lab_setup.scan_sample(cfg, args.sample)
     cfg = lab_setup.check_map(cfg, sample, given=bool(args.sample), step_um=args.step_um)
@@ -350,7 +350,7 @@ def _cmd_scan(args: argparse.Namespace) -> int:
 def _cmd_resume(args: argparse.Namespace) -> int:
     from goniolab.app import lab_scan, lab_setup
 
-    live = lab_setup.load_config(args.config) if args.config else None
+    live = lab_setup.load_config(args.config, args.store) if args.config else None
     config_store = None if live is None else live.lab.store
     with lab_setup.open_store(args.store, config_store, create=False) as store:
         return _run_scan(

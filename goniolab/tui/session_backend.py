@@ -90,7 +90,7 @@ class SessionBackend:
         self._lab_model = model
         self._align_plan = align_plan or AlignPlan()
         self.config_path = Path(config_path)
-        self.config = load_config(self.config_path)
+        self.config = load_config(self.config_path, store_path)
         self.time_scale = time_scale
         # The config's own map is resolved (relative to the config file) by the Lab.
         self.sample = self.config.sample.map
