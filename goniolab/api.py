@@ -267,9 +267,9 @@ class Run:
     @property
     def record(self) -> RunRecord:
         """The run's row: kind, plan, config snapshot, sample, model, status, times."""
-        from goniolab.app.stored_runs import get_run, open_store
+        from goniolab.app.stored_runs import get_run, reading_store
 
-        with open_store(self.store) as s:
+        with reading_store(self.store, None) as s:
             return get_run(s, self.id)
 
     @property
@@ -355,9 +355,9 @@ def open_dataset(path: str | Path) -> xr.Dataset:
 
 def open_run(run_id: int, store: str | Path | None = None) -> Run:
     """Run ``run_id`` of the store (``None``: the default store, as the CLI's)."""
-    from goniolab.app.stored_runs import store_path
+    from goniolab.app.lab_setup import store_location
 
-    run = Run(int(run_id), store_path(store))
+    run = Run(int(run_id), store_location(store))
     run.record  # noqa: B018 - fail here, with the store's message, when it does not exist
     return run
 
@@ -524,8 +524,7 @@ async def run_scan_async(
         what was measured stays stored.
     """
     from goniolab.app.lab_scan import scan
-    from goniolab.app.lab_setup import brdf_plan, load_config, open_store, run_meta
-    from goniolab.app.lab_setup import store_location as location_of
+    from goniolab.app.lab_setup import brdf_plan, load_config, open_store, run_meta, store_location
     from goniolab.progress import auto_progress
 
     cfg = load_config(config)
@@ -534,7 +533,7 @@ async def run_scan_async(
         repeats=repeats, dwell_s=dwell_s, exposure_us=exposure_us, auto_exposure=auto_exposure,
         what="run_scan", angles_option="theta_r_deg",
     )  # fmt: skip
-    location = location_of(store, cfg.lab.store)
+    location = store_location(store, config=cfg)
     control = _CONTROL.get()
     reporter = auto_progress() if progress else None
 

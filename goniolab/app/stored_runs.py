@@ -3,7 +3,7 @@
 Every face that reads or writes the run store (``goniolab runs``, ``goniolab plot``,
 ``goniolab fit colour``, the notebook's :class:`goniolab.api.Run`) calls these use cases:
 the store is chosen here (``--store``, else the config's ``[lab] store``, else the default
-file: :func:`store_path`), opened here, and a run that is not there is one
+file: :func:`goniolab.app.lab_setup.store_location`, the one place for every face), opened here, and a run that is not there is one
 :class:`~goniolab.errors.UserError` (:func:`get_run`). Each use case returns a typed result
 the face presents (text, JSON, a DataFrame).
 
@@ -13,13 +13,13 @@ The module is named ``stored_runs`` (not ``runs``): a module name is used once i
 
 from __future__ import annotations
 
-import shlex
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from goniolab.app.lab_setup import open_store, resume_command, store_location
 from goniolab.errors import UserError, a_run_of_kind
 
 if TYPE_CHECKING:  # sqlite3 and the plans load when a use case runs, not at --help
@@ -44,15 +44,14 @@ __all__ = [
     "interrupted",
     "list_runs",
     "migrate_runs",
-    "open_store",
     "plot_run",
-    "resume_command",
+    "reading_store",
     "run_colour",
     "run_dataframe",
     "run_summary",
     "run_xarray",
+    "scan_run",
     "show_run",
-    "store_path",
     "summarize_run",
     "writable_store",
     "write_run_spectra",
@@ -63,27 +62,10 @@ Location = Path | str
 
 
 # ----------------------------------------------------------------------- the store, a run
-def store_path(store: str | Path | None = None, config: str | Path | None = None) -> Location:
-    """The store chosen by ``store`` (``--store``), else the ``[lab] store`` of the lab
-    config ``config``, else the default file (:func:`goniolab.store.resolve_store_path`)."""
-    from goniolab.store import resolve_store_path
-
-    config_store: str | None = None
-    if config:
-        from goniolab.config import load_lab_config
-
-        config_store = load_lab_config(config).lab.store
-    return resolve_store_path(None if store is None else str(store), config_store)
-
-
-def open_store(store: str | Path | None = None, config: str | Path | None = None) -> RunStore:
-    """Open the chosen store for reading (nothing is created or written; it must exist)."""
-    from goniolab.store import RunStore, StoreError
-
-    try:
-        return RunStore(store_path(store, config), readonly=True)
-    except StoreError as exc:
-        raise UserError(str(exc)) from exc
+def reading_store(store: str | Path | None, config: str | Path | None) -> RunStore:
+    """The chosen store (:func:`goniolab.app.lab_setup.open_store`) opened for reading:
+    nothing is created or written; it must exist."""
+    return open_store(store, config=config, readonly=True)
 
 
 @contextmanager
@@ -92,10 +74,10 @@ def writable_store(
 ) -> Iterator[RunStore]:
     """The chosen store opened for writing (``create=False``: it must exist); any
     :class:`~goniolab.store.StoreError` while it is open is a :class:`UserError`."""
-    from goniolab.store import RunStore, StoreError
+    from goniolab.store import StoreError
 
     try:
-        with RunStore(store_path(store, config), create=create) as s:
+        with open_store(store, config=config, create=create) as s:
             yield s
     except StoreError as exc:
         raise UserError(str(exc)) from exc
@@ -112,8 +94,9 @@ def get_run(store: RunStore, run_id: int, *, allow_damaged: bool = False) -> Run
         raise UserError(str(exc)) from exc
 
 
-def _scan_run(store: RunStore, run_id: int, needs: str) -> RunRecord:
-    """A run that must be a scan (brdf) run: ``needs`` says what for."""
+def scan_run(store: RunStore, run_id: int, needs: str) -> RunRecord:
+    """Run ``run_id`` of ``store``, which must be a scan (brdf) run: ``needs`` says what
+    for (``"colour needs a scan (brdf) run"``)."""
     rec = get_run(store, run_id)
     if rec.kind != "brdf":
         raise UserError(f"run {rec.id} is {a_run_of_kind(rec.kind)}: {needs}")
@@ -168,25 +151,6 @@ def run_colour(store: RunStore, rec: RunRecord) -> list[dict[str, Any]]:
     except (TypeError, ValueError, AttributeError):
         pc = None  # a damaged snapshot: repeats averaged as L*a*b*
     return colour_rows(store.points(rec.id), store.predicted_colours(rec.id), theta_i, pc)
-
-
-def resume_command(run_id: int, store: RunStore) -> str:
-    """The command that resumes run ``run_id`` of ``store``: ``--store`` named unless it is
-    the default store (``scan resume`` reads the run's config from the store itself). A
-    PostgreSQL URL is shown without its password (libpq reads it from PGPASSWORD or
-    ~/.pgpass)."""
-    from goniolab.store import default_store_path
-
-    cmd = f"goniolab scan resume {run_id}"
-    if store.is_postgres:
-        return f"{cmd} --store {shlex.quote(store.location)}"
-    try:
-        default = store.path.resolve() == default_store_path().resolve()
-    except OSError:
-        default = False
-    if not default:
-        cmd += f" --store {shlex.quote(str(store.path.resolve()))}"
-    return cmd
 
 
 # ----------------------------------------------------------------------- list, show
@@ -250,12 +214,12 @@ def list_runs(
     empty list (``missing_ok``; nothing is created), else the store's error."""
     from goniolab.store import StoreError
 
-    path = store_path(store, config)
+    path = store_location(store, config=config)
     if missing_ok and isinstance(path, Path) and not path.exists():
         # a fresh installation (or a mistyped --store): nothing to list, nothing created
         return RunList(str(path), exists=False)
     filtered = any(v is not None for v in (operator, tag, sample_id, text))
-    with open_store(path) as s:  # a missing store: its own message
+    with reading_store(path, None) as s:  # a missing store: its own message
         try:
             briefs = s.list_briefs(
                 limit=limit, operator=operator, tag=tag, sample_id=sample_id, text=text
@@ -291,7 +255,7 @@ def show_run(
     run_id: int, store: str | Path | None = None, config: str | Path | None = None
 ) -> RunView:
     """Run ``run_id`` with its summary recomputed from its stored readings."""
-    with open_store(store, config) as s:
+    with reading_store(store, config) as s:
         rec = get_run(s, run_id)
         resume = resume_command(rec.id, s) if rec.status != "done" and rec.kind == "brdf" else None
         return RunView(rec, interrupted(s, rec), run_summary(s, rec), run_colour(s, rec), resume)
@@ -301,7 +265,7 @@ def summarize_run(
     run_id: int, store: str | Path | None = None, config: str | Path | None = None
 ) -> dict[str, Any]:
     """The summary ``runs show`` prints (RMSE, peaks, counts) of run ``run_id``."""
-    with open_store(store, config) as s:
+    with reading_store(store, config) as s:
         return run_summary(s, get_run(s, run_id))
 
 
@@ -313,7 +277,7 @@ def run_xarray(
     from goniolab.datasets import run_dataset
     from goniolab.store import StoreError
 
-    with open_store(store, config) as s:
+    with reading_store(store, config) as s:
         get_run(s, run_id)
         try:
             return run_dataset(s, run_id)
@@ -329,7 +293,7 @@ def run_dataframe(
     from goniolab.export import run_dataframe as frame
     from goniolab.store import StoreError
 
-    with open_store(store, config) as s:
+    with reading_store(store, config) as s:
         get_run(s, run_id)
         try:
             return frame(s, run_id)
@@ -371,7 +335,7 @@ def export_run(
             f"runs export --format {fmt}: a binary format needs -o FILE "
             f"(e.g. -o run{EXPORTERS[fmt].suffix})"
         )
-    with open_store(store, config) as s:
+    with reading_store(store, config) as s:
         get_run(s, run_id)
         try:
             text = export(s, run_id, fmt, output)
@@ -413,7 +377,7 @@ def plot_run(
             raise UserError(f"--out {path}: the suffix picks the format: {', '.join(PLOT_FORMATS)}")
         if path.parent and not path.parent.is_dir():
             raise UserError(f"--out {path}: no such directory {path.parent}")
-    with open_store(store, config) as s:
+    with reading_store(store, config) as s:
         rec = get_run(s, run_id)
         try:
             fig = draw(s, run_id, out=path, log=log)
@@ -446,8 +410,8 @@ def write_run_spectra(
     :func:`goniolab.spectra_files.write_spectra_file`: CSV ``R_400..``, Parquet, netCDF)."""
     from goniolab.run_spectra import spectra_tables
 
-    with open_store(store, config) as s:
-        rec = _scan_run(s, run_id, "spectra need a scan (brdf) run")
+    with reading_store(store, config) as s:
+        rec = scan_run(s, run_id, "spectra need a scan (brdf) run")
         tables, attrs = spectra_tables(s, rec.id, which)
     if not tables:
         raise UserError(f"run {rec.id} has no {which} spectra on one wavelength grid")
@@ -564,7 +528,7 @@ def migrate_runs(
     from goniolab.store import RunStore, StoreError, is_store_url
 
     src_loc: Location = source if is_store_url(source) else Path(source).expanduser()
-    target = store_path(store, config)
+    target = store_location(store, config=config)
     if isinstance(src_loc, Path) and isinstance(target, Path):
         same = src_loc.resolve() == target.resolve() or (
             src_loc.exists() and target.exists() and src_loc.samefile(target)

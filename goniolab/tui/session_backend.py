@@ -97,7 +97,7 @@ class SessionBackend:
         if sample:
             self.sample = _sample_spec(sample)
             check_sample(self.sample, given=sample)
-        self.store_path = store_location(store_path, self.config.lab.store)
+        self.store_path = store_location(store_path, config=self.config)
         self.bus = EventBus()
         self.session: ScanSession | None = None
         self.gloss: GlossSession | None = None
