@@ -480,7 +480,9 @@ class SessionBackend:
             colours: list[ColourPredicted] = []
             if rec.kind == "brdf":
                 plan = BrdfPlan.from_dict(rec.plan)
+                white = _stored_white_xyz(rec.config)
                 for p in store.points(run_id):
+                    c = p.colour
                     measured.append(
                         PointMeasured(
                             run_id=run_id,
@@ -492,9 +494,11 @@ class SessionBackend:
                             luminance_pct=p.luminance_pct,
                             measured_theta_i_deg=p.measured_theta_i_deg,
                             measured_theta_r_deg=p.measured_theta_r_deg,
-                            lab=None
-                            if p.colour is None
-                            else (p.colour["L"], p.colour["a"], p.colour["b"]),
+                            lab=None if c is None else (c["L"], c["a"], c["b"]),
+                            # as the live event: repeats are averaged as spectra (issue 25)
+                            xyz=None if c is None else (c["X"], c["Y"], c["Z"]),
+                            white_xyz=None if c is None else white,
+                            quality=str(p.raw.get("quality", "unknown")),
                         )
                     )
                 for index, c in sorted(store.predicted_colours(run_id).items()):
@@ -535,6 +539,20 @@ class SessionBackend:
                 len(measured) if rec.kind == "brdf" else len(gloss),
             )
             return StoredRun(summary, measured, predicted, gloss, colours)
+
+
+def _stored_white_xyz(config: dict[str, Any]) -> tuple[float, float, float] | None:
+    """The white a stored run's L*a*b* is relative to (its snapshot's ``[colour]``, as
+    the runner's :class:`goniolab.scan.colour.PointColour`); ``None`` for a snapshot that
+    cannot say (its repeats are then averaged as L*a*b*, as ``runs colour`` does)."""
+    from goniolab.colour.spectra import white_xyz
+    from goniolab.scan.colour import PointColour
+
+    try:
+        x, y, z = (float(v) for v in white_xyz(PointColour.from_snapshot(config).settings))
+    except (TypeError, ValueError, AttributeError):
+        return None
+    return (x, y, z)
 
 
 #: A status read that takes longer than this shows the arm's link as lost (seconds).
