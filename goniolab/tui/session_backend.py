@@ -482,7 +482,7 @@ class SessionBackend:
                 plan = BrdfPlan.from_dict(rec.plan)
                 white = _stored_white_xyz(rec.config)
                 for p in store.points(run_id):
-                    c = p.colour
+                    col = p.colour
                     measured.append(
                         PointMeasured(
                             run_id=run_id,
@@ -494,10 +494,10 @@ class SessionBackend:
                             luminance_pct=p.luminance_pct,
                             measured_theta_i_deg=p.measured_theta_i_deg,
                             measured_theta_r_deg=p.measured_theta_r_deg,
-                            lab=None if c is None else (c["L"], c["a"], c["b"]),
+                            lab=None if col is None else (col["L"], col["a"], col["b"]),
                             # as the live event: repeats are averaged as spectra (issue 25)
-                            xyz=None if c is None else (c["X"], c["Y"], c["Z"]),
-                            white_xyz=None if c is None else white,
+                            xyz=None if col is None else (col["X"], col["Y"], col["Z"]),
+                            white_xyz=None if col is None else white,
                             quality=str(p.raw.get("quality", "unknown")),
                         )
                     )
