@@ -201,6 +201,10 @@ class SessionBackend:
             repeats=DEFAULT_REPEATS,
         )
 
+    def check_setup(self, setup: ScanSetup) -> None:
+        """:meth:`ScanSetup.validate` against this lab's arm limits (its config's)."""
+        setup.validate(self.config.goniometer.lamp.limits_deg)
+
     @property
     def simulated(self) -> bool:
         """The instruments are simulated (in-process or served on the wire)."""
@@ -216,7 +220,7 @@ class SessionBackend:
     async def predict_curve(self, setup: ScanSetup) -> list[float]:
         """The prediction of ``setup.sample`` over the sweep (model built and evaluated in
         worker threads, see :class:`~goniolab.scan.prediction.Predictor`)."""
-        setup.validate()
+        self.check_setup(setup)
         model = await self.model(setup.sample)
         values = await asyncio.to_thread(
             Predictor.from_config(model, self.config).predict_sync,
@@ -243,8 +247,8 @@ class SessionBackend:
     async def start(self, setup: ScanSetup) -> int:
         """Check the plan (every geometry and the park position), then create the run in
         the store and start the runner in a task; return the run id."""
+        self.check_setup(setup)
         session = self._require_open()
-        setup.validate()
         if self.running:
             raise UserError("a scan is already running")
         plan = brdf_plan(
