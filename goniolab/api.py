@@ -32,7 +32,6 @@ from typing import TYPE_CHECKING, Any, ParamSpec, TypeVar
 
 import numpy as np
 
-from goniolab.errors import UserError
 from goniolab.scan.plans import DEFAULT_REPEATS
 from goniolab.store import RunRecord
 
@@ -82,16 +81,6 @@ def load_surface(path: str | Path, *, step_um: float | None = None) -> xr.DataAr
     from goniolab.datasets import heightmap_dataarray
 
     return heightmap_dataarray(heightmap_of(path, step_um))
-
-
-def _angles(theta_r_deg: str | Sequence[float] | np.ndarray) -> np.ndarray:
-    from goniolab.scan.plans import PlanError, parse_angles
-
-    spec = theta_r_deg if isinstance(theta_r_deg, str) else [float(v) for v in theta_r_deg]
-    try:
-        return np.asarray(parse_angles(spec, name="theta_r_deg"), dtype=np.float64)
-    except PlanError as exc:
-        raise UserError(str(exc)) from None
 
 
 def predict_brdf(
@@ -345,12 +334,9 @@ def open_dataset(path: str | Path) -> xr.Dataset:
     """Read back a netCDF file goniolab wrote (``goniolab runs export RUN -o run.nc``, or
     a prediction saved with :func:`goniolab.datasets.write_netcdf`): the same variables,
     units and attributes as :meth:`Run.to_xarray`, times as UTC ``datetime64``."""
-    from goniolab.datasets import open_dataset as read
+    from goniolab.app.netcdf_files import read_dataset
 
-    try:
-        return read(path)
-    except OSError as exc:
-        raise UserError(str(exc)) from None
+    return read_dataset(path)
 
 
 def open_run(run_id: int, store: str | Path | None = None) -> Run:

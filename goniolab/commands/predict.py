@@ -79,8 +79,8 @@ def _write_out(args: argparse.Namespace, make: Any) -> None:
     """``--out FILE.nc``: the prediction as a netCDF Dataset (units on every variable)."""
     if not args.out:
         return
+    from goniolab.app.netcdf_files import save_dataset
     from goniolab.app.predictions import index_json
-    from goniolab.datasets import write_netcdf
 
     out = Path(args.out)
     if out.suffix.lower() not in (".nc", ".nc4"):
@@ -90,10 +90,7 @@ def _write_out(args: argparse.Namespace, make: Any) -> None:
              "model": args.model}  # fmt: skip
     if args.wavelength_nm is not None:
         attrs["wavelength_nm"] = float(args.wavelength_nm)
-    try:
-        write_netcdf(make(attrs), out)
-    except OSError as exc:
-        raise UserError(f"cannot write {out}: {exc.strerror or exc}") from exc
+    save_dataset(make(attrs), out)
     print(f"prediction written to {out}", file=sys.stderr)
 
 
