@@ -14,7 +14,7 @@ The module is named ``stored_runs`` (not ``runs``): a module name is used once i
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
+from contextlib import AbstractContextManager, contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -62,25 +62,34 @@ Location = Path | str
 
 
 # ----------------------------------------------------------------------- the store, a run
-def reading_store(store: str | Path | None, config: str | Path | None) -> RunStore:
-    """The chosen store (:func:`goniolab.app.lab_setup.open_store`) opened for reading:
-    nothing is created or written; it must exist."""
-    return open_store(store, config=config, readonly=True)
-
-
 @contextmanager
-def writable_store(
-    store: str | Path | None = None, config: str | Path | None = None, *, create: bool = True
-) -> Iterator[RunStore]:
-    """The chosen store opened for writing (``create=False``: it must exist); any
-    :class:`~goniolab.store.StoreError` while it is open is a :class:`UserError`."""
+def _held(opened: Callable[[], RunStore]) -> Iterator[RunStore]:
+    """The store ``opened()`` returns, closed at the end; any
+    :class:`~goniolab.store.StoreError` while it is open is a :class:`UserError` (the
+    store's message names the store and the run)."""
     from goniolab.store import StoreError
 
     try:
-        with open_store(store, config=config, create=create) as s:
+        with opened() as s:
             yield s
     except StoreError as exc:
         raise UserError(str(exc)) from exc
+
+
+def reading_store(
+    store: str | Path | None, config: str | Path | None
+) -> AbstractContextManager[RunStore]:
+    """The chosen store (:func:`goniolab.app.lab_setup.open_store`) opened for reading
+    (nothing is created or written; it must exist), its errors :class:`UserError`."""
+    return _held(lambda: open_store(store, config=config, readonly=True))
+
+
+def writable_store(
+    store: str | Path | None = None, config: str | Path | None = None, *, create: bool = True
+) -> AbstractContextManager[RunStore]:
+    """The chosen store opened for writing (``create=False``: it must exist), its errors
+    :class:`UserError`."""
+    return _held(lambda: open_store(store, config=config, create=create))
 
 
 def get_run(store: RunStore, run_id: int, *, allow_damaged: bool = False) -> RunRecord:
@@ -212,20 +221,15 @@ def list_runs(
     """The runs of the chosen store, newest first, filtered by operator, tag, sample id or
     a text in sample, sample id, operator, notes or tags. A store file not made yet is an
     empty list (``missing_ok``; nothing is created), else the store's error."""
-    from goniolab.store import StoreError
-
     path = store_location(store, config=config)
     if missing_ok and isinstance(path, Path) and not path.exists():
         # a fresh installation (or a mistyped --store): nothing to list, nothing created
         return RunList(str(path), exists=False)
     filtered = any(v is not None for v in (operator, tag, sample_id, text))
     with reading_store(path, None) as s:  # a missing store: its own message
-        try:
-            briefs = s.list_briefs(
-                limit=limit, operator=operator, tag=tag, sample_id=sample_id, text=text
-            )
-        except StoreError as exc:
-            raise UserError(str(exc)) from exc
+        briefs = s.list_briefs(
+            limit=limit, operator=operator, tag=tag, sample_id=sample_id, text=text
+        )
         runs = [RunBrief(r, n, interrupted(s, r)) for r, n in briefs]
         return RunList(s.location, True, runs, filtered)
 
@@ -275,14 +279,10 @@ def run_xarray(
     """Measured, predicted, residual (and colour) per point of run ``run_id``
     (:func:`goniolab.datasets.run_dataset`)."""
     from goniolab.datasets import run_dataset
-    from goniolab.store import StoreError
 
     with reading_store(store, config) as s:
         get_run(s, run_id)
-        try:
-            return run_dataset(s, run_id)
-        except StoreError as exc:
-            raise UserError(str(exc)) from exc
+        return run_dataset(s, run_id)
 
 
 def run_dataframe(
@@ -291,14 +291,10 @@ def run_dataframe(
     """One row per reading of run ``run_id`` (the CSV export's columns,
     :func:`goniolab.export.run_dataframe`)."""
     from goniolab.export import run_dataframe as frame
-    from goniolab.store import StoreError
 
     with reading_store(store, config) as s:
         get_run(s, run_id)
-        try:
-            return frame(s, run_id)
-        except StoreError as exc:
-            raise UserError(str(exc)) from exc
+        return frame(s, run_id)
 
 
 # ----------------------------------------------------------------------- export, plot
@@ -324,7 +320,6 @@ def export_run(
     ``output`` or as text (:mod:`goniolab.export`)."""
     from goniolab.export import EXPORTERS, resolve_format
     from goniolab.export import export_run as export
-    from goniolab.store import StoreError
 
     try:
         fmt = resolve_format(fmt, output)
@@ -344,8 +339,6 @@ def export_run(
                 f"cannot write {output}: {exc.strerror or exc}"
                 + (f" ({output} is left as it was)" if output and Path(output).exists() else "")
             ) from exc
-        except StoreError as exc:
-            raise UserError(str(exc)) from exc
     return ExportResult(run_id, fmt, None if output is None else Path(output), text)
 
 
