@@ -518,7 +518,7 @@ def migrate_runs(
     store, matched by run UUID: new runs copied, partial copies brought up to date, a run
     being measured right now skipped. ``on_run(entry, record)`` is told of each run as it
     is done."""
-    from goniolab.store import RunStore, StoreError, is_store_url
+    from goniolab.store import StoreError, is_store_url
 
     src_loc: Location = source if is_store_url(source) else Path(source).expanduser()
     target = store_location(store, config=config)
@@ -528,40 +528,28 @@ def migrate_runs(
         )
         if same:
             raise UserError(f"runs migrate: --from {source} is the target store itself")
-    try:
-        src = RunStore(src_loc, readonly=True)
-    except StoreError as exc:
-        raise UserError(str(exc)) from exc
     moved: list[dict[str, Any]] = []
-    with src:
-        try:
-            dst = RunStore(target)
-        except StoreError as exc:
-            raise UserError(str(exc)) from exc
-        with dst:
-            if _same_store(src, dst):
-                raise UserError(
-                    f"runs migrate: --from {src.location} is the target store {dst.location} "
-                    "itself (the same store UUID)"
-                )
-            try:
-                runs = sorted(src.list_runs(), key=lambda r: r.id)
-            except StoreError as exc:
-                raise UserError(str(exc)) from exc
-            for rec in runs:
-                entry: dict[str, Any] = {"from": rec.id, "uuid": rec.uuid}
-                if rec.status in ("running", "paused") and src.is_claimed(rec.id):
-                    why = "being measured right now; run migrate again when it has finished"
-                    entry.update(to=None, copied=False, action="skipped", reason=why)
+    with reading_store(src_loc, None) as src, writable_store(target, None) as dst:
+        if _same_store(src, dst):
+            raise UserError(
+                f"runs migrate: --from {src.location} is the target store {dst.location} "
+                "itself (the same store UUID)"
+            )
+        runs = sorted(src.list_runs(), key=lambda r: r.id)
+        for rec in runs:
+            entry: dict[str, Any] = {"from": rec.id, "uuid": rec.uuid}
+            if rec.status in ("running", "paused") and src.is_claimed(rec.id):
+                why = "being measured right now; run migrate again when it has finished"
+                entry.update(to=None, copied=False, action="skipped", reason=why)
+            else:
+                try:
+                    new_id, action = dst.copy_run_from(src, rec.id)
+                except StoreError as exc:
+                    entry.update(to=None, copied=False, action="error", error=str(exc))
                 else:
-                    try:
-                        new_id, action = dst.copy_run_from(src, rec.id)
-                    except StoreError as exc:
-                        entry.update(to=None, copied=False, action="error", error=str(exc))
-                    else:
-                        entry.update(to=new_id, copied=action == "copied", action=action)
-                moved.append(entry)
-                if on_run is not None:
-                    on_run(entry, rec)
-            where = dst.location
+                    entry.update(to=new_id, copied=action == "copied", action=action)
+            moved.append(entry)
+            if on_run is not None:
+                on_run(entry, rec)
+        where = dst.location
     return Migration(src.location, where, moved)
