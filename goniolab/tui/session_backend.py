@@ -21,7 +21,14 @@ from pathlib import Path
 from typing import Any
 
 from drivers.base import GLOSS_ANGLES_DEG, DeviceError
-from goniolab.app.lab_setup import brdf_plan, check_sample, load_config, open_store, store_location
+from goniolab.app.lab_setup import (
+    brdf_plan,
+    check_sample,
+    lab_errors,
+    load_config,
+    open_store,
+    store_location,
+)
 from goniolab.errors import UserError
 from goniolab.optics.models import ReflectanceModel
 from goniolab.scan.align import AlignPlan, AlignRunner
@@ -342,10 +349,12 @@ class SessionBackend:
         """Run to the end; a refused plan or an unexpected error becomes events, not a crash."""
         run_id = runner.run_id
         try:
-            await session.run(runner)
-        except PlanRefused as exc:
-            self._fail(run_id, "goniometer", f"plan refused (no arm moved): {exc}")
-        except (DeviceError, StoreError, OSError) as exc:
+            with lab_errors():  # the one translation, as the CLI's and the API's scans
+                await session.run(runner)
+        except UserError as exc:  # a refused plan, an instrument, the store, a held run
+            device = "goniometer" if isinstance(exc.__cause__, PlanRefused) else "lab"
+            self._fail(run_id, device, str(exc))
+        except OSError as exc:
             self._fail(run_id, "lab", str(exc))
         except Exception as exc:
             done = runner.state in (RunState.DONE, RunState.FAILED, RunState.ABORTED)
