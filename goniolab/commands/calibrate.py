@@ -22,7 +22,7 @@ def _cmd(args: argparse.Namespace) -> int:
     from goniolab.commands.scan import run_lab, specimen_prompt
 
     cfg = load_config(args.config, args.store)
-    with open_store(args.store, cfg.lab.store) as store:
+    with open_store(args.store, config=cfg) as store:
         out = run_lab(
             calibrate(
                 cfg, store, theta_deg=args.theta, repeats=args.repeats,
