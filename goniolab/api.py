@@ -32,7 +32,6 @@ from typing import TYPE_CHECKING, Any, ParamSpec, TypeVar
 
 import numpy as np
 
-from goniolab.errors import UserError
 from goniolab.scan.plans import DEFAULT_REPEATS
 from goniolab.store import RunRecord
 
@@ -82,16 +81,6 @@ def load_surface(path: str | Path, *, step_um: float | None = None) -> xr.DataAr
     from goniolab.datasets import heightmap_dataarray
 
     return heightmap_dataarray(heightmap_of(path, step_um))
-
-
-def _angles(theta_r_deg: str | Sequence[float] | np.ndarray) -> np.ndarray:
-    from goniolab.scan.plans import PlanError, parse_angles
-
-    spec = theta_r_deg if isinstance(theta_r_deg, str) else [float(v) for v in theta_r_deg]
-    try:
-        return np.asarray(parse_angles(spec, name="theta_r_deg"), dtype=np.float64)
-    except PlanError as exc:
-        raise UserError(str(exc)) from None
 
 
 def predict_brdf(
@@ -267,9 +256,9 @@ class Run:
     @property
     def record(self) -> RunRecord:
         """The run's row: kind, plan, config snapshot, sample, model, status, times."""
-        from goniolab.app.stored_runs import get_run, open_store
+        from goniolab.app.stored_runs import get_run, reading_store
 
-        with open_store(self.store) as s:
+        with reading_store(self.store, None) as s:
             return get_run(s, self.id)
 
     @property
@@ -345,19 +334,16 @@ def open_dataset(path: str | Path) -> xr.Dataset:
     """Read back a netCDF file goniolab wrote (``goniolab runs export RUN -o run.nc``, or
     a prediction saved with :func:`goniolab.datasets.write_netcdf`): the same variables,
     units and attributes as :meth:`Run.to_xarray`, times as UTC ``datetime64``."""
-    from goniolab.datasets import open_dataset as read
+    from goniolab.app.netcdf_files import read_dataset
 
-    try:
-        return read(path)
-    except OSError as exc:
-        raise UserError(str(exc)) from None
+    return read_dataset(path)
 
 
 def open_run(run_id: int, store: str | Path | None = None) -> Run:
     """Run ``run_id`` of the store (``None``: the default store, as the CLI's)."""
-    from goniolab.app.stored_runs import store_path
+    from goniolab.app.lab_setup import store_location
 
-    run = Run(int(run_id), store_path(store))
+    run = Run(int(run_id), store_location(store))
     run.record  # noqa: B018 - fail here, with the store's message, when it does not exist
     return run
 
@@ -524,17 +510,16 @@ async def run_scan_async(
         what was measured stays stored.
     """
     from goniolab.app.lab_scan import scan
-    from goniolab.app.lab_setup import brdf_plan, load_config, open_store, run_meta
-    from goniolab.app.lab_setup import store_location as location_of
+    from goniolab.app.lab_setup import brdf_plan, load_config, open_store, run_meta, store_location
     from goniolab.progress import auto_progress
 
-    cfg = load_config(config)
+    cfg = load_config(config, store)
     plan = brdf_plan(
         cfg, sample=sample or cfg.sample.map, theta_i_deg=theta_i_deg, theta_r_deg=theta_r_deg,
         repeats=repeats, dwell_s=dwell_s, exposure_us=exposure_us, auto_exposure=auto_exposure,
         what="run_scan", angles_option="theta_r_deg",
     )  # fmt: skip
-    location = location_of(store, cfg.lab.store)
+    location = store_location(store, config=cfg)
     control = _CONTROL.get()
     reporter = auto_progress() if progress else None
 

@@ -1,8 +1,17 @@
 """Errors the ``goniolab`` application reports to a user as one clear line.
 
 Library layers raise their own errors (``goniolab.optics.HeightMapError``,
-``drivers.base.DeviceError``, ``goniolab.config.ConfigError``); the CLI and the TUI
-translate them with :func:`as_user_error`.
+``drivers.base.DeviceError``, ``goniolab.store.StoreError``, ``goniolab.scan.plans.PlanError``);
+the application layer (:mod:`goniolab.app`, issue 24) turns those a user can act on into a
+:class:`UserError`, where a use case calls the library: on a lab with the one context
+manager :func:`goniolab.app.lab_setup.lab_errors` (a refused plan, an unreachable
+instrument, a store that refuses a write, a run another process holds); a store opened with
+:func:`goniolab.app.lab_setup.open_store`, a run read with
+:func:`goniolab.app.stored_runs.get_run`, a netCDF file with
+:mod:`goniolab.app.netcdf_files`, a height map or an option of a prediction in
+:mod:`goniolab.app.predictions`. Each face then presents a :class:`UserError` at one point:
+the CLI's ``goniolab.cli.main`` (``goniolab: error: ...`` and its ``exit_code``), the TUI's
+key actions (a notification), the notebook API (the exception itself).
 """
 
 from __future__ import annotations

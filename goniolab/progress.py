@@ -15,6 +15,12 @@ faces choose the renderer:
 - :class:`CallbackProgress`: each update handed to a function as a
   :class:`ProgressUpdate` (a UI that draws its own bar, a test).
 
+A library that reports ``(done, total, what)`` (the physical-optics model's set-up,
+:data:`goniolab.app.predictions.Progress`) is drawn by a reporter through
+:class:`StepsProgress` (:func:`model_progress`: only on a terminal, once the work has taken
+2 s). ``terminal_progress(..., piped_lines=False)`` draws nothing to a pipe or a file but
+still writes the messages (the batch of ``predict gloss``).
+
 The ETA shown is the caller's (``eta_s``, wall seconds) when it has one; without it
 (``eta_s=None``: a simulated clock at scale 0 takes no wall time, so a motion model cannot
 predict the wait) it is the measured wall time per step times the steps left, "?" until
@@ -42,10 +48,12 @@ __all__ = [
     "NullProgress",
     "ProgressUpdate",
     "Reporter",
+    "StepsProgress",
     "TerminalProgress",
     "auto_progress",
     "format_eta",
     "in_jupyter",
+    "model_progress",
     "notebook_progress",
     "terminal_progress",
 ]
@@ -218,12 +226,15 @@ class TerminalProgress(_Base):
         label: str = "",
         width: int = 30,
         jupyter: bool = False,
+        piped_lines: bool = True,
     ) -> None:
         super().__init__(total, label)
         self.stream = sys.stderr if stream is None else stream
         self.width = width
         self.jupyter = jupyter
         self.rich_bar = jupyter or self.stream.isatty()
+        #: Off: nothing drawn to a pipe or a file (the messages are still written).
+        self.piped_lines = piped_lines
         self._last_pct = -1
         self._rich: Any = None
         self._task: Any = None
@@ -260,6 +271,8 @@ class TerminalProgress(_Base):
             self._rich.update(self._task, completed=self.done, total=self.total, eta=eta,
                               detail=detail)  # fmt: skip
             return
+        if not self.piped_lines:
+            return
         total = self.total
         frac = self.done / total if total else 1.0
         n = round(frac * self.width)
@@ -284,11 +297,44 @@ class TerminalProgress(_Base):
 
 
 def terminal_progress(
-    total: int = 0, label: str = "", *, stream: TextIO | None = None
+    total: int = 0, label: str = "", *, stream: TextIO | None = None, piped_lines: bool = True
 ) -> TerminalProgress:
     """A :class:`TerminalProgress` on ``stream`` (default stderr); a context manager:
-    ``with terminal_progress(n, "maps") as p: p.advance()``."""
-    return TerminalProgress(stream, total=total, label=label)
+    ``with terminal_progress(n, "maps") as p: p.advance()``. ``piped_lines=False``: no
+    10 % lines to a pipe or a file (the messages still are)."""
+    return TerminalProgress(stream, total=total, label=label, piped_lines=piped_lines)
+
+
+class StepsProgress:
+    """A ``(done, total, what)`` progress callback drawn by ``reporter``, from the first
+    call made ``after_s`` seconds or more after this was made (short work shows nothing);
+    the reporter is finished when ``done`` reaches ``total``."""
+
+    def __init__(self, reporter: Reporter, *, after_s: float = 0.0) -> None:
+        self.reporter = reporter
+        self.after_s = after_s
+        self.t0 = time.monotonic()
+        #: The reporter was started (something was shown).
+        self.shown = False
+
+    def __call__(self, done: int, total: int, what: str) -> None:
+        if not self.shown:
+            if time.monotonic() - self.t0 < self.after_s:
+                return
+            self.shown = True
+            self.reporter.start(total, what)
+        self.reporter.advance(done, total=total)
+        if done >= total:
+            self.reporter.finish()
+
+
+def model_progress(*, after_s: float = 2.0, stream: TextIO | None = None) -> StepsProgress:
+    """The CLI's progress of long model work: a :func:`terminal_progress` bar on ``stream``
+    (default stderr) when a terminal watches and the work has taken ``after_s`` s; nothing
+    to a pipe or a file."""
+    out = sys.stderr if stream is None else stream
+    reporter: Reporter = TerminalProgress(out, label="model") if out.isatty() else NullProgress()
+    return StepsProgress(reporter, after_s=after_s)
 
 
 def notebook_progress(total: int = 0, label: str = "") -> TerminalProgress:

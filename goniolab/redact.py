@@ -171,9 +171,16 @@ def _kv_value(text: str, i: int) -> tuple[str, int]:
     return text[i:j], j
 
 
+def _is_uri(conninfo: str) -> bool:
+    """Whether ``conninfo`` is a URI: a string that starts with a libpq keyword is a
+    keyword/value string whatever its values hold (``password='0://'``: manual sec.
+    34.1.1), else one with ``://`` is a URI."""
+    return "://" in conninfo and not is_conninfo(conninfo)
+
+
 def conninfo_password(conninfo: str) -> str | None:
     """The password a connection string carries (percent-decoded for a URI), else ``None``."""
-    if "://" in conninfo:
+    if _is_uri(conninfo):
         head = conninfo.split("://", 1)[1]
         m = _URI_END.search(head)
         token = head if m is None else head[: m.start()]
@@ -197,13 +204,15 @@ def scrub_driver_message(message: str, conninfo: str) -> str:
     The password is known by parsing ``conninfo`` (never from the environment); a message
     is withheld rather than patched so that no hole reveals the secret's length or place.
     """
-    text = redact(" ".join(message.split()))
+    plain = " ".join(message.split())
+    text = redact(plain)
     secret = conninfo_password(conninfo)
     if secret is None:
         return text
-    raw = conninfo.split("://", 1)[1] if "://" in conninfo else conninfo
+    uri = _is_uri(conninfo)
+    raw = conninfo.split("://", 1)[1] if uri else conninfo
     pieces = {secret, *secret.split()}
-    if "%" in raw:
+    if uri and "%" in raw:
         at = raw.rfind("@")
         if at >= 0 and ":" in raw[:at]:
             pieces.add(raw[:at].split(":", 1)[1])
@@ -211,7 +220,9 @@ def scrub_driver_message(message: str, conninfo: str) -> str:
         w in text
         for w in ("percent-encoded", "connection info string", "invalid URI", "invalid integer")
     )
-    if parse_error or any(len(p) >= 2 and p in text for p in pieces):
+    # looked for before redact(): a password that reads as a URI ("a://u:p@h") would be
+    # half-blanked by it, and the half left would show
+    if parse_error or any(len(p) >= 2 and p in plain for p in pieces):
         return (
             "the driver's message is withheld: it quotes the connection string, which holds a "
             "password (check the URL: percent-encode '@', '/', ':', '%' and spaces in the "

@@ -526,11 +526,12 @@ NO_LAB_FACES = tuple(
 #: What a face may not import: the store, the lab config, the plans (goniolab.app does that).
 NO_LAB_FORBIDDEN = ("goniolab.store", "goniolab.config", "goniolab.scan.plans")
 #: What a face may import from goniolab: the application layer, the one error family, its
-#: fellow faces, and presentation helpers (JSON/text output, netCDF of a prediction) and the
-#: registries whose names its options offer.
+#: fellow faces, and presentation helpers (JSON/text output, netCDF of a prediction, the one
+#: progress abstraction) and the registries whose names its options offer.
 NO_LAB_MAY_IMPORT = (
     "goniolab.app", "goniolab.errors", "goniolab.commands", "goniolab.jsonout",
     "goniolab.textsafe", "goniolab.datasets", "goniolab.model_registry", "goniolab.export",
+    "goniolab.progress",
 )  # fmt: skip
 #: ``file: module`` -> why that face imports it beyond :data:`NO_LAB_MAY_IMPORT`.
 NO_LAB_IMPORT_EXCEPTIONS: dict[str, str] = {
@@ -541,7 +542,7 @@ NO_LAB_IMPORT_EXCEPTIONS: dict[str, str] = {
 #: (goniolab.app's scan use cases); the module-level imports they need are listed here.
 API_LAB_NAMES = {
     "_ScanControl", "_run_blocking", "_ScanCall", "_scan_call", "_scan_in_this_thread",
-    "run_scan", "run_scan_async", "_scan", "_angles", "_blocking",
+    "run_scan", "run_scan_async", "_scan", "_blocking",
 }  # fmt: skip
 API_MODULE_IMPORT_EXCEPTIONS: dict[str, str] = {
     "goniolab.store": "run_scan opens its store (RunMeta, RunStore); Run.record's type",

@@ -11,8 +11,10 @@ from goniolab.progress import (
     CallbackProgress,
     NullProgress,
     ProgressUpdate,
+    StepsProgress,
     TerminalProgress,
     auto_progress,
+    model_progress,
     terminal_progress,
 )
 from goniolab.scan.events import Progress
@@ -119,3 +121,44 @@ def test_outside_a_kernel_progress_goes_to_stderr_and_nothing_to_stdout(
     silent.message("x")
     silent.finish()
     assert capsys.readouterr() == ("", "")
+
+
+def test_a_libraries_steps_callback_is_drawn_by_a_reporter() -> None:
+    """The physical-optics model's ``(done, total, what)`` progress (app.predictions'
+    Progress) goes through the one abstraction: started once with its label, every step
+    advanced, finished at the end."""
+    got: list[ProgressUpdate] = []
+    steps = StepsProgress(CallbackProgress(got.append))
+    for k in range(1, 4):
+        steps(k, 3, "tabulating the Kirchhoff integral")
+    assert [(u.kind, u.done, u.total) for u in got] == [
+        ("start", 0, 3), ("advance", 1, 3), ("advance", 2, 3), ("advance", 3, 3),
+        ("finish", 3, 3),
+    ]  # fmt: skip
+    assert got[0].label == "tabulating the Kirchhoff integral" and steps.shown
+    late = StepsProgress(CallbackProgress(got.append), after_s=3600.0)
+    late(1, 3, "quick")  # short work shows nothing
+    assert not late.shown and len(got) == 5
+
+
+def test_model_progress_draws_a_rich_bar_on_a_terminal_only() -> None:
+    term = _Terminal()
+    steps = model_progress(after_s=0.0, stream=term)
+    for k in range(1, 5):
+        steps(k, 4, "kirchhoff table")
+    assert "4/4" in term.getvalue() and "kirchhoff table" in term.getvalue()
+    pipe = io.StringIO()
+    steps = model_progress(after_s=0.0, stream=pipe)
+    for k in range(1, 5):
+        steps(k, 4, "kirchhoff table")
+    assert pipe.getvalue() == ""  # a script's stderr stays clean
+
+
+def test_a_batch_bar_writes_only_its_messages_to_a_pipe() -> None:
+    pipe = io.StringIO()
+    with terminal_progress(3, "gloss", stream=pipe, piped_lines=False) as bar:
+        bar.advance()
+        bar.message("goniolab: error: b.npy: not a height map")
+        bar.advance()
+        bar.advance()
+    assert pipe.getvalue() == "goniolab: error: b.npy: not a height map\n"

@@ -190,3 +190,23 @@ def test_fuzz_keyword_password_never_survives(pw: str) -> None:
     assert conninfo_password(text) == pw  # the parser reads what libpq reads
     out = redact(text)
     assert out == "host=db password=*** dbname=runs" or pw not in out
+
+
+@pytest.mark.parametrize(
+    ("pw", "quoted"),
+    [
+        ("0://", "'0://'"),  # the fuzz test's find: a '://' inside a quoted value
+        ("a://u:p@h", "'a://u:p@h'"),
+        ("it's://x", "'it\\'s://x'"),
+        ("x://y", "x://y"),  # unquoted: runs to the next space
+    ],
+)
+def test_keyword_password_holding_a_uri_scheme_is_read_as_libpq_does(pw: str, quoted: str) -> None:
+    """A keyword/value string is one because it starts with a libpq keyword (manual sec.
+    34.1.1.1), whatever its values hold: ``password='0://'`` is the password ``0://``
+    (single quotes, backslash escapes), not a URI without a password."""
+    text = f"host=db password={quoted} dbname=runs"
+    assert conninfo_password(text) == pw
+    assert redact(text) == "host=db password=*** dbname=runs"
+    msg = scrub_driver_message(f'FATAL: password "{pw}" is wrong', text)
+    assert pw not in msg and "withheld" in msg

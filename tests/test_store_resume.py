@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pytest
 
+from goniolab.app.lab_setup import resume_command
 from goniolab.cli import main
-from goniolab.commands.scan import resume_command
 from goniolab.store import RunStore, default_store_path
 from tests.test_session import CLI_PLAN, sim_config
 

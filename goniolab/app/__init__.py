@@ -15,6 +15,7 @@ Modules (each imported on its own, so ``goniolab --help`` stays light):
 - :mod:`goniolab.app.stored_runs`: runs list / show / export / import / annotate / spectra
   / migrate, plot of a run;
   :mod:`goniolab.app.sample_maps`: the built-in samples;
+  :mod:`goniolab.app.netcdf_files`: netCDF files saved and read back;
 - :mod:`goniolab.app.lab_scan` (with :mod:`goniolab.app.lab_setup`, :mod:`goniolab.app.lab_gloss`):
   scan, align and resume on a lab, the gloss log, calibrate (``lab_``: a module name is used
   once in the tree, and ``commands/scan.py`` is taken).

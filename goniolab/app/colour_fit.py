@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
-from goniolab.errors import UserError, a_run_of_kind
+from goniolab.errors import UserError
 
 if TYPE_CHECKING:
     from goniolab.store import RunRecord
@@ -128,7 +128,7 @@ def fit_colour(
     import numpy as np
 
     from goniolab.app.colours import load_paint_file
-    from goniolab.app.stored_runs import get_run, open_store, run_colour
+    from goniolab.app.stored_runs import reading_store, run_colour, scan_run
     from goniolab.colour.paint import Paint
     from goniolab.colour.paint_fit import FitError, fit_paint
 
@@ -138,12 +138,8 @@ def fit_colour(
 
     if not (math.isfinite(opts.min_aspecular_deg) and opts.min_aspecular_deg >= 0):
         raise UserError(f"--min-aspecular {opts.min_aspecular_deg:g}: must be >= 0 deg")
-    with open_store(store, config) as s:
-        rec = get_run(s, run_id)
-        if rec.kind != "brdf":
-            raise UserError(
-                f"run {rec.id} is {a_run_of_kind(rec.kind)}: a colour fit needs a scan run"
-            )
+    with reading_store(store, config) as s:
+        rec = scan_run(s, run_id, "a colour fit needs a scan run")
         rows = run_colour(s, rec)
     coloured = [r for r in rows if "L" in r]
     if not coloured:

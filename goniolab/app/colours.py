@@ -341,17 +341,11 @@ def runs_colour(
     """A scan's measured colour per geometry judged against its prediction, or with ``vs``
     against another scan (the standard), under the tolerance set ``tolerance``
     (:func:`load_tolerance`), and under more ``illuminants`` / for ``metamerism``."""
-    from goniolab.app.stored_runs import get_run, open_store
+    from goniolab.app.stored_runs import get_run, reading_store, scan_run
 
     tol = load_tolerance(tolerance)
-    with open_store(store, config) as s:
-        rec = get_run(s, run_id)
-        if rec.kind != "brdf":
-            from goniolab.errors import a_run_of_kind
-
-            raise UserError(
-                f"run {rec.id} is {a_run_of_kind(rec.kind)}: colour needs a scan (brdf) run"
-            )
+    with reading_store(store, config) as s:
+        rec = scan_run(s, run_id, "colour needs a scan (brdf) run")
         other = None
         if vs is not None:
             other = get_run(s, vs)

@@ -192,13 +192,18 @@ async def _scan_on(
         scale = session.clock_scale
         check = prepared.check
         lab_time = "" if scale == 1.0 else f" ({check.eta_s:.2f} s of lab clock)"
-        # an instant sim clock takes no wall time for the lab's: the ETA comes from the
-        # readings as they are timed (goniolab.progress)
-        eta = format_eta(check.eta_s / scale) if scale > 0 else "from the readings"
+        # the motion model knows moves, dwells and exposures, not the computing and the
+        # links (issue 27: "ETA 27 s" before a scan of 47 s); an instant sim clock takes no
+        # wall time for the lab's. The live ETA measures the run (goniolab.scan.eta).
+        if scale > 0:
+            eta = f"motion and exposures {format_eta(check.eta_s / scale)}{lab_time}"
+        else:
+            eta = f"motion and exposures{lab_time}"
         homed = await session.homed()
         notify(
-            f"{check.n_readings} readings, {check.n_moves} moves, ETA {eta}{lab_time}"
-            + ("" if homed else " after homing the arms (the home search is not estimated)")
+            f"{check.n_readings} readings, {check.n_moves} moves; {eta}, "
+            "the live ETA measures the rest"
+            + ("" if homed else " (after homing the arms, which is not estimated)")
         )
         runner = session.start(prepared, meta=meta)
         notify(f"run {runner.run_id} in store {store.location}")

@@ -58,12 +58,13 @@ def quiet(text: str) -> None:
 
 
 # --------------------------------------------------------------------------- config, store
-def load_config(path: str | Path) -> LabConfig:
+def load_config(path: str | Path, store: str | Path | None = None) -> LabConfig:
     """The lab config of ``path``, validated (:func:`goniolab.config.load_lab_config`): the
-    one place a use case reads it, once per use case."""
+    one place a use case reads it, once per use case. ``store`` (``--store``) replaces
+    ``[lab] store``, so the alignment state is the one beside the store the run uses."""
     import goniolab.config
 
-    return goniolab.config.load_lab_config(path)
+    return goniolab.config.load_lab_config(path, store=store)
 
 
 def with_model(cfg: LabConfig, model: str | None) -> LabConfig:
@@ -73,23 +74,31 @@ def with_model(cfg: LabConfig, model: str | None) -> LabConfig:
     return cfg.model_copy(update={"sample": cfg.sample.model_copy(update={"model": model})})
 
 
-def store_location(store: str | Path | None, config_store: str | None = None) -> str | Path:
-    """The store a use case opens: ``store`` (``--store``) first, then the config's
-    ``[lab] store``, then the default file (:func:`goniolab.store.resolve_store_path`)."""
+def store_location(
+    store: str | Path | None = None, *, config: LabConfig | str | Path | None = None
+) -> str | Path:
+    """The store a use case opens, chosen here for every face: ``store`` (``--store``)
+    first, then the ``[lab] store`` of ``config`` (a loaded :class:`LabConfig`, or the path
+    of a lab config file, read here), then the default file
+    (:func:`goniolab.store.resolve_store_path`)."""
     from goniolab.store import resolve_store_path
 
+    if isinstance(config, str | Path):
+        config = load_config(config) if str(config) else None
+    config_store = None if config is None else config.lab.store
     return resolve_store_path(None if store is None else str(store), config_store)
 
 
 def open_store(
-    store: str | Path | None,
-    config_store: str | None = None,
+    store: str | Path | None = None,
     *,
+    config: LabConfig | str | Path | None = None,
     create: bool = True,
     readonly: bool = False,
     exit_code: int = 2,
 ) -> RunStore:
-    """The run store of ``store`` / the config's ``[lab] store`` / the default, opened.
+    """The run store :func:`store_location` chooses, opened (``readonly``: nothing is
+    created or written; ``create=False``: it must exist).
 
     Raises
     ------
@@ -99,7 +108,7 @@ def open_store(
     from goniolab.store import RunStore, StoreError
 
     try:
-        return RunStore(store_location(store, config_store), create=create, readonly=readonly)
+        return RunStore(store_location(store, config=config), create=create, readonly=readonly)
     except StoreError as exc:
         raise UserError(str(exc), exit_code=exit_code) from exc
 

@@ -3,7 +3,7 @@
 Every face that reads or writes the run store (``goniolab runs``, ``goniolab plot``,
 ``goniolab fit colour``, the notebook's :class:`goniolab.api.Run`) calls these use cases:
 the store is chosen here (``--store``, else the config's ``[lab] store``, else the default
-file: :func:`store_path`), opened here, and a run that is not there is one
+file: :func:`goniolab.app.lab_setup.store_location`, the one place for every face), opened here, and a run that is not there is one
 :class:`~goniolab.errors.UserError` (:func:`get_run`). Each use case returns a typed result
 the face presents (text, JSON, a DataFrame).
 
@@ -13,13 +13,13 @@ The module is named ``stored_runs`` (not ``runs``): a module name is used once i
 
 from __future__ import annotations
 
-import shlex
 from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
+from contextlib import AbstractContextManager, contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from goniolab.app.lab_setup import open_store, resume_command, store_location
 from goniolab.errors import UserError, a_run_of_kind
 
 if TYPE_CHECKING:  # sqlite3 and the plans load when a use case runs, not at --help
@@ -44,15 +44,14 @@ __all__ = [
     "interrupted",
     "list_runs",
     "migrate_runs",
-    "open_store",
     "plot_run",
-    "resume_command",
+    "reading_store",
     "run_colour",
     "run_dataframe",
     "run_summary",
     "run_xarray",
+    "scan_run",
     "show_run",
-    "store_path",
     "summarize_run",
     "writable_store",
     "write_run_spectra",
@@ -63,42 +62,34 @@ Location = Path | str
 
 
 # ----------------------------------------------------------------------- the store, a run
-def store_path(store: str | Path | None = None, config: str | Path | None = None) -> Location:
-    """The store chosen by ``store`` (``--store``), else the ``[lab] store`` of the lab
-    config ``config``, else the default file (:func:`goniolab.store.resolve_store_path`)."""
-    from goniolab.store import resolve_store_path
-
-    config_store: str | None = None
-    if config:
-        from goniolab.config import load_lab_config
-
-        config_store = load_lab_config(config).lab.store
-    return resolve_store_path(None if store is None else str(store), config_store)
-
-
-def open_store(store: str | Path | None = None, config: str | Path | None = None) -> RunStore:
-    """Open the chosen store for reading (nothing is created or written; it must exist)."""
-    from goniolab.store import RunStore, StoreError
-
-    try:
-        return RunStore(store_path(store, config), readonly=True)
-    except StoreError as exc:
-        raise UserError(str(exc)) from exc
-
-
 @contextmanager
-def writable_store(
-    store: str | Path | None = None, config: str | Path | None = None, *, create: bool = True
-) -> Iterator[RunStore]:
-    """The chosen store opened for writing (``create=False``: it must exist); any
-    :class:`~goniolab.store.StoreError` while it is open is a :class:`UserError`."""
-    from goniolab.store import RunStore, StoreError
+def _held(opened: Callable[[], RunStore]) -> Iterator[RunStore]:
+    """The store ``opened()`` returns, closed at the end; any
+    :class:`~goniolab.store.StoreError` while it is open is a :class:`UserError` (the
+    store's message names the store and the run)."""
+    from goniolab.store import StoreError
 
     try:
-        with RunStore(store_path(store, config), create=create) as s:
+        with opened() as s:
             yield s
     except StoreError as exc:
         raise UserError(str(exc)) from exc
+
+
+def reading_store(
+    store: str | Path | None, config: str | Path | None
+) -> AbstractContextManager[RunStore]:
+    """The chosen store (:func:`goniolab.app.lab_setup.open_store`) opened for reading
+    (nothing is created or written; it must exist), its errors :class:`UserError`."""
+    return _held(lambda: open_store(store, config=config, readonly=True))
+
+
+def writable_store(
+    store: str | Path | None = None, config: str | Path | None = None, *, create: bool = True
+) -> AbstractContextManager[RunStore]:
+    """The chosen store opened for writing (``create=False``: it must exist), its errors
+    :class:`UserError`."""
+    return _held(lambda: open_store(store, config=config, create=create))
 
 
 def get_run(store: RunStore, run_id: int, *, allow_damaged: bool = False) -> RunRecord:
@@ -112,8 +103,9 @@ def get_run(store: RunStore, run_id: int, *, allow_damaged: bool = False) -> Run
         raise UserError(str(exc)) from exc
 
 
-def _scan_run(store: RunStore, run_id: int, needs: str) -> RunRecord:
-    """A run that must be a scan (brdf) run: ``needs`` says what for."""
+def scan_run(store: RunStore, run_id: int, needs: str) -> RunRecord:
+    """Run ``run_id`` of ``store``, which must be a scan (brdf) run: ``needs`` says what
+    for (``"colour needs a scan (brdf) run"``)."""
     rec = get_run(store, run_id)
     if rec.kind != "brdf":
         raise UserError(f"run {rec.id} is {a_run_of_kind(rec.kind)}: {needs}")
@@ -168,25 +160,6 @@ def run_colour(store: RunStore, rec: RunRecord) -> list[dict[str, Any]]:
     except (TypeError, ValueError, AttributeError):
         pc = None  # a damaged snapshot: repeats averaged as L*a*b*
     return colour_rows(store.points(rec.id), store.predicted_colours(rec.id), theta_i, pc)
-
-
-def resume_command(run_id: int, store: RunStore) -> str:
-    """The command that resumes run ``run_id`` of ``store``: ``--store`` named unless it is
-    the default store (``scan resume`` reads the run's config from the store itself). A
-    PostgreSQL URL is shown without its password (libpq reads it from PGPASSWORD or
-    ~/.pgpass)."""
-    from goniolab.store import default_store_path
-
-    cmd = f"goniolab scan resume {run_id}"
-    if store.is_postgres:
-        return f"{cmd} --store {shlex.quote(store.location)}"
-    try:
-        default = store.path.resolve() == default_store_path().resolve()
-    except OSError:
-        default = False
-    if not default:
-        cmd += f" --store {shlex.quote(str(store.path.resolve()))}"
-    return cmd
 
 
 # ----------------------------------------------------------------------- list, show
@@ -248,20 +221,15 @@ def list_runs(
     """The runs of the chosen store, newest first, filtered by operator, tag, sample id or
     a text in sample, sample id, operator, notes or tags. A store file not made yet is an
     empty list (``missing_ok``; nothing is created), else the store's error."""
-    from goniolab.store import StoreError
-
-    path = store_path(store, config)
+    path = store_location(store, config=config)
     if missing_ok and isinstance(path, Path) and not path.exists():
         # a fresh installation (or a mistyped --store): nothing to list, nothing created
         return RunList(str(path), exists=False)
     filtered = any(v is not None for v in (operator, tag, sample_id, text))
-    with open_store(path) as s:  # a missing store: its own message
-        try:
-            briefs = s.list_briefs(
-                limit=limit, operator=operator, tag=tag, sample_id=sample_id, text=text
-            )
-        except StoreError as exc:
-            raise UserError(str(exc)) from exc
+    with reading_store(path, None) as s:  # a missing store: its own message
+        briefs = s.list_briefs(
+            limit=limit, operator=operator, tag=tag, sample_id=sample_id, text=text
+        )
         runs = [RunBrief(r, n, interrupted(s, r)) for r, n in briefs]
         return RunList(s.location, True, runs, filtered)
 
@@ -291,7 +259,7 @@ def show_run(
     run_id: int, store: str | Path | None = None, config: str | Path | None = None
 ) -> RunView:
     """Run ``run_id`` with its summary recomputed from its stored readings."""
-    with open_store(store, config) as s:
+    with reading_store(store, config) as s:
         rec = get_run(s, run_id)
         resume = resume_command(rec.id, s) if rec.status != "done" and rec.kind == "brdf" else None
         return RunView(rec, interrupted(s, rec), run_summary(s, rec), run_colour(s, rec), resume)
@@ -301,7 +269,7 @@ def summarize_run(
     run_id: int, store: str | Path | None = None, config: str | Path | None = None
 ) -> dict[str, Any]:
     """The summary ``runs show`` prints (RMSE, peaks, counts) of run ``run_id``."""
-    with open_store(store, config) as s:
+    with reading_store(store, config) as s:
         return run_summary(s, get_run(s, run_id))
 
 
@@ -311,14 +279,10 @@ def run_xarray(
     """Measured, predicted, residual (and colour) per point of run ``run_id``
     (:func:`goniolab.datasets.run_dataset`)."""
     from goniolab.datasets import run_dataset
-    from goniolab.store import StoreError
 
-    with open_store(store, config) as s:
+    with reading_store(store, config) as s:
         get_run(s, run_id)
-        try:
-            return run_dataset(s, run_id)
-        except StoreError as exc:
-            raise UserError(str(exc)) from exc
+        return run_dataset(s, run_id)
 
 
 def run_dataframe(
@@ -327,14 +291,10 @@ def run_dataframe(
     """One row per reading of run ``run_id`` (the CSV export's columns,
     :func:`goniolab.export.run_dataframe`)."""
     from goniolab.export import run_dataframe as frame
-    from goniolab.store import StoreError
 
-    with open_store(store, config) as s:
+    with reading_store(store, config) as s:
         get_run(s, run_id)
-        try:
-            return frame(s, run_id)
-        except StoreError as exc:
-            raise UserError(str(exc)) from exc
+        return frame(s, run_id)
 
 
 # ----------------------------------------------------------------------- export, plot
@@ -360,7 +320,6 @@ def export_run(
     ``output`` or as text (:mod:`goniolab.export`)."""
     from goniolab.export import EXPORTERS, resolve_format
     from goniolab.export import export_run as export
-    from goniolab.store import StoreError
 
     try:
         fmt = resolve_format(fmt, output)
@@ -371,7 +330,7 @@ def export_run(
             f"runs export --format {fmt}: a binary format needs -o FILE "
             f"(e.g. -o run{EXPORTERS[fmt].suffix})"
         )
-    with open_store(store, config) as s:
+    with reading_store(store, config) as s:
         get_run(s, run_id)
         try:
             text = export(s, run_id, fmt, output)
@@ -380,8 +339,6 @@ def export_run(
                 f"cannot write {output}: {exc.strerror or exc}"
                 + (f" ({output} is left as it was)" if output and Path(output).exists() else "")
             ) from exc
-        except StoreError as exc:
-            raise UserError(str(exc)) from exc
     return ExportResult(run_id, fmt, None if output is None else Path(output), text)
 
 
@@ -413,7 +370,7 @@ def plot_run(
             raise UserError(f"--out {path}: the suffix picks the format: {', '.join(PLOT_FORMATS)}")
         if path.parent and not path.parent.is_dir():
             raise UserError(f"--out {path}: no such directory {path.parent}")
-    with open_store(store, config) as s:
+    with reading_store(store, config) as s:
         rec = get_run(s, run_id)
         try:
             fig = draw(s, run_id, out=path, log=log)
@@ -446,8 +403,8 @@ def write_run_spectra(
     :func:`goniolab.spectra_files.write_spectra_file`: CSV ``R_400..``, Parquet, netCDF)."""
     from goniolab.run_spectra import spectra_tables
 
-    with open_store(store, config) as s:
-        rec = _scan_run(s, run_id, "spectra need a scan (brdf) run")
+    with reading_store(store, config) as s:
+        rec = scan_run(s, run_id, "spectra need a scan (brdf) run")
         tables, attrs = spectra_tables(s, rec.id, which)
     if not tables:
         raise UserError(f"run {rec.id} has no {which} spectra on one wavelength grid")
@@ -561,50 +518,38 @@ def migrate_runs(
     store, matched by run UUID: new runs copied, partial copies brought up to date, a run
     being measured right now skipped. ``on_run(entry, record)`` is told of each run as it
     is done."""
-    from goniolab.store import RunStore, StoreError, is_store_url
+    from goniolab.store import StoreError, is_store_url
 
     src_loc: Location = source if is_store_url(source) else Path(source).expanduser()
-    target = store_path(store, config)
+    target = store_location(store, config=config)
     if isinstance(src_loc, Path) and isinstance(target, Path):
         same = src_loc.resolve() == target.resolve() or (
             src_loc.exists() and target.exists() and src_loc.samefile(target)
         )
         if same:
             raise UserError(f"runs migrate: --from {source} is the target store itself")
-    try:
-        src = RunStore(src_loc, readonly=True)
-    except StoreError as exc:
-        raise UserError(str(exc)) from exc
     moved: list[dict[str, Any]] = []
-    with src:
-        try:
-            dst = RunStore(target)
-        except StoreError as exc:
-            raise UserError(str(exc)) from exc
-        with dst:
-            if _same_store(src, dst):
-                raise UserError(
-                    f"runs migrate: --from {src.location} is the target store {dst.location} "
-                    "itself (the same store UUID)"
-                )
-            try:
-                runs = sorted(src.list_runs(), key=lambda r: r.id)
-            except StoreError as exc:
-                raise UserError(str(exc)) from exc
-            for rec in runs:
-                entry: dict[str, Any] = {"from": rec.id, "uuid": rec.uuid}
-                if rec.status in ("running", "paused") and src.is_claimed(rec.id):
-                    why = "being measured right now; run migrate again when it has finished"
-                    entry.update(to=None, copied=False, action="skipped", reason=why)
+    with reading_store(src_loc, None) as src, writable_store(target, None) as dst:
+        if _same_store(src, dst):
+            raise UserError(
+                f"runs migrate: --from {src.location} is the target store {dst.location} "
+                "itself (the same store UUID)"
+            )
+        runs = sorted(src.list_runs(), key=lambda r: r.id)
+        for rec in runs:
+            entry: dict[str, Any] = {"from": rec.id, "uuid": rec.uuid}
+            if rec.status in ("running", "paused") and src.is_claimed(rec.id):
+                why = "being measured right now; run migrate again when it has finished"
+                entry.update(to=None, copied=False, action="skipped", reason=why)
+            else:
+                try:
+                    new_id, action = dst.copy_run_from(src, rec.id)
+                except StoreError as exc:
+                    entry.update(to=None, copied=False, action="error", error=str(exc))
                 else:
-                    try:
-                        new_id, action = dst.copy_run_from(src, rec.id)
-                    except StoreError as exc:
-                        entry.update(to=None, copied=False, action="error", error=str(exc))
-                    else:
-                        entry.update(to=new_id, copied=action == "copied", action=action)
-                moved.append(entry)
-                if on_run is not None:
-                    on_run(entry, rec)
-            where = dst.location
+                    entry.update(to=new_id, copied=action == "copied", action=action)
+            moved.append(entry)
+            if on_run is not None:
+                on_run(entry, rec)
+        where = dst.location
     return Migration(src.location, where, moved)

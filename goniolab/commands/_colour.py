@@ -15,7 +15,8 @@ import sys
 from typing import TYPE_CHECKING, Any
 
 from goniolab.commands._help import RUN_HELP
-from goniolab.commands._surface_args import ModelProgress, add_surface_options, surface_request
+from goniolab.commands._surface_args import add_surface_options, surface_request
+from goniolab.progress import model_progress
 
 if TYPE_CHECKING:
     from goniolab.app.colours import ColourOptions
@@ -53,7 +54,7 @@ def _colour_options(args: argparse.Namespace) -> ColourOptions:
 def _cmd_predict_colour(args: argparse.Namespace) -> int:
     from goniolab.app.colours import predict_colour
 
-    pred = predict_colour(surface_request(args), _colour_options(args), progress=ModelProgress())
+    pred = predict_colour(surface_request(args), _colour_options(args), progress=model_progress())
     for note in pred.notes:
         print(f"goniolab: note: {note}", file=sys.stderr)
     doc = pred.doc

@@ -7,8 +7,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
-import time
 from typing import TYPE_CHECKING
 
 from goniolab.model_registry import DEFAULT_MODEL, model_help, model_names
@@ -16,27 +14,7 @@ from goniolab.model_registry import DEFAULT_MODEL, model_help, model_names
 if TYPE_CHECKING:  # numpy and the optics load when a command runs, not at --help
     from goniolab.app.predictions import SurfaceRequest
 
-__all__ = ["ModelProgress", "add_surface_options", "parse_index", "surface_request"]
-
-
-class ModelProgress:
-    """Progress on stderr for model work that runs over ~2 s (only on a terminal)."""
-
-    def __init__(self) -> None:
-        self.start = time.monotonic()
-        self.shown = False
-
-    def __call__(self, done: int, total: int, what: str) -> None:
-        if not sys.stderr.isatty() or time.monotonic() - self.start < 2.0:
-            return
-        self.shown = True
-        end = "\n" if done >= total else ""
-        print(
-            f"\r{what}: {100 * done // max(total, 1):3d} % ({done}/{total})",
-            end=end,
-            file=sys.stderr,
-            flush=True,
-        )
+__all__ = ["add_surface_options", "parse_index", "surface_request"]
 
 
 def parse_index(text: str) -> complex:

@@ -21,8 +21,8 @@ def _cmd(args: argparse.Namespace) -> int:
     from goniolab.app.lab_setup import load_config, open_store, stderr_notify
     from goniolab.commands.scan import run_lab, specimen_prompt
 
-    cfg = load_config(args.config)
-    with open_store(args.store, cfg.lab.store) as store:
+    cfg = load_config(args.config, args.store)
+    with open_store(args.store, config=cfg) as store:
         out = run_lab(
             calibrate(
                 cfg, store, theta_deg=args.theta, repeats=args.repeats,

@@ -147,7 +147,7 @@ def _cmd_log(args: argparse.Namespace) -> int:
             if "remove" in stops:
                 stops["remove"]()
 
-    with open_store(args.store, None if cfg is None else cfg.lab.store) as store:
+    with open_store(args.store, config=cfg) as store:
         result = run_lab(log())
         if args.json:
             # the last JSON line: the session's statistics (reading lines carry "seq")

@@ -36,8 +36,9 @@ from pathlib import Path
 from typing import Any
 
 from goniolab.commands._angles import allow_negative_angles
-from goniolab.commands._surface_args import ModelProgress, add_surface_options, surface_request
+from goniolab.commands._surface_args import add_surface_options, surface_request
 from goniolab.errors import UserError
+from goniolab.progress import model_progress, terminal_progress
 
 __all__ = ["register"]
 
@@ -79,8 +80,8 @@ def _write_out(args: argparse.Namespace, make: Any) -> None:
     """``--out FILE.nc``: the prediction as a netCDF Dataset (units on every variable)."""
     if not args.out:
         return
+    from goniolab.app.netcdf_files import save_dataset
     from goniolab.app.predictions import index_json
-    from goniolab.datasets import write_netcdf
 
     out = Path(args.out)
     if out.suffix.lower() not in (".nc", ".nc4"):
@@ -90,10 +91,7 @@ def _write_out(args: argparse.Namespace, make: Any) -> None:
              "model": args.model}  # fmt: skip
     if args.wavelength_nm is not None:
         attrs["wavelength_nm"] = float(args.wavelength_nm)
-    try:
-        write_netcdf(make(attrs), out)
-    except OSError as exc:
-        raise UserError(f"cannot write {out}: {exc.strerror or exc}") from exc
+    save_dataset(make(attrs), out)
     print(f"prediction written to {out}", file=sys.stderr)
 
 
@@ -104,7 +102,7 @@ def _cmd_gloss(args: argparse.Namespace) -> int:
     from goniolab.app.predictions import predict_gloss
     from goniolab.datasets import gloss_dataset
 
-    pred = predict_gloss(surface_request(args), one_shot=True, progress=ModelProgress())
+    pred = predict_gloss(surface_request(args), one_shot=True, progress=model_progress())
     rep = pred.report
     prov_attrs = {"computed_by": json.dumps(pred.computed_by),
                   "warnings": json.dumps(pred.warnings)}  # fmt: skip
@@ -182,7 +180,9 @@ def _cmd_gloss_batch(args: argparse.Namespace) -> int:
         args.map, surface_request(args), jobs=args.jobs, scheduler=args.scheduler
     )
     failed = 0
-    with _progress(len(args.map)) as bar:
+    # a bar on a terminal (never on stdout: the rows go there, issue 22.3); to a pipe or
+    # a file only the messages
+    with terminal_progress(len(args.map), "gloss", piped_lines=False) as bar:
         for row in rows:
             if "error" in row:
                 failed += 1
@@ -198,58 +198,6 @@ def _cmd_gloss_batch(args: argparse.Namespace) -> int:
     return 0
 
 
-class _BatchBar:
-    """The batch's progress: a rich bar drawn on stderr, messages scrolled above it.
-
-    The bar never touches stdout: rich's ``Progress`` redirects ``sys.stdout`` into its own
-    console by default (``redirect_stdout=True``), so with the console on stderr every row
-    printed while the bar was live went to the terminal and ``--json > file`` stayed empty
-    (issue 22.3). Here both redirections are off and messages go through the bar's console.
-    """
-
-    def __init__(self, progress: Any = None, task: Any = None) -> None:
-        self._progress = progress
-        self._task = task
-
-    def advance(self) -> None:
-        if self._progress is not None:
-            self._progress.advance(self._task)
-
-    def message(self, text: str) -> None:
-        if self._progress is not None:
-            self._progress.console.print(text, markup=False, highlight=False, soft_wrap=True)
-        else:
-            print(text, file=sys.stderr, flush=True)
-
-
-def _progress(total: int) -> Any:
-    """A rich progress bar on stderr while a terminal watches (nothing otherwise)."""
-    from contextlib import contextmanager
-
-    @contextmanager
-    def bar() -> Any:
-        if not sys.stderr.isatty():
-            yield _BatchBar()
-            return
-        from rich.console import Console
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeRemainingColumn
-
-        with Progress(
-            "[progress.description]{task.description}",
-            BarColumn(),
-            MofNCompleteColumn(),
-            TimeRemainingColumn(),
-            console=Console(stderr=True),
-            transient=True,
-            redirect_stdout=False,
-            redirect_stderr=False,
-        ) as progress:
-            task = progress.add_task("gloss", total=total)
-            yield _BatchBar(progress, task)
-
-    return bar()
-
-
 def _cmd_brdf(args: argparse.Namespace) -> int:
     from goniolab.app.predictions import predict_brdf
     from goniolab.datasets import brdf_dataset
@@ -262,7 +210,7 @@ def _cmd_brdf(args: argparse.Namespace) -> int:
         detector_deg=args.detector_deg,
         point=args.point,
         one_shot=True,
-        progress=ModelProgress(),
+        progress=model_progress(),
     )
     _warn(pred.warnings)
     tr, brdf, lum = pred.theta_r_deg, pred.brdf_sr, pred.luminance_pct
@@ -299,7 +247,7 @@ def _cmd_albedo(args: argparse.Namespace) -> int:
     from goniolab.app.predictions import predict_albedo
 
     pred = predict_albedo(surface_request(args), args.theta_i, one_shot=True,
-                          progress=ModelProgress())  # fmt: skip
+                          progress=model_progress())  # fmt: skip
     _warn(pred.warnings)
     if args.json:
         print(json.dumps(pred.as_dict(), indent=2, allow_nan=False))

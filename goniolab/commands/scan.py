@@ -41,7 +41,6 @@ __all__ = [
     "point_detail",
     "read_stdin_line",
     "register",
-    "resume_command",
     "run_lab",
     "run_meta_args",
     "specimen_prompt",
@@ -98,13 +97,6 @@ def point_detail(ev: PointMeasured, predicted_pct: float | None) -> str:
     return detail(ev, predicted_pct)
 
 
-def resume_command(run_id: int, store: RunStore) -> str:
-    """The command that resumes run ``run_id`` (:func:`goniolab.app.lab_setup.resume_command`)."""
-    from goniolab.app.lab_setup import resume_command as command
-
-    return command(run_id, store)
-
-
 async def read_stdin_line() -> str:
     """One line from stdin without a blocking thread, so that Ctrl-C (an abort, then a
     cancellation) ends the wait at once; a regular file or a closed stdin falls back to
@@ -159,6 +151,8 @@ async def _watch(state: dict[str, Any], run: Coroutine[Any, Any, ScanOutcome]) -
     130."""
     import asyncio
 
+    from goniolab.app import lab_setup
+
     state["main"] = asyncio.current_task()
     try:
         return await run
@@ -168,7 +162,7 @@ async def _watch(state: dict[str, Any], run: Coroutine[Any, Any, ScanOutcome]) -
             raise
         print(
             f"goniolab: run {runner.run_id} aborted; continue it with: "
-            f"{resume_command(runner.run_id, runner.store)}",
+            f"{lab_setup.resume_command(runner.run_id, runner.store)}",
             file=sys.stderr,
         )
         return 130
@@ -208,6 +202,7 @@ def _say(state: dict[str, Any], text: str) -> None:
 
 
 def _present(out: ScanOutcome, store: RunStore, json_out: bool) -> int:
+    from goniolab.app import lab_setup
     from goniolab.scan.events import RunState
 
     if json_out:
@@ -218,7 +213,7 @@ def _present(out: ScanOutcome, store: RunStore, json_out: bool) -> int:
     if out.state is not RunState.DONE:
         print(
             f"goniolab: run {out.run_id} {out.state.value}; continue it with: "
-            f"{resume_command(out.run_id, store)}",
+            f"{lab_setup.resume_command(out.run_id, store)}",
             file=sys.stderr,
         )
     return _exit_code(out.state)
@@ -246,7 +241,7 @@ def _cmd_align(args: argparse.Namespace, cfg: Any, sample: str) -> int:
     plan = lab_setup.align_plan(
         cfg, sample=sample, theta_i_deg=args.align_theta_i, exposure_us=args.exposure_us
     )
-    with lab_setup.open_store(args.store, cfg.lab.store) as store:
+    with lab_setup.open_store(args.store, config=cfg) as store:
         bar = _progress()
         out = run_lab(
             lab_scan.align(
@@ -315,7 +310,7 @@ def _cmd_scan(args: argparse.Namespace) -> int:
         raise UserError("scan: --config FILE is required (e.g. configs/lab-sim.toml)")
     from goniolab.app import lab_scan, lab_setup
 
-    cfg = lab_setup.load_config(args.config)
+    cfg = lab_setup.load_config(args.config, args.store)
     theta_r_given = args.theta_r is not None
     sample = lab_setup.scan_sample(cfg, args.sample)
     cfg = lab_setup.check_map(cfg, sample, given=bool(args.sample), step_um=args.step_um)
@@ -335,7 +330,7 @@ def _cmd_scan(args: argparse.Namespace) -> int:
         dwell_s=args.dwell, exposure_us=args.exposure_us,
         mirror_reference=args.mirror_reference, auto_exposure=args.auto_exposure,
     )  # fmt: skip
-    with lab_setup.open_store(args.store, cfg.lab.store) as store:
+    with lab_setup.open_store(args.store, config=cfg) as store:
         return _run_scan(
             store,
             args.json,
@@ -350,9 +345,8 @@ def _cmd_scan(args: argparse.Namespace) -> int:
 def _cmd_resume(args: argparse.Namespace) -> int:
     from goniolab.app import lab_scan, lab_setup
 
-    live = lab_setup.load_config(args.config) if args.config else None
-    config_store = None if live is None else live.lab.store
-    with lab_setup.open_store(args.store, config_store, create=False) as store:
+    live = lab_setup.load_config(args.config, args.store) if args.config else None
+    with lab_setup.open_store(args.store, config=live, create=False) as store:
         return _run_scan(
             store,
             args.json,

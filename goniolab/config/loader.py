@@ -50,13 +50,18 @@ def _get(data: dict[str, Any], dotted: str) -> Any:
     return node
 
 
-def load_lab_config(path: str | Path) -> LabConfig:
+def load_lab_config(path: str | Path, *, store: str | Path | None = None) -> LabConfig:
     """Read and validate a lab config file.
 
     Parameters
     ----------
     path
         The TOML file.
+    store
+        The run store the user chose (``--store``), which replaces ``[lab] store`` before
+        the alignment state is looked up: the state lives beside the store a run uses
+        (:func:`alignment_state_path`), so two checkouts with their own stores do not
+        correct each other's moves. A relative file is relative to the working directory.
 
     Returns
     -------
@@ -88,7 +93,19 @@ def load_lab_config(path: str | Path) -> LabConfig:
     cfg, profiles = _resolve_profiles(cfg, p)
     register_checks(cfg, p, profiles)
     exposure_check(cfg, p, profiles["spectro.profile"])
+    if store is not None:
+        cfg = cfg.model_copy(update={"lab": cfg.lab.model_copy(update={"store": _as_given(store)})})
     return with_alignment_state(cfg)
+
+
+def _as_given(store: str | Path) -> str:
+    """A ``--store`` value as ``[lab] store`` holds it: a URL or conninfo unchanged, a file
+    made absolute (the config's relative stores are relative to the config's directory,
+    the command line's to the working directory)."""
+    text = str(store)
+    if "://" in text or "=" in text:
+        return text
+    return str(Path(text).expanduser().resolve())
 
 
 def did_you_mean_key(key: str, reason: str) -> str:

@@ -21,7 +21,14 @@ from pathlib import Path
 from typing import Any
 
 from drivers.base import GLOSS_ANGLES_DEG, DeviceError
-from goniolab.app.lab_setup import brdf_plan, check_sample, load_config, open_store, store_location
+from goniolab.app.lab_setup import (
+    brdf_plan,
+    check_sample,
+    lab_errors,
+    load_config,
+    open_store,
+    store_location,
+)
 from goniolab.errors import UserError
 from goniolab.optics.models import ReflectanceModel
 from goniolab.scan.align import AlignPlan, AlignRunner
@@ -90,14 +97,14 @@ class SessionBackend:
         self._lab_model = model
         self._align_plan = align_plan or AlignPlan()
         self.config_path = Path(config_path)
-        self.config = load_config(self.config_path)
+        self.config = load_config(self.config_path, store_path)
         self.time_scale = time_scale
         # The config's own map is resolved (relative to the config file) by the Lab.
         self.sample = self.config.sample.map
         if sample:
             self.sample = _sample_spec(sample)
             check_sample(self.sample, given=sample)
-        self.store_path = store_location(store_path, self.config.lab.store)
+        self.store_path = store_location(store_path, config=self.config)
         self.bus = EventBus()
         self.session: ScanSession | None = None
         self.gloss: GlossSession | None = None
@@ -201,6 +208,10 @@ class SessionBackend:
             repeats=DEFAULT_REPEATS,
         )
 
+    def check_setup(self, setup: ScanSetup) -> None:
+        """:meth:`ScanSetup.validate` against this lab's arm limits (its config's)."""
+        setup.validate(self.config.goniometer.lamp.limits_deg)
+
     @property
     def simulated(self) -> bool:
         """The instruments are simulated (in-process or served on the wire)."""
@@ -216,7 +227,7 @@ class SessionBackend:
     async def predict_curve(self, setup: ScanSetup) -> list[float]:
         """The prediction of ``setup.sample`` over the sweep (model built and evaluated in
         worker threads, see :class:`~goniolab.scan.prediction.Predictor`)."""
-        setup.validate()
+        self.check_setup(setup)
         model = await self.model(setup.sample)
         values = await asyncio.to_thread(
             Predictor.from_config(model, self.config).predict_sync,
@@ -243,8 +254,8 @@ class SessionBackend:
     async def start(self, setup: ScanSetup) -> int:
         """Check the plan (every geometry and the park position), then create the run in
         the store and start the runner in a task; return the run id."""
+        self.check_setup(setup)
         session = self._require_open()
-        setup.validate()
         if self.running:
             raise UserError("a scan is already running")
         plan = brdf_plan(
@@ -338,10 +349,12 @@ class SessionBackend:
         """Run to the end; a refused plan or an unexpected error becomes events, not a crash."""
         run_id = runner.run_id
         try:
-            await session.run(runner)
-        except PlanRefused as exc:
-            self._fail(run_id, "goniometer", f"plan refused (no arm moved): {exc}")
-        except (DeviceError, StoreError, OSError) as exc:
+            with lab_errors():  # the one translation, as the CLI's and the API's scans
+                await session.run(runner)
+        except UserError as exc:  # a refused plan, an instrument, the store, a held run
+            device = "goniometer" if isinstance(exc.__cause__, PlanRefused) else "lab"
+            self._fail(run_id, device, str(exc))
+        except OSError as exc:
             self._fail(run_id, "lab", str(exc))
         except Exception as exc:
             done = runner.state in (RunState.DONE, RunState.FAILED, RunState.ABORTED)
@@ -480,7 +493,9 @@ class SessionBackend:
             colours: list[ColourPredicted] = []
             if rec.kind == "brdf":
                 plan = BrdfPlan.from_dict(rec.plan)
+                white = _stored_white_xyz(rec.config)
                 for p in store.points(run_id):
+                    col = p.colour
                     measured.append(
                         PointMeasured(
                             run_id=run_id,
@@ -492,9 +507,11 @@ class SessionBackend:
                             luminance_pct=p.luminance_pct,
                             measured_theta_i_deg=p.measured_theta_i_deg,
                             measured_theta_r_deg=p.measured_theta_r_deg,
-                            lab=None
-                            if p.colour is None
-                            else (p.colour["L"], p.colour["a"], p.colour["b"]),
+                            lab=None if col is None else (col["L"], col["a"], col["b"]),
+                            # as the live event: repeats are averaged as spectra (issue 25)
+                            xyz=None if col is None else (col["X"], col["Y"], col["Z"]),
+                            white_xyz=None if col is None else white,
+                            quality=str(p.raw.get("quality", "unknown")),
                         )
                     )
                 for index, c in sorted(store.predicted_colours(run_id).items()):
@@ -535,6 +552,20 @@ class SessionBackend:
                 len(measured) if rec.kind == "brdf" else len(gloss),
             )
             return StoredRun(summary, measured, predicted, gloss, colours)
+
+
+def _stored_white_xyz(config: dict[str, Any]) -> tuple[float, float, float] | None:
+    """The white a stored run's L*a*b* is relative to (its snapshot's ``[colour]``, as
+    the runner's :class:`goniolab.scan.colour.PointColour`); ``None`` for a snapshot that
+    cannot say (its repeats are then averaged as L*a*b*, as ``runs colour`` does)."""
+    from goniolab.colour.spectra import white_xyz
+    from goniolab.scan.colour import PointColour
+
+    try:
+        x, y, z = (float(v) for v in white_xyz(PointColour.from_snapshot(config).settings))
+    except (TypeError, ValueError, AttributeError):
+        return None
+    return (x, y, z)
 
 
 #: A status read that takes longer than this shows the arm's link as lost (seconds).

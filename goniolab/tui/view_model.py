@@ -15,6 +15,7 @@ from collections.abc import Awaitable
 from dataclasses import dataclass, field
 from typing import Protocol
 
+from drivers.arm_limits import LAMP_LIMITS_DEG, outside_limits
 from goniolab.errors import UserError
 from goniolab.scan.events import (
     ColourPredicted,
@@ -83,8 +84,13 @@ class ScanSetup:
     theta_r_step_deg: float
     repeats: int
 
-    def validate(self) -> None:
-        """Raise :class:`UserError` naming the form field and the reason when invalid."""
+    def validate(self, theta_i_limits_deg: tuple[float, float] = LAMP_LIMITS_DEG) -> None:
+        """Raise :class:`UserError` naming the form field and the reason when invalid.
+
+        ``theta_i_limits_deg``: the lamp arm's soft limits of the lab's config
+        (``goniometer.lamp.limits_deg``, as the dry run checks them); the form, which has
+        no config, checks the defaults of :mod:`drivers.arm_limits`, the one place of them.
+        """
         values = {
             "theta_i_deg": self.theta_i_deg,
             "theta_r_start_deg": self.theta_r_start_deg,
@@ -98,8 +104,12 @@ class ScanSetup:
                 )
         if not self.sample:
             raise UserError("scan setup: sample: choose a sample")
-        if not 0.0 <= self.theta_i_deg < 90.0:
-            raise UserError(f"scan setup: θi must lie in [0, 90) deg, got {self.theta_i_deg:g}")
+        if outside_limits(self.theta_i_deg, theta_i_limits_deg) or not self.theta_i_deg < 90.0:
+            lo, hi = theta_i_limits_deg
+            raise UserError(
+                f"scan setup: θi must lie within the lamp arm's limits [{lo:g}, "
+                f"{min(hi, 90.0):g}] deg (goniometer.lamp.limits_deg), got {self.theta_i_deg:g}"
+            )
         if self.theta_r_step_deg <= 0.0:
             raise UserError(f"scan setup: θr step must be > 0 deg, got {self.theta_r_step_deg:g}")
         if self.theta_r_stop_deg < self.theta_r_start_deg:

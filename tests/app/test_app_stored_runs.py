@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from goniolab.app.lab_setup import store_location
 from goniolab.app.stored_runs import (
     annotate_run,
     export_run,
@@ -16,10 +17,9 @@ from goniolab.app.stored_runs import (
     import_runs,
     list_runs,
     migrate_runs,
-    open_store,
     plot_run,
+    reading_store,
     show_run,
-    store_path,
     summarize_run,
 )
 from goniolab.config import configs_dir
@@ -33,7 +33,7 @@ def store(tmp_path: Path) -> Path:
 
 
 def test_a_missing_run_is_one_user_error_naming_store_and_run(store: Path) -> None:
-    with open_store(store) as s, pytest.raises(UserError) as err:
+    with reading_store(store, None) as s, pytest.raises(UserError) as err:
         get_run(s, 9)
     assert str(err.value) == f"store {store}: no run 9"
     for call in (show_run, summarize_run):
@@ -99,7 +99,7 @@ def test_import_and_migrate_copy_runs_by_uuid(store: Path, tmp_path: Path) -> No
         str(store), tmp_path / "third.sqlite", on_run=lambda e, r: told.append(e["action"])
     )
     assert told == ["copied", "copied"] and moved.errors == 0
-    with open_store(tmp_path / "third.sqlite") as s:
+    with reading_store(tmp_path / "third.sqlite", None) as s:
         assert [p.luminance_pct for p in s.points(1)] == [
             lum(0, 0), lum(0, 1), lum(1, 0), lum(1, 1), lum(2, 0),
         ]  # fmt: skip
@@ -112,7 +112,7 @@ def test_annotate_edits_the_stored_tags(store: Path) -> None:
     assert rec.operator == "ada" and list(rec.tags) == ["a", "b"]
     rec = annotate_run(1, store=store, remove_tags=["a"], add_tags=["c"])
     assert list(rec.tags) == ["b", "c"] and rec.operator == "ada"  # None keeps the operator
-    with open_store(store) as s:
+    with reading_store(store, None) as s:
         assert list(get_run(s, 1).tags) == ["b", "c"]
 
 
@@ -125,10 +125,10 @@ def test_plot_writes_the_file_its_suffix_names(store: Path, tmp_path: Path) -> N
 
 
 def test_the_store_is_chosen_by_store_then_config(tmp_path: Path) -> None:
-    assert store_path(tmp_path / "a.sqlite") == tmp_path / "a.sqlite"
+    assert store_location(tmp_path / "a.sqlite") == tmp_path / "a.sqlite"
     cfg = tmp_path / "lab.toml"
     text = (configs_dir() / "lab-sim.toml").read_text()
     assert 'store = ""' in text
     cfg.write_text(text.replace('store = ""', f'store = "{tmp_path / "cfg.sqlite"}"', 1))
-    assert store_path(None, cfg) == tmp_path / "cfg.sqlite"
-    assert store_path(tmp_path / "a.sqlite", cfg) == tmp_path / "a.sqlite"
+    assert store_location(None, config=cfg) == tmp_path / "cfg.sqlite"
+    assert store_location(tmp_path / "a.sqlite", config=cfg) == tmp_path / "a.sqlite"
