@@ -41,6 +41,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from goniolab.optics import _fft
 from goniolab.optics.heightmap import HeightMap, fill_missing, level_plane, plane_fit
 
 __all__ = [
@@ -254,12 +255,10 @@ class PSD2:
 
 def psd2(tiled: TiledMap) -> PSD2:
     """PSD of a tiled map, averaged over the tiles (module docstring for the normalisation)."""
-    import scipy.fft
-
     acc = np.zeros((tiled.ny_t, tiled.nx_t), dtype=np.float64)
     for k in range(tiled.n_tiles):
         h, w = tiled.tile(k)
-        spec = scipy.fft.fft2(w * h, workers=-1)
+        spec = _fft.fft(_fft.fft((w * h).astype(np.complex64), axis=1), axis=0)
         acc += np.abs(spec).astype(np.float64) ** 2
     psd = acc * tiled.dx_um * tiled.dy_um / (tiled.sum_w2 * tiled.n_tiles)
     fx = np.fft.fftfreq(tiled.nx_t, tiled.dx_um).astype(np.float64)
@@ -281,13 +280,15 @@ def _dft_last(a: NDArray[np.complex64], idx: NDArray[np.int64], length: int) -> 
     padded FFT, and no padded copy of the tile) or when the padded copy would exceed
     :data:`_MAX_PADDED_BYTES`, else the padded FFT.
     """
-    import scipy.fft
-
     n = a.shape[-1]
     rows = a.size // max(n, 1)
     few = idx.size < (length // n) * max(1.0, math.log2(length))
     if length == n or (not few and rows * length * 8 <= _MAX_PADDED_BYTES):
-        out: NDArray[Any] = np.take(scipy.fft.fft(a, n=length, axis=-1, workers=-1), idx, axis=-1)
+        if length != n:
+            padded = np.zeros((*a.shape[:-1], length), dtype=a.dtype)
+            padded[..., :n] = a
+            a = padded
+        out: NDArray[Any] = np.take(_fft.fft(a, axis=-1), idx, axis=-1)
         return out
     e = np.exp((-2j * math.pi / length) * np.outer(np.arange(n), idx)).astype(np.complex64)
     result: NDArray[Any] = a @ e
@@ -315,12 +316,10 @@ def pruned_fft2(
     ny, nx = (term.shape[1], term.shape[0]) if y_first else term.shape
     ly, lx = (ny, nx) if lengths is None else lengths
     if (ly, lx) == (ny, nx):
-        import scipy.fft
-
-        a = scipy.fft.fft(term, axis=1, workers=-1)
+        a = _fft.fft(term, axis=1)
         dc = complex(np.sum(a[:, 0], dtype=np.complex128))
         first, second = (ky, kx) if y_first else (kx, ky)
-        a = scipy.fft.fft(np.take(a, first, axis=1), axis=0, workers=-1, overwrite_x=True)
+        a = _fft.fft(np.take(a, first, axis=1), axis=0)
         a = np.take(a, second, axis=0)
         out[...] = a.T if y_first else a
         return dc

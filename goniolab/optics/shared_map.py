@@ -62,6 +62,7 @@ class SharedMap:
         self.cache: OrderedDict[tuple[Any, ...], Any] = OrderedDict()
         self.lock = threading.Lock()
         self._facets: dict[tuple[complex, bool], FacetModel] = {}
+        self._factories: dict[tuple[complex, bool], Callable[[], FacetModel]] = {}
         #: the other wave models of the same map, by (kind, n, wavelength, weighting, masking)
         self.siblings: dict[tuple[Any, ...], Any] = {}
 
@@ -114,19 +115,37 @@ class SharedMap:
         return FacetModel(surf, masking=True, backend="numpy")
 
     def facet(self, n: complex, masking: bool) -> FacetModel:
-        """The facet model of the full map (fallback), built on first use."""
-        key = (n, masking)
+        """The facet model of the full map (fallback), built on first use: the one a
+        factory was adopted for (:meth:`adopt_facet_factory`), else one on the slope
+        cells (``backend="lean"``: no numba, within 2e-3 of the curves' peak of the
+        per-facet kernels, tests/optics/test_lean_backend.py)."""
+        key = (complex(n), bool(masking))
         with self.lock:
-            if key not in self._facets:
-                surf = self._facets_surface
-                self._facets[key] = FacetModel(surf, n=n, masking=masking)
-            return self._facets[key]
+            found = self._facets.get(key)
+            factory = self._factories.get(key)
+        if found is not None:
+            return found
+        if factory is not None:
+            made = factory()  # outside the lock: it may build the facet slopes
+        else:
+            made = FacetModel(self._facets_surface, n=n, masking=masking, backend="lean")
+        with self.lock:
+            return self._facets.setdefault(key, made)
 
     def adopt_facet(self, facet: FacetModel) -> None:
         """Use ``facet`` (a facet model of this map) as the fallback of its index and
-        masking: the ``auto`` model shares the one it already built."""
+        masking."""
         with self.lock:
             self._facets[(facet.n, facet.masking)] = facet
+
+    def adopt_facet_factory(
+        self, n: complex, masking: bool, factory: Callable[[], FacetModel]
+    ) -> None:
+        """Build the fallback of index ``n`` and ``masking`` with ``factory`` when first
+        needed: the ``auto`` model shares its own facet model, built only if a geometry
+        needs it."""
+        with self.lock:
+            self._factories[(complex(n), bool(masking))] = factory
 
     @cached_property
     def _facets_surface(self) -> Surface:
