@@ -111,7 +111,10 @@ def build_auto(hm: HeightMap | None, options: ModelOptions) -> ReflectanceModel:
         the_map = hm
 
         def facet() -> FacetModel:
-            built = build_facet(the_map, lean)
+            try:
+                built = build_facet(the_map, lean)
+            except ValueError as exc:  # built late: the error still names the map
+                raise UserError(one_line(f"{the_map.source}: {exc}")) from None
             assert isinstance(built, FacetModel)
             return built
 
@@ -227,15 +230,6 @@ def _model(
     if entry.needs_heightmap:
         hm = resolve_map(spec, step_um=step_um)
         _check_numeric_range(spec, hm)
-    facet: Any = None
-    if entry.uses_facet:  # the facet model of the map on the slope cells, cached, shared,
-        # and built only when a geometry needs it (build_auto)
-
-        def facet() -> Any:
-            return _model(
-                key, spec, n, step_um, slope_method, weighting, masking, "facet", None, "lean"
-            )
-
     try:
         return build_model(
             hm,
@@ -245,7 +239,6 @@ def _model(
             masking=masking,
             model=model,
             wavelength_nm=wavelength_nm,
-            facet=facet,
             backend=backend,
         )
     except ValueError as exc:

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from goniolab.optics._kernels_numpy import interval_overlap_numpy, table_numpy
+from goniolab.optics._kernels_numpy import interval_overlap_numpy
 
 #: the numba kernels (``*_numba``) are loaded on first access (module ``__getattr__``)
 __all__ = ["cone_cells_numpy", "kirchhoff_band_numpy", "rect_cells_numpy"]
@@ -41,6 +41,29 @@ def _bounds(coord: FloatArray, centre: float, reach: float) -> tuple[int, int]:
     return lo, hi
 
 
+def _lookup(g: FloatArray, table: FloatArray, g0: float, g1: float, o_in: float) -> FloatArray:
+    """The O(gamma) table at ``g`` (``g`` overwritten): ``o_in`` up to ``g0``, 0 from ``g1``,
+    linear between the nodes as the numba kernels' ``_table`` (no search: the nodes are
+    equally spaced, so the index is computed)."""
+    n = table.size
+    if not g1 > g0:
+        out: FloatArray = np.where(g <= g0, o_in, 0.0)
+        return out
+    below, beyond = g <= g0, g >= g1
+    t = np.clip(g, g0, g1, out=g)
+    t -= g0
+    t *= (n - 1) / (g1 - g0)
+    i = t.astype(np.int64)
+    np.minimum(i, n - 2, out=i)
+    t -= i
+    lo = table[i]
+    inner = (table[i + 1] - lo) * t
+    inner += lo
+    inner[below] = o_in
+    inner[beyond] = 0.0
+    return inner
+
+
 def cone_cells_numpy(
     wox: FloatArray,
     woy: FloatArray,
@@ -51,8 +74,14 @@ def cone_cells_numpy(
     g1: float,
     o_in: float,
 ) -> FloatArray:
-    """Numpy twin of :func:`cone_cells_numba`."""
+    """Numpy twin of :func:`cone_cells_numba`: the cells' ``wo_z`` (and which cells are
+    above the horizon) formed once, then per direction the chord to every cell of the
+    window within reach, its angle and the table, summed with the cells' powers."""
     reach = 2.0 * math.sin(0.5 * min(g1, math.pi)) + 1e-12
+    z2 = 1.0 - wox[None, :] ** 2 - woy[:, None] ** 2
+    ok = z2 > 0.0
+    zz = np.sqrt(np.where(ok, z2, 0.0))
+    pv = np.where(ok, p, 0.0)
     out = np.zeros(dirs.shape[0])
     for k in range(dirs.shape[0]):
         d = dirs[k]
@@ -60,15 +89,17 @@ def cone_cells_numpy(
         i0, i1 = _bounds(woy, float(d[1]), reach)
         if j1 <= j0 or i1 <= i0:
             continue
-        xx = wox[None, j0:j1]
-        yy = woy[i0:i1, None]
-        z2 = 1.0 - xx * xx - yy * yy
-        ok = z2 > 0.0
-        zz = np.sqrt(np.where(ok, z2, 0.0))
-        ch = 0.5 * np.sqrt((xx - d[0]) ** 2 + (yy - d[1]) ** 2 + (zz - d[2]) ** 2)
-        g = 2.0 * np.arcsin(np.minimum(ch, 1.0))
-        o_val = np.where(ok, table_numpy(g, table, g0, g1, o_in), 0.0)
-        out[k] = float(np.sum(p[i0:i1, j0:j1] * o_val))
+        g = zz[i0:i1, j0:j1] - d[2]
+        g *= g
+        g += ((woy[i0:i1] - d[1]) ** 2)[:, None]
+        g += ((wox[j0:j1] - d[0]) ** 2)[None, :]
+        np.sqrt(g, out=g)
+        g *= 0.5
+        np.minimum(g, 1.0, out=g)
+        np.arcsin(g, out=g)
+        g *= 2.0
+        o_val = _lookup(g, table, g0, g1, o_in)
+        out[k] = float(np.einsum("ij,ij->", pv[i0:i1, j0:j1], o_val))
     return out
 
 
@@ -111,22 +142,39 @@ def kirchhoff_band_numpy(
     w_cols: NDArray[np.complex128],
     acc: FloatArray,
 ) -> None:
-    """Numpy twin of :func:`kirchhoff_band_numba`."""
+    """Numpy twin of :func:`kirchhoff_band_numba`: the same
+    Horner sums over the rectangle of cells holding those the band owns, in real and
+    imaginary parts (the step ``-i d`` is imaginary: ``f (-i a) = a f_im - i a f_re``),
+    added to ``acc`` where the band owns the cell."""
     own = ok & (vz >= lo) & ((vz <= hi) if hi_inclusive else (vz < hi))
-    ii, jj = np.nonzero(own)
-    if ii.size == 0:
+    ri = np.flatnonzero(own.any(axis=1))
+    if ri.size == 0:
         return
-    step = -1j * ((vz[ii, jj] - vc) * h_max)
+    ci = np.flatnonzero(own.any(axis=0))
+    a0, a1, b0, b1 = int(ri[0]), int(ri[-1]) + 1, int(ci[0]), int(ci[-1]) + 1
+    r, c = rows[a0:a1], cols[b0:b1]
+    if r.size > 1 and np.all(np.diff(r) == 1) and c.size > 1 and np.all(np.diff(c) == 1):
+        sub = spec[:, int(r[0]) : int(r[-1]) + 1, int(c[0]) : int(c[-1]) + 1]
+    else:
+        sub = spec[:, r][:, :, c]
+    x = vz[a0:a1, b0:b1] - vc
+    x *= h_max
     n_terms = spec.shape[0]
-    r, c = rows[ii], cols[jj]
-    f = spec[n_terms - 1, r, c].astype(np.complex128)
-    e = np.full(ii.size, dc[n_terms - 1], dtype=np.complex128)
+    top = sub[n_terms - 1]
+    fr, fi = top.real.astype(np.float64), top.imag.astype(np.float64)
+    er = np.full(x.shape, dc[n_terms - 1].real)
+    ei = np.full(x.shape, dc[n_terms - 1].imag)
     for n in range(n_terms - 2, -1, -1):
-        s = step / (n + 1)
-        f = spec[n, r, c] + f * s
-        e = dc[n] + e * s
-    u = f - e * (w_rows[ii] * w_cols[jj])
-    acc[ii, jj] += u.real * u.real + u.imag * u.imag
+        a = x / (n + 1)
+        term = sub[n]
+        fr, fi = term.real + a * fi, term.imag - a * fr
+        er, ei = dc[n].real + a * ei, dc[n].imag - a * er
+    w = np.multiply.outer(w_rows[a0:a1], w_cols[b0:b1])
+    ur = fr - (er * w.real - ei * w.imag)
+    ui = fi - (er * w.imag + ei * w.real)
+    power = ur * ur
+    power += ui * ui
+    acc[a0:a1, b0:b1] += np.where(own[a0:a1, b0:b1], power, 0.0)
 
 
 _NUMBA = ("cone_cells_numba", "kirchhoff_band_numba", "rect_cells_numba")

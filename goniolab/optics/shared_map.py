@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from goniolab.optics import _fft
 from goniolab.optics.facet import FacetModel
 from goniolab.optics.heightmap import HeightMap
 from goniolab.optics.psd import TiledMap
@@ -155,28 +156,33 @@ class SharedMap:
     def stats(self) -> MapStats:
         t = self.tiled
         ny, nx = t.shape
-        # sums over blocks of rows of the levelled map (float64): no copy of the whole map
+        # sums over blocks of rows of the levelled map (float64): no copy of the whole map;
+        # one pass (the sum of squares about zero, then about the mean: the levelled mean
+        # is ~0, so no precision is lost)
         blocks = [(r0, min(r0 + _STATS_ROWS, ny)) for r0 in range(0, ny, _STATS_ROWS)]
-        s1 = sp = sq2 = 0.0
+        s1 = s2 = sp = sq2 = 0.0
         for r0, r1 in blocks:  # one more row for the y differences
             z = t.levelled(slice(r0, min(r1 + 1, ny)), slice(None)).astype(np.float64)
-            s1 += float(np.sum(z[: r1 - r0]))
-            sp += float(np.sum((np.diff(z[: r1 - r0], axis=1) / t.dx_um) ** 2))
-            sq2 += float(np.sum((np.diff(z, axis=0) / t.dy_um) ** 2))
-        mean = s1 / (ny * nx)
-        s2 = 0.0
-        for r0, r1 in blocks:
-            z = t.levelled(slice(r0, r1), slice(None)).astype(np.float64)
-            s2 += float(np.sum((z - mean) ** 2))
-        sq = math.sqrt(s2 / (ny * nx))
+            zb = z[: r1 - r0]
+            s1 += float(np.sum(zb))
+            s2 += float(np.einsum("ij,ij->", zb, zb))
+            d = np.diff(zb, axis=1)
+            sp += float(np.einsum("ij,ij->", d, d)) / (t.dx_um * t.dx_um)
+            d = np.diff(z, axis=0)
+            sq2 += float(np.einsum("ij,ij->", d, d)) / (t.dy_um * t.dy_um)
+        n_pts = ny * nx
+        mean = s1 / n_pts
+        sq = math.sqrt(max(s2 / n_pts - mean * mean, 0.0))
         sdq = math.sqrt(sp / (ny * (nx - 1)) + sq2 / ((ny - 1) * nx))
-        # isotropic ACF along x and y from the first tile's periodogram (1/e crossing)
+        # ACF along x and y of the first windowed tile, each from 1-D transforms: the power
+        # summed over the other axis is the transform of the ACF at zero lag along it
+        # (Wiener-Khinchin, Parseval over the other axis); circular, as the periodogram's
         h, w = t.tile(0)
-        spec = np.abs(np.fft.rfft2((h * w).astype(np.float64))) ** 2
-        acf = np.fft.irfft2(spec, s=h.shape)
-        acf /= acf[0, 0] if acf[0, 0] > 0 else 1.0
-        lx = first_below(acf[0, : h.shape[1] // 2], math.exp(-1.0)) * t.dx_um
-        ly = first_below(acf[: h.shape[0] // 2, 0], math.exp(-1.0)) * t.dy_um
+        hw = (h * w).astype(np.complex64)
+        acf_x = _acf_along(hw, axis=1)
+        acf_y = _acf_along(hw, axis=0)
+        lx = first_below(acf_x[: h.shape[1] // 2], math.exp(-1.0)) * t.dx_um
+        ly = first_below(acf_y[: h.shape[0] // 2], math.exp(-1.0)) * t.dy_um
         return MapStats(
             sq_um=sq,
             sdq=sdq,
@@ -184,6 +190,16 @@ class SharedMap:
             step_um=max(t.dx_um, t.dy_um),
             field_um=min(t.nx_t * t.dx_um, t.ny_t * t.dy_um),
         )
+
+
+def _acf_along(hw: NDArray[np.complex64], axis: int) -> FloatArray:
+    """Normalised circular autocorrelation of ``hw`` along ``axis`` at zero lag across it:
+    the inverse transform of ``sum_other |FFT_axis(hw)|^2``."""
+    spec = _fft.fft(hw, axis=axis)
+    power = np.sum(np.abs(spec).astype(np.float64) ** 2, axis=1 - axis)
+    acf = np.fft.irfft(power[: power.size // 2 + 1], n=power.size)
+    out: FloatArray = acf / acf[0] if acf[0] > 0 else acf
+    return out
 
 
 def first_below(a: FloatArray, level: float) -> float:
