@@ -161,8 +161,11 @@ class PhysicalOpticsModel(EnergyBudget, CellApertures):
         V(lambda) (the index ``n`` is taken constant); ``"single"``: at ``wavelength_nm``.
     masking : bool
         Multiply by the Smith G2 of the map's slopes (default on).
-    backend : {"numba", "numpy"}
-        Aperture-sum kernels.
+    backend : {"numpy", "numba"}
+        Aperture-sum kernels: numpy (default: the same CPU time in process as the
+        compiled kernels since issue 26, without numba's ~1 s of import and cache loading
+        per process, ``bench/bench_lean.py``) or the compiled numba kernels
+        (:mod:`goniolab.optics._cell_kernels_numba`, imported on first use).
     tile, taper : int, float
         Tile side (points) and window taper (:mod:`goniolab.optics.psd`).
     progress : callable, optional
@@ -179,7 +182,7 @@ class PhysicalOpticsModel(EnergyBudget, CellApertures):
         wavelength_nm: float = 550.0,
         gloss_weighting: GlossWeighting = "iso2813",
         masking: bool = True,
-        backend: Backend = "numba",
+        backend: Backend = "numpy",
         tile: int = DEFAULT_TILE,
         taper: float = DEFAULT_TAPER,
         progress: Progress | None = None,
