@@ -34,6 +34,7 @@ References
 from __future__ import annotations
 
 import math
+import weakref
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Any
@@ -96,6 +97,14 @@ def tile_starts(n: int, tile: int) -> tuple[list[int], int]:
     n_seg = max(1, math.ceil(n / tile))
     size = n // n_seg
     return [k * size for k in range(n_seg)], size
+
+
+#: Largest total size of a map's tiles (float32 bytes) that :meth:`TiledMap.tile` keeps.
+_TILE_CACHE_BYTES: int = 32 << 20
+#: The kept tiles of each tiled map (dropped with the map).
+_TILES: weakref.WeakKeyDictionary[TiledMap, dict[int, NDArray[np.float32]]] = (
+    weakref.WeakKeyDictionary()
+)
 
 
 @dataclass(frozen=True, eq=False)
@@ -220,14 +229,28 @@ class TiledMap:
         return len(self.ys) * len(self.xs)
 
     def tile(self, k: int) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
-        """Heights of tile ``k`` (window-weighted mean removed) and its window (float32;
-        the window is shared, read-only)."""
+        """Heights of tile ``k`` (window-weighted mean removed) and its window (float32,
+        read-only; the window is shared).
+
+        When all the tiles together take at most :data:`_TILE_CACHE_BYTES` (a 2048 x 2048
+        map: 16 MB) each is formed once and kept: a gloss report of 16 wavelengths asks
+        for every tile a few dozen times (levelling it each time cost a third of the
+        work beside the FFTs). Larger maps form a tile on each request (memory bounded by
+        a tile, as before).
+        """
+        keep = self.n_tiles * self.ny_t * self.nx_t * 4 <= _TILE_CACHE_BYTES
+        kept = _TILES.setdefault(self, {}) if keep else None
+        if kept is not None and k in kept:
+            return kept[k], self.window
         iy, ix = divmod(k, len(self.xs))
         y0, x0 = self.ys[iy], self.xs[ix]
         h = self.levelled(slice(y0, y0 + self.ny_t), slice(x0, x0 + self.nx_t))
         w = self.window
         mean = float(np.sum(w * h, dtype=np.float64) / np.sum(w, dtype=np.float64))
         h -= np.float32(mean)
+        h.setflags(write=False)
+        if kept is not None:
+            kept[k] = h
         return h, w
 
 
