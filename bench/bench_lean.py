@@ -52,9 +52,13 @@ sys.path.insert(0, str(ROOT / "bench"))
 
 
 def run(cmd: list[str], env: dict[str, str]) -> tuple[float, float]:
-    """(wall s, CPU s of the process and its children)."""
+    """(wall s, CPU s of the process and its children), run from the temporary directory:
+    ``python -c`` puts the working directory first on ``sys.path``, which would shadow
+    ``PYTHONPATH`` (the checkout under test) with a checkout it was started in."""
     t0 = time.perf_counter()
-    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(
+        cmd, env=env, cwd=tempfile.gettempdir(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE
+    )
     _, status, ru = os.wait4(proc.pid, 0)
     wall = time.perf_counter() - t0
     code = os.waitstatus_to_exitcode(status)
