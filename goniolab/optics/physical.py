@@ -432,15 +432,17 @@ class PhysicalOpticsModel(EnergyBudget, CellApertures):
         return p.notes[-1] if p.notes else "facet model"
 
     # ------------------------------------------------------------------ fractions
-    def _boxes(
+    def _fractions(
         self,
         theta_i_deg: float,
         theta_r_deg: FloatArray,
         source: Aperture,
         receptor: Aperture,
         lams_nm: Sequence[float],
-    ) -> tuple[list[CellBox], tuple[int, int]]:
-        """The cells a reading needs, per wavelength, and the zero padding of their grid."""
+    ) -> FloatArray:
+        """Flux fractions ``(n_lambda, n_points)``: the coherent beam (analytic) plus the
+        diffuse cells the map resolves, on a grid refined by zero padding until the
+        receptor spans :data:`~goniolab.optics.cell_apertures.CELLS_ACROSS` cells."""
         ra, rb = self._reach(source, receptor)
         if isinstance(source, Cone) and self._split_source(theta_i_deg, source):
             # the turned-back receptors of the source's sub-cones reach one source half
@@ -454,20 +456,6 @@ class PhysicalOpticsModel(EnergyBudget, CellApertures):
                 theta_i_deg, lam_nm * 1e-3, float(tr.min()) - ra, float(tr.max()) + ra, rb, os
             )
             boxes.append(box)
-        return boxes, os
-
-    def _fractions(
-        self,
-        theta_i_deg: float,
-        theta_r_deg: FloatArray,
-        source: Aperture,
-        receptor: Aperture,
-        lams_nm: Sequence[float],
-    ) -> FloatArray:
-        """Flux fractions ``(n_lambda, n_points)``: the coherent beam (analytic) plus the
-        diffuse cells the map resolves, on a grid refined by zero padding until the
-        receptor spans :data:`~goniolab.optics.cell_apertures.CELLS_ACROSS` cells."""
-        boxes, os = self._boxes(theta_i_deg, theta_r_deg, source, receptor, lams_nm)
         lams_um = [lam * 1e-3 for lam in lams_nm]
         powers, coh = self._cell_powers(theta_i_deg, lams_um, boxes, os)
         out = np.empty((len(lams_nm), theta_r_deg.size))
