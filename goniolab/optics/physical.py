@@ -162,10 +162,7 @@ class PhysicalOpticsModel(EnergyBudget, CellApertures):
     masking : bool
         Multiply by the Smith G2 of the map's slopes (default on).
     backend : {"numpy", "numba"}
-        Aperture-sum kernels: numpy (default: the same CPU time in process as the
-        compiled kernels since issue 26, without numba's ~1 s of import and cache loading
-        per process, ``bench/bench_lean.py``) or the compiled numba kernels
-        (:mod:`goniolab.optics._cell_kernels_numba`, imported on first use).
+        Aperture sums: numpy (default: no JIT start-up) or numba (:mod:`._cell_kernels_numba`).
     tile, taper : int, float
         Tile side (points) and window taper (:mod:`goniolab.optics.psd`).
     progress : callable, optional
@@ -217,6 +214,19 @@ class PhysicalOpticsModel(EnergyBudget, CellApertures):
         self.masking = bool(masking)
         self.backend: Backend = backend
         self.progress = progress
+
+    @property
+    def progress(self) -> Progress | None:
+        """``progress(done, total, what)`` or None; setting it also makes the facet work
+        on the same map report there (:meth:`SharedMap.report_to`: a large map's slopes,
+        walked block by block)."""
+        return self._progress
+
+    @progress.setter
+    def progress(self, fn: Progress | None) -> None:
+        self._progress = fn
+        if fn is not None:
+            self._shared.report_to(fn)
 
     # ------------------------------------------------------------------ construction
     def with_optics(

@@ -24,7 +24,7 @@ from goniolab.optics import _fft
 from goniolab.optics.facet import FacetModel
 from goniolab.optics.heightmap import HeightMap
 from goniolab.optics.psd import TiledMap
-from goniolab.optics.surface import Surface
+from goniolab.optics.surface import MapSurface, Surface
 
 __all__ = ["MapStats", "SharedMap", "first_below"]
 
@@ -66,6 +66,17 @@ class SharedMap:
         self._factories: dict[tuple[complex, bool], Callable[[], FacetModel]] = {}
         #: the other wave models of the same map, by (kind, n, wavelength, weighting, masking)
         self.siblings: dict[tuple[Any, ...], Any] = {}
+        #: where the facet models of this map report long walks (:meth:`report_to`)
+        self.progress: Callable[[int, int, str], None] | None = None
+
+    def report_to(self, fn: Callable[[int, int, str], None]) -> None:
+        """Make the facet models of this map (the shared one and the fallbacks) report
+        their walks over a large map's slopes to ``fn``
+        (:class:`~goniolab.optics.surface.MapSurface`)."""
+        with self.lock:
+            self.progress = fn
+            for facet in self._facets.values():
+                _report(facet, fn)
 
     def cached(self, key: tuple[Any, ...], make: Callable[[], Any]) -> Any:
         with self.lock:
@@ -131,13 +142,16 @@ class SharedMap:
         else:
             made = FacetModel(self._facets_surface, n=n, masking=masking, backend="lean")
         with self.lock:
-            return self._facets.setdefault(key, made)
+            out = self._facets.setdefault(key, made)
+            _report(out, self.progress)
+            return out
 
     def adopt_facet(self, facet: FacetModel) -> None:
         """Use ``facet`` (a facet model of this map) as the fallback of its index and
         masking."""
         with self.lock:
             self._facets[(facet.n, facet.masking)] = facet
+            _report(facet, self.progress)
 
     def adopt_facet_factory(
         self, n: complex, masking: bool, factory: Callable[[], FacetModel]
@@ -200,6 +214,11 @@ def _acf_along(hw: NDArray[np.complex64], axis: int) -> FloatArray:
     acf = np.fft.irfft(power[: power.size // 2 + 1], n=power.size)
     out: FloatArray = acf / acf[0] if acf[0] > 0 else acf
     return out
+
+
+def _report(facet: FacetModel, fn: Callable[[int, int, str], None] | None) -> None:
+    if fn is not None and isinstance(facet.surface, MapSurface):
+        facet.surface.progress = fn
 
 
 def first_below(a: FloatArray, level: float) -> float:

@@ -54,6 +54,9 @@ from drivers.goniometer import TwoArmGoniometer
 from drivers.timing import Clock
 from goniolab.optics.apertures import Cone, cap_overlap_fraction
 from goniolab.optics.fresnel import fresnel
+from goniolab.scan.align_eta import eta_left, legs, move_size, nominal_parts, sweep
+from goniolab.scan.dryrun import ArmMotion
+from goniolab.scan.eta import EtaEstimator, WallTime
 from goniolab.scan.events import (
     EventBus,
     PointMeasured,
@@ -436,6 +439,11 @@ class AlignRunner:
         Where readings, events and the result go.
     move_timeout_s
         Timeout of one move.
+    motion, wall
+        The arms' motion model and the clock of the ETA
+        (:class:`goniolab.scan.eta.EtaEstimator`, the scans' estimator, over the plan's
+        nominal sweeps: peaks at the nominal speculars). Without ``motion`` the moves are
+        sized in degrees and timed from the first ones measured.
     """
 
     def __init__(
@@ -454,6 +462,8 @@ class AlignRunner:
         exposure: AutoExposure | None = None,
         standard: Standard | None = None,
         gates: AlignGates | None = None,
+        motion: ArmMotion | None = None,
+        wall: WallTime | None = None,
     ) -> None:
         self.goniometer = goniometer
         self.spectro = spectro
@@ -480,9 +490,13 @@ class AlignRunner:
         self._abort = False
         #: :meth:`run` has published the run's end (done, aborted or failed)
         self.finished = False
-        n_coarse = len(plan.sweeps(plan.theta_i_deg[0])[0])
-        n_fine = len(plan.fine(0.0))
-        self._total = 2 * len(plan.theta_i_deg) * (n_coarse + n_fine)
+        self.motion = motion
+        self.wall = WallTime.of(clock) if wall is None else wall
+        #: the readings' nominal geometries (each sweep's peak at its nominal specular)
+        lim = goniometer.detector.limits_deg
+        self._nominal = [g for ti in sorted(plan.theta_i_deg) for g in sweep(plan, lim, ti, ti)] * 2
+        self._total = len(self._nominal)
+        self._eta: EtaEstimator | None = None
 
     @property
     def aborted(self) -> bool:
@@ -494,11 +508,13 @@ class AlignRunner:
         readings kept, no result) and raises :class:`AlignAborted`."""
         self._abort = True
 
-    async def _go(self, ti: float, tr: float) -> None:
-        """Move to (ti, tr), approaching both arms from below (the scans' direction)."""
+    async def _go(self, ti: float, tr: float) -> float | None:
+        """Move to (ti, tr), approaching both arms from below (the scans' direction);
+        returns the move's size for the ETA (``None``: no move)."""
         pos = self._position or await self.goniometer.positions_deg()
-        if ti < pos[0] - 1e-9 or tr < pos[1] - 1e-9:
-            pre = (min(ti, pos[0]) - 0.5, min(tr, pos[1]) - 0.5)
+        moves = legs(pos, ti, tr)
+        if len(moves) == 2:
+            pre = moves[0][1]
             try:
                 self.goniometer.check_geometry(*pre)
                 await self.goniometer.move_to(pre[0], pre[1], self.move_timeout_s)
@@ -506,11 +522,27 @@ class AlignRunner:
                 pass
         await self.goniometer.move_to(ti, tr, self.move_timeout_s)
         self._position = (ti, tr)
+        return None if (ti, tr) == tuple(pos) else move_size(self.motion, moves)
+
+    async def _place(self, specimen: str) -> None:
+        """The operator (or the simulated lab) places ``specimen``: not the run's pace."""
+        if self._eta is not None:
+            self._eta.pause()
+        try:
+            await self.place_specimen(specimen)
+        finally:
+            if self._eta is not None:
+                self._eta.resume()
 
     async def _read(self, specimen: str, phase: str, ti: float, tr: float) -> float:
         if self._abort:
             raise AlignAborted(f"aborted after {self._index} readings")
-        await self._go(ti, tr)
+        eta = self._eta
+        mark = None if eta is None else eta.start_part()
+        move_x = await self._go(ti, tr)
+        if eta is not None and mark is not None and move_x is not None:
+            eta.finish_part("move", move_x, mark)
+        mark = None if eta is None else eta.start_part()
         reading, self._exposure_us = await self.exposure.read(self.spectro, self._exposure_us)
         value = float(reading.luminance_pct)
         quality = reading_quality(reading)
@@ -538,6 +570,8 @@ class AlignRunner:
             },
             timestamp=ts,
         )
+        if eta is not None and mark is not None:
+            eta.finish_part("reading", self.plan.exposure_us * 1e-6, mark)
         self._index += 1
         self.bus.publish(
             PointMeasured(
@@ -546,9 +580,12 @@ class AlignRunner:
                 measured_theta_i_deg=ti, measured_theta_r_deg=tr, predicted_pct=None,
             )
         )  # fmt: skip
+        if eta is not None:
+            eta.finish_point()
         self.bus.publish(
-            Progress(run_id=self.run_id, done=self._index, total=self._total, eta_s=0.0)
-        )
+            Progress(run_id=self.run_id, done=self._index, total=self._total,
+                     eta_s=eta_left(self._eta, self._total - self._index))
+        )  # fmt: skip
         return value
 
     async def _peak_sweeps(
@@ -566,6 +603,11 @@ class AlignRunner:
         centre = float(coarse[int(np.argmax(c_vals))])
         fine = self.plan.fine(centre)
         fine = fine[(fine >= lo) & (fine <= hi)]
+        # centred on the measured maximum, the fine sweep may lose other readings than
+        # the nominal one to a limit
+        self._total += len(sweep(self.plan, (lo, hi), ti, centre)) - len(
+            sweep(self.plan, (lo, hi), ti, ti)
+        )
         readings = {float(t): await self._read(specimen, "fine", ti, float(t)) for t in fine}
         step = self.plan.fine_step_deg
         for _ in range(round(self.plan.coarse_span_deg / step)):
@@ -616,7 +658,15 @@ class AlignRunner:
         self.bus.publish(StateChanged(run_id=self.run_id, state=RunState.RUNNING, reason=""))
         try:
             await self.spectro.set_exposure_us(self._exposure_us)
-            await self.place_specimen("standard")
+            start = await self.goniometer.positions_deg()
+            parts = nominal_parts(self._nominal, (float(start[0]), float(start[1])),
+                                  self.motion, self.plan.exposure_us * 1e-6)  # fmt: skip
+            self._eta = EtaEstimator(parts, None, self.wall, move_known=self.motion is not None)
+            self.bus.publish(
+                Progress(run_id=self.run_id, done=0, total=self._total, eta_s=self._eta.total_s)
+            )
+            await self._place("standard")
+            self._eta.begin_point()
             lamp: list[float] = []
             det: list[float] = []
             vals: list[float] = []
@@ -640,7 +690,7 @@ class AlignRunner:
                 saturated=self._saturated.get("standard", 0),
             )  # fmt: skip
             d_l, d_d, rms = fit.lamp_zero_deg, fit.detector_zero_deg, fit.rms_rel
-            await self.place_specimen("sample")
+            await self._place("sample")
             self._position = None
             taus: list[tuple[float, float]] = []
             step = self.plan.fine_step_deg
