@@ -147,7 +147,7 @@ def build_model(
     model: str = DEFAULT_MODEL,
     wavelength_nm: float | None = None,
     facet: FacetModel | None = None,
-    backend: Backend = "numba",
+    backend: Backend = "lean",
 ) -> ReflectanceModel:
     """The registered ``model`` (:mod:`goniolab.model_registry`) of a loaded height map,
     not cached (:func:`model_for` caches by spec). ``facet``: the facet model of the map a
@@ -255,7 +255,7 @@ def model_for(
     masking: bool = True,
     model: str = DEFAULT_MODEL,
     wavelength_nm: float | None = None,
-    backend: Backend = "numba",
+    backend: Backend = "lean",
 ) -> ReflectanceModel:
     """The reflectance model of a surface: the one way every face gets a sample's model.
 

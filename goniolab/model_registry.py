@@ -78,7 +78,7 @@ class ModelOptions:
     weighting: str = "radiometric"
     masking: bool = True
     wavelength_nm: float | None = None
-    backend: str = "numba"
+    backend: str = "lean"
     facet: Any = None
 
 
