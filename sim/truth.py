@@ -24,8 +24,8 @@ with physics the predictor does not share:
 
 Cost and caching: a table is one FFT of the tile per (q_z band, wavelength), shared by
 every incidence angle (the band is rescaled to each reading's own q_z). Tables are kept in
-memory and in a disk cache (``cache_dir``), keyed by the truth's content and the
-settings; docs/TWIN.md gives measured build times.
+memory and in a disk cache (``cache_dir``), keyed by the truth's content, the settings and
+the code that builds them (:func:`table_code_key`); docs/TWIN.md gives measured build times.
 
 References
 ----------
@@ -82,6 +82,7 @@ __all__ = [
     "build_truth",
     "luminance_weights",
     "smith_shadowing",
+    "table_code_key",
     "truth_for",
 ]
 
@@ -122,6 +123,29 @@ def _luminance_pct(
         for t in tr.flat
     ]
     return np.asarray(out, dtype=np.float64).reshape(tr.shape)
+
+
+@functools.lru_cache(maxsize=1)
+def table_code_key() -> str:
+    """What, besides the truth's content and settings, decides a cached table's numbers: the
+    source of the modules that build the true tile and its tables (this one,
+    :mod:`sim.true_surface`, :mod:`sim.kirchhoff_orders`) and the numpy and scipy versions.
+
+    Part of the disk cache's key. Without it, tables written by another version of the twin
+    (another branch, an older checkout: the cache directory is per user, not per checkout)
+    were read back as this one's; they differ by up to ~1e-4 relative, and the spectro's
+    Poisson noise, whose sampler draws a variable number of uniforms, turns such a change
+    into a different noise stream for every later reading: at an instant clock, RMSE 0.250
+    or 0.247 % for the same seed (the closing note's "known defect")."""
+    import scipy
+
+    import sim.kirchhoff_orders
+    import sim.true_surface
+
+    h = hashlib.sha1(f"numpy {np.__version__} scipy {scipy.__version__}".encode())
+    for mod in (__file__, sim.true_surface.__file__, sim.kirchhoff_orders.__file__):
+        h.update(Path(mod).read_bytes())
+    return h.hexdigest()[:16]
 
 
 class TruthOptics:
@@ -231,7 +255,8 @@ class TruthOptics:
         d = self.settings.cache_dir
         if not d:
             return None
-        h = hashlib.sha1((self.truth.content_key + self.settings.key()).encode()).hexdigest()[:20]
+        key = self.truth.content_key + self.settings.key() + table_code_key()
+        h = hashlib.sha1(key.encode()).hexdigest()[:20]
         return Path(d) / f"twin-{h}.npz"
 
     def _load_disk(self) -> None:
