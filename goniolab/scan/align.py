@@ -53,7 +53,7 @@ from drivers.base import DeviceError, Spectrocolorimeter
 from drivers.goniometer import TwoArmGoniometer
 from drivers.timing import Clock
 from goniolab.optics.apertures import Cone, cap_overlap_fraction
-from goniolab.optics.fresnel import fresnel
+from goniolab.optics.fresnel import fresnel, fresnel_dielectric_sp
 from goniolab.scan.events import (
     EventBus,
     PointMeasured,
@@ -116,6 +116,10 @@ class AlignGates:
     max_rms_rel: float = 0.02
     max_sigma_deg: float = 0.05
     max_geometric_gap_deg: float = 0.1
+    #: the fitted detector polarisation weight ``w`` (share of its response to s light)
+    #: within ``0.5 +/- max_s_weight_dev``: a polarisation dependence ``2w - 1`` beyond
+    #: 20 % is no fibre-fed spectrometer's, it is a misfit
+    max_s_weight_dev: float = 0.1
 
 
 @dataclass(frozen=True, slots=True)
@@ -241,8 +245,16 @@ def _standard_model(
     detector: Cone,
     n: float = BLACK_GLASS_N,
 ) -> FloatArray:
-    d_l, d_d, k, floor = params
-    r = fresnel(np.cos(np.radians(lamp + d_l)), n)
+    """The black glass's reading; ``params = (dL, dD, k, floor[, w])``: with ``w`` the
+    detector's share of response to s-polarised light, ``R = w R_s + (1 - w) R_p``
+    (Fresnel, Born & Wolf sec. 1.5.2), without it the unpolarised mean."""
+    d_l, d_d, k, floor = params[:4]
+    if len(params) > 4:
+        w = float(params[4])
+        r_s, r_p = fresnel_dielectric_sp(np.cos(np.radians(lamp + d_l)), n)
+        r = w * np.asarray(r_s) + (1.0 - w) * np.asarray(r_p)
+    else:
+        r = fresnel(np.cos(np.radians(lamp + d_l)), n)
     gamma = np.radians(np.abs(det + d_d - lamp - d_l))
     o = cap_overlap_fraction(
         gamma, math.radians(source.half_angle_deg), math.radians(detector.half_angle_deg)
@@ -265,10 +277,16 @@ class StandardFit:
     lamp_zero_sigma_deg: float
     detector_zero_sigma_deg: float
     geometric_difference_deg: float
+    #: the detector's share of response to s-polarised light, fitted with its 1-sigma
+    #: (three or more incidences), else 0.5 assumed (sigma NaN)
+    s_weight: float = 0.5
+    s_weight_sigma: float = math.nan
 
     def as_dict(self) -> dict[str, float]:
         """JSON form."""
         return {
+            "s_weight": self.s_weight,
+            "s_weight_sigma": self.s_weight_sigma,
             "lamp_zero_deg": self.lamp_zero_deg,
             "detector_zero_deg": self.detector_zero_deg,
             "scale": self.scale,
@@ -303,6 +321,7 @@ def fit_standard_full(
     source: Cone,
     detector: Cone,
     n: float = BLACK_GLASS_N,
+    fit_polarisation: bool | None = None,
 ) -> StandardFit:
     """Fit the black-glass readings (certified index ``n``).
 
@@ -310,6 +329,16 @@ def fit_standard_full(
     (module docstring) over all readings, 0.3 % relative plus 5e-4 % absolute sigma; the
     parameter covariance is ``s^2 (J^T J)^-1`` at the solution (Press et al., *Numerical
     Recipes*, 3rd ed., sec. 15.5), ``s^2`` the reduced chi-square.
+
+    ``fit_polarisation`` (default: with three or more incidences) also fits the detector's
+    polarisation weight ``w`` (:func:`_standard_model`). A fibre-fed grating spectrometer
+    answers s and p light unequally by a few % and the glass polarises strongly
+    (R_s 18 %, R_p 0.4 % at 60 deg): an unpolarised fit of a detector with ``w = 0.51``
+    (2 % polarisation dependence) puts both zeros 0.27 deg off with an rms of 0.4 %, which
+    no gate sees (issue 21: "the absolute zeros rest on the shape of the Fresnel curve").
+    The peaks' heights at three incidences fix ``k``, ``dL`` and ``w`` together (R_s and
+    R_p change differently with incidence); with two, ``w`` is taken as 0.5 and said so
+    (``s_weight_sigma`` NaN).
     """
     from scipy.optimize import least_squares
 
@@ -330,9 +359,10 @@ def fit_standard_full(
     def resid(p: FloatArray) -> FloatArray:
         return np.asarray((_standard_model(p, lamp, det, source, detector, n) - y) / sigma)
 
-    fit = least_squares(
-        resid, x0=np.array([0.0, -s0, 1.0, 0.0]), x_scale=np.array([0.1, 0.1, 0.1, 1e-3])
-    )
+    with_w = np.unique(lamp).size >= 3 if fit_polarisation is None else fit_polarisation
+    x0 = [0.0, -s0, 1.0, 0.0] + ([0.5] if with_w else [])
+    scale = [0.1, 0.1, 0.1, 1e-3] + ([0.01] if with_w else [])
+    fit = least_squares(resid, x0=np.array(x0), x_scale=np.array(scale))
     d_l, d_d = float(fit.x[0]), float(fit.x[1])
     model = _standard_model(fit.x, lamp, det, source, detector, n)
     big = y > 0.1 * y.max()
@@ -353,6 +383,8 @@ def fit_standard_full(
         lamp_zero_sigma_deg=float(sd[0]),
         detector_zero_sigma_deg=float(sd[1]),
         geometric_difference_deg=float(np.mean(shifts)) if shifts else math.nan,
+        s_weight=float(fit.x[4]) if with_w else 0.5,
+        s_weight_sigma=float(sd[4]) if with_w else math.nan,
     )
 
 
@@ -407,6 +439,12 @@ def check_standard(
         raise AlignRefused(
             f"refused: the zeros are uncertain to {sig:.3g} deg (1 sigma; allowed "
             f"{gates.max_sigma_deg:g} deg): add incidences or finer sweeps"
+        )
+    if not abs(fit.s_weight - 0.5) <= gates.max_s_weight_dev:
+        raise AlignRefused(
+            f"refused: the black-glass fit needs a detector answering {100 * fit.s_weight:.1f} % "
+            f"to s-polarised light (allowed 50 +/- {100 * gates.max_s_weight_dev:g} %): "
+            "the readings do not follow the glass's Fresnel curve"
         )
     gap = abs(fit.lamp_zero_deg - fit.detector_zero_deg - fit.geometric_difference_deg)
     if not gap <= gates.max_geometric_gap_deg:
