@@ -125,6 +125,15 @@ def _luminance_pct(
     return np.asarray(out, dtype=np.float64).reshape(tr.shape)
 
 
+#: The orders of a flat mirror: all the power in the specular order (the band at q_z = 0).
+_MIRROR_ORDERS = OrderTable(
+    du=np.array([-1e-3, 0.0, 1e-3]),
+    dv=np.array([0.0]),
+    p=np.array([[0.0, 1.0, 0.0]], dtype=np.float32),
+    qz=1.0,
+)
+
+
 @functools.lru_cache(maxsize=1)
 def table_code_key() -> str:
     """What, besides the truth's content and settings, decides a cached table's numbers: the
@@ -317,7 +326,8 @@ class TruthOptics:
         """Surface-reflected flux fraction, shape (n_wavelength_nodes, n_tr).
 
         Two bands around the reading's own ``q_z = cos ti + cos tr``, each rescaled to it
-        (:meth:`OrderTable.reading`), interpolated linearly in q_z.
+        (:meth:`OrderTable.reading`), interpolated linearly in q_z; below the first band,
+        the flat mirror and the first band, weighted for the tile's coherent share.
         """
         reach = round(self._reach_v(source, detector), 6)
         cos_ti = math.cos(math.radians(ti_deg))
@@ -327,9 +337,21 @@ class TruthOptics:
                 u_d = math.sin(math.radians(float(tr)))
                 q = cos_ti + math.cos(math.radians(float(tr)))
                 (q_lo, q_hi), w = self._bands_for(q, lam * 1e-3)
-                if q_lo <= 0.0:
-                    w = 1.0
                 acc = 0.0
+                if q_lo <= 0.0:
+                    # below the first band (grazing: G85's q_z = 0.174): the band at q_z = 0
+                    # is the flat mirror (all power coherent); mixed with the first band so
+                    # that the coherent share is the tile's own at this q_z (the first band
+                    # alone carried its own, 0.45 against 0.72 for wittmann-3 at 85 deg)
+                    c_q, c_hi = (
+                        float(self.coherent_share(np.array([lam]), q)[0]),
+                        float(self.coherent_share(np.array([lam]), q_hi)[0]),
+                    )
+                    w = 1.0 if c_hi >= 1.0 - 1e-9 else min(1.0, max(0.0, (1 - c_q) / (1 - c_hi)))
+                    if w < 1.0:
+                        acc += (1.0 - w) * _MIRROR_ORDERS.reading(
+                            ti_deg, u_d, q, self.truth.n, source, detector
+                        )
                 for qb, wb in ((q_lo, 1.0 - w), (q_hi, w)):
                     if wb <= 1e-12 or qb <= 0.0:
                         continue
@@ -354,6 +376,50 @@ class TruthOptics:
         ang = (1.0 - ft) / (1.0 - r_ext) * cos_tr * omega / math.pi
         return np.asarray((1.0 - fi) * saunderson * ang[None, :])
 
+    def shadowing(self, theta_i_deg: float, theta_r_deg: float) -> FloatArray:
+        """Factor on the surface reflection per wavelength node: shadowing and masking by
+        the coat's own roughness, which the Kirchhoff tables lack (issue 21: the twin must
+        have what real samples have), on the light the roughness scatters only.
+
+        ``f = C + (1 - C) G1(theta_i) G1(theta_r)``: ``G1`` Smith's function of the tile's
+        rms slope (:func:`smith_shadowing`), ``C = |<exp(i k q_z z)>|^2`` the coherent
+        share of the reflection, the characteristic function of the tile's heights at
+        ``q_z = cos theta_i + cos theta_r`` (Beckmann & Spizzichino ch. 5; ``exp(-g)`` for
+        Gaussian heights). Shadowing is geometric optics: a bump casts a shadow only where
+        it is optically rough at that geometry. The coherent beam of a coat that is
+        optically smooth at grazing incidence (``k q_z Sq`` small: wittmann-3 at 85 deg,
+        ``g = 0.38``) is not shadowed by its filler bumps, whose shadows, 0.3 um tall and
+        3 um long at 5 deg elevation, are washed out by diffraction (Fresnel number
+        ``h^2 / (lambda L)`` ~ 0.05); a coat rough at that geometry (``C`` -> 0) gets
+        Smith's factor whole. The earlier factor on all of the reflection cut the twin's
+        G85 of wittmann-3 from 60.0 to 26.7 GU, below the unmasked facet prediction
+        (36.3 GU), where Wittmann et al. (2021, fig. 9b, sec. 5.4) measure the silica
+        samples' G85 above it."""
+        sigma = self.truth.slope_rms_x
+        g2 = float(smith_shadowing(theta_i_deg, sigma) * smith_shadowing(theta_r_deg, sigma))
+        nodes = np.asarray(self.settings.wavelengths_nm, dtype=np.float64)
+        if g2 >= 1.0:
+            return np.ones_like(nodes)
+        q = math.cos(math.radians(theta_i_deg)) + math.cos(math.radians(abs(theta_r_deg)))
+        c = self.coherent_share(nodes, q)
+        return np.asarray(c + (1.0 - c) * g2)
+
+    def coherent_share(self, wavelengths_nm: FloatArray, qz: float) -> FloatArray:
+        """``|<exp(i k q_z z)>|^2`` over the tile per wavelength, from its height histogram
+        (8192 bins: the phase within a bin varies by under 0.05 rad for the tiles here)."""
+        counts, centres = self._height_histogram
+        k = 2.0 * math.pi / (np.asarray(wavelengths_nm, dtype=np.float64) * 1e-3)
+        phase = np.outer(k * qz, centres)
+        p = counts / counts.sum()
+        mean = (np.cos(phase) @ p) + 1j * (np.sin(phase) @ p)
+        return np.asarray(np.abs(mean) ** 2)
+
+    @functools.cached_property
+    def _height_histogram(self) -> tuple[FloatArray, FloatArray]:
+        z = np.asarray(self.truth.z_um, dtype=np.float64).ravel()
+        counts, edges = np.histogram(z, bins=8192)
+        return counts.astype(np.float64), 0.5 * (edges[:-1] + edges[1:])
+
     def spectral_fraction(
         self,
         theta_i_deg: float,
@@ -366,13 +432,7 @@ class TruthOptics:
         :data:`SPECTRUM_WAVELENGTHS_NM` (surface + body), blocking."""
         tr = np.asarray([theta_r_deg], dtype=np.float64)
         surf = self._surface_at(theta_i_deg, tr, source, detector)[:, 0]
-        # shadowing and masking by the coat's own roughness (the Kirchhoff tables have
-        # none): Smith's G1 for the lamp and for the detector, felt at grazing angles on
-        # rough coats (issue 21: the twin must have what real samples have)
-        sigma = self.truth.slope_rms_x
-        surf = surf * float(
-            smith_shadowing(theta_i_deg, sigma) * smith_shadowing(theta_r_deg, sigma)
-        )
+        surf = surf * self.shadowing(theta_i_deg, theta_r_deg)
         wl = np.asarray(SPECTRUM_WAVELENGTHS_NM)
         spec = np.interp(wl, np.asarray(self.settings.wavelengths_nm), surf)
         body = self._body_fraction(theta_i_deg, tr, detector)[:, 0]
