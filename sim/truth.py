@@ -376,20 +376,22 @@ class TruthOptics:
         ang = (1.0 - ft) / (1.0 - r_ext) * cos_tr * omega / math.pi
         return np.asarray((1.0 - fi) * saunderson * ang[None, :])
 
-    def shadowing(self, theta_i_deg: float, theta_r_deg: float) -> FloatArray:
-        """Factor on the surface reflection per wavelength node: shadowing and masking by
-        the coat's own roughness, which the Kirchhoff tables lack (issue 21: the twin must
-        have what real samples have), on the light the roughness scatters only.
+    def shadowing(self, theta_i_deg: float, theta_r_deg: float) -> tuple[float, FloatArray]:
+        """Shadowing and masking by the coat's own roughness, which the Kirchhoff tables
+        lack (issue 21: the twin must have what real samples have), on the light the
+        roughness scatters only: ``(G, C)``.
 
-        ``f = C + (1 - C) G1(theta_i) G1(theta_r)``: ``G1`` Smith's function of the tile's
-        rms slope (:func:`smith_shadowing`), ``C = |<exp(i k q_z z)>|^2`` the coherent
-        share of the reflection, the characteristic function of the tile's heights at
+        ``G = G1(theta_i) G1(theta_r)``, Smith's function of the tile's rms slope
+        (:func:`smith_shadowing`), multiplies the diffuse part of a reading;
+        ``C = |<exp(i k q_z z)>|^2`` per wavelength node is the coherent share of the
+        reflection, the characteristic function of the tile's heights at
         ``q_z = cos theta_i + cos theta_r`` (Beckmann & Spizzichino ch. 5; ``exp(-g)`` for
-        Gaussian heights). Shadowing is geometric optics: a bump casts a shadow only where
-        it is optically rough at that geometry. The coherent beam of a coat that is
-        optically smooth at grazing incidence (``k q_z Sq`` small: wittmann-3 at 85 deg,
-        ``g = 0.38``) is not shadowed by its filler bumps, whose shadows, 0.3 um tall and
-        3 um long at 5 deg elevation, are washed out by diffraction (Fresnel number
+        Gaussian heights): the coherent beam, ``C`` times what a flat mirror of the coat
+        reads there, is not shadowed (:meth:`spectral_fraction`). Shadowing is geometric
+        optics: a bump casts a shadow only where it is optically rough at that geometry.
+        The coherent beam of a coat optically smooth at grazing incidence (wittmann-3 at
+        85 deg, ``g = 0.38``) passes its filler bumps, whose shadows, 0.3 um tall and 3 um
+        long at 5 deg elevation, are washed out by diffraction (Fresnel number
         ``h^2 / (lambda L)`` ~ 0.05); a coat rough at that geometry (``C`` -> 0) gets
         Smith's factor whole. The earlier factor on all of the reflection cut the twin's
         G85 of wittmann-3 from 60.0 to 26.7 GU, below the unmasked facet prediction
@@ -399,10 +401,9 @@ class TruthOptics:
         g2 = float(smith_shadowing(theta_i_deg, sigma) * smith_shadowing(theta_r_deg, sigma))
         nodes = np.asarray(self.settings.wavelengths_nm, dtype=np.float64)
         if g2 >= 1.0:
-            return np.ones_like(nodes)
+            return 1.0, np.ones_like(nodes)
         q = math.cos(math.radians(theta_i_deg)) + math.cos(math.radians(abs(theta_r_deg)))
-        c = self.coherent_share(nodes, q)
-        return np.asarray(c + (1.0 - c) * g2)
+        return g2, self.coherent_share(nodes, q)
 
     def coherent_share(self, wavelengths_nm: FloatArray, qz: float) -> FloatArray:
         """``|<exp(i k q_z z)>|^2`` over the tile per wavelength, from its height histogram
@@ -432,7 +433,16 @@ class TruthOptics:
         :data:`SPECTRUM_WAVELENGTHS_NM` (surface + body), blocking."""
         tr = np.asarray([theta_r_deg], dtype=np.float64)
         surf = self._surface_at(theta_i_deg, tr, source, detector)[:, 0]
-        surf = surf * self.shadowing(theta_i_deg, theta_r_deg)
+        g2, coherent = self.shadowing(theta_i_deg, theta_r_deg)
+        if g2 < 1.0:
+            # the coherent beam's part of the reading: the tile's coherent share of what a
+            # flat mirror of the coat reads here (the source image in the detector)
+            q = math.cos(math.radians(theta_i_deg)) + math.cos(math.radians(theta_r_deg))
+            mirror = _MIRROR_ORDERS.reading(
+                theta_i_deg, math.sin(math.radians(theta_r_deg)), q, self.truth.n, source, detector
+            )
+            beam = np.minimum(coherent * mirror, surf)
+            surf = beam + g2 * (surf - beam)
         wl = np.asarray(SPECTRUM_WAVELENGTHS_NM)
         spec = np.interp(wl, np.asarray(self.settings.wavelengths_nm), surf)
         body = self._body_fraction(theta_i_deg, tr, detector)[:, 0]
