@@ -15,11 +15,11 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from goniolab.colour.spectral import SpectralPredictor
 from goniolab.config import LabConfig
@@ -58,6 +58,11 @@ class Predictor:
     spectral: SpectralPredictor | None = None
     #: How spectra become colour (illuminant, observer, scale) for the predicted colour.
     point_colour: PointColour | None = None
+    #: predicted spectra per geometry (theta_i, theta_r): the luminance and the colour of a
+    #: run's geometries come from one evaluation
+    _spectra: dict[tuple[float, float], NDArray[np.float64]] = field(
+        default_factory=dict, repr=False, compare=False
+    )
 
     @classmethod
     def from_config(cls, model: ReflectanceModel, config: LabConfig) -> Predictor:
@@ -93,11 +98,24 @@ class Predictor:
         ``luminance_pct``."""
         tr = np.asarray(theta_r_deg, dtype=np.float64)
         if self.spectral is not None:
-            spectra = self.spectral.spectrum_pct(theta_i_deg, tr.ravel())
+            spectra = self.spectra_pct(theta_i_deg, tr.ravel())
             lum: NDArray[np.float64] = (spectra @ self._y_weights()) / 100.0
             return lum.reshape(tr.shape)
         out = self.model.luminance_pct(theta_i_deg, tr, source=self.source, detector=self.detector)
         return np.asarray(out, dtype=np.float64).reshape(tr.shape)
+
+    def spectra_pct(self, theta_i_deg: float, theta_r_deg: ArrayLike) -> NDArray[np.float64]:
+        """The predicted spectra (% of the mirror, ``(n_geometries, n_wavelengths)``) of
+        :attr:`spectral`, each geometry evaluated once per predictor (blocking)."""
+        assert self.spectral is not None
+        tr = np.atleast_1d(np.asarray(theta_r_deg, dtype=np.float64))
+        ti = float(theta_i_deg)
+        missing = sorted({float(t) for t in tr if (ti, float(t)) not in self._spectra})
+        if missing:
+            new = self.spectral.spectrum_pct(ti, missing)
+            for t, row in zip(missing, new, strict=True):
+                self._spectra[(ti, t)] = np.asarray(row, dtype=np.float64)
+        return np.stack([self._spectra[(ti, float(t))] for t in tr])
 
     def _y_weights(self) -> NDArray[np.float64]:
         """The Y row of the ASTM E308 weights of the run's ``[colour]`` settings."""
@@ -123,7 +141,7 @@ class Predictor:
 
         pc = self.point_colour or PointColour(detector_cone_deg=self.detector.full_angle_deg)
         tr = np.asarray(theta_r_deg, dtype=np.float64)
-        spectra = self.spectral.spectrum_pct(theta_i_deg, tr)
+        spectra = self.spectra_pct(theta_i_deg, tr)
         factors = np.stack([pc.factors(s, float(t)) for s, t in zip(spectra, tr, strict=True)])
         lab = xyz_to_colour(
             spectra_to_xyz(self.spectral.wavelengths_nm, factors, pc.settings), pc.settings
