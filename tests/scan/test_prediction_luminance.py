@@ -11,6 +11,7 @@ ASTM E308 integration of the predicted spectrum the run stores, not goniolab's w
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -98,3 +99,38 @@ def test_coat_term_at_the_peak_is_the_paint_coat_fresnel_and_the_run_is_told() -
     # a sample with no paint table keeps the lab's n: no note
     plain = Predictor.from_config(model_for("sample:wittmann-3", n=1.55, model="facet"), cfg)
     assert plain.coat_index_note() is None
+
+
+def test_a_run_stores_a_predicted_luminance_equal_to_y_of_its_stored_spectrum(
+    tmp_path: Path,
+) -> None:
+    # the same through a scan of the in-process twin: what the store holds (the predicted
+    # luminance per geometry, the predicted spectrum per geometry) agrees at the peak too
+    import contextlib
+    import io
+    import json
+
+    from goniolab.cli import main
+    from goniolab.store import RunStore
+
+    store = tmp_path / "s.sqlite"
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
+        code = main(["scan", "--config", str(configs_dir() / "lab-sim.toml"), "--sample",
+                     "sample:white", "--model", "facet", "--theta-r", "0,30,44,45,46,60",
+                     "--repeats", "1", "--time-scale", "0", "--json", "--store", str(store)])  # fmt: skip
+    assert code == 0
+    run_id = int(json.loads(out.getvalue())["run_id"])
+    with RunStore(store, readonly=True) as s:
+        lum = s.predictions(run_id)
+        colours = s.predicted_colours(run_id)
+    assert sorted(lum) == sorted(colours) == list(range(6))
+    from goniolab.scan.colour import PointColour
+
+    settings = PointColour.from_config(load_lab_config(configs_dir() / "lab-sim.toml")).settings
+    wl = [float(w) for w in np.arange(380.0, 781.0, 10.0)]
+    for i in range(6):
+        spectrum = colours[i].spectrum_pct
+        assert spectrum is not None and len(spectrum) == len(wl)
+        assert lum[i] == pytest.approx(_y_colour_science(wl, spectrum, settings), abs=1e-6)
+    assert lum[3] > 2.0  # 45 deg: the peak
