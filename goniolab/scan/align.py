@@ -56,6 +56,7 @@ from goniolab.optics.apertures import Cone, cap_overlap_fraction
 from goniolab.optics.fresnel import fresnel, fresnel_dielectric_sp
 from goniolab.scan.events import (
     EventBus,
+    InstrumentError,
     PointMeasured,
     Progress,
     RunFinished,
@@ -677,6 +678,22 @@ class AlignRunner:
                 n=n, certificate=str(cite.get("certificate", "none")),
                 saturated=self._saturated.get("standard", 0),
             )  # fmt: skip
+            if math.isnan(fit.s_weight_sigma):
+                # said, not silently assumed (issue 21: a 2 % polarisation dependence moves
+                # both zeros ~0.3 deg, and no gate sees it)
+                self.bus.publish(
+                    InstrumentError(
+                        run_id=self.run_id,
+                        device="spectro",
+                        message=(
+                            "the black-glass fit takes the spectro as insensitive to "
+                            f"polarisation: {len(set(lamp))} incidences cannot tell it from the "
+                            "lamp zero (a 2 % polarisation dependence moves both zeros ~0.3 "
+                            "deg); align at three or more incidences to fit it"
+                        ),
+                        fatal=False,
+                    )
+                )
             d_l, d_d, rms = fit.lamp_zero_deg, fit.detector_zero_deg, fit.rms_rel
             await self.place_specimen("sample")
             self._position = None

@@ -342,6 +342,23 @@ def _peaks_of(lamp: list[float], vals: list[float]) -> list[dict[str, float]]:
     ]  # fmt: skip
 
 
+@pytest.mark.slow
+def test_align_at_two_incidences_says_it_assumes_an_unpolarised_spectro(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # two incidences cannot separate the detector's polarisation from the lamp zero: the
+    # fit takes w = 0.5 and the run says so (no silent assumption)
+    cfg_path = misaligned_config(tmp_path, 5)
+    code = main(["scan", "--config", str(cfg_path), "--plan", "align", "--align-theta-i",
+                 "20,60", "--time-scale", "0", "--json", "--no-write-config"])  # fmt: skip
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    assert "takes the spectro as insensitive to polarisation: 2 incidences" in err
+    fit = json.loads(out)["standard_fit"]
+    sigma = fit["s_weight_sigma"]
+    assert fit["s_weight"] == 0.5 and (sigma is None or math.isnan(sigma))
+
+
 def test_a_fit_needing_an_absurd_polarisation_is_refused() -> None:
     lamp, det, vals = _glass_readings(0.0, 0.0, 0.5, (20.0, 40.0, 60.0))
     fit = fit_standard_full(lamp, det, vals, source=Cone(6.0), detector=Cone(6.0))
