@@ -191,6 +191,11 @@ class Predictor:
         note = self.coat_index_note()
         if note is not None:
             warnings.append(note)
+        if self.spectral is not None:
+            # computed in a thread before the run starts (session.prepare): the Y weights
+            # (colour-science's import and integration, ~2.6 s the first time) are then
+            # ready, and the first reading does not race ahead of its prediction
+            self._y_weights()
         return {"computed_by": computed_by, "warnings": warnings}
 
     def coat_index_note(self) -> str | None:
