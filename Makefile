@@ -2,12 +2,16 @@
 # `make run` installs what the app needs and starts it on the simulated lab; `make test`
 # adds the test and lint tools (pytest, ruff, mypy, the bluesky/PostgreSQL/dask extras).
 # Each stage says what it does; pip shows a line per package it fetches or installs.
+# --no-compile: pip does not byte-compile every module of every package it installs
+# (scipy's, pandas', numba's test suites included), which took a fresh `make run` longer
+# than everything else pip does; Python writes the bytecode of the modules the app
+# actually imports on its first start (bench/README.md has the paired timing).
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 RUN_STAMP := $(VENV)/.installed-run
 DEV_STAMP := $(VENV)/.installed-dev
-PIP    := $(BIN)/python -m pip install --disable-pip-version-check --progress-bar on
+PIP    := $(BIN)/python -m pip install --disable-pip-version-check --progress-bar on --no-compile
 
 .PHONY: run test check lint format typecheck bench venv clean
 
@@ -32,16 +36,19 @@ run: $(RUN_STAMP)
 	$(BIN)/goniolab tui --config configs/lab-sim.toml --autostart --gloss-every 5
 
 check: $(DEV_STAMP)
-	$(BIN)/ruff check goniolab drivers sim tests bench
-	$(BIN)/ruff format --check goniolab drivers sim tests bench
+	$(BIN)/ruff check goniolab drivers sim labtoml tests bench
+	$(BIN)/ruff format --check goniolab drivers sim labtoml tests bench
 	$(BIN)/mypy
 
+# Two workers; worksteal lets an idle worker take half of the other's queue, and
+# tests/conftest.py starts the tests marked slow first on each worker (the long end-to-end
+# runs must not be the last ones left). --durations lists the slowest, to see one creep in.
 test: check
-	$(BIN)/python -m pytest -n 2 -q
+	$(BIN)/python -m pytest -n 2 --dist worksteal --durations=15 -q
 
 format: $(DEV_STAMP)
-	$(BIN)/ruff check --fix goniolab drivers sim tests bench
-	$(BIN)/ruff format goniolab drivers sim tests bench
+	$(BIN)/ruff check --fix goniolab drivers sim labtoml tests bench
+	$(BIN)/ruff format goniolab drivers sim labtoml tests bench
 
 bench: $(RUN_STAMP)
 	$(BIN)/python bench/bench_optics.py

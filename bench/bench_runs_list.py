@@ -1,22 +1,39 @@
 """``runs list`` on a big store: the one-query listing (counts from the indexes,
 :meth:`RunStore.list_briefs`) against the per-run way it replaced (a record query, then a
-count or a load of the gloss readings per run).
+count or a load of the gloss readings per run), in SQLite and in PostgreSQL, in process and
+as whole ``goniolab runs list`` / ``open_runs(limit=20)`` processes (issue 26: 4.4 s / 3.8 s
+on a PostgreSQL store of 520 runs, target <= 0.2 s).
 
-    PYTHONPATH=$PWD python bench/bench_runs_list.py [RUNS] [POINTS_PER_RUN]
+    PYTHONPATH=$PWD python bench/bench_runs_list.py [RUNS] [POINTS_PER_RUN] [--backend sqlite|postgres|both] [--repeats 5]
+
+PostgreSQL: a throw-away server is started the way the tests start theirs
+(``tests/pg_server.py``: initdb + pg_ctl on a temp dir, a free port, scram-sha-256; as root
+the server runs as the ``postgres`` user); the backend is skipped, with the reason, when the
+server binaries or psycopg are missing. Each figure is the median of ``--repeats`` runs
+after one warm-up.
 """
 
 from __future__ import annotations
 
+import argparse
+import contextlib
+import os
+import statistics
+import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
-from goniolab.store import RunStore
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from goniolab.store import RunStore  # noqa: E402 -- after the sys.path line
 
 
-def build(path: Path, runs: int, points: int) -> None:
-    with RunStore(path) as s:
+def build(location: str | Path, runs: int, points: int) -> None:
+    with RunStore(location) as s:
         for r in range(runs):
             kind = "gloss" if r % 5 == 4 else "brdf"
             rid = s.create_run(kind=kind, plan={}, config={"lab": {"name": "b"}},
@@ -45,23 +62,86 @@ def per_run(s: RunStore) -> int:
     return n
 
 
-def main() -> None:
-    runs = int(sys.argv[1]) if len(sys.argv) > 1 else 500
-    points = int(sys.argv[2]) if len(sys.argv) > 2 else 500
-    with tempfile.TemporaryDirectory() as d:
-        path = Path(d) / "big.sqlite"
-        build(path, runs, points)
-        with RunStore(path, readonly=True) as s:
-            for name, fn in (
-                ("one query", lambda: sum(n or 0 for _, n in s.list_briefs())),
-                ("per run (before)", lambda: per_run(s)),
-            ):
-                fn()
-                t0 = time.perf_counter()
-                total = fn()
-                dt = time.perf_counter() - t0
-                print(f"{name:18s} {runs} runs, {total} readings: {dt * 1e3:8.1f} ms")
+def median_s(fn: Callable[[], object], repeats: int) -> float:
+    fn()  # warm-up (connection, caches)
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+_API = (
+    "import sys; from goniolab.api import open_runs; print(len(open_runs(sys.argv[1], limit=20)))"
+)
+_CLI = "import sys; from goniolab.cli import main; sys.exit(main(sys.argv[1:]))"
+
+
+def whole_process(argv: list[str], env: dict[str, str], repeats: int) -> float:
+    """Median wall time of a whole process (python start-up and imports included)."""
+
+    def run() -> None:
+        subprocess.run(argv, check=True, capture_output=True, env=env, cwd=ROOT, timeout=300)
+
+    return median_s(run, repeats)
+
+
+@contextlib.contextmanager
+def store(backend: str, tmp: Path) -> Iterator[tuple[str, dict[str, str]] | str]:
+    """The store's location and the environment its clients need, or why not."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "GONIOLAB_LOG_DIR": str(tmp)}
+    if backend == "sqlite":
+        yield str(tmp / "big.sqlite"), env
+        return
+    from tests.pg_server import PLANTED_PASSWORD, find_pg_bin, pg_server
+
+    bindir, why = find_pg_bin()
+    if bindir is None:
+        yield f"PostgreSQL skipped: {why}"
+        return
+    with pg_server(bindir) as srv:
+        os.environ["PGPASSWORD"] = PLANTED_PASSWORD
+        env["PGPASSWORD"] = PLANTED_PASSWORD
+        yield srv.create_db("bench"), env
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("runs", nargs="?", type=int, default=500)
+    ap.add_argument("points", nargs="?", type=int, default=500)
+    ap.add_argument("--backend", choices=("sqlite", "postgres", "both"), default="both")
+    ap.add_argument("--repeats", type=int, default=5)
+    args = ap.parse_args(argv)
+    backends = ("sqlite", "postgres") if args.backend == "both" else (args.backend,)
+    for backend in backends:
+        with tempfile.TemporaryDirectory() as d, store(backend, Path(d)) as where:
+            if isinstance(where, str):
+                print(where)
+                continue
+            location, env = where
+            t0 = time.perf_counter()
+            build(location, args.runs, args.points)
+            print(
+                f"{backend}: {args.runs} runs of {args.points} points (a gloss run in five: "
+                f"{args.points // 10} readings) written in {time.perf_counter() - t0:.1f} s"
+            )
+            with RunStore(location, readonly=True) as s:
+                total = sum(n or 0 for _, n in s.list_briefs())
+                for name, fn in (
+                    ("one query (list_briefs)", lambda: s.list_briefs()),
+                    ("per run (before)", lambda: per_run(s)),
+                ):
+                    dt = median_s(fn, args.repeats)
+                    print(f"  {name:32s} {total} readings: {dt * 1e3:8.1f} ms")
+            cli = [sys.executable, "-c", _CLI, "runs", "list", "--store", location]
+            api = [sys.executable, "-c", _API, location]
+            for name, cmd in (("goniolab runs list (process)", cli),
+                              ("open_runs(limit=20) (process)", api)):  # fmt: skip
+                dt = whole_process(cmd, env, args.repeats)
+                print(f"  {name:32s} {dt * 1e3:8.1f} ms")
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -46,11 +46,11 @@ wait for the lock: it must reach the arms at any moment.
 from __future__ import annotations
 
 import asyncio
-import math
 from collections.abc import Awaitable, Sequence
 from dataclasses import dataclass
 from typing import Literal
 
+from drivers.arm_limits import outside_limits, separation_floor_problem
 from drivers.base import Axis, DeviceError, InterlockError, LimitError
 
 __all__ = ["HomingStep", "TwoArmGoniometer", "plan_homing", "plan_moves"]
@@ -261,10 +261,8 @@ class TwoArmGoniometer:
         home_deg: tuple[float, float] = (0.0, 0.0),
         corrections_deg: tuple[float, float] = (0.0, 0.0),
     ) -> None:
-        if not (math.isfinite(min_separation_deg) and min_separation_deg >= 0.0):
-            raise ValueError(
-                f"goniometer: min_separation_deg must be >= 0, got {min_separation_deg}"
-            )
+        if problem := separation_floor_problem(min_separation_deg):  # as the config checks
+            raise ValueError(f"goniometer: min_separation_deg: {problem}")
         self.lamp = lamp
         self.detector = detector
         self.min_separation_deg = float(min_separation_deg)
@@ -330,7 +328,7 @@ class TwoArmGoniometer:
             (self.detector, theta_r_deg, "theta_r"),
         ):
             lo, hi = axis.limits_deg
-            if not lo <= value <= hi:
+            if outside_limits(value, axis.limits_deg):
                 raise LimitError(
                     f"{label}={value} deg outside the {axis.name} arm limits [{lo}, {hi}] deg",
                     device=axis.name,

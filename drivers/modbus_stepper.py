@@ -73,6 +73,7 @@ from pymodbus.client.mixin import ModbusClientMixin
 from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
 from pymodbus.framer import FramerType
 
+from drivers.arm_limits import LAMP_LIMITS_DEG, limits_problem
 from drivers.base import (
     AxisStatus,
     DeviceFault,
@@ -186,7 +187,7 @@ class ModbusStepperAxis:
         unit_id: int = 1,
         steps_per_deg: float = 1000.0,
         gear_ratio: float = 1.0,
-        limits_deg: tuple[float, float] = (0.0, 85.0),
+        limits_deg: tuple[float, float] = LAMP_LIMITS_DEG,
         speed_deg_s: float = 20.0,
         accel_deg_s2: float = 40.0,
         stall_tolerance_deg: float = 0.5,
@@ -210,10 +211,8 @@ class ModbusStepperAxis:
         if not (gear_ratio > 0 and math.isfinite(gear_ratio)):
             raise ValueError(f"{name}: gear_ratio must be > 0 and finite, got {gear_ratio}")
         lo, hi = (float(v) for v in limits_deg)
-        if not lo < hi:
-            raise ValueError(
-                f"{name}: limits_deg must be (low, high) with low < high, got {limits_deg}"
-            )
+        if problem := limits_problem((lo, hi)):  # drivers.arm_limits, as the config checks
+            raise ValueError(f"{name}: limits_deg: {problem}")
         for label, value in (
             ("speed_deg_s", speed_deg_s),
             ("accel_deg_s2", accel_deg_s2),

@@ -4,9 +4,10 @@ Shared by the device profiles (:mod:`drivers.profiles`) and the lab configs
 (:mod:`goniolab.config`); it lives in ``drivers`` because drivers import nothing from
 ``goniolab``, so the config reuses it rather than the other way round.
 
-* :func:`read_toml` reads and parses a file; every failure is a :class:`TomlFileError`
-  whose ``reason`` is one line ("profile file not found", "TOML syntax error: ... (at
-  line 3, column 8)").
+* Reading and parsing the file is the house's one TOML loader, :mod:`labtoml`
+  (:func:`~labtoml.read_toml`, :class:`~labtoml.TomlFileError`, re-exported here for the
+  schemas' callers); it lives outside ``drivers`` because ``goniolab.colour`` and
+  ``goniolab.surfaces`` read TOML too and may not import ``drivers``.
 * :func:`first_issue` turns a pydantic :class:`~pydantic.ValidationError` into the dotted
   key of its first error (``registers.output_status``, ``replies.measure[1]``) and a reason.
   Two phrasings: :func:`pydantic_reason` keeps pydantic's words ("Input should be greater
@@ -18,12 +19,12 @@ Shared by the device profiles (:mod:`drivers.profiles`) and the lab configs
 
 from __future__ import annotations
 
-import tomllib
 from collections.abc import Callable, Mapping, Sequence
-from pathlib import Path
 from typing import Any
 
 from pydantic import ValidationError
+
+from labtoml import TomlFileError, read_toml
 
 __all__ = [
     "KeyedValueError",
@@ -35,27 +36,6 @@ __all__ = [
     "read_toml",
     "short_repr",
 ]
-
-
-class TomlFileError(ValueError):
-    """A TOML file could not be read or parsed.
-
-    Attributes
-    ----------
-    path
-        The file.
-    reason
-        One line: ``"<what> not found"``, ``"cannot read <what>: ..."`` or
-        ``"TOML syntax error: ... (at line L, column C)"``.
-    not_found
-        True when the file does not exist (callers add a hint, e.g. the known names).
-    """
-
-    def __init__(self, path: Path, reason: str, *, not_found: bool = False) -> None:
-        self.path = path
-        self.reason = reason
-        self.not_found = not_found
-        super().__init__(f"{path}: {reason}")
 
 
 class KeyedValueError(ValueError):
@@ -73,35 +53,6 @@ class KeyedValueError(ValueError):
         self.key = key
         self.reason = reason
         super().__init__(reason)
-
-
-def read_toml(path: Path, *, what: str) -> dict[str, Any]:
-    """Read and parse a TOML file.
-
-    Parameters
-    ----------
-    path
-        The file.
-    what
-        How the file is named in messages (``"profile file"``, ``"config file"``).
-
-    Raises
-    ------
-    TomlFileError
-        Missing or unreadable file, not UTF-8, or a TOML syntax error (with line and column).
-    """
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise TomlFileError(path, f"{what} not found", not_found=True) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise TomlFileError(path, f"cannot read {what}: {exc}") from None
-    try:
-        return tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise TomlFileError(path, f"TOML syntax error: {exc}") from None
-    except RecursionError:  # tomllib recurses once per nested array / inline table
-        raise TomlFileError(path, f"arrays or tables nested too deeply to be a {what}") from None
 
 
 def short_repr(value: Any, limit: int = 60) -> str:

@@ -21,25 +21,26 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
-import math
+import contextvars
+import functools
+import json
 import sys
-from collections.abc import Coroutine, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Callable, Coroutine, Sequence
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any, ParamSpec, TypeVar
 
 import numpy as np
 
 from goniolab.errors import UserError
 from goniolab.scan.plans import DEFAULT_REPEATS
-from goniolab.store import RunMeta, RunRecord, RunStore, StoreError, resolve_store_path
+from goniolab.store import RunRecord
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
     import pandas as pd
     import xarray as xr
 
-    from goniolab.optics.heightmap import HeightMap
-    from goniolab.optics.models import ReflectanceModel
+    from goniolab.app.predictions import SurfaceRequest
 
 __all__ = [
     "Run",
@@ -54,91 +55,10 @@ __all__ = [
 ]
 
 _T = TypeVar("_T")
-
-#: Default source and detector cones of the Wittmann goniometer (sec. 2.3), full angles.
-DEFAULT_CONE_DEG = 6.0
+_P = ParamSpec("_P")
 
 
 # --------------------------------------------------------------------------- surfaces
-def _heightmap(surface: Any, step_um: float | None = None) -> HeightMap:
-    from goniolab.optics.heightmap import HeightMap
-    from goniolab.surfaces.resolve import resolve_map
-
-    if isinstance(surface, HeightMap):
-        return surface
-    if isinstance(surface, str | Path):
-        return resolve_map(surface, step_um=step_um)
-    attrs = getattr(surface, "attrs", None)
-    if attrs is not None and getattr(surface, "ndim", 0) == 2:
-        return _dataarray_heightmap(surface)
-    raise UserError(
-        f"surface: expected a file path, sample:NAME or a load_surface() DataArray, "
-        f"got {type(surface).__name__}"
-    )
-
-
-#: Relative tolerance between a DataArray's coordinate steps and its dx_um/dy_um attributes
-#: (and between its own steps: the grid must be regular).
-_STEP_RTOL = 1e-6
-
-
-def _coordinate_step(da: Any, dim: str, attr: str) -> float:
-    """The lateral step along ``dim``: its coordinates' spacing, checked regular and
-    against the ``attr`` attribute when both exist.
-
-    After ``z.isel(x_um=slice(None, None, 2))`` or ``z.coarsen(x_um=2).mean()`` xarray keeps
-    the attributes (``dx_um = 1``) while the coordinates step by 2: the step from the
-    attribute silently gave the gloss of a map twice as steep (issue 22.10). The
-    coordinates are what xarray keeps right, so they decide; a disagreeing attribute is
-    refused rather than guessed over.
-    """
-    name = f"surface DataArray: {dim}"
-    given = da.attrs.get(attr)
-    coord = da.coords.get(dim)
-    if coord is None or coord.size < 2:
-        if given is None:
-            raise UserError(f"{name}: no coordinates and no {attr} attribute (use load_surface)")
-        step = float(given)
-    else:
-        diffs = np.diff(np.asarray(coord.values, dtype=np.float64))
-        step = float(np.mean(diffs))
-        if not (math.isfinite(step) and step > 0):
-            raise UserError(f"{name}: coordinates must increase (mean step {step:g} um)")
-        if float(np.max(np.abs(diffs - step))) > _STEP_RTOL * step:
-            raise UserError(
-                f"{name}: coordinates are not evenly spaced (steps {float(diffs.min()):g} to "
-                f"{float(diffs.max()):g} um): a height map needs a regular grid"
-            )
-        if given is not None and abs(float(given) - step) > _STEP_RTOL * step:
-            raise UserError(
-                f"{name}: coordinates step by {step:g} um but attrs['{attr}'] = {float(given):g}"
-                f" (after isel/coarsen/interp xarray keeps the old attribute): set "
-                f"attrs['{attr}'] = {step:g} or delete it"
-            )
-    if not (math.isfinite(step) and step > 0):
-        raise UserError(f"{name}: step {step:g} um must be positive")
-    return step
-
-
-def _dataarray_heightmap(da: Any) -> HeightMap:
-    from goniolab.optics.heightmap import HeightMap
-
-    dims = tuple(da.dims)
-    if set(dims) == {"y_um", "x_um"} and dims != ("y_um", "x_um"):
-        da = da.transpose("y_um", "x_um")  # rows are y, whatever order the user left
-    elif dims != ("y_um", "x_um"):
-        raise UserError(f"surface DataArray: dims {dims}, expected ('y_um', 'x_um')")
-    try:
-        return HeightMap(
-            np.asarray(da.values, dtype=np.float64),
-            _coordinate_step(da, "x_um", "dx_um"),
-            _coordinate_step(da, "y_um", "dy_um"),
-            source=str(da.attrs.get("source", "<DataArray>")),
-        )
-    except ValueError as exc:
-        raise UserError(f"surface DataArray: {exc}") from None
-
-
 def load_surface(path: str | Path, *, step_um: float | None = None) -> xr.DataArray:
     """A height map as a DataArray ``height_um`` with dims ``(y_um, x_um)``.
 
@@ -158,34 +78,10 @@ def load_surface(path: str | Path, *, step_um: float | None = None) -> xr.DataAr
         the steps from the coordinates (so ``isel``/``coarsen`` results work once
         ``dx_um``/``dy_um`` are set right or deleted; a disagreeing attribute is refused).
     """
+    from goniolab.app.predictions import heightmap_of
     from goniolab.datasets import heightmap_dataarray
 
-    return heightmap_dataarray(_heightmap(path, step_um))
-
-
-def _model(
-    surface: Any,
-    *,
-    n: complex | float,
-    step_um: float | None,
-    slope_method: str,
-    weighting: str,
-    masking: bool,
-    model: str = "auto",
-    wavelength_nm: float | None = None,
-) -> ReflectanceModel:
-    from goniolab.model_cache import model_for
-
-    options: dict[str, Any] = {
-        "slope_method": slope_method,
-        "weighting": weighting,
-        "masking": masking,
-        "model": model,
-        "wavelength_nm": wavelength_nm,
-    }
-    if isinstance(surface, str | Path):
-        return model_for(surface, n=n, step_um=step_um, **options)
-    return model_for(_heightmap(surface, step_um), n=n, **options)
+    return heightmap_dataarray(heightmap_of(path, step_um))
 
 
 def _angles(theta_r_deg: str | Sequence[float] | np.ndarray) -> np.ndarray:
@@ -198,25 +94,14 @@ def _angles(theta_r_deg: str | Sequence[float] | np.ndarray) -> np.ndarray:
         raise UserError(str(exc)) from None
 
 
-def _source_label(surface: Any) -> str:
-    if isinstance(surface, str | Path):
-        return str(surface)
-    return str(getattr(surface, "attrs", {}).get("source", getattr(surface, "source", "")))
-
-
-def _index_attr(n: complex | float) -> float | list[float]:
-    c = complex(n)
-    return c.real if c.imag == 0 else [c.real, c.imag]
-
-
 def predict_brdf(
     surface: Any,
     *,
     theta_i_deg: float = 45.0,
     theta_r_deg: str | Sequence[float] | np.ndarray = "0:70:1",
     n: complex | float = 1.55,
-    source_deg: float = DEFAULT_CONE_DEG,
-    detector_deg: float = DEFAULT_CONE_DEG,
+    source_deg: float | None = None,
+    detector_deg: float | None = None,
     point: bool = False,
     step_um: float | None = None,
     slope_method: str = "forward",
@@ -239,9 +124,11 @@ def predict_brdf(
     n
         Refractive index (complex ``n + ik`` for metals).
     source_deg, detector_deg
-        Full angles of the lamp and detector cones (the goniometer's apertures).
+        Full angles of the lamp and detector cones (the goniometer's apertures; default
+        6 deg each, the Wittmann goniometer's).
     point
-        The BRDF in the exact direction only (no apertures, no ``luminance_pct``).
+        The BRDF in the exact direction only (no apertures, no ``luminance_pct``; no cone
+        may then be given).
     model, wavelength_nm
         ``auto`` (default: the regime rule per geometry), ``facet``, ``kirchhoff`` or
         ``rayleigh-rice``, and the wave models' wavelength (see
@@ -257,52 +144,36 @@ def predict_brdf(
         ``brdf_sr`` (1/sr: luminance / 100 / projected solid angle of the detector, or the
         point BRDF with ``point=True``); coords ``theta_i_deg`` and ``aspecular_deg``.
     """
+    from goniolab.app.predictions import API_NAMES, index_json
+    from goniolab.app.predictions import predict_brdf as predict
     from goniolab.datasets import brdf_dataset
-    from goniolab.optics.apertures import Cone, projected_solid_angle_sr
-    from goniolab.scan.prediction import model_name
 
-    ti = float(theta_i_deg)
-    if not (math.isfinite(ti) and 0.0 <= ti < 90.0):
-        raise UserError(f"theta_i_deg {theta_i_deg}: must be in [0, 90) deg")
-    tr = _angles(theta_r_deg)
-    if np.any(np.abs(tr) >= 90.0):
-        raise UserError("theta_r_deg: angles must be in (-90, 90) deg")
-    refl = _model(
-        surface,
-        n=n,
-        step_um=step_um,
-        slope_method=slope_method,
-        weighting=weighting,
-        masking=masking,
-        model=model,
-        wavelength_nm=wavelength_nm,
+    req = _request(surface, n, step_um, slope_method, weighting, masking, model, wavelength_nm)
+    p = predict(
+        req,
+        theta_i_deg=theta_i_deg,
+        theta_r_deg=theta_r_deg,
+        source_deg=source_deg,
+        detector_deg=detector_deg,
+        point=point,
+        names=API_NAMES,
     )
     attrs: dict[str, Any] = {
-        "sample": _source_label(surface),
-        "n": _index_attr(n),
+        "sample": p.surface,
+        "n": index_json(p.n),
         "weighting": weighting,
         "slope_method": slope_method,
         "masking": int(masking),
-        "model": type(refl).__name__,
-        "model_name": model_name(refl),
+        "model": p.model_class,
+        "model_name": p.model_kind,
+        "computed_by": json.dumps(p.models),
+        "warnings": json.dumps(p.warnings),
     }
-    if point:
-        brdf = np.asarray(refl.brdf_inplane(ti, tr), dtype=np.float64)
-        return brdf_dataset(ti, tr, brdf, None, attrs={**attrs, "aperture": "none (point)"})
-    try:
-        src, det = Cone(float(source_deg)), Cone(float(detector_deg))
-    except ValueError as exc:
-        raise UserError(f"source_deg/detector_deg: {exc}") from None
-    if det.full_angle_deg == 0.0:
-        raise UserError("detector_deg 0 has no solid angle: use point=True for the BRDF")
-    try:
-        lum = np.asarray(refl.luminance_pct(ti, tr, source=src, detector=det), dtype=np.float64)
-    except ValueError as exc:
-        raise UserError(f"theta_i_deg {ti:g} / source_deg: {exc}") from None
-    om = np.array([projected_solid_angle_sr(det, float(t)) for t in tr])
-    brdf = np.where(om > 0, lum / 100.0 / np.where(om > 0, om, 1.0), 0.0)
-    attrs.update(source_cone_deg=src.full_angle_deg, detector_cone_deg=det.full_angle_deg)
-    return brdf_dataset(ti, tr, brdf, lum, attrs=attrs)
+    if p.luminance_pct is None:
+        attrs["aperture"] = "none (point)"
+    else:
+        attrs.update(source_cone_deg=p.source_deg, detector_cone_deg=p.detector_deg)
+    return brdf_dataset(p.theta_i_deg, p.theta_r_deg, p.brdf_sr, p.luminance_pct, attrs=attrs)
 
 
 def predict_gloss(
@@ -327,42 +198,39 @@ def predict_gloss(
         ``gloss_gu`` along ``geometry_deg`` (20, 60, 85), scalar ``haze_index``, ``doi``
         and the E430 readings; ``d523_recommended_angle_deg`` as an attribute.
     """
+    from goniolab.app.predictions import API_NAMES, index_json
+    from goniolab.app.predictions import predict_gloss as predict
     from goniolab.datasets import gloss_dataset
-    from goniolab.optics.gloss_standards import gloss_report
 
-    refl = _model(
-        surface,
-        n=n,
-        step_um=step_um,
-        slope_method=slope_method,
-        weighting=weighting,
-        masking=masking,
-        model=model,
-        wavelength_nm=wavelength_nm,
-    )
-    return gloss_dataset(
-        gloss_report(refl),
-        attrs={"sample": _source_label(surface), "n": _index_attr(n), "weighting": weighting},
-    )
+    req = _request(surface, n, step_um, slope_method, weighting, masking, model, wavelength_nm)
+    p = predict(req, names=API_NAMES)
+    attrs = {
+        "sample": p.surface,
+        "n": index_json(p.n),
+        "weighting": weighting,
+        "computed_by": json.dumps(p.computed_by),
+        "warnings": json.dumps(p.warnings),
+    }
+    return gloss_dataset(p.report, attrs=attrs)
+
+
+def _request(
+    surface: Any,
+    n: complex | float,
+    step_um: float | None,
+    slope_method: str,
+    weighting: str,
+    masking: bool,
+    model: str,
+    wavelength_nm: float | None,
+) -> SurfaceRequest:
+    from goniolab.app.predictions import SurfaceRequest as Request
+
+    return Request(surface, complex(n), step_um, slope_method, weighting, masking, model,
+                          wavelength_nm)  # fmt: skip
 
 
 # --------------------------------------------------------------------------- runs
-def _store_location(store: str | Path | None, config: str | Path | None = None) -> str | Path:
-    config_store = None
-    if config is not None:
-        from goniolab.config import load_lab_config
-
-        config_store = load_lab_config(config).lab.store
-    return resolve_store_path(None if store is None else str(store), config_store)
-
-
-def _open_readonly(location: str | Path) -> RunStore:
-    try:
-        return RunStore(location, readonly=True)
-    except StoreError as exc:
-        raise UserError(str(exc)) from exc
-
-
 @dataclass(frozen=True)
 class Run:
     """A stored run: its record and its data as xarray / pandas.
@@ -389,22 +257,20 @@ class Run:
     ) -> RunRecord:
         """Set the run's operator, physical sample id, notes or tags (``None`` keeps one;
         the config's ``[run]`` table gives a new run its defaults); returns the record."""
-        try:
-            with RunStore(self.store, create=False) as s:
-                return s.set_meta(
-                    self.id, operator=operator, sample_id=sample_id, notes=notes, tags=tags
-                )
-        except StoreError as exc:
-            raise UserError(str(exc)) from exc
+        from goniolab.app.stored_runs import annotate_run
+
+        return annotate_run(
+            self.id, store=self.store, operator=operator, sample_id=sample_id, notes=notes,
+            tags=tags,
+        )  # fmt: skip
 
     @property
     def record(self) -> RunRecord:
         """The run's row: kind, plan, config snapshot, sample, model, status, times."""
-        with _open_readonly(self.store) as s:
-            try:
-                return s.get_run(self.id)
-            except StoreError as exc:
-                raise UserError(str(exc)) from exc
+        from goniolab.app.stored_runs import get_run, open_store
+
+        with open_store(self.store) as s:
+            return get_run(s, self.id)
 
     @property
     def status(self) -> str:
@@ -414,41 +280,30 @@ class Run:
     def to_xarray(self) -> xr.Dataset:
         """Measured, predicted, residual (and colour) per point: see
         :func:`goniolab.datasets.run_dataset`."""
-        from goniolab.datasets import run_dataset
+        from goniolab.app.stored_runs import run_xarray
 
-        with _open_readonly(self.store) as s:
-            try:
-                return run_dataset(s, self.id)
-            except StoreError as exc:
-                raise UserError(str(exc)) from exc
+        return run_xarray(self.id, self.store)
 
     def to_dataframe(self) -> pd.DataFrame:
         """One row per reading (the CSV export's columns, ``timestamp`` as UTC datetimes)."""
-        from goniolab.export import run_dataframe
+        from goniolab.app.stored_runs import run_dataframe
 
-        with _open_readonly(self.store) as s:
-            try:
-                s.get_run(self.id)
-                return run_dataframe(s, self.id)
-            except StoreError as exc:
-                raise UserError(str(exc)) from exc
+        return run_dataframe(self.id, self.store)
 
     def summary(self) -> dict[str, Any]:
         """The summary ``goniolab runs show`` prints (RMSE, peaks, counts)."""
-        from goniolab.commands.runs import run_summary
+        from goniolab.app.stored_runs import summarize_run
 
-        with _open_readonly(self.store) as s:
-            return run_summary(s, self.record)
+        return summarize_run(self.id, self.store)
 
     def plot(self, out: str | Path | None = None, *, log: bool = False) -> Any:
         """The figure ``goniolab plot`` draws; saved to ``out`` when given.
 
         In a notebook the figure shows inline as the cell's value (no ``%matplotlib
         inline`` needed: :func:`_show_figures_inline`)."""
-        from goniolab.run_plots import plot_run
+        from goniolab.app.stored_runs import plot_run
 
-        with _open_readonly(self.store) as s:
-            fig = plot_run(s, self.id, out=out, log=log)
+        fig = plot_run(self.id, out, log=log, store=self.store).figure
         _show_figures_inline()
         return fig
 
@@ -500,7 +355,9 @@ def open_dataset(path: str | Path) -> xr.Dataset:
 
 def open_run(run_id: int, store: str | Path | None = None) -> Run:
     """Run ``run_id`` of the store (``None``: the default store, as the CLI's)."""
-    run = Run(int(run_id), _store_location(store))
+    from goniolab.app.stored_runs import store_path
+
+    run = Run(int(run_id), store_path(store))
     run.record  # noqa: B018 - fail here, with the store's message, when it does not exist
     return run
 
@@ -515,28 +372,24 @@ def open_runs(
     """
     import pandas as pd
 
-    from goniolab.commands.runs import interrupted
+    from goniolab.app.stored_runs import list_runs
 
-    location = _store_location(store, config)
-    rows: list[dict[str, Any]] = []
-    with _open_readonly(location) as s:
-        for r in s.list_runs(limit=limit):
-            rows.append(
-                {
-                    "id": r.id,
-                    "kind": r.kind,
-                    "status": r.status,
-                    "interrupted": interrupted(s, r),
-                    "sample": r.sample,
-                    "readings": s.count_points(r.id)
-                    if r.kind == "brdf"
-                    else len(s.gloss_readings(r.id)),
-                    "created_at": r.created_at,
-                    "finished_at": r.finished_at,
-                    "theta_i_deg": r.plan.get("theta_i_deg"),
-                    "reason": r.reason,
-                }
-            )
+    listing = list_runs(store, config, limit=limit, missing_ok=False)
+    rows = [
+        {
+            "id": b.record.id,
+            "kind": b.record.kind,
+            "status": b.record.status,
+            "interrupted": b.interrupted,
+            "sample": b.record.sample,
+            "readings": b.readings,
+            "created_at": b.record.created_at,
+            "finished_at": b.record.finished_at,
+            "theta_i_deg": b.record.plan.get("theta_i_deg"),
+            "reason": b.record.reason,
+        }
+        for b in listing.runs
+    ]
     columns = ["id", "kind", "status", "interrupted", "sample", "readings", "created_at",
                "finished_at", "theta_i_deg", "reason"]  # fmt: skip
     df = pd.DataFrame.from_records(rows, columns=columns)
@@ -565,6 +418,12 @@ class _ScanControl:
         return True
 
 
+#: The control of the blocking :func:`run_scan` call that runs this scan (None: awaited).
+_CONTROL: contextvars.ContextVar[_ScanControl | None] = contextvars.ContextVar(
+    "goniolab_scan_control", default=None
+)
+
+
 def _run_blocking(coro: Coroutine[Any, Any, _T], control: _ScanControl | None = None) -> _T:
     """Run ``coro`` to completion from plain code or from a notebook.
 
@@ -578,12 +437,14 @@ def _run_blocking(coro: Coroutine[Any, Any, _T], control: _ScanControl | None = 
     aborts the scan through ``control``: the arms stop and park and the run is stored as
     aborted, as Ctrl-C does in ``goniolab scan``; this call then returns the aborted run.
     """
+    ctx = contextvars.copy_context()
+    ctx.run(_CONTROL.set, control)
     try:
         asyncio.get_running_loop()
     except RuntimeError:
-        return asyncio.run(coro)
+        return ctx.run(asyncio.run, coro)
     with concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="goniolab-scan") as pool:
-        future = pool.submit(asyncio.run, coro)
+        future = pool.submit(ctx.run, asyncio.run, coro)
         try:
             return future.result()
         except KeyboardInterrupt:
@@ -595,151 +456,15 @@ def _run_blocking(coro: Coroutine[Any, Any, _T], control: _ScanControl | None = 
             return future.result()
 
 
-@dataclass(frozen=True)
-class _ScanCall:
-    """A checked ``run_scan`` call: the plan, the config file and the store location."""
+def _blocking(scan: Callable[_P, Coroutine[Any, Any, Run]]) -> Callable[_P, Run]:
+    """The blocking face of the coroutine ``scan`` (same parameters, same result)."""
 
-    config_path: str
-    plan: Any
-    location: str | Path
-    time_scale: float | None
-    progress: bool
-    meta: RunMeta = field(default_factory=RunMeta)  # operator, sample id, notes, tags
+    @functools.wraps(scan)
+    def run(*args: _P.args, **kwargs: _P.kwargs) -> Run:
+        control = _ScanControl()
+        return _run_blocking(scan(*args, **kwargs), control)
 
-
-def _scan_call(
-    config: str | Path,
-    *,
-    sample: str | None,
-    theta_i_deg: float,
-    theta_r_deg: str | Sequence[float],
-    repeats: int,
-    dwell_s: float,
-    exposure_us: int | None,
-    store: str | Path | None,
-    time_scale: float | None,
-    progress: bool,
-    meta: RunMeta | None = None,
-    auto_exposure: bool = True,
-) -> _ScanCall:
-    from goniolab.config import load_lab_config
-    from goniolab.scan.plans import BrdfPlan, PlanError
-
-    cfg = load_lab_config(config)
-    try:
-        plan = BrdfPlan(
-            theta_i_deg=float(theta_i_deg),
-            theta_r_deg=tuple(float(v) for v in _angles(theta_r_deg)),
-            repeats=int(repeats),
-            dwell_s=float(dwell_s),
-            exposure_us=cfg.spectro.exposure_us if exposure_us is None else int(exposure_us),
-            sample=sample or cfg.sample.map,
-            auto_exposure=bool(auto_exposure),
-        )
-    except PlanError as exc:
-        raise UserError(f"run_scan: {exc}") from None
-    location = resolve_store_path(None if store is None else str(store), cfg.lab.store)
-    return _ScanCall(
-        str(Path(config).resolve()), plan, location, time_scale, progress, meta or RunMeta()
-    )
-
-
-async def _scan_in_this_thread(call: _ScanCall, control: _ScanControl | None = None) -> Run:
-    """Open the store in the running thread, scan, close the store."""
-    from drivers.base import DeviceError
-
-    try:
-        rs = RunStore(call.location)
-    except StoreError as exc:
-        raise UserError(str(exc)) from exc
-    try:
-        with rs:
-            run_id = await _scan(
-                call.config_path,
-                call.plan,
-                rs,
-                call.time_scale,
-                call.progress,
-                control,
-                meta=call.meta,
-            )
-    except DeviceError as exc:
-        raise UserError(f"instrument error: {exc}", exit_code=1) from exc
-    return Run(run_id, call.location)
-
-
-def run_scan(
-    config: str | Path,
-    *,
-    sample: str | None = None,
-    theta_i_deg: float = 45.0,
-    theta_r_deg: str | Sequence[float] = "0:70:1",
-    repeats: int = DEFAULT_REPEATS,
-    dwell_s: float = 0.0,
-    exposure_us: int | None = None,
-    store: str | Path | None = None,
-    time_scale: float | None = None,
-    progress: bool = True,
-    operator: str | None = None,
-    sample_id: str | None = None,
-    notes: str | None = None,
-    tags: Sequence[str] = (),
-    auto_exposure: bool = True,
-) -> Run:
-    """Run an in-plane scan in one call (blocking) and return the stored :class:`Run`.
-
-    Works from a script and from a notebook cell (whose event loop is already running:
-    the scan then runs on its own loop in a worker thread, the store opened there). In a
-    notebook, ``await run_scan_async(...)`` runs it on the notebook's loop instead.
-    Interrupting the kernel aborts the scan (arms stopped and parked, the run stored
-    ``aborted``) and returns that run.
-
-    Parameters
-    ----------
-    config
-        Lab config TOML (``configs/lab-sim.toml`` for the simulated lab).
-    sample
-        ``sample:NAME`` or a height-map path (default: the config's ``[sample] map``).
-    theta_i_deg, theta_r_deg, repeats, dwell_s, exposure_us
-        The plan, as ``goniolab scan`` takes it.
-    store
-        Run store file or ``postgresql://`` URL (default: config ``[lab] store``, else
-        the user data dir).
-    time_scale
-        Simulated lab only: clock scale (0 = no waiting).
-    progress
-        Show a progress bar (``tqdm.auto``: a widget in a notebook, a text bar on stderr in
-        a terminal; never on stdout).
-    auto_exposure
-        Choose each reading's exposure from the instrument's signal level (the default,
-        as ``goniolab scan``); ``False`` keeps ``exposure_us``.
-    operator, sample_id, notes, tags
-        The run's identity (who measures, the physical sample's id, free text, tags),
-        stored with the run beside its UUID; the config's ``[run]`` table fills what is
-        left out. Change it later with :meth:`Run.annotate`.
-
-    Returns
-    -------
-    Run
-        Also when the run ends ``failed``: its ``status`` and ``record.reason`` say why and
-        what was measured stays stored.
-    """
-    call = _scan_call(
-        config,
-        sample=sample,
-        theta_i_deg=theta_i_deg,
-        theta_r_deg=theta_r_deg,
-        repeats=repeats,
-        dwell_s=dwell_s,
-        exposure_us=exposure_us,
-        store=store,
-        time_scale=time_scale,
-        progress=progress,
-        meta=RunMeta.given(operator, sample_id, notes, tags),
-        auto_exposure=auto_exposure,
-    )
-    control = _ScanControl()
-    return _run_blocking(_scan_in_this_thread(call, control), control)
+    return run
 
 
 async def run_scan_async(
@@ -760,72 +485,82 @@ async def run_scan_async(
     tags: Sequence[str] = (),
     auto_exposure: bool = True,
 ) -> Run:
-    """:func:`run_scan` as a coroutine on the caller's event loop: ``run = await
-    gl.run_scan_async(...)`` in a notebook cell (the kernel stays responsive to other
-    cells' ``await``s; the model work runs in threads). Same parameters and result."""
-    call = _scan_call(
-        config,
-        sample=sample,
-        theta_i_deg=theta_i_deg,
-        theta_r_deg=theta_r_deg,
-        repeats=repeats,
-        dwell_s=dwell_s,
-        exposure_us=exposure_us,
-        store=store,
-        time_scale=time_scale,
-        progress=progress,
-        meta=RunMeta.given(operator, sample_id, notes, tags),
-        auto_exposure=auto_exposure,
-    )
-    return await _scan_in_this_thread(call)
+    """Run an in-plane scan and return the stored :class:`Run`: ``run = await
+    gl.run_scan_async(...)`` on the caller's event loop (a notebook cell: the kernel stays
+    responsive to other cells' ``await``s; the model work runs in threads).
+    :func:`run_scan` is the same call, blocking.
 
+    The use case is :func:`goniolab.app.lab_scan.scan` (the one ``goniolab scan`` runs):
+    the config is read once, the plan built by :func:`goniolab.app.lab_setup.brdf_plan`.
 
-async def _scan(
-    config_path: str,
-    plan: Any,
-    store: RunStore,
-    time_scale: float | None,
-    progress: bool,
-    control: _ScanControl | None = None,
-    *,
-    meta: Any = None,
-) -> int:
-    from goniolab.config import load_lab_config
-    from goniolab.scan.events import Progress
-    from goniolab.scan.runner import PlanRefused
-    from goniolab.session import ScanSession
+    Parameters
+    ----------
+    config
+        Lab config TOML (``configs/lab-sim.toml`` for the simulated lab).
+    sample
+        ``sample:NAME`` or a height-map path (default: the config's ``[sample] map``).
+    theta_i_deg, theta_r_deg, repeats, dwell_s, exposure_us
+        The plan, as ``goniolab scan`` takes it.
+    store
+        Run store file or ``postgresql://`` URL (default: config ``[lab] store``, else
+        the user data dir).
+    time_scale
+        Simulated lab only: clock scale (0 = no waiting).
+    progress
+        Show a progress bar (:func:`goniolab.progress.auto_progress`: rich's bar as an
+        output widget in a notebook, a text bar on stderr in a terminal; never on stdout).
+    auto_exposure
+        Choose each reading's exposure from the instrument's signal level (the default,
+        as ``goniolab scan``); ``False`` keeps ``exposure_us``.
+    operator, sample_id, notes, tags
+        The run's identity (who measures, the physical sample's id, free text, tags),
+        stored with the run beside its UUID; the config's ``[run]`` table fills what is
+        left out. Change it later with :meth:`Run.annotate`.
 
-    cfg = load_lab_config(config_path)
-    async with ScanSession.open(cfg, store, sample=plan.sample, time_scale=time_scale) as session:
-        try:
-            runner = session.start(await session.prepare(plan), meta=meta)
-        except PlanRefused as exc:
-            raise UserError(f"plan refused (no arm moved): {exc}") from exc
-        run_id = runner.run_id
+    Returns
+    -------
+    Run
+        Also when the run ends ``failed``: its ``status`` and ``record.reason`` say why and
+        what was measured stays stored.
+    """
+    from goniolab.app.lab_scan import scan
+    from goniolab.app.lab_setup import brdf_plan, load_config, open_store, run_meta
+    from goniolab.app.lab_setup import store_location as location_of
+    from goniolab.progress import auto_progress
+
+    cfg = load_config(config, store)
+    plan = brdf_plan(
+        cfg, sample=sample or cfg.sample.map, theta_i_deg=theta_i_deg, theta_r_deg=theta_r_deg,
+        repeats=repeats, dwell_s=dwell_s, exposure_us=exposure_us, auto_exposure=auto_exposure,
+        what="run_scan", angles_option="theta_r_deg",
+    )  # fmt: skip
+    location = location_of(store, cfg.lab.store)
+    control = _CONTROL.get()
+    reporter = auto_progress() if progress else None
+
+    def started(runner: Any) -> None:
+        if reporter is not None:
+            reporter.label = f"run {runner.run_id}"
         if control is not None:
             control.loop, control.runner = asyncio.get_running_loop(), runner
-        bus = session.bus
-        queue = bus.subscribe()
 
-        async def report() -> None:
-            if not progress:
-                while await queue.get() is not None:
-                    pass
-                return
-            # tqdm.auto: an ipywidgets bar in a Jupyter kernel, a text bar on stderr
-            # elsewhere (never stdout, so a script's output stays clean)
-            from tqdm.auto import tqdm
+    # opened in the running thread (an SQLite connection stays in the thread that made it)
+    with open_store(location) as rs:
+        out = await scan(
+            cfg, rs, plan, time_scale=time_scale, reporter=reporter, on_start=started,
+            meta=run_meta(operator, sample_id, notes, tags),
+        )  # fmt: skip
+    return Run(out.run_id, location)
 
-            with tqdm(total=len(plan.points()), desc=f"run {run_id}", unit="pt") as bar:
-                while (ev := await queue.get()) is not None:
-                    if isinstance(ev, Progress):
-                        bar.total = ev.total
-                        bar.update(ev.done - bar.n)
 
-        reporter = asyncio.create_task(report())
-        try:
-            await session.run(runner)
-        finally:
-            bus.close()
-            await reporter
-    return run_id
+run_scan = _blocking(run_scan_async)
+run_scan.__doc__ = (
+    "Run an in-plane scan in one call (blocking) and return the stored :class:`Run`.\n\n"
+    "Works from a script and from a notebook cell (whose event loop is already running: the\n"
+    "scan then runs on its own loop in a worker thread, the store opened there). In a\n"
+    "notebook, ``await run_scan_async(...)`` runs it on the notebook's loop instead.\n"
+    "Interrupting the kernel aborts the scan (arms stopped and parked, the run stored\n"
+    "``aborted``) and returns that run.\n\n"
+    # the parameters and result of run_scan_async (python -OO strips both docstrings)
+    + (run_scan_async.__doc__ or "\n\n").split("\n\n", 1)[1]
+)

@@ -331,6 +331,8 @@ class LabDevices:
     goniometer: Goniometer
     glossmeter: Glossmeter | None
     sample: str
+    #: closes the lab (:func:`goniolab.app.lab_scan.open_lab`)
+    stack: Any = None
 
     def close(self) -> None:
         """Park the arms and release the instruments (in the RunEngine's loop)."""
@@ -340,7 +342,10 @@ class LabDevices:
                 g = self.lab.config.goniometer
                 await self.lab.goniometer.park(g.move_timeout_s)
             finally:
-                await self.lab.__aexit__(None, None, None)
+                if self.stack is not None:
+                    await self.stack.aclose()
+                else:
+                    await self.lab.__aexit__(None, None, None)
 
         call_in_bluesky_event_loop(_close())
 
@@ -357,25 +362,23 @@ def connect_lab(
 
     A :class:`bluesky.RunEngine` must exist (it owns the loop the devices live in).
     """
-    from goniolab.config import load_lab_config
-    from goniolab.lab_wiring import Lab
-    from goniolab.scan.colour import PointColour
-    from goniolab.session import home_timeout_s, with_sample
+    from contextlib import AsyncExitStack
 
-    cfg = load_lab_config(config)
-    if sample:
-        cfg = with_sample(cfg, sample)
+    from goniolab.app.lab_scan import home_arms, open_lab
+    from goniolab.app.lab_setup import load_config
+    from goniolab.scan.colour import PointColour
+
+    cfg = load_config(config)
 
     async def _open() -> LabDevices:
-        lab = Lab.from_config(cfg, time_scale=time_scale)
-        await lab.__aenter__()
+        stack = AsyncExitStack()
+        lab = await stack.enter_async_context(
+            open_lab(cfg, sample=sample or "", time_scale=time_scale)
+        )
         try:
             c = lab.config
             gonio = lab.goniometer
-            lamp_status = await gonio.lamp.status()
-            det_status = await gonio.detector.status()
-            if not (lamp_status.homed and det_status.homed):
-                await gonio.home(home_timeout_s(c))
+            await home_arms(lab)
             timeout = c.goniometer.move_timeout_s
             devices = LabDevices(
                 lab=lab,
@@ -393,6 +396,7 @@ def connect_lab(
                 if getattr(lab, "glossmeter", None) is None
                 else Glossmeter(lab.glossmeter, name="glossmeter"),
                 sample=c.sample.map,
+                stack=stack,
             )
             for dev in (
                 devices.lamp,
@@ -409,7 +413,7 @@ def connect_lab(
             await lab.spectro.set_exposure_us(c.spectro.exposure_us)
             return devices
         except BaseException:
-            await lab.__aexit__(None, None, None)
+            await stack.aclose()
             raise
 
     result: LabDevices = call_in_bluesky_event_loop(_open())
@@ -433,18 +437,34 @@ def inplane_scan(
     identity as goniolab stores it: ``run_uuid`` (a UUID 4), ``operator``, ``sample_id``,
     ``notes`` and ``tags`` (from the config's ``[run]`` table; ``md`` overrides them).
 
+    The plan is the one ``goniolab scan`` builds (:func:`goniolab.app.lab_setup.brdf_plan`),
+    read in the order its runner reads it, and the session's dry run
+    (:func:`goniolab.app.lab_scan.check_plan`) checks every geometry and the park position
+    before the run opens: an unsafe plan moves nothing.
+
     Returns
     -------
     str
         The run's uid.
+
+    Raises
+    ------
+    goniolab.errors.UserError
+        An angle list or repeat count that is no plan, or a plan the arms cannot run.
     """
-    angles = [float(t) for t in theta_r_deg]
-    if not angles:
-        raise ValueError("theta_r_deg: no detector angles")
-    if repeats < 1:
-        raise ValueError(f"repeats must be >= 1, got {repeats}")
+    from goniolab.app.lab_scan import check_plan
+    from goniolab.app.lab_setup import brdf_plan
+
+    config = lab.lab.config
+    # the plan the CLI, the API and the TUI build, at the spectro's configured exposure
+    plan = brdf_plan(
+        config, sample=lab.sample, theta_i_deg=theta_i_deg,
+        theta_r_deg=[float(t) for t in theta_r_deg], repeats=repeats, auto_exposure=False,
+        what="inplane_scan", angles_option="theta_r_deg",
+    )  # fmt: skip
+    angles = list(plan.theta_r_deg)
     detectors = [lab.spectro]
-    run_cfg = getattr(getattr(lab.lab, "config", None), "run", None)
+    run_cfg = config.run
     identity = {  # the run identity a stored run has (issue 22.4): UUID, who, what sample
         "run_uuid": str(uuid.uuid4()),
         "operator": getattr(run_cfg, "operator", ""),
@@ -456,14 +476,14 @@ def inplane_scan(
         **identity,
         "plan_name": "goniolab_inplane_scan",
         "plan_args": {
-            "theta_i_deg": float(theta_i_deg),
+            "theta_i_deg": plan.theta_i_deg,
             "theta_r_deg": angles,
-            "repeats": int(repeats),
+            "repeats": plan.repeats,
         },
         "sample": lab.sample,
         "detectors": [d.name for d in detectors],
         "motors": [lab.lamp.name, lab.detector.name],
-        "num_points": len(angles) * int(repeats),
+        "num_points": len(plan.points()),
         "hints": {"dimensions": [([lab.detector.readback_deg.name], "primary")]},
         **(md or {}),
     }
@@ -471,11 +491,19 @@ def inplane_scan(
     @bpp.stage_decorator([*detectors, lab.lamp, lab.detector])
     @bpp.run_decorator(md=metadata)
     def inner() -> Generator[Any, Any, None]:
-        yield from bps.mv(lab.lamp, float(theta_i_deg))
-        for tr in angles:
-            yield from bps.mv(lab.detector, tr)
-            for _ in range(int(repeats)):
-                yield from bps.trigger_and_read([*detectors, lab.lamp, lab.detector])
+        # the readings in the order the session's runner takes them (plan.points())
+        at: tuple[float, float] | None = None
+        for pt in plan.points():
+            if at is None or pt.theta_i_deg != at[0]:
+                yield from bps.mv(lab.lamp, pt.theta_i_deg)
+            if at is None or pt.theta_r_deg != at[1]:
+                yield from bps.mv(lab.detector, pt.theta_r_deg)
+            at = (pt.theta_i_deg, pt.theta_r_deg)
+            yield from bps.trigger_and_read([*detectors, lab.lamp, lab.detector])
 
+    # the session's dry run, in the RunEngine's loop, before any document or motion: an
+    # unsafe plan is refused with the CLI's words (UserError), nothing moves
+    (checked,) = yield from bps.wait_for([lambda: check_plan(lab.lab, plan, what="inplane_scan")])
+    checked.result()
     uid: str = yield from inner()  # run_decorator returns the run's uid
     return uid

@@ -22,6 +22,15 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+# the spectra of a stored run (its own module since issue 25; their names stay importable
+# from here)
+from goniolab.run_spectra import (
+    RunSpectra,
+    predicted_grid_nm,
+    run_reflectance_factors,
+    run_spectra,
+)
+
 if TYPE_CHECKING:  # pragma: no cover - typing only
     import xarray as xr
 
@@ -43,6 +52,7 @@ __all__ = [
     "predicted_grid_nm",
     "run_dataset",
     "run_reflectance_factors",
+    "run_spectra",
     "to_datetime64",
     "write_netcdf",
 ]
@@ -115,8 +125,8 @@ LONG_NAMES: dict[str, str] = {
     "predicted_pct": "model prediction of the relative luminance",
     "residual_pct": "mean measured minus predicted",
     "reflectance_pct": (
-        "spectral reading as the spectro reports it, % of its reference (the mirror), "
-        "before the mirror level and the detector-cone scale: not a reflectance factor"
+        "spectral reading as the spectro reports it, % of its own reference, before the "
+        "certified-mirror referencing and the detector-cone scale: not a reflectance factor"
     ),
     "reflectance_factor": (
         "measured spectral reflectance factor (1 = perfect reflecting diffuser, "
@@ -588,18 +598,20 @@ def _brdf_run_dataset(store: RunStore, rec: RunRecord) -> xr.Dataset:
     }
     if spec is not None:
         data["reflectance_pct"] = ((*dims, "wavelength_nm"), spec, _attrs("reflectance_pct"))
-    _, factors, predicted_factors = run_reflectance_factors(store, rec.id)
+    spectra = run_spectra(store, rec.id, points)
+    factors, predicted_factors = spectra.measured, spectra.predicted
+    labels = _spectrum_attrs(spectra)
     if spec is not None and factors.shape[-1] == spec.shape[-1]:
         data["reflectance_factor"] = (
             (*dims, "wavelength_nm"),
             factors,
-            _attrs("reflectance_factor", scale=_scale_name(rec), **_mirror_label(rec)),
+            _attrs("reflectance_factor", **labels),
         )
     if predicted_factors is not None:
         data["predicted_reflectance_factor"] = (
             ("theta_r_deg", "predicted_wavelength_nm"),
             predicted_factors,
-            _attrs("predicted_reflectance_factor", scale=_scale_name(rec), **_mirror_label(rec)),
+            _attrs("predicted_reflectance_factor", **labels),
         )
     if plan.mirror_reference:
         data["mirror_pct"] = (
@@ -627,10 +639,10 @@ def _brdf_run_dataset(store: RunStore, rec: RunRecord) -> xr.Dataset:
             np.asarray(grid, dtype=np.float64),
             _attrs("wavelength_nm"),
         )
-    if predicted_factors is not None:
+    if spectra.predicted_wavelengths_nm is not None:
         coords["predicted_wavelength_nm"] = (
             "predicted_wavelength_nm",
-            predicted_grid_nm(predicted_factors.shape[-1]),
+            spectra.predicted_wavelengths_nm,
             _attrs("wavelength_nm", long_name="wavelength of the predicted spectra"),
         )
     ds = xr.Dataset(data, coords=coords)
@@ -644,94 +656,25 @@ def _brdf_run_dataset(store: RunStore, rec: RunRecord) -> xr.Dataset:
     return ds
 
 
-def _factor_scale(rec: RunRecord, theta_r_deg: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Per geometry, what turns a fraction of the mirror into a reflectance factor: the
-    run's ``[colour] scale`` through its detector cone
-    (:func:`goniolab.colour.spectral.reflectance_factor_scale`, as the runner does)."""
-    from goniolab.colour.spectral import reflectance_factor_scale
-
-    cfg = rec.config if isinstance(rec.config, dict) else {}
-    scale = str((cfg.get("colour") or {}).get("scale", "diffuser"))
-    cone = float((cfg.get("spectro") or {}).get("detector_cone_deg", 6.0))
-    try:
-        out = np.asarray(
-            reflectance_factor_scale(theta_r_deg, cone, scale),  # type: ignore[arg-type]
-            dtype=np.float64,
-        )
-    except ValueError:  # a point detector or a grazing angle: no factor (NaN, not a guess)
-        return np.full(theta_r_deg.shape, np.nan)
-    return np.broadcast_to(out, theta_r_deg.shape).astype(np.float64)
-
-
-def _mirror_label(rec: RunRecord) -> dict[str, str]:
-    """A run whose ``[colour] scale`` is ``mirror`` keeps fractions of the mirror, not
-    reflectance factors: its long_name says so."""
-    if _scale_name(rec) != "mirror":
-        return {}
-    return {
-        "long_name": "spectral reading as a fraction of the mirror reference ([colour] "
-        "scale = mirror): not a reflectance factor"
+def _spectrum_attrs(spectra: RunSpectra) -> dict[str, Any]:
+    """The attributes of a reflectance-factor variable: its scale, what it is relative
+    to, what the readings were referenced to, the cone, the standards and the calibration
+    the run cites (:meth:`goniolab.run_spectra.RunSpectra.provenance`)."""
+    prov = spectra.provenance()
+    out: dict[str, Any] = {
+        "scale": spectra.scale,
+        "relative_to": prov["relative_to"],
+        "referenced_to": prov["referenced_to"],
+        "detector_cone_deg": prov["detector_cone_deg"],
+        "reference_standards_json": _dumps(prov["standards"]),
+        "calibration_json": _dumps(prov["calibration"]),
     }
-
-
-def _scale_name(rec: RunRecord) -> str:
-    cfg = rec.config if isinstance(rec.config, dict) else {}
-    return str((cfg.get("colour") or {}).get("scale", "diffuser"))
-
-
-def run_reflectance_factors(
-    store: RunStore, run_id: int
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64] | None]:
-    """Measured and predicted spectra of a scan run as reflectance factors.
-
-    Returns ``(wavelengths_nm, measured (n_geometries, repeats, n_wl), predicted
-    (n_geometries, n_wl_pred) or None)``; measured is empty along ``n_wl`` when the readings
-    carry no common wavelength grid. A reading's spectrum (% of the spectro's reference)
-    is divided by the run's mirror level when the plan measured one, then scaled to the
-    perfect diffuser through the detector cone (the runner's
-    :meth:`goniolab.scan.colour.PointColour.factors`). Predicted spectra (% of the mirror,
-    on the standard 380-780 nm grid) get the same cone scale.
-    """
-    from goniolab.scan.plans import MIRROR_INDEX, BrdfPlan
-
-    rec = store.get_run(run_id)
-    plan = BrdfPlan.from_dict(rec.plan)
-    tr = np.asarray(plan.theta_r_deg, dtype=np.float64)
-    n, reps = tr.size, plan.repeats
-    points = [p for p in store.points(rec.id) if p.index != MIRROR_INDEX]
-    grids = {tuple(p.raw.get("wavelengths_nm") or ()) for p in points if p.index >= 0}
-    grid = next(iter(grids)) if len(grids) == 1 else ()
-    wl = np.asarray(grid, dtype=np.float64)
-    measured = np.full((n, reps, wl.size), np.nan)
-    scale = _factor_scale(rec, tr)
-    for p in points:
-        if not (0 <= p.index < n and 0 <= p.repeat < reps) or not grid:
-            continue
-        values = p.raw.get("values")
-        if values is None or len(values) != wl.size:
-            continue
-        r = np.asarray(values, dtype=np.float64) / 100.0
-        mirror = p.raw.get("mirror_pct")
-        if plan.mirror_reference and mirror:
-            r = r * (100.0 / float(mirror))
-        measured[p.index, p.repeat, :] = r * scale[p.index]
-    predicted: NDArray[np.float64] | None = None
-    getter = getattr(store, "predicted_colours", None)
-    rows = getter(rec.id) if getter is not None else {}
-    spectra = {int(k): pc.spectrum_pct for k, pc in rows.items() if pc.spectrum_pct}
-    if spectra:
-        m = len(next(iter(spectra.values())))
-        predicted = np.full((n, m), np.nan)
-        for k, sp in spectra.items():
-            if 0 <= k < n and len(sp) == m:
-                predicted[k] = np.asarray(sp, dtype=np.float64) / 100.0 * scale[k]
-    return wl, measured, predicted
-
-
-def predicted_grid_nm(n_wavelengths: int) -> NDArray[np.float64]:
-    """The grid of stored predicted spectra: the standard 380-780 nm in ``n`` steps
-    (:func:`goniolab.colour.spectra.standard_grid_nm`, what the spectral predictor uses)."""
-    return np.linspace(380.0, 780.0, int(n_wavelengths))
+    if spectra.scale == "mirror":
+        out["long_name"] = (
+            "spectral reading as a fraction of the mirror reference ([colour] scale = mirror): "
+            "not a reflectance factor"
+        )
+    return out
 
 
 def _predicted_colour(store: RunStore, run_id: int, n: int) -> dict[str, NDArray[np.float64]]:

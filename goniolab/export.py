@@ -7,14 +7,22 @@ suffix or a format no exporter has is refused, naming the ones there are.
 
 - **csv**: one row per reading (:func:`export_rows`: :data:`SCAN_COLUMNS` for a scan,
   :data:`GLOSS_COLUMNS` for a gloss log, colour columns included), ISO 8601 UTC timestamps.
-- **json**: ``{"run": {...}, "readings": [...]}``, the run record with ISO times beside
-  the Unix ones, readings as in the CSV.
+  A scan with spectra adds :data:`SPECTRUM_COLUMNS`, then ``R_400 ... R_700`` (one column
+  per wavelength of the readings' grid: the reading's spectrum as a reflectance factor,
+  :mod:`goniolab.run_spectra`) and ``predicted_R_380 ...`` (the geometry's predicted
+  spectrum on the predictions' grid); a cell is empty where there is no value.
+- **json**: ``{"run": {...}, "readings": [...], "spectra": {...}}``, the run record with ISO
+  times beside the Unix ones, readings as in the CSV, and for a scan with spectra what they
+  are (quantity, units, relative to, referenced to, cone, standards, calibration, grids).
 - **netcdf** (netCDF-4 through xarray + h5netcdf): the Dataset of
   :func:`goniolab.datasets.run_dataset`, CF-style ``units`` on every variable and the run's
-  metadata (plan, model, config snapshot, status, version) as global attributes.
+  metadata (plan, model, config snapshot, status, version) as global attributes; the spectra
+  as ``reflectance_factor`` and ``predicted_reflectance_factor`` with the same provenance as
+  attributes.
 - **parquet** (pyarrow): the CSV's table with typed columns (timestamps as
-  ``timestamp[us, UTC]``) and the run record as JSON in the schema metadata under the key
-  ``goniolab.run``.
+  ``timestamp[us, UTC]``), the run record as JSON in the schema metadata under the key
+  ``goniolab.run``, the spectra's provenance under ``goniolab.spectra`` and ``units``,
+  ``long_name``, ``wavelength_nm`` on each spectral column.
 
 Every file is built in memory and replaced whole (:mod:`goniolab._atomic`): a full disk
 or a failed export leaves an existing file as it was. Each carries the run's UUID
@@ -36,6 +44,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -46,7 +55,9 @@ from goniolab._atomic import atomic_write_bytes
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
     import pandas as pd
+    import pyarrow as pa
 
+    from goniolab.run_spectra import RunSpectra
     from goniolab.store import PointRow, RunStore
 
 __all__ = [
@@ -54,8 +65,11 @@ __all__ = [
     "FORMATS",
     "GLOSS_COLUMNS",
     "PARQUET_RUN_KEY",
+    "PARQUET_SPECTRA_KEY",
     "SCAN_COLUMNS",
+    "SPECTRUM_COLUMNS",
     "Exporter",
+    "export_columns",
     "export_rows",
     "export_rows_iso",
     "export_run",
@@ -73,6 +87,9 @@ SCAN_COLUMNS: tuple[str, ...] = (
     "repeat",
     "theta_i_deg",
     "theta_r_deg",
+    # ASTM E2194 / DIN 6175-2: theta_i - theta_r (goniolab.colour.multiangle.aspecular_deg;
+    # 15 = theta_r 30 at theta_i 45, < 0 beyond the specular direction)
+    "aspecular_deg",
     "measured_theta_i_deg",
     "measured_theta_r_deg",
     "luminance_pct",
@@ -107,8 +124,19 @@ GLOSS_COLUMNS: tuple[str, ...] = (
     "predicted_g60_gu",
     "predicted_g85_gu",
 )
+#: After :data:`SCAN_COLUMNS` in the export of a scan with spectra, before its ``R_<nm>``
+#: and ``predicted_R_<nm>`` columns: what the spectra are relative to (``perfect diffuser``:
+#: reflectance factors; ``perfect mirror``: fractions of the mirror, the ``[colour] scale =
+#: "mirror"``) and what the reading was referenced to (a certified standard with its
+#: certificate and method, or the spectro's own reference; empty without a spectrum).
+SPECTRUM_COLUMNS: tuple[str, ...] = ("spectrum_relative_to", "spectrum_referenced_to")
+#: The ``spectrum_relative_to`` cell by ``[colour] scale``.
+SPECTRUM_RELATIVE_TO: dict[str, str] = {"diffuser": "perfect diffuser", "mirror": "perfect mirror"}
 #: Schema-metadata key of the run record in a Parquet export.
 PARQUET_RUN_KEY = b"goniolab.run"
+#: Schema-metadata key of the spectra's provenance (JSON) in a Parquet export
+#: (:meth:`goniolab.run_spectra.RunSpectra.provenance`).
+PARQUET_SPECTRA_KEY = b"goniolab.spectra"
 
 #: A text format's writer: the file's text.
 TextWriter = Callable[["RunStore", int], str]
@@ -224,7 +252,7 @@ def resolve_format(fmt: str | None, out: str | Path | None) -> str:
         suffix = Path(out).suffix
         raise ValueError(
             f"{out}: {'the suffix ' + repr(suffix) if suffix else 'no suffix'} names no "
-            f"export format (known: {_known_suffixes()}); give the format explicitly"
+            f"export format (known: {_known_suffixes()}); pass --format csv|json|netcdf|parquet (format= in Python)"
         )
     return named
 
@@ -280,10 +308,31 @@ def export_run(store: RunStore, run_id: int, fmt: str, out: str | Path | None = 
 
 def export_rows(store: RunStore, run_id: int) -> list[dict[str, Any]]:
     """One flat dict per reading of ``run_id`` (points for scans, readings for gloss), with
-    the columns :data:`SCAN_COLUMNS` or :data:`GLOSS_COLUMNS`; timestamps in Unix seconds."""
+    the columns of :func:`export_columns` (:data:`SCAN_COLUMNS` or :data:`GLOSS_COLUMNS`,
+    then a scan's spectra); timestamps in Unix seconds."""
+    return _table(store, run_id).rows
+
+
+def export_columns(store: RunStore, run_id: int) -> tuple[str, ...]:
+    """The columns of ``run_id``'s export, in file order: :data:`GLOSS_COLUMNS` for a gloss
+    log; :data:`SCAN_COLUMNS` for a scan, followed, when it has spectra, by
+    :data:`SPECTRUM_COLUMNS`, ``R_<nm>`` per wavelength of the readings' grid (the
+    reading's spectrum on the run's scale) and ``predicted_R_<nm>`` per wavelength of
+    the predictions' grid (the geometry's predicted spectrum)."""
+    return _table(store, run_id).columns
+
+
+@dataclass(frozen=True, slots=True)
+class _Table:
+    columns: tuple[str, ...]
+    rows: list[dict[str, Any]]
+    spectra: RunSpectra | None
+
+
+def _table(store: RunStore, run_id: int) -> _Table:
     run = store.get_run(run_id)
     if run.kind == "gloss":
-        return [
+        rows = [
             {
                 "run_id": run_id,
                 "run_uuid": run.uuid,
@@ -299,8 +348,10 @@ def export_rows(store: RunStore, run_id: int) -> list[dict[str, Any]]:
             }
             for g in store.gloss_readings(run_id)
         ]
+        return _Table(GLOSS_COLUMNS, rows, None)
     preds = store.predictions(run_id)
     pcols = store.predicted_colours(run_id)
+    points = store.points(run_id)
 
     def colour_cols(p: PointRow) -> dict[str, Any]:
         c = p.colour or {}
@@ -320,7 +371,7 @@ def export_rows(store: RunStore, run_id: int) -> list[dict[str, Any]]:
             "colour_error": p.colour_error,
         }
 
-    return [
+    rows = [
         {
             "run_id": run_id,
             "run_uuid": run.uuid,
@@ -328,6 +379,7 @@ def export_rows(store: RunStore, run_id: int) -> list[dict[str, Any]]:
             "repeat": p.repeat,
             "theta_i_deg": p.theta_i_deg,
             "theta_r_deg": p.theta_r_deg,
+            "aspecular_deg": p.theta_i_deg - p.theta_r_deg,  # the core's, inline (cheap import)
             "measured_theta_i_deg": p.measured_theta_i_deg,
             "measured_theta_r_deg": p.measured_theta_r_deg,
             "luminance_pct": p.luminance_pct,
@@ -339,19 +391,75 @@ def export_rows(store: RunStore, run_id: int) -> list[dict[str, Any]]:
             "peak_fraction": p.raw.get("peak_fraction"),
             "timestamp": p.timestamp,
         }
-        for p in store.points(run_id)
+        for p in points
     ]
+    if run.kind != "brdf":  # an alignment or calibration run: no spectra on a scan's grid
+        return _Table(SCAN_COLUMNS, rows, None)
+    if not any(p.raw.get("values") for p in points) and not any(
+        pc.spectrum_pct for pc in pcols.values()
+    ):  # nothing spectral stored (an imported run, a luminance-only instrument)
+        return _Table(SCAN_COLUMNS, rows, None)
+    from goniolab.run_spectra import run_spectra
+
+    spectra = run_spectra(store, run_id, points)
+    extra = _spectrum_columns(spectra)
+    if not extra:
+        return _Table(SCAN_COLUMNS, rows, None)
+    for p, row in zip(points, rows, strict=True):
+        row.update(_spectrum_cells(spectra, p.index, p.repeat))
+    return _Table(SCAN_COLUMNS + extra, rows, spectra)
 
 
-def _columns(store: RunStore, run_id: int) -> tuple[str, ...]:
-    return GLOSS_COLUMNS if store.get_run(run_id).kind == "gloss" else SCAN_COLUMNS
+def _spectrum_columns(spectra: RunSpectra) -> tuple[str, ...]:
+    from goniolab.run_spectra import PREDICTED_PREFIX, spectral_columns
+
+    measured = spectral_columns(spectra.wavelengths_nm) if spectra.has_measured else []
+    predicted = (
+        []
+        if spectra.predicted_wavelengths_nm is None
+        else spectral_columns(spectra.predicted_wavelengths_nm, PREDICTED_PREFIX)
+    )
+    if not measured and not predicted:
+        return ()
+    return (*SPECTRUM_COLUMNS, *measured, *predicted)
+
+
+def _cells(values: Any) -> list[float | None]:
+    return [float(v) if math.isfinite(v) else None for v in values]
+
+
+def _spectrum_cells(spectra: RunSpectra, index: int, repeat: int) -> dict[str, Any]:
+    """A reading's spectrum columns: its own measured spectrum and its geometry's
+    prediction (empty for the mirror reference and for a reading without a spectrum)."""
+    from goniolab.run_spectra import PREDICTED_PREFIX, spectral_columns
+
+    n, reps = spectra.measured.shape[:2]
+    inside = 0 <= index < n and 0 <= repeat < reps
+    referenced = spectra.referenced_by.get((index, repeat), "") if inside else ""
+    out: dict[str, Any] = {
+        "spectrum_relative_to": SPECTRUM_RELATIVE_TO.get(spectra.scale, spectra.scale),
+        "spectrum_referenced_to": referenced,
+    }
+    if spectra.has_measured:
+        names = spectral_columns(spectra.wavelengths_nm)
+        values = _cells(spectra.measured[index, repeat]) if referenced else [None] * len(names)
+        out.update(zip(names, values, strict=True))
+    if spectra.predicted is not None and spectra.predicted_wavelengths_nm is not None:
+        names = spectral_columns(spectra.predicted_wavelengths_nm, PREDICTED_PREFIX)
+        at_geometry = 0 <= index < spectra.predicted.shape[0]
+        values = _cells(spectra.predicted[index]) if at_geometry else [None] * len(names)
+        out.update(zip(names, values, strict=True))
+    return out
 
 
 def export_rows_iso(store: RunStore, run_id: int) -> list[dict[str, Any]]:
     """:func:`export_rows` with each ``timestamp`` as ISO 8601 UTC text."""
+    return _iso(export_rows(store, run_id))
+
+
+def _iso(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     from goniolab.datasets import iso_utc
 
-    rows = export_rows(store, run_id)
     for row in rows:
         if "timestamp" in row:
             row["timestamp"] = iso_utc(row["timestamp"])
@@ -360,10 +468,13 @@ def export_rows_iso(store: RunStore, run_id: int) -> list[dict[str, Any]]:
 
 def run_dataframe(store: RunStore, run_id: int) -> pd.DataFrame:
     """One row per reading as a pandas DataFrame; ``timestamp`` is ``datetime64[us, UTC]``."""
+    return _dataframe(_table(store, run_id))
+
+
+def _dataframe(table: _Table) -> pd.DataFrame:
     import pandas as pd
 
-    rows = export_rows(store, run_id)
-    df = pd.DataFrame.from_records(rows, columns=list(_columns(store, run_id)))
+    df = pd.DataFrame.from_records(table.rows, columns=list(table.columns))
     if "timestamp" in df:
         df["timestamp"] = pd.to_datetime(df["timestamp"], unit="s", utc=True).astype(
             "datetime64[us, UTC]"
@@ -389,16 +500,19 @@ def _run_doc(store: RunStore, run_id: int) -> dict[str, Any]:
 
 
 def _csv_text(store: RunStore, run_id: int) -> str:
-    rows = export_rows_iso(store, run_id)
+    table = _table(store, run_id)
     buf = io.StringIO()
-    writer = csv.DictWriter(buf, fieldnames=list(_columns(store, run_id)), lineterminator="\n")
+    writer = csv.DictWriter(buf, fieldnames=list(table.columns), lineterminator="\n")
     writer.writeheader()  # also for a run without readings yet
-    writer.writerows(rows)
+    writer.writerows(_iso(table.rows))
     return buf.getvalue()
 
 
 def _json_text(store: RunStore, run_id: int) -> str:
-    doc = {"run": _run_doc(store, run_id), "readings": export_rows_iso(store, run_id)}
+    table = _table(store, run_id)
+    doc: dict[str, Any] = {"run": _run_doc(store, run_id), "readings": _iso(table.rows)}
+    if table.spectra is not None:
+        doc["spectra"] = table.spectra.provenance()
     return jsonout.dumps(doc, indent=2, default=str) + "\n"  # no NaN/Infinity
 
 
@@ -412,19 +526,69 @@ def _write_parquet(store: RunStore, run_id: int, out: Path) -> None:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    df = run_dataframe(store, run_id)
-    table = pa.Table.from_pandas(df, preserve_index=False)
-    meta = dict(table.schema.metadata or {})
+    table = _table(store, run_id)
+    arrow = pa.Table.from_pandas(_dataframe(table), preserve_index=False)
+    meta = dict(arrow.schema.metadata or {})
     meta[PARQUET_RUN_KEY] = json.dumps(_run_doc(store, run_id), sort_keys=True).encode()
+    if table.spectra is not None:
+        prov = table.spectra.provenance()
+        meta[PARQUET_SPECTRA_KEY] = json.dumps(prov, sort_keys=True).encode()
+        arrow = arrow.replace_schema_metadata(meta)
+        arrow = arrow.cast(_spectrum_schema(arrow.schema, table.spectra))
+    else:
+        arrow = arrow.replace_schema_metadata(meta)
     sink = pa.BufferOutputStream()  # in memory, then replaced whole (goniolab._atomic)
-    pq.write_table(table.replace_schema_metadata(meta), sink)
+    pq.write_table(arrow, sink)
     atomic_write_bytes(out, sink.getvalue().to_pybytes())
 
 
+def _spectrum_schema(schema: pa.Schema, spectra: RunSpectra) -> pa.Schema:
+    """``schema`` with field metadata on each spectral column: ``units`` "1", a
+    ``long_name`` saying measured or predicted and relative to what, ``wavelength_nm``."""
+    from goniolab.run_spectra import PREDICTED_PREFIX, spectral_columns
+
+    labels: dict[str, tuple[str, float]] = {}
+    if spectra.has_measured:
+        for name, w in zip(spectral_columns(spectra.wavelengths_nm), spectra.wavelengths_nm,
+                           strict=True):  # fmt: skip
+            labels[name] = (f"measured {spectra.quantity}", float(w))
+    if spectra.predicted_wavelengths_nm is not None:
+        grid = spectra.predicted_wavelengths_nm
+        for name, w in zip(spectral_columns(grid, PREDICTED_PREFIX), grid, strict=True):
+            labels[name] = (f"predicted {spectra.quantity}", float(w))
+    fields = []
+    for f in schema:
+        if f.name in labels:
+            what, w = labels[f.name]
+            f = f.with_metadata(
+                {
+                    b"units": b"1",
+                    b"long_name": f"{what} at {w:g} nm, relative to the {spectra.relative_to}".encode(),
+                    b"wavelength_nm": f"{w:g}".encode(),
+                }
+            )
+        fields.append(f)
+    import pyarrow as pa
+
+    return pa.schema(fields, metadata=schema.metadata)
+
+
 register_exporter(
-    Exporter("csv", (".csv",), "one row per reading, ISO 8601 UTC timestamps", text=_csv_text)
+    Exporter(
+        "csv",
+        (".csv",),
+        "one row per reading, ISO 8601 UTC timestamps, spectra as R_<nm> columns",
+        text=_csv_text,
+    )
 )
-register_exporter(Exporter("json", (".json",), "the run record and its readings", text=_json_text))
+register_exporter(
+    Exporter(
+        "json",
+        (".json",),
+        "the run record, its readings and their spectra's provenance",
+        text=_json_text,
+    )
+)
 register_exporter(
     Exporter(
         "netcdf",

@@ -90,14 +90,23 @@ def _title(ds: xr.Dataset) -> str:
 
 def _predicted_label(ds: xr.Dataset) -> str:
     """``predicted (kirchhoff model)``: the model the run was predicted with (its stored
-    ``model_name``; a run that names none says only ``predicted``, not a guess)."""
+    ``model_name``; ``predicted (auto: facet, kirchhoff)`` naming the models the auto rule
+    picked, from the run's ``computed_by``; a run that names none says only ``predicted``,
+    not a guess)."""
     import json
 
     try:
         model = json.loads(str(ds.attrs.get("model_json") or "{}"))
     except ValueError:
         model = {}
-    name = model.get("model_name") or model.get("kind") if isinstance(model, dict) else None
+    if not isinstance(model, dict):
+        return "predicted"
+    name = model.get("model_name") or model.get("kind")
+    computed_by = model.get("computed_by")
+    used = sorted(computed_by) if isinstance(computed_by, dict) else []
+    if name == "auto" and used:
+        # issue 27: the legend names the model auto picked, not "auto model"
+        return f"predicted (auto: {', '.join(str(m) for m in used)})"
     return f"predicted ({name} model)" if name else "predicted"
 
 

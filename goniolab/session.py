@@ -447,6 +447,7 @@ class ScanSession:
             bus=self.bus,
             move_timeout_s=cfg.goniometer.move_timeout_s,
             standard=self.standard("black_glass"),
+            motion=ArmMotion.from_config(cfg.goniometer),
         )
 
         def save(result: AlignResult) -> str:

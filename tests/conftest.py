@@ -31,3 +31,98 @@ def pytest_configure(config: pytest.Config) -> None:
     from tests._warm import warm_caches
 
     warm_caches()
+
+
+#: End-to-end tests measured at 10 s or more (``--durations`` per directory, one directory at
+#: a time, 2-core machine; bench/README.md has the command and the table). They are marked
+#: ``slow`` here, beside the ones marked in their files, so that ``-m "not slow"`` leaves
+#: them out and :func:`pytest_collection_modifyitems` starts them first. A test renamed or
+#: removed just drops out of this list's effect.
+MEASURED_SLOW = frozenset(
+    {
+        "tests/tui/test_lab.py::test_scan_on_the_sim_lab_measured_equals_predicted",
+        "tests/tui/test_lab.py::test_pause_resume_abort_on_the_sim_lab",
+        "tests/tui/test_lab.py::test_the_sim_lab_measures_the_sample_picked_in_the_form",
+        "tests/tui/test_lab.py::test_an_internal_error_fails_the_run_on_screen_and_keeps_the_readings",
+        "tests/tui/test_lab.py::test_run_identity_dialog_is_stored_with_the_next_runs",
+        "tests/tui/test_lab.py::test_quit_during_a_scan_aborts_it_and_exits",
+        "tests/tui/test_lab.py::test_geometry_out_of_reach_is_a_form_error",
+        "tests/tui/test_app.py::test_gloss_log_and_runs_browser",
+        "tests/tui/test_app.py::test_sample_picker_changes_the_prediction_and_a_new_scan_clears_old_metrics",
+        "tests/tui/test_app.py::test_gloss_every_fills_the_log_while_idle",
+        "tests/tui/test_app.py::test_command_palette_offers_abort",
+        "tests/tui/test_app.py::test_instrument_timeout_is_a_notification_not_a_crash",
+        "tests/tui/test_terminal.py::test_goniolab_tui_runs_in_tmux",
+        "tests/tui/test_snapshots.py::test_runs_browser",
+        "tests/scan/test_align.py::test_align_on_the_twin_recovers_offsets_and_tilt_within_005_deg",
+        "tests/scan/test_adaptive.py::test_scan_adaptive_on_the_sim_lab",
+        "tests/scan/test_integration.py::test_ctrl_c_aborts_parks_and_says_how_to_resume",
+        "tests/scan/test_integration.py::test_gloss_log_from_a_port_without_config",
+        "tests/scan/test_integration.py::test_kill_9_then_resume_stores_every_reading_exactly_once",
+        "tests/sim/test_wire.py::test_goniolab_sim_serve_subprocess",
+        "tests/colour/test_cli_colour.py::test_flop_of_the_built_in_paints",
+        "tests/drivers/test_stil.py::test_perfect_reflecting_diffuser_is_white",
+        "tests/surfaces/test_samples_save.py::test_a_saved_file_predicts_as_the_sample_does",
+        "tests/contract/test_interlock_random.py::test_random_concurrent_moves_keep_the_arms_apart",
+        "tests/contract/test_lab.py::test_shipped_sim_lab_reads_the_sample_model",
+        "tests/test_cli_alarm.py::test_an_alarm_before_a_scan_is_cleared_from_the_cli",
+        "tests/test_cli_stop_signals.py::test_a_signal_parks_the_arms_of_the_wire_lab",
+        "tests/test_cli_stop_signals.py::test_a_signal_ends_a_gloss_log_as_aborted",
+        "tests/test_cli_stop_signals.py::test_a_signal_aborts_the_scan_and_parks",
+        "tests/test_batch.py::test_dask_workers_get_absolute_paths",
+        "tests/test_api.py::test_interrupting_a_scan_in_a_running_loop_aborts_it",
+        "tests/test_api.py::test_the_readme_example_runs",
+        "tests/test_notebook.py::test_run_scan_in_a_kernel_with_postgresql",
+        "tests/test_notebook.py::test_run_scan_in_a_kernel_with_sqlite",
+        "tests/test_notebook.py::test_interrupting_the_kernel_aborts_the_scan",
+        "tests/test_store_pg.py::test_two_scans_write_at_once",
+        "tests/test_store_pg.py::test_kill_9_mid_scan_then_resume",
+        "tests/test_provenance_faces.py::test_gloss_and_scan_runs_name_their_models",
+    }
+)
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Mark the measured slow tests and, under xdist, start the slow tests first on every
+    worker.
+
+    xdist's ``worksteal`` scheduler (``make test``) hands each of the N workers a contiguous
+    N-th of the collection, then lets an idle worker take half of the longest queue's tail.
+    A slow test left at a queue's end would keep its worker busy after the others ran out,
+    so the slow tests are dealt round-robin to the fronts of the N shares; the other tests
+    keep their order (a module's tests stay together). Every worker sorts the same
+    collection the same way (xdist requires identical collections).
+    """
+    for item in items:
+        if item.nodeid.split("[")[0] in MEASURED_SLOW and item.get_closest_marker("slow") is None:
+            item.add_marker(pytest.mark.slow)
+    workers = _workers(config)
+    if workers < 2 or len(items) < 2 * workers:
+        return
+    slow = [it for it in items if it.get_closest_marker("slow") is not None]
+    fast = [it for it in items if it.get_closest_marker("slow") is None]
+    shares: list[list[pytest.Item]] = [[] for _ in range(workers)]
+    for k, it in enumerate(slow):
+        shares[k % workers].append(it)
+    # the share sizes the scheduler cuts: pending // nodes_remaining, node by node
+    left = len(items)
+    sizes = []
+    for i in range(workers):
+        sizes.append(left // (workers - i))
+        left -= sizes[-1]
+    pos = 0
+    for share, size in zip(shares, sizes, strict=True):
+        take = max(0, size - len(share))
+        share.extend(fast[pos : pos + take])
+        pos += take
+    shares[-1].extend(fast[pos:])
+    items[:] = [it for share in shares for it in share]
+
+
+def _workers(config: pytest.Config) -> int:
+    """The number of xdist workers of this run (on the controller and on each worker)."""
+    inp = getattr(config, "workerinput", None)
+    if inp is not None:
+        return int(inp.get("workercount", 1))
+    n = config.getoption("numprocesses", default=None)
+    return int(n) if isinstance(n, int) else 0

@@ -112,6 +112,31 @@ def test_the_interlock_fails_the_move(engine: Any) -> None:
         lab.close()
 
 
+def test_a_plan_out_of_reach_is_refused_before_the_run_opens(engine: Any, tmp_path: Path) -> None:
+    """inplane_scan goes through the session's dry run (goniolab.app.lab_scan.check_plan):
+    a detector angle beyond the arm's limit is refused with the CLI's words before any
+    document or motion (it used to open the run, move the lamp, read 40 deg and fail on
+    the move to the bad angle)."""
+    from bluesky import plan_stubs as bps
+
+    from goniolab.errors import UserError
+    from tests.twin_configs import ideal_config
+
+    lab = connect_lab(ideal_config(tmp_path), time_scale=0)
+    names: list[str] = []
+    try:
+        hi = lab.lab.config.goniometer.detector.limits_deg[1]
+        before = [engine(bps.rd(arm)).plan_result for arm in (lab.lamp, lab.detector)]
+        engine.subscribe(lambda name, doc: names.append(name))
+        with pytest.raises(UserError, match=r"^plan refused \(no arm moved\): "):
+            engine(inplane_scan(lab, theta_i_deg=45.0, theta_r_deg=[40.0, hi + 5.0], repeats=1))
+        after = [engine(bps.rd(arm)).plan_result for arm in (lab.lamp, lab.detector)]
+    finally:
+        lab.close()
+    assert names == []  # no start, no event: the run never opened
+    assert after == pytest.approx(before, abs=1e-9)  # nothing moved
+
+
 def _sim_separation_monitor(lab: Any) -> Any:
     """Record the smallest |theta_i + theta_r| of the twin's arms (their encoders) at every
     10 ms of the lab clock, in the RunEngine's loop, until stopped."""

@@ -175,3 +175,30 @@ def test_documented_fault_keys_load_when_uncommented(tmp_path: Path) -> None:
     f = cfg.sim.faults
     assert f.devices == ("spectro",) and f.timeout_rate == 0.05 and f.disconnect_after == 100
     assert (f.lamp_stall_at_deg, f.detector_alarm_at_deg, f.alarm_code) == (30.0, 10.0, 0x30)
+
+
+def test_the_alignment_state_follows_the_store_the_user_chose(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``--store`` decides where the alignment state is read and written: it was looked up
+    beside the config's ``[lab] store`` (or in the user data directory, shared by every
+    checkout with a ``lab-sim.toml``), so one clone's alignment corrected another's moves."""
+    from goniolab.config import alignment_state_path, write_alignment_state
+
+    cfg_path = tmp_path / "lab-sim.toml"
+    cfg_path.write_text(
+        (Path(__file__).parents[1] / "configs" / "lab-sim.toml").read_text(), encoding="utf-8"
+    )
+    mine, theirs = tmp_path / "mine", tmp_path / "theirs"
+    mine.mkdir()
+    theirs.mkdir()
+    monkeypatch.chdir(mine)
+    cfg = load_lab_config(cfg_path, store="runs.sqlite")  # relative to the working directory
+    assert cfg.lab.store == str(mine / "runs.sqlite")
+    assert alignment_state_path(cfg) == mine / "lab-sim.alignment.toml"
+    write_alignment_state(cfg, {"lamp_zero_deg": 0.25, "detector_zero_deg": -0.5, "run": 3})
+    assert load_lab_config(cfg_path, store=mine / "runs.sqlite").alignment.lamp_zero_deg == 0.25
+    other = load_lab_config(cfg_path, store=theirs / "runs.sqlite").alignment
+    assert other.lamp_zero_deg == 0.0 and other.loaded_from != str(mine / "lab-sim.alignment.toml")
+    url = "postgresql://lab@db/runs"
+    assert load_lab_config(cfg_path, store=url).lab.store == url

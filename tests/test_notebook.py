@@ -79,7 +79,7 @@ def _check_scan_cells(cells: list[Any]) -> None:
     assert _text(cells[1]) == "(1, 'done')"
     assert _text(cells[2]) == "(2, 'done')"
     for cell in cells[1:3]:
-        # progress is a notebook widget (tqdm.auto + ipywidgets), nothing printed on stdout
+        # progress is a notebook widget (rich's bar in an ipywidgets Output), nothing on stdout
         kinds = [set(o.get("data", {})) for o in cell.outputs if o.output_type == "display_data"]
         assert any("application/vnd.jupyter.widget-view+json" in k for k in kinds), cell.outputs
         assert _streams(cell, "stdout") == ""

@@ -152,3 +152,28 @@ def test_colour_per_point_reaches_the_dataset_and_the_plot(tmp_path: Path) -> No
     measured = next(ln for ln in lab_ax.get_lines() if ln.get_label() == "L* measured")
     np.testing.assert_array_equal(measured.get_xdata(), [5.0, 0.0, -5.0])  # E2194 aspecular
     np.testing.assert_array_equal(measured.get_ydata(), [50.0, 51.0, 52.0])
+
+
+def test_an_auto_run_names_the_models_auto_picked(tmp_path: Path) -> None:
+    """issue 27: an auto run's legend said "predicted (auto model)"; it names the models the
+    auto rule picked, as the run's stored ``computed_by`` records them."""
+    from goniolab.datasets import run_dataset
+    from goniolab.run_plots import plot_dataset
+
+    with RunStore(make_store(tmp_path / "s.sqlite"), readonly=True) as s:
+        ds = run_dataset(s, 1)
+    computed_by = {"kirchhoff": [60.0, 70.0], "facet": [40.0, 45.0]}
+    ds.attrs["model_json"] = json.dumps({"model_name": "auto", "computed_by": computed_by})
+    labels = [ln.get_label() for ln in plot_dataset(ds).axes[0].get_lines()]
+    assert "predicted (auto: facet, kirchhoff)" in labels
+
+
+def test_python_dash_m_runs_the_same_command_line() -> None:
+    """``python -m goniolab`` is the ``goniolab`` script (it failed: no __main__ module)."""
+    import subprocess
+    import sys
+
+    out = subprocess.run(
+        [sys.executable, "-m", "goniolab", "--help"], capture_output=True, text=True, timeout=60
+    )
+    assert out.returncode == 0 and out.stdout.startswith("usage: goniolab")

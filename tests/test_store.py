@@ -214,7 +214,7 @@ def test_export_of_a_run_without_readings_has_the_header(store_path: Path) -> No
         rid = _run(s)
         header = export_run(s, rid, "csv").splitlines()
         assert header == [
-            "run_id,run_uuid,index,repeat,theta_i_deg,theta_r_deg,measured_theta_i_deg,"
+            "run_id,run_uuid,index,repeat,theta_i_deg,theta_r_deg,aspecular_deg,measured_theta_i_deg,"
             "measured_theta_r_deg,luminance_pct,predicted_pct,X,Y,Z,L_star,a_star,b_star,"
             "C_star,h_deg,predicted_L_star,predicted_a_star,predicted_b_star,colour_error,"
             "quality,peak_fraction,timestamp"

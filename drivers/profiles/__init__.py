@@ -61,7 +61,8 @@ from drivers.profiles.stepper_schema import (
     StepperRegisters,
 )
 from drivers.profiles.stil_schema import StilFile, StilProfile, template_regex
-from drivers.toml_schema import TomlFileError, first_issue, plain_reason, read_toml, short_repr
+from drivers.toml_schema import first_issue, plain_reason, short_repr
+from labtoml import TomlFileError, read_toml
 
 __all__ = [
     "PROFILES_DIR",

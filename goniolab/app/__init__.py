@@ -8,9 +8,14 @@ here, once.
 
 Modules (each imported on its own, so ``goniolab --help`` stays light):
 
-- :mod:`goniolab.app.predict`: predict brdf / gloss / albedo from a sample or a map;
-- :mod:`goniolab.app.colour`: predict colour, runs colour, fit colour;
-- :mod:`goniolab.app.runs`: runs list / show / export / import / annotate / spectra /
-  migrate, plot and render of a run;
-- :mod:`goniolab.app.scan`: scan, align and resume on a lab, the gloss log, calibrate.
+- :mod:`goniolab.app.predictions`: predict stats / brdf / gloss / albedo from a sample or
+  a map;
+- :mod:`goniolab.app.colours`: predict colour, runs colour, render of the predicted paint;
+  :mod:`goniolab.app.colour_fit`: fit colour;
+- :mod:`goniolab.app.stored_runs`: runs list / show / export / import / annotate / spectra
+  / migrate, plot of a run;
+  :mod:`goniolab.app.sample_maps`: the built-in samples;
+- :mod:`goniolab.app.lab_scan` (with :mod:`goniolab.app.lab_setup`, :mod:`goniolab.app.lab_gloss`):
+  scan, align and resume on a lab, the gloss log, calibrate (``lab_``: a module name is used
+  once in the tree, and ``commands/scan.py`` is taken).
 """

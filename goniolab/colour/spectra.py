@@ -54,7 +54,9 @@ __all__ = [
     "spectra_to_xyz",
     "spectrum_to_colour",
     "standard_grid_nm",
+    "white_xyz",
     "xyz_to_colour",
+    "xyz_to_colour_of_white",
     "xyz_weights",
 ]
 
@@ -371,20 +373,31 @@ def spectra_to_xyz(
     return out
 
 
-def xyz_to_colour(xyz: ArrayLike, settings: ColourSettings | None = None) -> FloatArray:
-    """``(..., 3)`` XYZ (Y = 100 scale) to ``(..., 8)``: X, Y, Z, L*, a*, b*, C*, h (deg).
-
-    CIE 1976 L*a*b* relative to the illuminant's white for the observer (CIE 15:2004
-    eqs. 8.1-8.3, ``f(t) = t^(1/3)`` above ``(6/29)^3``, else ``t / (3 (6/29)^2) + 4/29``)
-    and L*C*h (eq. 8.4). Written out rather than called through ``colour.XYZ_to_Lab``,
-    whose argument handling cost ~1 ms per reading; tests/colour/test_spectra.py checks
-    it against colour-science.
-    """
+def white_xyz(settings: ColourSettings | None = None) -> FloatArray:
+    """The illuminant's white for the observer, XYZ on the Y = 100 scale (the ``X_n, Y_n,
+    Z_n`` of CIE 15:2004 eqs. 8.1-8.3)."""
     s = (settings or ColourSettings()).validated()
-    xyz_a = np.asarray(xyz, dtype=np.float64)
     x_w, y_w = _white_xy(s.observer, s.illuminant)
-    white = np.array([x_w / y_w, 1.0, (1.0 - x_w - y_w) / y_w])
-    t = xyz_a / 100.0 / white
+    return np.array([x_w / y_w, 1.0, (1.0 - x_w - y_w) / y_w]) * 100.0
+
+
+def xyz_to_colour(xyz: ArrayLike, settings: ColourSettings | None = None) -> FloatArray:
+    """``(..., 3)`` XYZ (Y = 100 scale) to ``(..., 8)``: X, Y, Z, L*, a*, b*, C*, h (deg),
+    relative to the white of ``settings`` (:func:`xyz_to_colour_of_white`)."""
+    return xyz_to_colour_of_white(xyz, white_xyz(settings))
+
+
+def xyz_to_colour_of_white(xyz: ArrayLike, white: ArrayLike) -> FloatArray:
+    """``(..., 3)`` XYZ to ``(..., 8)``: X, Y, Z, L*, a*, b*, C*, h (deg) relative to the
+    white ``white`` (XYZ, same scale).
+
+    CIE 1976 L*a*b* (CIE 15:2004 eqs. 8.1-8.3, ``f(t) = t^(1/3)`` above ``(6/29)^3``, else
+    ``t / (3 (6/29)^2) + 4/29``) and L*C*h (eq. 8.4). Written out rather than called
+    through ``colour.XYZ_to_Lab``, whose argument handling cost ~1 ms per reading;
+    tests/colour/test_spectra.py checks it against colour-science.
+    """
+    xyz_a = np.asarray(xyz, dtype=np.float64)
+    t = xyz_a / np.asarray(white, dtype=np.float64)
     delta = 6.0 / 29.0
     f = np.where(t > delta**3, np.cbrt(t), t / (3.0 * delta**2) + 4.0 / 29.0)
     big_l = 116.0 * f[..., 1] - 16.0

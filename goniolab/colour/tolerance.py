@@ -10,13 +10,35 @@ that was measured passes (an angle the set names but the run lacks is reported a
 Tolerance sets are the lab's agreement with its customer. DIN 6175-2:2001 (goniochromatic
 automotive paints) frames them per aspecular angle -- the same colour difference is judged
 more leniently near the specular direction (15 deg), where the lightness of an effect paint
-changes steeply with angle, than at 45 deg -- but its limits and weights are in the paid
-standard (and OEM norms such as VW 50195), not reproduced here. The built-in ``din6175-2``
-set is goniolab's starting point *in that frame* and says so in its ``source``; put the
-agreed limits in a TOML file::
+changes steeply with angle, than at 45 deg.
+
+**The built-in ``din6175-2`` set is provisional** (:attr:`ToleranceSet.provisional`; every
+face that shows it says so: ``runs colour`` text through its ``source``, the JSON
+``tolerance.provisional``, the TUI colour table's overall row). What is not verified, and
+why:
+
+- the tolerance formula of DIN 6175-2:2001-03 (a weighting of CIELAB dL*, dC*, dH* per
+  measurement angle; the Audi "AUDI2000" formula tested by Melgosa et al. 2014 is of that
+  kind) and its parameters per angle, and hence its limits at 15/25/45/75/110 deg, are in the paid standard (DIN Media,
+  formerly Beuth) and in OEM norms (VW 50195, BMW AA-0354) that are not public. A search of
+  the stored public pages, documentation and code (Nov 2026: "DIN 6175-2 tolerance",
+  "Audi tolerance formula effect coatings", "DIN 6175-2 dL dC dH angles 15 25 45 75 110",
+  "AUDI2000 formula") found the standard's front matter (scope, normative references), the
+  DIN catalogue entry and the abstract of Melgosa et al. 2014 (Opt. Express 22(3),
+  3458-3467, a test of AUDI2000), but not the formula's equations or its per-angle
+  parameters: no worked example to test an implementation against;
+- DIN 6175:2019-11 replaced DIN 6175-1:2009 and DIN 6175-2:2001 with one tolerance formula
+  for solid and effect coatings and updated measurement geometries (DIN catalogue entry);
+  its formula is not public either.
+
+So the set's numbers (dE00 and |dL*|, |dC*|, |dH*| per angle, :func:`_din_frame`) are
+goniolab's starting values *in that frame* (looser near specular), not the standard's.
+Put the agreed limits in a TOML file (``provisional = true`` marks a set of unconfirmed
+limits the same way)::
 
     name = "oem-silver"
     source = "OEM colour norm XY-123, table 2"
+    provisional = false        # true: limits not yet confirmed (every output says so)
     metric = "CIE 2000"        # or "CIE 1994", "CIE 1976", "CMC"
     cmc_l = 2.0                # CMC only (default 2:1)
     cmc_c = 1.0
@@ -29,14 +51,14 @@ agreed limits in a TOML file::
 References
 ----------
 .. [1] DIN 6175-2:2001-03, Farbtoleranzen fuer Automobillackierungen - Teil 2:
-   Effektlackierungen (frame: aspecular angles 15/25/45/75/110, per-angle limits).
+   Effektlackierungen (frame: aspecular angles 15/25/45/75/110, per-angle limits; not
+   consulted: not publicly available). Superseded by DIN 6175:2019-11.
 .. [2] ASTM E2194-14 (aspecular angles); CIE 15:2004 sec. 8 (dL*, dC*, dH*).
 """
 
 from __future__ import annotations
 
 import math
-import tomllib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -44,6 +66,7 @@ from typing import Any
 import numpy as np
 
 from goniolab.colour.difference import DIFFERENCE_METHODS, differences
+from labtoml import TomlFileError, parse_toml
 
 __all__ = [
     "BUILTIN_SETS",
@@ -96,6 +119,14 @@ class ToleranceSet:
     limits: Mapping[float, AngleLimits] = field(default_factory=dict)
     cmc_l: float = 2.0
     cmc_c: float = 1.0
+    #: limits not confirmed against their source (the built-in ``din6175-2``): every
+    #: output that judges with the set says so
+    provisional: bool = False
+
+    @property
+    def label(self) -> str:
+        """The set's name, with ``(provisional)`` when its limits are not confirmed."""
+        return f"{self.name} (provisional)" if self.provisional else self.name
 
     @property
     def metric_key(self) -> str:
@@ -113,6 +144,7 @@ class ToleranceSet:
             "name": self.name,
             "source": self.source,
             "metric": self.metric_label,
+            "provisional": self.provisional,
             "limits": {f"{a:g}": lim.as_dict() for a, lim in sorted(self.limits.items())},
         }
 
@@ -223,12 +255,14 @@ def _din_frame() -> ToleranceSet:
     return ToleranceSet(
         name="din6175-2",
         source=(
-            "goniolab starting limits in the DIN 6175-2:2001 frame (aspecular 15/25/45/75/110,"
-            " looser near specular); not the standard's table: put your agreed limits in a "
-            "TOML set (--tolerance FILE.toml)"
+            "PROVISIONAL: goniolab starting limits in the DIN 6175-2:2001 frame (aspecular "
+            "15/25/45/75/110, looser near specular), not the standard's formula or table "
+            "(not publicly available, so not verified); put your agreed limits in a TOML "
+            "set (--tolerance FILE.toml)"
         ),
         metric="CIE 2000",
         limits={a: AngleLimits(*v) for a, v in table.items()},
+        provisional=True,
     )
 
 
@@ -261,7 +295,7 @@ def tolerance_from_dict(doc: Mapping[str, Any], *, where: str = "tolerance") -> 
     ToleranceError
         ``where: key: reason``.
     """
-    known = {"name", "source", "metric", "cmc_l", "cmc_c", "angles"}
+    known = {"name", "source", "metric", "cmc_l", "cmc_c", "angles", "provisional"}
     extra = sorted(set(doc) - known)
     if extra:
         raise ToleranceError(
@@ -298,6 +332,9 @@ def tolerance_from_dict(doc: Mapping[str, Any], *, where: str = "tolerance") -> 
     source = doc.get("source", where)
     if not isinstance(name, str) or not isinstance(source, str):
         raise ToleranceError(f"{where}: name and source must be text")
+    provisional = doc.get("provisional", False)
+    if not isinstance(provisional, bool):
+        raise ToleranceError(f"{where}: provisional: must be true or false, got {provisional!r}")
     return ToleranceSet(
         name=name,
         source=source,
@@ -305,6 +342,7 @@ def tolerance_from_dict(doc: Mapping[str, Any], *, where: str = "tolerance") -> 
         limits=limits,
         cmc_l=_positive(doc.get("cmc_l", 2.0), f"{where}: cmc_l"),
         cmc_c=_positive(doc.get("cmc_c", 1.0), f"{where}: cmc_c"),
+        provisional=provisional,
     )
 
 
@@ -322,9 +360,9 @@ def load_tolerance_set(name_or_path: str, text: str | None = None) -> ToleranceS
             "or a FILE.toml)"
         )
     try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ToleranceError(f"{name_or_path}: not valid TOML: {exc}") from None
+        doc = parse_toml(text, name_or_path, what="tolerance set")
+    except TomlFileError as exc:
+        raise ToleranceError(str(exc)) from None
     return tolerance_from_dict(doc, where=name_or_path)
 
 

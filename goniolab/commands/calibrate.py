@@ -14,50 +14,22 @@ from goniolab.errors import UserError
 __all__ = ["register"]
 
 
-async def _execute(args: argparse.Namespace) -> int:
-    from drivers.base import DeviceError
-    from goniolab import __version__
-    from goniolab.commands.scan import _open, _specimen_prompt
-    from goniolab.config import load_lab_config
-    from goniolab.scan.calibration import CalibrationRefused, run_calibration
-    from goniolab.scan.colour import PointColour
-    from goniolab.scan.events import RunState
-    from goniolab.session import ScanSession, config_snapshot, home_timeout_s
+def _cmd(args: argparse.Namespace) -> int:
+    if not args.config:
+        raise UserError("calibrate: --config is required")
+    from goniolab.app.lab_scan import calibrate
+    from goniolab.app.lab_setup import load_config, open_store, stderr_notify
+    from goniolab.commands.scan import run_lab, specimen_prompt
 
-    cfg = load_lab_config(args.config)
-    with _open(args.store, cfg.lab.store) as store:
-        async with ScanSession.open(
-            cfg, store, time_scale=args.time_scale, operator=_specimen_prompt
-        ) as session:
-            mirror, check = session.standard("mirror"), session.standard("black_glass")
-            plan = {"kind": "calibration", "theta_deg": args.theta, "repeats": args.repeats,
-                    "check": check.name}  # fmt: skip
-            run_id = store.create_run(
-                kind="calibration", plan=plan, config=config_snapshot(cfg), sample="",
-                model={}, version=__version__,
-            )  # fmt: skip
-            hook = session.lab.place_specimen or session.operator
-            if hook is None:
-                raise UserError("a calibration needs an operator to place the standards")
-            try:
-                if not await session.homed():
-                    await session.home()
-                record = await run_calibration(
-                    goniometer=session.lab.goniometer, spectro=session.lab.spectro,
-                    place=hook, store=store, run_id=run_id, mirror=mirror, check=check,
-                    settings=PointColour.from_config(cfg).settings, theta_deg=args.theta,
-                    repeats=args.repeats, exposure_us=cfg.spectro.exposure_us,
-                    move_timeout_s=cfg.goniometer.move_timeout_s,
-                )  # fmt: skip
-            except (CalibrationRefused, DeviceError) as exc:
-                store.set_status(run_id, RunState.FAILED.value, str(exc))
-                raise UserError(f"calibration run {run_id} failed: {exc}", exit_code=1) from exc
-            finally:
-                try:
-                    await session.lab.goniometer.park(home_timeout_s(cfg))
-                except DeviceError as exc:
-                    print(f"goniolab: warning: parking failed: {exc}", file=sys.stderr)
-            store.set_status(run_id, RunState.DONE.value)
+    cfg = load_config(args.config, args.store)
+    with open_store(args.store, cfg.lab.store) as store:
+        out = run_lab(
+            calibrate(
+                cfg, store, theta_deg=args.theta, repeats=args.repeats,
+                time_scale=args.time_scale, operator=specimen_prompt, notify=stderr_notify,
+            )
+        )  # fmt: skip
+    run_id, record = out.run_id, out.record
     c = record["check"]
     if args.json:
         print(json.dumps({"run_id": run_id, **record}, indent=2))
@@ -71,14 +43,6 @@ async def _execute(args: argparse.Namespace) -> int:
     if not c["ok"]:
         print("goniolab: warning: the check standard missed its certificate", file=sys.stderr)
     return 0
-
-
-def _cmd(args: argparse.Namespace) -> int:
-    from goniolab.commands.scan import run_lab
-
-    if not args.config:
-        raise UserError("calibrate: --config is required")
-    return run_lab(_execute(args))
 
 
 def register(subparsers: Any) -> None:

@@ -20,16 +20,14 @@ import os
 import sys
 from typing import TYPE_CHECKING, Any
 
-from goniolab.commands.scan import run_lab
+from goniolab.commands.scan import add_run_meta_args, run_lab, run_meta_args
 from goniolab.errors import UserError
 
 if TYPE_CHECKING:  # loaded when a session runs, not at --help (tests/test_startup.py)
     import asyncio
 
     from goniolab.scan.events import GlossRead
-    from goniolab.scan.gloss_logger import GlossResult
-    from goniolab.scan.plans import GlossPlan
-    from goniolab.store import RunStore
+    from goniolab.scan.gloss_logger import GlossLogger, GlossResult
 
 __all__ = ["format_reading", "register"]
 
@@ -84,71 +82,46 @@ async def _print_events(q: asyncio.Queue[Any], json_out: bool) -> None:
             print(f"goniolab: {kind}: {ev.device}: {ev.message}", file=sys.stderr, flush=True)
 
 
-def _open_meter_from_port(args: argparse.Namespace) -> Any:
-    """A glossmeter driver on ``--port`` speaking ``--protocol`` (no lab config)."""
-    from drivers.glossmeter import open_glossmeter
+def _cmd_log(args: argparse.Namespace) -> int:
+    if not args.config and not args.port:
+        from drivers.protocols import GLOSSMETERS
 
-    return open_glossmeter(
-        args.port,
-        protocol=args.protocol,
-        profile=args.profile,
-        serial_number=args.serial_number,
-        baudrate=args.baudrate,
-        timeout_s=args.timeout,
-    )
-
-
-def _pushes(protocol: str) -> bool:
-    """Whether a ``protocol``'s meter prints its readings on its own (drivers.protocols)."""
-    from drivers.protocols import GLOSSMETERS
-
-    return GLOSSMETERS[protocol].pushes_readings
-
-
-async def _session(args: argparse.Namespace, store: RunStore, plan: GlossPlan) -> GlossResult:
-    import asyncio
-    from contextlib import AsyncExitStack
-
-    from goniolab.commands._signals import describe, install_stop_signals
-    from goniolab.session import GlossSession, SampleModels
-
-    async with AsyncExitStack() as stack:
-        if args.config:
-            from goniolab.config import load_lab_config
-
-            session = await stack.enter_async_context(
-                GlossSession.open(
-                    load_lab_config(args.config),
-                    store,
-                    sample=plan.sample,
-                    time_scale=args.time_scale,
-                )
-            )
-        else:
-            from drivers.timing import RealClock
-
-            meter = _open_meter_from_port(args)
-            await meter.connect()
-            stack.push_async_callback(meter.close)
-            session = GlossSession(
-                meter,
-                RealClock(),
-                store,
-                config={"port": args.port, "protocol": args.protocol, "baudrate": args.baudrate},
-                models=SampleModels(args.n),
-            )
-        mode = args.mode or ("push" if _pushes(args.protocol) and not args.config else "measure")
-        from goniolab.commands.scan import run_meta_args
-
-        logger = await session.start(
-            plan, mode=mode, interval_s=args.interval, meta=run_meta_args(args)
+        raise UserError(
+            "gloss log: give --config FILE, or --port PORT --protocol "
+            + "|".join(GLOSSMETERS.names())
         )
-        from goniolab.commands.scan import announce_store
+    from goniolab.app.lab_gloss import MeterPort, gloss_log, gloss_plan
+    from goniolab.app.lab_setup import check_sample, load_config, open_store, stderr_notify
+    from goniolab.scan.events import RunState
 
-        announce_store(store, logger.run_id)
-        printer = asyncio.create_task(_print_events(session.bus.subscribe(), args.json))
-        loop = asyncio.get_running_loop()
-        run_task = asyncio.ensure_future(logger.run())
+    if args.config and args.port:
+        raise UserError("gloss log: --config and --port exclude each other")
+    if args.port and "://" not in args.port and not os.path.exists(args.port):
+        raise UserError(f"gloss log: --port {args.port}: no such device")
+    if not args.interval >= 0:
+        raise UserError(f"gloss log: --interval must be >= 0 s, got {args.interval}")
+    if not args.timeout > 0:
+        raise UserError(f"gloss log: --timeout must be > 0 s, got {args.timeout}")
+    sample = args.sample or ""
+    if args.sample:  # checked, as the user typed it (the stored run names it so)
+        check_sample(args.sample)
+    cfg = load_config(args.config) if args.config else None
+    if cfg is not None:
+        sample = args.sample or cfg.sample.map
+    plan = gloss_plan(args.count, args.angles, sample)
+    port = None
+    if args.port:
+        port = MeterPort(
+            args.port, protocol=args.protocol, profile=args.profile,
+            serial_number=args.serial_number, baudrate=args.baudrate, timeout_s=args.timeout,
+            n=args.n,
+        )  # fmt: skip
+    stops: dict[str, Any] = {}
+
+    def on_start(logger: GlossLogger) -> None:
+        import asyncio
+
+        from goniolab.commands._signals import describe, install_stop_signals
 
         def stop_first(name: str) -> None:
             # Ctrl-C ends a log as the operator's stop; SIGTERM / SIGHUP as an abort
@@ -159,58 +132,23 @@ async def _session(args: argparse.Namespace, store: RunStore, plan: GlossPlan) -
             # timeout and is stored, and so is the run's end: nothing to cancel
             logger.stop(by=describe(name))
 
-        remove_signals = install_stop_signals(loop, stop_first, stop_again)
+        loop = asyncio.get_running_loop()
+        stops["remove"] = install_stop_signals(loop, stop_first, stop_again)
+
+    async def log() -> GlossResult:
         try:
-            result = await run_task
+            return await gloss_log(
+                store, plan, config=cfg, port=port, time_scale=args.time_scale,
+                mode=args.mode, interval_s=args.interval, meta=run_meta_args(args),
+                watch=lambda q: _print_events(q, args.json), on_start=on_start,
+                notify=stderr_notify,
+            )  # fmt: skip
         finally:
-            remove_signals()
-            session.bus.close()
-            await printer
-        return result
+            if "remove" in stops:
+                stops["remove"]()
 
-
-def _cmd_log(args: argparse.Namespace) -> int:
-    if not args.config and not args.port:
-        from drivers.protocols import GLOSSMETERS
-
-        raise UserError(
-            "gloss log: give --config FILE, or --port PORT --protocol "
-            + "|".join(GLOSSMETERS.names())
-        )
-    from goniolab.scan.events import RunState
-    from goniolab.scan.plans import GlossPlan, PlanError
-    from goniolab.store import RunStore, StoreError, resolve_store_path
-
-    if args.config and args.port:
-        raise UserError("gloss log: --config and --port exclude each other")
-    if args.port and "://" not in args.port and not os.path.exists(args.port):
-        raise UserError(f"gloss log: --port {args.port}: no such device")
-    if not args.interval >= 0:
-        raise UserError(f"gloss log: --interval must be >= 0 s, got {args.interval}")
-    if not args.timeout > 0:
-        raise UserError(f"gloss log: --timeout must be > 0 s, got {args.timeout}")
-    config_store = None
-    sample = args.sample or ""
-    if args.sample:
-        from goniolab.session import check_sample
-
-        check_sample(args.sample)
-    if args.config:
-        from goniolab.config import load_lab_config
-
-        cfg = load_lab_config(args.config)
-        config_store = cfg.lab.store
-        sample = args.sample or cfg.sample.map
-    try:
-        plan = GlossPlan(count=args.count, angles_deg=tuple(args.angles), sample=sample)
-    except PlanError as exc:
-        raise UserError(f"gloss log: {exc}") from exc
-    try:
-        store = RunStore(resolve_store_path(args.store, config_store))
-    except StoreError as exc:
-        raise UserError(str(exc)) from exc
-    with store:
-        result = run_lab(_session(args, store, plan))
+    with open_store(args.store, None if cfg is None else cfg.lab.store) as store:
+        result = run_lab(log())
         if args.json:
             # the last JSON line: the session's statistics (reading lines carry "seq")
             print(
@@ -266,8 +204,6 @@ def register(subparsers: Any) -> None:
         "--n", type=float, default=1.55, help="refractive index for --sample (no config)"
     )
     pl.add_argument("--count", type=int, default=0, help="readings to take (0 = until Ctrl-C)")
-    from goniolab.commands.scan import add_run_meta_args
-
     add_run_meta_args(pl)  # --operator, --sample-id, --note, --tag (run identity)
     pl.add_argument("--angles", type=int, nargs="+", default=[20, 60, 85], help="geometries, deg")
     pl.add_argument("--mode", choices=("measure", "push"), default=None,

@@ -19,20 +19,13 @@ __all__ = ["register"]
 
 
 def _cmd_reset_alarm(args: argparse.Namespace) -> int:
+    from goniolab.app.lab_scan import reset_alarms
+    from goniolab.app.lab_setup import load_config
     from goniolab.commands.scan import run_lab
-    from goniolab.config import load_lab_config
-    from goniolab.lab_wiring import Lab
-    from goniolab.scan.alarm import reset_alarms
 
     if not args.config:
         raise UserError("lab reset-alarm: --config FILE is required (the scan's lab config)")
-    cfg = load_lab_config(args.config)
-
-    async def reset() -> list[Any]:
-        async with Lab.from_config(cfg) as lab:
-            return await reset_alarms(lab.goniometer)
-
-    alarms = run_lab(reset())
+    alarms = run_lab(reset_alarms(load_config(args.config)))
     if args.json:
         print(json.dumps([{"arm": a.arm, "before": a.before, "after": a.after} for a in alarms]))
     else:

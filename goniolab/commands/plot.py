@@ -17,28 +17,15 @@ from pathlib import Path
 from typing import Any
 
 from goniolab.commands._help import RUN_HELP
-from goniolab.errors import UserError
 
 __all__ = ["register"]
 
 
 def _cmd_plot(args: argparse.Namespace) -> int:
-    from goniolab.commands.runs import _get_run, open_store
-    from goniolab.run_plots import PLOT_FORMATS
+    from goniolab.app.stored_runs import plot_run
 
-    out = Path(args.out)
-    if out.suffix.lower() not in PLOT_FORMATS:
-        raise UserError(f"--out {out}: the suffix picks the format: {', '.join(PLOT_FORMATS)}")
-    if out.parent and not out.parent.is_dir():
-        raise UserError(f"--out {out}: no such directory {out.parent}")
-    with open_store(args.store, args.config) as store:
-        rec = _get_run(store, args.run)
-        from goniolab.run_plots import plot_run
-
-        try:
-            plot_run(store, args.run, out=out, log=args.log)
-        except OSError as exc:
-            raise UserError(f"cannot write {out}: {exc.strerror or exc}") from exc
+    drawn = plot_run(args.run, args.out, log=args.log, store=args.store, config=args.config)
+    rec, out = drawn.record, Path(args.out)
     if args.json:
         doc = {"run_id": rec.id, "kind": rec.kind, "output": str(out.resolve())}
         print(json.dumps(doc, indent=2))

@@ -10,142 +10,50 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import re
 import sys
-import time
-from pathlib import Path
 from typing import Any
 
-from goniolab.errors import UserError
-
-__all__ = ["register", "write_png"]
-
-
-def write_png(path: Path, rgb: Any) -> None:
-    """Write an ``(h, w, 3)`` sRGB array in [0, 1] as an 8-bit RGB PNG (Pillow, which
-    matplotlib depends on)."""
-    import numpy as np
-    from PIL import Image
-
-    data = np.round(np.clip(rgb, 0.0, 1.0) * 255.0).astype(np.uint8)
-    Image.fromarray(data, "RGB").save(path, format="PNG")
+__all__ = ["register"]
 
 
 def _cmd_render(args: argparse.Namespace) -> int:
-    import numpy as np
+    from goniolab.app.colours import RenderOptions, render_paint
 
-    out = Path(args.out)
-    if out.suffix.lower() != ".png":
-        raise UserError(f"--out {out}: the picture is written as PNG (.png)")
-    if out.parent and not out.parent.is_dir():
-        raise UserError(f"--out {out}: no such directory {out.parent}")
-    if not 8 <= args.size <= 8192:
-        raise UserError(f"--size {args.size}: must be in [8, 8192] pixels")
-    exposure: float | None = None
-    if args.exposure != "auto":
-        try:
-            exposure = float(args.exposure)
-        except ValueError:
-            raise UserError(f"--exposure {args.exposure}: a number or auto") from None
-        if not (math.isfinite(exposure) and exposure > 0):
-            raise UserError(f"--exposure {exposure:g}: must be > 0")
-    if not (math.isfinite(args.lamp_deg) and 0.0 <= args.lamp_deg <= 60.0):
-        raise UserError(f"--lamp-deg {args.lamp_deg:g}: must be in [0, 60] deg")
-    t0 = time.perf_counter()
-    if sys.stderr.isatty() and not args.json:  # the imports and the table take seconds
-        print(f"rendering {args.map} ({args.size}x{args.size}) ...", file=sys.stderr, flush=True)
-    from goniolab.colour.dispersion import DispersionError
-    from goniolab.colour.paint import PaintError
-    from goniolab.colour.paint_render import render, tabulate_brdf
-    from goniolab.colour.spectra import ColourError, ColourSettings, standard_grid_nm
-    from goniolab.model_cache import paint_for
-    from goniolab.optics.surface import roughness_stats
-    from goniolab.surfaces.resolve import resolve_map
+    opts = RenderOptions(
+        size=args.size,
+        lamps=args.lamps,
+        shape=args.shape,
+        paint=args.paint,
+        n=args.n,
+        step_um=args.step_um,
+        illuminant=args.illuminant,
+        observer=args.observer,
+        step_nm=args.step_nm,
+        lamp_deg=args.lamp_deg,
+        exposure=args.exposure,
+        sparkle=args.sparkle,
+        seed=args.seed,
+    )
 
-    try:
-        settings = ColourSettings(args.illuminant, args.observer).validated()
-    except ColourError as exc:
-        raise UserError(str(exc)) from None
-    if args.paint:
-        from goniolab.commands._colour import load_paint_file
+    def started() -> None:
+        if sys.stderr.isatty() and not args.json:  # the imports and the table take seconds
+            print(f"rendering {args.map} ({args.size}x{args.size}) ...", file=sys.stderr,
+                  flush=True)  # fmt: skip
 
-        paint = load_paint_file(args.paint)
-    else:
-        paint = paint_for(args.map, args.n)
-    hm = resolve_map(args.map, step_um=args.step_um)
-    try:
-        with np.errstate(over="ignore", invalid="ignore"):
-            alpha = float(roughness_stats(hm).Sdq)
-    except ValueError as exc:
-        raise UserError(f"{args.map}: {exc}") from None
-    if not (math.isfinite(alpha) and alpha > 0):
-        raise UserError(f"{args.map}: rms slope Sdq = {alpha:g}; the gloss lobe needs Sdq > 0")
-    alpha = max(alpha, 1e-3)
-    try:
-        wl = standard_grid_nm(args.step_nm)
-        paint.coat.check_covers(wl)
-        table = tabulate_brdf(
-            paint, alpha, lamp_radius_deg=0.5 * args.lamp_deg, wavelengths_nm=wl, settings=settings
-        )
-        sparkle = paint.has_flakes if args.sparkle is None else args.sparkle
-        pic = render(
-            table,
-            shape=args.shape,
-            size=args.size,
-            lamps=args.lamps,
-            exposure=exposure,
-            settings=settings,
-            sparkle=sparkle,
-            seed=args.seed,
-        )
-    except (ColourError, DispersionError, PaintError, ValueError) as exc:
-        raise UserError(f"{args.map}: {' '.join(str(exc).split())}") from None
-    try:
-        write_png(out, pic.srgb)
-    except OSError as exc:
-        raise UserError(f"cannot write {out}: {exc.strerror or exc}") from None
-    seconds = time.perf_counter() - t0
-    # the lightness range over the shape, as reflectance factors (the lamp's cos taken out)
-    y = pic.xyz[..., 1]
-    lit = pic.mask & (pic.cos_i > 0.05)
-    factor_l = 116.0 * np.cbrt(np.maximum(y[lit] / pic.cos_i[lit] / 100.0, 216 / 24389)) - 16.0
-    doc = {
-        "map": args.map,
-        "output": str(out.resolve()),
-        "size": args.size,
-        "shape": args.shape,
-        "lamps": args.lamps,
-        "illuminant": settings.illuminant,
-        "observer": settings.observer,
-        "alpha_sdq": alpha,
-        "lamp_deg": args.lamp_deg,
-        "paint": paint.describe(),
-        "exposure": pic.exposure,
-        "exposure_auto": pic.exposure_auto,
-        "clipped_fraction": pic.clipped_fraction,
-        "sparkle": sparkle,
-        "sparkle_pixel_fraction": (
-            float(np.mean(pic.sparkle_pixels[pic.mask])) if pic.sparkle_pixels is not None else 0.0
-        ),
-        "pixel_um": pic.pixel_um,
-        "lightness_factor_range": [float(np.min(factor_l)), float(np.max(factor_l))]
-        if factor_l.size
-        else None,
-        "seconds": seconds,
-    }
+    doc = render_paint(args.map, args.out, opts, started=started)
     if args.json:
         print(json.dumps(doc, indent=2))
     else:
         print(
             f"{args.map}: {args.shape} {args.size}x{args.size}, {args.lamps} lamp"
-            f"{'s' if args.lamps > 1 else ''}, drawn to {out} in {seconds:.1f} s; exposure "
-            f"{pic.exposure:.3g} ({'auto: ' if pic.exposure_auto else ''}"
-            f"{100 * pic.clipped_fraction:.2f} % of the pixels clip)"
+            f"{'s' if args.lamps > 1 else ''}, drawn to {args.out} in {doc['seconds']:.1f} s; "
+            f"exposure {doc['exposure']:.3g} ({'auto: ' if doc['exposure_auto'] else ''}"
+            f"{100 * doc['clipped_fraction']:.2f} % of the pixels clip)"
             + (
                 f"; sparkle: {100 * doc['sparkle_pixel_fraction']:.2f} % of the pixels "
-                f"({pic.pixel_um:.0f} um each) mirror the lamp"
-                if sparkle
+                f"({doc['pixel_um']:.0f} um each) mirror the lamp"
+                if doc["sparkle"]
                 else ""
             ),
             file=sys.stderr,
@@ -168,7 +76,7 @@ def register(subparsers: Any) -> None:
     )
     p.add_argument("--shape", choices=("panel", "sphere"), default="panel", help="what is drawn")
     p.add_argument("--paint", metavar="FILE.toml", help="paint definition (else the sample's)")
-    from goniolab.commands.predict import parse_index
+    from goniolab.commands._surface_args import parse_index
 
     p.add_argument(
         "--n", type=parse_index, default=complex(1.55), help="coat index of a map without paint"

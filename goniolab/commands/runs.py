@@ -8,40 +8,14 @@ import itertools
 import json
 import sys
 from collections.abc import Sequence
-from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from goniolab import jsonout
 from goniolab.commands._help import RUN_HELP
-from goniolab.errors import UserError, a_run_of_kind
+from goniolab.errors import UserError
 from goniolab.textsafe import escaped_stdout
 
-if TYPE_CHECKING:  # sqlite3 and the plans load when a command runs, not at --help
-    from goniolab.store import RunRecord, RunStore
-
-__all__ = ["angles_text", "open_store", "plan_text", "register", "run_summary", "store_path"]
-
-
-def store_path(store_arg: str | None, config_arg: str | None = None) -> Path | str:
-    """The store chosen by ``--store``, else config ``[lab] store``, else the default."""
-    from goniolab.store import resolve_store_path
-
-    config_store: str | None = None
-    if config_arg:
-        from goniolab.config import load_lab_config
-
-        config_store = load_lab_config(config_arg).lab.store
-    return resolve_store_path(store_arg, config_store)
-
-
-def open_store(store_arg: str | None, config_arg: str | None = None) -> RunStore:
-    """Open the chosen store for reading (nothing is created or written; it must exist)."""
-    from goniolab.store import RunStore, StoreError
-
-    try:
-        return RunStore(store_path(store_arg, config_arg), readonly=True)
-    except StoreError as exc:
-        raise UserError(str(exc)) from exc
+__all__ = ["angles_text", "colour_text", "plan_text", "register", "safe_text"]
 
 
 def _when(ts: float | None) -> str:
@@ -50,100 +24,53 @@ def _when(ts: float | None) -> str:
     return dt.datetime.fromtimestamp(ts, tz=dt.UTC).strftime("%Y-%m-%d %H:%M:%S")
 
 
-def _get_run(store: RunStore, run_id: int) -> RunRecord:
-    from goniolab.store import StoreError
-
-    try:
-        return store.get_run(run_id)
-    except StoreError as exc:
-        raise UserError(str(exc)) from exc
-
-
-def run_summary(store: RunStore, rec: RunRecord) -> dict[str, Any]:
-    """The summary of a stored run, recomputed from its stored readings and predictions."""
-    if rec.kind == "brdf":
-        from goniolab.scan.plans import BrdfPlan, PlanError
-        from goniolab.scan.summary import summarize_brdf  # numpy: only when a run is shown
-
-        try:
-            plan = BrdfPlan.from_dict(rec.plan)
-        except (PlanError, KeyError, TypeError, ValueError) as exc:
-            raise UserError(
-                f"store {store.location}: run {rec.id}: its stored plan cannot be read: {exc}"
-            ) from exc
-        from goniolab.store import StoreError
-
-        try:
-            return summarize_brdf(plan, store.points(rec.id), store.predictions(rec.id))
-        except StoreError as exc:
-            raise UserError(str(exc)) from exc
-    if rec.kind in ("align", "calibration"):
-        # the result is the run's record (what the alignment found, the calibration's check)
-        key = "alignment" if rec.kind == "align" else "calibration"
-        return {"readings": store.count_points(rec.id), key: rec.model.get(key)}
-    from goniolab.scan.plans import gloss_statistics
-
-    rows = store.gloss_readings(rec.id)
-    return {
-        "readings": len(rows),
-        "statistics": gloss_statistics([r.values_gu for r in rows]).as_dict(),
-    }
-
-
 def _cmd_list(args: argparse.Namespace) -> int:
-    from goniolab.store import StoreError
+    from goniolab.app.stored_runs import list_runs
 
-    path = store_path(args.store, args.config)
-    if isinstance(path, Path) and not path.exists():
-        # a fresh installation (or a mistyped --store): nothing to list, nothing created
+    listing = list_runs(
+        args.store,
+        args.config,
+        limit=args.limit,
+        operator=args.operator,
+        tag=args.tag,
+        sample_id=args.sample_id,
+        text=args.search,
+    )
+    if not listing.exists:
         if args.json:
             print("[]")
-        print(f"no runs: store {path} does not exist yet", file=sys.stderr)
+        print(f"no runs: store {listing.location} does not exist yet", file=sys.stderr)
         return 0
-    with open_store(args.store, args.config) as store:
-        try:
-            briefs = store.list_briefs(
-                limit=args.limit,
-                operator=args.operator,
-                tag=args.tag,
-                sample_id=args.sample_id,
-                text=args.search,
-            )
-        except StoreError as exc:
-            raise UserError(str(exc)) from exc
-        if args.json:
-            print(jsonout.dumps([_brief(store, r, n) for r, n in briefs], indent=2))
-            return 0
-        if not briefs:
-            filtered = any(
-                v is not None for v in (args.operator, args.tag, args.sample_id, args.search)
-            )
-            print(f"no runs{' match' if filtered else ''} in {store.location}", file=sys.stderr)
-            return 0
+    if args.json:
+        print(jsonout.dumps([b.as_dict() for b in listing.runs], indent=2))
+        return 0
+    if not listing.runs:
         print(
-            f"{'RUN':>5}  {'KIND':5}  {'STATUS':11}  {'READINGS':>8}  {'CREATED (UTC)':19}  SAMPLE"
+            f"no runs{' match' if listing.filtered else ''} in {listing.location}", file=sys.stderr
         )
-        for r, n in briefs:
-            b = _brief(store, r, n)
-            status = "damaged" if r.damage else "interrupted" if b["interrupted"] else r.status
-            readings = "?" if n is None else str(n)
-            extra = "".join(
-                f"  {label}{safe_text(v)}"
-                for label, v in (
-                    ("id:", r.sample_id),
-                    ("by ", r.operator),
-                    ("#", " #".join(r.tags)),
-                )
-                if v
+        return 0
+    print(f"{'RUN':>5}  {'KIND':5}  {'STATUS':11}  {'READINGS':>8}  {'CREATED (UTC)':19}  SAMPLE")
+    for b in listing.runs:
+        r, n = b.record, b.readings
+        status = "damaged" if r.damage else "interrupted" if b.interrupted else r.status
+        readings = "?" if n is None else str(n)
+        extra = "".join(
+            f"  {label}{safe_text(v)}"
+            for label, v in (
+                ("id:", r.sample_id),
+                ("by ", r.operator),
+                ("#", " #".join(r.tags)),
             )
-            print(
-                f"{r.id:>5}  {safe_text(r.kind):5}  {status:11}  {readings:>8}  "
-                f"{_when(r.created_at):19}  {safe_text(r.sample)}{extra}"
-            )
-            if r.damage:
-                print(f"       damaged: {safe_text(r.damage)}")
-            elif n is None:
-                print("       damaged: its readings cannot be counted (a damaged page)")
+            if v
+        )
+        print(
+            f"{r.id:>5}  {safe_text(r.kind):5}  {status:11}  {readings:>8}  "
+            f"{_when(r.created_at):19}  {safe_text(r.sample)}{extra}"
+        )
+        if r.damage:
+            print(f"       damaged: {safe_text(r.damage)}")
+        elif n is None:
+            print("       damaged: its readings cannot be counted (a damaged page)")
     return 0
 
 
@@ -152,33 +79,6 @@ def safe_text(text: str) -> str:
     if text.isprintable():
         return text
     return "".join(c if c.isprintable() else f"\\x{ord(c):02x}" for c in text)
-
-
-def interrupted(store: RunStore, r: RunRecord) -> bool:
-    """A run stored as running/paused that no runner holds (its process died)."""
-    return r.status in ("running", "paused") and store.is_claimed(r.id) is False
-
-
-def _brief(store: RunStore, r: RunRecord, readings: int | None) -> dict[str, Any]:
-    doc = {
-        "id": r.id,
-        "uuid": r.uuid,
-        "kind": r.kind,
-        "status": r.status,
-        "interrupted": interrupted(store, r),
-        "reason": r.reason,
-        "sample": r.sample,
-        "sample_id": r.sample_id,
-        "operator": r.operator,
-        "tags": list(r.tags),
-        "notes": r.notes,
-        "readings": readings,
-        "created_at": r.created_at,
-        "finished_at": r.finished_at,
-    }
-    if r.damage:
-        doc["damage"] = r.damage
-    return doc
 
 
 def angles_text(angles_deg: Sequence[float]) -> str:
@@ -207,20 +107,6 @@ def plan_text(plan: dict[str, Any]) -> str:
         )
     except (KeyError, TypeError, ValueError):
         return json.dumps(plan, sort_keys=True)
-
-
-def run_colour(store: RunStore, rec: RunRecord) -> list[dict[str, Any]]:
-    """Per-geometry measured and predicted colour of a BRDF run ([] for gloss runs)."""
-    if rec.kind != "brdf":
-        return []
-    from goniolab.scan.colour import PointColour, colour_rows
-
-    theta_i = float(rec.plan.get("theta_i_deg", 45.0))
-    try:
-        pc: PointColour | None = PointColour.from_snapshot(rec.config)
-    except (TypeError, ValueError, AttributeError):
-        pc = None  # a damaged snapshot: repeats averaged as L*a*b*
-    return colour_rows(store.points(rec.id), store.predicted_colours(rec.id), theta_i, pc)
 
 
 def _f(v: Any, fmt: str = "6.1f") -> str:
@@ -264,103 +150,85 @@ def colour_text(rows: list[dict[str, Any]], theta_i_deg: float = 45.0) -> list[s
 
 
 def _cmd_show(args: argparse.Namespace) -> int:
-    with open_store(args.store, args.config) as store:
-        rec = _get_run(store, args.run)
-        summary = run_summary(store, rec)
-        colour = run_colour(store, rec)
-        if args.json:
-            doc = {
-                "run": rec.as_dict(),
-                "interrupted": interrupted(store, rec),
-                "summary": summary,
-                "colour": colour,
-            }
-            print(jsonout.dumps(doc, indent=2))
-            return 0
-        status = rec.status
-        if interrupted(store, rec):
-            status += " (interrupted: no goniolab process is measuring it)"
-        print(f"run {rec.id} ({safe_text(rec.kind)}) on {safe_text(rec.sample) or '-'}: {status}")
-        print(f"  uuid {rec.uuid}")
-        for label, value in (
-            ("physical sample id", rec.sample_id),
-            ("operator", rec.operator),
-            ("tags", ", ".join(rec.tags)),
-            ("notes", rec.notes),
+    from goniolab.app.stored_runs import show_run
+
+    view = show_run(args.run, args.store, args.config)
+    rec, summary, colour = view.record, view.summary, view.colour
+    if args.json:
+        print(jsonout.dumps(view.as_dict(), indent=2))
+        return 0
+    status = rec.status
+    if view.interrupted:
+        status += " (interrupted: no goniolab process is measuring it)"
+    print(f"run {rec.id} ({safe_text(rec.kind)}) on {safe_text(rec.sample) or '-'}: {status}")
+    print(f"  uuid {rec.uuid}")
+    for label, value in (
+        ("physical sample id", rec.sample_id),
+        ("operator", rec.operator),
+        ("tags", ", ".join(rec.tags)),
+        ("notes", rec.notes),
+    ):
+        if value:
+            print(f"  {label}: {safe_text(value)}")
+    if rec.reason:
+        print(f"  reason: {safe_text(rec.reason)}")
+    print(f"  created {_when(rec.created_at)} UTC, finished {_when(rec.finished_at)} UTC")
+    print(f"  goniolab {rec.version}; model {json.dumps(rec.model, sort_keys=True)}")
+    print(f"  plan: {plan_text(rec.plan)}")
+    if rec.kind == "brdf":
+        from goniolab.commands.scan import format_summary
+
+        print(format_summary(summary))
+        if any("L" in r for r in colour):
+            print("  colour (reflectance factor, per geometry):")
+            theta_i = float(rec.plan.get("theta_i_deg", 45.0))
+            print("\n".join(colour_text(colour, theta_i)))
+    elif rec.kind in ("align", "calibration"):
+        print(f"  readings: {summary['readings']} (the result: the model's {rec.kind} record)")
+        result = summary.get("alignment") or {}
+        for label, key in (
+            ("lamp arm zero offset", "lamp_zero_deg"),
+            ("detector arm zero offset", "detector_zero_deg"),
+            ("sample tilt", "sample_tilt_deg"),
         ):
-            if value:
-                print(f"  {label}: {safe_text(value)}")
-        if rec.reason:
-            print(f"  reason: {safe_text(rec.reason)}")
-        print(f"  created {_when(rec.created_at)} UTC, finished {_when(rec.finished_at)} UTC")
-        print(f"  goniolab {rec.version}; model {json.dumps(rec.model, sort_keys=True)}")
-        print(f"  plan: {plan_text(rec.plan)}")
-        if rec.kind == "brdf":
-            from goniolab.commands.scan import format_summary
-
-            print(format_summary(summary))
-            if any("L" in r for r in colour):
-                print("  colour (reflectance factor, per geometry):")
-                theta_i = float(rec.plan.get("theta_i_deg", 45.0))
-                print("\n".join(colour_text(colour, theta_i)))
-        elif rec.kind in ("align", "calibration"):
-            print(f"  readings: {summary['readings']} (the result: the model's {rec.kind} record)")
-            result = summary.get("alignment") or {}
-            for label, key in (
-                ("lamp arm zero offset", "lamp_zero_deg"),
-                ("detector arm zero offset", "detector_zero_deg"),
-                ("sample tilt", "sample_tilt_deg"),
-            ):
-                if isinstance(result.get(key), int | float):
-                    print(f"  {label}: {result[key]:+.3f} deg")
-        else:
-            predicted = rec.model.get("predicted_gu") or {}
-            for angle, st in summary["statistics"].items():
-                pred = predicted.get(angle)
-                print(
-                    f"  G{angle}: {st['mean_gu']:.1f} +- {st['std_gu']:.1f} GU (n = {st['n']})"
-                    + ("" if pred is None else f", predicted {float(pred):.1f} GU")
-                )
-        if rec.status != "done" and rec.kind == "brdf":
-            from goniolab.commands.scan import resume_command
-
-            print(f"  continue it with: {resume_command(rec.id, store)}")
+            if isinstance(result.get(key), int | float):
+                print(f"  {label}: {result[key]:+.3f} deg")
+    else:
+        predicted = rec.model.get("predicted_gu") or {}
+        for angle, st in summary["statistics"].items():
+            pred = predicted.get(angle)
+            print(
+                f"  G{angle}: {st['mean_gu']:.1f} +- {st['std_gu']:.1f} GU (n = {st['n']})"
+                + ("" if pred is None else f", predicted {float(pred):.1f} GU")
+            )
+    if view.resume is not None:
+        print(f"  continue it with: {view.resume}")
     return 0
 
 
 def _cmd_colour(args: argparse.Namespace) -> int:
-    from goniolab.commands._colour import colour_report, colour_report_text, load_tolerance
+    from goniolab.app.colours import runs_colour
+    from goniolab.commands._colour import colour_report_text
 
-    tolerance = load_tolerance(args.tolerance)
-    with open_store(args.store, args.config) as store:
-        rec = _get_run(store, args.run)
-        if rec.kind != "brdf":
-            raise UserError(
-                f"run {rec.id} is {a_run_of_kind(rec.kind)}: colour needs a scan (brdf) run"
-            )
-        other = None
-        if args.vs is not None:
-            other = _get_run(store, args.vs)
-            if other.kind != "brdf":
-                raise UserError(f"run {other.id} is a {other.kind} run: --vs needs a scan run")
-        doc = colour_report(
-            store,
-            rec,
-            other,
-            tolerance=tolerance,
-            illuminants=list(args.illuminant),
-            metamerism=bool(args.metamerism),
-        )
+    report = runs_colour(
+        args.run,
+        vs=args.vs,
+        tolerance=args.tolerance,
+        illuminants=list(args.illuminant),
+        metamerism=bool(args.metamerism),
+        store=args.store,
+        config=args.config,
+    )
     if args.json:
-        print(jsonout.dumps(doc, indent=2))
+        print(jsonout.dumps(report.doc, indent=2))
         return 0
-    print(f"run {rec.id} on {rec.sample or '-'}: colour per geometry")
-    print("\n".join(colour_report_text(doc)))
+    print(f"run {report.record.id} on {report.record.sample or '-'}: colour per geometry")
+    print("\n".join(colour_report_text(report.doc)))
     return 0
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
-    from goniolab.export import EXPORTERS, export_run, resolve_format
+    from goniolab.app.stored_runs import export_run
 
     fmt = args.format
     if args.json and not args.output:
@@ -371,177 +239,86 @@ def _cmd_export(args: argparse.Namespace) -> int:
                 f"give -o FILE to write {fmt} (then --json reports what was written)"
             )
         fmt = "json"
-    try:
-        fmt = resolve_format(fmt, args.output)
-    except ValueError as exc:  # issue 27: `-o run.xlsx` wrote CSV silently
-        raise UserError(f"runs export: {exc}") from None
-    if EXPORTERS[fmt].binary and not args.output:
-        raise UserError(
-            f"runs export --format {fmt}: a binary format needs -o FILE "
-            f"(e.g. -o run{EXPORTERS[fmt].suffix})"
-        )
-    from goniolab.store import StoreError
-
-    with open_store(args.store, args.config) as store:
-        _get_run(store, args.run)
-        try:
-            text = export_run(store, args.run, fmt, args.output)
-        except OSError as exc:
-            raise UserError(
-                f"cannot write {args.output}: {exc.strerror or exc}"
-                + (f" ({args.output} is left as it was)" if Path(args.output).exists() else "")
-            ) from exc
-        except StoreError as exc:
-            raise UserError(str(exc)) from exc
-    if args.output:
-        if args.json:
-            doc = {"run_id": args.run, "format": fmt, "output": str(Path(args.output).resolve())}
-            print(jsonout.dumps(doc, indent=2))
-        else:
-            print(f"run {args.run} written to {args.output} ({fmt})", file=sys.stderr)
-    else:
+    done = export_run(args.run, fmt, args.output, store=args.store, config=args.config)
+    if done.output is None:
+        text = done.text
         sys.stdout.write(text if text.endswith("\n") or not text else text + "\n")
+    elif args.json:
+        doc = {"run_id": args.run, "format": done.format, "output": str(done.output.resolve())}
+        print(jsonout.dumps(doc, indent=2))
+    else:
+        print(f"run {args.run} written to {args.output} ({done.format})", file=sys.stderr)
     return 0
-
-
-def _same_store(src: RunStore, dst: RunStore) -> bool:
-    """Whether two open stores are one (a symlink, a relative path, another spelling of
-    the URL): the same store UUID, or for files the same file."""
-    a, b = src.store_uuid, dst.store_uuid
-    if a is not None and b is not None:
-        return a == b
-    if not (src.is_postgres or dst.is_postgres):
-        try:
-            return src.path.resolve().samefile(dst.path.resolve())
-        except OSError:
-            return False
-    return False
 
 
 def _cmd_import(args: argparse.Namespace) -> int:
     """Import JSON exports (matched by run UUID); one line per file, errors per file."""
-    from goniolab.store import RunStore, StoreError, import_json_export
+    from goniolab.app.stored_runs import import_runs
 
-    target = store_path(args.store, args.config)
-    try:
-        dst = RunStore(target)
-    except StoreError as exc:
-        raise UserError(str(exc)) from exc
-    done: list[dict[str, Any]] = []
-    failed = 0
-    with dst:
-        for name in args.files:
-            try:
-                here, action, uuid = import_json_export(dst, name)
-            except StoreError as exc:
-                failed += 1
-                print(f"goniolab: error: runs import: {exc}", file=sys.stderr)
-                done.append({"file": name, "error": str(exc)})
-                continue
-            done.append({"file": name, "run_id": here, "uuid": uuid, "action": action})
-            if not args.json:
-                print(f"{name}: run {here} ({uuid}) {action}; no spectra in a JSON export")
+    done = import_runs(args.files, args.store, args.config)
+    for row in done:
+        if "error" in row:
+            print(f"goniolab: error: runs import: {row['error']}", file=sys.stderr)
+        elif not args.json:
+            print(f"{row['file']}: run {row['run_id']} ({row['uuid']}) {row['action']}; "
+                  "no spectra in a JSON export")  # fmt: skip
     if args.json:
         print(json.dumps(done, indent=2))
-    return 2 if failed else 0
+    return 2 if any("error" in row for row in done) else 0
 
 
 def _cmd_migrate(args: argparse.Namespace) -> int:
     """Copy every run of an SQLite store (or another store) into the target store, matched
     by run UUID: new runs are copied, partial copies brought up to date."""
-    from goniolab.store import RunStore, StoreError, is_store_url
+    from goniolab.app.stored_runs import migrate_runs
 
-    source = args.source if is_store_url(args.source) else Path(args.source).expanduser()
-    target = store_path(args.store, args.config)
-    if isinstance(source, Path) and isinstance(target, Path):
-        same = source.resolve() == target.resolve() or (
-            source.exists() and target.exists() and source.samefile(target)
-        )
-        if same:
-            raise UserError(f"runs migrate: --from {args.source} is the target store itself")
-    try:
-        src = RunStore(source, readonly=True)
-    except StoreError as exc:
-        raise UserError(str(exc)) from exc
-    moved: list[dict[str, Any]] = []
-    errors = 0
-    with src:
-        try:
-            dst = RunStore(target)
-        except StoreError as exc:
-            raise UserError(str(exc)) from exc
-        with dst:
-            if _same_store(src, dst):
-                raise UserError(
-                    f"runs migrate: --from {src.location} is the target store {dst.location} "
-                    "itself (the same store UUID)"
-                )
-            try:
-                runs = sorted(src.list_runs(), key=lambda r: r.id)
-            except StoreError as exc:
-                raise UserError(str(exc)) from exc
-            for rec in runs:
-                entry: dict[str, Any] = {"from": rec.id, "uuid": rec.uuid}
-                if rec.status in ("running", "paused") and src.is_claimed(rec.id):
-                    entry.update(to=None, copied=False, action="skipped")
-                    why = "being measured right now; run migrate again when it has finished"
-                    entry["reason"] = why
-                    moved.append(entry)
-                    if not args.json:
-                        print(f"run {rec.id} ({rec.kind}, {rec.status}): skipped: {why}")
-                    continue
-                try:
-                    new_id, action = dst.copy_run_from(src, rec.id)
-                except StoreError as exc:
-                    errors += 1
-                    entry.update(to=None, copied=False, action="error", error=str(exc))
-                    moved.append(entry)
-                    print(f"run {rec.id}: not copied: {exc}", file=sys.stderr)
-                    continue
-                entry.update(to=new_id, copied=action == "copied", action=action)
-                moved.append(entry)
-                if not args.json:
-                    what = {
-                        "copied": "copied as",
-                        "updated": "brought up to date in",
-                        "unchanged": "already there as",
-                    }[action]
-                    print(f"run {rec.id} ({rec.kind}, {rec.status}): {what} run {new_id}")
-            where = dst.location
+    def said(entry: dict[str, Any], rec: Any) -> None:  # rec: the source run's record
+        action = entry["action"]
+        if action == "error":
+            print(f"run {rec.id}: not copied: {entry['error']}", file=sys.stderr)
+        elif args.json:
+            return
+        elif action == "skipped":
+            print(f"run {rec.id} ({rec.kind}, {rec.status}): skipped: {entry['reason']}")
+        else:
+            what = {
+                "copied": "copied as",
+                "updated": "brought up to date in",
+                "unchanged": "already there as",
+            }[action]
+            print(f"run {rec.id} ({rec.kind}, {rec.status}): {what} run {entry['to']}")
+
+    done = migrate_runs(args.source, args.store, args.config, on_run=said)
     if args.json:
-        print(json.dumps({"source": src.location, "target": where, "runs": moved}, indent=2))
+        print(json.dumps({"source": done.source, "target": done.target, "runs": done.runs},
+                         indent=2))  # fmt: skip
     else:
-        n = sum(1 for m in moved if m["action"] == "copied")
-        u = sum(1 for m in moved if m["action"] == "updated")
+        n = sum(1 for m in done.runs if m["action"] == "copied")
+        u = sum(1 for m in done.runs if m["action"] == "updated")
         print(
-            f"{n} of {len(moved)} runs copied, {u} updated, from {src.location} to {where}"
-            + (f"; {errors} could not be read" if errors else ""),
+            f"{n} of {len(done.runs)} runs copied, {u} updated, from {done.source} to "
+            f"{done.target}" + (f"; {done.errors} could not be read" if done.errors else ""),
             file=sys.stderr,
         )
-    return 1 if errors else 0
+    return 1 if done.errors else 0
 
 
 def _cmd_annotate(args: argparse.Namespace) -> int:
     """Set a run's operator, physical sample id, notes and tags."""
+    from goniolab.app.stored_runs import annotate_run
     from goniolab.commands.scan import run_meta_args
-    from goniolab.store import RunStore, StoreError
 
     meta = run_meta_args(args)
-    tags: list[str] | None = None
-    try:
-        with RunStore(store_path(args.store, args.config), create=False) as store:
-            rec = store.get_run(args.run, allow_damaged=True)
-            if meta.tags or args.untag:
-                tags = [t for t in (*rec.tags, *meta.tags) if t not in set(args.untag)]
-            rec = store.set_meta(
-                args.run,
-                operator=args.operator,
-                sample_id=args.sample_id,
-                notes=args.note,
-                tags=tags,
-            )
-    except StoreError as exc:
-        raise UserError(str(exc)) from exc
+    rec = annotate_run(
+        args.run,
+        store=args.store,
+        config=args.config,
+        operator=args.operator,
+        sample_id=args.sample_id,
+        notes=args.note,
+        add_tags=meta.tags,
+        remove_tags=args.untag,
+    )
     if args.json:
         print(json.dumps(rec.as_dict(), indent=2))
     else:

@@ -10,18 +10,13 @@ import json
 import sys
 from typing import Any
 
-from goniolab.errors import UserError
-
 __all__ = ["register"]
 
 
 def _cmd_samples(args: argparse.Namespace) -> int:
-    from goniolab.surfaces.synthetic import SampleError, sample_info, sample_names
+    from goniolab.app.sample_maps import list_samples
 
-    try:
-        infos = [sample_info(name) for name in sample_names()]
-    except SampleError as exc:
-        raise UserError(str(exc)) from None
+    infos = list_samples()
     rows = [
         {
             "name": i.name,
@@ -52,40 +47,25 @@ def _cmd_samples(args: argparse.Namespace) -> int:
 
 
 def _cmd_save(args: argparse.Namespace) -> int:
-    from pathlib import Path
+    from goniolab.app.sample_maps import save_sample
 
-    from goniolab.optics.heightmap import HeightMapError
-    from goniolab.surfaces.registry import save_heightmap
-    from goniolab.surfaces.synthetic import SampleError, make_sample
-
-    name = args.name.removeprefix("sample:")
-    try:
-        hm = make_sample(name, size=args.size, seed=args.seed, step_um=args.step_um)
-    except SampleError as exc:
-        raise UserError(str(exc)) from None
-    path = Path(args.file)
-    if path.exists() and not args.force:
-        raise UserError(f"{path}: exists; pass --force to overwrite it")
-    if not path.parent.is_dir():
-        raise UserError(f"{path}: no such directory {path.parent}")
-    try:
-        save_heightmap(hm, path, fmt=args.format)
-    except HeightMapError as exc:
-        raise UserError(str(exc)) from None
-    ny, nx = hm.z_um.shape
-    info = {
-        "sample": f"sample:{name}",
-        "file": str(path),
-        "shape": [ny, nx],
-        "step_um": [hm.dx_um, hm.dy_um],
-        "field_um": [nx * hm.dx_um, ny * hm.dy_um],
-    }
+    saved = save_sample(
+        args.name,
+        args.file,
+        size=args.size,
+        seed=args.seed,
+        step_um=args.step_um,
+        fmt=args.format,
+        force=args.force,
+    )
     if args.json:
-        print(json.dumps(info))
+        print(json.dumps(saved.as_dict()))
     else:
+        ny, nx = saved.shape
+        dx, dy = saved.dx_um, saved.dy_um
         print(
-            f"goniolab: wrote sample:{name} to {path} ({nx} x {ny} points, step "
-            f"{hm.dx_um:g} um, field {nx * hm.dx_um:g} x {ny * hm.dy_um:g} um)",
+            f"goniolab: wrote {saved.sample} to {saved.file} ({nx} x {ny} points, step "
+            f"{dx:g} um, field {nx * dx:g} x {ny * dy:g} um)",
             file=sys.stderr,
         )
     return 0

@@ -65,46 +65,40 @@ async def _serve(config_path: str, time_scale: float | None, as_json: bool) -> i
     import asyncio
     import signal
 
-    from drivers.timing import SimClock
-    from goniolab.config import load_lab_config
-    from goniolab.lab_wiring import build_sim_instruments, build_sim_server, sample_model
+    from goniolab.app.lab_scan import serve_simulated_lab
+    from goniolab.app.lab_setup import load_config
 
-    cfg = load_lab_config(config_path)
-    scale = cfg.lab.time_scale if time_scale is None else time_scale
-    model = await asyncio.to_thread(sample_model, cfg)
-    sims = build_sim_instruments(cfg, model, SimClock(scale))
-    server = build_sim_server(cfg, sims)
+    cfg = load_config(config_path)
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
     try:
-        try:
-            await server.start()
-        except OSError as exc:
-            raise UserError(f"cannot start the simulated lab: {exc}", exit_code=1) from None
-        endpoints = server.endpoints()
-        if as_json:
-            print(
-                json.dumps({"config": config_path, "time_scale": scale, "endpoints": endpoints}),
-                flush=True,
-            )
-        else:
-            print(f"goniolab: simulated lab from {config_path} (clock x{scale:g}):")
-            for name, ep in endpoints.items():
-                if "unit_id" not in ep:
-                    where = f"serial {ep['port']} -> {ep['pty']}"
-                elif ep["transport"] == "tcp":
-                    where = f"modbus tcp {ep['host']}:{ep['port']} unit {ep['unit_id']}"
-                else:
-                    where = f"modbus rtu {ep['serial_port']} unit {ep['unit_id']}"
-                print(f"  {name:<10} {where}  (profile {ep['profile']})")
-            print("Ctrl-C to stop.", flush=True)
-        await stop.wait()
+        async with serve_simulated_lab(cfg, time_scale=time_scale) as served:
+            _show(served.endpoints, config_path, served.time_scale, as_json)
+            await stop.wait()
     finally:
-        await server.stop()
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.remove_signal_handler(sig)
     if not as_json:
         print("goniolab: simulated lab stopped", file=sys.stderr)
     return 0
+
+
+def _show(endpoints: dict[str, Any], config_path: str, scale: float, as_json: bool) -> None:
+    if as_json:
+        print(
+            json.dumps({"config": config_path, "time_scale": scale, "endpoints": endpoints}),
+            flush=True,
+        )
+    else:
+        print(f"goniolab: simulated lab from {config_path} (clock x{scale:g}):")
+        for name, ep in endpoints.items():
+            if "unit_id" not in ep:
+                where = f"serial {ep['port']} -> {ep['pty']}"
+            elif ep["transport"] == "tcp":
+                where = f"modbus tcp {ep['host']}:{ep['port']} unit {ep['unit_id']}"
+            else:
+                where = f"modbus rtu {ep['serial_port']} unit {ep['unit_id']}"
+            print(f"  {name:<10} {where}  (profile {ep['profile']})")
+        print("Ctrl-C to stop.", flush=True)

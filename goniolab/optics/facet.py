@@ -121,7 +121,7 @@ from goniolab.optics.facet_backends import (
 )
 from goniolab.optics.fresnel import fresnel, fresnel_dielectric
 from goniolab.optics.slope_statistics import SlopeStatistics
-from goniolab.optics.surface import Surface
+from goniolab.optics.surface import STREAM_MIN_FACETS, Surface
 
 #: the facet model's public names; the cap overlaps and the thread limit are defined with
 #: the aperture integration and the kernel backends and keep this import path
@@ -139,6 +139,9 @@ Backend = Literal["numba", "numpy", "lean"]
 
 #: luminance_pct evaluates up to this many detector angles exactly, facet by facet.
 _EXACT_MAX_POINTS = 2
+#: The lean backend's numpy kernels take at most this many slope cells per call (their
+#: temporaries, about ten arrays of the cells, stay a few tens of MB on any map).
+_CELLS_PER_CALL = 1 << 20
 
 
 @dataclass(frozen=True, eq=False)
@@ -249,8 +252,17 @@ class FacetModel:
         self.grid_step_deg = float(grid_step_deg)
         self._seed = weighting == "seed"
         # The kernels take the slopes and form each normal on the fly (an empty third array
-        # says so, see goniolab.optics._kernels): no normal arrays beside the slopes.
-        self._mx, self._my, self._mz = surface.p, surface.q, SLOPES
+        # says so, see goniolab.optics._kernels): no normal arrays beside the slopes. A
+        # map's surface forms them when first asked (goniolab.optics.surface.MapSurface).
+        self._mz = SLOPES
+
+    @property
+    def _mx(self) -> FloatArray:
+        return self.surface.p
+
+    @property
+    def _my(self) -> FloatArray:
+        return self.surface.q
 
     def __repr__(self) -> str:
         return (
@@ -260,7 +272,7 @@ class FacetModel:
 
     # ------------------------------------------------------------------ kernel dispatch
     def _chunks(self) -> list[tuple[FloatArray, FloatArray, FloatArray]]:
-        n = self._mx.size
+        n = self.surface.n_facets
         cpus = thread_limit() or os.cpu_count() or 1
         n_threads = max(1, min(cpus, n // MIN_CHUNK))
         if self.backend != "numba" or n_threads == 1:
@@ -291,8 +303,13 @@ class FacetModel:
             if near is not None:
                 p, q = self._facets_near(wi, *near)
                 return [numpy_fn(p, q, SLOPES, *common)]
-            cp, cq, counts = self._slope_cells
-            return [numpy_fn(cp, cq, SLOPES, *common, counts=counts)]
+            cp, cq, counts = self._slope_cells  # in blocks: a block's temporaries only
+            return [
+                numpy_fn(cp[a:b], cq[a:b], SLOPES, *common, counts=counts[a:b])
+                for a, b in itertools.pairwise([*range(0, cp.size, _CELLS_PER_CALL), cp.size])
+            ]
+        if self.surface.streamed and self.surface.n_facets > STREAM_MIN_FACETS:
+            return self._run_blocks(numpy_fn if self.backend == "numpy" else kernel, common)
         chunks = self._chunks()
         if self.backend == "numpy":
             return [numpy_fn(*c, *common) for c in chunks]
@@ -302,17 +319,45 @@ class FacetModel:
         futures = [kernel_pool().submit(numba_fn, *c, *common) for c in chunks]
         return [f.result() for f in futures]
 
+    def _run_blocks(self, kernel: Any, common: tuple[Any, ...]) -> list[Any]:
+        """:meth:`_run`'s per-facet kernels over a large map's surface, block by block as
+        it forms them (:meth:`~goniolab.optics.surface.Surface.slope_blocks`): numba's on
+        up to as many blocks at once as threads, the numpy twin (``kernel`` a function) one
+        by one. The map's facets are never all held, nor the blocks' results: they are
+        summed as they come (every kernel's result is a sum over facets)."""
+
+        def add(a: Any, b: Any) -> Any:
+            return b if a is None else tuple(map(add, a, b)) if isinstance(a, tuple) else a + b
+
+        total: Any = None
+        if callable(kernel):
+            for p, q in self.surface.slope_blocks():
+                total = add(total, kernel(p, q, SLOPES, *common))
+            return [total]
+        numba_fn = getattr(numba_kernels(), kernel + "_numba")
+        width = max(1, thread_limit() or os.cpu_count() or 1)
+        wave: list[Any] = []
+        for p, q in self.surface.slope_blocks():
+            wave.append(kernel_pool().submit(numba_fn, p, q, SLOPES, *common))
+            if len(wave) >= width:
+                for f in wave:
+                    total = add(total, f.result())
+                wave = []
+        for f in wave:
+            total = add(total, f.result())
+        return [total]
+
     @cached_property
     def _slope_cells(self) -> tuple[FloatArray, FloatArray, FloatArray]:
         """The lean backend's slope cells ``(p, q, count)``
         (:func:`goniolab.optics.facet_backends.slope_cells`)."""
-        return slope_cells(self.surface.p, self.surface.q, self.surface.source)
+        return slope_cells(self.surface)
 
     def _facets_near(
         self, wi: FloatArray, alpha_rad: float, reach_a: float, reach_b: float
     ) -> tuple[FloatArray, FloatArray]:
         """The facets a narrow slit can reach (:func:`goniolab.optics.facet_backends.facets_near`)."""
-        return facets_near(self.surface.p, self.surface.q, wi, alpha_rad, reach_a, reach_b)
+        return facets_near(self.surface, None, wi, alpha_rad, reach_a, reach_b)
 
     # ------------------------------------------------------------------ slope statistics
     def slope_density(self, p: ArrayLike, q: ArrayLike) -> FloatArray:

@@ -23,6 +23,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from goniolab.optics.surface import Surface
+
 __all__ = [
     "LEAN_EXACT_BELOW_DEG",
     "LEAN_SLOPE_BIN",
@@ -63,13 +65,17 @@ _MAX_SLOPE_CELLS = 1 << 30
 SLOPES: FloatArray = np.empty(0)
 
 
-def check_slope_range(p: FloatArray, q: FloatArray, bin_: float, source: str) -> None:
+def check_slope_range(
+    p: FloatArray, q: FloatArray, bin_: float, source: str, *, worst: float | None = None
+) -> None:
     """Refuse slopes the lean histogram cannot index, naming the map and the range.
 
     A slope of ``2**30 * 1e-3`` (about 1e6, a facet 6e-5 deg from vertical) means a map
-    in the wrong units or with the wrong step, not a surface.
+    in the wrong units or with the wrong step, not a surface. ``worst``: the largest
+    ``|slope|`` when already known (``p`` and ``q`` are then not read).
     """
-    worst = max(float(np.max(np.abs(p))), float(np.max(np.abs(q))))
+    if worst is None:
+        worst = max(float(np.max(np.abs(p))), float(np.max(np.abs(q))))
     if not (math.isfinite(worst) and worst / bin_ < _MAX_SLOPE_CELLS):
         raise ValueError(
             f"{source}: slopes up to {worst:.3g} (a facet {math.degrees(math.atan(worst)):.6g} "
@@ -124,7 +130,7 @@ def thread_limit() -> int | None:
 
 
 def slope_cells(
-    p: FloatArray, q: FloatArray, source: str
+    p: FloatArray | Surface, q: FloatArray | None = None, source: str = ""
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """The occupied cells of the slope histogram of bin :data:`LEAN_SLOPE_BIN`:
     ``(p, q, count)`` of each cell's centre, for the ``"lean"`` backend (the slopes
@@ -141,26 +147,33 @@ def slope_cells(
     per facet (or :data:`_DENSE_MIN_CELLS`), otherwise only the occupied cells are counted (a sort of each
     block's cell keys, merged), at most one per facet. A slope range whose cell index
     does not fit 64-bit integers is refused (:func:`_check_slope_range`).
+
+    ``slope_cells(surface)`` takes the slopes of a
+    :class:`~goniolab.optics.surface.Surface` block by block
+    (:meth:`~goniolab.optics.surface.Surface.slope_blocks`): a map's surface then forms
+    them from the map as it goes, and the count never holds the map's facets.
     """
+    surface = p if isinstance(p, Surface) else Surface(p=p, q=p if q is None else q, source=source)
     b = LEAN_SLOPE_BIN
-    check_slope_range(p, q, b, source)
-    p0 = math.floor(float(p.min()) / b + 0.5)
-    q0 = math.floor(float(q.min()) / b + 0.5)
-    n_q = math.floor(float(q.max()) / b + 0.5) - q0 + 1
-    n_p = math.floor(float(p.max()) / b + 0.5) - p0 + 1
-    size = p.size
+    p_lo, p_hi, q_lo, q_hi = surface.slope_range
+    worst = max(abs(p_lo), abs(p_hi), abs(q_lo), abs(q_hi))
+    check_slope_range(SLOPES, SLOPES, b, surface.source, worst=worst)
+    p0 = math.floor(p_lo / b + 0.5)
+    q0 = math.floor(q_lo / b + 0.5)
+    n_q = math.floor(q_hi / b + 0.5) - q0 + 1
+    n_p = math.floor(p_hi / b + 0.5) - p0 + 1
+    size = surface.n_facets
     dense = n_p * n_q <= max(_DENSE_CELLS_PER_FACET * size, _DENSE_MIN_CELLS)
     counts = np.zeros(n_p * n_q if dense else 0, dtype=np.int64)
     keys: list[NDArray[np.int64]] = []
     tallies: list[NDArray[np.int64]] = []
     # the cell index (ip - p0) n_q + (iq - q0), ip = floor(p/b + 1/2), block by block:
     # the temporaries stay a block's, not the map's
-    for lo in range(0, size, _CELL_BLOCK):
-        hi = min(lo + _CELL_BLOCK, size)
-        kp = np.multiply(p[lo:hi], 1.0 / b)
+    for pb, qb in _cell_blocks(surface):
+        kp = np.multiply(pb, 1.0 / b)
         kp += 0.5
         np.floor(kp, out=kp)
-        kq = np.multiply(q[lo:hi], 1.0 / b)
+        kq = np.multiply(qb, 1.0 / b)
         kq += 0.5
         np.floor(kq, out=kq)
         key = kp.astype(np.int64)
@@ -193,8 +206,24 @@ def slope_cells(
     return cp, cq, weights.astype(np.float64)
 
 
+def _cell_blocks(surface: Surface) -> Iterator[tuple[FloatArray, FloatArray]]:
+    """Blocks of :data:`_CELL_BLOCK` facets: a held surface's slices, a streamed map
+    surface's blocks as it forms them."""
+    if surface.streamed:
+        yield from surface.slope_blocks()
+        return
+    for pb, qb in surface.slope_blocks():
+        for lo in range(0, pb.size, _CELL_BLOCK):
+            yield pb[lo : lo + _CELL_BLOCK], qb[lo : lo + _CELL_BLOCK]
+
+
 def facets_near(
-    p: FloatArray, q: FloatArray, wi: FloatArray, alpha_rad: float, reach_a: float, reach_b: float
+    p: FloatArray | Surface,
+    q: FloatArray | None,
+    wi: FloatArray,
+    alpha_rad: float,
+    reach_a: float,
+    reach_b: float,
 ) -> tuple[FloatArray, FloatArray]:
     """Of the slopes ``p``, ``q``: those of a superset of the facets whose mirror direction of ``wi``
     lies within ``reach_a`` in plane of the in-plane angle ``alpha_rad`` and within
@@ -206,24 +235,58 @@ def facets_near(
     facets that can reach the rectangle of directions lie within the bounding box of
     the image of its edge (sampled on 64 points a side, the box widened by 1 % of its
     size). All facets when a corner of the rectangle leaves the hemisphere.
+
+    ``p`` may be a :class:`~goniolab.optics.surface.Surface` (``q`` None): its facets are
+    then selected block by block, in facet order (the same arrays).
     """
+    if isinstance(p, Surface):
+        surface = p
+        box = _near_box(wi, alpha_rad, reach_a, reach_b)
+        if box is None:
+            return surface.p, surface.q
+        parts = [_inside(pb, qb, box) for pb, qb in surface.slope_blocks()]
+        if len(parts) == 1:
+            return parts[0]
+        return np.concatenate([a for a, _ in parts]), np.concatenate([b for _, b in parts])
+    assert q is not None
+    box = _near_box(wi, alpha_rad, reach_a, reach_b)
+    if box is None:
+        return p, q
+    return _inside(p, q, box)
+
+
+def _near_box(
+    wi: FloatArray, alpha_rad: float, reach_a: float, reach_b: float
+) -> tuple[float, float, float, float] | None:
+    """:func:`facets_near`'s slope box ``(p_lo, p_hi, q_lo, q_hi)``; None: all facets."""
     t = np.linspace(-1.0, 1.0, 65)
     one = np.ones_like(t)
     al = alpha_rad + reach_a * np.concatenate([t, one, -t, -one])
     be = reach_b * np.concatenate([-one, t, one, -t])
     if np.any(np.abs(al) >= 0.5 * math.pi) or reach_b >= 0.5 * math.pi:
-        return p, q
+        return None
     hx = wi[0] - np.sin(al) * np.cos(be)
     hy = wi[1] + np.sin(be)
     hz = wi[2] + np.cos(al) * np.cos(be)
     if np.any(hz <= 1e-9):
-        return p, q
+        return None
     rp, rq = -hx / hz, -hy / hz
     wp = 0.01 * float(rp.max() - rp.min()) + 1e-12
     wq = 0.01 * float(rq.max() - rq.min()) + 1e-12
-    inside = p >= float(rp.min()) - wp
-    inside &= p <= float(rp.max()) + wp
-    inside &= q >= float(rq.min()) - wq
-    inside &= q <= float(rq.max()) + wq
+    return (
+        float(rp.min()) - wp,
+        float(rp.max()) + wp,
+        float(rq.min()) - wq,
+        float(rq.max()) + wq,
+    )
+
+
+def _inside(
+    p: FloatArray, q: FloatArray, box: tuple[float, float, float, float]
+) -> tuple[FloatArray, FloatArray]:
+    inside = p >= box[0]
+    inside &= p <= box[1]
+    inside &= q >= box[2]
+    inside &= q <= box[3]
     idx = np.flatnonzero(inside)
     return p[idx], q[idx]

@@ -36,6 +36,8 @@ __all__ = [
 ]
 
 FloatArray = NDArray[np.float64]
+#: Points per block of rows when a map is walked in blocks (8 MB of float64).
+_BLOCK_POINTS = 1 << 20
 StepArg = float | tuple[float, float] | None
 
 
@@ -56,10 +58,13 @@ class HeightMap:
     ----------
     z_um
         2-D heights in micrometres, rows = y, columns = x; NaN = missing point. Stored as a
-        read-only float64 copy, except that a read-only, C-contiguous float64 array owning
-        its memory is taken as it is (a reader or :func:`level_plane` hands its fresh array
-        over: no 32 MB copy of a 2048^2 map). ``inf`` is rejected (readers turn invalid
-        points into NaN).
+        read-only float64 copy, except that a read-only, C-contiguous float64 or float32
+        array owning its memory is taken as it is (a reader or :func:`level_plane` hands its
+        fresh array over: no 32 MB copy of a 2048^2 map, and a float32 file stays float32,
+        half the memory: an 8192^2 map is 256 MB, not 512). Every computation on the heights
+        is float64: sums accumulate in float64 and slopes are taken from blocks of rows cast
+        to float64 (:mod:`goniolab.optics.surface`), so a float32 map gives exactly what its
+        float64 copy would. ``inf`` is rejected (readers turn invalid points into NaN).
     dx_um, dy_um
         Lateral steps along x (columns) and y (rows) in micrometres, finite and > 0.
     source
@@ -86,7 +91,7 @@ class HeightMap:
         given = self.z_um
         if (
             isinstance(given, np.ndarray)
-            and given.dtype == np.float64
+            and given.dtype in (np.float64, np.float32)
             and not given.flags.writeable
             and given.flags.c_contiguous
             and (given.flags.owndata or _read_only_base(given))
@@ -104,7 +109,7 @@ class HeightMap:
         if z.size == 0:
             raise heightmap_error(src, f"height map has zero points (shape {z.shape})")
         # one fast reduction; only a non-finite sum (NaN, inf or overflow) needs the scan
-        if not math.isfinite(float(np.sum(z))) and np.isinf(z).any():
+        if not math.isfinite(float(np.sum(z, dtype=np.float64))) and np.isinf(z).any():
             raise heightmap_error(src, "heights contain inf (use NaN for missing points)")
         z.setflags(write=False)
         object.__setattr__(self, "z_um", z)
@@ -137,8 +142,11 @@ class HeightMap:
 
     @property
     def n_valid(self) -> int:
-        """Number of valid (non-NaN) points."""
-        return int(np.count_nonzero(~np.isnan(self.z_um)))
+        """Number of valid (non-NaN) points (counted in blocks of rows: no map-sized mask)."""
+        z = self.z_um
+        rows = max(1, _BLOCK_POINTS // max(1, z.shape[1]))
+        nan = sum(int(np.count_nonzero(np.isnan(z[r : r + rows]))) for r in range(0, len(z), rows))
+        return int(z.size - nan)
 
     @property
     def valid_fraction(self) -> float:
@@ -186,9 +194,9 @@ def plane_fit_and_completeness(hm: HeightMap) -> tuple[float, float, float, bool
     ny, nx = z.shape
     x = (np.arange(nx, dtype=np.float64) - (nx - 1) / 2.0) * hm.dx_um
     y = (np.arange(ny, dtype=np.float64) - (ny - 1) / 2.0) * hm.dy_um
-    col = z.sum(axis=0)
+    col = z.sum(axis=0, dtype=np.float64)  # a float32 map accumulates in float64
     if np.isfinite(col).all():
-        row = z.sum(axis=1)
+        row = z.sum(axis=1, dtype=np.float64)
         sxx = ny * float(x @ x)
         syy = nx * float(y @ y)
         a = float(col.sum()) / z.size
@@ -198,7 +206,7 @@ def plane_fit_and_completeness(hm: HeightMap) -> tuple[float, float, float, bool
     valid = ~np.isnan(z)
     if not valid.any():
         raise heightmap_error(hm.source, "cannot level: no valid points")
-    zz = np.where(valid, z, 0.0)
+    zz = np.where(valid, z.astype(np.float64, copy=False), 0.0)
     v = valid.astype(np.float64)
     vc, vr = v.sum(axis=0), v.sum(axis=1)
     sx, sy = float(vc @ x), float(vr @ y)
@@ -279,7 +287,7 @@ def fill_missing(hm: HeightMap, method: Literal["nearest", "mean"] = "nearest") 
     if not missing.any():
         return hm
     if method == "mean":
-        filled = np.where(missing, float(np.mean(z[~missing])), z)
+        filled = np.where(missing, float(np.mean(z[~missing], dtype=np.float64)), z)
     elif method == "nearest":
         from scipy import ndimage
 

@@ -39,10 +39,11 @@ factor) at the fewest FFTs (:func:`band_plan`). Heights are float32 and tiles of
 ``tile`` points (:mod:`goniolab.optics.psd`), levelled from the map block by block, so the
 transforms' memory is bounded by the tile whatever the map size: a traced peak of about 8
 float32 tiles (32 MB for 1024 x 1024; ``tests/optics/test_kirchhoff.py`` checks it does
-not grow with the map). What grows with the map is the map itself (float64, not copied)
-and, when a geometry falls back to it, the facet model's float64 slopes (twice the map):
-``goniolab predict gloss`` of a 4096 x 4096 ``.sur`` peaks at 594 MB RSS, about 165 MB of
-it the runtime (``bench/bench_bigmap.py``, README "Speed").
+not grow with the map). What grows with the map is the map itself (not copied; a float32
+``.npy`` stays float32) and nothing else: the facet model a geometry falls back to forms its
+slopes from the map block by block (:class:`goniolab.optics.surface.MapSurface`); an
+8192 x 8192 float32 map predicts within 2.1 x its size (``bench/bench_memory.py``,
+bench/README.md).
 
 Coherent and diffuse parts: the coherent specular reflectance is
 ``R(ti) |sum W exp(-i v_z h)|^2 / (sum W)^2`` (:meth:`KirchhoffModel.specular_reflectance`),

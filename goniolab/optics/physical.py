@@ -215,6 +215,19 @@ class PhysicalOpticsModel(EnergyBudget, CellApertures):
         self.backend: Backend = backend
         self.progress = progress
 
+    @property
+    def progress(self) -> Progress | None:
+        """``progress(done, total, what)`` or None; setting it also makes the facet work
+        on the same map report there (:meth:`SharedMap.report_to`: a large map's slopes,
+        walked block by block)."""
+        return self._progress
+
+    @progress.setter
+    def progress(self, fn: Progress | None) -> None:
+        self._progress = fn
+        if fn is not None:
+            self._shared.report_to(fn)
+
     # ------------------------------------------------------------------ construction
     def with_optics(
         self, *, n: complex | float | None = None, wavelength_nm: float | None = None

@@ -34,6 +34,7 @@ References
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Any
@@ -102,8 +103,8 @@ class TiledMap:
     """A levelled, gap-filled height map cut into equal windowed tiles (float32).
 
     The levelled heights are formed on demand, block by block (:meth:`levelled`,
-    :meth:`tile`), from the map's own float64 array and its best plane: a map without
-    missing points is not copied. A map with gaps is filled (nearest valid point) and
+    :meth:`tile`), from the map's own array (float64, or float32 as a float32 file is
+    read) and its best plane, in float64: a map without missing points is not copied. A map with gaps is filled (nearest valid point) and
     levelled once into a float32 copy (half the float64 map's size).
 
     Attributes
@@ -136,7 +137,8 @@ class TiledMap:
     sum_w2: float
     source: str
     filled: int
-    #: float64 heights with ``plane`` (a, b, c) still to subtract, or float32 levelled heights
+    #: the map's own heights (float64 or float32) with ``plane`` (a, b, c) still to
+    #: subtract (in float64), or float32 levelled heights
     #: (``plane`` None)
     _src: NDArray[np.float64] | NDArray[np.float32]
     _plane: tuple[float, float, float] | None
@@ -159,7 +161,7 @@ class TiledMap:
             hm = fill_missing(hm, "nearest")
             src, plane = np.asarray(level_plane(hm).z_um, dtype=np.float32), None
         else:
-            src, plane = np.asarray(hm.z_um, dtype=np.float64), plane_fit(hm)
+            src, plane = hm.z_um, plane_fit(hm)  # float64 or float32: not copied
         ys, nyt = tile_starts(ny, tile)
         xs, nxt = tile_starts(nx, tile)
         wy = schwartz_taper(nyt, taper).astype(np.float32)
@@ -333,12 +335,17 @@ def pruned_fft2(
 
 
 def psd_region(
-    tiled: TiledMap, ky: NDArray[np.int64], kx: NDArray[np.int64], os: tuple[int, int]
+    tiled: TiledMap,
+    ky: NDArray[np.int64],
+    kx: NDArray[np.int64],
+    os: tuple[int, int],
+    progress: Callable[[int, int, str], None] | None = None,
 ) -> FloatArray:
     """The PSD (um^4) of :func:`psd2` at the cells ``(ky, kx)`` (non-negative indices) of
     the tile's transform zero-padded ``os = (os_x, os_y)`` times: the same windowed
     periodogram sampled on a grid of frequencies ``1 / (os n step)``, so that a sum over
-    the padded cells times their area ``df_x df_y / (os_x os_y)`` still gives Sq^2."""
+    the padded cells times their area ``df_x df_y / (os_x os_y)`` still gives Sq^2.
+    ``progress(done, total, what)`` hears of each tile of a map of several."""
     acc = np.zeros((ky.size, kx.size))
     spec = np.empty((ky.size, kx.size), dtype=np.complex64)
     lengths = (os[1] * tiled.ny_t, os[0] * tiled.nx_t)
@@ -350,5 +357,7 @@ def psd_region(
             term = np.ascontiguousarray(term.T)
         pruned_fft2(term, ky, kx, y_first, spec, lengths)
         acc += np.abs(spec).astype(np.float64) ** 2
+        if progress is not None and tiled.n_tiles > 1:
+            progress(k + 1, tiled.n_tiles, "rayleigh-rice PSD tiles")
     out: FloatArray = acc * tiled.dx_um * tiled.dy_um / (tiled.sum_w2 * tiled.n_tiles)
     return out

@@ -192,7 +192,7 @@ class RayleighRiceModel(PhysicalOpticsModel):
             return self.psd.psd_um4[np.ix_(box.iy % ly, box.ix % lx)]
         key = ("psd-region", (box.ix0, box.ix1, box.iy0, box.iy1), os)
         out: FloatArray = self._shared.cached(
-            key, lambda: psd_region(t, box.iy % ly, box.ix % lx, os)
+            key, lambda: psd_region(t, box.iy % ly, box.ix % lx, os, self.progress)
         )
         return out
 

@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 from goniolab.optics.facet import FacetModel
 from goniolab.optics.heightmap import HeightMap
 from goniolab.optics.psd import TiledMap
-from goniolab.optics.surface import Surface
+from goniolab.optics.surface import MapSurface, Surface
 
 __all__ = ["MapStats", "SharedMap", "first_below"]
 
@@ -64,6 +64,17 @@ class SharedMap:
         self._facets: dict[tuple[complex, bool], FacetModel] = {}
         #: the other wave models of the same map, by (kind, n, wavelength, weighting, masking)
         self.siblings: dict[tuple[Any, ...], Any] = {}
+        #: where the facet models of this map report long walks (:meth:`report_to`)
+        self.progress: Callable[[int, int, str], None] | None = None
+
+    def report_to(self, fn: Callable[[int, int, str], None]) -> None:
+        """Make the facet models of this map (the shared one and the fallbacks) report
+        their walks over a large map's slopes to ``fn``
+        (:class:`~goniolab.optics.surface.MapSurface`)."""
+        with self.lock:
+            self.progress = fn
+            for facet in self._facets.values():
+                _report(facet, fn)
 
     def cached(self, key: tuple[Any, ...], make: Callable[[], Any]) -> Any:
         with self.lock:
@@ -120,6 +131,7 @@ class SharedMap:
             if key not in self._facets:
                 surf = self._facets_surface
                 self._facets[key] = FacetModel(surf, n=n, masking=masking)
+                _report(self._facets[key], self.progress)
             return self._facets[key]
 
     def adopt_facet(self, facet: FacetModel) -> None:
@@ -127,6 +139,7 @@ class SharedMap:
         masking: the ``auto`` model shares the one it already built."""
         with self.lock:
             self._facets[(facet.n, facet.masking)] = facet
+            _report(facet, self.progress)
 
     @cached_property
     def _facets_surface(self) -> Surface:
@@ -165,6 +178,11 @@ class SharedMap:
             step_um=max(t.dx_um, t.dy_um),
             field_um=min(t.nx_t * t.dx_um, t.ny_t * t.dy_um),
         )
+
+
+def _report(facet: FacetModel, fn: Callable[[int, int, str], None] | None) -> None:
+    if fn is not None and isinstance(facet.surface, MapSurface):
+        facet.surface.progress = fn
 
 
 def first_below(a: FloatArray, level: float) -> float:

@@ -196,7 +196,9 @@ class SlopeStatistics:
         n = self.surface.n_facets
         if n > _LAMBDA_MAX_FACETS:
             idx = np.linspace(0, n - 1, _LAMBDA_MAX_FACETS).astype(np.int64)
-            p, q = self.surface.p[idx], self.surface.q[idx]
+            p, q = self.surface.take(idx)  # a map's surface reads these from the map
+        elif self.surface.streamed:
+            p, q = self.surface.take(np.arange(n))
         else:
             p, q = self.surface.p, self.surface.q
         th = np.radians(np.arange(0.0, 90.0 + 1e-9, _LAMBDA_THETA_STEP_DEG))

@@ -22,6 +22,7 @@ References
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Literal
@@ -32,6 +33,9 @@ from numpy.typing import ArrayLike, NDArray
 from goniolab.optics.heightmap import HeightMap, level_plane, plane_fit_and_completeness
 
 __all__ = [
+    "SLOPE_BLOCK_FACETS",
+    "STREAM_MIN_FACETS",
+    "MapSurface",
     "RoughnessStats",
     "SlopeHistogram",
     "SlopeMethod",
@@ -49,6 +53,11 @@ _METHODS: tuple[str, ...] = ("forward", "central", "plane8")
 MAX_HISTOGRAM_CELLS = 50_000_000
 #: Rows per block of the one-pass forward-difference walk (a few hundred kB per array).
 _BLOCK_ROWS = 16
+#: Facets per block when a surface's slopes are walked block by block
+#: (:meth:`Surface.slope_blocks`: 32 MB of float64 p and q).
+SLOPE_BLOCK_FACETS = 1 << 21
+#: ``progress(done, total, what)`` (as :data:`goniolab.optics.physical.Progress`).
+Progress = Callable[[int, int, str], None]
 
 
 def _forward_blocks(
@@ -84,21 +93,40 @@ def _forward_facets(hm: HeightMap, level: bool) -> tuple[FloatArray, FloatArray]
     if plan is None:
         return None
     _, b, c, blocks = plan
-    z = hm.z_um
-    ny, nx = z.shape
-    dx, dy = float(hm.dx_um), float(hm.dy_um)
+    ny, nx = hm.z_um.shape
     p = np.empty((ny - 1, nx - 1))
     q = np.empty((ny - 1, nx - 1))
     for r0, r1 in blocks:
-        pb, qb = p[r0:r1], q[r0:r1]
-        np.subtract(z[r0:r1, 1:], z[r0:r1, :-1], out=pb)
-        np.divide(pb, dx, out=pb)
-        np.subtract(z[r0 + 1 : r1 + 1, :-1], z[r0:r1, :-1], out=qb)
-        np.divide(qb, dy, out=qb)
-        if level:
-            pb -= b
-            qb -= c
+        _forward_rows(hm, b, c, level, r0, r1, p[r0:r1], q[r0:r1])
     return p.reshape(-1), q.reshape(-1)
+
+
+def _forward_rows(
+    hm: HeightMap,
+    b: float,
+    c: float,
+    level: bool,
+    r0: int,
+    r1: int,
+    pb: FloatArray | None = None,
+    qb: FloatArray | None = None,
+) -> tuple[FloatArray, FloatArray]:
+    """Forward slopes of the facet rows ``r0 .. r1 - 1`` (2-D, into ``pb``, ``qb`` when
+    given), levelled by the plane slopes ``b``, ``c``; a float32 map's rows are cast to
+    float64 first, so they equal the slopes of its float64 copy."""
+    z = hm.z_um[r0 : r1 + 1]
+    if z.dtype != np.float64:
+        z = z.astype(np.float64)
+    rows = r1 - r0
+    dx, dy = float(hm.dx_um), float(hm.dy_um)
+    pb = np.subtract(z[:rows, 1:], z[:rows, :-1], out=pb)
+    np.divide(pb, dx, out=pb)
+    qb = np.subtract(z[1 : rows + 1, :-1], z[:rows, :-1], out=qb)
+    np.divide(qb, dy, out=qb)
+    if level:
+        pb -= b
+        qb -= c
+    return pb, qb
 
 
 def slopes(hm: HeightMap, method: SlopeMethod = "forward") -> tuple[FloatArray, FloatArray]:
@@ -205,6 +233,10 @@ class Surface:
         Forward differences on a map without missing points take one pass and no levelled
         copy (:func:`_forward_facets`); the other methods and maps with NaN level first.
         """
+        if slope_method == "forward" and cls is Surface:
+            plan = _forward_blocks(hm, level)
+            if plan is not None and _slopes_finite(hm, plan[1], plan[2]):
+                return MapSurface(hm, plan[1], plan[2], level)
         if slope_method == "forward":
             fast = _forward_facets(hm, level)
             if fast is not None:
@@ -239,6 +271,34 @@ class Surface:
         """Number of facets."""
         return int(self.p.size)
 
+    def slope_blocks(self, facets: int | None = None) -> Iterator[tuple[FloatArray, FloatArray]]:
+        """The slopes ``(p, q)`` in consecutive blocks of about ``facets`` facets
+        (default :data:`SLOPE_BLOCK_FACETS`), in facet order (a map's surface forms each block from the map when asked, so a walk
+        over its facets holds one block, not the map's facets: :class:`MapSurface`)."""
+        step = max(1, int(SLOPE_BLOCK_FACETS if facets is None else facets))
+        for lo in range(0, self.n_facets, step):
+            yield self.p[lo : lo + step], self.q[lo : lo + step]
+
+    def take(self, idx: NDArray[np.int64]) -> tuple[FloatArray, FloatArray]:
+        """The slopes of the facets ``idx`` (indices in facet order)."""
+        return self.p[idx], self.q[idx]
+
+    @cached_property
+    def slope_range(self) -> tuple[float, float, float, float]:
+        """``(p_min, p_max, q_min, q_max)`` of the facets (one walk over the blocks)."""
+        lo_p = lo_q = math.inf
+        hi_p = hi_q = -math.inf
+        for p, q in self.slope_blocks():
+            lo_p, hi_p = min(lo_p, float(p.min())), max(hi_p, float(p.max()))
+            lo_q, hi_q = min(lo_q, float(q.min())), max(hi_q, float(q.max()))
+        return lo_p, hi_p, lo_q, hi_q
+
+    @property
+    def streamed(self) -> bool:
+        """True when the slopes are formed block by block from the map, not held
+        (:class:`MapSurface` before anything asked for :attr:`p` or :attr:`q`)."""
+        return False
+
     @cached_property
     def normals(self) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Unit facet normals ``m = (-p, -q, 1)/sqrt(1 + p^2 + q^2)`` (Wittmann eq. 4 corrected)."""
@@ -248,6 +308,117 @@ class Surface:
             np.ascontiguousarray(-self.q * inv),
             np.ascontiguousarray(inv),
         )
+
+
+def _slopes_finite(hm: HeightMap, b: float, c: float) -> bool:
+    """Whether every forward slope of a complete map is finite (no difference overflows):
+    bounded by the height range over the smaller step plus the plane's slopes."""
+    z = hm.z_um
+    span = (float(z.max()) - float(z.min())) / min(float(hm.dx_um), float(hm.dy_um))
+    return math.isfinite(span + abs(b) + abs(c))
+
+
+class MapSurface(Surface):
+    """The facets of a complete height map by forward differences (Wittmann sec. 3.1),
+    formed from the map block by block (:meth:`slope_blocks`) instead of held: the map's
+    own array (float32 or float64) is all that stays, so an 8192^2 float32 map costs its
+    256 MB, not 1 GB of float64 slopes beside it.
+
+    :attr:`p` and :attr:`q` are formed whole (and kept) only when something asks for them
+    (the per-facet numba and numpy kernels on a map of at most
+    :data:`STREAM_MIN_FACETS` facets, the kernel density of :meth:`brdf_point`): they equal
+    the blocks, which equal the slopes of the levelled map
+    (:func:`~goniolab.optics.heightmap.level_plane`) bit for bit. ``progress`` (settable,
+    ``progress(done, total, what)``) hears of every block of a walk over a map of more
+    than :data:`STREAM_MIN_FACETS` facets, as ``"facet slopes, pass N"`` (a gloss report
+    walks the map about a dozen times, a curve once or twice).
+    """
+
+    _hm: HeightMap
+    _plane: tuple[float, float, bool]
+
+    def __init__(self, hm: HeightMap, b: float, c: float, level: bool) -> None:
+        object.__setattr__(self, "dx_um", float(hm.dx_um))
+        object.__setattr__(self, "dy_um", float(hm.dy_um))
+        object.__setattr__(self, "source", hm.source)
+        object.__setattr__(self, "slope_method", "forward")
+        object.__setattr__(self, "_hm", hm)
+        object.__setattr__(self, "_plane", (float(b), float(c), bool(level)))
+        #: ``progress(done, total, what)`` or None (settable: not a dataclass field)
+        self.progress: Progress | None = None
+
+    def __repr__(self) -> str:
+        ny, nx = self._hm.shape
+        return f"MapSurface({self.source!r}, {nx} x {ny} map, {self.n_facets} facets)"
+
+    @property
+    def n_facets(self) -> int:
+        ny, nx = self._hm.shape
+        return (ny - 1) * (nx - 1)
+
+    @cached_property
+    def _whole(self) -> tuple[FloatArray, FloatArray]:
+        b, c, level = self._plane
+        hm = self._hm
+        ny, nx = hm.shape
+        p = np.empty((ny - 1, nx - 1))
+        q = np.empty((ny - 1, nx - 1))
+        for r0 in range(0, ny - 1, _BLOCK_ROWS):
+            r1 = min(r0 + _BLOCK_ROWS, ny - 1)
+            _forward_rows(hm, b, c, level, r0, r1, p[r0:r1], q[r0:r1])
+        return p.reshape(-1), q.reshape(-1)
+
+    @property
+    def p(self) -> FloatArray:
+        return self._whole[0]
+
+    @property
+    def q(self) -> FloatArray:
+        return self._whole[1]
+
+    @property
+    def streamed(self) -> bool:
+        return "_whole" not in self.__dict__
+
+    def slope_blocks(self, facets: int | None = None) -> Iterator[tuple[FloatArray, FloatArray]]:
+        if not self.streamed:
+            yield from super().slope_blocks(facets)
+            return
+        b, c, level = self._plane
+        ny, nx = self._hm.shape
+        rows = max(1, int(SLOPE_BLOCK_FACETS if facets is None else facets) // (nx - 1))
+        total = ny - 1
+        report = self.progress if self.n_facets > STREAM_MIN_FACETS else None
+        what = ""
+        if report is not None:
+            self.__dict__["_passes"] = self.__dict__.get("_passes", 0) + 1
+            what = f"facet slopes, pass {self.__dict__['_passes']}"
+        for r0 in range(0, total, rows):
+            r1 = min(r0 + rows, total)
+            pb, qb = _forward_rows(self._hm, b, c, level, r0, r1)
+            yield pb.reshape(-1), qb.reshape(-1)
+            if report is not None:
+                report(r1, total, what)
+
+    def take(self, idx: NDArray[np.int64]) -> tuple[FloatArray, FloatArray]:
+        if not self.streamed:
+            return super().take(idx)
+        b, c, level = self._plane
+        hm = self._hm
+        i, j = np.divmod(np.asarray(idx, dtype=np.int64), hm.shape[1] - 1)
+        z = hm.z_um
+        z0 = z[i, j].astype(np.float64)
+        p = (z[i, j + 1].astype(np.float64) - z0) / float(hm.dx_um)
+        q = (z[i + 1, j].astype(np.float64) - z0) / float(hm.dy_um)
+        if level:
+            p -= b
+            q -= c
+        return p, q
+
+
+#: A map's surface with more facets than this (4096^2) runs the per-facet numba and numpy
+#: kernels block by block instead of over its whole slope arrays, and reports progress.
+STREAM_MIN_FACETS = 1 << 24
 
 
 @dataclass(frozen=True, eq=False)
@@ -362,17 +533,20 @@ def _forward_stats(hm: HeightMap, bin_size: float) -> RoughnessStats | None:
     qb_all = np.empty((_BLOCK_ROWS, width))
     dev_all = np.empty((_BLOCK_ROWS + 1, nx))
     for r0, r1 in blocks:
+        # heights of rows r0 .. r1 (a float32 map's rows cast to float64 first)
+        zb = z[r0 : r1 + 1] if z.dtype == np.float64 else z[r0 : r1 + 1].astype(np.float64)
+        rows = r1 - r0
         # heights of rows r0 .. r1 - 1 (the last row is added after the loop)
-        dev = dev_all[: r1 - r0]
-        np.subtract(z[r0:r1], row_plane, out=dev)
+        dev = dev_all[:rows]
+        np.subtract(zb[:rows], row_plane, out=dev)
         dev -= (c * y_um[r0:r1])[:, None]
         s_abs += float(np.abs(dev).sum())
         s_sq += float(np.vdot(dev, dev))
-        pb, qb = pb_all[: r1 - r0], qb_all[: r1 - r0]
-        np.subtract(z[r0:r1, 1:], z[r0:r1, :-1], out=pb)
+        pb, qb = pb_all[:rows], qb_all[:rows]
+        np.subtract(zb[:rows, 1:], zb[:rows, :-1], out=pb)
         np.divide(pb, dx, out=pb)
         pb -= b
-        np.subtract(z[r0 + 1 : r1 + 1, :-1], z[r0:r1, :-1], out=qb)
+        np.subtract(zb[1 : rows + 1, :-1], zb[:rows, :-1], out=qb)
         np.divide(qb, dy, out=qb)
         qb -= c
         s_pp += float(np.vdot(pb, pb))

@@ -5,8 +5,9 @@
 with :class:`PlanRefused` before anything moves, and estimates the run time from the
 trapezoidal motion model (:func:`drivers.timing.trapezoid_duration_s`, Biagiotti &
 Melchiorri sec. 3.2) plus dwell and reading time and the final park move (a home search is
-controller-specific and not estimated). :class:`RunEta` turns that estimate into the time
-left while the run goes on.
+controller-specific and not estimated). Each reading's parts (:class:`~goniolab.scan.eta.
+PointParts`) are the priors of the run's ETA (:class:`~goniolab.scan.eta.EtaEstimator`),
+which measured rates replace as the run goes on.
 """
 
 from __future__ import annotations
@@ -18,9 +19,10 @@ from dataclasses import dataclass
 from drivers.base import DeviceError, Goniometer, InterlockError, LimitError
 from drivers.timing import trapezoid_duration_s
 from goniolab.config import GoniometerConfig
+from goniolab.scan.eta import PointParts
 from goniolab.scan.plans import MIRROR_INDEX, PlanPoint
 
-__all__ = ["ArmMotion", "DryRun", "PlanRefused", "RunEta", "dry_run", "reachable_range"]
+__all__ = ["ArmMotion", "DryRun", "PlanRefused", "dry_run", "reachable_range"]
 
 
 class PlanRefused(Exception):
@@ -55,50 +57,6 @@ class PlanRefused(Exception):
             f"{where}theta_i {self.theta_i_deg:g} deg, theta_r {self.theta_r_deg:g} deg is "
             f"out of the goniometer's reach: {self.reason}"
         )
-
-
-@dataclass(slots=True)
-class RunEta:
-    """Time left in a run: the dry-run estimate of the readings still to take (and of the
-    final park move), stretched by how much slower than estimated the run has been so far
-    (bus latency, polling, commits)."""
-
-    point_times_s: list[float]
-    park_s: float
-    t_start_s: float = 0.0
-    estimated_done_s: float = 0.0
-    #: lab-clock seconds the run spent paused (not the run being slow: issue 27, the ETA
-    #: doubled after a pause) and when the current pause began (``None``: running)
-    paused_s: float = 0.0
-    paused_at_s: float | None = None
-
-    @property
-    def total_s(self) -> float:
-        """The dry run's estimate of the whole rest of the run."""
-        return math.fsum(self.point_times_s) + self.park_s
-
-    def start(self, now_s: float) -> None:
-        """The first reading is about to be taken (lab clock)."""
-        self.t_start_s = now_s
-
-    def pause(self, now_s: float) -> None:
-        """The run pauses (its time until :meth:`resume` is not the run's)."""
-        if self.paused_at_s is None:
-            self.paused_at_s = now_s
-
-    def resume(self, now_s: float) -> None:
-        """The run goes on after a pause."""
-        if self.paused_at_s is not None:
-            self.paused_s += max(0.0, now_s - self.paused_at_s)
-            self.paused_at_s = None
-
-    def left_after(self, k: int, now_s: float) -> float:
-        """Estimated lab-clock seconds left once reading ``k`` (0-based) is stored; the
-        time spent paused is left out of the run's pace."""
-        self.estimated_done_s += self.point_times_s[k]
-        elapsed_s = now_s - self.t_start_s - self.paused_s
-        slowdown = elapsed_s / self.estimated_done_s if self.estimated_done_s > 0 else 1.0
-        return (math.fsum(self.point_times_s[k + 1 :]) + self.park_s) * max(1.0, slowdown)
 
 
 @dataclass(frozen=True, slots=True)
@@ -136,6 +94,8 @@ class DryRun:
     point_times_s: tuple[float, ...]
     #: The move from the last geometry to the park position that ends the run.
     park_s: float = 0.0
+    #: Each reading's parts (move, dwell, reading) in lab seconds, the ETA's priors.
+    parts: tuple[PointParts, ...] = ()
 
     @property
     def eta_s(self) -> float:
@@ -206,6 +166,7 @@ def dry_run(
             reach = reachable_range(goniometer) if isinstance(exc, LimitError) else ""
             raise PlanRefused("park position", *park_deg, exc, reach) from exc
     times: list[float] = []
+    parts: list[PointParts] = []
     pos = start_deg
     moves = 0
     checked: set[tuple[float, float]] = set()
@@ -219,11 +180,13 @@ def dry_run(
                 reach = reachable_range(goniometer) if isinstance(exc, LimitError) else ""
                 raise PlanRefused(what, *target, exc, reach) from exc
             checked.add(target)
-        t = reading_time_s
+        move_s: float | None = None
         if target != pos:
-            t += motion.move_time_s(pos, target) + dwell_s
+            move_s = motion.move_time_s(pos, target)
             moves += 1
             pos = target
-        times.append(t)
+        parts.append(PointParts(move_s, dwell_s if move_s is not None else 0.0, reading_time_s))
+        times.append(reading_time_s + (0.0 if move_s is None else move_s + dwell_s))
     park_s = 0.0 if park_deg is None else motion.move_time_s(pos, park_deg)
-    return DryRun(n_readings=len(points), n_moves=moves, point_times_s=tuple(times), park_s=park_s)
+    return DryRun(n_readings=len(points), n_moves=moves, point_times_s=tuple(times),
+                  park_s=park_s, parts=tuple(parts))  # fmt: skip

@@ -92,6 +92,12 @@ class PointMeasured(Event):
     #: Measured CIE L*a*b* of the reading's spectrum (``None``: no colour, see the
     #: InstrumentError published before it).
     lab: tuple[float, float, float] | None = None
+    #: Its CIE XYZ (Y = 100 scale) and the white its L*a*b* is relative to (``None``
+    #: without colour). XYZ is linear in the spectrum (CIE 15:2004 eq. 7.1): the mean XYZ
+    #: of the repeats is the XYZ of their mean spectrum, so a face averages repeats *as
+    #: spectra* by averaging XYZ (:func:`goniolab.colour.spectra.xyz_to_colour_of_white`).
+    xyz: tuple[float, float, float] | None = None
+    white_xyz: tuple[float, float, float] | None = None
     #: The reading's quality flag (:func:`goniolab.scan.exposure.reading_quality`): a
     #: ``saturated`` or ``under_noise_floor`` reading is stored but not averaged or fitted.
     quality: str = "unknown"
@@ -118,6 +124,11 @@ class ColourPredicted(Event):
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Progress(Event):
+    """How far a run is: ``done`` of ``total`` readings, ``eta_s`` the wall seconds left
+    (what the user waits, from the measured rates of moves, dwells and readings:
+    :class:`goniolab.scan.eta.EtaEstimator`; NaN while not known, at an instant sim clock
+    before a reading was timed)."""
+
     done: int
     total: int
     eta_s: float

@@ -27,7 +27,8 @@ The runner publishes events on an :class:`~goniolab.scan.events.EventBus`
 Before any motion, :func:`~goniolab.scan.dryrun.dry_run` checks every geometry and estimates
 the run time. This module holds the state machine, the run loop, the storing of each reading
 (through a store outage) and the end of a run (park, summary, record); the rest lives in one
-room each: the dry run and the time left in :mod:`goniolab.scan.dryrun`, the arm moves and the
+room each: the dry run in :mod:`goniolab.scan.dryrun`, the time left (from the measured
+rates of moves, dwells and readings) in :mod:`goniolab.scan.eta`, the arm moves and the
 retries through transient faults in :mod:`goniolab.scan.moves`, the reading path (spectro
 read, mirror reference, colour) in :mod:`goniolab.scan.spectro_readings`.
 
@@ -53,10 +54,10 @@ from goniolab.scan.dryrun import (
     ArmMotion,
     DryRun,
     PlanRefused,
-    RunEta,
     dry_run,
     reachable_range,
 )
+from goniolab.scan.eta import EtaEstimator, PointParts, WallTime
 from goniolab.scan.events import (
     ColourPredicted,
     EventBus,
@@ -126,7 +127,12 @@ class ScanRunner(SpectroReadings):
     park_deg
         Park geometry (theta_i, theta_r) after the run, an abort or a fault.
     reading_time_s
-        Duration of one reading for the ETA (default: the exposure time).
+        Duration of one reading for the ETA's prior (default: the exposure time).
+    wall
+        The clock the ETA is measured on (default: wall time against ``clock``'s scale,
+        :meth:`goniolab.scan.eta.WallTime.of`); the ETA starts from the motion model and
+        follows the measured rates of moves, dwells and readings
+        (:class:`goniolab.scan.eta.EtaEstimator`).
     position_tolerance_deg
         After a resume, arms further than this from the current target are re-moved.
     specimen_hook
@@ -182,6 +188,7 @@ class ScanRunner(SpectroReadings):
         mirror_standard: Standard | None = None,
         reconnect_window_s: float = 30.0,
         notices: Sequence[str] = (),
+        wall: WallTime | None = None,
     ) -> None:
         if reading_retries < 0:
             raise ValueError(f"reading_retries must be >= 0, got {reading_retries}")
@@ -200,6 +207,7 @@ class ScanRunner(SpectroReadings):
         self.home_timeout_s = home_timeout_s
         self.park_deg = park_deg
         self.reading_time_s = plan.exposure_us * 1e-6 if reading_time_s is None else reading_time_s
+        self.wall = WallTime.of(clock) if wall is None else wall
         self.position_tolerance_deg = position_tolerance_deg
         self.specimen_hook = specimen_hook
         self.misalignment_threshold_deg = misalignment_threshold_deg
@@ -233,7 +241,7 @@ class ScanRunner(SpectroReadings):
         self._abort_requested = False
         self._abort_by = ""
         #: the run's ETA while its readings are taken (pauses are left out of its pace)
-        self._eta: RunEta | None = None
+        self._eta: EtaEstimator | None = None
         self._wake = asyncio.Event()
         self._abort_event = asyncio.Event()
         self._homing_interrupted = False
@@ -291,12 +299,12 @@ class ScanRunner(SpectroReadings):
         if self._pause_requested:
             self._set_state(RunState.PAUSED)
             if self._eta is not None:
-                self._eta.pause(self.clock.now())
+                self._eta.pause()
             while self._pause_requested and not self._abort_requested:
                 self._wake.clear()
                 await self._wake.wait()
             if self._eta is not None:
-                self._eta.resume(self.clock.now())
+                self._eta.resume()
             if self._abort_requested:
                 return False
             self._set_state(RunState.RUNNING)
@@ -441,8 +449,9 @@ class ScanRunner(SpectroReadings):
                 await finish
             raise
 
-    async def _dry_run(self, todo: Sequence[PlanPoint]) -> RunEta:
-        """:func:`dry_run` of ``todo`` from where the arms stand (raises PlanRefused)."""
+    async def _dry_run(self, todo: Sequence[PlanPoint]) -> EtaEstimator:
+        """:func:`dry_run` of ``todo`` from where the arms stand (raises PlanRefused); its
+        parts are the priors of the run's ETA."""
         start_deg = await self._arm_positions("reading the arm positions")
         check = dry_run(
             todo,
@@ -453,9 +462,10 @@ class ScanRunner(SpectroReadings):
             reading_time_s=self.reading_time_s,
             park_deg=self.park_deg,
         )
-        return RunEta(list(check.point_times_s), check.park_s)
+        park_x = None if self.park_deg is None else check.park_s
+        return EtaEstimator(check.parts, park_x, self.wall)
 
-    async def _measure(self, todo: Sequence[PlanPoint], eta: RunEta) -> tuple[RunState, str]:
+    async def _measure(self, todo: Sequence[PlanPoint], eta: EtaEstimator) -> tuple[RunState, str]:
         """Home if needed, then take the readings of ``todo`` in order, each stored before
         the next; an abort ends the loop with its reason. A DeviceError propagates."""
         try:
@@ -473,12 +483,13 @@ class ScanRunner(SpectroReadings):
             )
             self._mirror_pct = self._mirror_level()
             self._reference = self._load_reference()
-            eta.start(self.clock.now())
             self._eta = eta
+            eta.begin_point()
             for k, p in enumerate(todo):
-                await self._go_to(p)
-                await self._take_reading(p)
-                self._publish_progress(eta.left_after(k, self.clock.now()))
+                await self._go_to(p, eta, eta.points[k])
+                with eta.part("reading", eta.points[k].reading_lab_s):
+                    await self._take_reading(p)
+                self._publish_progress(eta.end_point(k))
             state, reason = RunState.DONE, ""
         except Aborted as stop:
             state, reason = RunState.ABORTED, stop.reason
@@ -489,9 +500,11 @@ class ScanRunner(SpectroReadings):
             await self.specimen_hook("sample")
         return state, reason
 
-    async def _go_to(self, p: PlanPoint) -> None:
+    async def _go_to(self, p: PlanPoint, eta: EtaEstimator, parts: PointParts) -> None:
         """Everything before reading ``p``: honour a pause or an abort, put the specimen
-        ``p`` needs under the instruments, move the arms there and let them settle.
+        ``p`` needs under the instruments, move the arms there and let them settle (the
+        move and the dwell timed for the ETA, ``parts`` their model sizes; the specimen
+        swap is an operator's time, left out of it).
 
         Raises
         ------
@@ -503,10 +516,22 @@ class ScanRunner(SpectroReadings):
         want = "mirror" if p.index == MIRROR_INDEX else "sample"
         if want != self._specimen:
             assert self.specimen_hook is not None
-            await self._abortable(self.specimen_hook(want), f"while placing the {want}")
+            eta.pause()
+            try:
+                await self._abortable(self.specimen_hook(want), f"while placing the {want}")
+            finally:
+                eta.resume()
             self._specimen = want
-        if await self._ensure_position((p.theta_i_deg, p.theta_r_deg)):
+        target = (p.theta_i_deg, p.theta_r_deg)
+        move_x = parts.move_x
+        if move_x is None:  # a move the dry run did not plan (the arms were moved meanwhile)
+            move_x = 0.0 if self._target is None else self.motion.move_time_s(self._target, target)
+        mark = eta.start_part()
+        if await self._ensure_position(target):
+            eta.finish_part("move", move_x, mark)
+            mark = eta.start_part()
             await self.clock.sleep(self.plan.dwell_s)
+            eta.finish_part("dwell", self.plan.dwell_s, mark)
 
     async def _take_reading(self, p: PlanPoint) -> None:
         """Read ``p`` (with retries), scale it by the mirror level, store it, publish it."""
@@ -568,9 +593,18 @@ class ScanRunner(SpectroReadings):
                 measured_theta_r_deg=self._measured_deg[1],
                 predicted_pct=self._predicted.get(p.index),
                 lab=None if colour is None else (colour["L"], colour["a"], colour["b"]),
+                xyz=None if colour is None else (colour["X"], colour["Y"], colour["Z"]),
+                white_xyz=None if colour is None else self._white_xyz(),
                 quality=quality,
             )
         )
+
+    def _white_xyz(self) -> tuple[float, float, float]:
+        """The white of the run's colour settings (what its L*a*b* is relative to)."""
+        from goniolab.colour.spectra import white_xyz
+
+        x, y, z = (float(v) for v in white_xyz(self.point_colour.settings))
+        return (x, y, z)
 
     async def _store_reading(self, p: PlanPoint, write: Callable[[], None]) -> None:
         """Commit reading ``p`` with ``write``. When the store cannot take it
@@ -598,6 +632,8 @@ class ScanRunner(SpectroReadings):
                 fatal=False,
             )
         )
+        if self._eta is not None:  # an outage is not the run's pace
+            self._eta.pause()
         park_problem = await self._park()
         self._verify_position = True  # the arms left the geometry: the next move checks
         self._set_state(RunState.PAUSED, f"store unavailable: {first}" + (
@@ -632,6 +668,8 @@ class ScanRunner(SpectroReadings):
         # a restarted server dropped the claim with its connection: take it again (the
         # server answers now, so this cannot hang)
         await asyncio.to_thread(self.store.ensure_claim, self.run_id)
+        if self._eta is not None:
+            self._eta.resume()
         self.bus.publish(
             InstrumentError(
                 run_id=self.run_id,

@@ -6,9 +6,10 @@ time and identity, its readings and the predictions they carry), then copied int
 target with :func:`goniolab.store.migrate.copy_run`, the same path as ``runs migrate``: a
 run the target already holds (same UUID) is brought up to date, never duplicated.
 
-What a JSON export does not carry is not invented: a scan's spectra and its readings' raw
-records (the exposure, the signal level beside the quality flag) are not in it, so an
-imported run has its luminance, colour and predictions but no spectra; the import says so.
+What a JSON export does not carry is not invented: a scan's raw spectra (it carries them
+only as reflectance factors, ``R_<nm>``) and its readings' raw records (the exposure, the
+signal level beside the quality flag) are not in it, so an imported run has its luminance,
+colour and predictions but no spectra; the import says so.
 """
 
 from __future__ import annotations

@@ -66,16 +66,23 @@ def read_npy(path: Path, opts: ReadOptions) -> HeightMap:
         tokenize.TokenError,  # numpy tokenises the header dict to repair old files
     ) as exc:
         raise heightmap_error(name, f"not a readable .npy file: {exc}") from None
-    z = np.asarray(arr).astype(np.float64, copy=False)  # a float64 file is read once, no copy
-    if not np.isfinite(np.sum(z)):
+    # a float64 or float32 file is read once, no copy: float32 heights stay float32 (half
+    # the memory; HeightMap computes in float64 block by block). The file is read, not
+    # memory-mapped: the slopes touch every page, so a mapping would cost the same resident
+    # memory, and a mapped file rewritten while a cached model still reads it would crash
+    # the process (SIGBUS) instead of giving the old or the new heights.
+    z = np.asarray(arr)
+    if z.dtype != np.float32:
+        z = z.astype(np.float64, copy=False)
+    if not np.isfinite(np.sum(z, dtype=np.float64)):
         z[np.isinf(z)] = np.nan
     meta: dict[str, str] = {"format": "npy"}
     file_steps: tuple[float, float] | None = None
     side = _sidecar(path)
     if side.exists():
         file_steps, z_um_per, extra = _read_sidecar(side, name)
-        if z_um_per != 1.0:
-            z = z * z_um_per
+        if z_um_per != 1.0:  # scaled in float64, as a float64 file is
+            z = z.astype(np.float64, copy=False) * z_um_per
         meta.update(extra)
     # name the sidecar only when there is one (issue 27: the message named a missing file)
     what = side.name if side.exists() else f"the file (it has no sidecar {side.name})"
@@ -163,7 +170,7 @@ def _warn_if_nm(hm: HeightMap) -> None:
     1/:data:`_NM_CHECK_BLOCKS` of the map, so the check adds no full-size temporaries to the
     read (it made five, and set the peak memory of a 2048^2 read-to-curve at 3.25 x the
     map) and few numpy calls (row by row it took 60 ms of a 2048^2 read)."""
-    z = np.asarray(hm.z_um, dtype=np.float64)
+    z = hm.z_um  # float64, or float32 (the rows read are cast below)
     ny, nx = z.shape
     if ny < 2 or nx < 2:
         return
@@ -173,7 +180,8 @@ def _warn_if_nm(hm: HeightMap) -> None:
     per_block = max(1, ny // _NM_CHECK_BLOCKS)
     for k in range(0, rows.size, per_block):  # temporaries of a block of rows only
         block = rows[k : k + per_block]
-        top, below = z[block], z[block + 1]
+        top = z[block].astype(np.float64, copy=False)
+        below = z[block + 1].astype(np.float64, copy=False)
         vals = top[np.isfinite(top)]
         n += vals.size
         s1 += float(vals.sum())

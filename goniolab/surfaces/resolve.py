@@ -8,6 +8,8 @@ built-in synthetic sample (:mod:`goniolab.surfaces.synthetic`). Errors become :c
 
 from __future__ import annotations
 
+import threading
+import weakref
 from pathlib import Path
 
 from goniolab.errors import UserError
@@ -96,8 +98,36 @@ def _resolve(text: str, step_um: float | None) -> HeightMap:
     if not text:
         raise UserError("no height map given (a file path or sample:NAME)")
     try:
-        return load_heightmap(text, step_um=step_um)
+        key = _file_key(text, step_um)
+        with _lock:
+            hm = _read.get(key) if key is not None else None
+        if hm is None:
+            hm = load_heightmap(text, step_um=step_um)
+            if key is not None:
+                with _lock:
+                    _read[key] = hm
+        return hm
     except HeightMapError as exc:
         raise UserError(one_line(str(exc))) from None
     except OSError as exc:
         raise UserError(one_line(f"{text}: cannot read: {exc}")) from None
+
+
+#: The maps read from files and still held by someone (a model, a command), by file
+#: version: the ``auto`` model and the facet model it shares read one map, not two (an
+#: 8192^2 float32 map read twice cost 256 MB more). Weak: a map nobody holds is dropped.
+_read: weakref.WeakValueDictionary[tuple[str, int, int, float | None], HeightMap] = (
+    weakref.WeakValueDictionary()
+)
+_lock = threading.Lock()
+
+
+def _file_key(text: str, step_um: float | None) -> tuple[str, int, int, float | None] | None:
+    """The file's resolved path, mtime and size, and the step asked for; None when it cannot
+    be read (the reader reports why)."""
+    try:
+        path = Path(text).expanduser().resolve()
+        st = path.stat()
+    except (OSError, RuntimeError, ValueError):
+        return None
+    return str(path), st.st_mtime_ns, st.st_size, step_um

@@ -20,11 +20,12 @@ from __future__ import annotations
 
 import functools
 import math
-import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
+
+from labtoml import TomlFileError, read_toml
 
 if TYPE_CHECKING:  # numpy loads when a map is generated: listing the library needs none
     import numpy as np
@@ -138,16 +139,9 @@ def _check_params(info: SampleInfo, where: str) -> None:
 @functools.cache
 def _library() -> _Library:
     try:
-        with SAMPLES_TOML.open("rb") as fh:
-            data = tomllib.load(fh)
-    except OSError as exc:
-        raise SampleError(f"{SAMPLES_TOML}: cannot read the sample library: {exc}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise SampleError(f"{SAMPLES_TOML}: not valid TOML: {exc}") from None
-    except RecursionError:
-        raise SampleError(
-            f"{SAMPLES_TOML}: arrays or tables nested too deeply to be a sample library"
-        ) from None
+        data = read_toml(SAMPLES_TOML, what="sample library")
+    except TomlFileError as exc:
+        raise SampleError(str(exc)) from None
     defaults = data.get("defaults", {})
     size = int(_num(defaults, "size", "defaults", default=512))
     step = _num(defaults, "step_um", "defaults", default=1.0)

@@ -84,8 +84,8 @@ class CurveArrays:
 
 @dataclass(frozen=True, slots=True)
 class ColourArrays:
-    """Per point, sorted by ``theta_r_deg``: measured L*a*b* (mean of the repeats with
-    colour) and predicted L*a*b*, shape ``(n, 3)``, NaN where not (yet) known."""
+    """Per point, sorted by ``theta_r_deg``: measured L*a*b* (the repeats with colour
+    averaged as spectra, :meth:`Comparison.mean_lab`) and predicted L*a*b*, shape ``(n, 3)``, NaN where not (yet) known."""
 
     theta_r_deg: FloatArray
     measured_lab: FloatArray
@@ -141,6 +141,11 @@ class Comparison:
     gloss: list[GlossRead] = field(default_factory=list)
     #: Measured L*a*b* of each repeat with a colour, per plan point.
     lab: dict[int, list[tuple[float, float, float]]] = field(default_factory=dict)
+    #: Measured (XYZ, white) of each repeat with a colour, per plan point (``None`` where
+    #: the event carried none: the point's repeats are then averaged as L*a*b*).
+    xyz: dict[int, list[tuple[tuple[float, float, float], tuple[float, float, float]] | None]] = (
+        field(default_factory=dict)
+    )
     #: Predicted L*a*b* per plan point.
     predicted_lab: dict[int, tuple[float, float, float]] = field(default_factory=dict)
     #: The plan point of the last reading with a colour (the swatch shows it).
@@ -162,6 +167,7 @@ class Comparison:
         self.theta_r_deg.clear()
         self.predicted.clear()
         self.lab.clear()
+        self.xyz.clear()
         self.predicted_lab.clear()
         self.last_colour_index = None
         self.flagged.clear()
@@ -182,6 +188,9 @@ class Comparison:
         self.theta_r_deg.setdefault(ev.index, ev.theta_r_deg)
         if ev.lab is not None:
             self.lab.setdefault(ev.index, []).append(ev.lab)
+            xyz, white = ev.xyz, ev.white_xyz
+            pair = None if xyz is None or white is None else (xyz, white)
+            self.xyz.setdefault(ev.index, []).append(pair)
             self.last_colour_index = ev.index
 
     def add_colour(self, ev: ColourPredicted) -> None:
@@ -194,8 +203,24 @@ class Comparison:
         i = self.last_colour_index
         if i is None or i not in self.lab:
             return None
-        m = np.mean(np.array(self.lab[i]), axis=0)
+        m = self.mean_lab(i)
         return (float(m[0]), float(m[1]), float(m[2]))
+
+    def mean_lab(self, index: int) -> FloatArray:
+        """L*a*b* of point ``index``'s repeats averaged *as spectra*: the colour of their
+        mean XYZ, which is the XYZ of their mean spectrum (XYZ is linear in the spectrum,
+        CIE 15:2004 eq. 7.1; as ``runs show`` and ``runs colour`` average). Readings that
+        came without XYZ, or with different whites, are averaged as L*a*b*."""
+        pairs = self.xyz.get(index) or []
+        whites = {p[1] for p in pairs if p is not None}
+        if pairs and all(p is not None for p in pairs) and len(whites) == 1:
+            from goniolab.colour.spectra import xyz_to_colour_of_white
+
+            mean_xyz = np.mean(np.array([p[0] for p in pairs if p is not None]), axis=0)
+            out: FloatArray = xyz_to_colour_of_white(mean_xyz, next(iter(whites)))[3:6]
+            return out
+        lab_mean: FloatArray = np.mean(np.array(self.lab[index]), axis=0)
+        return lab_mean
 
     def colour_arrays(self) -> ColourArrays:
         """Measured and predicted L*a*b* per point, sorted by theta_r."""
@@ -205,7 +230,7 @@ class Comparison:
         pred = np.full((theta.size, 3), np.nan)
         for k, i in enumerate(idx):
             if self.lab.get(i):
-                meas[k] = np.mean(np.array(self.lab[i]), axis=0)
+                meas[k] = self.mean_lab(i)
             if i in self.predicted_lab:
                 pred[k] = self.predicted_lab[i]
         return ColourArrays(theta, meas, pred, self.theta_i_deg)

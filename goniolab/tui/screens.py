@@ -68,6 +68,19 @@ class RunIdentityScreen(ModalScreen[RunIdentity | None]):
         self.dismiss(None)
 
 
+def run_title(loaded: RunSummary, listed: RunSummary | None) -> str:
+    """The opened run's title line: its readings as the run list counts them (an
+    alignment's 288 readings, a gloss log's readings; issue 27: the title said "0
+    readings" for both), and where a run the plots here do not draw can be seen."""
+    n = loaded.n_points if listed is None else listed.n_points
+    text = f"run {loaded.run_id}: {loaded.sample}, {loaded.kind}, {loaded.status}, {n} readings"
+    if loaded.kind == "align":
+        text += f" (not drawn here: goniolab plot {loaded.run_id} -o align.png)"
+    elif loaded.kind not in ("brdf", "gloss"):
+        text += f" (not drawn here: goniolab runs show {loaded.run_id})"
+    return text
+
+
 class RunsScreen(Screen[None]):
     """Stored runs (newest first); Enter reopens one below the list."""
 
@@ -85,6 +98,8 @@ class RunsScreen(Screen[None]):
         super().__init__()
         self.backend = backend
         self.comparison = Comparison()
+        #: the run list's rows by run id (their reading counts are the store's)
+        self._listed: dict[int, RunSummary] = {}
         self.loaded_run: int | None = None
 
     def compose(self) -> ComposeResult:
@@ -123,6 +138,7 @@ class RunsScreen(Screen[None]):
     def _show_runs(self, runs: list[RunSummary]) -> None:
         table = self.query_one("#runs", DataTable)
         table.clear()
+        self._listed = {r.run_id: r for r in runs}
         for r in runs:
             started = datetime.fromtimestamp(r.started, tz=UTC).strftime("%Y-%m-%d %H:%M:%S")
             table.add_row(
@@ -166,9 +182,7 @@ class RunsScreen(Screen[None]):
             comparison.add_gloss(g)
         self.comparison = comparison
         self.loaded_run = s.run_id
-        self.query_one("#run-title", Static).update(
-            f"run {s.run_id}: {s.sample}, {s.kind}, {s.status}, {comparison.n_readings} readings"
-        )
+        self.query_one("#run-title", Static).update(run_title(s, self._listed.get(s.run_id)))
         self.query_one(ComparisonPanel).show(comparison)
 
     def action_toggle_log(self) -> None:

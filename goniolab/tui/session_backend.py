@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from drivers.base import GLOSS_ANGLES_DEG, DeviceError
-from goniolab.config import LabConfig, load_lab_config
+from goniolab.app.lab_setup import brdf_plan, check_sample, load_config, open_store, store_location
 from goniolab.errors import UserError
 from goniolab.optics.models import ReflectanceModel
 from goniolab.scan.align import AlignPlan, AlignRunner
@@ -35,11 +35,11 @@ from goniolab.scan.events import (
     RunFinished,
     RunState,
 )
-from goniolab.scan.plans import DEFAULT_REPEATS, BrdfPlan, GlossPlan, PlanError
+from goniolab.scan.plans import DEFAULT_REPEATS, BrdfPlan, GlossPlan
 from goniolab.scan.prediction import Predictor
 from goniolab.scan.runner import PlanRefused, ScanRunner
-from goniolab.session import GlossSession, ScanSession, check_sample
-from goniolab.store import RunMeta, RunStore, StoreError, resolve_store_path
+from goniolab.session import GlossSession, ScanSession
+from goniolab.store import RunMeta, StoreError
 from goniolab.surfaces.synthetic import sample_names
 from goniolab.tui.view_model import ArmState, RunIdentity, RunSummary, ScanSetup, StoredRun
 
@@ -90,14 +90,14 @@ class SessionBackend:
         self._lab_model = model
         self._align_plan = align_plan or AlignPlan()
         self.config_path = Path(config_path)
-        self.config: LabConfig = load_lab_config(self.config_path)
+        self.config = load_config(self.config_path, store_path)
         self.time_scale = time_scale
         # The config's own map is resolved (relative to the config file) by the Lab.
         self.sample = self.config.sample.map
         if sample:
             self.sample = _sample_spec(sample)
             check_sample(self.sample, given=sample)
-        self.store_path = resolve_store_path(store_path, self.config.lab.store)
+        self.store_path = store_location(store_path, self.config.lab.store)
         self.bus = EventBus()
         self.session: ScanSession | None = None
         self.gloss: GlossSession | None = None
@@ -133,7 +133,7 @@ class SessionBackend:
     async def open(self) -> None:
         """Build the lab (connect every instrument), open the store, home the goniometer."""
         try:
-            store = RunStore(self.store_path)
+            store = open_store(self.store_path, exit_code=1)
             self._stack.callback(store.close)
             session = await self._stack.enter_async_context(
                 ScanSession.open(
@@ -144,9 +144,6 @@ class SessionBackend:
                     bus=self.bus,
                 )
             )
-        except StoreError as exc:
-            await self._stack.aclose()
-            raise UserError(str(exc), exit_code=1) from exc
         except BaseException:
             await self._stack.aclose()
             raise
@@ -250,16 +247,14 @@ class SessionBackend:
         setup.validate()
         if self.running:
             raise UserError("a scan is already running")
-        try:
-            plan = BrdfPlan(
-                theta_i_deg=setup.theta_i_deg,
-                theta_r_deg=tuple(setup.theta_r_values_deg()),
-                repeats=setup.repeats,
-                exposure_us=self.config.spectro.exposure_us,
-                sample=setup.sample,
-            )
-        except PlanError as exc:
-            raise UserError(f"scan setup: {exc}") from exc
+        plan = brdf_plan(
+            self.config,
+            sample=setup.sample,
+            theta_i_deg=setup.theta_i_deg,
+            theta_r_deg=tuple(setup.theta_r_values_deg()),
+            repeats=setup.repeats,
+            what="scan setup",
+        )
         # The runner's dry run would refuse these too, but only after the run is stored
         # as failed: a geometry out of the arms' reach is a form error.
         try:
@@ -454,7 +449,7 @@ class SessionBackend:
     def prediction_models(self, run_id: int) -> str:
         """Which model computes the run's predicted curve, from its stored record
         (``computed_by``, :meth:`goniolab.scan.prediction.Predictor.provenance`)."""
-        with RunStore(self.store_path, readonly=True) as store:
+        with open_store(self.store_path, readonly=True) as store:
             computed_by = store.get_run(run_id).model.get("computed_by") or {}
         if len(computed_by) == 1:
             return str(next(iter(computed_by)))
@@ -464,7 +459,7 @@ class SessionBackend:
 
     def list_runs(self) -> list[RunSummary]:
         """Stored runs, newest first (own read-only connection: safe from a worker thread)."""
-        with RunStore(self.store_path, readonly=True) as store:
+        with open_store(self.store_path, readonly=True) as store:
             out = []
             for rec in store.list_runs(limit=200):
                 n = (
@@ -477,7 +472,7 @@ class SessionBackend:
 
     def load_run(self, run_id: int) -> StoredRun:
         """One stored run as events (own read-only connection: safe from a worker thread)."""
-        with RunStore(self.store_path, readonly=True) as store:
+        with open_store(self.store_path, readonly=True) as store:
             rec = store.get_run(run_id)
             measured: list[PointMeasured] = []
             predicted: list[PointPredicted] = []

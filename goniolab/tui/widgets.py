@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 from datetime import UTC, datetime
 
 import numpy as np
@@ -64,7 +65,8 @@ class ColourTable(DataTable[str]):
     """Per point: theta_r, the E2194 aspecular angle, measured L*a*b*, predicted L*, the
     signed dL*, dC*, dH* and dE00 (predicted - measured) and the verdict of the tolerance
     set at that aspecular angle (:data:`goniolab.colour.tolerance.BUILTIN_SETS`
-    ``din6175-2`` by default); a last row gives the overall verdict."""
+    ``din6175-2`` by default); a last row gives the overall verdict, with ``prov.`` beside
+    it for a provisional set (``din6175-2``'s limits are goniolab's, not the standard's)."""
 
     #: The tolerance set judged per angle (a :class:`goniolab.colour.tolerance.ToleranceSet`).
     tolerance_name = "din6175-2"
@@ -109,7 +111,9 @@ class ColourTable(DataTable[str]):
             )
         if overall["checked_angles"] and np.all(np.isfinite(d["dE00"])):
             verdict = "PASS" if overall["passed"] else "FAIL"
-            self.add_row("overall", "", "", "", "", "", "", "", "", tol.name[:6], verdict)
+            # a set whose limits are not confirmed says so beside its verdict
+            prov = "prov." if tol.provisional else ""
+            self.add_row("overall", "", "", "", "", "", "", "", prov, tol.name[:6], verdict)
 
 
 def fmt_num(value: float | None, digits: int = 2) -> str:
@@ -394,7 +398,7 @@ class StatusPanel(Vertical):
                 state = f"alarm {arm.alarm_code:#x}"
             elif not arm.homed:
                 state += ", not homed"
-            line.set_arm(arm.name, f"{arm.name} {fmt_num(arm.position_deg, 2)} {state}")
+            line.set_arm(arm.name, fmt_num(arm.position_deg, 2), state)
 
     def show_angles(self, theta_i_deg: float, theta_r_deg: float, moving: bool) -> None:
         """Update both arms from an ArmsMoved event (angles in degrees)."""
@@ -405,8 +409,8 @@ class StatusPanel(Vertical):
         self._set("detector", "motion", motion)
         line = _status_line(self)
         if line is not None:
-            line.set_arm("lamp", f"lamp {fmt_num(theta_i_deg, 2)} {motion}")
-            line.set_arm("detector", f"detector {fmt_num(theta_r_deg, 2)} {motion}")
+            line.set_arm("lamp", fmt_num(theta_i_deg, 2), motion)
+            line.set_arm("detector", fmt_num(theta_r_deg, 2), motion)
 
     def show_run(self, text: str) -> None:
         """Replace the run-state line (and the status line's run part)."""
@@ -416,9 +420,42 @@ class StatusPanel(Vertical):
             line.set_run(text)
 
 
+def _arms_text(arms: dict[str, tuple[str, str]], short: bool) -> str:
+    """Both arms' angle and state: ``lamp 45.00 idle  detector 30.00 moving``, or short
+    ``θi 45.00 θr 30.00 idle`` (one state when both share it)."""
+    labels = (("θi", "lamp"), ("θr", "detector")) if short else (("lamp", "lamp"), ("detector", "detector"))  # fmt: skip
+    parts = [(label, *arms[name]) for label, name in labels if name in arms]
+    if short and len(parts) == 2 and parts[0][2] == parts[1][2]:
+        return f"{parts[0][0]} {parts[0][1]} {parts[1][0]} {parts[1][1]} {parts[0][2]}"
+    return "  ".join(f"{label} {angle} {state}" for label, angle, state in parts)
+
+
+def status_text(run: str, arms: dict[str, tuple[str, str]], width: int) -> str:
+    """The status line for ``width`` columns (0: unknown, in full): the run part (state,
+    points, ETA, model) and each arm's (angle, state) as long as it fits, else shorter:
+    the arms as θi/θr, then the model's name alone, then no model (the instrument panel's
+    run line names it), so that the run's state, its points and both arms stay on an
+    80-column line (issue 27: the detector's part was cut off there)."""
+    runs = [run]
+    model = re.search(r"\s*\(predicted by ([^)]*)\)", run)
+    if model is not None:
+        runs.append(run.replace(model.group(0), f"  ({model.group(1)})"))
+        runs.append(run.replace(model.group(0), ""))
+    candidates = []
+    for r in runs:
+        for short in (False, True):
+            a = _arms_text(arms, short)
+            candidates.append(f"{r}  |  {a}" if a else r)
+    for text in candidates:
+        if width <= 0 or len(text) <= width:
+            return text
+    return candidates[-1][: max(0, width - 1)] + "…"
+
+
 class StatusLine(Static):
     """One line that stays on screen at any terminal size: the run (state, points, ETA) and
-    the lab (each arm's angle and motion, homed, link, alarm)."""
+    the lab (each arm's angle and motion, homed, link, alarm), shortened to fit
+    (:func:`status_text`)."""
 
     DEFAULT_CSS = """
     StatusLine { height: 1; background: $boost; padding: 0 1; }
@@ -427,21 +464,23 @@ class StatusLine(Static):
     def __init__(self, *, id: str | None = None) -> None:
         super().__init__("run: idle", id=id)
         self._run = "run: idle"
-        self._arms: dict[str, str] = {}
+        self._arms: dict[str, tuple[str, str]] = {}
 
     def set_run(self, text: str) -> None:
         """The run part (what the instrument panel's run line says)."""
         self._run = text
         self._show()
 
-    def set_arm(self, name: str, text: str) -> None:
-        """One arm's part (``lamp 45.00 idle``)."""
-        self._arms[name] = text
+    def set_arm(self, name: str, angle: str, state: str) -> None:
+        """One arm's part: its angle (``45.00``) and state (``idle``, ``alarm 0x10``)."""
+        self._arms[name] = (angle, state)
+        self._show()
+
+    def on_resize(self, event: events.Resize) -> None:
         self._show()
 
     def _show(self) -> None:
-        arms = "  ".join(self._arms[n] for n in ("lamp", "detector") if n in self._arms)
-        self.update(f"{self._run}  |  {arms}" if arms else self._run)
+        self.update(status_text(self._run, self._arms, self.content_region.width))
 
 
 def _status_line(widget: Widget) -> StatusLine | None:

@@ -134,7 +134,7 @@ def test_a_toml_set_is_validated_with_file_key_and_reason(tmp_path: Path) -> Non
         ('[angles."45"]\ndX = 1\n', "oem.toml: angles.45.dX: unknown limit"),
         ('metric = "CIE 2001"\n[angles."45"]\ndE = 1\n', "oem.toml: metric: 'CIE 2001'"),
         ("name = 'x'\n", "oem.toml: angles: needs at least one"),
-        ("angles = [", "oem.toml: not valid TOML"),
+        ("angles = [", "oem.toml: TOML syntax error"),
     ):
         with pytest.raises(ToleranceError, match=needle):
             load_tolerance_set("oem.toml", bad)

@@ -66,6 +66,25 @@ def test_run_dataset_netcdf_and_plot_follow_the_core(tmp_path: Path) -> None:
     np.testing.assert_array_equal(measured.get_xdata(), core)
 
 
+def test_csv_json_and_parquet_exports_follow_the_core(tmp_path: Path) -> None:
+    import csv
+    import io
+
+    import pyarrow.parquet as pq
+
+    from goniolab.export import export_run
+
+    with RunStore(_store(tmp_path / "s.sqlite"), readonly=True) as s:
+        csv_rows = list(csv.DictReader(io.StringIO(export_run(s, 1, "csv"))))
+        json_rows = json.loads(export_run(s, 1, "json"))["readings"]
+        export_run(s, 1, "parquet", tmp_path / "r.parquet")
+    pq_rows = pq.read_table(tmp_path / "r.parquet").to_pylist()
+    for rows in (csv_rows, json_rows, pq_rows):
+        got = [float(r["aspecular_deg"]) for r in rows]
+        core = [aspecular_deg(float(r["theta_r_deg"]), float(r["theta_i_deg"])) for r in rows]
+        assert got == core == [-15.0, 15.0, 45.0, 110.0]
+
+
 def test_brdf_dataset_and_api_follow_the_core() -> None:
     import goniolab.api as gl
     from goniolab.datasets import brdf_dataset

@@ -17,9 +17,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from goniolab.app.colours import load_paint_file
 from goniolab.colour.dispersion import DispersionError
 from goniolab.colour.paint import PaintError
-from goniolab.commands._colour import load_paint_file
 from goniolab.config import configs_dir
 from goniolab.errors import UserError
 from tests._fuzz import DELETE, fuzz_settings, leaves, set_path, toml_document

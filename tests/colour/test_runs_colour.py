@@ -130,3 +130,23 @@ def test_without_predictions_it_says_so_and_vs_judges_two_runs(
     assert doc["tolerance"]["overall"]["passed"] is True
     assert max(r["dE00"] for r in doc["metamerism"]) < 1e-9
     assert doc["vs"]["max_dE2000"] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_the_builtin_din_set_is_labelled_provisional_in_text_and_json(
+    store: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # its limits are goniolab's starting values, not DIN 6175-2's (not public): every
+    # output that judges with it says so; a lab's own set is not provisional unless it says
+    doc = _colour(capsys, store)
+    assert doc["tolerance"]["name"] == "din6175-2" and doc["tolerance"]["provisional"] is True
+    assert doc["tolerance"]["source"].startswith("PROVISIONAL:")
+    assert main(["runs", "colour", "1", "--store", str(store)]) == 0
+    assert "source: PROVISIONAL: " in capsys.readouterr().out
+    toml = tmp_path / "oem.toml"
+    toml.write_text('name = "oem"\nsource = "OEM norm 1"\n[angles."45"]\ndE = 1.0\n')
+    assert _colour(capsys, store, "--tolerance", str(toml))["tolerance"]["provisional"] is False
+    toml.write_text('name = "oem"\nsource = "draft"\nprovisional = true\n[angles."45"]\ndE = 1\n')
+    assert _colour(capsys, store, "--tolerance", str(toml))["tolerance"]["provisional"] is True
+    toml.write_text('name = "oem"\nprovisional = "yes"\n[angles."45"]\ndE = 1\n')
+    assert main(["runs", "colour", "1", "--store", str(store), "--tolerance", str(toml)]) == 2
+    assert "provisional: must be true or false" in capsys.readouterr().err

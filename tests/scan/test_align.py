@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import itertools
 import json
 import math
 from pathlib import Path
@@ -410,3 +411,47 @@ def test_align_refuses_a_saturated_standard_in_process_and_on_the_wire(
     assert code == 1
     assert "black-glass readings saturated the spectro even at the shortest exposure" in err, err
     assert cfg.read_text() == before and not (tmp_path / "lab.alignment.toml").exists()
+
+
+@pytest.mark.slow
+async def test_an_alignment_reports_an_eta_from_the_scans_estimator(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """issue 27: an alignment sent "ETA 0 s" for 100 s of readings. Its ETA now comes from
+    the scans' estimator over the nominal sweeps; measured on the twin's lab clock (the
+    ETA's wall clock replaced by it, so the truth is the lab time the run really took
+    after each reading), it is nonzero until the last reading, 0 then, and within 10 %
+    (+ 1 s) of the time really left from the sixth reading on."""
+    import goniolab.scan.eta as eta_module
+    from goniolab.scan.events import Progress
+    from goniolab.session import ScanSession
+
+    monkeypatch.setattr(
+        eta_module.WallTime, "of", classmethod(lambda cls, clock: cls(clock.now, 1.0))
+    )
+    cfg = load_lab_config(misaligned_config(tmp_path, 5))
+    seen: list[tuple[Progress, float]] = []
+    with RunStore(str(tmp_path / "runs.sqlite")) as store:
+        async with ScanSession.open(cfg, store, time_scale=0) as session:
+            publish = session.bus.publish
+
+            def record(ev: object) -> None:
+                if isinstance(ev, Progress):
+                    seen.append((ev, session.lab.clock.now()))
+                publish(ev)  # type: ignore[arg-type]
+
+            monkeypatch.setattr(session.bus, "publish", record)
+            _, result = await session.align(AlignPlan(sample=cfg.sample.map), save_state=False)
+    end_s = seen[-1][1]
+    readings = [(ev, t) for ev, t in seen if ev.done > 0]
+    assert len(readings) == result.readings and readings[-1][0].done == readings[-1][0].total
+    assert readings[-1][0].eta_s == 0.0
+    assert all(math.isfinite(ev.eta_s) and ev.eta_s > 0 for ev, _ in readings[:-1])
+    for k, (ev, t) in enumerate(readings):
+        # the first readings, on the dim wing of the first sweep, take the longest
+        # auto-exposures: 41 % over (107 s for 76 s) after the first, then within 10 %
+        tolerance = 0.5 if k < 5 else 0.1
+        assert abs(ev.eta_s - (end_s - t)) <= tolerance * (end_s - t) + 1.0, (ev.done, ev.eta_s)
+    etas = [ev.eta_s for ev, _ in readings]
+    assert all(b <= a + 1.0 for a, b in itertools.pairwise(etas))  # never up by > 1 s
+    assert etas[0] > 0.8 * end_s  # not "ETA 0 s" at the start

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import math
 import threading
 from collections.abc import Callable
 from typing import Any, cast
@@ -10,8 +11,10 @@ from typing import Any, cast
 import numpy as np
 import pytest
 
-from drivers.base import DeviceError, DeviceTimeout, Goniometer, ProtocolError
+from drivers.base import DeviceError, DeviceTimeout, Goniometer, ProtocolError, SpectroReading
+from drivers.timing import SimClock
 from goniolab.optics.apertures import Cone
+from goniolab.scan.eta import WallTime
 from goniolab.scan.events import (
     ArmsMoved,
     Event,
@@ -57,7 +60,9 @@ def make_runner(
         goniometer=as_goniometer(lab), spectro=lab.spectro, clock=lab.clock, plan=plan, store=store,
         run_id=run_id, bus=bus, motion=MOTION,
         predictor=Predictor(lab.model, Cone(6.0), Cone(6.0)),
-        park_deg=lab.goniometer.park_deg, **{"specimen_hook": specimen, **kw},  # type: ignore[arg-type]
+        park_deg=lab.goniometer.park_deg,
+        # the ETA measured on the instant lab clock: its seconds are the fake instruments'
+        **{"specimen_hook": specimen, "wall": WallTime(lab.clock.now, 1.0), **kw},  # type: ignore[arg-type]
     )  # fmt: skip
     return runner, bus
 
@@ -358,6 +363,72 @@ async def test_eta_stretches_by_the_observed_slowdown(fake_lab: FakeLab, store: 
     # before any reading: the plain estimate 4 x 0.01 s; then the remaining readings at
     # the observed 0.04 s each: 3 x 0.04, 2 x 0.04, 1 x 0.04, 0
     assert etas == pytest.approx([0.04, 0.12, 0.08, 0.04, 0.0], abs=1e-9)
+
+
+async def test_a_pause_leaves_the_runs_eta_unchanged(fake_lab: FakeLab, store: RunStore) -> None:
+    """issue 27: the ETA doubled after a pause. A run paused for 100 s of the (ETA's) clock
+    after every reading from its second on reports, reading by reading, the ETAs of the
+    same run unpaused, on a slow spectro (0.03 s beyond each exposure) that the ETA has to
+    learn."""
+    from .conftest import FakeGoniometer, FakeSpectro
+
+    def lab() -> FakeLab:
+        clock = SimClock(0)
+        gonio = FakeGoniometer(clock)
+        gonio.lamp.homed = gonio.detector.homed = True
+        spectro = FakeSpectro(gonio, clock)
+        spectro.overhead_s = 0.03
+        return FakeLab(clock=clock, goniometer=gonio, spectro=spectro, model=fake_lab.model)
+
+    plan = BrdfPlan(45.0, parse_angles("30:60:5"), dwell_s=0.25)
+
+    async def etas(paused_s: float) -> list[float]:
+        the_lab = lab()
+        runner, bus = make_runner(the_lab, store, plan)
+        waits: list[asyncio.Task[None]] = []
+
+        async def hold() -> None:
+            await the_lab.clock.sleep(paused_s)
+            runner.resume()
+
+        def on_event(ev: Event) -> None:
+            if paused_s and isinstance(ev, PointMeasured) and ev.index >= 1:
+                runner.pause()
+            if isinstance(ev, StateChanged) and ev.state is RunState.PAUSED:
+                waits.append(asyncio.create_task(hold()))
+
+        events = await drive(runner, bus, on_event)
+        assert runner.state is RunState.DONE and (bool(waits) == bool(paused_s))
+        return [e.eta_s for e in events if isinstance(e, Progress)]
+
+    plain, paused = await etas(0.0), await etas(100.0)
+    assert paused == pytest.approx(plain, abs=1e-9)
+    assert plain[2] > plain[-2] > 0.0  # and it counts down
+
+
+async def test_at_an_instant_clock_the_eta_is_the_readings_computing(
+    fake_lab: FakeLab, store: RunStore
+) -> None:
+    """issue 27: at --time-scale 0 the lab's sleeps take no wall time, and the ETA read
+    "0 s" through the 15-20 s of the twin's computing. Here each reading computes 0.4 s of
+    wall time (a fake wall clock), everything else none: the ETA is "?" (NaN) before two
+    readings were timed, then 0.4 s per reading left."""
+    g = fake_lab.goniometer
+    g.lamp.homed = g.detector.homed = True
+    wall = [0.0]
+    measure = fake_lab.spectro.measure
+
+    async def computing_measure() -> SpectroReading:
+        wall[0] += 0.4
+        return await measure()
+
+    fake_lab.spectro.measure = computing_measure  # type: ignore[method-assign]
+    plan = BrdfPlan(45.0, parse_angles("10:40:10"), repeats=2, dwell_s=0.5)
+    runner, bus = make_runner(fake_lab, store, plan, wall=WallTime(lambda: wall[0], 0.0))
+    events = await drive(runner, bus, lambda ev: None)
+    etas = [e.eta_s for e in events if isinstance(e, Progress)]
+    assert math.isnan(etas[0]) and math.isnan(etas[1])  # "?" until two readings were timed
+    assert etas[2:] == pytest.approx([0.4 * (7 - k) for k in range(1, 8)], abs=1e-9)
 
 
 async def test_unexpected_error_parks_marks_failed_and_surfaces(

@@ -88,3 +88,35 @@ def test_scan_setup_validation_names_the_field() -> None:
         ScanSetup("sample:flat", 20.0, 10.0, 0.0, 1.0, 1).validate()
     with pytest.raises(UserError, match="repeats"):
         ScanSetup("sample:flat", 20.0, 0.0, 10.0, 1.0, 0).validate()
+
+
+def test_repeats_are_averaged_as_spectra() -> None:
+    # two repeats of very different spectra: the comparison's L*a*b* is the colour of
+    # their mean spectrum (computed here from the spectra, independently of the events'
+    # XYZ), not the mean of their L*a*b*; without XYZ it falls back to the mean L*a*b*
+    import dataclasses
+
+    import numpy as np
+
+    from goniolab.colour.spectra import ColourSettings, spectrum_to_colour, white_xyz
+
+    settings = ColourSettings("D65", "10")
+    wl = np.arange(400.0, 701.0, 10.0)
+    spectra = [0.05 + 0.8 * (wl > 600), 0.6 - 0.5 * (wl > 500)]  # a red, then a blue-green
+    colours = [spectrum_to_colour(wl, r, settings) for r in spectra]
+    white = tuple(float(v) for v in white_xyz(settings))
+    c, plain = Comparison(), Comparison()
+    for rep, col in enumerate(colours):
+        ev = PointMeasured(
+            run_id=1, index=0, repeat=rep, theta_i_deg=45.0, theta_r_deg=30.0,
+            luminance_pct=1.0, measured_theta_i_deg=45.0, measured_theta_r_deg=30.0,
+            lab=col.lab, xyz=(col.X, col.Y, col.Z), white_xyz=white,  # type: ignore[arg-type]
+        )  # fmt: skip
+        c.add_measured(ev)
+        plain.add_measured(dataclasses.replace(ev, xyz=None, white_xyz=None))
+    truth = spectrum_to_colour(wl, np.mean(spectra, axis=0), settings).lab
+    mean_of_labs = np.mean([col.lab for col in colours], axis=0)
+    assert float(np.max(np.abs(np.subtract(truth, mean_of_labs)))) > 3.0  # the test can fail
+    np.testing.assert_allclose(c.colour_arrays().measured_lab[0], truth, atol=1e-9)
+    np.testing.assert_allclose(c.current_lab(), truth, atol=1e-9)  # type: ignore[arg-type]
+    np.testing.assert_allclose(plain.colour_arrays().measured_lab[0], mean_of_labs, atol=1e-12)

@@ -1,0 +1,5 @@
+"""``python -m goniolab``: the same command line as the ``goniolab`` script."""
+
+from goniolab.cli import main
+
+raise SystemExit(main())
