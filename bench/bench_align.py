@@ -5,11 +5,12 @@ Each seed draws both arms' zero offsets and the sample tilt uniformly in +/-1 de
 its estimates are compared with the drawn truth (``goniolab.lab_wiring.draw_session``).
 
     .venv/bin/python bench/bench_align.py [--seeds 0:20] [--sample sample:wittmann-3]
-        [--s-weight 0.505]
+        [--s-weight 0.51]
 
-``--s-weight`` gives the twin's spectro a polarisation sensitivity (``[sim.twin] s_weight``:
-its share of response to s-polarised light); the black glass polarises, the fit's Fresnel
-curve does not know it, and both zeros move together.
+``--s-weight`` sets the twin's spectro's polarisation sensitivity (``[sim.twin] s_weight``,
+its share of response to s-polarised light; default the twin's own, 0.51); the black glass
+polarises, and the fit finds ``w`` with three or more incidences (printed with its sigma
+and the zeros' sigma).
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ def _cpu() -> float:
     return r.ru_utime + r.ru_stime
 
 
-def config_text(seed: int, sample: str, store: Path, s_weight: float = 0.5) -> str:
+def config_text(seed: int, sample: str, store: Path, s_weight: float | None = None) -> str:
     """configs/lab-sim.toml with ``seed``, ``sample``, all three ranges at 1 deg and the
     spectro's ``s_weight``."""
     from goniolab.config import configs_dir
@@ -45,7 +46,8 @@ def config_text(seed: int, sample: str, store: Path, s_weight: float = 0.5) -> s
     text = text.replace('map = "sample:wittmann-3"', f'map = "{sample}"')
     for key in ("lamp_zero_range_deg", "detector_zero_range_deg", "sample_tilt_range_deg"):
         text = text.replace(f"# {key} = 0.5", f"{key} = 1.0")
-    text = text.replace('mode = "realistic"', f'mode = "realistic"\ns_weight = {s_weight}', 1)
+    if s_weight is not None:
+        text = text.replace('mode = "realistic"', f'mode = "realistic"\ns_weight = {s_weight}', 1)
     return text.replace('store = ""', f'store = "{store}"')
 
 
@@ -53,7 +55,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", default="0:20", help="first:stop (stop excluded)")
     ap.add_argument("--sample", default="sample:wittmann-3")
-    ap.add_argument("--s-weight", type=float, default=0.5, help="spectro's s share (0.5)")
+    ap.add_argument(
+        "--s-weight", type=float, default=None, help="spectro's s share (the twin's 0.51)"
+    )
     args = ap.parse_args()
     from goniolab.cli import main as cli
     from goniolab.config import load_lab_config
@@ -80,6 +84,9 @@ def main() -> None:
             print(
                 f"seed {seed:3d}: true " + " ".join(f"{truth[t]:+.3f}" for _, t in KEYS)
                 + "  error " + " ".join(f"{e:+.4f}" for e in err)
+                + f"  sigma {got['standard_fit']['lamp_zero_sigma_deg']:.3f}"
+                + f"  w {got['standard_fit']['s_weight']:.4f}"
+                + f" +- {got['standard_fit']['s_weight_sigma']:.4f}"
                 + f"  ({got['readings']} readings, {_cpu() - c0:.1f} s CPU)",
                 flush=True,
             )  # fmt: skip

@@ -14,6 +14,7 @@ the factories that build them from a map are here (:func:`build_facet` and its s
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from pathlib import Path
@@ -93,13 +94,31 @@ def build_facet(hm: HeightMap | None, options: ModelOptions) -> ReflectanceModel
 
 def build_auto(hm: HeightMap | None, options: ModelOptions) -> ReflectanceModel:
     """The ``auto`` model (:class:`goniolab.optics.model_choice.AutoModel`) on the facet
-    model ``options.facet`` (built here when not given)."""
+    model ``options.facet`` (a model or a factory; when not given, one on the slope cells,
+    ``backend="lean"``, built the first time a geometry needs it).
+
+    The rule reads the map's statistics only, so a map the rule sends to the facet model
+    imports no wave-optics code and one it sends to the wave models forms no facet slopes;
+    ``options.backend`` is not used: the facet model of ``auto`` always runs on the slope
+    cells and the wave models on numpy, the faster whole-process (``bench/bench_lean.py``;
+    the per-pixel numba kernels cost a process about 1 s of numba start-up)."""
     from goniolab.optics.model_choice import AutoModel
 
     hm = _need_map(hm, "auto")
-    facet = options.facet if options.facet is not None else build_facet(hm, options)
-    assert isinstance(facet, FacetModel)
-    out: ReflectanceModel = AutoModel(hm, facet, **_wave_options(options))
+    facet = options.facet
+    if facet is None:
+        lean = dataclasses.replace(options, backend="lean")
+        the_map = hm
+
+        def facet() -> FacetModel:
+            try:
+                built = build_facet(the_map, lean)
+            except ValueError as exc:  # built late: the error still names the map
+                raise UserError(one_line(f"{the_map.source}: {exc}")) from None
+            assert isinstance(built, FacetModel)
+            return built
+
+    out: ReflectanceModel = AutoModel(hm, facet, n=options.n, **_wave_options(options))
     return out
 
 
@@ -128,7 +147,7 @@ def build_model(
     model: str = DEFAULT_MODEL,
     wavelength_nm: float | None = None,
     facet: FacetModel | None = None,
-    backend: Backend = "numba",
+    backend: Backend = "lean",
 ) -> ReflectanceModel:
     """The registered ``model`` (:mod:`goniolab.model_registry`) of a loaded height map,
     not cached (:func:`model_for` caches by spec). ``facet``: the facet model of the map a
@@ -211,11 +230,6 @@ def _model(
     if entry.needs_heightmap:
         hm = resolve_map(spec, step_um=step_um)
         _check_numeric_range(spec, hm)
-    facet = None
-    if entry.uses_facet:  # the facet model of the map, cached and shared
-        facet = _model(
-            key, spec, n, step_um, slope_method, weighting, masking, "facet", None, backend
-        )
     try:
         return build_model(
             hm,
@@ -225,7 +239,6 @@ def _model(
             masking=masking,
             model=model,
             wavelength_nm=wavelength_nm,
-            facet=facet,
             backend=backend,
         )
     except ValueError as exc:
@@ -242,7 +255,7 @@ def model_for(
     masking: bool = True,
     model: str = DEFAULT_MODEL,
     wavelength_nm: float | None = None,
-    backend: Backend = "numba",
+    backend: Backend = "lean",
 ) -> ReflectanceModel:
     """The reflectance model of a surface: the one way every face gets a sample's model.
 

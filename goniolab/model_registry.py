@@ -62,12 +62,15 @@ class ModelOptions:
     slope_method, weighting, masking, backend
         Of the facet model (:meth:`goniolab.optics.surface.Surface.from_heightmap`,
         :class:`goniolab.optics.facet.FacetModel`); ``masking`` also of the wave models.
+        ``backend`` is that of ``model="facet"``: ``auto`` runs its facet model on the
+        slope cells (``"lean"``) whatever it says (:func:`goniolab.model_cache.build_auto`).
     wavelength_nm
         Wavelength of every response of a wave-optics model, or ``None``: 550 nm for
         curves, gloss weighted over CIE C x V(lambda) as ISO 2813 does.
     facet
-        The facet model of the same map and options when already built (a model whose
-        entry has ``uses_facet`` gets the cached one from :func:`goniolab.model_cache.model_for`).
+        The facet model of the same map and options, or a function that builds it on
+        first use (a model whose entry has ``uses_facet`` gets the cached one from
+        :func:`goniolab.model_cache.model_for`, built only if a geometry needs it).
     """
 
     n: complex = complex(1.55)
@@ -75,7 +78,7 @@ class ModelOptions:
     weighting: str = "radiometric"
     masking: bool = True
     wavelength_nm: float | None = None
-    backend: str = "numba"
+    backend: str = "lean"
     facet: Any = None
 
 

@@ -128,9 +128,15 @@ class SpectroChain:
     #: bright specimen lifts its own dark channels (a red's blue end) in proportion
     stray_rel: float = 1e-3
     #: share of the detector's response that goes to s-polarised light (0.5: insensitive).
-    #: A grating spectrometer favours one polarisation by a few %; it matters where the
-    #: specimen polarises, e.g. the black glass at 60 deg (R_s 18 %, R_p 0.4 %)
-    s_weight: float = 0.5
+    #: It matters where the specimen polarises, e.g. the black glass at 60 deg (R_s 18 %,
+    #: R_p 0.4 %). Default 0.51, a polarisation dependence ``(S_s - S_p) / (S_s + S_p)`` of
+    #: 2 %: a grating's efficiency differs between s and p by tens of % (C. Palmer,
+    #: *Diffraction Grating Handbook*, 8th ed., ch. 9 "efficiency characteristics"); a
+    #: multimode fibre in front of it (the Ruby's input) scrambles most of that, leaving a
+    #: residual of a few % (J. Kostkowski, *Reliable Spectroradiometry*, 1997, ch. 7,
+    #: polarisation errors). A typical value, unconfirmed for the STIL Ruby: its manual
+    #: gives none.
+    s_weight: float = 0.51
 
     def __post_init__(self) -> None:
         lamp_spectrum(self.lamp)  # validate

@@ -24,8 +24,8 @@ with physics the predictor does not share:
 
 Cost and caching: a table is one FFT of the tile per (q_z band, wavelength), shared by
 every incidence angle (the band is rescaled to each reading's own q_z). Tables are kept in
-memory and in a disk cache (``cache_dir``), keyed by the truth's content and the
-settings; docs/TWIN.md gives measured build times.
+memory and in a disk cache (``cache_dir``), keyed by the truth's content, the settings and
+the code that builds them (:func:`table_code_key`); docs/TWIN.md gives measured build times.
 
 References
 ----------
@@ -83,6 +83,7 @@ __all__ = [
     "build_truth",
     "luminance_weights",
     "smith_shadowing",
+    "table_code_key",
     "truth_for",
 ]
 
@@ -123,6 +124,38 @@ def _luminance_pct(
         for t in tr.flat
     ]
     return np.asarray(out, dtype=np.float64).reshape(tr.shape)
+
+
+#: The orders of a flat mirror: all the power in the specular order (the band at q_z = 0).
+_MIRROR_ORDERS = OrderTable(
+    du=np.array([-1e-3, 0.0, 1e-3]),
+    dv=np.array([0.0]),
+    p=np.array([[0.0, 1.0, 0.0]], dtype=np.float32),
+    qz=1.0,
+)
+
+
+@functools.lru_cache(maxsize=1)
+def table_code_key() -> str:
+    """What, besides the truth's content and settings, decides a cached table's numbers: the
+    source of the modules that build the true tile and its tables (this one,
+    :mod:`sim.true_surface`, :mod:`sim.kirchhoff_orders`) and the numpy and scipy versions.
+
+    Part of the disk cache's key. Without it, tables written by another version of the twin
+    (another branch, an older checkout: the cache directory is per user, not per checkout)
+    were read back as this one's; they differ by up to ~1e-4 relative, and the spectro's
+    Poisson noise, whose sampler draws a variable number of uniforms, turns such a change
+    into a different noise stream for every later reading: at an instant clock, RMSE 0.250
+    or 0.247 % for the same seed (the closing note's "known defect")."""
+    import scipy
+
+    import sim.kirchhoff_orders
+    import sim.true_surface
+
+    h = hashlib.sha1(f"numpy {np.__version__} scipy {scipy.__version__}".encode())
+    for mod in (__file__, sim.true_surface.__file__, sim.kirchhoff_orders.__file__):
+        h.update(Path(mod).read_bytes())
+    return h.hexdigest()[:16]
 
 
 class TruthOptics:
@@ -233,7 +266,8 @@ class TruthOptics:
         d = self.settings.cache_dir
         if not d:
             return None
-        h = hashlib.sha1((self.truth.content_key + self.settings.key()).encode()).hexdigest()[:20]
+        key = self.truth.content_key + self.settings.key() + table_code_key()
+        h = hashlib.sha1(key.encode()).hexdigest()[:20]
         return Path(d) / f"twin-{h}.npz"
 
     def _load_disk(self) -> None:
@@ -294,7 +328,8 @@ class TruthOptics:
         """Surface-reflected flux fraction, shape (n_wavelength_nodes, n_tr).
 
         Two bands around the reading's own ``q_z = cos ti + cos tr``, each rescaled to it
-        (:meth:`OrderTable.reading`), interpolated linearly in q_z.
+        (:meth:`OrderTable.reading`), interpolated linearly in q_z; below the first band,
+        the flat mirror and the first band, weighted for the tile's coherent share.
         """
         reach = round(self._reach_v(source, detector), 6)
         cos_ti = math.cos(math.radians(ti_deg))
@@ -304,9 +339,21 @@ class TruthOptics:
                 u_d = math.sin(math.radians(float(tr)))
                 q = cos_ti + math.cos(math.radians(float(tr)))
                 (q_lo, q_hi), w = self._bands_for(q, lam * 1e-3)
-                if q_lo <= 0.0:
-                    w = 1.0
                 acc = 0.0
+                if q_lo <= 0.0:
+                    # below the first band (grazing: G85's q_z = 0.174): the band at q_z = 0
+                    # is the flat mirror (all power coherent); mixed with the first band so
+                    # that the coherent share is the tile's own at this q_z (the first band
+                    # alone carried its own, 0.45 against 0.72 for wittmann-3 at 85 deg)
+                    c_q, c_hi = (
+                        float(self.coherent_share(np.array([lam]), q)[0]),
+                        float(self.coherent_share(np.array([lam]), q_hi)[0]),
+                    )
+                    w = 1.0 if c_hi >= 1.0 - 1e-9 else min(1.0, max(0.0, (1 - c_q) / (1 - c_hi)))
+                    if w < 1.0:
+                        acc += (1.0 - w) * _MIRROR_ORDERS.reading(
+                            ti_deg, u_d, q, self.truth.n, source, detector
+                        )
                 for qb, wb in ((q_lo, 1.0 - w), (q_hi, w)):
                     if wb <= 1e-12 or qb <= 0.0:
                         continue
@@ -331,6 +378,51 @@ class TruthOptics:
         ang = (1.0 - ft) / (1.0 - r_ext) * cos_tr * omega / math.pi
         return np.asarray((1.0 - fi) * saunderson * ang[None, :])
 
+    def shadowing(self, theta_i_deg: float, theta_r_deg: float) -> tuple[float, FloatArray]:
+        """Shadowing and masking by the coat's own roughness, which the Kirchhoff tables
+        lack (issue 21: the twin must have what real samples have), on the light the
+        roughness scatters only: ``(G, C)``.
+
+        ``G = G1(theta_i) G1(theta_r)``, Smith's function of the tile's rms slope
+        (:func:`smith_shadowing`), multiplies the diffuse part of a reading;
+        ``C = |<exp(i k q_z z)>|^2`` per wavelength node is the coherent share of the
+        reflection, the characteristic function of the tile's heights at
+        ``q_z = cos theta_i + cos theta_r`` (Beckmann & Spizzichino ch. 5; ``exp(-g)`` for
+        Gaussian heights): the coherent beam, ``C`` times what a flat mirror of the coat
+        reads there, is not shadowed (:meth:`spectral_fraction`). Shadowing is geometric
+        optics: a bump casts a shadow only where it is optically rough at that geometry.
+        The coherent beam of a coat optically smooth at grazing incidence (wittmann-3 at
+        85 deg, ``g = 0.38``) passes its filler bumps, whose shadows, 0.3 um tall and 3 um
+        long at 5 deg elevation, are washed out by diffraction (Fresnel number
+        ``h^2 / (lambda L)`` ~ 0.05); a coat rough at that geometry (``C`` -> 0) gets
+        Smith's factor whole. The earlier factor on all of the reflection cut the twin's
+        G85 of wittmann-3 from 60.0 to 26.7 GU, below the unmasked facet prediction
+        (36.3 GU), where Wittmann et al. (2021, fig. 9b, sec. 5.4) measure the silica
+        samples' G85 above it."""
+        sigma = self.truth.slope_rms_x
+        g2 = float(smith_shadowing(theta_i_deg, sigma) * smith_shadowing(theta_r_deg, sigma))
+        nodes = np.asarray(self.settings.wavelengths_nm, dtype=np.float64)
+        if g2 >= 1.0:
+            return 1.0, np.ones_like(nodes)
+        q = math.cos(math.radians(theta_i_deg)) + math.cos(math.radians(abs(theta_r_deg)))
+        return g2, self.coherent_share(nodes, q)
+
+    def coherent_share(self, wavelengths_nm: FloatArray, qz: float) -> FloatArray:
+        """``|<exp(i k q_z z)>|^2`` over the tile per wavelength, from its height histogram
+        (8192 bins: the phase within a bin varies by under 0.05 rad for the tiles here)."""
+        counts, centres = self._height_histogram
+        k = 2.0 * math.pi / (np.asarray(wavelengths_nm, dtype=np.float64) * 1e-3)
+        phase = np.outer(k * qz, centres)
+        p = counts / counts.sum()
+        mean = (np.cos(phase) @ p) + 1j * (np.sin(phase) @ p)
+        return np.asarray(np.abs(mean) ** 2)
+
+    @functools.cached_property
+    def _height_histogram(self) -> tuple[FloatArray, FloatArray]:
+        z = np.asarray(self.truth.z_um, dtype=np.float64).ravel()
+        counts, edges = np.histogram(z, bins=8192)
+        return counts.astype(np.float64), 0.5 * (edges[:-1] + edges[1:])
+
     def spectral_fraction(
         self,
         theta_i_deg: float,
@@ -343,13 +435,16 @@ class TruthOptics:
         :data:`SPECTRUM_WAVELENGTHS_NM` (surface + body), blocking."""
         tr = np.asarray([theta_r_deg], dtype=np.float64)
         surf = self._surface_at(theta_i_deg, tr, source, detector)[:, 0]
-        # shadowing and masking by the coat's own roughness (the Kirchhoff tables have
-        # none): Smith's G1 for the lamp and for the detector, felt at grazing angles on
-        # rough coats (issue 21: the twin must have what real samples have)
-        sigma = self.truth.slope_rms_x
-        surf = surf * float(
-            smith_shadowing(theta_i_deg, sigma) * smith_shadowing(theta_r_deg, sigma)
-        )
+        g2, coherent = self.shadowing(theta_i_deg, theta_r_deg)
+        if g2 < 1.0:
+            # the coherent beam's part of the reading: the tile's coherent share of what a
+            # flat mirror of the coat reads here (the source image in the detector)
+            q = math.cos(math.radians(theta_i_deg)) + math.cos(math.radians(theta_r_deg))
+            mirror = _MIRROR_ORDERS.reading(
+                theta_i_deg, math.sin(math.radians(theta_r_deg)), q, self.truth.n, source, detector
+            )
+            beam = np.minimum(coherent * mirror, surf)
+            surf = beam + g2 * (surf - beam)
         wl = np.asarray(SPECTRUM_WAVELENGTHS_NM)
         spec = np.interp(wl, np.asarray(self.settings.wavelengths_nm), surf)
         body = self._body_fraction(theta_i_deg, tr, detector)[:, 0]

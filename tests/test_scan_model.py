@@ -41,10 +41,26 @@ def _scan(tmp_path: Path, config: Path, *extra: str) -> tuple[dict[str, object],
 
 
 def _expected(model: str) -> np.ndarray:
+    """The named model's predicted luminance: Y of its predicted spectrum (issue 21: the
+    luminance prediction comes from the spectral one; a wave model is evaluated over the
+    wavelengths the instrument's Y weights, within 0.4 % of its 550 nm reading here)."""
+    from goniolab.colour.spectra import xyz_weights
+    from goniolab.model_cache import spectral_for
+    from goniolab.scan.colour import PointColour
+
     cfg = load_lab_config(configs_dir() / "lab-sim.toml")
     m = model_for(SAMPLE, n=cfg.sample.n, model=model)
     src, det = Cone(cfg.goniometer.source_cone_deg), Cone(cfg.spectro.detector_cone_deg)
-    return np.asarray(m.luminance_pct(45.0, np.asarray(THETA_R), source=src, detector=det))
+    at_550 = np.asarray(m.luminance_pct(45.0, np.asarray(THETA_R), source=src, detector=det))
+    sp = spectral_for(
+        m,
+        source_cone_deg=cfg.goniometer.source_cone_deg,
+        detector_cone_deg=cfg.spectro.detector_cone_deg,
+    )
+    w_y = xyz_weights(sp.wavelengths_nm, PointColour.from_config(cfg).settings)[1]
+    y = np.asarray(sp.spectrum_pct(45.0, THETA_R) @ w_y / 100.0)
+    np.testing.assert_allclose(y, at_550, rtol=0.01)  # the same model
+    return y
 
 
 @pytest.mark.slow  # ~20 s: the simulated lab measures (and gloss-reads) with the wave model

@@ -95,6 +95,10 @@ def test_cli_and_tui_store_identical_rows(
     assert code == 0, capsys.readouterr().err
     tui_run = asyncio.run(_tui_scan(cfg, tui_store))
     cli_rows, tui_rows = _rows(cli_store, 1), _rows(tui_store, tui_run)
+    # each run's config names the store it was written to (the alignment state lives
+    # beside it: load_lab_config(store=)); everything else is identical
+    assert cli_rows["run"]["config"]["lab"].pop("store") == str(cli_store.resolve())
+    assert tui_rows["run"]["config"]["lab"].pop("store") == str(tui_store.resolve())
     assert len(cli_rows["points"]) == 10 and len(cli_rows["predictions"]) == 5
     assert all(p.colour is not None for p in cli_rows["points"])  # colour columns compared too
     assert cli_rows["run"]["status"] == "done"

@@ -196,7 +196,15 @@ class SpectralPredictor:
         # three Chebyshev nodes over [lo, hi], quadratic Lagrange interpolation in n
         c, h = 0.5 * (lo + hi), 0.5 * (hi - lo)
         xs = c + h * np.cos(np.pi * (2 * np.arange(3) + 1) / 6.0)
-        ys = [self._surface_at(complex(x), mid_wl, theta_i_deg, tr) for x in xs]
+        # a factory that ignores n (a model used as it is) gives one model for all three
+        # nodes: evaluated once (the Lagrange weights sum to 1)
+        by_model: dict[int, FloatArray] = {}
+        ys = []
+        for x in xs:
+            model = self._model(complex(x), mid_wl)
+            if id(model) not in by_model:
+                by_model[id(model)] = self._surface_at(complex(x), mid_wl, theta_i_deg, tr)
+            ys.append(by_model[id(model)])
         weights = _lagrange_weights(xs, n_re)  # (3, n_wl)
         out2: FloatArray = sum(ys[j][:, None] * weights[j][None, :] for j in range(3))
         return out2

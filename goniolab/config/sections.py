@@ -312,8 +312,9 @@ class TwinConfig(StrictSection):
     read_noise_counts: Annotated[float, Field(strict=True, ge=0.0, le=1000.0)] = 5.0
     stray_pct: Annotated[float, Field(strict=True, ge=0.0, le=1.0)] = 0.002
     flicker_pct: Annotated[float, Field(strict=True, ge=0.0, le=10.0)] = 0.3
-    # share of the spectro's response to s-polarised light (0.5: insensitive)
-    s_weight: Annotated[float, Field(strict=True, ge=0.4, le=0.6)] = 0.5
+    # share of the spectro's response to s-polarised light (0.5: insensitive); 0.51 is a
+    # 2 % polarisation dependence, a fibre-fed grating spectrometer's few % (sim/spectro_chain.py)
+    s_weight: Annotated[float, Field(strict=True, ge=0.4, le=0.6)] = 0.51
     # the arms and the sample seating, drawn per session (uniform in +/- range)
     backlash_deg: Annotated[float, Field(strict=True, ge=0.0, le=1.0)] = 0.02
     lamp_zero_range_deg: Annotated[float, Field(strict=True, ge=0.0, le=5.0)] = 0.5

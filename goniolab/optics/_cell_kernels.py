@@ -13,64 +13,26 @@ overlaps for rectangles (Mihalik & Durikovic eqs. 15-17).
 (:mod:`goniolab.optics.kirchhoff`) per cell by Horner's scheme, the coherent part removed,
 and adds ``|U|^2`` to the cell.
 
-Each kernel exists in numba (``cache=True, nogil=True``) and as a numpy twin (the test
-reference and bench baseline). Cells outside each detector's reach are skipped by their
-sorted ``wox``/``woy`` coordinates.
+Each kernel exists as numpy code here (the default: no JIT start-up) and in numba
+(``cache=True, nogil=True``) in :mod:`._cell_kernels_numba`, imported only when a model
+asks for ``backend="numba"`` (``CK.cone_cells_numba`` and its siblings load it). Cells
+outside each detector's reach are skipped by their sorted ``wox``/``woy`` coordinates.
 """
 
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
-from numba import njit
 from numpy.typing import NDArray
 
-from goniolab.optics._kernels import interval_overlap_numpy, table_numpy
+from goniolab.optics._kernels_numpy import interval_overlap_numpy
 
-__all__ = [
-    "cone_cells_numba",
-    "cone_cells_numpy",
-    "kirchhoff_band_numba",
-    "kirchhoff_band_numpy",
-    "rect_cells_numba",
-    "rect_cells_numpy",
-]
+#: the numba kernels (``*_numba``) are loaded on first access (module ``__getattr__``)
+__all__ = ["cone_cells_numpy", "kirchhoff_band_numpy", "rect_cells_numpy"]
 
 FloatArray = NDArray[np.float64]
-
-
-@njit(cache=True, nogil=True, fastmath=False)
-def _table(
-    g: float, table: FloatArray, g0: float, g1: float, o_in: float
-) -> float:  # pragma: no cover - numba
-    if g <= g0:
-        return o_in
-    if g >= g1:
-        return 0.0
-    t = (g - g0) / (g1 - g0) * (table.size - 1)
-    i = int(t)
-    if i >= table.size - 1:
-        return table[table.size - 1]
-    f = t - i
-    return table[i] * (1.0 - f) + table[i + 1] * f
-
-
-@njit(cache=True, nogil=True, fastmath=False)
-def _overlap(x: float, s: float, r: float) -> float:  # pragma: no cover - numba
-    if s <= 0.0:
-        ax = abs(x)
-        h = 0.5 * r
-        if ax < h:
-            return 1.0
-        if ax == h:
-            return 0.5
-        return 0.0
-    lo = max(x - 0.5 * s, -0.5 * r)
-    hi = min(x + 0.5 * s, 0.5 * r)
-    if hi <= lo:
-        return 0.0
-    return (hi - lo) / s
 
 
 def _bounds(coord: FloatArray, centre: float, reach: float) -> tuple[int, int]:
@@ -79,68 +41,27 @@ def _bounds(coord: FloatArray, centre: float, reach: float) -> tuple[int, int]:
     return lo, hi
 
 
-@njit(cache=True, nogil=True, fastmath=False)
-def cone_cells_numba(
-    wox: FloatArray,
-    woy: FloatArray,
-    p: FloatArray,
-    dirs: FloatArray,
-    table: FloatArray,
-    g0: float,
-    g1: float,
-    o_in: float,
-) -> FloatArray:  # pragma: no cover - numba
-    """``out[k] = sum_cells P O(angle(wo, dirs[k]))`` (cap-overlap table on [g0, g1]).
-
-    The cells' ``wo_z`` are formed once; per direction and row only the columns within the
-    cap's chord are visited, and a cell whose chord to the direction is beyond the cap's
-    (so ``angle >= g1``, ``O = 0``) is dropped before the square root and arcsine: the same
-    sum, term for term, as :func:`cone_cells_numpy`.
-    """
-    s_half = math.sin(0.5 * min(g1, math.pi))
-    reach = 2.0 * s_half + 1e-12
-    cut2 = 4.0 * s_half * s_half * (1.0 + 1e-9) + 1e-15  # chord^2 beyond: angle >= g1
-    ny, nx = p.shape
-    zz = np.empty((ny, nx))
-    for i in range(ny):
-        yy = woy[i]
-        for j in range(nx):
-            xx = wox[j]
-            z2 = 1.0 - xx * xx - yy * yy
-            zz[i, j] = math.sqrt(z2) if z2 > 0.0 else -1.0
-    out = np.zeros(dirs.shape[0])
-    for k in range(dirs.shape[0]):
-        dx, dy, dz = dirs[k, 0], dirs[k, 1], dirs[k, 2]
-        j0 = np.searchsorted(wox, dx - reach)
-        j1 = np.searchsorted(wox, dx + reach, side="right")
-        i0 = np.searchsorted(woy, dy - reach)
-        i1 = np.searchsorted(woy, dy + reach, side="right")
-        acc = 0.0
-        for i in range(i0, i1):
-            yy = woy[i]
-            dyy = (yy - dy) ** 2
-            if dyy >= cut2:
-                continue
-            half = math.sqrt(cut2 - dyy) + 1e-12
-            ja = max(j0, np.searchsorted(wox, dx - half))
-            jb = min(j1, np.searchsorted(wox, dx + half, side="right"))
-            for j in range(ja, jb):
-                v = p[i, j]
-                if v == 0.0:
-                    continue
-                z = zz[i, j]
-                if z < 0.0:
-                    continue
-                c2 = (wox[j] - dx) ** 2 + dyy + (z - dz) ** 2
-                if c2 >= cut2:
-                    continue
-                ch = 0.5 * math.sqrt(c2)
-                g = 2.0 * math.asin(min(ch, 1.0))
-                if g >= g1:
-                    continue
-                acc += v * _table(g, table, g0, g1, o_in)
-        out[k] = acc
-    return out
+def _lookup(g: FloatArray, table: FloatArray, g0: float, g1: float, o_in: float) -> FloatArray:
+    """The O(gamma) table at ``g`` (``g`` overwritten): ``o_in`` up to ``g0``, 0 from ``g1``,
+    linear between the nodes as the numba kernels' ``_table`` (no search: the nodes are
+    equally spaced, so the index is computed)."""
+    n = table.size
+    if not g1 > g0:
+        out: FloatArray = np.where(g <= g0, o_in, 0.0)
+        return out
+    below, beyond = g <= g0, g >= g1
+    t = np.clip(g, g0, g1, out=g)
+    t -= g0
+    t *= (n - 1) / (g1 - g0)
+    i = t.astype(np.int64)
+    np.minimum(i, n - 2, out=i)
+    t -= i
+    lo = table[i]
+    inner = (table[i + 1] - lo) * t
+    inner += lo
+    inner[below] = o_in
+    inner[beyond] = 0.0
+    return inner
 
 
 def cone_cells_numpy(
@@ -153,8 +74,14 @@ def cone_cells_numpy(
     g1: float,
     o_in: float,
 ) -> FloatArray:
-    """Numpy twin of :func:`cone_cells_numba`."""
+    """Numpy twin of :func:`cone_cells_numba`: the cells' ``wo_z`` (and which cells are
+    above the horizon) formed once, then per direction the chord to every cell of the
+    window within reach, its angle and the table, summed with the cells' powers."""
     reach = 2.0 * math.sin(0.5 * min(g1, math.pi)) + 1e-12
+    z2 = 1.0 - wox[None, :] ** 2 - woy[:, None] ** 2
+    ok = z2 > 0.0
+    zz = np.sqrt(np.where(ok, z2, 0.0))
+    pv = np.where(ok, p, 0.0)
     out = np.zeros(dirs.shape[0])
     for k in range(dirs.shape[0]):
         d = dirs[k]
@@ -162,65 +89,17 @@ def cone_cells_numpy(
         i0, i1 = _bounds(woy, float(d[1]), reach)
         if j1 <= j0 or i1 <= i0:
             continue
-        xx = wox[None, j0:j1]
-        yy = woy[i0:i1, None]
-        z2 = 1.0 - xx * xx - yy * yy
-        ok = z2 > 0.0
-        zz = np.sqrt(np.where(ok, z2, 0.0))
-        ch = 0.5 * np.sqrt((xx - d[0]) ** 2 + (yy - d[1]) ** 2 + (zz - d[2]) ** 2)
-        g = 2.0 * np.arcsin(np.minimum(ch, 1.0))
-        o_val = np.where(ok, table_numpy(g, table, g0, g1, o_in), 0.0)
-        out[k] = float(np.sum(p[i0:i1, j0:j1] * o_val))
-    return out
-
-
-@njit(cache=True, nogil=True, fastmath=False)
-def rect_cells_numba(
-    wox: FloatArray,
-    woy: FloatArray,
-    p: FloatArray,
-    alpha_r: FloatArray,
-    s_in: float,
-    r_in: float,
-    s_perp: float,
-    r_perp: float,
-) -> FloatArray:  # pragma: no cover - numba
-    """``out[k] = sum_cells P O_in(alpha - alpha_r[k]) O_perp(beta)`` (rectangles).
-
-    ``alpha = atan2(-wo_x, wo_z)`` (in-plane angle), ``beta = asin(wo_y)``.
-    """
-    out = np.zeros(alpha_r.size)
-    half_b = 0.5 * (s_perp + r_perp)
-    half_a = 0.5 * (s_in + r_in)
-    for k in range(alpha_r.size):
-        ar = alpha_r[k]
-        cb = math.cos(min(half_b, 1.5))
-        s_hi = -math.sin(min(ar + half_a, 0.5 * math.pi))
-        s_lo = -math.sin(max(ar - half_a, -0.5 * math.pi))
-        lo = min(s_hi, s_hi * cb) - 1e-12
-        hi = max(s_lo, s_lo * cb) + 1e-12
-        j0 = np.searchsorted(wox, lo)
-        j1 = np.searchsorted(wox, hi, side="right")
-        yb = math.sin(min(half_b, 1.5)) + 1e-12
-        i0 = np.searchsorted(woy, -yb)
-        i1 = np.searchsorted(woy, yb, side="right")
-        acc = 0.0
-        for i in range(i0, i1):
-            yy = woy[i]
-            ob = _overlap(math.asin(max(-1.0, min(1.0, yy))), s_perp, r_perp)
-            if ob == 0.0:
-                continue
-            for j in range(j0, j1):
-                v = p[i, j]
-                if v == 0.0:
-                    continue
-                xx = wox[j]
-                z2 = 1.0 - xx * xx - yy * yy
-                if z2 <= 0.0:
-                    continue
-                al = math.atan2(-xx, math.sqrt(z2))
-                acc += v * ob * _overlap(al - ar, s_in, r_in)
-        out[k] = acc
+        g = zz[i0:i1, j0:j1] - d[2]
+        g *= g
+        g += ((woy[i0:i1] - d[1]) ** 2)[:, None]
+        g += ((wox[j0:j1] - d[0]) ** 2)[None, :]
+        np.sqrt(g, out=g)
+        g *= 0.5
+        np.minimum(g, 1.0, out=g)
+        np.arcsin(g, out=g)
+        g *= 2.0
+        o_val = _lookup(g, table, g0, g1, o_in)
+        out[k] = float(np.einsum("ij,ij->", pv[i0:i1, j0:j1], o_val))
     return out
 
 
@@ -247,54 +126,6 @@ def rect_cells_numpy(
     return out
 
 
-@njit(cache=True, nogil=True, fastmath=False)
-def kirchhoff_band_numba(
-    spec: NDArray[np.complex64],
-    dc: NDArray[np.complex128],
-    rows: NDArray[np.int64],
-    cols: NDArray[np.int64],
-    vz: FloatArray,
-    ok: NDArray[np.bool_],
-    lo: float,
-    hi: float,
-    hi_inclusive: bool,
-    vc: float,
-    h_max: float,
-    w_rows: NDArray[np.complex128],
-    w_cols: NDArray[np.complex128],
-    acc: FloatArray,
-) -> None:  # pragma: no cover - numba
-    """Add ``|U_d|^2`` of one Taylor band to ``acc`` (in place) for the cells it owns.
-
-    ``spec[n]`` is the transform of the n-th Taylor term ``W e^(-i v_c h) (h/h_max)^n``
-    on a region of the FFT grid (the box's cell ``(i, j)`` at ``spec[:, rows[i], cols[j]]``),
-    ``dc[n]`` its value at zero frequency. A cell with ``ok`` and ``lo <= vz < hi``
-    (``<= hi`` when ``hi_inclusive``) gets, with ``d = (vz - v_c) h_max``,
-    ``U = sum_n (spec[n] - dc[n] w_rows[i] w_cols[j]) (-i d)^n / n!`` (Horner's scheme;
-    the ``dc`` part is the coherent beam times the window's normalised transform).
-    """
-    n_terms = spec.shape[0]
-    for i in range(vz.shape[0]):
-        r = rows[i]
-        wr = w_rows[i]
-        for j in range(vz.shape[1]):
-            if not ok[i, j]:
-                continue
-            v = vz[i, j]
-            if v < lo or v > hi or (v == hi and not hi_inclusive):
-                continue
-            step = -1j * ((v - vc) * h_max)
-            c = cols[j]
-            f = complex(spec[n_terms - 1, r, c])
-            e = dc[n_terms - 1]
-            for n in range(n_terms - 2, -1, -1):
-                s = step / (n + 1)
-                f = complex(spec[n, r, c]) + f * s
-                e = dc[n] + e * s
-            u = f - e * (wr * w_cols[j])
-            acc[i, j] += u.real * u.real + u.imag * u.imag
-
-
 def kirchhoff_band_numpy(
     spec: NDArray[np.complex64],
     dc: NDArray[np.complex128],
@@ -311,19 +142,48 @@ def kirchhoff_band_numpy(
     w_cols: NDArray[np.complex128],
     acc: FloatArray,
 ) -> None:
-    """Numpy twin of :func:`kirchhoff_band_numba`."""
+    """Numpy twin of :func:`kirchhoff_band_numba`: the same
+    Horner sums over the rectangle of cells holding those the band owns, in real and
+    imaginary parts (the step ``-i d`` is imaginary: ``f (-i a) = a f_im - i a f_re``),
+    added to ``acc`` where the band owns the cell."""
     own = ok & (vz >= lo) & ((vz <= hi) if hi_inclusive else (vz < hi))
-    ii, jj = np.nonzero(own)
-    if ii.size == 0:
+    ri = np.flatnonzero(own.any(axis=1))
+    if ri.size == 0:
         return
-    step = -1j * ((vz[ii, jj] - vc) * h_max)
+    ci = np.flatnonzero(own.any(axis=0))
+    a0, a1, b0, b1 = int(ri[0]), int(ri[-1]) + 1, int(ci[0]), int(ci[-1]) + 1
+    r, c = rows[a0:a1], cols[b0:b1]
+    if r.size > 1 and np.all(np.diff(r) == 1) and c.size > 1 and np.all(np.diff(c) == 1):
+        sub = spec[:, int(r[0]) : int(r[-1]) + 1, int(c[0]) : int(c[-1]) + 1]
+    else:
+        sub = spec[:, r][:, :, c]
+    x = vz[a0:a1, b0:b1] - vc
+    x *= h_max
     n_terms = spec.shape[0]
-    r, c = rows[ii], cols[jj]
-    f = spec[n_terms - 1, r, c].astype(np.complex128)
-    e = np.full(ii.size, dc[n_terms - 1], dtype=np.complex128)
+    top = sub[n_terms - 1]
+    fr, fi = top.real.astype(np.float64), top.imag.astype(np.float64)
+    er = np.full(x.shape, dc[n_terms - 1].real)
+    ei = np.full(x.shape, dc[n_terms - 1].imag)
     for n in range(n_terms - 2, -1, -1):
-        s = step / (n + 1)
-        f = spec[n, r, c] + f * s
-        e = dc[n] + e * s
-    u = f - e * (w_rows[ii] * w_cols[jj])
-    acc[ii, jj] += u.real * u.real + u.imag * u.imag
+        a = x / (n + 1)
+        term = sub[n]
+        fr, fi = term.real + a * fi, term.imag - a * fr
+        er, ei = dc[n].real + a * ei, dc[n].imag - a * er
+    w = np.multiply.outer(w_rows[a0:a1], w_cols[b0:b1])
+    ur = fr - (er * w.real - ei * w.imag)
+    ui = fi - (er * w.imag + ei * w.real)
+    power = ur * ur
+    power += ui * ui
+    acc[a0:a1, b0:b1] += np.where(own[a0:a1, b0:b1], power, 0.0)
+
+
+_NUMBA = ("cone_cells_numba", "kirchhoff_band_numba", "rect_cells_numba")
+
+
+def __getattr__(name: str) -> Any:
+    """The numba kernels, imported on first use (:mod:`._cell_kernels_numba`)."""
+    if name in _NUMBA:
+        from goniolab.optics import _cell_kernels_numba
+
+        return getattr(_cell_kernels_numba, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

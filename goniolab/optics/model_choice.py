@@ -48,9 +48,10 @@ References
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any, Literal
+from functools import cached_property
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -63,7 +64,6 @@ from goniolab.optics.apertures import (
 )
 from goniolab.optics.facet import FacetModel
 from goniolab.optics.heightmap import HeightMap
-from goniolab.optics.kirchhoff import KirchhoffModel
 from goniolab.optics.physical import (
     FACET_MIN_HANDOVER_G,
     MAX_PHASE_STEP_RAD,
@@ -75,8 +75,11 @@ from goniolab.optics.physical import (
 )
 from goniolab.optics.provenance import Provenance
 from goniolab.optics.psd import DEFAULT_TAPER, DEFAULT_TILE
-from goniolab.optics.rayleigh_rice import RayleighRiceModel
 from goniolab.optics.shared_map import SharedMap
+
+if TYPE_CHECKING:
+    from goniolab.optics.kirchhoff import KirchhoffModel
+    from goniolab.optics.rayleigh_rice import RayleighRiceModel
 
 __all__ = [
     "FACET_MIN_G",
@@ -154,15 +157,28 @@ def choose_model(stats: MapStats, theta_deg: float, wavelength_nm: float) -> Cho
 class AutoModel:
     """The ``auto`` model: per geometry, the model :func:`choose_model` names.
 
+    The rule reads only the map's statistics (:attr:`stats`: Sq, Sdq, correlation length
+    and step, numpy only), so building the model and choosing cost no model: the facet
+    model (given as a factory) and the wave models (:mod:`goniolab.optics.kirchhoff`,
+    :mod:`goniolab.optics.rayleigh_rice`, their FFTs) are built the first time a geometry
+    needs them. A map that needs only the facet model imports no wave-optics module, and
+    one that needs only the wave models never forms the facet slopes, unless a geometry
+    hands over to the facet model.
+
     Parameters
     ----------
     hm : HeightMap
         The map.
-    facet : FacetModel
-        The facet model of the same map (its index is used everywhere).
+    facet : FacetModel or callable
+        The facet model of the same map (its index is used everywhere), or a function
+        that builds it (called once, on first use); ``n`` is then required.
+    n : complex, optional
+        Refractive index when ``facet`` is a factory (default: ``facet.n``).
     wavelength_nm, gloss_weighting, masking, tile, taper, progress
         As in :class:`~goniolab.optics.physical.PhysicalOpticsModel`; the rule is applied at
         ``wavelength_nm`` (550 nm by default, near the peak of the ISO 2813 weighting).
+    backend : {"numpy", "numba"}
+        Aperture-sum kernels of the wave models (numpy by default: no JIT start-up).
     """
 
     kind = "auto"
@@ -170,39 +186,91 @@ class AutoModel:
     def __init__(
         self,
         hm: HeightMap,
-        facet: FacetModel,
+        facet: FacetModel | Callable[[], FacetModel],
         *,
+        n: complex | float | None = None,
         wavelength_nm: float = 550.0,
         gloss_weighting: GlossWeighting = "iso2813",
         masking: bool = True,
         tile: int = DEFAULT_TILE,
         taper: float = DEFAULT_TAPER,
         progress: Progress | None = None,
+        backend: Literal["numpy", "numba"] = "numpy",
     ) -> None:
-        self.facet = facet
-        self.n = facet.n
+        if isinstance(facet, FacetModel):
+            built = facet
+            self._facet_factory: Callable[[], FacetModel] = lambda: built
+            self.n = facet.n
+        else:
+            if n is None:
+                raise TypeError("AutoModel needs n when the facet model is given as a factory")
+            self._facet_factory = facet
+            self.n = complex(n)
         self.masking = bool(masking)
         self.wavelength_nm = float(wavelength_nm)
-        shared = SharedMap(hm, tile, taper)
-        shared.adopt_facet(facet)
-        opts: dict[str, Any] = {
-            "n": facet.n,
+        self._shared = SharedMap(hm, tile, taper)
+        self._shared.adopt_facet_factory(self.n, self.masking, lambda: self.facet)
+        self._opts: dict[str, Any] = {
+            "n": self.n,
             "wavelength_nm": wavelength_nm,
             "gloss_weighting": gloss_weighting,
             "masking": masking,
             "progress": progress,
-            "shared": shared,
+            "shared": self._shared,
+            "backend": backend,
         }
-        self.kirchhoff = KirchhoffModel(**opts)
-        self.rayleigh_rice = RayleighRiceModel(**opts)
-        self.surface = facet.surface
+
+    @cached_property
+    def facet(self) -> FacetModel:
+        """The facet model (built on first use)."""
+        return self._facet_factory()
+
+    @cached_property
+    def kirchhoff(self) -> KirchhoffModel:
+        """The Kirchhoff model of the map (its module imported on first use)."""
+        from goniolab.optics.kirchhoff import KirchhoffModel
+
+        return KirchhoffModel(**self._opts)
+
+    @cached_property
+    def rayleigh_rice(self) -> RayleighRiceModel:
+        """The Rayleigh-Rice model of the map (its module imported on first use)."""
+        from goniolab.optics.rayleigh_rice import RayleighRiceModel
+
+        return RayleighRiceModel(**self._opts)
+
+    @property
+    def surface(self) -> Any:
+        """The facet set of the map (:attr:`facet`'s surface)."""
+        return self.facet.surface
+
+    @property
+    def source(self) -> str:
+        """Where the map came from."""
+        return self._shared.tiled.source
+
+    @property
+    def progress(self) -> Progress | None:
+        """``progress(done, total, what)`` of the wave models' long transforms (set here, it
+        reaches the models built so far and those built later)."""
+        out: Progress | None = self._opts["progress"]
+        return out
+
+    @progress.setter
+    def progress(self, value: Progress | None) -> None:
+        self._opts["progress"] = value
+        for name in ("kirchhoff", "rayleigh_rice"):
+            m = self.__dict__.get(name)
+            if m is not None:
+                m.progress = value
 
     def __repr__(self) -> str:
-        return f"AutoModel({self.kirchhoff.source!r}, n={self.n}, wavelength_nm={self.wavelength_nm:g})"
+        return f"AutoModel({self.source!r}, n={self.n}, wavelength_nm={self.wavelength_nm:g})"
 
     @property
     def stats(self) -> MapStats:
-        return self.kirchhoff.stats
+        """The map's roughness, which the rule reads (numpy only, no model built)."""
+        return self._shared.stats
 
     def choice(self, theta_deg: float) -> Choice:
         """The model for incidence ``theta_deg``."""

@@ -161,8 +161,8 @@ class PhysicalOpticsModel(EnergyBudget, CellApertures):
         V(lambda) (the index ``n`` is taken constant); ``"single"``: at ``wavelength_nm``.
     masking : bool
         Multiply by the Smith G2 of the map's slopes (default on).
-    backend : {"numba", "numpy"}
-        Aperture-sum kernels.
+    backend : {"numpy", "numba"}
+        Aperture sums: numpy (default: no JIT start-up) or numba (:mod:`._cell_kernels_numba`).
     tile, taper : int, float
         Tile side (points) and window taper (:mod:`goniolab.optics.psd`).
     progress : callable, optional
@@ -179,7 +179,7 @@ class PhysicalOpticsModel(EnergyBudget, CellApertures):
         wavelength_nm: float = 550.0,
         gloss_weighting: GlossWeighting = "iso2813",
         masking: bool = True,
-        backend: Backend = "numba",
+        backend: Backend = "numpy",
         tile: int = DEFAULT_TILE,
         taper: float = DEFAULT_TAPER,
         progress: Progress | None = None,

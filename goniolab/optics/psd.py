@@ -34,6 +34,7 @@ References
 from __future__ import annotations
 
 import math
+import weakref
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
@@ -42,6 +43,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from goniolab.optics import _fft
 from goniolab.optics.heightmap import HeightMap, fill_missing, level_plane, plane_fit
 
 __all__ = [
@@ -96,6 +98,14 @@ def tile_starts(n: int, tile: int) -> tuple[list[int], int]:
     n_seg = max(1, math.ceil(n / tile))
     size = n // n_seg
     return [k * size for k in range(n_seg)], size
+
+
+#: Largest total size of a map's tiles (float32 bytes) that :meth:`TiledMap.tile` keeps.
+_TILE_CACHE_BYTES: int = 32 << 20
+#: The kept tiles of each tiled map (dropped with the map).
+_TILES: weakref.WeakKeyDictionary[TiledMap, dict[int, NDArray[np.float32]]] = (
+    weakref.WeakKeyDictionary()
+)
 
 
 @dataclass(frozen=True, eq=False)
@@ -221,14 +231,28 @@ class TiledMap:
         return len(self.ys) * len(self.xs)
 
     def tile(self, k: int) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
-        """Heights of tile ``k`` (window-weighted mean removed) and its window (float32;
-        the window is shared, read-only)."""
+        """Heights of tile ``k`` (window-weighted mean removed) and its window (float32,
+        read-only; the window is shared).
+
+        When all the tiles together take at most :data:`_TILE_CACHE_BYTES` (a 2048 x 2048
+        map: 16 MB) each is formed once and kept: a gloss report of 16 wavelengths asks
+        for every tile a few dozen times (levelling it each time cost a third of the
+        work beside the FFTs). Larger maps form a tile on each request (memory bounded by
+        a tile, as before).
+        """
+        keep = self.n_tiles * self.ny_t * self.nx_t * 4 <= _TILE_CACHE_BYTES
+        kept = _TILES.setdefault(self, {}) if keep else None
+        if kept is not None and k in kept:
+            return kept[k], self.window
         iy, ix = divmod(k, len(self.xs))
         y0, x0 = self.ys[iy], self.xs[ix]
         h = self.levelled(slice(y0, y0 + self.ny_t), slice(x0, x0 + self.nx_t))
         w = self.window
         mean = float(np.sum(w * h, dtype=np.float64) / np.sum(w, dtype=np.float64))
         h -= np.float32(mean)
+        h.setflags(write=False)
+        if kept is not None:
+            kept[k] = h
         return h, w
 
 
@@ -256,12 +280,10 @@ class PSD2:
 
 def psd2(tiled: TiledMap) -> PSD2:
     """PSD of a tiled map, averaged over the tiles (module docstring for the normalisation)."""
-    import scipy.fft
-
     acc = np.zeros((tiled.ny_t, tiled.nx_t), dtype=np.float64)
     for k in range(tiled.n_tiles):
         h, w = tiled.tile(k)
-        spec = scipy.fft.fft2(w * h, workers=-1)
+        spec = _fft.fft(_fft.fft((w * h).astype(np.complex64), axis=1), axis=0)
         acc += np.abs(spec).astype(np.float64) ** 2
     psd = acc * tiled.dx_um * tiled.dy_um / (tiled.sum_w2 * tiled.n_tiles)
     fx = np.fft.fftfreq(tiled.nx_t, tiled.dx_um).astype(np.float64)
@@ -283,13 +305,15 @@ def _dft_last(a: NDArray[np.complex64], idx: NDArray[np.int64], length: int) -> 
     padded FFT, and no padded copy of the tile) or when the padded copy would exceed
     :data:`_MAX_PADDED_BYTES`, else the padded FFT.
     """
-    import scipy.fft
-
     n = a.shape[-1]
     rows = a.size // max(n, 1)
     few = idx.size < (length // n) * max(1.0, math.log2(length))
     if length == n or (not few and rows * length * 8 <= _MAX_PADDED_BYTES):
-        out: NDArray[Any] = np.take(scipy.fft.fft(a, n=length, axis=-1, workers=-1), idx, axis=-1)
+        if length != n:
+            padded = np.zeros((*a.shape[:-1], length), dtype=a.dtype)
+            padded[..., :n] = a
+            a = padded
+        out: NDArray[Any] = np.take(_fft.fft(a, axis=-1), idx, axis=-1)
         return out
     e = np.exp((-2j * math.pi / length) * np.outer(np.arange(n), idx)).astype(np.complex64)
     result: NDArray[Any] = a @ e
@@ -317,12 +341,10 @@ def pruned_fft2(
     ny, nx = (term.shape[1], term.shape[0]) if y_first else term.shape
     ly, lx = (ny, nx) if lengths is None else lengths
     if (ly, lx) == (ny, nx):
-        import scipy.fft
-
-        a = scipy.fft.fft(term, axis=1, workers=-1)
+        a = _fft.fft(term, axis=1)
         dc = complex(np.sum(a[:, 0], dtype=np.complex128))
         first, second = (ky, kx) if y_first else (kx, ky)
-        a = scipy.fft.fft(np.take(a, first, axis=1), axis=0, workers=-1, overwrite_x=True)
+        a = _fft.fft(np.take(a, first, axis=1), axis=0)
         a = np.take(a, second, axis=0)
         out[...] = a.T if y_first else a
         return dc

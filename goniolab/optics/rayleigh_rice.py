@@ -41,6 +41,7 @@ References
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from functools import cached_property
@@ -135,6 +136,10 @@ class RayleighRiceModel(PhysicalOpticsModel):
         df2 = 1.0 / (os[0] * t.nx_t * t.dx_um * os[1] * t.ny_t * t.dy_um)
         out, coh = [], []
         scales = self._energy_scales(theta_i_deg, lams_um)
+        union = functools.reduce(CellBox.union, boxes)
+        # on a padded grid one periodogram of the boxes' union serves every wavelength
+        # (each region costs a pass over the whole tile: 16 of them were most of a gloss)
+        whole = self._psd_cells(union, os) if os != (1, 1) and len(boxes) > 1 else None
         for lam, box, scale in zip(lams_um, boxes, scales, strict=True):
             x, y, z, ok = self._geometry(theta_i_deg, lam, box, os)
             st = np.sqrt(x * x + y * y)
@@ -142,7 +147,13 @@ class RayleighRiceModel(PhysicalOpticsModel):
             # azimuth from the forward direction: phi_ours - 180 deg
             phi_deg = np.where(st > 0, np.degrees(np.arctan2(-y, -x)), 0.0)
             q = rr_q_factor(theta_i_deg, ts_deg, phi_deg, self.n)
-            pv = self._psd_cells(box, os)
+            if whole is None:
+                pv = self._psd_cells(box, os)
+            else:
+                pv = whole[
+                    box.iy0 - union.iy0 : box.iy1 - union.iy0 + 1,
+                    box.ix0 - union.ix0 : box.ix1 - union.ix0 + 1,
+                ]
             dw = math.exp(-self._g_at(theta_i_deg, lam))
             p = 16.0 * math.pi**2 * ci * np.where(ok, z, 0.0) * q * pv * df2 / lam**2
             out.append(np.where(ok, scale * dw * p, 0.0))

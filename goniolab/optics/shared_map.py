@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from goniolab.optics import _fft
 from goniolab.optics.facet import FacetModel
 from goniolab.optics.heightmap import HeightMap
 from goniolab.optics.psd import TiledMap
@@ -62,6 +63,7 @@ class SharedMap:
         self.cache: OrderedDict[tuple[Any, ...], Any] = OrderedDict()
         self.lock = threading.Lock()
         self._facets: dict[tuple[complex, bool], FacetModel] = {}
+        self._factories: dict[tuple[complex, bool], Callable[[], FacetModel]] = {}
         #: the other wave models of the same map, by (kind, n, wavelength, weighting, masking)
         self.siblings: dict[tuple[Any, ...], Any] = {}
         #: where the facet models of this map report long walks (:meth:`report_to`)
@@ -125,21 +127,40 @@ class SharedMap:
         return FacetModel(surf, masking=True, backend="numpy")
 
     def facet(self, n: complex, masking: bool) -> FacetModel:
-        """The facet model of the full map (fallback), built on first use."""
-        key = (n, masking)
+        """The facet model of the full map (fallback), built on first use: the one a
+        factory was adopted for (:meth:`adopt_facet_factory`), else one on the slope
+        cells (``backend="lean"``: no numba, within 2e-3 of the curves' peak of the
+        per-facet kernels, tests/optics/test_lean_backend.py)."""
+        key = (complex(n), bool(masking))
         with self.lock:
-            if key not in self._facets:
-                surf = self._facets_surface
-                self._facets[key] = FacetModel(surf, n=n, masking=masking)
-                _report(self._facets[key], self.progress)
-            return self._facets[key]
+            found = self._facets.get(key)
+            factory = self._factories.get(key)
+        if found is not None:
+            return found
+        if factory is not None:
+            made = factory()  # outside the lock: it may build the facet slopes
+        else:
+            made = FacetModel(self._facets_surface, n=n, masking=masking, backend="lean")
+        with self.lock:
+            out = self._facets.setdefault(key, made)
+            _report(out, self.progress)
+            return out
 
     def adopt_facet(self, facet: FacetModel) -> None:
         """Use ``facet`` (a facet model of this map) as the fallback of its index and
-        masking: the ``auto`` model shares the one it already built."""
+        masking."""
         with self.lock:
             self._facets[(facet.n, facet.masking)] = facet
             _report(facet, self.progress)
+
+    def adopt_facet_factory(
+        self, n: complex, masking: bool, factory: Callable[[], FacetModel]
+    ) -> None:
+        """Build the fallback of index ``n`` and ``masking`` with ``factory`` when first
+        needed: the ``auto`` model shares its own facet model, built only if a geometry
+        needs it."""
+        with self.lock:
+            self._factories[(complex(n), bool(masking))] = factory
 
     @cached_property
     def _facets_surface(self) -> Surface:
@@ -149,28 +170,33 @@ class SharedMap:
     def stats(self) -> MapStats:
         t = self.tiled
         ny, nx = t.shape
-        # sums over blocks of rows of the levelled map (float64): no copy of the whole map
+        # sums over blocks of rows of the levelled map (float64): no copy of the whole map;
+        # one pass (the sum of squares about zero, then about the mean: the levelled mean
+        # is ~0, so no precision is lost)
         blocks = [(r0, min(r0 + _STATS_ROWS, ny)) for r0 in range(0, ny, _STATS_ROWS)]
-        s1 = sp = sq2 = 0.0
+        s1 = s2 = sp = sq2 = 0.0
         for r0, r1 in blocks:  # one more row for the y differences
             z = t.levelled(slice(r0, min(r1 + 1, ny)), slice(None)).astype(np.float64)
-            s1 += float(np.sum(z[: r1 - r0]))
-            sp += float(np.sum((np.diff(z[: r1 - r0], axis=1) / t.dx_um) ** 2))
-            sq2 += float(np.sum((np.diff(z, axis=0) / t.dy_um) ** 2))
-        mean = s1 / (ny * nx)
-        s2 = 0.0
-        for r0, r1 in blocks:
-            z = t.levelled(slice(r0, r1), slice(None)).astype(np.float64)
-            s2 += float(np.sum((z - mean) ** 2))
-        sq = math.sqrt(s2 / (ny * nx))
+            zb = z[: r1 - r0]
+            s1 += float(np.sum(zb))
+            s2 += float(np.einsum("ij,ij->", zb, zb))
+            d = np.diff(zb, axis=1)
+            sp += float(np.einsum("ij,ij->", d, d)) / (t.dx_um * t.dx_um)
+            d = np.diff(z, axis=0)
+            sq2 += float(np.einsum("ij,ij->", d, d)) / (t.dy_um * t.dy_um)
+        n_pts = ny * nx
+        mean = s1 / n_pts
+        sq = math.sqrt(max(s2 / n_pts - mean * mean, 0.0))
         sdq = math.sqrt(sp / (ny * (nx - 1)) + sq2 / ((ny - 1) * nx))
-        # isotropic ACF along x and y from the first tile's periodogram (1/e crossing)
+        # ACF along x and y of the first windowed tile, each from 1-D transforms: the power
+        # summed over the other axis is the transform of the ACF at zero lag along it
+        # (Wiener-Khinchin, Parseval over the other axis); circular, as the periodogram's
         h, w = t.tile(0)
-        spec = np.abs(np.fft.rfft2((h * w).astype(np.float64))) ** 2
-        acf = np.fft.irfft2(spec, s=h.shape)
-        acf /= acf[0, 0] if acf[0, 0] > 0 else 1.0
-        lx = first_below(acf[0, : h.shape[1] // 2], math.exp(-1.0)) * t.dx_um
-        ly = first_below(acf[: h.shape[0] // 2, 0], math.exp(-1.0)) * t.dy_um
+        hw = (h * w).astype(np.complex64)
+        acf_x = _acf_along(hw, axis=1)
+        acf_y = _acf_along(hw, axis=0)
+        lx = first_below(acf_x[: h.shape[1] // 2], math.exp(-1.0)) * t.dx_um
+        ly = first_below(acf_y[: h.shape[0] // 2], math.exp(-1.0)) * t.dy_um
         return MapStats(
             sq_um=sq,
             sdq=sdq,
@@ -178,6 +204,16 @@ class SharedMap:
             step_um=max(t.dx_um, t.dy_um),
             field_um=min(t.nx_t * t.dx_um, t.ny_t * t.dy_um),
         )
+
+
+def _acf_along(hw: NDArray[np.complex64], axis: int) -> FloatArray:
+    """Normalised circular autocorrelation of ``hw`` along ``axis`` at zero lag across it:
+    the inverse transform of ``sum_other |FFT_axis(hw)|^2``."""
+    spec = _fft.fft(hw, axis=axis)
+    power = np.sum(np.abs(spec).astype(np.float64) ** 2, axis=1 - axis)
+    acf = np.fft.irfft(power[: power.size // 2 + 1], n=power.size)
+    out: FloatArray = acf / acf[0] if acf[0] > 0 else acf
+    return out
 
 
 def _report(facet: FacetModel, fn: Callable[[int, int, str], None] | None) -> None:

@@ -38,6 +38,8 @@ _KDE_MAX_NODES = 2048
 _LAMBDA_MAX_FACETS = 1 << 17
 _LAMBDA_THETA_STEP_DEG = 0.5
 _LAMBDA_PHI_STEP_DEG = 5.0
+#: Bins of the projected slope per azimuth when the Lambda table is summed.
+_LAMBDA_BINS = 1 << 12
 
 
 def cell_bilinear(
@@ -192,7 +194,16 @@ class SlopeStatistics:
     # ------------------------------------------------------------------ Smith masking
     @cached_property
     def _lambda_table(self) -> FloatArray:
-        """``T(theta, phi) = mean(max(0, cos t - sin t (p cos ph + q sin ph)))`` on a grid."""
+        """``T(theta, phi) = mean(max(0, cos t - sin t (p cos ph + q sin ph)))`` on a grid.
+
+        Per azimuth the projected slope ``x = p cos ph + q sin ph`` is counted in
+        :data:`_LAMBDA_BINS` equal bins (counts and sums of x), and ``T`` summed over the
+        bins below ``cot t``, the bin holding ``cot t`` taken in proportion (its facets
+        spread evenly over it): one pass of ``bincount`` per azimuth instead of a sort,
+        and the azimuth ``ph + 180`` (``x -> -x``) read from the same bins. The
+        proportional bin is off by at most a bin's share of the facets times its width
+        (1e-7 of ``cos t`` for 2**17 Gaussian facets), far below the subsample's own noise.
+        """
         n = self.surface.n_facets
         if n > _LAMBDA_MAX_FACETS:
             idx = np.linspace(0, n - 1, _LAMBDA_MAX_FACETS).astype(np.int64)
@@ -202,17 +213,40 @@ class SlopeStatistics:
         else:
             p, q = self.surface.p, self.surface.q
         th = np.radians(np.arange(0.0, 90.0 + 1e-9, _LAMBDA_THETA_STEP_DEG))
-        ph = np.radians(np.arange(0.0, 360.0 + 1e-9, _LAMBDA_PHI_STEP_DEG))
+        n_ph = round(360.0 / _LAMBDA_PHI_STEP_DEG)
+        ph = np.radians(_LAMBDA_PHI_STEP_DEG * np.arange(n_ph + 1))
         ct, st = np.cos(th), np.sin(th)
         with np.errstate(divide="ignore"):
             cot = np.where(st > 0, ct / st, np.inf)
         table = np.empty((th.size, ph.size))
         m = p.size
-        for j, phi in enumerate(ph):
-            s = np.sort(p * math.cos(phi) + q * math.sin(phi))
-            cs = np.concatenate(([0.0], np.cumsum(s)))
-            k = np.searchsorted(s, cot, side="left")
-            table[:, j] = (k * ct - st * cs[k]) / m
+        nb = _LAMBDA_BINS
+        half = n_ph // 2
+        for j in range(half):
+            x = p * math.cos(ph[j]) + q * math.sin(ph[j])
+            lo, hi = float(x.min()), float(x.max())
+            width = max(hi - lo, 1e-300) / nb
+            k = np.minimum(((x - lo) / width).astype(np.int64), nb - 1)
+            cnt = np.bincount(k, minlength=nb).astype(np.float64)
+            tot = np.bincount(k, weights=x, minlength=nb)
+            c_cnt = np.concatenate(([0.0], np.cumsum(cnt)))
+            c_tot = np.concatenate(([0.0], np.cumsum(tot)))
+            for sign, col in ((1.0, j), (-1.0, j + half)):
+                # facets with sign * x < cot: x below cot (sign +) or above -cot (sign -)
+                u = np.clip((sign * cot - lo) / width, 0.0, float(nb))
+                b = np.minimum(u.astype(np.int64), nb - 1)
+                f = np.clip(u - b, 0.0, 1.0)
+                if sign > 0:  # bins below b, and the fraction f of bin b
+                    count = c_cnt[b] + f * cnt[b]
+                    total = c_tot[b] + f * (cnt[b] * (lo + width * (b + 0.5 * f)))
+                else:  # bins above b, and the fraction 1 - f of bin b
+                    g = 1.0 - f
+                    count = (c_cnt[nb] - c_cnt[b + 1]) + g * cnt[b]
+                    total = (c_tot[nb] - c_tot[b + 1]) + g * (
+                        cnt[b] * (lo + width * (b + f + 0.5 * g))
+                    )
+                table[:, col] = (count * ct - sign * st * total) / m
+        table[:, n_ph] = table[:, 0]
         return table
 
     def smith_lambda(self, w: ArrayLike) -> FloatArray:

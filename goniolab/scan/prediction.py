@@ -15,11 +15,11 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from goniolab.colour.spectral import SpectralPredictor
 from goniolab.config import LabConfig
@@ -58,6 +58,11 @@ class Predictor:
     spectral: SpectralPredictor | None = None
     #: How spectra become colour (illuminant, observer, scale) for the predicted colour.
     point_colour: PointColour | None = None
+    #: predicted spectra per geometry (theta_i, theta_r): the luminance and the colour of a
+    #: run's geometries come from one evaluation
+    _spectra: dict[tuple[float, float], NDArray[np.float64]] = field(
+        default_factory=dict, repr=False, compare=False
+    )
 
     @classmethod
     def from_config(cls, model: ReflectanceModel, config: LabConfig) -> Predictor:
@@ -81,22 +86,44 @@ class Predictor:
     def predict_sync(self, theta_i_deg: float, theta_r_deg: Sequence[float]) -> NDArray[np.float64]:
         """Predicted luminance in % of a mirror at ``theta_r_deg`` (blocking; for threads).
 
-        The coat surface's reading (``model.luminance_pct``) plus, with a spectral
-        prediction, the paint body's: ``sum_l W_Y(l) f_body(l)`` (the Y row of the
-        ASTM E308 weights of the ``[colour]`` settings, Y = 100 for R = 1, so Y in %), the same body
-        the predicted colour includes (issue 21: white at theta_r 0 predicted 0.000 %
-        against 0.23 % measured)."""
+        With a spectral prediction, the luminance *is* the Y of the predicted spectrum (coat
+        surface + paint body, ``SpectralPredictor.spectrum_pct``) under the run's
+        ``[colour]`` illuminant and observer: ``Y = sum_l W_Y(l) S(l) / 100`` with the
+        ASTM E308 weights (Y = 100 for R = 1, so Y in %), the spectrum the predicted colour
+        is computed from. Luminance and colour cannot disagree by construction (issue 21:
+        white at theta_r 0 predicted 0.000 % while its spectrum held the body; at the peak
+        the coat term read 3.09 % through the lab's n = 1.55 while the spectrum's coat,
+        the sample's Cauchy clear coat of n(550 nm) = 1.505, gave 2.77 %: two coat
+        indices; :meth:`provenance` says when they differ). Without one, the model's own
+        ``luminance_pct``."""
         tr = np.asarray(theta_r_deg, dtype=np.float64)
-        out = self.model.luminance_pct(theta_i_deg, tr, source=self.source, detector=self.detector)
-        lum = np.asarray(out, dtype=np.float64).reshape(tr.shape)
         if self.spectral is not None:
-            from goniolab.colour.spectra import xyz_weights
+            spectra = self.spectra_pct(theta_i_deg, tr.ravel())
+            lum: NDArray[np.float64] = (spectra @ self._y_weights()) / 100.0
+            return lum.reshape(tr.shape)
+        out = self.model.luminance_pct(theta_i_deg, tr, source=self.source, detector=self.detector)
+        return np.asarray(out, dtype=np.float64).reshape(tr.shape)
 
-            settings = (self.point_colour or PointColour()).settings
-            y = np.asarray(xyz_weights(self.spectral.wavelengths_nm, settings)[1])
-            body = np.asarray(self.spectral.paint_fraction(theta_i_deg, tr), dtype=np.float64)
-            lum = lum + (body @ y).reshape(tr.shape)  # W_Y @ fraction is Y in %
-        return lum
+    def spectra_pct(self, theta_i_deg: float, theta_r_deg: ArrayLike) -> NDArray[np.float64]:
+        """The predicted spectra (% of the mirror, ``(n_geometries, n_wavelengths)``) of
+        :attr:`spectral`, each geometry evaluated once per predictor (blocking)."""
+        assert self.spectral is not None
+        tr = np.atleast_1d(np.asarray(theta_r_deg, dtype=np.float64))
+        ti = float(theta_i_deg)
+        missing = sorted({float(t) for t in tr if (ti, float(t)) not in self._spectra})
+        if missing:
+            new = self.spectral.spectrum_pct(ti, missing)
+            for t, row in zip(missing, new, strict=True):
+                self._spectra[(ti, t)] = np.asarray(row, dtype=np.float64)
+        return np.stack([self._spectra[(ti, float(t))] for t in tr])
+
+    def _y_weights(self) -> NDArray[np.float64]:
+        """The Y row of the ASTM E308 weights of the run's ``[colour]`` settings."""
+        from goniolab.colour.spectra import xyz_weights
+
+        assert self.spectral is not None
+        settings = (self.point_colour or PointColour()).settings
+        return np.asarray(xyz_weights(self.spectral.wavelengths_nm, settings)[1], dtype=np.float64)
 
     async def predict(
         self, theta_i_deg: float, theta_r_deg: Sequence[float]
@@ -114,7 +141,7 @@ class Predictor:
 
         pc = self.point_colour or PointColour(detector_cone_deg=self.detector.full_angle_deg)
         tr = np.asarray(theta_r_deg, dtype=np.float64)
-        spectra = self.spectral.spectrum_pct(theta_i_deg, tr)
+        spectra = self.spectra_pct(theta_i_deg, tr)
         factors = np.stack([pc.factors(s, float(t)) for s, t in zip(spectra, tr, strict=True)])
         lab = xyz_to_colour(
             spectra_to_xyz(self.spectral.wavelengths_nm, factors, pc.settings), pc.settings
@@ -161,7 +188,41 @@ class Predictor:
             p = provenance_of(self.model, theta_i_deg, tr, self.source, self.detector)
             computed_by.setdefault(p.model, []).append(tr)
             warnings.extend(n for n in p.notes if n not in warnings)
+        note = self.coat_index_note()
+        if note is not None:
+            warnings.append(note)
+        if self.spectral is not None:
+            # computed in a thread before the run starts (session.prepare): the Y weights
+            # (colour-science's import and integration, ~2.6 s the first time) are then
+            # ready, and the first reading does not race ahead of its prediction
+            self._y_weights()
         return {"computed_by": computed_by, "warnings": warnings}
+
+    def coat_index_note(self) -> str | None:
+        """What the user must know when the coat index of the spectral prediction is not the
+        model's ``n`` (``[sample] n``): a sample whose paint table names its own clear coat
+        (``configs/samples.toml``) is predicted with that coat's n(lambda), unless the
+        surface model cannot be rebuilt per index (then ``n`` stays, the paint's coat enters
+        the body term only). ``None`` when they agree within 0.001."""
+        if self.spectral is None or self.spectral.surface is None:
+            return None
+        n_model = getattr(self.model, "n", None)
+        if n_model is None:
+            return None
+        n_coat = complex(self.spectral.paint.coat.index(np.array([550.0]))[0])
+        n_lab = complex(n_model)
+        if abs(n_coat - n_lab) <= 1e-3:
+            return None
+        if self.spectral.surface.name.endswith("(fixed n)"):
+            return (
+                f"the coat surface is predicted with [sample] n = {n_lab.real:.4g} at every "
+                f"wavelength ({self.spectral.surface.name} is not rebuilt per index); the "
+                f"paint's clear coat (n(550 nm) = {n_coat.real:.4g}) enters the body only"
+            )
+        return (
+            f"the coat surface is predicted with the sample paint's clear coat n(lambda) "
+            f"(n(550 nm) = {n_coat.real:.4g}), not [sample] n = {n_lab.real:.4g}"
+        )
 
 
 def model_name(model: ReflectanceModel) -> str:

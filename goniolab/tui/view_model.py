@@ -108,7 +108,8 @@ class ScanSetup:
             lo, hi = theta_i_limits_deg
             raise UserError(
                 f"scan setup: θi must lie within the lamp arm's limits [{lo:g}, "
-                f"{min(hi, 90.0):g}] deg (goniometer.lamp.limits_deg), got {self.theta_i_deg:g}"
+                f"{min(hi, 90.0):g}] deg (the lab config's [goniometer.lamp] limits), got "
+                f"{self.theta_i_deg:g}"
             )
         if self.theta_r_step_deg <= 0.0:
             raise UserError(f"scan setup: θr step must be > 0 deg, got {self.theta_r_step_deg:g}")

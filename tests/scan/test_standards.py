@@ -126,10 +126,8 @@ def test_mirror_reference_keeps_the_colour_of_the_realistic_twin(tmp_path: Path)
 def test_luminance_prediction_includes_the_paint_body_like_the_colour() -> None:
     # issue 21: the luminance prediction ignored the paint body while the predicted spectrum
     # (hence the predicted colour) included it: white at theta_r 0 predicted 0.000 %.
-    # The body term of the predicted luminance is now the predicted spectrum's: off the
-    # specular peak (where the body dominates) the luminance is Y of the predicted spectrum.
-    # (At the peak the coat term stays the model's own luminance, what the ideal twin reads;
-    # the spectral surface term differs there: 2.78 vs 3.10 % at 45/45 for sample:white.)
+    # The predicted luminance is now Y of the predicted spectrum at every angle, the peak
+    # included (tests/scan/test_prediction_luminance.py checks it against colour-science).
     from goniolab.colour.spectra import xyz_weights
     from goniolab.config import load_lab_config
     from goniolab.model_cache import model_for

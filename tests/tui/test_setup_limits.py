@@ -36,7 +36,9 @@ def test_the_backend_checks_its_configs_lamp_limits(tmp_path: Path) -> None:
     cfg.write_text(text.replace("limits_deg = [0.0, 85.0]", "limits_deg = [0.0, 80.0]", 1))
     backend = SessionBackend(cfg, model=AnalyticModel("beckmann", alpha=0.1))
     backend.check_setup(_setup(80.0))
-    with pytest.raises(UserError, match=r"limits \[0, 80\] deg \(goniometer.lamp.limits_deg\)"):
+    with pytest.raises(
+        UserError, match=r"limits \[0, 80\] deg \(the lab config's \[goniometer.lamp\] limits\)"
+    ):
         backend.check_setup(_setup(82.0))
     # the prediction and the start refuse it before anything is opened or moved
     with pytest.raises(UserError, match=r"limits \[0, 80\]"):
