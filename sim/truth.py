@@ -64,6 +64,7 @@ from goniolab.optics.fresnel import fresnel
 from goniolab.optics.heightmap import HeightMap
 from sim.kirchhoff_orders import OrderTable, gauss_blur, smith_shadowing
 from sim.true_surface import TrueSurface, TwinSettings, build_truth
+from sim.twin_flakes import twin_paint
 from sim.twin_spectra import (
     BODY_SPECTRA,
     SPECTRUM_WAVELENGTHS_NM,
@@ -175,6 +176,7 @@ class TruthOptics:
         self.build_seconds = 0.0
         self.ffts = 0
         self._body = body_reflectance(truth.body)
+        self._paint = twin_paint(truth.body)  # a painted truth's flakes (sim/twin_flakes.py)
 
     # ------------------------------------------------------------------ bands
     def _band_dq(self, lam_um: float) -> float:
@@ -446,6 +448,14 @@ class TruthOptics:
         wl = np.asarray(SPECTRUM_WAVELENGTHS_NM)
         spec = np.interp(wl, np.asarray(self.settings.wavelengths_nm), surf)
         body = self._body_fraction(theta_i_deg, tr, detector)[:, 0]
+        if self._paint is not None:
+            body = body + self._paint.flake_fraction(
+                theta_i_deg,
+                theta_r_deg,
+                source=source,
+                detector=detector,
+                n=float(np.real(self.truth.n)),
+            )
         return np.asarray(spec + body)
 
     def luminance_pct(

@@ -34,10 +34,14 @@ def body_reflectance(
 ) -> FloatArray:
     """Diffuse reflectance (fraction) of a named body at ``wavelengths_nm``.
 
+    A painted truth's name (:data:`sim.twin_flakes.TWIN_PAINTS`) gives its diffuse body,
+    the binder between and above the flakes (the flakes' lobe is added by
+    :class:`sim.truth.TruthOptics`).
+
     Raises
     ------
     ValueError
-        Unknown name (the message lists :data:`BODY_SPECTRA`).
+        Unknown name (the message lists :data:`BODY_SPECTRA` and the painted truths).
     """
     wl = np.asarray(wavelengths_nm, dtype=np.float64)
     if name == "black":  # carbon-black ink: ~3 %, slightly rising to the red
@@ -51,7 +55,13 @@ def body_reflectance(
     elif name == "blue":
         r = 0.05 + 0.45 * np.exp(-(((wl - 460.0) / 45.0) ** 2))
     else:
-        raise ValueError(f"unknown body {name!r}; known: {', '.join(BODY_SPECTRA)}")
+        from sim.twin_flakes import TWIN_PAINTS  # a painted truth: its diffuse body
+
+        paint = TWIN_PAINTS.get(name)
+        if paint is None:
+            known = ", ".join((*BODY_SPECTRA, *TWIN_PAINTS))
+            raise ValueError(f"unknown body {name!r}; known: {known}")
+        r = np.interp(wl, SPECTRUM_WAVELENGTHS_NM, paint.diffuse_reflectance())
     return np.asarray(r, dtype=np.float64)
 
 
