@@ -259,6 +259,11 @@ class TerminalProgress(_Base):
             # never wrap sys.stdout: the summary and --json go there (issue 22.3)
             redirect_stdout=False,
             redirect_stderr=False,
+            # In a kernel the bar is an ipywidgets Output, and rich's refresh thread draws
+            # into it inside ``with widget:``; a cell's result printed while that thread is
+            # in there was captured into the widget (the cell showed no result, now and
+            # then). There it is drawn only here, on the reporting thread, before finish().
+            auto_refresh=not self.jupyter,
         )
         self._rich.start()
         self._task = self._rich.add_task(self.label, total=self.total, eta="?", detail="")
@@ -270,6 +275,8 @@ class TerminalProgress(_Base):
                 self._start_rich()
             self._rich.update(self._task, completed=self.done, total=self.total, eta=eta,
                               detail=detail)  # fmt: skip
+            if self.jupyter:
+                self._rich.refresh()
             return
         if not self.piped_lines:
             return
