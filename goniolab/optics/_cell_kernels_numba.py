@@ -11,15 +11,16 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 from numpy.typing import NDArray
+
+from goniolab.optics._kernels import interval_overlap, njit_cached
 
 __all__ = ["cone_cells_numba", "kirchhoff_band_numba", "rect_cells_numba"]
 
 FloatArray = NDArray[np.float64]
 
 
-@njit(cache=True, nogil=True, fastmath=False)
+@njit_cached(nogil=True, fastmath=False)
 def _table(
     g: float, table: FloatArray, g0: float, g1: float, o_in: float
 ) -> float:  # pragma: no cover - numba
@@ -35,24 +36,7 @@ def _table(
     return table[i] * (1.0 - f) + table[i + 1] * f
 
 
-@njit(cache=True, nogil=True, fastmath=False)
-def _overlap(x: float, s: float, r: float) -> float:  # pragma: no cover - numba
-    if s <= 0.0:
-        ax = abs(x)
-        h = 0.5 * r
-        if ax < h:
-            return 1.0
-        if ax == h:
-            return 0.5
-        return 0.0
-    lo = max(x - 0.5 * s, -0.5 * r)
-    hi = min(x + 0.5 * s, 0.5 * r)
-    if hi <= lo:
-        return 0.0
-    return (hi - lo) / s
-
-
-@njit(cache=True, nogil=True, fastmath=False)
+@njit_cached(nogil=True, fastmath=False)
 def cone_cells_numba(
     wox: FloatArray,
     woy: FloatArray,
@@ -116,7 +100,7 @@ def cone_cells_numba(
     return out
 
 
-@njit(cache=True, nogil=True, fastmath=False)
+@njit_cached(nogil=True, fastmath=False)
 def rect_cells_numba(
     wox: FloatArray,
     woy: FloatArray,
@@ -149,7 +133,7 @@ def rect_cells_numba(
         acc = 0.0
         for i in range(i0, i1):
             yy = woy[i]
-            ob = _overlap(math.asin(max(-1.0, min(1.0, yy))), s_perp, r_perp)
+            ob = interval_overlap(math.asin(max(-1.0, min(1.0, yy))), s_perp, r_perp)
             if ob == 0.0:
                 continue
             for j in range(j0, j1):
@@ -161,12 +145,12 @@ def rect_cells_numba(
                 if z2 <= 0.0:
                     continue
                 al = math.atan2(-xx, math.sqrt(z2))
-                acc += v * ob * _overlap(al - ar, s_in, r_in)
+                acc += v * ob * interval_overlap(al - ar, s_in, r_in)
         out[k] = acc
     return out
 
 
-@njit(cache=True, nogil=True, fastmath=False)
+@njit_cached(nogil=True, fastmath=False)
 def kirchhoff_band_numba(
     spec: NDArray[np.complex64],
     dc: NDArray[np.complex128],

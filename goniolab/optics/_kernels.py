@@ -31,7 +31,7 @@ memory and traffic).
 Compiled kernels are cached on disk (``cache=True``): numba keeps them in ``__pycache__``
 beside this file, or in the user cache directory (``NUMBA_CACHE_DIR`` to choose) when the
 package directory is read-only; when no directory is writable the kernels are compiled
-in each process instead (:func:`_njit`).
+in each process instead (:func:`njit_cached`).
 """
 
 from __future__ import annotations
@@ -73,7 +73,9 @@ __all__ = [
     "hemisphere_bin_tables",
     "hemisphere_numba",
     "hemisphere_numpy",
+    "interval_overlap",
     "interval_overlap_numpy",
+    "njit_cached",
     "normals_numpy",
     "rect_response_numba",
     "rect_response_numpy",
@@ -88,7 +90,7 @@ FloatArray = NDArray[np.float64]
 CACHED: bool = True
 
 
-def _njit(**options: Any) -> Callable[[Callable[..., Any]], Any]:
+def njit_cached(**options: Any) -> Callable[[Callable[..., Any]], Any]:
     """``numba.njit(cache=True, **options)``, without the cache when numba finds no
     writable cache directory (it raises at decoration then): slower start, same kernels."""
 
@@ -103,7 +105,7 @@ def _njit(**options: Any) -> Callable[[Callable[..., Any]], Any]:
     return wrap
 
 
-@_njit(nogil=True, fastmath=False)
+@njit_cached(nogil=True, fastmath=False)
 def _normal(
     mx: FloatArray, my: FloatArray, mz: FloatArray, k: int
 ) -> tuple[float, float, float]:  # pragma: no cover - numba
@@ -118,7 +120,7 @@ def _normal(
 
 
 # ----------------------------------------------------------------------------- scalar helpers
-@_njit(nogil=True, fastmath=False)
+@njit_cached(nogil=True, fastmath=False)
 def _fresnel_scalar(c: float, n_re: float, n_im: float) -> float:  # pragma: no cover - numba
     """Unpolarised Fresnel reflectance (cosine form of Wittmann eq. 9; pbrt FrComplex)."""
     if c < 0.0:
@@ -146,7 +148,7 @@ def _fresnel_scalar(c: float, n_re: float, n_im: float) -> float:  # pragma: no 
     )
 
 
-@_njit(nogil=True, fastmath=False)
+@njit_cached(nogil=True, fastmath=False)
 def _fresnel_d_scalar(
     c: float, n_re: float, n_im: float
 ) -> tuple[float, float]:  # pragma: no cover - numba
@@ -199,7 +201,7 @@ def _fresnel_d_scalar(
     return f, df
 
 
-@_njit(nogil=True, fastmath=False)
+@njit_cached(nogil=True, fastmath=False)
 def _weight_grad(
     c: float, mz: float, wz: float, n_re: float, n_im: float, seed: bool
 ) -> tuple[float, float, float]:  # pragma: no cover - numba
@@ -219,7 +221,7 @@ def _weight_grad(
     return phi / (mz * wz), (f + c * df) / (mz * wz) - 2.0 * phi / (wz * wz), phi / (mz * wz * wz)
 
 
-@_njit(nogil=True, fastmath=False)
+@njit_cached(nogil=True, fastmath=False)
 def _reflect(
     mx: float,
     my: float,
@@ -238,7 +240,7 @@ def _reflect(
     return ox, oy, oz, _weight(c, mz, wz, n_re, n_im, seed)
 
 
-@_njit(nogil=True, fastmath=False)
+@njit_cached(nogil=True, fastmath=False)
 def _mirror(
     mx: float, my: float, mz: float, wx: float, wy: float, wz: float
 ) -> tuple[float, float, float, float]:  # pragma: no cover - numba
@@ -252,7 +254,7 @@ def _mirror(
     return 2.0 * c * mx - wx, 2.0 * c * my - wy, oz, c
 
 
-@_njit(nogil=True, fastmath=False)
+@njit_cached(nogil=True, fastmath=False)
 def _weight(
     c: float, mz: float, wz: float, n_re: float, n_im: float, seed: bool
 ) -> float:  # pragma: no cover - numba
@@ -261,8 +263,8 @@ def _weight(
     return f if seed else c / (mz * wz) * f
 
 
-@_njit(nogil=True, fastmath=False)
-def _interval_overlap(x: float, s: float, r: float) -> float:  # pragma: no cover - numba
+@njit_cached(nogil=True, fastmath=False)
+def interval_overlap(x: float, s: float, r: float) -> float:  # pragma: no cover - numba
     """Fraction of [x - s/2, x + s/2] inside [-r/2, r/2] (indicator when s == 0)."""
     if s <= 0.0:
         ax = abs(x)
@@ -279,7 +281,7 @@ def _interval_overlap(x: float, s: float, r: float) -> float:  # pragma: no cove
     return (hi - lo) / s
 
 
-@_njit(nogil=True, fastmath=False)
+@njit_cached(nogil=True, fastmath=False)
 def _table(
     g: float, table: FloatArray, g0: float, g1: float, o_in: float
 ) -> float:  # pragma: no cover
@@ -297,7 +299,7 @@ def _table(
 
 
 # ----------------------------------------------------------------------------- numba kernels
-@_njit(nogil=True, fastmath=False)
+@njit_cached(nogil=True, fastmath=False)
 def _diamond(x: float, y: float) -> float:  # pragma: no cover - numba
     """Pseudo-angle in [0, 4), strictly increasing with atan2(y, x) mod 2 pi; 0 at (0, 0)."""
     if x == 0.0 and y == 0.0:
@@ -307,7 +309,7 @@ def _diamond(x: float, y: float) -> float:  # pragma: no cover - numba
     return 2.0 - y / (-x - y) if x < 0.0 else 3.0 + x / (x - y)
 
 
-@_njit(nogil=True, fastmath=False)
+@njit_cached(nogil=True, fastmath=False)
 def hemisphere_numba(
     mx: FloatArray,
     my: FloatArray,
@@ -363,13 +365,13 @@ def hemisphere_numba(
     return hist, total
 
 
-@_njit(nogil=True)
+@njit_cached(nogil=True)
 def coarse_size(n_fine: int) -> int:  # pragma: no cover - numba (also callable from Python)
     """Nodes of the coarse gradient grid covering a fine grid of ``n_fine`` nodes."""
     return -(-(n_fine - 1) // GRAD_COARSEN) + 2
 
 
-@_njit(nogil=True, fastmath=False)
+@njit_cached(nogil=True, fastmath=False)
 def deposit_numba(
     mx: FloatArray,
     my: FloatArray,
@@ -455,7 +457,7 @@ def deposit_numba(
     return grid, ggrid, total
 
 
-@_njit(nogil=True, fastmath=False)
+@njit_cached(nogil=True, fastmath=False)
 def cone_response_numba(
     mx: FloatArray,
     my: FloatArray,
@@ -511,7 +513,7 @@ def cone_response_numba(
     return acc
 
 
-@_njit(nogil=True, fastmath=False)
+@njit_cached(nogil=True, fastmath=False)
 def rect_response_numba(
     mx: FloatArray,
     my: FloatArray,
@@ -547,9 +549,9 @@ def rect_response_numba(
         if cd <= 0.0 or abs(sd) > tan_a * cd:
             continue
         be = math.asin(max(-1.0, min(1.0, oy)))
-        ob = _interval_overlap(be, s_perp, r_perp)
+        ob = interval_overlap(be, s_perp, r_perp)
         if ob == 0.0:
             continue
         w = _weight(c, mzk, wz, n_re, n_im, seed)
-        acc += w * ob * _interval_overlap(math.atan2(sd, cd), s_in, r_in)
+        acc += w * ob * interval_overlap(math.atan2(sd, cd), s_in, r_in)
     return acc

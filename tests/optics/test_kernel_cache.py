@@ -53,14 +53,14 @@ def test_kernels_are_compiled_once_into_the_cache_directory(tmp_path: Path) -> N
 
 def test_a_kernel_without_any_cache_location_is_compiled_in_process(tmp_path: Path) -> None:
     # numba finds no cache locator for source it cannot locate (here: exec'd text) and
-    # raises at decoration; _njit then compiles without a cache
+    # raises at decoration; njit_cached then compiles without a cache
     code = (
         "import json\n"
         "from goniolab.optics import _kernels as K\n"
         "ns = {}\n"
         "exec(compile('def f(x):\\n    return 2.0 * x + 1.0\\n', '<text>', 'exec'), ns)\n"
         "before = K.CACHED\n"
-        "g = K._njit(nogil=True)(ns['f'])\n"
+        "g = K.njit_cached(nogil=True)(ns['f'])\n"
         "print(json.dumps({'value': g(3.0), 'before': before, 'cached': K.CACHED}))\n"
     )
     assert _run(code, tmp_path) == {"value": 7.0, "before": True, "cached": False}
