@@ -123,7 +123,7 @@ def _spectral(req: SurfaceRequest, opts: ColourOptions, progress: Any) -> Any:
     from goniolab.colour.spectra import ColourError
     from goniolab.model_cache import spectral_for
 
-    model = surface_model(req, one_shot=True, progress=progress)
+    model = surface_model(req, progress=progress)
     paint = load_paint_file(opts.paint) if opts.paint else None
     try:
         return spectral_for(

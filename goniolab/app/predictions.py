@@ -228,16 +228,14 @@ def surface_model(
     req: SurfaceRequest,
     *,
     names: OptionNames = CLI_NAMES,
-    one_shot: bool = False,
     progress: Progress | None = None,
 ) -> ReflectanceModel:
     """The reflectance model of ``req`` (:func:`goniolab.model_cache.model_for`).
 
-    ``one_shot``: one prediction in a process that then ends (the CLI). Every face gets the
-    same model: the facet model on its slope cells (``backend="lean"``, the default of
-    :func:`goniolab.model_cache.model_for`), so the CLI and the notebook print the same
-    numbers (the notebook's per-pixel numba kernels differed by 0.3 %). ``progress`` is
-    told of the physical-optics models' long work.
+    Every face gets the same model: the facet model on its slope cells (``backend="lean"``,
+    the default of :func:`goniolab.model_cache.model_for`), so the CLI and the notebook print
+    the same numbers (the notebook's per-pixel numba kernels differed by 0.3 %).
+    ``progress`` is told of the physical-optics models' long work.
     """
     from goniolab.model_cache import model_for
 
@@ -433,14 +431,13 @@ def predict_gloss(
     req: SurfaceRequest,
     *,
     names: OptionNames = CLI_NAMES,
-    one_shot: bool = False,
     progress: Progress | None = None,
 ) -> GlossPrediction:
     """ISO 2813 gloss at 20/60/85 deg and the ASTM D4039/E430 readings of ``req``
     (:func:`goniolab.optics.gloss_standards.gloss_report`)."""
     from goniolab.optics.gloss_standards import gloss_report
 
-    model = surface_model(req, names=names, one_shot=one_shot, progress=progress)
+    model = surface_model(req, names=names, progress=progress)
     try:
         rep = gloss_report(model)
     except ValueError as exc:
@@ -619,7 +616,6 @@ def predict_brdf(
     detector_deg: float | None = None,
     point: bool = False,
     names: OptionNames = CLI_NAMES,
-    one_shot: bool = False,
     progress: Progress | None = None,
 ) -> BrdfPrediction:
     """The in-plane curve the scattering model of ``req`` predicts (facet: Wittmann et al.
@@ -638,7 +634,7 @@ def predict_brdf(
         raise UserError(f"{names.theta_r}{given}: angles must be in (-90, 90) deg")
     if point and (detector_deg is not None or source_deg is not None):
         raise UserError(f"{names.point} takes no {names.detector}/{names.source} (no aperture)")
-    model = surface_model(req, names=names, one_shot=one_shot, progress=progress)
+    model = surface_model(req, names=names, progress=progress)
     lum: NDArray[np.float64] | None = None
     src_deg = det_deg = None
     if point:
@@ -724,7 +720,6 @@ def predict_albedo(
     theta_i_deg: str | Sequence[float] = "0,30,60,85",
     *,
     names: OptionNames = CLI_NAMES,
-    one_shot: bool = False,
     progress: Progress | None = None,
 ) -> AlbedoPrediction:
     """Directional-hemispherical reflectance and TIS of ``req`` per incidence (issue 20),
@@ -736,7 +731,7 @@ def predict_albedo(
     bad = [a for a in angles if not (math.isfinite(a) and 0.0 <= a <= 89.0)]
     if bad or not angles:
         raise UserError(f"{names.theta_i} {theta_i_deg!r}: angles must be in [0, 89] deg")
-    model = surface_model(req, names=names, one_shot=one_shot, progress=progress)
+    model = surface_model(req, names=names, progress=progress)
     lam = 550.0 if req.wavelength_nm is None else float(req.wavelength_nm)
     albedo: list[float] = []
     tis: list[float] = []

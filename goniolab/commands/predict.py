@@ -102,7 +102,7 @@ def _cmd_gloss(args: argparse.Namespace) -> int:
     from goniolab.app.predictions import predict_gloss
     from goniolab.datasets import gloss_dataset
 
-    pred = predict_gloss(surface_request(args), one_shot=True, progress=model_progress())
+    pred = predict_gloss(surface_request(args), progress=model_progress())
     rep = pred.report
     prov_attrs = {"computed_by": json.dumps(pred.computed_by),
                   "warnings": json.dumps(pred.warnings)}  # fmt: skip
@@ -209,7 +209,6 @@ def _cmd_brdf(args: argparse.Namespace) -> int:
         source_deg=args.source_deg,
         detector_deg=args.detector_deg,
         point=args.point,
-        one_shot=True,
         progress=model_progress(),
     )
     _warn(pred.warnings)
@@ -246,8 +245,7 @@ def _cmd_albedo(args: argparse.Namespace) -> int:
     """Directional-hemispherical reflectance and TIS per incidence (issue 20)."""
     from goniolab.app.predictions import predict_albedo
 
-    pred = predict_albedo(surface_request(args), args.theta_i, one_shot=True,
-                          progress=model_progress())  # fmt: skip
+    pred = predict_albedo(surface_request(args), args.theta_i, progress=model_progress())
     _warn(pred.warnings)
     if args.json:
         print(json.dumps(pred.as_dict(), indent=2, allow_nan=False))
