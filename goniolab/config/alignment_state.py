@@ -62,13 +62,15 @@ def alignment_state_path(cfg: LabConfig) -> Path:
     """
     import platformdirs
 
+    from goniolab.store import is_store_url
+
     base = Path(cfg.source).resolve().parent if cfg.source else Path.cwd()
     if cfg.alignment.state_file:
         p = Path(cfg.alignment.state_file).expanduser()
         return p if p.is_absolute() else base / p
     stem = Path(cfg.source).stem if cfg.source else "lab"
     store = cfg.lab.store
-    if store and "://" not in store and "=" not in store:
+    if store and not is_store_url(store):
         sp = Path(store).expanduser()
         return (sp if sp.is_absolute() else base / sp).parent / f"{stem}.alignment.toml"
     return Path(platformdirs.user_data_dir("goniolab", appauthor=False)) / f"{stem}.alignment.toml"

@@ -102,8 +102,10 @@ def _as_given(store: str | Path) -> str:
     """A ``--store`` value as ``[lab] store`` holds it: a URL or conninfo unchanged, a file
     made absolute (the config's relative stores are relative to the config's directory,
     the command line's to the working directory)."""
+    from goniolab.store import is_store_url
+
     text = str(store)
-    if "://" in text or "=" in text:
+    if is_store_url(text):
         return text
     return str(Path(text).expanduser().resolve())
 
