@@ -51,8 +51,9 @@ def test_spectro_chain_is_unbiased_below_saturation_with_shot_noise_vs_exposure(
     for exposure, n in ((10_000, 400), (1_000, 400)):
         vals = np.array([chain.read(frac, exposure, rng)[0] for _ in range(n)])
         assert vals[:, peak].mean() == pytest.approx(0.1, rel=0.01)
-        # shot noise only: counts N = 0.1 g t/10ms, electrons 2N, sigma(value) = 0.1/sqrt(2N)
-        counts = 0.1 * gain[peak] * exposure / 10_000
+        # shot noise only: counts N = 0.1 g t/10ms per pixel, P pixels per channel,
+        # electrons 2NP, sigma(value) = 0.1/sqrt(2NP)
+        counts = 0.1 * gain[peak] * exposure / 10_000 * chain.pixels_per_channel
         assert vals[:, peak].std() == pytest.approx(0.1 / math.sqrt(2 * counts), rel=0.15)
     # the blue end gets fewer counts (halogen x silicon), so it is noisier
     vals = np.array([chain.read(frac, 10_000, rng)[0] for _ in range(200)])
