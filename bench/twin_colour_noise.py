@@ -11,7 +11,12 @@ of ``goniolab runs colour``), against the first-order propagation of the chain's
 (:meth:`sim.spectro_chain.SpectroChain.covariance`,
 :func:`goniolab.colour.uncertainty.lab_covariance`).
 
-    .venv/bin/python bench/twin_colour_noise.py [--pixels 1] [--repeats 400]
+``--swing`` prints instead the noise-free colour of the default sample over theta_r
+20..70 deg, from the truth's Kirchhoff tables at its 3 wavelength nodes (450/550/650 nm,
+linear between, flat outside) and at 13 (400..700 nm every 25 nm): where the a*, b* of a
+scan come from when no noise is added.
+
+    .venv/bin/python bench/twin_colour_noise.py [--pixels 1] [--repeats 400] [--swing]
 """
 
 from __future__ import annotations
@@ -62,6 +67,41 @@ def settled_exposure_us(chain: SpectroChain, fraction: np.ndarray) -> int:
     return int(min(max(t, 500), 250_000))
 
 
+def swing(cfg_path: str) -> None:
+    """Noise-free L*a*b* of the default sample's truth over theta_r, 3 against 13 nodes."""
+    from goniolab.surfaces.resolve import resolve_map
+    from sim.assembly import twin_settings
+    from sim.truth import truth_for
+
+    cfg = load_lab_config(cfg_path)
+    spec = cfg.sample_map()
+    hm = resolve_map(spec, step_um=cfg.sample.step_um)
+    wl = np.asarray(SPECTRUM_WAVELENGTHS_NM)
+    trs = np.arange(20.0, 71.0, 1.0)
+    scale = reflectance_factor_scale(trs, 6.0)[:, None]
+    labs = []
+    for nodes in ((450.0, 550.0, 650.0), tuple(float(x) for x in np.arange(400, 701, 25))):
+        settings = dataclasses.replace(twin_settings(cfg), wavelengths_nm=nodes)
+        truth = truth_for(hm, n=cfg.sample.n, body="black", settings=settings, name=spec)
+        frac = np.array([truth.spectral_fraction(45.0, float(t)) for t in trs])
+        labs.append(xyz_to_colour(spectra_to_xyz(wl, frac * scale))[:, 3:6])
+        truth.save_cache()
+    print(f"{spec}, body black, theta_i 45, noise-free truth: L* a* b* at 3 | 13 nodes")
+    print("| theta_r | aspec | 3 nodes | 13 nodes |")
+    print("|---|---|---|---|")
+    for k, t in enumerate(trs):
+        a, b = labs[0][k], labs[1][k]
+        print(
+            f"| {t:g} | {45 - t:g} | {a[0]:.1f} {a[1]:.1f} {a[2]:.1f} "
+            f"| {b[0]:.1f} {b[1]:.1f} {b[2]:.1f} |"
+        )
+    for name, lab in zip(("3", "13"), labs, strict=True):
+        print(
+            f"{name} nodes: a* {lab[:, 1].min():.1f}..{lab[:, 1].max():.1f}, "
+            f"b* {lab[:, 2].min():.1f}..{lab[:, 2].max():.1f}"
+        )
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--config", default="configs/lab-sim.toml")
@@ -70,7 +110,11 @@ def main() -> None:
     )
     ap.add_argument("--repeats", type=int, default=400)
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--swing", action="store_true", help="noise-free colour over theta_r")
     args = ap.parse_args()
+    if args.swing:
+        swing(args.config)
+        return
     chain = SpectroChain()
     if args.pixels is not None:
         chain = dataclasses.replace(chain, pixels_per_channel=args.pixels)
@@ -95,7 +139,8 @@ def main() -> None:
         lab_mean = xyz_to_colour(spectra_to_xyz(wl, mean_spec))[3:6]
         clean = xyz_to_colour(spectra_to_xyz(wl, frac * scale))[3:6]
         cov = chain.covariance(frac, t_us) * (scale / 100.0) ** 2
-        sd_an = np.sqrt(np.diag(lab_covariance(wl, frac * scale, cov)))
+        mean_r = chain.mean_reading_pct(frac) / 100.0 * scale  # with the stray light
+        sd_an = np.sqrt(np.diag(lab_covariance(wl, mean_r, cov)))
         sd = lab.std(axis=0, ddof=1)
         de = delta_e(lab, np.broadcast_to(lab_mean, lab.shape), "CIE 2000")
         print(

@@ -169,7 +169,7 @@ class SpectroChain:
         t_rel = exposure_us / 10_000.0
         g = self.gain() * t_rel
         flicker = 1.0 + 0.01 * self.flicker_pct * float(rng.standard_normal())
-        signal = np.clip(self._light_pct(fraction) * flicker, 0.0, None) * g
+        signal = np.clip(self.mean_reading_pct(fraction) * flicker, 0.0, None) * g
         dark = self.dark_counts_per_s * exposure_us * 1e-6
         px = self.pixels_per_channel
         # electrons of the channel's px pixels together; counts and read noise per pixel
@@ -182,8 +182,9 @@ class SpectroChain:
         values = (raw - self.bias_counts - dark) / g
         return np.asarray(values), peak
 
-    def _light_pct(self, fraction: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Light entering per channel in % of a mirror: the specimen's plus stray light."""
+    def mean_reading_pct(self, fraction: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Light entering per channel in % of a mirror, the specimen's plus stray light: the
+        mean of the reported values below saturation (the point :meth:`covariance` is about)."""
         f_pct = 100.0 * np.asarray(fraction, dtype=np.float64)
         return np.asarray(f_pct + self.stray_pct + self.stray_rel * float(np.mean(f_pct)))
 
@@ -201,7 +202,7 @@ class SpectroChain:
         """
         t_rel = exposure_us / 10_000.0
         g = self.gain() * t_rel
-        m = self._light_pct(fraction)
+        m = self.mean_reading_pct(fraction)
         dark = self.dark_counts_per_s * exposure_us * 1e-6
         px = self.pixels_per_channel
         var_counts = (

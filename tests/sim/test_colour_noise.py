@@ -79,7 +79,8 @@ def test_repeat_colour_noise_matches_the_analytic_propagation(
     lab = _lab(spectra_to_xyz(WL, vals / 100.0 * scale))
     sd = lab.std(axis=0, ddof=1)
     cov_r = chain.covariance(frac, exposure) * (scale / 100.0) ** 2
-    sd_analytic = np.sqrt(np.diag(lab_covariance(WL, frac * scale, cov_r)))
+    mean_r = chain.mean_reading_pct(frac) / 100.0 * scale  # the specimen plus stray light
+    sd_analytic = np.sqrt(np.diag(lab_covariance(WL, mean_r, cov_r)))
     # the sample sd of n Gaussian draws is within 3 x 1/sqrt(2(n-1)) = 3.9 % (n = 3000)
     assert sd == pytest.approx(sd_analytic, rel=0.06)
     # and the covariance itself: the spectral noise per channel
