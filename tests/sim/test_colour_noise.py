@@ -140,3 +140,28 @@ def test_one_pixel_per_channel_is_the_previous_chain_bit_for_bit() -> None:
 def test_pixels_per_channel_must_be_positive() -> None:
     with pytest.raises(ValueError, match="pixels_per_channel"):
         SpectroChain(pixels_per_channel=0)
+
+
+@pytest.mark.parametrize("theta_r", [55.0, 67.0])
+def test_the_chain_adds_no_colour_to_the_truths(theta_r: float) -> None:
+    # where the default sample's measured a*/b* swing most (aspecular -10 and -22 deg), the
+    # mean of repeat readings is the colour of the truth's own noise-free spectrum plus
+    # the stray light (the chain's dark subtraction, gain calibration and exposure add no
+    # colour): within 4 standard errors of the analytic propagation
+    from goniolab.config import load_lab_config
+    from sim.assembly import sample_truth
+
+    cfg = load_lab_config("configs/lab-sim.toml")
+    frac = np.asarray(sample_truth(cfg, "sample:wittmann-3").spectral_fraction(45.0, theta_r))
+    chain = SpectroChain()
+    exposure = min(_settled_exposure(chain, frac), 250_000)
+    scale = float(reflectance_factor_scale(theta_r, 6.0))
+    rng = np.random.default_rng(11)
+    n = 400
+    vals = np.array([chain.read(frac, exposure, rng)[0] for _ in range(n)])
+    measured = _lab(spectra_to_xyz(WL, vals.mean(axis=0) / 100.0 * scale))
+    mean_r = chain.mean_reading_pct(frac) / 100.0 * scale
+    truth = _lab(spectra_to_xyz(WL, mean_r))
+    cov = chain.covariance(frac, exposure) * (scale / 100.0) ** 2
+    se = np.sqrt(np.diag(lab_covariance(WL, mean_r, cov)) / n)
+    assert np.all(np.abs(measured - truth) < 4.0 * se)
