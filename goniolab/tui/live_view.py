@@ -108,13 +108,27 @@ class LiveView(App[int]):
             self.preview_prediction()
 
     def preview_prediction(self) -> None:
-        """Between scans, draw the model's curve for the form's sample and sweep."""
-        if not self.ready.is_set() or self.backend.running or self._starting:
+        """Check the form's plan as it is typed (a sweep the arms cannot reach is refused
+        under the fields, in the words of ``goniolab scan``); between scans, draw the
+        model's curve for the form's sample and sweep."""
+        if not self.ready.is_set():
             return
         try:
-            setup = self.query_one(ScanForm).read()
-        except (UserError, NoMatches):
+            form = self.query_one(ScanForm)
+            setup = form.read()
+        except NoMatches:
+            return
+        except UserError:
+            form.show_problem("")
             return  # incomplete form (typing in progress): keep what is shown
+        try:
+            self.backend.check_setup(setup)
+        except UserError as exc:
+            form.show_problem(str(exc))
+            return
+        form.show_problem("")
+        if self.backend.running or self._starting:
+            return
         if len(setup.theta_r_values_deg()) > self.PREVIEW_MAX_POINTS:
             return
         self._preview(setup)

@@ -116,6 +116,10 @@ class ScriptedBackend:
     def sample_note(self) -> str:
         return "the scripted lab measures the selected sample"
 
+    def check_setup(self, setup: ScanSetup) -> None:
+        """The form's own checks only: the scripted lab has no arm limits."""
+        setup.validate()
+
     async def predict_curve(self, setup: ScanSetup) -> list[float]:
         """PREVIEW_SCALE[sample] x PRED_SCALE x the scripted Gaussian."""
         setup.validate()
