@@ -394,7 +394,11 @@ async def calibrate(
     """
     from drivers.base import DeviceError
     from goniolab import __version__
-    from goniolab.scan.calibration import CalibrationRefused, run_calibration
+    from goniolab.scan.calibration import (
+        CalibrationRefused,
+        detector_polarisation,
+        run_calibration,
+    )
     from goniolab.scan.colour import PointColour
     from goniolab.scan.events import RunState
     from goniolab.session import ScanSession, config_snapshot, home_timeout_s
@@ -413,6 +417,13 @@ async def calibrate(
             hook = session.lab.place_specimen or session.operator
             if hook is None:
                 raise UserError("a calibration needs an operator to place the standards")
+            # the check standard is read as the chain reads it: the detector's s-weight
+            simulated = cfg.lab.mode == "sim" or cfg.lab.start_sim_servers
+            polarisation = detector_polarisation(
+                store,
+                alignment_run=cfg.alignment.run,
+                simulated_s_weight=cfg.sim.twin.s_weight if simulated else None,
+            )
             try:
                 if not await session.homed():
                     await session.home()
@@ -421,7 +432,7 @@ async def calibrate(
                     place=hook, store=store, run_id=run_id, mirror=mirror, check=check,
                     settings=PointColour.from_config(cfg).settings, theta_deg=theta_deg,
                     repeats=repeats, exposure_us=cfg.spectro.exposure_us,
-                    move_timeout_s=cfg.goniometer.move_timeout_s,
+                    move_timeout_s=cfg.goniometer.move_timeout_s, polarisation=polarisation,
                 )  # fmt: skip
             except (CalibrationRefused, DeviceError) as exc:
                 store.set_status(run_id, RunState.FAILED.value, str(exc))
