@@ -70,10 +70,12 @@ from goniolab.scan.events import (
     InstrumentError,
     PointMeasured,
     Progress,
+    RecordingBus,
     RunFinished,
     RunStarted,
     RunState,
     StateChanged,
+    WarningLog,
 )
 from goniolab.scan.exposure import AutoExposure, reading_quality
 from goniolab.scan.plans import PlanError
@@ -175,6 +177,8 @@ class AlignResult:
     #: moves made without the approach from below (its point out of reach, or its move
     #: failed): each was reported when it happened
     approaches_skipped: int = 0
+    #: the run's warnings, as they were published (:class:`~goniolab.scan.events.WarningLog`)
+    warnings: list[str] = field(default_factory=list)
 
     def corrections_deg(self) -> tuple[float, float]:
         """Added to requested angles before the arms move (``[alignment]``): the sample
@@ -200,6 +204,7 @@ class AlignResult:
             "standard": self.standard,
             "state_file": self.state_file,
             "approaches_skipped": self.approaches_skipped,
+            "warnings": self.warnings,
         }
 
 
@@ -255,7 +260,9 @@ class AlignRunner:
         self.place_specimen = place_specimen
         self.store = store
         self.run_id = run_id
-        self.bus = bus
+        #: the run's warnings as they are published (kept in the result)
+        self.warnings = WarningLog(run_id)
+        self.bus: EventBus = RecordingBus(bus, self.warnings)
         self.move_timeout_s = move_timeout_s
         self.exposure = exposure or AutoExposure()
         #: the certified black glass (``configs/standards.toml [black_glass]``)
@@ -540,6 +547,7 @@ class AlignRunner:
                 standard_fit=fit.as_dict(),
                 standard={**cite, "signal_level_unknown_readings": self._unknown_level},
                 approaches_skipped=self.approaches_skipped,
+                warnings=self.warnings.lines(),
             )
         except AlignAborted as exc:
             self.store.set_status(self.run_id, RunState.ABORTED.value, str(exc))

@@ -255,15 +255,24 @@ class WarningLog:
 
 
 class RecordingBus(EventBus):
-    """``inner``'s subscribers (the same queues), with every event published here also
-    offered to a :class:`WarningLog`: a runner publishes through it, so that its warnings
-    are kept with its result."""
+    """``inner`` itself (its subscribers, its ``publish``), with every event published
+    here also offered to a :class:`WarningLog`: a runner publishes through it, so that its
+    warnings are kept with its result."""
 
     def __init__(self, inner: EventBus, log: WarningLog) -> None:
         super().__init__()
-        self._queues = inner._queues  # one fan-out: subscribing on either reaches both
+        self.inner = inner
         self.log = log
+
+    def subscribe(self) -> asyncio.Queue[Event | None]:
+        return self.inner.subscribe()
+
+    def unsubscribe(self, q: asyncio.Queue[Event | None]) -> None:
+        self.inner.unsubscribe(q)
 
     def publish(self, event: Event) -> None:
         self.log.add(event)
-        super().publish(event)
+        self.inner.publish(event)
+
+    def close(self) -> None:
+        self.inner.close()
