@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Any
 from goniolab.app.lab_setup import (
     Notify,
     SpecimenHook,
+    check_reach,
     lab_errors,
     quiet,
     resume_config,
@@ -252,6 +253,10 @@ async def scan(
     UserError
         The plan refused, an instrument unreachable, the store refusing the run.
     """
+    if not adaptive:  # (an adaptive plan's angles are chosen, then checked, on the lab)
+        # out of the arms' reach: refused in the dry run's words before any instrument is
+        # reached (a typo'd sweep needs no lab); the session's dry run checks again
+        check_reach(cfg, plan)
     with lab_errors("scan"):
         return await _scan_on(
             with_model(cfg, model), store, plan, run_id=None, time_scale=time_scale,

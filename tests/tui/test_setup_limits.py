@@ -198,3 +198,26 @@ def test_check_reach_names_the_range_an_alignment_leaves(tmp_path: Path) -> None
         "alignment corrections (lamp +0.000, detector -2.000 deg) the arms reach "
         "theta_i 0.000..85.000 deg, theta_r 2.000..72.000 deg"
     )
+
+
+def test_goniolab_scan_refuses_before_reaching_an_instrument(tmp_path: Path) -> None:
+    # a lab whose controllers are not there (nothing listens on port 1): a sweep out of
+    # reach is refused by the plan check in its words (exit 2), not by the connection
+    from goniolab.config import configs_dir
+
+    text = (configs_dir() / "lab-sim-wire.toml").read_text()
+    text = text.replace("start_sim_servers = true", "start_sim_servers = false")
+    text = text.replace("port = 5020", "port = 1")
+    assert "port = 5020" not in text
+    cfg = tmp_path / "lab.toml"
+    cfg.write_text(text)
+    said = cli_error(cfg, "45", "0:80:1")
+    assert said == (
+        "plan refused (no arm moved): point 71 (theta_i=45 deg, theta_r=71 deg) is unsafe: "
+        "detector: theta_r=71.0 deg outside the detector arm limits [0.0, 70.0] deg"
+    )
+    lab = load_lab_config(cfg)
+    plan = brdf_plan(lab, sample=lab.sample.map, theta_i_deg=45.0, theta_r_deg="0:80:1")
+    with pytest.raises(UserError) as err:
+        check_reach(lab, plan)
+    assert str(err.value) == said
