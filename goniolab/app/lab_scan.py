@@ -443,11 +443,16 @@ async def calibrate(
                 store.set_status(run_id, RunState.FAILED.value, str(exc))
                 raise UserError(f"calibration run {run_id} failed: {exc}", exit_code=1) from exc
             finally:
+                park_problem = ""
                 try:
                     await session.lab.goniometer.park(home_timeout_s(cfg))
                 except DeviceError as exc:
-                    notify(f"warning: parking failed: {exc}")
-            store.set_status(run_id, RunState.DONE.value)
+                    park_problem = f"parking failed: {exc}"
+                    notify(f"warning: {park_problem}")
+            if park_problem:  # said, and kept with the record (--json, the stored run)
+                record["warnings"] = [park_problem]
+                store.update_model(run_id, {"calibration": record})
+            store.set_status(run_id, RunState.DONE.value, park_problem)
     return CalibrationOutcome(run_id, record, cfg.source, store.location)
 
 

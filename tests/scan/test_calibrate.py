@@ -244,3 +244,25 @@ def test_a_table_certificate_is_held_as_it_is() -> None:
     np.testing.assert_allclose(
         glass.reflectance([550.0], 60.0, s_weight=0.51), [0.51 * r_s + 0.49 * r_p], rtol=1e-12
     )
+
+
+def test_a_park_that_fails_after_the_calibration_is_kept_with_its_record(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from drivers.base import DeviceTimeout
+    from drivers.goniometer import TwoArmGoniometer
+
+    async def stuck(self: TwoArmGoniometer, timeout_s: float) -> None:
+        raise DeviceTimeout("no answer within 1 s", device="lamp")
+
+    monkeypatch.setattr(TwoArmGoniometer, "park", stuck)
+    cfg = _config(tmp_path)
+    code, rec, err = _json(["calibrate", "--config", str(cfg), "--time-scale", "0", "--json"])
+    assert code == 0, err
+    said = "parking failed: lamp: no answer within 1 s"
+    assert f"warning: {said}" in err
+    assert rec["warnings"] == [said]
+    with RunStore(str(tmp_path / "runs.sqlite")) as store:
+        run = store.get_run(int(rec["run_id"]))  # type: ignore[call-overload]
+        assert run.status == "done" and run.reason == said
+        assert run.model["calibration"]["warnings"] == [said]
