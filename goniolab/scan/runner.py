@@ -89,6 +89,7 @@ __all__ = [
     "RunResult",
     "ScanRunner",
     "dry_run",
+    "notice_event",
     "reachable_range",
 ]
 
@@ -105,6 +106,17 @@ class RunResult:
     state: RunState
     reason: str
     summary: dict[str, Any] = field(default_factory=dict)
+
+
+def notice_event(run_id: int, note: str) -> InstrumentError:
+    """A notice a run starts with, as a warning of the device it concerns: the prediction's
+    notes (``"prediction: ..."``, :meth:`goniolab.session.ScanSession.start`) are the
+    model's, the others the calibration's (:func:`goniolab.scan.calibration.
+    calibration_notices`)."""
+    head, sep, text = note.partition(": ")
+    if sep and head == "prediction":
+        return InstrumentError(run_id=run_id, device="model", message=text, fatal=False)
+    return InstrumentError(run_id=run_id, device="calibration", message=note, fatal=False)
 
 
 class ScanRunner(SpectroReadings):
@@ -395,9 +407,7 @@ class ScanRunner(SpectroReadings):
             )
         )
         for note in self.notices:
-            self.bus.publish(
-                InstrumentError(run_id=self.run_id, device="calibration", message=note, fatal=False)
-            )
+            self.bus.publish(notice_event(self.run_id, note))
         self._set_state(RunState.RUNNING)
         self._publish_progress(eta.total_s)
         predict_task = asyncio.create_task(self._predict_all(), name=f"predict-run-{self.run_id}")

@@ -69,3 +69,15 @@ def test_a_scans_warnings_reach_stderr_json_and_the_stored_run(tmp_path: Path) -
     assert doc["warnings"] == said
     with RunStore(str(tmp_path / "runs.sqlite")) as store:
         assert store.get_run(int(doc["run_id"])).model["run_warnings"] == said
+
+
+def test_a_prediction_notice_is_the_models_warning_not_the_calibrations() -> None:
+    from goniolab.scan.runner import notice_event
+
+    ev = notice_event(5, "prediction: 85 deg is computed by kirchhoff")
+    assert (ev.device, ev.message, ev.fatal, ev.run_id) == (
+        "model", "85 deg is computed by kirchhoff", False, 5,
+    )  # fmt: skip
+    old = "the calibration (run 2) is 25.0 h old, older than 24 h: run goniolab calibrate"
+    ev = notice_event(5, old)
+    assert (ev.device, ev.message) == ("calibration", old)
