@@ -17,6 +17,7 @@ side, < 0 on the lamp side), and the arms are ``|theta_i + theta_r|`` apart.
 from __future__ import annotations
 
 import math
+from typing import Literal, NamedTuple
 
 __all__ = [
     "ARM_TRAVEL_DEG",
@@ -24,6 +25,8 @@ __all__ = [
     "DETECTOR_LIMITS_DEG",
     "LAMP_LIMITS_DEG",
     "MIN_SEPARATION_FLOOR_DEG",
+    "GeometryProblem",
+    "geometry_problem",
     "limits_problem",
     "outside_limits",
     "separation_floor_problem",
@@ -75,3 +78,56 @@ def outside_limits(value_deg: float, limits_deg: tuple[float, float]) -> bool:
     """Whether an arm angle lies outside its soft limits (a NaN angle does)."""
     lo, hi = limits_deg
     return not lo <= value_deg <= hi
+
+
+class GeometryProblem(NamedTuple):
+    """Why the arms must not stand at a geometry (:func:`geometry_problem`).
+
+    ``kind`` is ``"limit"`` (an arm beyond its soft limits: the driver raises
+    ``LimitError``) or ``"interlock"`` (the arms too close: ``InterlockError``); ``device``
+    the arm (or ``"goniometer"``) the error names; ``message`` the reason, in the words
+    every face shows.
+    """
+
+    kind: Literal["limit", "interlock"]
+    device: str
+    message: str
+
+
+def geometry_problem(
+    theta_i_deg: float,
+    theta_r_deg: float,
+    *,
+    lamp_limits_deg: tuple[float, float],
+    detector_limits_deg: tuple[float, float],
+    min_separation_deg: float,
+    lamp: str = "lamp",
+    detector: str = "detector",
+) -> GeometryProblem | None:
+    """Why the arms' own angles ``theta_i_deg`` (lamp), ``theta_r_deg`` (detector) are
+    unsafe, or ``None``: an arm outside its soft limits (the lamp checked first), else the
+    arms ``|theta_i + theta_r|`` apart, below ``min_separation_deg``.
+
+    The one text of the refusal: :meth:`drivers.goniometer.TwoArmGoniometer.check_geometry`
+    raises it, and the lab's plan check (:func:`goniolab.app.lab_setup.check_reach`, the
+    TUI form as it is typed) raises it from the config's limits before any instrument is
+    reached. ``lamp``/``detector``: the arms' names.
+    """
+    for name, value, limits, label in (
+        (lamp, theta_i_deg, lamp_limits_deg, "theta_i"),
+        (detector, theta_r_deg, detector_limits_deg, "theta_r"),
+    ):
+        if outside_limits(value, limits):
+            lo, hi = limits
+            return GeometryProblem(
+                "limit", name, f"{label}={value} deg outside the {name} arm limits [{lo}, {hi}] deg"
+            )
+    separation = abs(theta_i_deg + theta_r_deg)
+    if separation < min_separation_deg:
+        return GeometryProblem(
+            "interlock",
+            "goniometer",
+            f"theta_i={theta_i_deg} deg, theta_r={theta_r_deg} deg puts the arms "
+            f"{separation:.3f} deg apart, below the minimum {min_separation_deg} deg",
+        )
+    return None

@@ -50,7 +50,7 @@ from collections.abc import Awaitable, Sequence
 from dataclasses import dataclass
 from typing import Literal
 
-from drivers.arm_limits import outside_limits, separation_floor_problem
+from drivers.arm_limits import geometry_problem, separation_floor_problem
 from drivers.base import Axis, DeviceError, InterlockError, LimitError
 
 __all__ = ["HomingStep", "TwoArmGoniometer", "plan_homing", "plan_moves"]
@@ -323,23 +323,18 @@ class TwoArmGoniometer:
             ``|theta_i_deg + theta_r_deg| < min_separation_deg``.
         """
         theta_i_deg, theta_r_deg = self._arms(theta_i_deg, theta_r_deg)
-        for axis, value, label in (
-            (self.lamp, theta_i_deg, "theta_i"),
-            (self.detector, theta_r_deg, "theta_r"),
-        ):
-            lo, hi = axis.limits_deg
-            if outside_limits(value, axis.limits_deg):
-                raise LimitError(
-                    f"{label}={value} deg outside the {axis.name} arm limits [{lo}, {hi}] deg",
-                    device=axis.name,
-                )
-        separation = abs(theta_i_deg + theta_r_deg)
-        if separation < self.min_separation_deg:
-            raise InterlockError(
-                f"theta_i={theta_i_deg} deg, theta_r={theta_r_deg} deg puts the arms "
-                f"{separation:.3f} deg apart, below the minimum {self.min_separation_deg} deg",
-                device="goniometer",
-            )
+        problem = geometry_problem(  # drivers.arm_limits: the one text of the refusal
+            theta_i_deg,
+            theta_r_deg,
+            lamp_limits_deg=self.lamp.limits_deg,
+            detector_limits_deg=self.detector.limits_deg,
+            min_separation_deg=self.min_separation_deg,
+            lamp=self.lamp.name,
+            detector=self.detector.name,
+        )
+        if problem is not None:
+            error = LimitError if problem.kind == "limit" else InterlockError
+            raise error(problem.message, device=problem.device)
 
     async def connect(self) -> None:
         """Connect both arms."""

@@ -40,7 +40,16 @@ from sim.instruments import (
     SpectroChain,
 )
 from sim.motion import SimMotor
-from sim.truth import FlatSpecimen, TruthOptics, TwinSettings, truth_for
+from sim.truth import FlatSpecimen, TruthOptics, TwinSettings, table_code_key, truth_for
+from sim.twin_cache import (
+    FOREIGN_MAX_AGE_S,
+    MAX_CACHE_BYTES,
+    CacheEntry,
+    CacheInfo,
+    clear,
+    scan,
+)
+from sim.twin_cache import prune as prune_cache
 from sim.wire import ModbusAxisServer, SimLabServer, StilPtyDevice, WireAxis, ZgmPtyDevice
 
 if TYPE_CHECKING:  # the type only: sim never imports the application (tests/test_layers.py)
@@ -48,6 +57,8 @@ if TYPE_CHECKING:  # the type only: sim never imports the application (tests/tes
     from goniolab.config import AxisConfig, GlossmeterConfig, LabConfig, SpectroConfig
 
 __all__ = [
+    "TWIN_CACHE_FOREIGN_MAX_AGE_S",
+    "TWIN_CACHE_MAX_BYTES",
     "SimInstruments",
     "SimLab",
     "build_sim_instruments",
@@ -55,6 +66,8 @@ __all__ = [
     "draw_session",
     "sample_truth",
     "socket_url",
+    "twin_cache",
+    "twin_cache_dir",
     "twin_settings",
 ]
 
@@ -76,14 +89,49 @@ class SimInstruments:
     truth: TruthOptics | None = None
 
 
+def twin_cache_dir() -> Path:
+    """Where the twin keeps its response tables (:mod:`sim.twin_cache`): ``twin`` in the
+    user cache directory (``platformdirs.user_cache_dir("goniolab")``: on Linux
+    ``$XDG_CACHE_HOME/goniolab/twin``, by default ``~/.cache/goniolab/twin``)."""
+    import platformdirs
+
+    return Path(platformdirs.user_cache_dir("goniolab")) / "twin"
+
+
+#: What the twin prunes its cache to after each write: at most this many bytes, and no file
+#: of another code version unused for longer than this many seconds (:mod:`sim.twin_cache`).
+TWIN_CACHE_MAX_BYTES = MAX_CACHE_BYTES
+TWIN_CACHE_FOREIGN_MAX_AGE_S = FOREIGN_MAX_AGE_S
+
+
+def twin_cache(
+    *,
+    clear_all: bool = False,
+    prune: bool = False,
+    max_bytes: int = MAX_CACHE_BYTES,
+    foreign_max_age_s: float = FOREIGN_MAX_AGE_S,
+) -> tuple[CacheInfo, list[CacheEntry], str]:
+    """The twin's disk cache (``goniolab sim cache``): emptied with ``clear_all``, pruned
+    with ``prune`` (:func:`sim.twin_cache.prune`, with ``max_bytes`` and
+    ``foreign_max_age_s``), then as it is; with the files removed and the running table
+    code's key (:func:`sim.truth.table_code_key`)."""
+    d, code = twin_cache_dir(), table_code_key()
+    removed: list[CacheEntry] = []
+    if clear_all:
+        removed = clear(d)
+    elif prune:
+        removed = prune_cache(
+            d, code_key=code, max_bytes=max_bytes, foreign_max_age_s=foreign_max_age_s
+        )
+    return scan(d), removed, code
+
+
 def twin_settings(cfg: LabConfig) -> TwinSettings:
-    """The truth's settings from ``[sim.twin]`` (disk cache under the user cache dir)."""
+    """The truth's settings from ``[sim.twin]`` (disk cache: :func:`twin_cache_dir`)."""
     t = cfg.sim.twin
     cache_dir = None
     if t.cache:
-        import platformdirs
-
-        cache_dir = str(Path(platformdirs.user_cache_dir("goniolab")) / "twin")
+        cache_dir = str(twin_cache_dir())
     return TwinSettings(
         step_um=t.step_um,
         subres_rq_nm=t.subres_rq_nm,

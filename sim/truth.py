@@ -25,7 +25,8 @@ with physics the predictor does not share:
 Cost and caching: a table is one FFT of the tile per (q_z band, wavelength), shared by
 every incidence angle (the band is rescaled to each reading's own q_z). Tables are kept in
 memory and in a disk cache (``cache_dir``), keyed by the truth's content, the settings and
-the code that builds them (:func:`table_code_key`); docs/TWIN.md gives measured build times.
+the code that builds them (:func:`table_code_key`), written atomically and pruned
+(:mod:`sim.twin_cache`); docs/TWIN.md gives measured build times.
 
 References
 ----------
@@ -42,7 +43,6 @@ from __future__ import annotations
 import functools
 import hashlib
 import math
-import os
 import threading
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -266,9 +266,10 @@ class TruthOptics:
         d = self.settings.cache_dir
         if not d:
             return None
+        from sim.twin_cache import cache_file
+
         key = self.truth.content_key + self.settings.key() + table_code_key()
-        h = hashlib.sha1(key.encode()).hexdigest()[:20]
-        return Path(d) / f"twin-{h}.npz"
+        return cache_file(d, table_code_key(), hashlib.sha1(key.encode()).hexdigest()[:20])
 
     def _load_disk(self) -> None:
         path = self._cache_file()
@@ -288,12 +289,19 @@ class TruthOptics:
                     )
         except (OSError, ValueError, KeyError):
             return  # a damaged cache is rebuilt
+        from sim.twin_cache import mark_used
+
+        mark_used(path)  # the least recently used files are pruned first
 
     def save_cache(self) -> None:
-        """Write the tables built so far to the disk cache (atomic; no-op without one)."""
+        """Write the tables built so far to the disk cache (atomic; no-op without one),
+        then prune the cache (:func:`sim.twin_cache.prune`: other code versions' files
+        unused for a day, then the least recently used down to its size cap)."""
         path = self._cache_file()
         if path is None or not self._dirty:
             return
+        from sim.twin_cache import prune, write_atomic
+
         with self._lock:
             items = list(self._tables.items())
             self._dirty = False
@@ -304,11 +312,14 @@ class TruthOptics:
             arrays[f"u_{i}"] = tab.du
             arrays[f"v_{i}"] = tab.dv
             arrays[f"p_{i}"] = tab.p
+
+        def write(tmp: Path) -> None:
+            with open(tmp, "wb") as f:  # a file object: np.savez adds no ".npz" to it
+                np.savez(f, **arrays)  # type: ignore[arg-type]
+
         try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp.npz")
-            np.savez(tmp, **arrays)  # type: ignore[arg-type]
-            os.replace(tmp, path)
+            write_atomic(path, write)
+            prune(path.parent, code_key=table_code_key(), keep=path)
         except OSError:
             pass  # the cache is an optimisation
 

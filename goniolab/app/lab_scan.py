@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Any
 from goniolab.app.lab_setup import (
     Notify,
     SpecimenHook,
+    check_reach,
     lab_errors,
     quiet,
     resume_config,
@@ -252,6 +253,10 @@ async def scan(
     UserError
         The plan refused, an instrument unreachable, the store refusing the run.
     """
+    if not adaptive:  # (an adaptive plan's angles are chosen, then checked, on the lab)
+        # out of the arms' reach: refused in the dry run's words before any instrument is
+        # reached (a typo'd sweep needs no lab); the session's dry run checks again
+        check_reach(cfg, plan)
     with lab_errors("scan"):
         return await _scan_on(
             with_model(cfg, model), store, plan, run_id=None, time_scale=time_scale,
@@ -394,7 +399,11 @@ async def calibrate(
     """
     from drivers.base import DeviceError
     from goniolab import __version__
-    from goniolab.scan.calibration import CalibrationRefused, run_calibration
+    from goniolab.scan.calibration import (
+        CalibrationRefused,
+        detector_polarisation,
+        run_calibration,
+    )
     from goniolab.scan.colour import PointColour
     from goniolab.scan.events import RunState
     from goniolab.session import ScanSession, config_snapshot, home_timeout_s
@@ -413,6 +422,13 @@ async def calibrate(
             hook = session.lab.place_specimen or session.operator
             if hook is None:
                 raise UserError("a calibration needs an operator to place the standards")
+            # the check standard is read as the chain reads it: the detector's s-weight
+            simulated = cfg.lab.mode == "sim" or cfg.lab.start_sim_servers
+            polarisation = detector_polarisation(
+                store,
+                alignment_run=cfg.alignment.run,
+                simulated_s_weight=cfg.sim.twin.s_weight if simulated else None,
+            )
             try:
                 if not await session.homed():
                     await session.home()
@@ -421,17 +437,22 @@ async def calibrate(
                     place=hook, store=store, run_id=run_id, mirror=mirror, check=check,
                     settings=PointColour.from_config(cfg).settings, theta_deg=theta_deg,
                     repeats=repeats, exposure_us=cfg.spectro.exposure_us,
-                    move_timeout_s=cfg.goniometer.move_timeout_s,
+                    move_timeout_s=cfg.goniometer.move_timeout_s, polarisation=polarisation,
                 )  # fmt: skip
             except (CalibrationRefused, DeviceError) as exc:
                 store.set_status(run_id, RunState.FAILED.value, str(exc))
                 raise UserError(f"calibration run {run_id} failed: {exc}", exit_code=1) from exc
             finally:
+                park_problem = ""
                 try:
                     await session.lab.goniometer.park(home_timeout_s(cfg))
                 except DeviceError as exc:
-                    notify(f"warning: parking failed: {exc}")
-            store.set_status(run_id, RunState.DONE.value)
+                    park_problem = f"parking failed: {exc}"
+                    notify(f"warning: {park_problem}")
+            if park_problem:  # said, and kept with the record (--json, the stored run)
+                record["warnings"] = [park_problem]
+                store.update_model(run_id, {"calibration": record})
+            store.set_status(run_id, RunState.DONE.value, park_problem)
     return CalibrationOutcome(run_id, record, cfg.source, store.location)
 
 

@@ -21,6 +21,7 @@ if TYPE_CHECKING:  # loaded when a use case runs
     from goniolab.config import LabConfig
     from goniolab.scan.align import AlignPlan
     from goniolab.scan.plans import BrdfPlan
+    from goniolab.scan.runner import PlanRefused
     from goniolab.store import RunMeta, RunRecord, RunStore
 
 __all__ = [
@@ -30,12 +31,14 @@ __all__ = [
     "align_plan",
     "brdf_plan",
     "check_map",
+    "check_reach",
     "check_sample",
     "config_changes",
     "e2194_angles",
     "lab_errors",
     "load_config",
     "open_store",
+    "plan_refused",
     "quiet",
     "resume_command",
     "resume_config",
@@ -125,6 +128,13 @@ def run_meta(
     return RunMeta.given(operator, sample_id, notes, tags)
 
 
+def plan_refused(exc: PlanRefused) -> UserError:
+    """The dry run's refusal as the user reads it, from every face (``goniolab scan``,
+    the TUI form, the notebook): ``plan refused (no arm moved): point N (theta_i=..,
+    theta_r=..) is unsafe: <the driver's reason>``."""
+    return UserError(f"plan refused (no arm moved): {exc}")
+
+
 @contextlib.contextmanager
 def lab_errors(what: str = "") -> Any:
     """Turn the library's errors a user can act on into :class:`UserError`: an instrument
@@ -138,7 +148,7 @@ def lab_errors(what: str = "") -> Any:
     try:
         yield
     except PlanRefused as exc:
-        raise UserError(f"plan refused (no arm moved): {exc}") from exc
+        raise plan_refused(exc) from exc
     except RunBusy as exc:
         raise UserError(f"{exc} (no arm moved)") from exc
     except PlanError as exc:
@@ -239,6 +249,42 @@ def brdf_plan(
         )
     except PlanError as exc:
         raise UserError(f"{what}: {exc}") from exc
+
+
+def check_reach(
+    cfg: LabConfig,
+    plan: BrdfPlan,
+    *,
+    corrections_deg: tuple[float, float] | None = None,
+) -> None:
+    """Refuse ``plan`` when the arms cannot reach one of its geometries (or the park
+    position), before any instrument is reached: the dry run's check
+    (:func:`goniolab.scan.dryrun.check_reach`) against the config's ``[goniometer]``
+    limits and interlock, through the driver's words (:func:`drivers.arm_limits.
+    geometry_problem`) and :func:`lab_errors`' translation, so that the TUI form says
+    what ``goniolab scan`` says for the same plan.
+
+    ``corrections_deg``: the alignment corrections the arms add to every move (the open
+    lab's; default the config's ``[alignment]``).
+
+    Raises
+    ------
+    UserError
+        ``plan refused (no arm moved): point N (theta_i=.., theta_r=..) is unsafe: ..``.
+    """
+    from goniolab.scan.dryrun import check_reach as refuse_unsafe
+    from goniolab.scan.dryrun import config_reach
+
+    g = cfg.goniometer
+    corr = cfg.alignment.corrections_deg() if corrections_deg is None else corrections_deg
+    check_geometry, reach = config_reach(g, corr)
+    with lab_errors():
+        refuse_unsafe(
+            plan.points(),
+            check_geometry,
+            park_deg=(g.park.theta_i_deg, g.park.theta_r_deg),
+            reach=reach,
+        )
 
 
 def e2194_angles(

@@ -160,6 +160,12 @@ EXAMPLES: dict[str, list[str]] = {
     "sim": [
         "goniolab sim serve --config configs/lab-sim-wire.toml",
         "goniolab sim serve --config configs/lab-sim-wire.toml --json --time-scale 0",
+        "goniolab sim cache                  # the twin's table cache: where, how big",
+    ],
+    "sim cache": [
+        "goniolab sim cache",
+        "goniolab sim cache --prune --max-mb 1000 --other-versions-age-h 0",
+        "goniolab sim cache --clear",
     ],
     "sim serve": [
         "goniolab sim serve --config configs/lab-sim-wire.toml   # until Ctrl-C",

@@ -40,6 +40,8 @@ def _cmd(args: argparse.Namespace) -> int:
         print(f"  check {c['standard']} (certificate {c['certificate']}): {c['measured_y_pct']:.3f} %"
               f" against {c['certified_y_pct']:.3f} %, residual {c['residual_pct']:+.3f} %"
               f" (tolerance {c['tolerance_pct']:g} %): {'ok' if c['ok'] else 'MISSED'}")  # fmt: skip
+        print(f"    certified value read as: {c['weighting']} (unpolarised "
+              f"{c['certified_unpolarised_y_pct']:.3f} %)")  # fmt: skip
     if not c["ok"]:
         print("goniolab: warning: the check standard missed its certificate", file=sys.stderr)
     return 0

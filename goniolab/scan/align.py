@@ -70,10 +70,12 @@ from goniolab.scan.events import (
     InstrumentError,
     PointMeasured,
     Progress,
+    RecordingBus,
     RunFinished,
     RunStarted,
     RunState,
     StateChanged,
+    WarningLog,
 )
 from goniolab.scan.exposure import AutoExposure, reading_quality
 from goniolab.scan.plans import PlanError
@@ -172,6 +174,11 @@ class AlignResult:
     standard: dict[str, Any] = field(default_factory=dict)
     #: where the result was saved (the lab's alignment state file), "" = with the run only
     state_file: str = ""
+    #: moves made without the approach from below (its point out of reach, or its move
+    #: failed): each was reported when it happened
+    approaches_skipped: int = 0
+    #: the run's warnings, as they were published (:class:`~goniolab.scan.events.WarningLog`)
+    warnings: list[str] = field(default_factory=list)
 
     def corrections_deg(self) -> tuple[float, float]:
         """Added to requested angles before the arms move (``[alignment]``): the sample
@@ -196,6 +203,8 @@ class AlignResult:
             "standard_fit": self.standard_fit,
             "standard": self.standard,
             "state_file": self.state_file,
+            "approaches_skipped": self.approaches_skipped,
+            "warnings": self.warnings,
         }
 
 
@@ -251,7 +260,9 @@ class AlignRunner:
         self.place_specimen = place_specimen
         self.store = store
         self.run_id = run_id
-        self.bus = bus
+        #: the run's warnings as they are published (kept in the result)
+        self.warnings = WarningLog(run_id)
+        self.bus: EventBus = RecordingBus(bus, self.warnings)
         self.move_timeout_s = move_timeout_s
         self.exposure = exposure or AutoExposure()
         #: the certified black glass (``configs/standards.toml [black_glass]``)
@@ -265,6 +276,8 @@ class AlignRunner:
         self._exposure_us = plan.exposure_us
         self._index = 0
         self._position: tuple[float, float] | None = None
+        #: moves made without their approach from below (:meth:`_go`)
+        self.approaches_skipped = 0
         self._abort = False
         #: :meth:`run` has published the run's end (done, aborted or failed)
         self.finished = False
@@ -296,8 +309,21 @@ class AlignRunner:
             try:
                 self.goniometer.check_geometry(*pre)
                 await self.goniometer.move_to(pre[0], pre[1], self.move_timeout_s)
-            except Exception:
-                pass
+            except DeviceError as exc:
+                # said and counted, not skipped silently: this sweep's backlash differs
+                self.approaches_skipped += 1
+                self.bus.publish(
+                    InstrumentError(
+                        run_id=self.run_id,
+                        device="goniometer",
+                        message=(
+                            f"approach from below skipped: theta_i {pre[0]:g}, theta_r "
+                            f"{pre[1]:g} deg: {exc}; moving to theta_i {ti:g}, theta_r "
+                            f"{tr:g} deg directly (the arms' backlash is not taken out there)"
+                        ),
+                        fatal=False,
+                    )
+                )
         await self.goniometer.move_to(ti, tr, self.move_timeout_s)
         self._position = (ti, tr)
         return None if (ti, tr) == tuple(pos) else move_size(self.motion, moves)
@@ -520,6 +546,8 @@ class AlignRunner:
                 readings=self._index,
                 standard_fit=fit.as_dict(),
                 standard={**cite, "signal_level_unknown_readings": self._unknown_level},
+                approaches_skipped=self.approaches_skipped,
+                warnings=self.warnings.lines(),
             )
         except AlignAborted as exc:
             self.store.set_status(self.run_id, RunState.ABORTED.value, str(exc))

@@ -31,6 +31,7 @@ __all__ = [
     "fit_standard",
     "fit_standard_full",
     "half_max_midpoint",
+    "parameter_sigmas",
 ]
 
 #: Refractive index of the ISO 2813 black-glass standard.
@@ -166,6 +167,16 @@ def fit_standard(
     return f.lamp_zero_deg, f.detector_zero_deg, f.rms_rel
 
 
+def parameter_sigmas(variances: NDArray[np.float64]) -> NDArray[np.float64]:
+    """1-sigma of each fitted parameter from the covariance's diagonal. A negative or
+    non-finite variance (``J^T J`` too ill-conditioned to invert) is an unknown
+    uncertainty: ``inf``, which the gates refuse, never 0 (a clip to 0 made such a zero
+    look exact and pass the 0.08 deg gate)."""
+    v = np.asarray(variances, dtype=np.float64)
+    ok = np.isfinite(v) & (v >= 0.0)
+    return np.where(ok, np.sqrt(np.where(ok, v, 0.0)), math.inf)
+
+
 def fit_standard_full(
     lamp_deg: Sequence[float],
     det_deg: Sequence[float],
@@ -224,7 +235,7 @@ def fit_standard_full(
     s2 = float(np.sum(fit.fun**2)) / dof
     try:
         cov = np.linalg.inv(fit.jac.T @ fit.jac) * s2
-        sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+        sd = parameter_sigmas(np.diag(cov))
     except np.linalg.LinAlgError:
         sd = np.full(fit.x.size, math.inf)
     return StandardFit(

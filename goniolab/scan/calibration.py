@@ -10,8 +10,14 @@ At the specular geometry ``(theta, theta)`` the calibration reads
        R_check(lambda) = g(lambda) / m(lambda) x R_mirror,cert(lambda)
 
    and its luminance ``Y_check`` (the ``[colour]`` weights) is compared with the
-   certificate's ``Y_cert`` (Fresnel of n at theta): ``residual = Y_check - Y_cert``,
-   within the standard's ``tolerance`` or the record says it missed.
+   certificate's ``Y_cert`` as this detector reads it: the glass's Fresnel reflectances
+   of its certified index weighted with the detector's share ``w`` of response to
+   s-polarised light, ``R = w R_s + (1 - w) R_p`` (Born & Wolf sec. 1.5.2; ISO 2813:2014
+   sec. 5.3: n = 1.567), the weighting the alignment fits (:func:`detector_polarisation`);
+   ``residual = Y_check - Y_cert``, within the standard's ``tolerance`` or the record
+   says it missed. The glass polarises (R_s 10.780 %, R_p 1.162 % at 45 deg), so a 51 % s
+   detector reads it 0.096 points above the unpolarised certificate (0.198 at 60 deg,
+   the whole 0.2 % tolerance).
 
 The instrument's dark reference is its own (subtracted inside the spectro: the twin's
 ``SpectroChain``; a real Ruby's dark shutter); a saturated or under-noise-floor reading
@@ -39,8 +45,11 @@ from goniolab.scan.standards import Standard
 from goniolab.store import RunRecord, RunStore
 
 __all__ = [
+    "UNPOLARISED",
     "CalibrationRefused",
+    "DetectorPolarisation",
     "calibration_notices",
+    "detector_polarisation",
     "latest_calibration",
     "run_calibration",
 ]
@@ -50,6 +59,83 @@ SpecimenHook = Callable[[str], Awaitable[None]]
 
 class CalibrationRefused(RuntimeError):
     """A reading the calibration cannot use (saturated, under the noise floor)."""
+
+
+@dataclass(frozen=True, slots=True)
+class DetectorPolarisation:
+    """The spectro's share ``s_weight`` of response to s-polarised light (0.5: it answers
+    s and p alike) and where the number comes from (``source``: ``"fitted"`` by an
+    alignment, ``"configured"`` for the simulated detector, ``"assumed"``), with one line
+    for the user (``note``)."""
+
+    s_weight: float
+    source: str
+    note: str
+    s_weight_sigma: float = math.nan
+    alignment_run: int | None = None
+
+    def as_dict(self) -> dict[str, Any]:
+        """What the calibration record stores (JSON: a NaN sigma is ``None``)."""
+        return {
+            "s_weight": self.s_weight,
+            "s_weight_sigma": self.s_weight_sigma if math.isfinite(self.s_weight_sigma) else None,
+            "source": self.source,
+            "alignment_run": self.alignment_run,
+            "note": self.note,
+        }
+
+
+#: A detector taken to answer s and p light alike (nothing fitted or configured).
+UNPOLARISED = DetectorPolarisation(
+    0.5,
+    "assumed",
+    "w = 0.5 assumed (unpolarised): no alignment has fitted the detector's s-weight "
+    "(goniolab scan --plan align, three or more incidences)",
+)
+
+
+def detector_polarisation(
+    store: RunStore, *, alignment_run: int, simulated_s_weight: float | None = None
+) -> DetectorPolarisation:
+    """The weighting the measurement chain uses for the detector: the ``s_weight`` the
+    black-glass fit of the alignment the arms apply found (``alignment_run``, the config's
+    ``[alignment] run``; fitted only with three or more incidences, else its ``w = 0.5``
+    was assumed), else the simulated detector's ``[sim.twin] s_weight``
+    (``simulated_s_weight``, a simulated lab), else :data:`UNPOLARISED`."""
+    from goniolab.store import StoreError
+
+    unfitted = ""
+    if alignment_run > 0:
+        try:
+            rec = store.get_run(alignment_run)
+        except StoreError:
+            rec = None
+        fit: dict[str, Any] = {}
+        if rec is not None and rec.kind == "align" and rec.status == "done":
+            fit = (rec.model.get("alignment") or {}).get("standard_fit") or {}
+        w, sd = fit.get("s_weight"), fit.get("s_weight_sigma")
+        if isinstance(w, int | float) and isinstance(sd, int | float) and math.isfinite(sd):
+            return DetectorPolarisation(
+                float(w),
+                "fitted",
+                f"w = {w:.4f} +/- {sd:.4f} fitted by the black-glass sweeps of alignment run "
+                f"{alignment_run} (the alignment the arms apply)",
+                float(sd),
+                alignment_run,
+            )
+        unfitted = (
+            f"alignment run {alignment_run} fitted no w (two incidences, or not in this store)"
+        )
+    if simulated_s_weight is not None:
+        return DetectorPolarisation(
+            float(simulated_s_weight),
+            "configured",
+            f"w = {simulated_s_weight:g}: the simulated detector's [sim.twin] s_weight "
+            f"({unfitted or 'no alignment has fitted w'})",
+        )
+    if unfitted:
+        return DetectorPolarisation(0.5, "assumed", f"w = 0.5 assumed (unpolarised): {unfitted}")
+    return UNPOLARISED
 
 
 @dataclass(frozen=True, slots=True)
@@ -108,9 +194,11 @@ async def run_calibration(
     repeats: int = 3,
     exposure_us: int = 10_000,
     move_timeout_s: float = 30.0,
+    polarisation: DetectorPolarisation = UNPOLARISED,
 ) -> dict[str, Any]:
     """Measure mirror and check standard (module docstring); return the record (also
-    stored as the run's model and its status ``done``).
+    stored as the run's model and its status ``done``). ``polarisation``: the detector's
+    s-weight the check standard's certificate is read with (:func:`detector_polarisation`).
 
     Raises
     ------
@@ -133,7 +221,19 @@ async def run_calibration(
     w_y = np.asarray(xyz_weights(m.wavelengths_nm, settings)[1])
     r_check = g.mean_pct / m.mean_pct * mirror.reflectance(m.wavelengths_nm, theta_deg)
     y_check = float(w_y @ r_check)
-    y_cert = float(w_y @ check.reflectance(m.wavelengths_nm, theta_deg))
+    w = polarisation.s_weight if check.splits_polarisation else 0.5
+    y_cert = float(w_y @ check.reflectance(m.wavelengths_nm, theta_deg, s_weight=w))
+    y_unpolarised = float(w_y @ check.reflectance(m.wavelengths_nm, theta_deg))
+    if check.splits_polarisation:
+        weighting = (
+            f"R = w R_s + (1 - w) R_p of n = {check.n:g} (Fresnel) at {theta_deg:g} deg, "
+            f"{polarisation.note}"
+        )
+    else:
+        weighting = (
+            "the certificate's table as it is (unpolarised: it gives no s and p parts; "
+            f"the detector's {polarisation.note})"
+        )
     residual = y_check - y_cert
     tol_pct = 100.0 * check.tolerance
     now = time.time()
@@ -149,6 +249,10 @@ async def run_calibration(
         "check": {
             **check.cite(),
             "certified_y_pct": y_cert,
+            "certified_unpolarised_y_pct": y_unpolarised,
+            "s_weight": w,
+            "weighting": weighting,
+            "polarisation": polarisation.as_dict(),
             "measured_y_pct": y_check,
             "residual_pct": residual,
             "tolerance_pct": tol_pct,

@@ -13,16 +13,25 @@ which measured rates replace as the run goes on.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
+from drivers.arm_limits import geometry_problem
 from drivers.base import DeviceError, Goniometer, InterlockError, LimitError
 from drivers.timing import trapezoid_duration_s
 from goniolab.config import GoniometerConfig
 from goniolab.scan.eta import PointParts
 from goniolab.scan.plans import MIRROR_INDEX, PlanPoint
 
-__all__ = ["ArmMotion", "DryRun", "PlanRefused", "dry_run", "reachable_range"]
+__all__ = [
+    "ArmMotion",
+    "DryRun",
+    "PlanRefused",
+    "check_reach",
+    "config_reach",
+    "dry_run",
+    "reachable_range",
+]
 
 
 class PlanRefused(Exception):
@@ -47,15 +56,6 @@ class PlanRefused(Exception):
         super().__init__(
             f"{what} (theta_i={theta_i_deg:g} deg, theta_r={theta_r_deg:g} deg) is unsafe: {cause}"
             + (f"; {reach}" if reach else "")
-        )
-
-    @property
-    def out_of_reach(self) -> str:
-        """The refusal as a form error: the geometry first, then the reason."""
-        where = "the park position: " if self.what == "park position" else ""
-        return (
-            f"{where}theta_i {self.theta_i_deg:g} deg, theta_r {self.theta_r_deg:g} deg is "
-            f"out of the goniometer's reach: {self.reason}"
         )
 
 
@@ -108,16 +108,88 @@ def reachable_range(goniometer: Goniometer) -> str:
     (``""`` without corrections): a sweep to a limit that an alignment moved is refused
     with this range rather than failing mid-run."""
     corr = getattr(goniometer, "corrections_deg", (0.0, 0.0))
+    return _reach_text(goniometer.lamp.limits_deg, goniometer.detector.limits_deg, corr)
+
+
+def _reach_text(
+    lamp_limits_deg: tuple[float, float],
+    detector_limits_deg: tuple[float, float],
+    corr: tuple[float, float],
+) -> str:
     if not any(corr):
         return ""
     parts = []
-    for axis, c, label in ((goniometer.lamp, corr[0], "theta_i"), (goniometer.detector, corr[1], "theta_r")):  # fmt: skip
-        lo, hi = axis.limits_deg
+    for (lo, hi), c, label in ((lamp_limits_deg, corr[0], "theta_i"), (detector_limits_deg, corr[1], "theta_r")):  # fmt: skip
         parts.append(f"{label} {lo - c:.3f}..{hi - c:.3f} deg")
     return (
         f"with the alignment corrections (lamp {corr[0]:+.3f}, detector {corr[1]:+.3f} deg) the "
         f"arms reach {', '.join(parts)}"
     )
+
+
+def check_reach(
+    points: Sequence[PlanPoint],
+    check_geometry: Callable[[float, float], None],
+    *,
+    park_deg: tuple[float, float] | None,
+    reach: Callable[[], str] = str,
+) -> None:
+    """Refuse the plan when the park position or a point's geometry is unsafe: the check
+    of :func:`dry_run`, before any motion.
+
+    ``check_geometry`` raises :class:`~drivers.base.LimitError` or
+    :class:`~drivers.base.InterlockError` (a goniometer's, or :func:`config_reach`'s);
+    ``reach()`` the reachable range named beside a limit refusal.
+
+    Raises
+    ------
+    PlanRefused
+        Naming the park position or the first unsafe point, its geometry and the reason.
+    """
+    if park_deg is not None:
+        try:
+            check_geometry(*park_deg)
+        except (LimitError, InterlockError) as exc:
+            text = reach() if isinstance(exc, LimitError) else ""
+            raise PlanRefused("park position", *park_deg, exc, text) from exc
+    checked: set[tuple[float, float]] = set()
+    for p in points:
+        target = (p.theta_i_deg, p.theta_r_deg)
+        if target in checked:
+            continue
+        try:
+            check_geometry(*target)
+        except (LimitError, InterlockError) as exc:
+            what = "mirror reference" if p.index == MIRROR_INDEX else f"point {p.index}"
+            text = reach() if isinstance(exc, LimitError) else ""
+            raise PlanRefused(what, *target, exc, text) from exc
+        checked.add(target)
+
+
+def config_reach(
+    goniometer: GoniometerConfig, corrections_deg: tuple[float, float]
+) -> tuple[Callable[[float, float], None], Callable[[], str]]:
+    """The goniometer's ``check_geometry`` and :func:`reachable_range` from a lab config's
+    ``[goniometer]`` and the alignment's corrections, with no instrument reached: the
+    driver's check (:func:`drivers.arm_limits.geometry_problem`, the arms named ``lamp``
+    and ``detector`` as the lab wires them), so a plan is refused in the driver's words
+    before the lab is opened (the TUI form, as it is typed)."""
+    lamp, det = goniometer.lamp.limits_deg, goniometer.detector.limits_deg
+    corr = (float(corrections_deg[0]), float(corrections_deg[1]))
+
+    def check_geometry(theta_i_deg: float, theta_r_deg: float) -> None:
+        problem = geometry_problem(
+            theta_i_deg + corr[0],
+            theta_r_deg + corr[1],
+            lamp_limits_deg=lamp,
+            detector_limits_deg=det,
+            min_separation_deg=goniometer.min_separation_deg,
+        )
+        if problem is not None:
+            error = LimitError if problem.kind == "limit" else InterlockError
+            raise error(problem.message, device=problem.device)
+
+    return check_geometry, lambda: _reach_text(lamp, det, corr)
 
 
 def dry_run(
@@ -159,27 +231,18 @@ def dry_run(
     PlanRefused
         Naming the first unsafe point, its geometry and the goniometer's reason.
     """
-    if park_deg is not None:
-        try:
-            goniometer.check_geometry(*park_deg)
-        except (LimitError, InterlockError) as exc:
-            reach = reachable_range(goniometer) if isinstance(exc, LimitError) else ""
-            raise PlanRefused("park position", *park_deg, exc, reach) from exc
+    check_reach(
+        points,
+        goniometer.check_geometry,
+        park_deg=park_deg,
+        reach=lambda: reachable_range(goniometer),
+    )
     times: list[float] = []
     parts: list[PointParts] = []
     pos = start_deg
     moves = 0
-    checked: set[tuple[float, float]] = set()
     for p in points:
         target = (p.theta_i_deg, p.theta_r_deg)
-        if target not in checked:
-            try:
-                goniometer.check_geometry(*target)
-            except (LimitError, InterlockError) as exc:
-                what = "mirror reference" if p.index == MIRROR_INDEX else f"point {p.index}"
-                reach = reachable_range(goniometer) if isinstance(exc, LimitError) else ""
-                raise PlanRefused(what, *target, exc, reach) from exc
-            checked.add(target)
         move_s: float | None = None
         if target != pos:
             move_s = motion.move_time_s(pos, target)

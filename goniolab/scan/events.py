@@ -28,10 +28,12 @@ __all__ = [
     "PointMeasured",
     "PointPredicted",
     "Progress",
+    "RecordingBus",
     "RunFinished",
     "RunStarted",
     "RunState",
     "StateChanged",
+    "WarningLog",
 ]
 
 
@@ -217,3 +219,60 @@ class EventBus:
                 yield ev
         finally:
             self.unsubscribe(q)
+
+
+class WarningLog:
+    """The warnings of one run (its non-fatal :class:`InstrumentError` events) in the order
+    they came, a repeated one counted: what the run's stored record and ``--json`` carry
+    beside the live messages (no fallback said on stderr only)."""
+
+    #: The most distinct warnings kept (a reconnect storm is counted, not listed).
+    MAX_LINES = 100
+
+    def __init__(self, run_id: int) -> None:
+        self.run_id = run_id
+        self._counts: dict[str, int] = {}
+        self.dropped = 0
+
+    def add(self, event: Event) -> None:
+        """Record ``event`` if it is a warning of this run."""
+        if not isinstance(event, InstrumentError) or event.fatal or event.run_id != self.run_id:
+            return
+        text = f"{event.device}: {event.message}"
+        if text in self._counts:
+            self._counts[text] += 1
+        elif len(self._counts) < self.MAX_LINES:
+            self._counts[text] = 1
+        else:
+            self.dropped += 1
+
+    def lines(self) -> list[str]:
+        """Each warning once, ``(N times)`` after a repeated one."""
+        out = [t if n == 1 else f"{t} ({n} times)" for t, n in self._counts.items()]
+        if self.dropped:
+            out.append(f"... and {self.dropped} more warnings (see the run's log)")
+        return out
+
+
+class RecordingBus(EventBus):
+    """``inner`` itself (its subscribers, its ``publish``), with every event published
+    here also offered to a :class:`WarningLog`: a runner publishes through it, so that its
+    warnings are kept with its result."""
+
+    def __init__(self, inner: EventBus, log: WarningLog) -> None:
+        super().__init__()
+        self.inner = inner
+        self.log = log
+
+    def subscribe(self) -> asyncio.Queue[Event | None]:
+        return self.inner.subscribe()
+
+    def unsubscribe(self, q: asyncio.Queue[Event | None]) -> None:
+        self.inner.unsubscribe(q)
+
+    def publish(self, event: Event) -> None:
+        self.log.add(event)
+        self.inner.publish(event)
+
+    def close(self) -> None:
+        self.inner.close()

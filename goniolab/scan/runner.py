@@ -65,10 +65,12 @@ from goniolab.scan.events import (
     PointMeasured,
     PointPredicted,
     Progress,
+    RecordingBus,
     RunFinished,
     RunStarted,
     RunState,
     StateChanged,
+    WarningLog,
 )
 from goniolab.scan.exposure import EXCLUDED_QUALITY, AutoExposure, reading_quality
 from goniolab.scan.moves import Aborted, describe_error
@@ -87,6 +89,7 @@ __all__ = [
     "RunResult",
     "ScanRunner",
     "dry_run",
+    "notice_event",
     "reachable_range",
 ]
 
@@ -103,6 +106,17 @@ class RunResult:
     state: RunState
     reason: str
     summary: dict[str, Any] = field(default_factory=dict)
+
+
+def notice_event(run_id: int, note: str) -> InstrumentError:
+    """A notice a run starts with, as a warning of the device it concerns: the prediction's
+    notes (``"prediction: ..."``, :meth:`goniolab.session.ScanSession.start`) are the
+    model's, the others the calibration's (:func:`goniolab.scan.calibration.
+    calibration_notices`)."""
+    head, sep, text = note.partition(": ")
+    if sep and head == "prediction":
+        return InstrumentError(run_id=run_id, device="model", message=text, fatal=False)
+    return InstrumentError(run_id=run_id, device="calibration", message=note, fatal=False)
 
 
 class ScanRunner(SpectroReadings):
@@ -200,7 +214,9 @@ class ScanRunner(SpectroReadings):
         self.plan = plan
         self.store = store
         self.run_id = run_id
-        self.bus = bus
+        #: the run's warnings as they are published (stored with the run, in its summary)
+        self.warnings = WarningLog(run_id)
+        self.bus: EventBus = RecordingBus(bus, self.warnings)
         self.motion = motion
         self.predictor = predictor
         self.move_timeout_s = move_timeout_s
@@ -391,9 +407,7 @@ class ScanRunner(SpectroReadings):
             )
         )
         for note in self.notices:
-            self.bus.publish(
-                InstrumentError(run_id=self.run_id, device="calibration", message=note, fatal=False)
-            )
+            self.bus.publish(notice_event(self.run_id, note))
         self._set_state(RunState.RUNNING)
         self._publish_progress(eta.total_s)
         predict_task = asyncio.create_task(self._predict_all(), name=f"predict-run-{self.run_id}")
@@ -710,6 +724,26 @@ class ScanRunner(SpectroReadings):
                 )
             )
 
+    def _keep_warnings(self, summary: dict[str, Any]) -> None:
+        """The run's warnings into its summary (``--json``, the TUI's end of run) and its
+        stored record (``run_warnings`` of the model, a resumed run's added to the earlier
+        ones): every fallback the user was told of live stays with the run."""
+        lines = self.warnings.lines()
+        if not lines:
+            return
+        summary["warnings"] = lines
+        try:
+            earlier = self.store.get_run(self.run_id).model.get("run_warnings") or []
+            kept = [*earlier, *(w for w in lines if w not in earlier)]
+            self.store.update_model(self.run_id, {"run_warnings": kept})
+        except StoreError as exc:
+            self.bus.publish(
+                InstrumentError(
+                    run_id=self.run_id, device="store",
+                    message=f"the run's warnings could not be stored: {exc}", fatal=False,
+                )
+            )  # fmt: skip
+
     async def _finish(
         self,
         state: RunState,
@@ -742,6 +776,7 @@ class ScanRunner(SpectroReadings):
             summary = {}
             problem = f"summary failed: {describe_error(exc)}"
             reason = f"{reason}; {problem}" if reason else problem
+        self._keep_warnings(summary)
         self._set_state(state, reason)
         self.bus.publish(
             RunFinished(run_id=self.run_id, state=state, reason=reason, summary=summary)

@@ -77,19 +77,40 @@ class Standard:
     source: str = ""
 
     def reflectance(
-        self, wavelengths_nm: ArrayLike, theta_i_deg: float = 0.0
+        self, wavelengths_nm: ArrayLike, theta_i_deg: float = 0.0, *, s_weight: float = 0.5
     ) -> NDArray[np.float64]:
-        """Certified reflectance (fraction) at ``wavelengths_nm`` for incidence ``theta_i_deg``."""
+        """Certified reflectance (fraction) at ``wavelengths_nm`` for incidence ``theta_i_deg``,
+        as a detector answering ``s_weight`` to s-polarised light reads it.
+
+        A ``fresnel`` standard reflects ``R = w R_s + (1 - w) R_p`` of unpolarised light
+        into such a detector (Born & Wolf, *Principles of Optics*, sec. 1.5.2, the
+        Fresnel power reflectances; ``w = 0.5`` is the unpolarised ``(R_s + R_p) / 2``
+        of the certificate, ISO 2813:2014 sec. 5.3). A ``table`` standard's certificate is
+        unpolarised and gives no s and p parts: the table, whatever ``s_weight``
+        (:attr:`splits_polarisation`).
+        """
         wl = np.asarray(wavelengths_nm, dtype=np.float64)
         if self.model == "fresnel":
-            from goniolab.optics.fresnel import fresnel
+            from goniolab.optics.fresnel import fresnel, fresnel_dielectric_sp
 
-            r = float(fresnel(math.cos(math.radians(theta_i_deg)), self.n))
+            cos_i = math.cos(math.radians(theta_i_deg))
+            if s_weight == 0.5:
+                r = float(fresnel(cos_i, self.n))
+            else:
+                r_s, r_p = fresnel_dielectric_sp(cos_i, self.n)
+                r = s_weight * float(r_s) + (1.0 - s_weight) * float(r_p)
             return np.full(wl.shape, r)
         return np.asarray(
             np.interp(wl, np.asarray(self.wavelength_nm), np.asarray(self.reflectance_table)),
             dtype=np.float64,
         )
+
+    @property
+    def splits_polarisation(self) -> bool:
+        """Whether the certificate gives the s and p reflectances apart (a ``fresnel``
+        standard: from its index), so that a polarisation-sensitive reading can be held
+        to it."""
+        return self.model == "fresnel"
 
     def luminance_pct(self, theta_i_deg: float, weights_y: Sequence[float] | None = None) -> float:
         """Certified value as a luminance in % (Y-weighted mean over 380..780 nm when

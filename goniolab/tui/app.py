@@ -179,6 +179,7 @@ class GonioApp(LabActions):
         self._opening = False  # backend.open() or home() in progress
         self._gloss_polling = False
         self._error_toast_s: dict[str, float] = {}  # device -> time of its last error toast
+        self._toasts_held = 0  # warnings of the run not toasted (a device's burst)
         self._pause_on_start = False
         self._starts = 0  # scans started: a prediction preview older than a start is dropped
         self._queue: asyncio.Queue[Event | None] | None = None

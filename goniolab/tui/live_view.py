@@ -86,6 +86,7 @@ class LiveView(App[int]):
     _starting: bool
     _starts: int
     _error_toast_s: dict[str, float]
+    _toasts_held: int
 
     @property
     def backend(self) -> Backend:
@@ -108,13 +109,27 @@ class LiveView(App[int]):
             self.preview_prediction()
 
     def preview_prediction(self) -> None:
-        """Between scans, draw the model's curve for the form's sample and sweep."""
-        if not self.ready.is_set() or self.backend.running or self._starting:
+        """Check the form's plan as it is typed (a sweep the arms cannot reach is refused
+        under the fields, in the words of ``goniolab scan``); between scans, draw the
+        model's curve for the form's sample and sweep."""
+        if not self.ready.is_set():
             return
         try:
-            setup = self.query_one(ScanForm).read()
-        except (UserError, NoMatches):
+            form = self.query_one(ScanForm)
+            setup = form.read()
+        except NoMatches:
+            return
+        except UserError:
+            form.show_problem("")
             return  # incomplete form (typing in progress): keep what is shown
+        try:
+            self.backend.check_setup(setup)
+        except UserError as exc:
+            form.show_problem(str(exc))
+            return
+        form.show_problem("")
+        if self.backend.running or self._starting:
+            return
         if len(setup.theta_r_values_deg()) > self.PREVIEW_MAX_POINTS:
             return
         self._preview(setup)
@@ -150,6 +165,8 @@ class LiveView(App[int]):
         self.events_seen += 1
         panel = self.query_one(StatusPanel)
         if isinstance(ev, RunStarted):
+            if ev.kind in ("align", "brdf"):
+                self._toasts_held = 0
             if ev.kind == "align":  # its readings are not a curve of the form's sweep
                 self.run_id, self.run_kind = ev.run_id, ev.kind
                 self.progress = (0, ev.total_points, math.nan)
@@ -209,6 +226,8 @@ class LiveView(App[int]):
                     severity="error",
                     timeout=10,
                 )
+            elif ev.run_id == self.run_id:  # counted: the run's end says how many
+                self._toasts_held += 1
             if ev.fatal:
                 self.show_banner(f"{ev.device}: {ev.message}")
         elif isinstance(ev, RunFinished):
@@ -222,9 +241,24 @@ class LiveView(App[int]):
                 self.show_banner(text)
             if self.run_kind == "align" and ev.state is RunState.DONE:
                 text = alignment_note(ev.run_id, ev.summary)
+            text += self._warnings_note(ev)
             self.notify(text, title="Align" if self.run_kind == "align" else "Scan",
                         severity=severity, timeout=15 if self.run_kind == "align" else 5)  # fmt: skip
         self.show_run_line()
+
+    def _warnings_note(self, ev: RunFinished) -> str:
+        """The run's warnings at its end: how many, that they are stored with it, and how
+        many of them were not toasted (a device's burst shows one toast per
+        :data:`ERROR_TOAST_INTERVAL_S`); ``""`` without any."""
+        warnings = ev.summary.get("warnings") or []
+        held, self._toasts_held = self._toasts_held, 0
+        if not warnings:
+            return ""
+        text = (
+            f"; {len(warnings)} warning{'s' if len(warnings) != 1 else ''} stored with the run "
+            f"(goniolab runs show {ev.run_id})"
+        )
+        return text + (f"; {held} of its messages were not shown as they came" if held else "")
 
     def show_run_line(self) -> None:
         """The one-line run status under the arm table."""

@@ -23,10 +23,12 @@ from typing import Any
 from drivers.base import GLOSS_ANGLES_DEG, DeviceError
 from goniolab.app.lab_setup import (
     brdf_plan,
+    check_reach,
     check_sample,
     lab_errors,
     load_config,
     open_store,
+    plan_refused,
     store_location,
 )
 from goniolab.errors import UserError
@@ -209,8 +211,27 @@ class SessionBackend:
         )
 
     def check_setup(self, setup: ScanSetup) -> None:
-        """:meth:`ScanSetup.validate` against this lab's arm limits (its config's)."""
-        setup.validate(self.config.goniometer.lamp.limits_deg)
+        """:meth:`ScanSetup.validate`, then the plan's reach as ``goniolab scan`` refuses
+        it (:func:`goniolab.app.lab_setup.check_reach`: the config's arm limits, interlock
+        and park, the alignment's corrections; its words)."""
+        self._plan(setup)
+
+    def _plan(self, setup: ScanSetup) -> BrdfPlan:
+        """The form's plan, checked (:meth:`check_setup`)."""
+        setup.validate()
+        plan = brdf_plan(
+            self.config,
+            sample=setup.sample,
+            theta_i_deg=setup.theta_i_deg,
+            theta_r_deg=tuple(setup.theta_r_values_deg()),
+            repeats=setup.repeats,
+            what="scan setup",
+        )
+        # The open lab's corrections (an alignment run here changed them since the config
+        # was read); before the lab is open, the config's.
+        corrections = None if self.session is None else self.session.lab.goniometer.corrections_deg
+        check_reach(self.config, plan, corrections_deg=corrections)
+        return plan
 
     @property
     def simulated(self) -> bool:
@@ -254,24 +275,17 @@ class SessionBackend:
     async def start(self, setup: ScanSetup) -> int:
         """Check the plan (every geometry and the park position), then create the run in
         the store and start the runner in a task; return the run id."""
-        self.check_setup(setup)
+        plan = self._plan(setup)
         session = self._require_open()
         if self.running:
             raise UserError("a scan is already running")
-        plan = brdf_plan(
-            self.config,
-            sample=setup.sample,
-            theta_i_deg=setup.theta_i_deg,
-            theta_r_deg=tuple(setup.theta_r_values_deg()),
-            repeats=setup.repeats,
-            what="scan setup",
-        )
         # The runner's dry run would refuse these too, but only after the run is stored
-        # as failed: a geometry out of the arms' reach is a form error.
+        # as failed: a geometry out of the arms' reach is a form error, in the words of
+        # goniolab scan (plan_refused).
         try:
             scan = await session.prepare(plan)
         except PlanRefused as exc:
-            raise UserError(f"scan setup: {exc.out_of_reach}") from None
+            raise plan_refused(exc) from exc
         if self.running:  # started meanwhile (the model was built in a thread)
             raise UserError("a scan is already running")
         self._scan_sample = setup.sample

@@ -15,7 +15,6 @@ from collections.abc import Awaitable
 from dataclasses import dataclass, field
 from typing import Protocol
 
-from drivers.arm_limits import LAMP_LIMITS_DEG, outside_limits
 from goniolab.errors import UserError
 from goniolab.scan.events import (
     ColourPredicted,
@@ -84,12 +83,13 @@ class ScanSetup:
     theta_r_step_deg: float
     repeats: int
 
-    def validate(self, theta_i_limits_deg: tuple[float, float] = LAMP_LIMITS_DEG) -> None:
-        """Raise :class:`UserError` naming the form field and the reason when invalid.
+    def validate(self) -> None:
+        """Raise :class:`UserError` naming the form field and the reason when a value
+        cannot make a sweep (not a number, step, order, repeats, too many angles).
 
-        ``theta_i_limits_deg``: the lamp arm's soft limits of the lab's config
-        (``goniometer.lamp.limits_deg``, as the dry run checks them); the form, which has
-        no config, checks the defaults of :mod:`drivers.arm_limits`, the one place of them.
+        Whether the arms can reach the sweep is the lab's question, not the form's:
+        :meth:`Backend.check_setup` asks it with the lab config's limits, in the words of
+        ``goniolab scan`` (:func:`goniolab.app.lab_setup.check_reach`).
         """
         values = {
             "theta_i_deg": self.theta_i_deg,
@@ -104,13 +104,6 @@ class ScanSetup:
                 )
         if not self.sample:
             raise UserError("scan setup: sample: choose a sample")
-        if outside_limits(self.theta_i_deg, theta_i_limits_deg) or not self.theta_i_deg < 90.0:
-            lo, hi = theta_i_limits_deg
-            raise UserError(
-                f"scan setup: θi must lie within the lamp arm's limits [{lo:g}, "
-                f"{min(hi, 90.0):g}] deg (the lab config's [goniometer.lamp] limits), got "
-                f"{self.theta_i_deg:g}"
-            )
         if self.theta_r_step_deg <= 0.0:
             raise UserError(f"scan setup: θr step must be > 0 deg, got {self.theta_r_step_deg:g}")
         if self.theta_r_stop_deg < self.theta_r_start_deg:
@@ -207,6 +200,11 @@ class Backend(Protocol):
 
     def default_setup(self) -> ScanSetup:
         """The form's initial values (from the config)."""
+        ...
+
+    def check_setup(self, setup: ScanSetup) -> None:
+        """Raise :class:`UserError` when ``setup`` is invalid or out of the arms' reach
+        (the form calls it as it is typed; :meth:`start` refuses the same)."""
         ...
 
     @property

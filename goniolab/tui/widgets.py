@@ -545,6 +545,8 @@ class ScanForm(Vertical):
     ScanForm .field Label { width: 11; }
     ScanForm .field Input { width: 1fr; }
     ScanForm #sample-note { height: auto; color: $text-muted; margin: 0 0 1 0; }
+    ScanForm #form-problem { height: auto; color: $error; display: none; }
+    ScanForm #form-problem.shown { display: block; }
     """
 
     FIELDS = (
@@ -579,9 +581,23 @@ class ScanForm(Vertical):
                     type="integer" if key == "repeats" else "number",
                     compact=True,
                 )
+        yield Static("", id="form-problem")
 
     def on_mount(self) -> None:
         self.border_title = "scan setup"
+
+    def show_problem(self, text: str) -> None:
+        """Why the plan as typed cannot run (the lab's words, :meth:`Backend.check_setup`),
+        under the fields; ``""`` hides the line."""
+        line = self.query_one("#form-problem", Static)
+        line.update(text)
+        line.set_class(bool(text), "shown")
+
+    @property
+    def problem(self) -> str:
+        """The refusal shown under the fields (``""``: none)."""
+        line = self.query_one("#form-problem", Static)
+        return str(line.render()) if line.has_class("shown") else ""
 
     def read_sample(self) -> str:
         """The selected sample as a spec (``sample:NAME`` or a path)."""

@@ -355,9 +355,20 @@ def test_align_at_two_incidences_says_it_assumes_an_unpolarised_spectro(
     out, err = capsys.readouterr()
     assert code == 0, err
     assert "takes the spectro as insensitive to polarisation: 2 incidences" in err
-    fit = json.loads(out)["standard_fit"]
+    doc = json.loads(out)
+    fit = doc["standard_fit"]
     sigma = fit["s_weight_sigma"]
     assert fit["s_weight"] == 0.5 and (sigma is None or math.isnan(sigma))
+    # the same line stays with the result (--json, and the stored run's alignment)
+    (said,) = [
+        line.removeprefix("goniolab: warning: ")
+        for line in err.splitlines()
+        if "insensitive to polarisation" in line
+    ]
+    assert said in doc["warnings"]
+    with RunStore(str(tmp_path / "runs.sqlite")) as store:
+        stored = store.get_run(int(doc["run_id"])).model["alignment"]
+    assert said in stored["warnings"] and stored["approaches_skipped"] == 0
 
 
 def test_a_fit_needing_an_absurd_polarisation_is_refused() -> None:

@@ -511,3 +511,29 @@ async def test_a_asks_for_confirmation_and_not_while_a_field_is_edited() -> None
         assert len(backend.setups) == 1
         await backend.release(3)
         await wait_until(pilot, lambda: app.run_state is RunState.DONE)
+
+
+async def test_the_end_of_a_run_says_how_many_warnings_it_stored_and_how_many_were_held() -> None:
+    # A burst of one device's warnings shows one toast; the run's end says how many
+    # warnings the run stored and that the burst's others were not shown as they came.
+    backend = ScriptedBackend()
+    backend.run_warnings = ["spectro: reading retried (4 times)"]
+    app = GonioApp(backend, poll_hz=0)
+    async with app.run_test(size=SIZE) as pilot:
+        await wait_until(pilot, app.ready.is_set)
+        await pilot.press("s")
+        await wait_until(pilot, lambda: app.run_state is RunState.RUNNING)
+        for _ in range(4):
+            backend.bus.publish(
+                InstrumentError(run_id=1, device="spectro", message="reading retried", fatal=False)
+            )
+        await backend.release(11)
+        await wait_until(pilot, lambda: app.run_state is RunState.DONE)
+        await wait_until(pilot, lambda: any(n.startswith("Scan: run 1 done") for n in notes(app)))
+        assert [n for n in notes(app) if n.startswith("spectro error")] == [
+            "spectro error: reading retried"
+        ]
+        assert notes(app)[-1] == (
+            "Scan: run 1 done; 1 warning stored with the run (goniolab runs show 1); 3 of its "
+            "messages were not shown as they came"
+        )

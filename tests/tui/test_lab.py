@@ -336,7 +336,7 @@ async def test_geometry_out_of_reach_is_a_form_error(tmp_path: Path) -> None:
                 "theta_r_start_deg": f"{max(lo_deg, 0.0):g}",
                 "theta_r_stop_deg": f"{hi_deg + 5:g}",
             },
-            f"theta_r {first_out} deg is out of the goniometer's reach",
+            f"(theta_i=45 deg, theta_r={first_out} deg) is unsafe",
             "detector arm limits",
         ),
         (
@@ -345,7 +345,7 @@ async def test_geometry_out_of_reach_is_a_form_error(tmp_path: Path) -> None:
                 "theta_r_start_deg": "0",
                 "theta_r_stop_deg": "20",
             },
-            f"theta_i {min_sep_deg / 2:g} deg, theta_r 0 deg is out of the goniometer's reach",
+            f"(theta_i={min_sep_deg / 2:g} deg, theta_r=0 deg) is unsafe",
             "apart",
         ),
     ]

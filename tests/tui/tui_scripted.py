@@ -77,6 +77,8 @@ class ScriptedBackend:
         self.stored: dict[int, StoredRun] = {}
         self.gloss_samples: list[str] = []
         self.previews: list[ScanSetup] = []
+        #: the scan's warnings, as its RunFinished summary carries them (the runner's log)
+        self.run_warnings: list[str] = []
         self.homings = 0
 
     @property
@@ -115,6 +117,10 @@ class ScriptedBackend:
     @property
     def sample_note(self) -> str:
         return "the scripted lab measures the selected sample"
+
+    def check_setup(self, setup: ScanSetup) -> None:
+        """The form's own checks only: the scripted lab has no arm limits."""
+        setup.validate()
 
     async def predict_curve(self, setup: ScanSetup) -> list[float]:
         """PREVIEW_SCALE[sample] x PRED_SCALE x the scripted Gaussian."""
@@ -299,7 +305,9 @@ class ScriptedBackend:
                 )
             )
             await asyncio.sleep(0)
-        pub(RunFinished(run_id=run_id, timestamp=self._ts(99), state=state, reason="", summary={}))
+        summary = {"warnings": list(self.run_warnings)} if self.run_warnings else {}
+        pub(RunFinished(run_id=run_id, timestamp=self._ts(99), state=state, reason="",
+                        summary=summary))  # fmt: skip
         self.stored[run_id] = StoredRun(
             RunSummary(run_id, self._ts(0), "brdf", setup.sample, state.value, len(measured)),
             measured,
