@@ -105,7 +105,7 @@ def surface_colour_note(model: str, theta_r_deg: Sequence[float] = ()) -> str:
 
     A surface whose features are near the wavelength scatters light differently at each
     wavelength (diffraction): identical 5 um filler caps of 0.9 um make the scalar
-    Kirchhoff reading of ``sample:wittmann-3`` swing by C* up to ~16 within 25 deg of
+    Kirchhoff reading of ``sample:wittmann-3`` swing by C* up to ~20 within 25 deg of
     specular, at 0.25 um steps, where the Kirchhoff model is valid
     (``bench/near_specular_colour.py``). A geometric-optics model has none of that: its
     predicted a*, b* near specular come from the coat's dispersion and the paint only, and

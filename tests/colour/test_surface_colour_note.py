@@ -2,7 +2,7 @@
 
 The facet model (geometric optics) has no wavelength in its scattering: the near-specular
 colour a surface's features make by diffraction (``bench/near_specular_colour.py``: the
-scalar Kirchhoff model of ``sample:wittmann-3`` at 0.25 um steps swings a*, b* by C* ~16
+scalar Kirchhoff model of ``sample:wittmann-3`` at 0.25 um steps swings a*, b* by C* up to ~20
 within 25 deg of specular) is not in its prediction. ``goniolab runs colour`` (text and
 JSON), the stored run's provenance (``Predictor.provenance``, shown at scan time) and each
 row's ``predicted_model`` must say which model made the predicted colour and that it
