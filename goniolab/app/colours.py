@@ -117,7 +117,8 @@ class ColourPrediction:
     notes: list[str] = field(default_factory=list)
 
 
-def _spectral(req: SurfaceRequest, opts: ColourOptions, progress: Any) -> Any:
+def _spectral(req: SurfaceRequest, opts: ColourOptions, progress: Any) -> tuple[Any, Any]:
+    """The surface model of ``req`` and its spectral predictor (with the paint)."""
     from goniolab.app.predictions import surface_model
     from goniolab.colour.dispersion import DispersionError
     from goniolab.colour.spectra import ColourError
@@ -126,7 +127,7 @@ def _spectral(req: SurfaceRequest, opts: ColourOptions, progress: Any) -> Any:
     model = surface_model(req, progress=progress)
     paint = load_paint_file(opts.paint) if opts.paint else None
     try:
-        return spectral_for(
+        return model, spectral_for(
             model,
             source_cone_deg=opts.source_deg,
             detector_cone_deg=opts.detector_deg,
@@ -242,7 +243,7 @@ def predict_colour(
         tr = np.array([theta_r_for_aspecular(a, theta_i) for a in E2194_ASPECULAR_DEG])
     if np.any(np.abs(tr) + 0.5 * opts.detector_deg >= 90.0):
         raise UserError("--theta-r: the detector cone must stay above the horizon (|theta_r| < 87)")
-    sp = _spectral(req, opts, progress)
+    model, sp = _spectral(req, opts, progress)
     try:
         spectra = sp.spectrum_pct(theta_i, tr)
         scale = reflectance_factor_scale(tr, opts.detector_deg, opts.scale)  # type: ignore[arg-type]
@@ -268,6 +269,8 @@ def predict_colour(
                 "reflectance_factor": [float(v) for v in f],
             }
         )
+    colour_notes = _surface_colour_notes(model, theta_i, rows, opts)
+    notes.extend(colour_notes)
     try:
         sparkle = (
             sparkle_report(
@@ -309,6 +312,7 @@ def predict_colour(
         "geometries": rows,
         "flop_index": flop_of_rows(rows, theta_i),
         "flop_index_note": flop_index_note(theta_i),
+        "predicted_colour_notes": colour_notes,
     }
     if sparkle:
         doc["sparkle"] = sparkle
@@ -430,6 +434,59 @@ def _pairs_by_index(
     return out
 
 
+def _surface_colour_notes(
+    model: Any, theta_i: float, rows: list[dict[str, Any]], opts: ColourOptions
+) -> list[str]:
+    """Name the model that computes each row's coat-surface part (``surface_model``,
+    :func:`goniolab.optics.provenance.provenance_of`) and warn where it has no wavelength in
+    it (:func:`goniolab.colour.spectral.surface_colour_note`)."""
+    from goniolab.colour.spectral import surface_colour_note, wavelength_free
+    from goniolab.optics.apertures import Cone
+    from goniolab.optics.provenance import provenance_of
+
+    src, det = Cone(opts.source_deg), Cone(opts.detector_deg)
+    free: dict[str, list[float]] = {}
+    for r in rows:
+        t = float(r["theta_r_deg"])
+        name = provenance_of(model, theta_i, t, src, det).model
+        r["surface_model"] = name
+        if wavelength_free(name):
+            free.setdefault(name, []).append(t)
+    return [surface_colour_note(name, angles) for name, angles in free.items()]
+
+
+def _predicted_colour_notes(rec: Any, rows: list[dict[str, Any]]) -> list[str]:
+    """Name the model of each row's predicted colour (``predicted_model``, from the run's
+    stored ``computed_by``, :meth:`goniolab.scan.prediction.Predictor.provenance`) and,
+    where that model has no wavelength in it (the facet model), say on the row
+    (``predicted_colour_note``) and in the returned notes that its colour from surface
+    scattering is not predicted (:func:`goniolab.colour.spectral.surface_colour_note`)."""
+    from goniolab.colour.spectral import surface_colour_note, wavelength_free
+
+    model = rec.model if isinstance(rec.model, dict) else {}
+    computed_by = model.get("computed_by")
+    by_angle: dict[float, str] = {}
+    if isinstance(computed_by, dict):
+        for name, angles in computed_by.items():
+            for t in angles if isinstance(angles, list) else []:
+                by_angle[round(float(t), 6)] = str(name)
+    elif isinstance(model.get("model_name"), str):  # a run that predates computed_by
+        by_angle = {round(float(r["theta_r_deg"]), 6): model["model_name"] for r in rows}
+    free: dict[str, list[float]] = {}
+    for r in rows:
+        if r.get("predicted_L") is None:
+            continue
+        t = float(r["theta_r_deg"])
+        name = by_angle.get(round(t, 6))
+        if name is None:
+            continue
+        r["predicted_model"] = name
+        if wavelength_free(name):
+            r["predicted_colour_note"] = surface_colour_note(name)
+            free.setdefault(name, []).append(t)
+    return [surface_colour_note(name, angles) for name, angles in free.items()]
+
+
 def colour_report(
     store: Any,
     rec: Any,
@@ -464,6 +521,7 @@ def colour_report(
                 f"runs {rec.id} and {other.id} were lit at theta_i {theta_i:g} and "
                 f"{ti_other:g} deg: their colours are not comparable geometry by geometry"
             )
+    colour_notes = _predicted_colour_notes(rec, rows)
     other_rows = run_colour(store, other) if other is not None else None
     pairs = _pairs_by_index(rows, other_rows)
     if other is not None and not pairs:
@@ -501,6 +559,7 @@ def colour_report(
         "flop_index": flop_of_rows(rows, theta_i),
         "predicted_flop_index": flop_of_rows(rows, theta_i, "predicted_L"),
         "flop_index_note": flop_index_note(theta_i),
+        "predicted_colour_notes": colour_notes,
         "pair": (
             {"reference": f"run {rec.id} measured", "sample": f"run {rec.id} predicted"}
             if other is None

@@ -56,6 +56,8 @@ __all__ = [
     "SpectralPredictor",
     "SurfaceFactory",
     "reflectance_factor_scale",
+    "surface_colour_note",
+    "wavelength_free",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -87,6 +89,37 @@ def reflectance_factor_scale(
         raise ValueError("the detector cone must lie above the horizon")
     out: FloatArray = 1.0 / (math.sin(a) ** 2 * np.cos(np.radians(tr)))
     return out
+
+
+def wavelength_free(model: str) -> bool:
+    """Whether the surface model named ``model`` (a provenance name:
+    :func:`goniolab.optics.provenance.provenance_of`) has no wavelength in its scattering:
+    the facet model and the analytic microfacet models are geometric optics, their only
+    wavelength dependence is the coat's n(lambda) in the Fresnel term."""
+    return model == "facet" or model.startswith("analytic")
+
+
+def surface_colour_note(model: str, theta_r_deg: Sequence[float] = ()) -> str:
+    """What the user must know about a predicted colour whose coat-surface part comes from
+    a :func:`wavelength_free` model.
+
+    A surface whose features are near the wavelength scatters light differently at each
+    wavelength (diffraction): identical 5 um filler caps of 0.9 um make the scalar
+    Kirchhoff reading of ``sample:wittmann-3`` swing by C* up to ~20 within 25 deg of
+    specular, at 0.25 um steps, where the Kirchhoff model is valid
+    (``bench/near_specular_colour.py``). A geometric-optics model has none of that: its
+    predicted a*, b* near specular come from the coat's dispersion and the paint only, and
+    are not a prediction of the surface's colour.
+    """
+    where = ""
+    if len(theta_r_deg):
+        lo, hi = min(theta_r_deg), max(theta_r_deg)
+        where = f" (theta_r {lo:g} deg)" if lo == hi else f" (theta_r {lo:g}..{hi:g} deg)"
+    return (
+        f"predicted colour{where}: the {model} model is wavelength-independent: near-specular "
+        "colour from surface scattering is not predicted (its a*, b* come from the coat's "
+        "dispersion and the paint only)"
+    )
 
 
 @dataclass(frozen=True, slots=True)

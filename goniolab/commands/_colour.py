@@ -196,6 +196,7 @@ def colour_report_text(doc: dict[str, Any], *, with_geometries: bool = True) -> 
     from goniolab.commands.runs import colour_text
 
     out = colour_text(doc["geometries"], doc["theta_i_deg"]) if with_geometries else []
+    out.extend(f"note: {n}" for n in doc.get("predicted_colour_notes", []))
     tol = doc["tolerance"]
     pair = doc["pair"]
     out.append(

@@ -191,6 +191,13 @@ class Predictor:
         note = self.coat_index_note()
         if note is not None:
             warnings.append(note)
+        if self.spectral is not None and self.spectral.surface is not None:
+            # a predicted colour whose coat surface has no wavelength in it says so
+            from goniolab.colour.spectral import surface_colour_note, wavelength_free
+
+            warnings.extend(
+                surface_colour_note(m, trs) for m, trs in computed_by.items() if wavelength_free(m)
+            )
         if self.spectral is not None:
             # computed in a thread before the run starts (session.prepare): the Y weights
             # (colour-science's import and integration, ~2.6 s the first time) are then

@@ -25,16 +25,18 @@ def factor_spectrum(wl: np.ndarray, aspecular: float, shift: float = 0.0) -> np.
 
 
 def make_spectral_store(path: Path, *, shift: float = 0.0, with_predictions: bool = True,
-                        repeats: int = 2, scale: str = "diffuser") -> Path:  # fmt: skip
+                        repeats: int = 2, scale: str = "diffuser",
+                        model: dict | None = None) -> Path:  # fmt: skip
     """Run 1: the six E2194 angles at 45 deg, ``repeats`` readings each, spectra stored in
-    % of the mirror (the runner's form); predictions = the same factors with ``shift``."""
+    % of the mirror (the runner's form); predictions = the same factors with ``shift``;
+    ``model``: the run's model column (the predictor's provenance)."""
     tr = tuple(sorted((theta_r_for_aspecular(a) for a in E2194_ASPECULAR_DEG), reverse=True))
     plan = BrdfPlan(45.0, tr, repeats=repeats, sample="sample:x")
     pc = PointColour(detector_cone_deg=CONE_DEG)
     with RunStore(path) as s:
         config = {**CONFIG, "colour": {**CONFIG["colour"], "scale": scale}}
         rid = s.create_run(kind="brdf", plan=plan.to_dict(), config=config, sample="sample:x",
-                           model={}, version="t")  # fmt: skip
+                           model=model or {}, version="t")  # fmt: skip
         preds = []
         for k, t in enumerate(tr):
             a = 45.0 - t
