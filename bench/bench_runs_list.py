@@ -11,12 +11,21 @@ PostgreSQL: a throw-away server is started the way the tests start theirs
 the server runs as the ``postgres`` user); the backend is skipped, with the reason, when the
 server binaries or psycopg are missing. Each figure is the median of ``--repeats`` runs
 after one warm-up.
+
+Whole processes run twice: with goniolab's bytecode cached (``PYTHONPYCACHEPREFIX`` in the
+temp dir, written by the warm-up: what any installation where Python may write
+``__pycache__`` sees from the second run on) and without (``PYTHONDONTWRITEBYTECODE=1``:
+every goniolab module compiled at each start, as in a read-only checkout or this
+sandbox's environment). Beside them the floors no listing can go under: ``python -c pass``
+and ``python -c "import pandas"`` (``open_runs`` returns a DataFrame, so pandas is part of
+its contract). The load average is printed before and after.
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import os
 import statistics
 import subprocess
@@ -78,6 +87,12 @@ _API = (
 _CLI = "import sys; from goniolab.cli import main; sys.exit(main(sys.argv[1:]))"
 
 
+def api_in_process(location: str) -> None:
+    from goniolab.api import open_runs
+
+    open_runs(location, limit=20)
+
+
 def whole_process(argv: list[str], env: dict[str, str], repeats: int) -> float:
     """Median wall time of a whole process (python start-up and imports included)."""
 
@@ -106,6 +121,10 @@ def store(backend: str, tmp: Path) -> Iterator[tuple[str, dict[str, str]] | str]
         yield srv.create_db("bench"), env
 
 
+def _load() -> str:
+    return " ".join(f"{x:.2f}" for x in os.getloadavg())
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("runs", nargs="?", type=int, default=500)
@@ -115,7 +134,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     backends = ("sqlite", "postgres") if args.backend == "both" else (args.backend,)
     for backend in backends:
-        with tempfile.TemporaryDirectory() as d, store(backend, Path(d)) as where:
+        with tempfile.TemporaryDirectory() as tmp, store(backend, Path(tmp)) as where:
             if isinstance(where, str):
                 print(where)
                 continue
@@ -134,12 +153,26 @@ def main(argv: list[str] | None = None) -> int:
                 ):
                     dt = median_s(fn, args.repeats)
                     print(f"  {name:32s} {total} readings: {dt * 1e3:8.1f} ms")
+                dt = median_s(functools.partial(api_in_process, location), args.repeats)
+                print(
+                    f"  {'open_runs(limit=20) in process':32s} {dt * 1e3:8.1f} ms (pandas loaded)"
+                )
             cli = [sys.executable, "-c", _CLI, "runs", "list", "--store", location]
             api = [sys.executable, "-c", _API, location]
-            for name, cmd in (("goniolab runs list (process)", cli),
-                              ("open_runs(limit=20) (process)", api)):  # fmt: skip
-                dt = whole_process(cmd, env, args.repeats)
-                print(f"  {name:32s} {dt * 1e3:8.1f} ms")
+            cached = {k: v for k, v in env.items() if k != "PYTHONDONTWRITEBYTECODE"}
+            cached["PYTHONPYCACHEPREFIX"] = str(Path(tmp) / "pyc")
+            uncached = {**env, "PYTHONDONTWRITEBYTECODE": "1"}
+            for label, e in (("bytecode cached", cached), ("no bytecode cache", uncached)):
+                print(f"  whole process, {label}, load {_load()}:")
+                for name, cmd in (
+                    ("python -c pass (floor)", [sys.executable, "-c", "pass"]),
+                    ("goniolab runs list", cli),
+                    ('python -c "import pandas" (floor)', [sys.executable, "-c", "import pandas"]),
+                    ("open_runs(limit=20)", api),
+                ):
+                    dt = whole_process(cmd, e, args.repeats)
+                    print(f"    {name:34s} {dt * 1e3:8.1f} ms")
+            print(f"  load after: {_load()}")
     return 0
 
 
