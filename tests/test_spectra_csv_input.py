@@ -84,3 +84,17 @@ def test_compare_reads_a_semicolon_file_like_the_comma_file(
     for doc in docs:
         doc.pop("file"), doc["pair"].pop("reference")
     assert docs[0] == docs[1] and docs[0]["rows_read"] == 3
+
+
+def test_a_file_in_a_windows_code_page_is_refused_naming_the_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Excel's plain "CSV" on Windows writes cp1252 (a degree sign is byte 0xb0): refused in
+    one line naming the file and line, not read in a guessed encoding (nor a traceback)."""
+    f = tmp_path / "cp1252.csv"
+    f.write_bytes(_plain().encode() + "# theta_i 45\u00b0\n".encode("cp1252"))
+    args = ["predict", "colour", "sample:solid-red", "--step-nm", "20", "--compare", str(f)]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert f"--compare {f}: line 5: byte 0xb0 is not UTF-8 text" in err
+    assert err.count("\n") == 1

@@ -147,9 +147,16 @@ def _compare_file(opts: ColourOptions) -> tuple[Any, int]:
 
     p = Path(str(opts.compare))
     try:
-        text = p.read_text(encoding="utf-8")
+        data = p.read_bytes()
+        text = data.decode("utf-8")
     except OSError as exc:
         raise UserError(f"--compare {p}: cannot read: {exc.strerror}") from None
+    except UnicodeDecodeError as exc:  # a spreadsheet's "CSV" in its Windows code page
+        line = data[: exc.start].count(b"\n") + 1
+        raise UserError(
+            f"--compare {p}: line {line}: byte 0x{data[exc.start]:02x} is not UTF-8 text "
+            "(save the file as 'CSV UTF-8')"
+        ) from None
     try:
         table = read_spectra_csv(text, where=str(p), unit=opts.compare_unit,
                                  theta_i_deg=opts.theta_i_deg).select("measured")  # fmt: skip
