@@ -4,7 +4,7 @@ count or a load of the gloss readings per run), in SQLite and in PostgreSQL, in 
 as whole ``goniolab runs list`` / ``open_runs(limit=20)`` processes (issue 26: 4.4 s / 3.8 s
 on a PostgreSQL store of 520 runs, target <= 0.2 s).
 
-    PYTHONPATH=$PWD python bench/bench_runs_list.py [RUNS] [POINTS_PER_RUN] [--backend sqlite|postgres|both] [--repeats 5]
+    PYTHONPATH=$PWD python bench/bench_runs_list.py [RUNS] [POINTS_PER_RUN] [--backend sqlite|postgres|both] [--repeats 5] [--before DIR]
 
 PostgreSQL: a throw-away server is started the way the tests start theirs
 (``tests/pg_server.py``: initdb + pg_ctl on a temp dir, a free port, scram-sha-256; as root
@@ -30,6 +30,7 @@ import argparse
 import contextlib
 import functools
 import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -112,13 +113,23 @@ def api_in_process(location: str) -> None:
     open_runs(location, limit=20)
 
 
-def whole_process(argv: list[str], env: dict[str, str], repeats: int) -> float:
-    """Median wall time of a whole process (python start-up and imports included)."""
+def whole_process(
+    argv: list[str], env: dict[str, str], repeats: int, cwd: Path
+) -> tuple[float, float]:
+    """Medians of the wall time and of the CPU time (user + system) of a whole process
+    (python start-up and imports included), run in ``cwd`` (not the checkout: ``python -c``
+    puts the working directory first on the path). On a loaded machine the wall time waits
+    for a core; the CPU time does much less."""
+    cpu: list[float] = []
 
     def run() -> None:
-        subprocess.run(argv, check=True, capture_output=True, env=env, cwd=ROOT, timeout=300)
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        subprocess.run(argv, check=True, capture_output=True, env=env, cwd=cwd, timeout=300)
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        cpu.append(after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime)
 
-    return median_s(run, repeats)
+    wall = median_s(run, repeats)
+    return wall, statistics.median(cpu[1:])  # not the warm-up's
 
 
 @contextlib.contextmanager
@@ -150,6 +161,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("points", nargs="?", type=int, default=500)
     ap.add_argument("--backend", choices=("sqlite", "postgres", "both"), default="both")
     ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument(
+        "--before",
+        metavar="DIR",
+        help="also time the whole processes with the goniolab of DIR (a checkout of an older "
+        "commit: git archive BASE goniolab | tar -x -C DIR)",
+    )
     args = ap.parse_args(argv)
     backends = ("sqlite", "postgres") if args.backend == "both" else (args.backend,)
     for backend in backends:
@@ -189,14 +206,23 @@ def main(argv: list[str] | None = None) -> int:
             uncached = {**env, "PYTHONDONTWRITEBYTECODE": "1"}
             for label, e in (("bytecode cached", cached), ("no bytecode cache", uncached)):
                 print(f"  whole process, {label}, load {_load()}:")
-                for name, cmd in (
-                    ("python -c pass (floor)", [sys.executable, "-c", "pass"]),
-                    ("goniolab runs list", cli),
-                    ('python -c "import pandas" (floor)', [sys.executable, "-c", "import pandas"]),
-                    ("open_runs(limit=20)", api),
+                before = {**e, "PYTHONPATH": str(args.before)}
+                for name, cmd, env_k in (
+                    ("python -c pass (floor)", [sys.executable, "-c", "pass"], e),
+                    ("goniolab runs list", cli, e),
+                    ("goniolab runs list (--before)", cli, before),
+                    (
+                        'python -c "import pandas" (floor)',
+                        [sys.executable, "-c", "import pandas"],
+                        e,
+                    ),
+                    ("open_runs(limit=20)", api, e),
+                    ("open_runs(limit=20) (--before)", api, before),
                 ):
-                    dt = whole_process(cmd, e, args.repeats)
-                    print(f"    {name:34s} {dt * 1e3:8.1f} ms")
+                    if env_k is before and not args.before:
+                        continue
+                    wall, cpu = whole_process(cmd, env_k, args.repeats, Path(tmp))
+                    print(f"    {name:34s} {wall * 1e3:8.1f} ms wall {cpu * 1e3:8.1f} ms CPU")
             print(f"  load after: {_load()}")
     return 0
 
