@@ -493,6 +493,9 @@ def restore_from_export(
             f"{where}: columns {p_names[0]}..{p_names[-1]}: predicted spectra are stored on "
             f"{p_wl.size} steps of 380-780 nm, not on this grid"
         )
+    exact = (provenance or {}).get("wavelengths_nm")  # the grid unrounded (names: %g)
+    if isinstance(exact, list) and len(exact) == wl.size and spectral_columns(exact) == names:
+        wl = np.asarray(exact, dtype=np.float64)
     tr = np.asarray(BrdfPlan.from_dict(rec.plan).theta_r_deg, dtype=np.float64)
     scale = factor_scale(rec, tr)
     raw: dict[tuple[int, int], dict[str, Any]] = {}

@@ -160,3 +160,25 @@ def test_bad_spectra_in_an_export_are_refused_naming_file_reading_and_column(
     assert f"{grid}: columns predicted_R_400..predicted_R_780:" in err
     with RunStore(target, readonly=True) as s:
         assert s.list_runs() == []  # nothing half-imported
+
+
+def test_a_grid_finer_than_the_column_names_comes_back_unrounded(tmp_path: Path) -> None:
+    """Column names carry 6 digits (``R_400.012``); the JSON's ``spectra`` block carries the
+    grid itself, and the import takes it from there."""
+    from goniolab.scan.plans import BrdfPlan
+
+    wl = [400.0123456 + 50.0 * k for k in range(7)]
+    plan = BrdfPlan(45.0, (30.0, 20.0), repeats=1, sample="sample:x")
+    src = tmp_path / "f.sqlite"
+    with RunStore(src) as s:
+        rid = s.create_run(kind="brdf", plan=plan.to_dict(), sample="sample:x", version="t",
+                           config={"spectro": {"detector_cone_deg": 6.0}}, model={})  # fmt: skip
+        for k, tr in enumerate(plan.theta_r_deg):
+            s.add_point(rid, index=k, repeat=0, theta_i_deg=45.0, theta_r_deg=tr,
+                        measured_theta_i_deg=45.0, measured_theta_r_deg=tr, luminance_pct=3.0,
+                        raw={"wavelengths_nm": wl, "values": [3.0 + 0.1 * j for j in range(7)]},
+                        timestamp=1.0 + k)  # fmt: skip
+    _, a, b = _round_trip(src, tmp_path)
+    assert "R_400.012" in a["readings"][0]
+    assert b["spectra"]["wavelengths_nm"] == wl
+    assert a["readings"] == b["readings"] and a["spectra"] == b["spectra"]
