@@ -78,6 +78,7 @@ __all__ = [
     "export_rows_iso",
     "export_run",
     "format_for_path",
+    "read_parquet_export",
     "register_exporter",
     "resolve_format",
     "run_dataframe",
@@ -597,6 +598,47 @@ def _spectrum_schema(schema: pa.Schema, spectra: RunSpectra) -> pa.Schema:
     import pyarrow as pa
 
     return pa.schema(fields, metadata=schema.metadata)
+
+
+def read_parquet_export(path: str | Path) -> dict[str, Any]:
+    """A Parquet export read back as the JSON export's document (``{"run", "readings",
+    "spectra"}``, timestamps in Unix seconds, a NaN cell as ``None``), for ``runs import``.
+
+    Raises
+    ------
+    ValueError
+        The file cannot be read as Parquet, or carries no goniolab run record (the message
+        names the file).
+    """
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    try:
+        table = pq.read_table(path)
+    except (OSError, pa.ArrowException) as exc:
+        raise ValueError(f"{path}: not a Parquet file: {exc}") from None
+    meta = table.schema.metadata or {}
+    if PARQUET_RUN_KEY not in meta:
+        raise ValueError(
+            f"{path}: no {PARQUET_RUN_KEY.decode()} schema metadata (not a goniolab run "
+            "export: 'goniolab runs export RUN -o FILE.parquet' writes one)"
+        )
+    try:
+        run = json.loads(meta[PARQUET_RUN_KEY])
+        spectra = json.loads(meta[PARQUET_SPECTRA_KEY]) if PARQUET_SPECTRA_KEY in meta else None
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ValueError(f"{path}: its goniolab schema metadata is not JSON: {exc}") from None
+
+    def cell(v: Any) -> Any:
+        if isinstance(v, float) and math.isnan(v):
+            return None  # the DataFrame's missing value (an empty CSV cell, null in JSON)
+        return v.timestamp() if hasattr(v, "timestamp") else v
+
+    readings = [{k: cell(v) for k, v in row.items()} for row in table.to_pylist()]
+    doc: dict[str, Any] = {"run": run, "readings": readings}
+    if spectra is not None:
+        doc["spectra"] = spectra
+    return doc
 
 
 register_exporter(

@@ -182,3 +182,39 @@ def test_a_grid_finer_than_the_column_names_comes_back_unrounded(tmp_path: Path)
     assert "R_400.012" in a["readings"][0]
     assert b["spectra"]["wavelengths_nm"] == wl
     assert a["readings"] == b["readings"] and a["spectra"] == b["spectra"]
+
+
+def test_a_parquet_export_imports_with_its_spectra(tmp_path: Path) -> None:
+    """``runs import`` reads a Parquet export too (the run record and the spectra's
+    provenance are in its schema metadata): Parquet -> import -> Parquet is the same
+    table, and the JSON exports of both runs are the same."""
+    import pandas as pd
+
+    src = make_spectral_store(tmp_path / "a.sqlite", shift=SHIFT)
+    _export(src, tmp_path / "a.parquet")
+    target = tmp_path / "b.sqlite"
+    assert main(["runs", "import", str(tmp_path / "a.parquet"), "--store", str(target)]) == 0
+    _export(target, tmp_path / "b.parquet")
+    pd.testing.assert_frame_equal(
+        pd.read_parquet(tmp_path / "a.parquet"), pd.read_parquet(tmp_path / "b.parquet")
+    )
+    _export(src, tmp_path / "a.json")
+    _export(target, tmp_path / "b.json")
+    a, b = (json.loads((tmp_path / f"{x}.json").read_text()) for x in "ab")
+    assert a["readings"] == b["readings"] and a["spectra"] == b["spectra"]
+
+
+def test_a_parquet_file_that_is_not_an_export_is_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import pandas as pd
+
+    other = tmp_path / "other.parquet"
+    pd.DataFrame({"x": [1.0]}).to_parquet(other)
+    broken = tmp_path / "broken.pq"
+    broken.write_bytes(b"PAR1 not really")
+    assert main(["runs", "import", str(other), str(broken), "--store",
+                 str(tmp_path / "t.sqlite")]) == 2  # fmt: skip
+    err = capsys.readouterr().err
+    assert f"{other}: no goniolab.run schema metadata (not a goniolab run export" in err
+    assert f"{broken}: not a Parquet file" in err

@@ -466,21 +466,28 @@ def annotate_run(
 def import_runs(
     files: Sequence[str], store: str | Path | None = None, config: str | Path | None = None
 ) -> list[dict[str, Any]]:
-    """Read JSON exports back into the chosen store, matched by run UUID: per file
+    """Read JSON (or Parquet) exports back into the chosen store, matched by run UUID: per file
     ``{"file", "run_id", "uuid", "action"}``, or ``{"file", "error"}`` for one that failed
     (the others are still imported). A scan's exported spectra are stored back
     (:func:`goniolab.run_spectra.restore_from_export`): exported again, it gives the same
     spectra."""
-    from goniolab.store import StoreError, import_json_export
+    from goniolab.export import read_parquet_export
+    from goniolab.store import StoreError, import_export_doc, import_json_export
 
     done: list[dict[str, Any]] = []
     with writable_store(store, config) as dst:
         for name in files:
             try:
                 counted: list[int] = []
-                here, action, uuid = import_json_export(
-                    dst, name, restore_spectra=functools.partial(_restore, counted=counted)
-                )
+                restore = functools.partial(_restore, counted=counted)
+                if Path(name).suffix.lower() in (".parquet", ".pq"):
+                    try:
+                        doc = read_parquet_export(name)
+                    except ValueError as exc:
+                        raise StoreError(str(exc)) from None
+                    here, action, uuid = import_export_doc(dst, doc, name, restore_spectra=restore)
+                else:
+                    here, action, uuid = import_json_export(dst, name, restore_spectra=restore)
             except StoreError as exc:
                 done.append({"file": name, "error": str(exc)})
                 continue

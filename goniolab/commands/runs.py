@@ -446,16 +446,18 @@ def register(subparsers: Any) -> None:
     pi = sub.add_parser(
         "import",
         parents=[common],
-        help="read runs exported with 'runs export --format json' back into a store",
-        description="Read runs exported with 'goniolab runs export RUN --format json' back "
-        "into the store chosen by --store/--config. A run keeps its UUID, creation time and "
+        help="read runs exported with 'runs export --format json' (or parquet) back into a store",
+        description="Read runs exported with 'goniolab runs export RUN --format json' (or "
+        "-o FILE.parquet) back into the store chosen by --store/--config. A run keeps its UUID, creation time and "
         "identity; one the store already holds is matched by its UUID (left as it is, or "
         "brought up to date), never duplicated. A scan's spectra (R_<nm>, predicted_R_<nm>) "
         "are stored back: exported again, it gives the same spectra. Not in an export, so "
         "not imported: the spectro's raw reading beside a referenced spectrum, the mirror "
         "reference's spectrum, the exposure.",
     )
-    pi.add_argument("files", nargs="+", metavar="FILE", help="JSON export(s) of goniolab runs")
+    pi.add_argument(
+        "files", nargs="+", metavar="FILE", help="JSON or Parquet export(s) of goniolab runs"
+    )
     pi.add_argument("--json", action="store_true", help="print what was imported as JSON")
     pi.set_defaults(func=_cmd_import)
 

@@ -29,7 +29,7 @@ from goniolab.store.exceptions import StoreError
 from goniolab.store.records import COLOUR_KEYS, PredictedColour, RunMeta, RunRecord
 from goniolab.store.runstore import RunStore
 
-__all__ = ["RestoreSpectra", "import_json_export"]
+__all__ = ["RestoreSpectra", "import_export_doc", "import_json_export"]
 
 #: ``(run, readings, the export's "spectra", file) -> (raw fields per (index, repeat),
 #: predicted spectrum in % of the mirror per index)``; raises ValueError naming the file,
@@ -72,6 +72,11 @@ def _load(path: Path) -> dict[str, Any]:
         raise StoreError(f"{path}: cannot read: {exc.strerror or exc}") from None
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise StoreError(f"{path}: not a JSON file: {exc}") from None
+    return _checked(doc, path)
+
+
+def _checked(doc: Any, path: Path) -> dict[str, Any]:
+    """``doc`` when it is a run export's document (``run``, ``readings``), else why not."""
     if not (isinstance(doc, dict) and isinstance(doc.get("run"), dict)):
         raise StoreError(
             f"{path}: not a goniolab run export (expected 'run' and 'readings' from "
@@ -213,7 +218,22 @@ def import_json_export(
         the message names the file and the key.
     """
     p = Path(path)
-    doc = _load(p)
+    return import_export_doc(target, _load(p), p, restore_spectra=restore_spectra)
+
+
+def import_export_doc(
+    target: RunStore,
+    doc: Mapping[str, Any],
+    path: str | Path,
+    *,
+    restore_spectra: RestoreSpectra | None = None,
+) -> tuple[int, str, str]:
+    """Import a run export's document (``{"run", "readings", "spectra"}``, as the JSON
+    export writes it: read from another format, e.g. a Parquet export by
+    :func:`goniolab.export.read_parquet_export`) into ``target``; as
+    :func:`import_json_export`, ``path`` naming the file in messages."""
+    p = Path(path)
+    doc = _checked(dict(doc), p)
     with (
         tempfile.TemporaryDirectory(prefix="goniolab-import-") as tmp,
         RunStore(Path(tmp) / "scratch.sqlite") as scratch,
