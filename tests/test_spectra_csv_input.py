@@ -98,3 +98,30 @@ def test_a_file_in_a_windows_code_page_is_refused_naming_the_line(
     err = capsys.readouterr().err
     assert f"--compare {f}: line 5: byte 0xb0 is not UTF-8 text" in err
     assert err.count("\n") == 1
+
+
+def test_percentages_read_as_factors_are_pointed_out(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Every value above 1 (here: the table in percent) is said, with the option that reads
+    percent; the same file with ``--compare-unit percent``, and the factor file, say nothing."""
+    pct = _plain().splitlines()
+    pct = [pct[0]] + [
+        ",".join(c if k < 2 else f"{100 * float(c):g}" for k, c in enumerate(row.split(",")))
+        for row in pct[1:]
+    ]
+    f = tmp_path / "pct.csv"
+    f.write_text("\n".join(pct) + "\n")
+    (tmp_path / "factor.csv").write_text(_plain())
+    args = ["predict", "colour", "sample:solid-red", "--step-nm", "20", "--json", "--compare"]
+    notes = []
+    for extra in ([str(f)], [str(f), "--compare-unit", "percent"], [str(tmp_path / "factor.csv")]):
+        assert main([*args, *extra]) == 0
+        notes.append(json.loads(capsys.readouterr().out)["compare"]["spectra_notes"])
+    # the lowest: 45 deg's two repeats averaged as spectra, (12.5 + 12.75) / 2 at 400 nm
+    said = (
+        f"every value of {f} is above 1 (the lowest 12.6): read as reflectance factors; "
+        "if they are percentages, pass --compare-unit percent"
+    )
+    assert said in notes[0]
+    assert notes[1] == notes[2] == [n for n in notes[0] if n != said]
