@@ -24,6 +24,10 @@ suffix or a format no exporter has is refused, naming the ones there are.
   ``goniolab.run``, the spectra's provenance under ``goniolab.spectra`` and ``units``,
   ``long_name``, ``wavelength_nm`` on each spectral column.
 
+``spectra=False`` (``runs export --no-spectra``) leaves a scan's spectra out of every format:
+the compact table. ``goniolab runs import`` reads a JSON export's spectra back
+(:func:`goniolab.run_spectra.restore_from_export`).
+
 Every file is built in memory and replaced whole (:mod:`goniolab._atomic`): a full disk
 or a failed export leaves an existing file as it was. Each carries the run's UUID
 (``run_uuid`` column, ``uuid`` in the run record, ``run_uuid`` attribute).
@@ -74,6 +78,7 @@ __all__ = [
     "export_rows_iso",
     "export_run",
     "format_for_path",
+    "read_parquet_export",
     "register_exporter",
     "resolve_format",
     "run_dataframe",
@@ -138,10 +143,11 @@ PARQUET_RUN_KEY = b"goniolab.run"
 #: (:meth:`goniolab.run_spectra.RunSpectra.provenance`).
 PARQUET_SPECTRA_KEY = b"goniolab.spectra"
 
-#: A text format's writer: the file's text.
-TextWriter = Callable[["RunStore", int], str]
+#: A text format's writer: the file's text (a writer of an exporter with ``no_spectra``
+#: also takes ``spectra=False``).
+TextWriter = Callable[..., str]
 #: A binary format's writer: writes the file (replaced whole).
-FileWriter = Callable[["RunStore", int, Path], None]
+FileWriter = Callable[..., None]
 
 
 @dataclass(frozen=True, slots=True)
@@ -161,6 +167,9 @@ class Exporter:
         A text format's writer (to stdout or to a file).
     to_file
         A binary format's writer (it needs a file).
+    no_spectra
+        The writer takes ``spectra=False`` (``runs export --no-spectra``): the compact
+        table, without a scan's spectral columns and their provenance.
     """
 
     name: str
@@ -168,6 +177,7 @@ class Exporter:
     description: str
     text: TextWriter | None = None
     to_file: FileWriter | None = None
+    no_spectra: bool = False
 
     @property
     def suffix(self) -> str:
@@ -257,7 +267,9 @@ def resolve_format(fmt: str | None, out: str | Path | None) -> str:
     return named
 
 
-def export_run(store: RunStore, run_id: int, fmt: str, out: str | Path | None = None) -> str:
+def export_run(
+    store: RunStore, run_id: int, fmt: str, out: str | Path | None = None, *, spectra: bool = True
+) -> str:
     """Export run ``run_id`` in ``fmt`` (a name of :data:`EXPORTERS`).
 
     Parameters
@@ -271,6 +283,10 @@ def export_run(store: RunStore, run_id: int, fmt: str, out: str | Path | None = 
     out
         The file to write; required for the binary formats (netCDF, Parquet). ``None``
         returns the text of a text format instead.
+    spectra
+        ``False``: leave a scan's spectra out (the ``R_<nm>``, ``predicted_R_<nm>`` and
+        :data:`SPECTRUM_COLUMNS` columns, the JSON's ``spectra``, netCDF's spectral
+        variables): the compact table (``runs export --no-spectra``).
 
     Returns
     -------
@@ -280,23 +296,31 @@ def export_run(store: RunStore, run_id: int, fmt: str, out: str | Path | None = 
     Raises
     ------
     ValueError
-        Unknown format (the message lists the known ones), or a binary format without
-        ``out``.
+        Unknown format (the message lists the known ones), a binary format without
+        ``out``, or ``spectra=False`` for a format that cannot leave them out.
     OSError
         The file cannot be written (an existing file is left as it was).
     """
     exporter = EXPORTERS.get(fmt)
     if exporter is None:
         raise ValueError(f"export format must be one of {', '.join(EXPORTERS)}, got {fmt!r}")
+    options: dict[str, bool] = {}
+    if not spectra:
+        if not exporter.no_spectra:
+            with_option = ", ".join(e.name for e in EXPORTERS.values() if e.no_spectra)
+            raise ValueError(
+                f"{fmt} cannot leave the spectra out (formats that can: {with_option})"
+            )
+        options["spectra"] = False
     if exporter.to_file is not None:
         if out is None:
             raise ValueError(
                 f"{fmt} is a binary format: give an output file (-o run{exporter.suffix})"
             )
-        exporter.to_file(store, run_id, Path(out))
+        exporter.to_file(store, run_id, Path(out), **options)
         return ""
     assert exporter.text is not None
-    text = exporter.text(store, run_id)
+    text = exporter.text(store, run_id, **options)
     if out is None:
         return text
     atomic_write_bytes(out, text.encode("utf-8"))
@@ -329,7 +353,7 @@ class _Table:
     spectra: RunSpectra | None
 
 
-def _table(store: RunStore, run_id: int) -> _Table:
+def _table(store: RunStore, run_id: int, with_spectra: bool = True) -> _Table:
     run = store.get_run(run_id)
     if run.kind == "gloss":
         rows = [
@@ -393,9 +417,9 @@ def _table(store: RunStore, run_id: int) -> _Table:
         }
         for p in points
     ]
-    if run.kind != "brdf":  # an alignment or calibration run: no spectra on a scan's grid
+    if run.kind != "brdf" or not with_spectra:  # an alignment or calibration run: no spectra
         return _Table(SCAN_COLUMNS, rows, None)
-    if not any(p.raw.get("values") for p in points) and not any(
+    if not any(p.raw.get("values") or p.raw.get("absolute_values") for p in points) and not any(
         pc.spectrum_pct for pc in pcols.values()
     ):  # nothing spectral stored (an imported run, a luminance-only instrument)
         return _Table(SCAN_COLUMNS, rows, None)
@@ -499,8 +523,8 @@ def _run_doc(store: RunStore, run_id: int) -> dict[str, Any]:
 # ---------------------------------------------------------------------- the writers
 
 
-def _csv_text(store: RunStore, run_id: int) -> str:
-    table = _table(store, run_id)
+def _csv_text(store: RunStore, run_id: int, spectra: bool = True) -> str:
+    table = _table(store, run_id, spectra)
     buf = io.StringIO()
     writer = csv.DictWriter(buf, fieldnames=list(table.columns), lineterminator="\n")
     writer.writeheader()  # also for a run without readings yet
@@ -508,25 +532,28 @@ def _csv_text(store: RunStore, run_id: int) -> str:
     return buf.getvalue()
 
 
-def _json_text(store: RunStore, run_id: int) -> str:
-    table = _table(store, run_id)
+def _json_text(store: RunStore, run_id: int, spectra: bool = True) -> str:
+    table = _table(store, run_id, spectra)
     doc: dict[str, Any] = {"run": _run_doc(store, run_id), "readings": _iso(table.rows)}
     if table.spectra is not None:
         doc["spectra"] = table.spectra.provenance()
     return jsonout.dumps(doc, indent=2, default=str) + "\n"  # no NaN/Infinity
 
 
-def _write_netcdf(store: RunStore, run_id: int, out: Path) -> None:
+def _write_netcdf(store: RunStore, run_id: int, out: Path, spectra: bool = True) -> None:
     from goniolab.datasets import run_dataset, write_netcdf
 
-    write_netcdf(run_dataset(store, run_id), out)
+    ds = run_dataset(store, run_id)
+    if not spectra:  # the variables on a wavelength axis, and the axes
+        ds = ds.drop_dims([d for d in ("wavelength_nm", "predicted_wavelength_nm") if d in ds.dims])
+    write_netcdf(ds, out)
 
 
-def _write_parquet(store: RunStore, run_id: int, out: Path) -> None:
+def _write_parquet(store: RunStore, run_id: int, out: Path, spectra: bool = True) -> None:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    table = _table(store, run_id)
+    table = _table(store, run_id, spectra)
     arrow = pa.Table.from_pandas(_dataframe(table), preserve_index=False)
     meta = dict(arrow.schema.metadata or {})
     meta[PARQUET_RUN_KEY] = json.dumps(_run_doc(store, run_id), sort_keys=True).encode()
@@ -573,12 +600,54 @@ def _spectrum_schema(schema: pa.Schema, spectra: RunSpectra) -> pa.Schema:
     return pa.schema(fields, metadata=schema.metadata)
 
 
+def read_parquet_export(path: str | Path) -> dict[str, Any]:
+    """A Parquet export read back as the JSON export's document (``{"run", "readings",
+    "spectra"}``, timestamps in Unix seconds, a NaN cell as ``None``), for ``runs import``.
+
+    Raises
+    ------
+    ValueError
+        The file cannot be read as Parquet, or carries no goniolab run record (the message
+        names the file).
+    """
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    try:
+        table = pq.read_table(path)
+    except (OSError, pa.ArrowException) as exc:
+        raise ValueError(f"{path}: not a Parquet file: {exc}") from None
+    meta = table.schema.metadata or {}
+    if PARQUET_RUN_KEY not in meta:
+        raise ValueError(
+            f"{path}: no {PARQUET_RUN_KEY.decode()} schema metadata (not a goniolab run "
+            "export: 'goniolab runs export RUN -o FILE.parquet' writes one)"
+        )
+    try:
+        run = json.loads(meta[PARQUET_RUN_KEY])
+        spectra = json.loads(meta[PARQUET_SPECTRA_KEY]) if PARQUET_SPECTRA_KEY in meta else None
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ValueError(f"{path}: its goniolab schema metadata is not JSON: {exc}") from None
+
+    def cell(v: Any) -> Any:
+        if isinstance(v, float) and math.isnan(v):
+            return None  # the DataFrame's missing value (an empty CSV cell, null in JSON)
+        return v.timestamp() if hasattr(v, "timestamp") else v
+
+    readings = [{k: cell(v) for k, v in row.items()} for row in table.to_pylist()]
+    doc: dict[str, Any] = {"run": run, "readings": readings}
+    if spectra is not None:
+        doc["spectra"] = spectra
+    return doc
+
+
 register_exporter(
     Exporter(
         "csv",
         (".csv",),
         "one row per reading, ISO 8601 UTC timestamps, spectra as R_<nm> columns",
         text=_csv_text,
+        no_spectra=True,
     )
 )
 register_exporter(
@@ -587,6 +656,7 @@ register_exporter(
         (".json",),
         "the run record, its readings and their spectra's provenance",
         text=_json_text,
+        no_spectra=True,
     )
 )
 register_exporter(
@@ -595,6 +665,7 @@ register_exporter(
         (".nc", ".nc4", ".netcdf"),
         "netCDF-4 (xarray + h5netcdf): CF-style units, the run's metadata as attributes",
         to_file=_write_netcdf,
+        no_spectra=True,
     )
 )
 register_exporter(
@@ -603,5 +674,6 @@ register_exporter(
         (".parquet", ".pq"),
         "Parquet (pyarrow): typed columns, the run record in the schema metadata",
         to_file=_write_parquet,
+        no_spectra=True,
     )
 )

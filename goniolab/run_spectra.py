@@ -40,8 +40,11 @@ if TYPE_CHECKING:  # pragma: no cover - typing only
 
 __all__ = [
     "PREDICTED_PREFIX",
+    "RestoredSpectra",
     "RunSpectra",
+    "percent_of_mirror",
     "predicted_grid_nm",
+    "restore_from_export",
     "run_reflectance_factors",
     "run_spectra",
     "spectra_tables",
@@ -199,6 +202,9 @@ def _reference_label(raw: Mapping[str, Any]) -> str:
     """What a reading was referenced to, in one CSV cell without commas (a naive
     ``awk -F,`` of the export keeps its columns): ``certified mirror (certificate X;
     spectral)`` or :data:`INSTRUMENT_REFERENCE`."""
+    imported = raw.get("referenced_to")  # a reading read back from an export says it
+    if isinstance(imported, str) and imported:
+        return imported
     ref = raw.get("reference")
     if isinstance(ref, Mapping) and ref.get("standard"):
         parts = [f"certificate {ref['certificate']}"] if ref.get("certificate") else []
@@ -369,3 +375,159 @@ def spectra_tables(
         "calibration": prov["calibration"],
     }
     return out, attrs
+
+
+# ------------------------------------------------------------------ an export read back
+@dataclass(frozen=True)
+class RestoredSpectra:
+    """A scan export's spectra turned back into what the store keeps (``runs import``).
+
+    Attributes
+    ----------
+    raw
+        Per ``(index, repeat)``, the fields to put into the reading's raw record:
+        ``wavelengths_nm`` and ``values`` (% of the mirror, what the spectro reports) or,
+        for a reading referenced to a certified standard, ``absolute_values`` (its
+        referenced spectrum), and ``referenced_to`` (the export's
+        ``spectrum_referenced_to``).
+    predicted_pct
+        Per geometry index, its predicted spectrum in % of the mirror on
+        :func:`predicted_grid_nm`.
+    """
+
+    raw: dict[tuple[int, int], dict[str, Any]]
+    predicted_pct: dict[int, tuple[float, ...]]
+
+
+def percent_of_mirror(factors: FloatArray, scale: float) -> FloatArray:
+    """The % of the mirror that :func:`run_spectra` turns into ``factors``: the inverse of
+    ``values / 100 * scale``, exact in floating point.
+
+    ``factors / scale * 100`` can be an ulp or two off the value the forward step maps to
+    ``factors``; each element is stepped (``numpy.nextafter``) until the forward step gives
+    back its factor bit for bit, so an export read back exports the same numbers. A factor
+    no value reaches (a file edited by hand) keeps the nearest value found.
+    """
+    x = factors / scale * 100.0
+    for _ in range(16):
+        f = x / 100.0 * scale
+        off = f != factors
+        if not off.any():
+            break
+        x = np.where(off, np.nextafter(x, np.where(f < factors, np.inf, -np.inf)), x)
+    return x
+
+
+def _grid_of(columns: Sequence[str], prefix: str, where: str) -> tuple[list[str], FloatArray]:
+    """The spectral columns with ``prefix`` (``R_400`` or ``predicted_R_400``) of an export's
+    readings and their wavelengths, in file order."""
+    names = [c for c in columns if c.startswith(prefix + "R_")]
+    try:
+        wl = np.array([float(c[len(prefix) + 2 :]) for c in names], dtype=np.float64)
+    except ValueError:
+        bad = next(c for c in names if not c[len(prefix) + 2 :].replace(".", "", 1).isdigit())
+        raise ValueError(f"{where}: column {bad!r}: not a wavelength in nm") from None
+    return names, wl
+
+
+def _row_spectrum(row: Mapping[str, Any], names: Sequence[str], where: str) -> FloatArray | None:
+    """The cells ``names`` of one reading: None when all are empty, else every one a
+    finite number (a reading's spectrum is whole or absent in an export)."""
+    cells = [row.get(c) for c in names]
+    if all(v is None for v in cells):
+        return None
+    out = np.empty(len(names))
+    for k, (name, v) in enumerate(zip(names, cells, strict=True)):
+        if isinstance(v, bool) or not isinstance(v, int | float) or not np.isfinite(v):
+            raise ValueError(
+                f"{where}, column {name}: {v!r} is not a finite number (a spectrum is whole "
+                "or absent)"
+            )
+        out[k] = float(v)
+    return out
+
+
+def _standard_for(label: str, standards: Sequence[Any]) -> dict[str, Any] | None:
+    """The export's certified standard a reading's ``spectrum_referenced_to`` names (the
+    label :func:`_reference_label` wrote: standard, then its certificate), else None."""
+    for st in standards:
+        if not (isinstance(st, Mapping) and st.get("standard")):
+            continue
+        head = f"certified {st['standard']} (".replace(",", ";")
+        cert = f"certificate {st['certificate']}".replace(",", ";") if st.get("certificate") else ""
+        if label.startswith(head) and cert in label:
+            return dict(st)
+    return None
+
+
+def restore_from_export(
+    rec: RunRecord,
+    readings: Sequence[Mapping[str, Any]],
+    where: str,
+    *,
+    provenance: Mapping[str, Any] | None = None,
+) -> RestoredSpectra:
+    """The measured and predicted spectra of a JSON export's readings (``R_<nm>``,
+    ``predicted_R_<nm>``: reflectance factors on the run's ``[colour] scale``,
+    :func:`run_spectra`) as the store keeps them, for the run ``rec`` (its plan and config
+    snapshot give each geometry's scale). Exported again, the run gives the same numbers
+    (:func:`percent_of_mirror`). ``provenance``, the export's ``spectra``, gives a
+    referenced reading its certified standard back (matched by the reading's label).
+
+    Raises
+    ------
+    ValueError
+        ``where: readings[N], column C: why`` -- a cell that is not a number, a spectrum
+        given where the run's scale has no factor (a point detector), a predicted grid other
+        than the stored one, two readings of one geometry with different predictions.
+    """
+    from goniolab.scan.plans import BrdfPlan
+
+    if not readings:
+        return RestoredSpectra({}, {})
+    columns = list(dict.fromkeys(c for r in readings for c in r))
+    names, wl = _grid_of(columns, "", where)
+    p_names, p_wl = _grid_of(columns, PREDICTED_PREFIX, where)
+    if p_names and not np.array_equal(p_wl, predicted_grid_nm(p_wl.size)):
+        raise ValueError(
+            f"{where}: columns {p_names[0]}..{p_names[-1]}: predicted spectra are stored on "
+            f"{p_wl.size} steps of 380-780 nm, not on this grid"
+        )
+    exact = (provenance or {}).get("wavelengths_nm")  # the grid unrounded (names: %g)
+    if isinstance(exact, list) and len(exact) == wl.size and spectral_columns(exact) == names:
+        wl = np.asarray(exact, dtype=np.float64)
+    tr = np.asarray(BrdfPlan.from_dict(rec.plan).theta_r_deg, dtype=np.float64)
+    scale = factor_scale(rec, tr)
+    raw: dict[tuple[int, int], dict[str, Any]] = {}
+    predicted: dict[int, tuple[float, ...]] = {}
+    for n, row in enumerate(readings):
+        at = f"{where}: readings[{n}]"
+        k, rep = int(row["index"]), int(row["repeat"])
+        inside = 0 <= k < tr.size
+        measured = _row_spectrum(row, names, at) if names else None
+        if measured is not None:
+            if not (inside and np.isfinite(scale[k]) and scale[k] != 0.0):
+                raise ValueError(
+                    f"{at}, column {names[0]}: a spectrum at a geometry whose scale has no "
+                    f"factor (index {k}: no reflectance factor there)"
+                )
+            label = str(row.get("spectrum_referenced_to") or "")
+            pct = [float(v) for v in percent_of_mirror(measured, float(scale[k]))]
+            key = "values" if label in ("", INSTRUMENT_REFERENCE) else "absolute_values"
+            raw[(k, rep)] = {
+                "wavelengths_nm": [float(w) for w in wl],
+                key: pct,
+                "referenced_to": label or INSTRUMENT_REFERENCE,
+            }
+            standard = _standard_for(label, (provenance or {}).get("standards") or ())
+            if key == "absolute_values" and standard is not None:
+                raw[(k, rep)]["reference"] = standard
+        pred = _row_spectrum(row, p_names, at) if p_names else None
+        if pred is not None and inside and np.isfinite(scale[k]) and scale[k] != 0.0:
+            pct_p = tuple(float(v) for v in percent_of_mirror(pred, float(scale[k])))
+            if predicted.setdefault(k, pct_p) != pct_p:
+                raise ValueError(
+                    f"{at}, column {p_names[0]}: geometry {k}'s predicted spectrum differs "
+                    "from the one of its other readings"
+                )
+    return RestoredSpectra(raw, predicted)

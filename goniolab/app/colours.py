@@ -148,9 +148,16 @@ def _compare_file(opts: ColourOptions) -> tuple[Any, int]:
 
     p = Path(str(opts.compare))
     try:
-        text = p.read_text(encoding="utf-8")
+        data = p.read_bytes()
+        text = data.decode("utf-8")
     except OSError as exc:
         raise UserError(f"--compare {p}: cannot read: {exc.strerror}") from None
+    except UnicodeDecodeError as exc:  # a spreadsheet's "CSV" in its Windows code page
+        line = data[: exc.start].count(b"\n") + 1
+        raise UserError(
+            f"--compare {p}: line {line}: byte 0x{data[exc.start]:02x} is not UTF-8 text "
+            "(save the file as 'CSV UTF-8')"
+        ) from None
     try:
         table = read_spectra_csv(text, where=str(p), unit=opts.compare_unit,
                                  theta_i_deg=opts.theta_i_deg).select("measured")  # fmt: skip
@@ -175,6 +182,20 @@ def _compare_file(opts: ColourOptions) -> tuple[Any, int]:
     return averaged, int(table.factors.shape[0])
 
 
+def _percent_note(opts: ColourOptions, measured: Any) -> str:
+    """A note when a file read as reflectance factors has every value above 1: a paint's
+    factor is under 1 away from the specular direction (only near it, on a metallic, above),
+    a percentage above 1 nearly everywhere. Said, not assumed: the values are used as
+    given."""
+    low = float(measured.factors.min())
+    if opts.compare_unit != "factor" or low <= 1.0:
+        return ""
+    return (
+        f"every value of {opts.compare} is above 1 (the lowest {low:.3g}): read as reflectance "
+        "factors; if they are percentages, pass --compare-unit percent"
+    )
+
+
 def _compare_doc(opts: ColourOptions, measured: Any, rows_read: int, predicted_lab: Any,
                  settings: Any) -> dict[str, Any]:  # fmt: skip
     """Differences and tolerance verdicts of the prediction against the measured file."""
@@ -191,7 +212,9 @@ def _compare_doc(opts: ColourOptions, measured: Any, rows_read: int, predicted_l
         "wavelengths_nm": [float(w) for w in measured.wavelengths_nm],
         "measured_lab": [[float(v) for v in row] for row in lab_m],
         "pair": {"reference": f"measured {opts.compare}", "sample": "this prediction"},
-        "spectra_notes": [n for n in (range_note(measured.wavelengths_nm),) if n],
+        "spectra_notes": [
+            n for n in (range_note(measured.wavelengths_nm), _percent_note(opts, measured)) if n
+        ],
         "tolerance": {
             **tolerance.describe(),
             "geometries": [v.as_dict() for v in verdicts],

@@ -13,7 +13,8 @@ The module is named ``stored_runs`` (not ``runs``): a module name is used once i
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator, Sequence
+import functools
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import AbstractContextManager, contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -315,9 +316,11 @@ def export_run(
     *,
     store: str | Path | None = None,
     config: str | Path | None = None,
+    spectra: bool = True,
 ) -> ExportResult:
     """Export run ``run_id`` in ``fmt`` (default: from ``output``'s suffix, else CSV) to
-    ``output`` or as text (:mod:`goniolab.export`)."""
+    ``output`` or as text (:mod:`goniolab.export`); ``spectra=False``: without a scan's
+    spectra (the compact table)."""
     from goniolab.export import EXPORTERS, resolve_format
     from goniolab.export import export_run as export
 
@@ -330,10 +333,12 @@ def export_run(
             f"runs export --format {fmt}: a binary format needs -o FILE "
             f"(e.g. -o run{EXPORTERS[fmt].suffix})"
         )
+    if not spectra and not EXPORTERS[fmt].no_spectra:
+        raise UserError(f"runs export --no-spectra: the {fmt} format cannot leave spectra out")
     with reading_store(store, config) as s:
         get_run(s, run_id)
         try:
-            text = export(s, run_id, fmt, output)
+            text = export(s, run_id, fmt, output, spectra=spectra)
         except OSError as exc:
             raise UserError(
                 f"cannot write {output}: {exc.strerror or exc}"
@@ -461,21 +466,52 @@ def annotate_run(
 def import_runs(
     files: Sequence[str], store: str | Path | None = None, config: str | Path | None = None
 ) -> list[dict[str, Any]]:
-    """Read JSON exports back into the chosen store, matched by run UUID: per file
+    """Read JSON (or Parquet) exports back into the chosen store, matched by run UUID: per file
     ``{"file", "run_id", "uuid", "action"}``, or ``{"file", "error"}`` for one that failed
-    (the others are still imported)."""
-    from goniolab.store import StoreError, import_json_export
+    (the others are still imported). A scan's exported spectra are stored back
+    (:func:`goniolab.run_spectra.restore_from_export`): exported again, it gives the same
+    spectra."""
+    from goniolab.export import read_parquet_export
+    from goniolab.store import StoreError, import_export_doc, import_json_export
 
     done: list[dict[str, Any]] = []
     with writable_store(store, config) as dst:
         for name in files:
             try:
-                here, action, uuid = import_json_export(dst, name)
+                counted: list[int] = []
+                restore = functools.partial(_restore, counted=counted)
+                if Path(name).suffix.lower() in (".parquet", ".pq"):
+                    try:
+                        doc = read_parquet_export(name)
+                    except ValueError as exc:
+                        raise StoreError(str(exc)) from None
+                    here, action, uuid = import_export_doc(dst, doc, name, restore_spectra=restore)
+                else:
+                    here, action, uuid = import_json_export(dst, name, restore_spectra=restore)
             except StoreError as exc:
                 done.append({"file": name, "error": str(exc)})
                 continue
-            done.append({"file": name, "run_id": here, "uuid": uuid, "action": action})
+            done.append({"file": name, "run_id": here, "uuid": uuid, "action": action,
+                         "spectra": counted[0] if counted else 0,
+                         "predicted_spectra": counted[1] if counted else 0})  # fmt: skip
     return done
+
+
+def _restore(
+    rec: RunRecord,
+    readings: Sequence[Mapping[str, Any]],
+    provenance: Mapping[str, Any],
+    where: str,
+    *,
+    counted: list[int],
+) -> tuple[Mapping[tuple[int, int], Mapping[str, Any]], Mapping[int, Sequence[float]]]:
+    """:func:`goniolab.run_spectra.restore_from_export` in the store's terms; ``counted``
+    gets the numbers of measured and predicted spectra restored."""
+    from goniolab.run_spectra import restore_from_export
+
+    restored = restore_from_export(rec, readings, where, provenance=provenance)
+    counted[:] = [len(restored.raw), len(restored.predicted_pct)]
+    return restored.raw, restored.predicted_pct
 
 
 @dataclass(frozen=True)

@@ -159,9 +159,9 @@ def spectra_csv(
     return buf.getvalue()
 
 
-def _float(text: str, where: str) -> float:
+def _float(text: str, where: str, decimal_comma: bool = False) -> float:
     try:
-        v = float(text)
+        v = float(text.replace(",", ".") if decimal_comma else text)
     except ValueError:
         raise ColourError(f"{where}: {text!r} is not a number") from None
     if not math.isfinite(v):
@@ -178,16 +178,23 @@ def read_spectra_csv(
 ) -> MultiAngleSpectra:
     """Parse a multi-angle spectra CSV (the first header block; ``#`` lines are comments).
 
+    What spreadsheet programs write is read as such: a UTF-8 byte-order mark is skipped, and
+    a header with no comma but semicolons (or tabs) sets the separator, with decimal commas
+    in the cells (``0,45``: the CSV of a German or French Excel).
+
     Raises
     ------
     ColourError
         ``where: line N: reason`` -- no spectral columns, no angle column, a cell that is
         not a number, a spectrum :func:`check_spectrum` refuses.
     """
+    text = text.removeprefix("\ufeff")  # Excel's "CSV UTF-8"
     lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
     if not lines:
         raise ColourError(f"{where}: no rows")
-    rows = list(csv.reader(lines))
+    sep = next((d for d in (",", ";", "\t") if d in lines[0]), ",")
+    comma = sep != ","  # then a comma in a cell is a decimal comma
+    rows = list(csv.reader(lines, delimiter=sep))
     header = [h.strip() for h in rows[0]]
     lower = [h.lower() for h in header]
     spectral: list[tuple[int, float]] = []
@@ -216,22 +223,24 @@ def read_spectra_csv(
             raise ColourError(f"{w}: {len(row)} cells for {len(header)} columns")
         if row == header:  # a second block's header: only the first block is read
             break
-        ti = _float(row[col["theta_i_deg"]], w) if "theta_i_deg" in col else float(theta_i_deg)
+        cell = {name: _float(row[k], f"{w}, {header[k]}", comma) for name, k in col.items()
+                if name != "source"}  # fmt: skip
+        ti = cell["theta_i_deg"] if "theta_i_deg" in col else float(theta_i_deg)
         if "theta_r_deg" in col:
-            tr = _float(row[col["theta_r_deg"]], w)
+            tr = cell["theta_r_deg"]
         else:
-            tr = theta_r_for_aspecular(_float(row[col["aspecular_deg"]], w), ti)
+            tr = theta_r_for_aspecular(cell["aspecular_deg"], ti)
         if not (abs(ti) < 90.0 and abs(tr) < 90.0):
             raise ColourError(f"{w}: geometry theta_i {ti:g}, theta_r {tr:g} is below the horizon")
         values = np.array(
-            [np.nan if not row[k].strip() else _float(row[k], f"{w}, {header[k]}")
+            [np.nan if not row[k].strip() else _float(row[k], f"{w}, {header[k]}", comma)
              for k, _ in spectral]
         ) * scale  # fmt: skip
         ti_l.append(ti)
         tr_l.append(tr)
         fac.append(values)
         src.append(row[col["source"]].strip() if "source" in col else "measured")
-        rep.append(int(_float(row[col["repeat"]], w)) if "repeat" in col else 0)
+        rep.append(int(cell["repeat"]) if "repeat" in col else 0)
     if not fac:
         raise ColourError(f"{where}: a header but no spectra")
     table = np.array(fac)

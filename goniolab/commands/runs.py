@@ -239,7 +239,10 @@ def _cmd_export(args: argparse.Namespace) -> int:
                 f"give -o FILE to write {fmt} (then --json reports what was written)"
             )
         fmt = "json"
-    done = export_run(args.run, fmt, args.output, store=args.store, config=args.config)
+    done = export_run(
+        args.run, fmt, args.output, store=args.store, config=args.config,
+        spectra=not args.no_spectra,
+    )  # fmt: skip
     if done.output is None:
         text = done.text
         sys.stdout.write(text if text.endswith("\n") or not text else text + "\n")
@@ -260,8 +263,12 @@ def _cmd_import(args: argparse.Namespace) -> int:
         if "error" in row:
             print(f"goniolab: error: runs import: {row['error']}", file=sys.stderr)
         elif not args.json:
-            print(f"{row['file']}: run {row['run_id']} ({row['uuid']}) {row['action']}; "
-                  "no spectra in a JSON export")  # fmt: skip
+            spectra = (
+                f"{row['spectra']} measured and {row['predicted_spectra']} predicted spectra"
+                if row["spectra"] or row["predicted_spectra"]
+                else "no spectra in the file"
+            )
+            print(f"{row['file']}: run {row['run_id']} ({row['uuid']}) {row['action']}; {spectra}")
     if args.json:
         print(json.dumps(done, indent=2))
     return 2 if any("error" in row for row in done) else 0
@@ -403,6 +410,12 @@ def register(subparsers: Any) -> None:
     )
     pe.add_argument("-o", "--output", help="write to FILE instead of stdout")
     pe.add_argument(
+        "--no-spectra",
+        action="store_true",
+        help="leave a scan's spectra out: no R_<nm> / predicted_R_<nm> columns (CSV, "
+        "Parquet), no 'spectra' (JSON), no spectral variables (netCDF)",
+    )
+    pe.add_argument(
         "--json",
         action="store_true",
         help="without -o: the run as JSON on stdout (--format json); with -o: print what "
@@ -433,14 +446,18 @@ def register(subparsers: Any) -> None:
     pi = sub.add_parser(
         "import",
         parents=[common],
-        help="read runs exported with 'runs export --format json' back into a store",
-        description="Read runs exported with 'goniolab runs export RUN --format json' back "
-        "into the store chosen by --store/--config. A run keeps its UUID, creation time and "
+        help="read runs exported with 'runs export --format json' (or parquet) back into a store",
+        description="Read runs exported with 'goniolab runs export RUN --format json' (or "
+        "-o FILE.parquet) back into the store chosen by --store/--config. A run keeps its UUID, creation time and "
         "identity; one the store already holds is matched by its UUID (left as it is, or "
-        "brought up to date), never duplicated. A JSON export carries no spectra: an "
-        "imported scan has its luminance, colour and predictions, not its spectra.",
+        "brought up to date), never duplicated. A scan's spectra (R_<nm>, predicted_R_<nm>) "
+        "are stored back: exported again, it gives the same spectra. Not in an export, so "
+        "not imported: the spectro's raw reading beside a referenced spectrum, the mirror "
+        "reference's spectrum, the exposure.",
     )
-    pi.add_argument("files", nargs="+", metavar="FILE", help="JSON export(s) of goniolab runs")
+    pi.add_argument(
+        "files", nargs="+", metavar="FILE", help="JSON or Parquet export(s) of goniolab runs"
+    )
     pi.add_argument("--json", action="store_true", help="print what was imported as JSON")
     pi.set_defaults(func=_cmd_import)
 

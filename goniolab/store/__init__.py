@@ -48,7 +48,7 @@ Exports (CSV, JSON, netCDF, Parquet) live with the exporters: :mod:`goniolab.exp
 from __future__ import annotations
 
 from goniolab.store.exceptions import RunBusy, StoreDamaged, StoreError, StoreUnavailable
-from goniolab.store.json_import import import_json_export
+from goniolab.store.json_import import import_export_doc, import_json_export
 from goniolab.store.records import (
     COLOUR_KEYS,
     GlossRow,
@@ -73,6 +73,7 @@ __all__ = [
     "StoreError",
     "StoreUnavailable",
     "default_store_path",
+    "import_export_doc",
     "import_json_export",
     "is_store_url",
     "legacy_uuid",

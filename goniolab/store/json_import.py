@@ -6,10 +6,14 @@ time and identity, its readings and the predictions they carry), then copied int
 target with :func:`goniolab.store.migrate.copy_run`, the same path as ``runs migrate``: a
 run the target already holds (same UUID) is brought up to date, never duplicated.
 
-What a JSON export does not carry is not invented: a scan's raw spectra (it carries them
-only as reflectance factors, ``R_<nm>``) and its readings' raw records (the exposure, the
-signal level beside the quality flag) are not in it, so an imported run has its luminance,
-colour and predictions but no spectra; the import says so.
+Spectra (issue 25): a scan's export carries each reading's spectrum and its geometry's
+predicted spectrum as reflectance factors (``R_<nm>``, ``predicted_R_<nm>``). Given the
+``restore_spectra`` step of the caller (:func:`goniolab.run_spectra.restore_from_export`:
+the store does not know the colour scales), they are stored back as the runner stores them
+(% of the mirror, the referenced spectrum for a reading referenced to a standard), and the
+predicted L*a*b* with them: exported again, the run gives the same spectra. What an export
+does not carry is not invented: the spectro's raw reading beside a referenced spectrum, the
+mirror reference's spectrum, the exposure; the import says so.
 """
 
 from __future__ import annotations
@@ -17,14 +21,23 @@ from __future__ import annotations
 import json
 import math
 import tempfile
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 from goniolab.store.exceptions import StoreError
-from goniolab.store.records import COLOUR_KEYS, RunMeta
+from goniolab.store.records import COLOUR_KEYS, PredictedColour, RunMeta, RunRecord
 from goniolab.store.runstore import RunStore
 
-__all__ = ["import_json_export"]
+__all__ = ["RestoreSpectra", "import_export_doc", "import_json_export"]
+
+#: ``(run, readings, the export's "spectra", file) -> (raw fields per (index, repeat),
+#: predicted spectrum in % of the mirror per index)``; raises ValueError naming the file,
+#: the reading and the column.
+RestoreSpectra = Callable[
+    [RunRecord, Sequence[Mapping[str, Any]], Mapping[str, Any], str],
+    tuple[Mapping[tuple[int, int], Mapping[str, Any]], Mapping[int, Sequence[float]]],
+]
 
 #: Export column -> stored colour key (the export names L*, a*... with a _star suffix).
 _COLOUR_COLUMNS = {
@@ -59,6 +72,11 @@ def _load(path: Path) -> dict[str, Any]:
         raise StoreError(f"{path}: cannot read: {exc.strerror or exc}") from None
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise StoreError(f"{path}: not a JSON file: {exc}") from None
+    return _checked(doc, path)
+
+
+def _checked(doc: Any, path: Path) -> dict[str, Any]:
+    """``doc`` when it is a run export's document (``run``, ``readings``), else why not."""
     if not (isinstance(doc, dict) and isinstance(doc.get("run"), dict)):
         raise StoreError(
             f"{path}: not a goniolab run export (expected 'run' and 'readings' from "
@@ -78,7 +96,9 @@ def _load(path: Path) -> dict[str, Any]:
     return doc
 
 
-def _fill(scratch: RunStore, doc: dict[str, Any], path: Path) -> int:
+def _fill(
+    scratch: RunStore, doc: dict[str, Any], path: Path, restore: RestoreSpectra | None
+) -> int:
     """Write the export's run and readings into ``scratch``; return the run's id there."""
     run = doc["run"]
     meta = RunMeta.given(
@@ -116,8 +136,19 @@ def _fill(scratch: RunStore, doc: dict[str, Any], path: Path) -> int:
                     timestamp=_time(r["timestamp"]),
                 )
             return run_id
+        readings = doc.get("readings", [])
+        spectra: Mapping[tuple[int, int], Mapping[str, Any]] = {}
+        predicted_pct: Mapping[int, Sequence[float]] = {}
+        if restore is not None:
+            try:
+                spectra, predicted_pct = restore(
+                    scratch.get_run(run_id), readings, doc.get("spectra") or {}, str(path)
+                )
+            except ValueError as exc:
+                raise StoreError(str(exc)) from None
         predictions: dict[int, tuple[int, float, float, float]] = {}
-        for r in doc.get("readings", []):
+        predicted_lab: dict[int, tuple[float, float, float]] = {}
+        for r in readings:
             colour = {
                 key: float(r[col]) for col, key in _COLOUR_COLUMNS.items() if r.get(col) is not None
             }
@@ -130,7 +161,16 @@ def _fill(scratch: RunStore, doc: dict[str, Any], path: Path) -> int:
                 measured_theta_i_deg=float(r["measured_theta_i_deg"]),
                 measured_theta_r_deg=float(r["measured_theta_r_deg"]),
                 luminance_pct=float(r["luminance_pct"]),
-                raw={"imported_from": path.name, "quality": r.get("quality") or ""},
+                raw={
+                    "imported_from": path.name,
+                    "quality": r.get("quality") or "",
+                    **(
+                        {}
+                        if r.get("peak_fraction") is None
+                        else {"peak_fraction": float(r["peak_fraction"])}
+                    ),
+                    **spectra.get((int(r["index"]), int(r["repeat"])), {}),
+                },
                 timestamp=_time(r["timestamp"]),
                 colour=colour if len(colour) == len(COLOUR_KEYS) else None,
                 colour_error=str(r.get("colour_error") or ""),
@@ -139,15 +179,31 @@ def _fill(scratch: RunStore, doc: dict[str, Any], path: Path) -> int:
             if pred is not None and math.isfinite(float(pred)):
                 i = int(r["index"])
                 predictions[i] = (i, float(r["theta_i_deg"]), float(r["theta_r_deg"]), float(pred))
+                lab = [r.get(f"predicted_{c}_star") for c in ("L", "a", "b")]
+                if all(v is not None for v in lab):
+                    predicted_lab[i] = (float(lab[0]), float(lab[1]), float(lab[2]))
         if predictions:
             scratch.add_predictions(run_id, sorted(predictions.values()))
+        colours = [
+            (i, PredictedColour(*lab, _spectrum(predicted_pct.get(i))))
+            for i, lab in sorted(predicted_lab.items())
+        ]
+        if colours:
+            scratch.add_predicted_colours(run_id, colours)
     except (KeyError, TypeError, ValueError) as exc:
         raise StoreError(f"{path}: readings: a reading lacks or garbles {exc}") from None
     return run_id
 
 
-def import_json_export(target: RunStore, path: str | Path) -> tuple[int, str, str]:
-    """Import the run of the JSON export ``path`` into ``target``.
+def _spectrum(values: Sequence[float] | None) -> tuple[float, ...] | None:
+    return None if values is None else tuple(float(v) for v in values)
+
+
+def import_json_export(
+    target: RunStore, path: str | Path, *, restore_spectra: RestoreSpectra | None = None
+) -> tuple[int, str, str]:
+    """Import the run of the JSON export ``path`` into ``target``; ``restore_spectra``
+    stores a scan's exported spectra back (without it, they are left out).
 
     Returns
     -------
@@ -162,11 +218,26 @@ def import_json_export(target: RunStore, path: str | Path) -> tuple[int, str, st
         the message names the file and the key.
     """
     p = Path(path)
-    doc = _load(p)
+    return import_export_doc(target, _load(p), p, restore_spectra=restore_spectra)
+
+
+def import_export_doc(
+    target: RunStore,
+    doc: Mapping[str, Any],
+    path: str | Path,
+    *,
+    restore_spectra: RestoreSpectra | None = None,
+) -> tuple[int, str, str]:
+    """Import a run export's document (``{"run", "readings", "spectra"}``, as the JSON
+    export writes it: read from another format, e.g. a Parquet export by
+    :func:`goniolab.export.read_parquet_export`) into ``target``; as
+    :func:`import_json_export`, ``path`` naming the file in messages."""
+    p = Path(path)
+    doc = _checked(dict(doc), p)
     with (
         tempfile.TemporaryDirectory(prefix="goniolab-import-") as tmp,
         RunStore(Path(tmp) / "scratch.sqlite") as scratch,
     ):
-        run_id = _fill(scratch, doc, p)
+        run_id = _fill(scratch, doc, p, restore_spectra)
         here, action = target.copy_run_from(scratch, run_id)
     return here, action, str(doc["run"]["uuid"])

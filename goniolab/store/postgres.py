@@ -56,14 +56,21 @@ def psycopg_module() -> Any:
 
 def pg_connect(conninfo: str, location: str, *, autocommit: bool = True) -> Any:
     """A new psycopg connection with the store's timeouts: connect, statement (server
-    side) and TCP keepalives/user timeout (a dead peer is noticed in seconds)."""
+    side) and TCP keepalives/user timeout (a dead peer is noticed in seconds).
+
+    The session runs with ``jit=off``: the store's statements are short lookups, but the
+    listing's per-run counts (:meth:`goniolab.store.RunStore.list_briefs`) exceed
+    ``jit_above_cost`` on a store of a few hundred runs, and the JIT compile of a fresh
+    session's first query (LLVM loaded, code emitted) cost more than the query itself:
+    86 ms against 37 ms with ``jit=off`` on 520 runs / 213,200 readings
+    (bench/bench_runs_list.py), and each CLI process is a fresh session."""
     psycopg = psycopg_module()
     try:
         return psycopg.connect(
             conninfo,
             autocommit=autocommit,
             connect_timeout=CONNECT_TIMEOUT_S,
-            options=f"-c statement_timeout={int(STATEMENT_TIMEOUT_S * 1000)}",
+            options=f"-c statement_timeout={int(STATEMENT_TIMEOUT_S * 1000)} -c jit=off",
             keepalives=1,
             keepalives_idle=5,
             keepalives_interval=2,

@@ -84,6 +84,9 @@ class RunRecord:
     ``damage`` is empty for a sound row; for a row whose JSON cannot be decoded it says
     which column and why (``plan``/``config``/``model`` are then empty): :meth:`RunStore.
     list_runs` lists such a run, :meth:`RunStore.get_run` refuses it in one line.
+
+    ``brief``: a listing's record (:meth:`RunStore.list_briefs`), whose ``config`` snapshot
+    and ``model`` were not read (they are empty here; :meth:`RunStore.get_run` reads them).
     """
 
     id: int
@@ -104,15 +107,20 @@ class RunRecord:
     tags: tuple[str, ...] = ()
     sample_id: str = ""
     damage: str = ""
+    brief: bool = False
 
     @classmethod
-    def from_row(cls, row: Sequence[Any], location: str = "") -> RunRecord:
+    def from_row(cls, row: Sequence[Any], location: str = "", *, brief: bool = False) -> RunRecord:
         """From the columns of :func:`run_select`, in that order (a row without the identity
-        columns gets :func:`legacy_uuid` and empty metadata)."""
+        columns gets :func:`legacy_uuid` and empty metadata); ``brief``: the config and
+        model columns are not decoded (a listing's record)."""
         run_id = int(row[0])
         damage: list[str] = []
         decoded: list[Any] = []
         for k, column in ((2, "plan_json"), (3, "config_json"), (5, "model_json")):
+            if brief and k != 2:
+                decoded.append({})
+                continue
             try:
                 value = json_column(run_id, column, row[k])
                 if not isinstance(value, dict):
@@ -148,6 +156,7 @@ class RunRecord:
             tags=tags,
             sample_id=str(ident[4] or ""),
             damage="; ".join(damage),
+            brief=brief,
         )
 
     def as_dict(self) -> dict[str, Any]:

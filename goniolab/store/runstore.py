@@ -322,6 +322,14 @@ class RunStore(ReadingTables):
         (one of the run's tags), ``text`` (a case-insensitive substring of the sample,
         sample id, operator, notes or tags).
 
+        The records are brief (:attr:`RunRecord.brief`): a listing shows neither the config
+        snapshot nor the model, and decoding them was most of its time (a real scan's
+        snapshot is 3 kB of JSON: 107 against 45 ms for 520 runs, bench/bench_runs_list.py).
+        The server still checks that they are JSON objects where it can (SQLite's
+        ``json_valid``, PostgreSQL 16's ``pg_input_is_valid``); a run failing the check is
+        read whole, so its ``damage`` says why, as :meth:`list_runs` does. On PostgreSQL
+        before 16 a config or model column garbled by hand shows when the run is opened.
+
         A store whose readings cannot be counted (a damaged page) gets each run's count
         on its own; a run whose count fails has ``None`` (and :meth:`count_readings`
         says why).
@@ -347,10 +355,15 @@ class RunStore(ReadingTables):
                     " OR LOWER(COALESCE(tags_json, '')) LIKE ?)"
                 )
                 params += [like] * 5
-        sql = self._run_select.replace(
-            " FROM runs",
-            ", (SELECT COUNT(*) FROM points p WHERE p.run_id = runs.id),"
-            " (SELECT COUNT(*) FROM gloss_readings g WHERE g.run_id = runs.id) FROM runs",
+        sql = (
+            self._run_select.replace("config_json,", "NULL,")
+            .replace("model_json,", "NULL,")
+            .replace(
+                " FROM runs",
+                f", {self._objects_check()},"
+                " (SELECT COUNT(*) FROM points p WHERE p.run_id = runs.id),"
+                " (SELECT COUNT(*) FROM gloss_readings g WHERE g.run_id = runs.id) FROM runs",
+            )
         )
         if where:
             sql += " WHERE " + " AND ".join(where)
@@ -365,7 +378,9 @@ class RunStore(ReadingTables):
             rows = None
         if rows is not None:
             for r in rows:
-                rec = RunRecord.from_row(r[:-2], self.location)
+                rec = RunRecord.from_row(r[:-3], self.location, brief=True)
+                if not r[-3]:  # config or model is no JSON object: read whole, say why
+                    rec = self.get_run(rec.id, allow_damaged=True)
                 out.append((rec, int(r[-1] if rec.kind == "gloss" else r[-2])))
         else:
             for rec in self.list_runs():
@@ -384,6 +399,21 @@ class RunStore(ReadingTables):
             ]
             out = out[:limit] if limit is not None else out
         return out
+
+    def _objects_check(self) -> str:
+        """SQL true when a run's config_json and model_json are JSON objects, without
+        raising on a garbled one (see :meth:`list_briefs`)."""
+        cols = ("config_json", "model_json")
+        if not self.db.is_postgres:
+            valid = " AND ".join(f"json_valid({c})" for c in cols)
+            objects = " AND ".join(f"json_type({c}) = 'object'" for c in cols)
+            return f"CASE WHEN {valid} THEN {objects} ELSE 0 END"
+        version = int(getattr(getattr(self.db.raw, "info", None), "server_version", 0) or 0)
+        if version < 160000:
+            return "TRUE"
+        valid = " AND ".join(f"pg_input_is_valid({c}, 'json')" for c in cols)
+        objects = " AND ".join(f"json_typeof({c}::json) = 'object'" for c in cols)
+        return f"CASE WHEN {valid} THEN {objects} ELSE FALSE END"
 
     def count_readings(self, rec: RunRecord) -> int:
         """The number of readings of ``rec``: points of a scan, readings of a gloss log."""
