@@ -61,6 +61,12 @@ _DENSE_CELLS_PER_FACET = 4
 _DENSE_MIN_CELLS = 1 << 20
 #: Largest |slope| / bin the lean histogram indexes: (2 * 2**30)**2 cells fit an int64 key.
 _MAX_SLOPE_CELLS = 1 << 30
+#: Maps of at most this many facets count their slope cells in one walk
+#: (:func:`_dense_cells_one_pass`: 4 bytes per facet kept meanwhile).
+_ONE_PASS_MAX_FACETS = 1 << 24
+#: ... and count the kept indices this many at a time.
+_ONE_PASS_COUNT = 1 << 21
+_I16_MIN, _I16_MAX = float(np.iinfo(np.int16).min), float(np.iinfo(np.int16).max)
 #: Empty third facet array: the kernels read ``(p, q)`` slopes instead of unit normals.
 SLOPES: FloatArray = np.empty(0)
 
@@ -154,6 +160,10 @@ def slope_cells(
     them from the map as it goes, and the count never holds the map's facets.
     """
     surface = p if isinstance(p, Surface) else Surface(p=p, q=p if q is None else q, source=source)
+    if surface.n_facets <= _ONE_PASS_MAX_FACETS:
+        got = _dense_cells_one_pass(surface)
+        if got is not None:
+            return got
     b = LEAN_SLOPE_BIN
     p_lo, p_hi, q_lo, q_hi = surface.slope_range
     worst = max(abs(p_lo), abs(p_hi), abs(q_lo), abs(q_hi))
@@ -203,6 +213,55 @@ def slope_cells(
         weights = np.bincount(inverse, weights=np.concatenate(tallies)).astype(np.int64)
     cp = ((cells // n_q + p0) * b).astype(np.float64)
     cq = ((cells % n_q + q0) * b).astype(np.float64)
+    return cp, cq, weights.astype(np.float64)
+
+
+def _dense_cells_one_pass(surface: Surface) -> tuple[FloatArray, FloatArray, FloatArray] | None:
+    """:func:`slope_cells` in one walk over the slopes: each block's cell indices
+    ``floor(p / b + 1/2)``, ``floor(q / b + 1/2)`` (the same float operations) are kept as
+    int16 (a quarter of the slopes' memory) while their range is found, then counted. The
+    two-walk path (:attr:`~goniolab.optics.surface.Surface.slope_range` first) formed every
+    slope twice. None, and nothing kept, when an index leaves int16 (``|slope| >= 32.7``),
+    is not finite, or the range needs the sparse count: :func:`slope_cells` then takes its
+    general path, which also names a map beyond the index."""
+    inv = 1.0 / LEAN_SLOPE_BIN
+    kps: list[NDArray[np.int16]] = []
+    kqs: list[NDArray[np.int16]] = []
+    lo_p = lo_q = math.inf
+    hi_p = hi_q = -math.inf
+    for pb, qb in _cell_blocks(surface):
+        ks = []
+        for v in (pb, qb):
+            k = np.multiply(v, inv)
+            k += 0.5
+            np.floor(k, out=k)
+            ks.append((k, float(k.min()), float(k.max())))
+        (kp, a_p, b_p), (kq, a_q, b_q) = ks
+        if not all(_I16_MIN <= v <= _I16_MAX for v in (a_p, b_p, a_q, b_q)):  # NaN: False
+            return None
+        lo_p, hi_p = min(lo_p, a_p), max(hi_p, b_p)
+        lo_q, hi_q = min(lo_q, a_q), max(hi_q, b_q)
+        kps.append(kp.astype(np.int16))
+        kqs.append(kq.astype(np.int16))
+    p0, q0 = int(lo_p), int(lo_q)
+    n_p, n_q = int(hi_p) - p0 + 1, int(hi_q) - q0 + 1
+    n_cells = n_p * n_q
+    if n_cells > max(_DENSE_CELLS_PER_FACET * surface.n_facets, _DENSE_MIN_CELLS):
+        return None
+    ip = np.concatenate(kps) if len(kps) > 1 else kps[0]
+    iq = np.concatenate(kqs) if len(kqs) > 1 else kqs[0]
+    del kps, kqs
+    counts = np.zeros(n_cells, dtype=np.int64)
+    offset = p0 * n_q + q0
+    for lo in range(0, ip.size, _ONE_PASS_COUNT):  # int64 keys of a chunk at a time
+        key = np.multiply(ip[lo : lo + _ONE_PASS_COUNT], n_q, dtype=np.int64)
+        key += iq[lo : lo + _ONE_PASS_COUNT]
+        key -= offset
+        counts += np.bincount(key, minlength=n_cells)
+    cells = np.flatnonzero(counts)
+    weights = counts[cells]
+    cp = ((cells // n_q + p0) * LEAN_SLOPE_BIN).astype(np.float64)
+    cq = ((cells % n_q + q0) * LEAN_SLOPE_BIN).astype(np.float64)
     return cp, cq, weights.astype(np.float64)
 
 
