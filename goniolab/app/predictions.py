@@ -255,8 +255,11 @@ def surface_model(
         model = model_for(heightmap_of(req.surface, req.step_um), **options)
     if progress is not None and (_is_physical(model) or _is_auto(model)):
         # auto passes it on to the wave models it builds (reading its .kirchhoff here built
-        # both wave models, and imported their modules, for a map it sends to facets)
+        # both wave models, and imported their modules, for a map it sends to facets) and
+        # to its facet model
         model.progress = progress  # type: ignore[attr-defined]
+    elif progress is not None and _is_a(model, "goniolab.optics.facet", "FacetModel"):
+        model.report_to(progress)  # type: ignore[attr-defined]  # --model facet: the same display
     return model
 
 

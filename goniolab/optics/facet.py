@@ -121,7 +121,7 @@ from goniolab.optics.facet_backends import (
 )
 from goniolab.optics.fresnel import fresnel, fresnel_dielectric
 from goniolab.optics.slope_statistics import SlopeStatistics
-from goniolab.optics.surface import STREAM_MIN_FACETS, Surface
+from goniolab.optics.surface import STREAM_MIN_FACETS, MapSurface, Surface
 
 #: the facet model's public names; the cap overlaps and the thread limit are defined with
 #: the aperture integration and the kernel backends and keep this import path
@@ -255,6 +255,13 @@ class FacetModel:
         # says so, see goniolab.optics._kernels): no normal arrays beside the slopes. A
         # map's surface forms them when first asked (goniolab.optics.surface.MapSurface).
         self._mz = SLOPES
+
+    def report_to(self, fn: Any) -> None:
+        """Report the walks over a large map's slopes to ``fn(done, total, what)``
+        (:class:`~goniolab.optics.surface.MapSurface`: a map of more than
+        :data:`~goniolab.optics.surface.STREAM_MIN_FACETS` facets); a no-op for held slopes."""
+        if isinstance(self.surface, MapSurface):
+            self.surface.progress = fn
 
     @property
     def _mx(self) -> FloatArray:
