@@ -313,8 +313,8 @@ class Surface:
 def _slopes_finite(hm: HeightMap, b: float, c: float) -> bool:
     """Whether every forward slope of a complete map is finite (no difference overflows):
     bounded by the height range over the smaller step plus the plane's slopes."""
-    z = hm.z_um
-    span = (float(z.max()) - float(z.min())) / min(float(hm.dx_um), float(hm.dy_um))
+    lo, hi = hm.z_range  # a complete map's: its min and max
+    span = (hi - lo) / min(float(hm.dx_um), float(hm.dy_um))
     return math.isfinite(span + abs(b) + abs(c))
 
 
