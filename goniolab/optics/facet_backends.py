@@ -64,6 +64,8 @@ _MAX_SLOPE_CELLS = 1 << 30
 #: Maps of at most this many facets count their slope cells in one walk
 #: (:func:`_dense_cells_one_pass`: 4 bytes per facet kept meanwhile).
 _ONE_PASS_MAX_FACETS = 1 << 24
+#: ... forming the slopes this many at a time (a few rows of a map: in cache) ...
+_ONE_PASS_CHUNK = 1 << 16
 #: ... and count the kept indices this many at a time.
 _ONE_PASS_COUNT = 1 << 21
 _I16_MIN, _I16_MAX = float(np.iinfo(np.int16).min), float(np.iinfo(np.int16).max)
@@ -225,32 +227,37 @@ def _dense_cells_one_pass(surface: Surface) -> tuple[FloatArray, FloatArray, Flo
     is not finite, or the range needs the sparse count: :func:`slope_cells` then takes its
     general path, which also names a map beyond the index."""
     inv = 1.0 / LEAN_SLOPE_BIN
-    kps: list[NDArray[np.int16]] = []
-    kqs: list[NDArray[np.int16]] = []
+    n = surface.n_facets
+    ip = np.empty(n, dtype=np.int16)
+    iq = np.empty(n, dtype=np.int16)
+    buf = np.empty(0)
     lo_p = lo_q = math.inf
     hi_p = hi_q = -math.inf
-    for pb, qb in _cell_blocks(surface):
-        ks = []
-        for v in (pb, qb):
-            k = np.multiply(v, inv)
+    at = 0
+    # blocks of a few rows, formed in reused arrays: the work stays in cache
+    for pb, qb in surface.slope_blocks(_ONE_PASS_CHUNK, reuse=True):
+        m = pb.size
+        if m > buf.size:  # a block is one row at least
+            buf = np.empty(m)
+        k = buf[:m]
+        for v, out in ((pb, ip), (qb, iq)):
+            np.multiply(v, inv, out=k)
             k += 0.5
             np.floor(k, out=k)
-            ks.append((k, float(k.min()), float(k.max())))
-        (kp, a_p, b_p), (kq, a_q, b_q) = ks
-        if not all(_I16_MIN <= v <= _I16_MAX for v in (a_p, b_p, a_q, b_q)):  # NaN: False
-            return None
-        lo_p, hi_p = min(lo_p, a_p), max(hi_p, b_p)
-        lo_q, hi_q = min(lo_q, a_q), max(hi_q, b_q)
-        kps.append(kp.astype(np.int16))
-        kqs.append(kq.astype(np.int16))
+            lo, hi = float(k.min()), float(k.max())
+            if not (_I16_MIN <= lo <= _I16_MAX and _I16_MIN <= hi <= _I16_MAX):  # NaN: False
+                return None
+            np.copyto(out[at : at + m], k, casting="unsafe")  # exact: integers in range
+            if out is ip:
+                lo_p, hi_p = min(lo_p, lo), max(hi_p, hi)
+            else:
+                lo_q, hi_q = min(lo_q, lo), max(hi_q, hi)
+        at += m
     p0, q0 = int(lo_p), int(lo_q)
     n_p, n_q = int(hi_p) - p0 + 1, int(hi_q) - q0 + 1
     n_cells = n_p * n_q
     if n_cells > max(_DENSE_CELLS_PER_FACET * surface.n_facets, _DENSE_MIN_CELLS):
         return None
-    ip = np.concatenate(kps) if len(kps) > 1 else kps[0]
-    iq = np.concatenate(kqs) if len(kqs) > 1 else kqs[0]
-    del kps, kqs
     counts = np.zeros(n_cells, dtype=np.int64)
     offset = p0 * n_q + q0
     for lo in range(0, ip.size, _ONE_PASS_COUNT):  # int64 keys of a chunk at a time

