@@ -116,7 +116,7 @@ from goniolab.optics.facet_backends import (
     kernel_pool,
     limit_threads,
     numba_kernels,
-    slope_cells,
+    slope_cells_indexed,
     thread_limit,
 )
 from goniolab.optics.fresnel import fresnel, fresnel_dielectric
@@ -358,13 +358,24 @@ class FacetModel:
     def _slope_cells(self) -> tuple[FloatArray, FloatArray, FloatArray]:
         """The lean backend's slope cells ``(p, q, count)``
         (:func:`goniolab.optics.facet_backends.slope_cells`)."""
-        return slope_cells(self.surface)
+        cells, index = slope_cells_indexed(self.surface)
+        self.__dict__["_cell_index"] = index
+        return cells
 
     def _facets_near(
         self, wi: FloatArray, alpha_rad: float, reach_a: float, reach_b: float
     ) -> tuple[FloatArray, FloatArray]:
-        """The facets a narrow slit can reach (:func:`goniolab.optics.facet_backends.facets_near`)."""
-        return facets_near(self.surface, None, wi, alpha_rad, reach_a, reach_b)
+        """The facets a narrow slit can reach (:func:`goniolab.optics.facet_backends.facets_near`).
+
+        From the second slit on (a gloss report reads eight), the facets' cell indices of
+        the slope-cell count pick them (counted now if not yet: one walk over the slopes
+        instead of one per slit)."""
+        walks = self.__dict__.get("_near_walks", 0)
+        self.__dict__["_near_walks"] = walks + 1
+        if walks >= 1 and self.backend == "lean":
+            self._slope_cells  # noqa: B018  (counted once; it keeps the index)
+        index = self.__dict__.get("_cell_index")
+        return facets_near(self.surface, None, wi, alpha_rad, reach_a, reach_b, index)
 
     # ------------------------------------------------------------------ slope statistics
     def slope_density(self, p: ArrayLike, q: ArrayLike) -> FloatArray:

@@ -30,16 +30,20 @@ __all__ = [
     "LEAN_SLOPE_BIN",
     "MIN_CHUNK",
     "SLOPES",
+    "cell_index_of",
     "check_slope_range",
     "facets_near",
     "kernel_pool",
     "limit_threads",
     "numba_kernels",
     "slope_cells",
+    "slope_cells_indexed",
     "thread_limit",
 ]
 
 FloatArray = NDArray[np.float64]
+#: Every facet's lean cell indices ``(ip, iq)``, in facet order.
+CellIndex = tuple[NDArray[np.int16], NDArray[np.int16]]
 
 #: Facets per thread below which the numba kernels run on one thread.
 MIN_CHUNK = 1 << 16
@@ -162,10 +166,23 @@ def slope_cells(
     them from the map as it goes, and the count never holds the map's facets.
     """
     surface = p if isinstance(p, Surface) else Surface(p=p, q=p if q is None else q, source=source)
+    return slope_cells_indexed(surface)[0]
+
+
+def slope_cells_indexed(
+    surface: Surface,
+) -> tuple[tuple[FloatArray, FloatArray, FloatArray], CellIndex | None]:
+    """:func:`slope_cells` of ``surface`` and, when they were counted in one walk
+    (:func:`_dense_cells_one_pass`), every facet's cell indices ``(ip, iq)`` (int16, in
+    facet order), which :func:`facets_near` reads instead of walking the slopes again."""
     if surface.n_facets <= _ONE_PASS_MAX_FACETS:
         got = _dense_cells_one_pass(surface)
         if got is not None:
             return got
+    return _cells_two_walks(surface), None
+
+
+def _cells_two_walks(surface: Surface) -> tuple[FloatArray, FloatArray, FloatArray]:
     b = LEAN_SLOPE_BIN
     p_lo, p_hi, q_lo, q_hi = surface.slope_range
     worst = max(abs(p_lo), abs(p_hi), abs(q_lo), abs(q_hi))
@@ -218,7 +235,9 @@ def slope_cells(
     return cp, cq, weights.astype(np.float64)
 
 
-def _dense_cells_one_pass(surface: Surface) -> tuple[FloatArray, FloatArray, FloatArray] | None:
+def _dense_cells_one_pass(
+    surface: Surface,
+) -> tuple[tuple[FloatArray, FloatArray, FloatArray], CellIndex] | None:
     """:func:`slope_cells` in one walk over the slopes: each block's cell indices
     ``floor(p / b + 1/2)``, ``floor(q / b + 1/2)`` (the same float operations) are kept as
     int16 (a quarter of the slopes' memory) while their range is found, then counted. The
@@ -269,7 +288,17 @@ def _dense_cells_one_pass(surface: Surface) -> tuple[FloatArray, FloatArray, Flo
     weights = counts[cells]
     cp = ((cells // n_q + p0) * LEAN_SLOPE_BIN).astype(np.float64)
     cq = ((cells % n_q + q0) * LEAN_SLOPE_BIN).astype(np.float64)
-    return cp, cq, weights.astype(np.float64)
+    ip.setflags(write=False)
+    iq.setflags(write=False)
+    return (cp, cq, weights.astype(np.float64)), (ip, iq)
+
+
+def cell_index_of(v: float) -> int:
+    """The lean histogram's cell index ``floor(v / b + 1/2)`` of a slope ``v``, by the
+    float operations the facets' indices are formed with (so it orders with them)."""
+    k = v * (1.0 / LEAN_SLOPE_BIN)
+    k += 0.5
+    return math.floor(k)
 
 
 def _cell_blocks(surface: Surface) -> Iterator[tuple[FloatArray, FloatArray]]:
@@ -290,6 +319,7 @@ def facets_near(
     alpha_rad: float,
     reach_a: float,
     reach_b: float,
+    index: CellIndex | None = None,
 ) -> tuple[FloatArray, FloatArray]:
     """Of the slopes ``p``, ``q``: those of a superset of the facets whose mirror direction of ``wi``
     lies within ``reach_a`` in plane of the in-plane angle ``alpha_rad`` and within
@@ -303,13 +333,26 @@ def facets_near(
     size). All facets when a corner of the rectangle leaves the hemisphere.
 
     ``p`` may be a :class:`~goniolab.optics.surface.Surface` (``q`` None): its facets are
-    then selected block by block, in facet order (the same arrays).
+    then selected block by block, in facet order (the same arrays), or, given the facets'
+    cell ``index`` (:func:`slope_cells_indexed`), from those whose cells meet the box,
+    without forming the other slopes (the same facets, in the same order).
     """
     if isinstance(p, Surface):
         surface = p
         box = _near_box(wi, alpha_rad, reach_a, reach_b)
         if box is None:
             return surface.p, surface.q
+        if index is not None:
+            # the facets whose cells meet the box (a superset: the index is monotone in
+            # the slope), then the box itself on their slopes, taken from the map
+            ip, iq = index
+            lo_p, hi_p = (min(max(cell_index_of(v), -(1 << 15)), (1 << 15) - 1) for v in box[:2])
+            lo_q, hi_q = (min(max(cell_index_of(v), -(1 << 15)), (1 << 15) - 1) for v in box[2:])
+            hit = ip >= lo_p
+            hit &= ip <= hi_p
+            hit &= iq >= lo_q
+            hit &= iq <= hi_q
+            return _inside(*surface.take(np.flatnonzero(hit)), box)
         parts = [_inside(pb, qb, box) for pb, qb in surface.slope_blocks()]
         if len(parts) == 1:
             return parts[0]
