@@ -110,15 +110,17 @@ class HeightMap:
             )
         if z.size == 0:
             raise heightmap_error(src, f"height map has zero points (shape {z.shape})")
-        # one fast reduction; only a non-finite sum (NaN, inf or overflow) needs the scan
-        complete = math.isfinite(float(np.sum(z, dtype=np.float64)))
+        # one fast reduction (the column sums, which the plane fit reads too); only a
+        # non-finite sum (NaN, inf or overflow) needs the scan
+        col = z.sum(axis=0, dtype=np.float64) if z.ndim == 2 else np.sum(z, dtype=np.float64)
+        complete = bool(np.isfinite(col).all())
         if not complete and np.isinf(z).any():
             raise heightmap_error(src, "heights contain inf (use NaN for missing points)")
         z.setflags(write=False)
         object.__setattr__(self, "z_um", z)
         # a finite sum: no NaN (n_valid needs no count); the heights are read-only, so what
         # is derived from them (the plane fit, the range) is kept (_derived)
-        object.__setattr__(self, "_derived", {"complete": True} if complete else {})
+        object.__setattr__(self, "_derived", {"complete": True, "col_sum": col} if complete else {})
         for name in ("dx_um", "dy_um"):
             value = getattr(self, name)
             try:
@@ -224,7 +226,9 @@ def _plane_fit_and_completeness(hm: HeightMap) -> tuple[float, float, float, boo
     ny, nx = z.shape
     x = (np.arange(nx, dtype=np.float64) - (nx - 1) / 2.0) * hm.dx_um
     y = (np.arange(ny, dtype=np.float64) - (ny - 1) / 2.0) * hm.dy_um
-    col = z.sum(axis=0, dtype=np.float64)  # a float32 map accumulates in float64
+    col = hm._derived.get("col_sum")
+    if col is None:
+        col = z.sum(axis=0, dtype=np.float64)  # a float32 map accumulates in float64
     if np.isfinite(col).all():
         row = z.sum(axis=1, dtype=np.float64)
         sxx = ny * float(x @ x)

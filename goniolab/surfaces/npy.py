@@ -75,19 +75,21 @@ def read_npy(path: Path, opts: ReadOptions) -> HeightMap:
     if z.dtype != np.float32:
         z = z.astype(np.float64, copy=False)
     if not np.isfinite(np.sum(z, dtype=np.float64)):
-        z[np.isinf(z)] = np.nan
+        z[np.isinf(z)] = np.nan  # then no height is infinite, unless scaled below
     meta: dict[str, str] = {"format": "npy"}
     file_steps: tuple[float, float] | None = None
     side = _sidecar(path)
+    scaled = False
     if side.exists():
         file_steps, z_um_per, extra = _read_sidecar(side, name)
         if z_um_per != 1.0:  # scaled in float64, as a float64 file is
             z = z.astype(np.float64, copy=False) * z_um_per
+            scaled = True
         meta.update(extra)
     # name the sidecar only when there is one (issue 27: the message named a missing file)
     what = side.name if side.exists() else f"the file (it has no sidecar {side.name})"
     dx, dy = resolve_steps(name, file_steps, opts.step_um, what=what)
-    hm = make_heightmap(name, z, dx, dy, meta)
+    hm = make_heightmap(name, z, dx, dy, meta, no_inf=not scaled)
     _warn_if_nm(hm)
     return hm
 
