@@ -16,14 +16,16 @@ import math
 import os
 import threading
 from collections.abc import Iterator
-from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from goniolab.optics.surface import Surface
+
+if TYPE_CHECKING:  # the pool is made (and concurrent.futures imported) for numba's threads
+    from concurrent.futures import ThreadPoolExecutor
 
 __all__ = [
     "LEAN_EXACT_BELOW_DEG",
@@ -129,6 +131,8 @@ def limit_threads(n: int) -> Iterator[None]:
 def kernel_pool() -> ThreadPoolExecutor:
     global _executor
     if _executor is None:
+        from concurrent.futures import ThreadPoolExecutor
+
         _executor = ThreadPoolExecutor(
             max_workers=max(1, os.cpu_count() or 1), thread_name_prefix="facet"
         )
