@@ -258,8 +258,11 @@ def surface_model(
         # both wave models, and imported their modules, for a map it sends to facets) and
         # to its facet model
         model.progress = progress  # type: ignore[attr-defined]
-    elif progress is not None and _is_a(model, "goniolab.optics.facet", "FacetModel"):
-        model.report_to(progress)  # type: ignore[attr-defined]  # --model facet: the same display
+    elif progress is not None and _is_a(
+        getattr(model, "surface", None), "goniolab.optics.surface", "MapSurface"
+    ):
+        # --model facet: the same display (a large map's walks over its slopes report)
+        model.surface.progress = progress  # type: ignore[attr-defined]
     return model
 
 

@@ -121,7 +121,7 @@ from goniolab.optics.facet_backends import (
 )
 from goniolab.optics.fresnel import fresnel, fresnel_dielectric
 from goniolab.optics.slope_statistics import SlopeStatistics
-from goniolab.optics.surface import STREAM_MIN_FACETS, MapSurface, Surface
+from goniolab.optics.surface import STREAM_MIN_FACETS, Surface
 
 #: the facet model's public names; the cap overlaps and the thread limit are defined with
 #: the aperture integration and the kernel backends and keep this import path
@@ -256,13 +256,6 @@ class FacetModel:
         # map's surface forms them when first asked (goniolab.optics.surface.MapSurface).
         self._mz = SLOPES
 
-    def report_to(self, fn: Any) -> None:
-        """Report the walks over a large map's slopes to ``fn(done, total, what)``
-        (:class:`~goniolab.optics.surface.MapSurface`: a map of more than
-        :data:`~goniolab.optics.surface.STREAM_MIN_FACETS` facets); a no-op for held slopes."""
-        if isinstance(self.surface, MapSurface):
-            self.surface.progress = fn
-
     @property
     def _mx(self) -> FloatArray:
         return self.surface.p
@@ -365,15 +358,11 @@ class FacetModel:
     def _facets_near(
         self, wi: FloatArray, alpha_rad: float, reach_a: float, reach_b: float
     ) -> tuple[FloatArray, FloatArray]:
-        """The facets a narrow slit can reach (:func:`goniolab.optics.facet_backends.facets_near`).
-
-        From the second slit on (a gloss report reads eight), the facets' cell indices of
-        the slope-cell count pick them (counted now if not yet: one walk over the slopes
-        instead of one per slit)."""
-        walks = self.__dict__.get("_near_walks", 0)
-        self.__dict__["_near_walks"] = walks + 1
-        if walks >= 1 and self.backend == "lean":
-            self._slope_cells  # noqa: B018  (counted once; it keeps the index)
+        """The facets a narrow slit can reach (:func:`goniolab.optics.facet_backends.facets_near`);
+        from the second slit on, picked by the facets' cell indices (:attr:`_slope_cells`)."""
+        walks = self.__dict__["_near_walks"] = self.__dict__.get("_near_walks", 0) + 1
+        if walks > 1 and self.backend == "lean":
+            self._slope_cells  # noqa: B018  (one walk for all slits; it keeps the index)
         index = self.__dict__.get("_cell_index")
         return facets_near(self.surface, None, wi, alpha_rad, reach_a, reach_b, index)
 
