@@ -418,11 +418,14 @@ class MapSurface(Surface):
             return super().take(idx)
         b, c, level = self._plane
         hm = self._hm
-        i, j = np.divmod(np.asarray(idx, dtype=np.int64), hm.shape[1] - 1)
-        z = hm.z_um
-        z0 = z[i, j].astype(np.float64)
-        p = (z[i, j + 1].astype(np.float64) - z0) / float(hm.dx_um)
-        q = (z[i + 1, j].astype(np.float64) - z0) / float(hm.dy_um)
+        nx = hm.shape[1]
+        i, j = np.divmod(np.asarray(idx, dtype=np.int64), nx - 1)
+        k = i * nx  # flat index of each facet's corner: 1-D gathers of the map
+        k += j
+        z = hm.z_um.reshape(-1)
+        z0 = z.take(k).astype(np.float64, copy=False)
+        p = (z.take(k + 1).astype(np.float64, copy=False) - z0) / float(hm.dx_um)
+        q = (z.take(k + nx).astype(np.float64, copy=False) - z0) / float(hm.dy_um)
         if level:
             p -= b
             q -= c
