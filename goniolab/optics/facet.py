@@ -139,6 +139,9 @@ Backend = Literal["numba", "numpy", "lean"]
 
 #: luminance_pct evaluates up to this many detector angles exactly, facet by facet.
 _EXACT_MAX_POINTS = 2
+#: The lean backend keeps its facets' cell indices (for the near slits) for maps of at
+#: most this many facets (2048^2): a cached model of a larger map would hold tens of MB.
+_KEEP_INDEX_MAX_FACETS = 1 << 22
 #: The lean backend's numpy kernels take at most this many slope cells per call (their
 #: temporaries, about ten arrays of the cells, stay a few tens of MB on any map).
 _CELLS_PER_CALL = 1 << 20
@@ -352,7 +355,8 @@ class FacetModel:
         """The lean backend's slope cells ``(p, q, count)``
         (:func:`goniolab.optics.facet_backends.slope_cells`)."""
         cells, index = slope_cells_indexed(self.surface)
-        self.__dict__["_cell_index"] = index
+        keep = self.surface.n_facets <= _KEEP_INDEX_MAX_FACETS  # 4 bytes a facet, held
+        self.__dict__["_cell_index"] = index if keep else None
         return cells
 
     def _facets_near(
