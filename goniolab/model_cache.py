@@ -187,7 +187,7 @@ def _check_numeric_range(spec: str, hm: Any) -> None:
 
     z = np.asarray(hm.z_um)
     # fmax/fmin skip NaN and make no copy of the map (np.abs(z[finite]) made two)
-    top, bottom = float(np.fmax.reduce(z, axis=None)), float(np.fmin.reduce(z, axis=None))
+    bottom, top = hm.z_range
     if math.isfinite(top) and math.isfinite(bottom):
         z_max = max(abs(top), abs(bottom))
     else:  # all NaN, or an infinity: the finite points only (copies; a rare map)

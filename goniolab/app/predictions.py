@@ -19,7 +19,6 @@ module name is used once in the tree, ``goniolab/commands/predict.py`` is the CL
 
 from __future__ import annotations
 
-import asyncio
 import math
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
@@ -256,8 +255,14 @@ def surface_model(
         model = model_for(heightmap_of(req.surface, req.step_um), **options)
     if progress is not None and (_is_physical(model) or _is_auto(model)):
         # auto passes it on to the wave models it builds (reading its .kirchhoff here built
-        # both wave models, and imported their modules, for a map it sends to facets)
+        # both wave models, and imported their modules, for a map it sends to facets) and
+        # to its facet model
         model.progress = progress  # type: ignore[attr-defined]
+    elif progress is not None and _is_a(
+        getattr(model, "surface", None), "goniolab.optics.surface", "MapSurface"
+    ):
+        # --model facet: the same display (a large map's walks over its slopes report)
+        model.surface.progress = progress  # type: ignore[attr-defined]
     return model
 
 
@@ -293,6 +298,16 @@ def require_finite(spec: str, doc: dict[str, Any], cause: str) -> None:
 def _model_name(model: Any) -> str:
     kind = getattr(model, "kind", None)
     return kind if isinstance(kind, str) and kind in model_names() else "facet"
+
+
+def _model_kind(model: Any) -> str:
+    """:func:`goniolab.scan.prediction.model_name` of ``model`` (its :func:`model_for` name,
+    else ``facet`` for a facet model, else its class name), without importing the scan
+    layer (its config and store cost a ``predict`` process about 0.1 s)."""
+    kind = getattr(model, "kind", None)
+    if isinstance(kind, str) and kind in model_names():
+        return kind
+    return "facet" if _is_a(model, "goniolab.optics.facet", "FacetModel") else type(model).__name__
 
 
 # --------------------------------------------------------------------------- stats
@@ -454,6 +469,8 @@ def predict_gloss(
 
 async def predict_gloss_async(req: SurfaceRequest, **kwargs: Any) -> GlossPrediction:
     """:func:`predict_gloss` in a worker thread (the caller's event loop stays free)."""
+    import asyncio  # here: a command's run (no event loop) need not import it
+
     return await asyncio.to_thread(predict_gloss, req, **kwargs)
 
 
@@ -623,7 +640,6 @@ def predict_brdf(
     (default :data:`DEFAULT_CONE_DEG` each), or with ``point`` the BRDF in the exact
     direction (no cone may then be given)."""
     from goniolab.optics.apertures import Cone, Rect, projected_solid_angle_sr
-    from goniolab.scan.prediction import model_name
 
     ti = float(theta_i_deg)
     if not (math.isfinite(ti) and 0.0 <= ti < 90.0):
@@ -669,7 +685,7 @@ def predict_brdf(
     peak = _peak(tr, brdf if lum is None else lum, "brdf_sr" if lum is None else "luminance_pct")
     result = BrdfPrediction(
         req.label, complex(req.n), ti, tr, brdf, lum, src_deg, det_deg, req.wavelength_nm,
-        name, per, fb, warnings, peak, type(model).__name__, model_name(model),
+        name, per, fb, warnings, peak, type(model).__name__, _model_kind(model),
     )  # fmt: skip
     require_finite(req.label, result.as_dict(), MODEL_OVERFLOW)
     return result
@@ -677,6 +693,8 @@ def predict_brdf(
 
 async def predict_brdf_async(req: SurfaceRequest, **kwargs: Any) -> BrdfPrediction:
     """:func:`predict_brdf` in a worker thread (the caller's event loop stays free)."""
+    import asyncio
+
     return await asyncio.to_thread(predict_brdf, req, **kwargs)
 
 

@@ -76,6 +76,13 @@ def _cmd_stats(args: argparse.Namespace) -> int:
     return 0
 
 
+def _datasets() -> Any:
+    """:mod:`goniolab.datasets`, imported only when ``--out`` writes a file."""
+    from goniolab import datasets
+
+    return datasets
+
+
 def _write_out(args: argparse.Namespace, make: Any) -> None:
     """``--out FILE.nc``: the prediction as a netCDF Dataset (units on every variable)."""
     if not args.out:
@@ -100,13 +107,12 @@ def _cmd_gloss(args: argparse.Namespace) -> int:
         return _cmd_gloss_batch(args)
     args.map = args.map[0]
     from goniolab.app.predictions import predict_gloss
-    from goniolab.datasets import gloss_dataset
 
     pred = predict_gloss(surface_request(args), progress=model_progress())
     rep = pred.report
     prov_attrs = {"computed_by": json.dumps(pred.computed_by),
                   "warnings": json.dumps(pred.warnings)}  # fmt: skip
-    _write_out(args, lambda attrs: gloss_dataset(rep, attrs={**attrs, **prov_attrs}))
+    _write_out(args, lambda attrs: _datasets().gloss_dataset(rep, attrs={**attrs, **prov_attrs}))
     _warn(pred.warnings)
     if args.json:
         print(json.dumps(pred.as_dict(), indent=2, allow_nan=False))
@@ -200,7 +206,6 @@ def _cmd_gloss_batch(args: argparse.Namespace) -> int:
 
 def _cmd_brdf(args: argparse.Namespace) -> int:
     from goniolab.app.predictions import predict_brdf
-    from goniolab.datasets import brdf_dataset
 
     pred = predict_brdf(
         surface_request(args),
@@ -219,7 +224,9 @@ def _cmd_brdf(args: argparse.Namespace) -> int:
     cones["warnings"] = json.dumps(pred.warnings)
     _write_out(
         args,
-        lambda attrs: brdf_dataset(pred.theta_i_deg, tr, brdf, lum, attrs={**attrs, **cones}),
+        lambda attrs: _datasets().brdf_dataset(
+            pred.theta_i_deg, tr, brdf, lum, attrs={**attrs, **cones}
+        ),
     )
     if args.json:
         print(json.dumps(pred.as_dict(), indent=2, allow_nan=False))

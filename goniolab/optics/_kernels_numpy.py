@@ -107,17 +107,25 @@ def weight_grad_numpy(
     oy = 2.0 * c * my - wi[1]
     oz = 2.0 * c * mz - wi[2]
     keep = (c > 0.0) & (oz > 0.0)
+    w, pp, qq = _weight_terms(c, mz, wi, n_re, n_im, seed)
+    zero = np.zeros_like(c)
+    return ox, oy, oz, np.where(keep, w, zero), np.where(keep, pp, zero), np.where(keep, qq, zero)
+
+
+def _weight_terms(
+    c: FloatArray, mz: FloatArray, wi: FloatArray, n_re: float, n_im: float, seed: bool
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The weight and its gradient coefficients ``(w, P, Q)`` of facets with ``c = wi . m``
+    (:func:`weight_grad_numpy`, before the facets facing away are zeroed)."""
     f, df = fresnel_d_numpy(c, n_re, n_im)
     wz = wi[2]
     if seed:
-        w, pp, qq = f, df, np.zeros_like(f)
-    else:
-        phi = c * f
-        w = phi / (mz * wz)
-        pp = (f + c * df) / (mz * wz) - 2.0 * phi / (wz * wz)
-        qq = phi / (mz * wz * wz)
-    zero = np.zeros_like(c)
-    return ox, oy, oz, np.where(keep, w, zero), np.where(keep, pp, zero), np.where(keep, qq, zero)
+        return f, df, np.zeros_like(f)
+    phi = c * f
+    w = phi / (mz * wz)
+    pp = (f + c * df) / (mz * wz) - 2.0 * phi / (wz * wz)
+    qq = phi / (mz * wz * wz)
+    return w, pp, qq
 
 
 def diamond_numpy(x: FloatArray, y: FloatArray) -> FloatArray:
@@ -207,17 +215,35 @@ def deposit_numpy(
     *,
     counts: FloatArray | None = None,
 ) -> tuple[FloatArray, FloatArray, float]:
-    """Numpy twin of :func:`deposit_numba`."""
+    """Numpy twin of :func:`deposit_numba`.
+
+    The mirror directions come first: the weights (Fresnel and its derivative) are then
+    formed only for the facets that face the lamp, reflect above the horizon and land on
+    the grid (on a rough map about half of them), each by the same operations as
+    :func:`weight_grad_numpy`, so the grid is the same."""
     mx, my, mz = normals_numpy(mx, my, mz)
-    ox, oy, oz, w, pp, qq = weight_grad_numpy(mx, my, mz, wi, n_re, n_im, seed)
-    if counts is not None:
-        w, pp, qq = w * counts, pp * counts, qq * counts
-    keep = w != 0.0
-    ox, oy, oz, w, pp, qq = ox[keep], oy[keep], oz[keep], w[keep], pp[keep], qq[keep]
+    c = wi[0] * mx + wi[1] * my + wi[2] * mz
+    ox = 2.0 * c * mx - wi[0]
+    oy = 2.0 * c * my - wi[1]
+    oz = 2.0 * c * mz - wi[2]
     x = (np.arctan2(-ox, oz) - a0) / ha
     y = (oy - b0) / hb
-    sel = (x >= 0.0) & (x < na - 1.0) & (y >= 0.0) & (y < nb - 1.0)
-    x, y, w = x[sel], y[sel], w[sel]
+    sel = (c > 0.0) & (oz > 0.0)
+    sel &= x >= 0.0
+    sel &= x < na - 1.0
+    sel &= y >= 0.0
+    sel &= y < nb - 1.0
+    at = np.flatnonzero(sel)
+    mx, my, mz, c = mx[at], my[at], mz[at], c[at]
+    ox, oy, oz, x, y = ox[at], oy[at], oz[at], x[at], y[at]
+    w, pp, qq = _weight_terms(c, mz, wi, n_re, n_im, seed)
+    if counts is not None:
+        cnt = counts[at]
+        w, pp, qq = w * cnt, pp * cnt, qq * cnt
+    keep = w != 0.0  # (none is dropped here unless its weight is 0)
+    if not keep.all():
+        mx, my, mz, ox, oy, oz = mx[keep], my[keep], mz[keep], ox[keep], oy[keep], oz[keep]
+        w, pp, qq, x, y = w[keep], pp[keep], qq[keep], x[keep], y[keep]
 
     def cic(xs: FloatArray, ys: FloatArray, val: FloatArray, n0: int, n1: int) -> FloatArray:
         i = xs.astype(np.int64)
@@ -234,8 +260,7 @@ def deposit_numpy(
     nac, nbc = coarse_size(na), coarse_size(nb)
     ggrid = np.zeros((nac, nbc, 2))
     if grad:
-        ox, oy, oz, pp, qq = ox[sel], oy[sel], oz[sel], pp[sel], qq[sel]
-        mxs, mys, mzs = mx[keep][sel], my[keep][sel], mz[keep][sel]
+        mxs, mys, mzs = mx, my, mz
         rho = np.sqrt(ox * ox + oz * oz)
         ga = (pp * (ox * mzs - oz * mxs) + qq * ox) / rho
         gb = (pp * (rho * rho * mys - oy * (ox * mxs + oz * mzs)) - qq * oz * oy) / rho

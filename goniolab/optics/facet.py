@@ -116,7 +116,7 @@ from goniolab.optics.facet_backends import (
     kernel_pool,
     limit_threads,
     numba_kernels,
-    slope_cells,
+    slope_cells_indexed,
     thread_limit,
 )
 from goniolab.optics.fresnel import fresnel, fresnel_dielectric
@@ -139,6 +139,9 @@ Backend = Literal["numba", "numpy", "lean"]
 
 #: luminance_pct evaluates up to this many detector angles exactly, facet by facet.
 _EXACT_MAX_POINTS = 2
+#: The lean backend keeps its facets' cell indices (for the near slits) for maps of at
+#: most this many facets (2048^2): a cached model of a larger map would hold tens of MB.
+_KEEP_INDEX_MAX_FACETS = 1 << 22
 #: The lean backend's numpy kernels take at most this many slope cells per call (their
 #: temporaries, about ten arrays of the cells, stay a few tens of MB on any map).
 _CELLS_PER_CALL = 1 << 20
@@ -351,13 +354,21 @@ class FacetModel:
     def _slope_cells(self) -> tuple[FloatArray, FloatArray, FloatArray]:
         """The lean backend's slope cells ``(p, q, count)``
         (:func:`goniolab.optics.facet_backends.slope_cells`)."""
-        return slope_cells(self.surface)
+        cells, index = slope_cells_indexed(self.surface)
+        keep = self.surface.n_facets <= _KEEP_INDEX_MAX_FACETS  # 4 bytes a facet, held
+        self.__dict__["_cell_index"] = index if keep else None
+        return cells
 
     def _facets_near(
         self, wi: FloatArray, alpha_rad: float, reach_a: float, reach_b: float
     ) -> tuple[FloatArray, FloatArray]:
-        """The facets a narrow slit can reach (:func:`goniolab.optics.facet_backends.facets_near`)."""
-        return facets_near(self.surface, None, wi, alpha_rad, reach_a, reach_b)
+        """The facets a narrow slit can reach (:func:`goniolab.optics.facet_backends.facets_near`);
+        from the second slit on, picked by the facets' cell indices (:attr:`_slope_cells`)."""
+        walks = self.__dict__["_near_walks"] = self.__dict__.get("_near_walks", 0) + 1
+        if walks > 1 and self.backend == "lean":
+            self._slope_cells  # noqa: B018  (one walk for all slits; it keeps the index)
+        index = self.__dict__.get("_cell_index")
+        return facets_near(self.surface, None, wi, alpha_rad, reach_a, reach_b, index)
 
     # ------------------------------------------------------------------ slope statistics
     def slope_density(self, p: ArrayLike, q: ArrayLike) -> FloatArray:

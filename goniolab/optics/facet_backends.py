@@ -16,30 +16,36 @@ import math
 import os
 import threading
 from collections.abc import Iterator
-from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from goniolab.optics.surface import Surface
 
+if TYPE_CHECKING:  # the pool is made (and concurrent.futures imported) for numba's threads
+    from concurrent.futures import ThreadPoolExecutor
+
 __all__ = [
     "LEAN_EXACT_BELOW_DEG",
     "LEAN_SLOPE_BIN",
     "MIN_CHUNK",
     "SLOPES",
+    "cell_index_of",
     "check_slope_range",
     "facets_near",
     "kernel_pool",
     "limit_threads",
     "numba_kernels",
     "slope_cells",
+    "slope_cells_indexed",
     "thread_limit",
 ]
 
 FloatArray = NDArray[np.float64]
+#: Every facet's lean cell indices ``(ip, iq)``, in facet order.
+CellIndex = tuple[NDArray[np.int16], NDArray[np.int16]]
 
 #: Facets per thread below which the numba kernels run on one thread.
 MIN_CHUNK = 1 << 16
@@ -61,6 +67,14 @@ _DENSE_CELLS_PER_FACET = 4
 _DENSE_MIN_CELLS = 1 << 20
 #: Largest |slope| / bin the lean histogram indexes: (2 * 2**30)**2 cells fit an int64 key.
 _MAX_SLOPE_CELLS = 1 << 30
+#: Maps of at most this many facets count their slope cells in one walk
+#: (:func:`_dense_cells_one_pass`: 4 bytes per facet kept meanwhile).
+_ONE_PASS_MAX_FACETS = 1 << 24
+#: ... forming the slopes this many at a time (a few rows of a map: in cache) ...
+_ONE_PASS_CHUNK = 1 << 16
+#: ... and count the kept indices this many at a time.
+_ONE_PASS_COUNT = 1 << 21
+_I16_MIN, _I16_MAX = float(np.iinfo(np.int16).min), float(np.iinfo(np.int16).max)
 #: Empty third facet array: the kernels read ``(p, q)`` slopes instead of unit normals.
 SLOPES: FloatArray = np.empty(0)
 
@@ -117,6 +131,8 @@ def limit_threads(n: int) -> Iterator[None]:
 def kernel_pool() -> ThreadPoolExecutor:
     global _executor
     if _executor is None:
+        from concurrent.futures import ThreadPoolExecutor
+
         _executor = ThreadPoolExecutor(
             max_workers=max(1, os.cpu_count() or 1), thread_name_prefix="facet"
         )
@@ -154,6 +170,23 @@ def slope_cells(
     them from the map as it goes, and the count never holds the map's facets.
     """
     surface = p if isinstance(p, Surface) else Surface(p=p, q=p if q is None else q, source=source)
+    return slope_cells_indexed(surface)[0]
+
+
+def slope_cells_indexed(
+    surface: Surface,
+) -> tuple[tuple[FloatArray, FloatArray, FloatArray], CellIndex | None]:
+    """:func:`slope_cells` of ``surface`` and, when they were counted in one walk
+    (:func:`_dense_cells_one_pass`), every facet's cell indices ``(ip, iq)`` (int16, in
+    facet order), which :func:`facets_near` reads instead of walking the slopes again."""
+    if surface.n_facets <= _ONE_PASS_MAX_FACETS:
+        got = _dense_cells_one_pass(surface)
+        if got is not None:
+            return got
+    return _cells_two_walks(surface), None
+
+
+def _cells_two_walks(surface: Surface) -> tuple[FloatArray, FloatArray, FloatArray]:
     b = LEAN_SLOPE_BIN
     p_lo, p_hi, q_lo, q_hi = surface.slope_range
     worst = max(abs(p_lo), abs(p_hi), abs(q_lo), abs(q_hi))
@@ -206,6 +239,72 @@ def slope_cells(
     return cp, cq, weights.astype(np.float64)
 
 
+def _dense_cells_one_pass(
+    surface: Surface,
+) -> tuple[tuple[FloatArray, FloatArray, FloatArray], CellIndex] | None:
+    """:func:`slope_cells` in one walk over the slopes: each block's cell indices
+    ``floor(p / b + 1/2)``, ``floor(q / b + 1/2)`` (the same float operations) are kept as
+    int16 (a quarter of the slopes' memory) while their range is found, then counted. The
+    two-walk path (:attr:`~goniolab.optics.surface.Surface.slope_range` first) formed every
+    slope twice. None, and nothing kept, when an index leaves int16 (``|slope| >= 32.7``),
+    is not finite, or the range needs the sparse count: :func:`slope_cells` then takes its
+    general path, which also names a map beyond the index."""
+    inv = 1.0 / LEAN_SLOPE_BIN
+    n = surface.n_facets
+    ip = np.empty(n, dtype=np.int16)
+    iq = np.empty(n, dtype=np.int16)
+    buf = np.empty(0)
+    lo_p = lo_q = math.inf
+    hi_p = hi_q = -math.inf
+    at = 0
+    # blocks of a few rows, formed in reused arrays: the work stays in cache
+    for pb, qb in surface.slope_blocks(_ONE_PASS_CHUNK, reuse=True):
+        m = pb.size
+        if m > buf.size:  # a block is one row at least
+            buf = np.empty(m)
+        k = buf[:m]
+        for v, out in ((pb, ip), (qb, iq)):
+            np.multiply(v, inv, out=k)
+            k += 0.5
+            np.floor(k, out=k)
+            lo, hi = float(k.min()), float(k.max())
+            if not (_I16_MIN <= lo <= _I16_MAX and _I16_MIN <= hi <= _I16_MAX):  # NaN: False
+                return None
+            np.copyto(out[at : at + m], k, casting="unsafe")  # exact: integers in range
+            if out is ip:
+                lo_p, hi_p = min(lo_p, lo), max(hi_p, hi)
+            else:
+                lo_q, hi_q = min(lo_q, lo), max(hi_q, hi)
+        at += m
+    p0, q0 = int(lo_p), int(lo_q)
+    n_p, n_q = int(hi_p) - p0 + 1, int(hi_q) - q0 + 1
+    n_cells = n_p * n_q
+    if n_cells > max(_DENSE_CELLS_PER_FACET * surface.n_facets, _DENSE_MIN_CELLS):
+        return None
+    counts = np.zeros(n_cells, dtype=np.int64)
+    offset = p0 * n_q + q0
+    for lo in range(0, ip.size, _ONE_PASS_COUNT):  # int64 keys of a chunk at a time
+        key = np.multiply(ip[lo : lo + _ONE_PASS_COUNT], n_q, dtype=np.int64)
+        key += iq[lo : lo + _ONE_PASS_COUNT]
+        key -= offset
+        counts += np.bincount(key, minlength=n_cells)
+    cells = np.flatnonzero(counts)
+    weights = counts[cells]
+    cp = ((cells // n_q + p0) * LEAN_SLOPE_BIN).astype(np.float64)
+    cq = ((cells % n_q + q0) * LEAN_SLOPE_BIN).astype(np.float64)
+    ip.setflags(write=False)
+    iq.setflags(write=False)
+    return (cp, cq, weights.astype(np.float64)), (ip, iq)
+
+
+def cell_index_of(v: float) -> int:
+    """The lean histogram's cell index ``floor(v / b + 1/2)`` of a slope ``v``, by the
+    float operations the facets' indices are formed with (so it orders with them)."""
+    k = v * (1.0 / LEAN_SLOPE_BIN)
+    k += 0.5
+    return math.floor(k)
+
+
 def _cell_blocks(surface: Surface) -> Iterator[tuple[FloatArray, FloatArray]]:
     """Blocks of :data:`_CELL_BLOCK` facets: a held surface's slices, a streamed map
     surface's blocks as it forms them."""
@@ -224,6 +323,7 @@ def facets_near(
     alpha_rad: float,
     reach_a: float,
     reach_b: float,
+    index: CellIndex | None = None,
 ) -> tuple[FloatArray, FloatArray]:
     """Of the slopes ``p``, ``q``: those of a superset of the facets whose mirror direction of ``wi``
     lies within ``reach_a`` in plane of the in-plane angle ``alpha_rad`` and within
@@ -237,13 +337,26 @@ def facets_near(
     size). All facets when a corner of the rectangle leaves the hemisphere.
 
     ``p`` may be a :class:`~goniolab.optics.surface.Surface` (``q`` None): its facets are
-    then selected block by block, in facet order (the same arrays).
+    then selected block by block, in facet order (the same arrays), or, given the facets'
+    cell ``index`` (:func:`slope_cells_indexed`), from those whose cells meet the box,
+    without forming the other slopes (the same facets, in the same order).
     """
     if isinstance(p, Surface):
         surface = p
         box = _near_box(wi, alpha_rad, reach_a, reach_b)
         if box is None:
             return surface.p, surface.q
+        if index is not None:
+            # the facets whose cells meet the box (a superset: the index is monotone in
+            # the slope), then the box itself on their slopes, taken from the map
+            ip, iq = index
+            lo_p, hi_p = (min(max(cell_index_of(v), -(1 << 15)), (1 << 15) - 1) for v in box[:2])
+            lo_q, hi_q = (min(max(cell_index_of(v), -(1 << 15)), (1 << 15) - 1) for v in box[2:])
+            hit = ip >= lo_p
+            hit &= ip <= hi_p
+            hit &= iq >= lo_q
+            hit &= iq <= hi_q
+            return _inside(*surface.take(np.flatnonzero(hit)), box)
         parts = [_inside(pb, qb, box) for pb, qb in surface.slope_blocks()]
         if len(parts) == 1:
             return parts[0]

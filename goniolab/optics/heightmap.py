@@ -83,6 +83,8 @@ class HeightMap:
     dy_um: float
     source: str = "<memory>"
     meta: dict[str, str] = field(default_factory=dict)
+    #: values derived from the (read-only) heights, kept: not a field
+    _derived: dict[str, Any] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         src = self.source
@@ -108,11 +110,17 @@ class HeightMap:
             )
         if z.size == 0:
             raise heightmap_error(src, f"height map has zero points (shape {z.shape})")
-        # one fast reduction; only a non-finite sum (NaN, inf or overflow) needs the scan
-        if not math.isfinite(float(np.sum(z, dtype=np.float64))) and np.isinf(z).any():
+        # one fast reduction (the column sums, which the plane fit reads too); only a
+        # non-finite sum (NaN, inf or overflow) needs the scan
+        col = z.sum(axis=0, dtype=np.float64) if z.ndim == 2 else np.sum(z, dtype=np.float64)
+        complete = bool(np.isfinite(col).all())
+        if not complete and np.isinf(z).any():
             raise heightmap_error(src, "heights contain inf (use NaN for missing points)")
         z.setflags(write=False)
         object.__setattr__(self, "z_um", z)
+        # a finite sum: no NaN (n_valid needs no count); the heights are read-only, so what
+        # is derived from them (the plane fit, the range) is kept (_derived)
+        object.__setattr__(self, "_derived", {"complete": True, "col_sum": col} if complete else {})
         for name in ("dx_um", "dy_um"):
             value = getattr(self, name)
             try:
@@ -144,9 +152,23 @@ class HeightMap:
     def n_valid(self) -> int:
         """Number of valid (non-NaN) points (counted in blocks of rows: no map-sized mask)."""
         z = self.z_um
+        if self._derived.get("complete"):
+            return int(z.size)
         rows = max(1, _BLOCK_POINTS // max(1, z.shape[1]))
         nan = sum(int(np.count_nonzero(np.isnan(z[r : r + rows]))) for r in range(0, len(z), rows))
         return int(z.size - nan)
+
+    @property
+    def z_range(self) -> tuple[float, float]:
+        """``(min, max)`` of the valid heights (NaN skipped; NaN, NaN when none), found
+        once (``np.fmin`` / ``np.fmax`` reductions: no copy of the map)."""
+        got = self._derived.get("z_range")
+        if got is None:
+            z = self.z_um
+            got = (float(np.fmin.reduce(z, axis=None)), float(np.fmax.reduce(z, axis=None)))
+            self._derived["z_range"] = got
+        out: tuple[float, float] = got
+        return out
 
     @property
     def valid_fraction(self) -> float:
@@ -189,12 +211,24 @@ def plane_fit(hm: HeightMap) -> tuple[float, float, float]:
 
 
 def plane_fit_and_completeness(hm: HeightMap) -> tuple[float, float, float, bool]:
-    """:func:`plane_fit` and whether the map has no missing point."""
+    """:func:`plane_fit` and whether the map has no missing point (computed once per map:
+    the wave models' tiles and the facet slopes both level it)."""
+    got = hm._derived.get("plane")
+    if got is None:
+        got = _plane_fit_and_completeness(hm)
+        hm._derived["plane"] = got
+    out: tuple[float, float, float, bool] = got
+    return out
+
+
+def _plane_fit_and_completeness(hm: HeightMap) -> tuple[float, float, float, bool]:
     z = hm.z_um
     ny, nx = z.shape
     x = (np.arange(nx, dtype=np.float64) - (nx - 1) / 2.0) * hm.dx_um
     y = (np.arange(ny, dtype=np.float64) - (ny - 1) / 2.0) * hm.dy_um
-    col = z.sum(axis=0, dtype=np.float64)  # a float32 map accumulates in float64
+    col = hm._derived.get("col_sum")
+    if col is None:
+        col = z.sum(axis=0, dtype=np.float64)  # a float32 map accumulates in float64
     if np.isfinite(col).all():
         row = z.sum(axis=1, dtype=np.float64)
         sxx = ny * float(x @ x)

@@ -129,7 +129,7 @@ def choose_model(stats: MapStats, theta_deg: float, wavelength_nm: float) -> Cho
     lam_um = wavelength_nm * 1e-3
     if g <= RR_MAX_G and stats.sdq <= RR_MAX_SDQ:
         return Choice("rayleigh-rice", g, f"g = {g:.3g} <= {RR_MAX_G:g}, Sdq {stats.sdq:.3g}")
-    if stats.corr_length_um < lam_um and g <= 1.0:
+    if g <= 1.0 and stats.corr_length_um < lam_um:  # g first: the length costs FFTs
         return Choice(
             "rayleigh-rice",
             g,
@@ -222,8 +222,11 @@ class AutoModel:
 
     @cached_property
     def facet(self) -> FacetModel:
-        """The facet model (built on first use)."""
-        return self._facet_factory()
+        """The facet model (built on first use); its walks over a large map report to
+        :attr:`progress` (:meth:`SharedMap.adopt_facet`)."""
+        facet = self._facet_factory()
+        self._shared.adopt_facet(facet)
+        return facet
 
     @cached_property
     def kirchhoff(self) -> KirchhoffModel:
@@ -259,6 +262,8 @@ class AutoModel:
     @progress.setter
     def progress(self, value: Progress | None) -> None:
         self._opts["progress"] = value
+        if value is not None:  # the facet model's walks too
+            self._shared.report_to(value)
         for name in ("kirchhoff", "rayleigh_rice"):
             m = self.__dict__.get(name)
             if m is not None:

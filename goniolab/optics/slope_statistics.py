@@ -222,11 +222,18 @@ class SlopeStatistics:
         m = p.size
         nb = _LAMBDA_BINS
         half = n_ph // 2
-        for j in range(half):
-            x = p * math.cos(ph[j]) + q * math.sin(ph[j])
+        x = np.empty(m)
+        buf = np.empty(m)
+        k = np.empty(m, dtype=np.int64)
+        for j in range(half):  # the temporaries reused: x = p cos + q sin, k its bin
+            np.multiply(p, math.cos(ph[j]), out=x)
+            x += np.multiply(q, math.sin(ph[j]), out=buf)
             lo, hi = float(x.min()), float(x.max())
             width = max(hi - lo, 1e-300) / nb
-            k = np.minimum(((x - lo) / width).astype(np.int64), nb - 1)
+            np.subtract(x, lo, out=buf)
+            buf /= width
+            k[...] = buf  # truncation, as astype(np.int64)
+            np.minimum(k, nb - 1, out=k)
             cnt = np.bincount(k, minlength=nb).astype(np.float64)
             tot = np.bincount(k, weights=x, minlength=nb)
             c_cnt = np.concatenate(([0.0], np.cumsum(cnt)))
@@ -272,6 +279,57 @@ class SlopeStatistics:
         out: FloatArray = np.maximum(lam, 0.0)
         return out
 
+    def _nodes_lambda(self, al: FloatArray, be: FloatArray) -> FloatArray:
+        """:meth:`smith_lambda` of the grid nodes ``wo = (-sin al cos be, sin be, cos al
+        cos be)`` (in-plane angle ``al`` x out-of-plane ``be``, rad), the same operations on
+        the same values without the ``(..., 3)`` direction array: its strided components
+        and a dozen temporaries of the grid's size cost a 71-point curve's two grids
+        (0.9 M nodes) about 25 ms."""
+        table = self._lambda_table
+        n0, n1 = table.shape
+        cb = np.cos(be)
+        cz = np.multiply.outer(np.cos(al), cb)
+        np.clip(cz, -1.0, 1.0, out=cz)
+        x = np.arccos(cz)
+        np.degrees(x, out=x)
+        x /= _LAMBDA_THETA_STEP_DEG
+        np.clip(x, 0.0, n0 - 1.0, out=x)
+        y = np.arctan2(np.broadcast_to(np.sin(be), cz.shape), np.multiply.outer(-np.sin(al), cb))
+        np.degrees(y, out=y)
+        np.remainder(y, 360.0, out=y)
+        y /= _LAMBDA_PHI_STEP_DEG
+        np.clip(y, 0.0, n1 - 1.0, out=y)
+        i = np.floor(x).astype(np.int64)
+        np.minimum(i, n0 - 2, out=i)
+        j = np.floor(y).astype(np.int64)
+        np.minimum(j, n1 - 2, out=j)
+        x -= i  # the fractions fx, fy
+        y -= j
+        flat = i
+        flat *= n1
+        flat += j
+        del j
+        tf = table.ravel()
+        gx, gy = 1.0 - x, 1.0 - y
+        # cell_bilinear's sum, term by term in its order
+        t = tf.take(flat) * gx
+        t *= gy
+        u = tf.take(flat + n1) * x
+        u *= gy
+        t += u
+        flat += 1
+        u = tf.take(flat) * gx
+        u *= y
+        t += u
+        flat += n1
+        u = tf.take(flat) * x
+        u *= y
+        t += u
+        with np.errstate(divide="ignore", invalid="ignore"):
+            lam = np.where(cz > 0, t / np.where(cz > 0, cz, 1.0) - 1.0, np.inf)
+        out: FloatArray = np.maximum(lam, 0.0, out=lam)
+        return out
+
     def masking_g2(self, wi: ArrayLike, wo: ArrayLike) -> FloatArray:
         """Height-correlated Smith masking-shadowing ``1/(1 + Lambda(wi) + Lambda(wo))``."""
         out: FloatArray = 1.0 / (1.0 + self.smith_lambda(wi) + self.smith_lambda(wo))
@@ -293,13 +351,7 @@ class SlopeStatistics:
         )
         lam = self._node_lambda.get(key)
         if lam is None:
-            al = np.radians(alpha_deg)[:, None]
-            be = beta_rad[None, :]
-            wo = np.stack(
-                np.broadcast_arrays(-np.sin(al) * np.cos(be), np.sin(be), np.cos(al) * np.cos(be)),
-                axis=-1,
-            )
-            lam = self.smith_lambda(wo)
+            lam = self._nodes_lambda(np.radians(alpha_deg), np.asarray(beta_rad, np.float64))
             if len(self._node_lambda) >= 8:
                 self._node_lambda.pop(next(iter(self._node_lambda)))
             self._node_lambda[key] = lam

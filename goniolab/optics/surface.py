@@ -271,10 +271,15 @@ class Surface:
         """Number of facets."""
         return int(self.p.size)
 
-    def slope_blocks(self, facets: int | None = None) -> Iterator[tuple[FloatArray, FloatArray]]:
+    def slope_blocks(
+        self, facets: int | None = None, *, reuse: bool = False
+    ) -> Iterator[tuple[FloatArray, FloatArray]]:
         """The slopes ``(p, q)`` in consecutive blocks of about ``facets`` facets
         (default :data:`SLOPE_BLOCK_FACETS`), in facet order (a map's surface forms each block from the map when asked, so a walk
-        over its facets holds one block, not the map's facets: :class:`MapSurface`)."""
+        over its facets holds one block, not the map's facets: :class:`MapSurface`).
+        ``reuse``: a map's surface may form each block in the previous block's arrays (the
+        caller keeps none of them): small blocks then stay in cache, and no new memory is
+        touched per block."""
         step = max(1, int(SLOPE_BLOCK_FACETS if facets is None else facets))
         for lo in range(0, self.n_facets, step):
             yield self.p[lo : lo + step], self.q[lo : lo + step]
@@ -313,8 +318,8 @@ class Surface:
 def _slopes_finite(hm: HeightMap, b: float, c: float) -> bool:
     """Whether every forward slope of a complete map is finite (no difference overflows):
     bounded by the height range over the smaller step plus the plane's slopes."""
-    z = hm.z_um
-    span = (float(z.max()) - float(z.min())) / min(float(hm.dx_um), float(hm.dy_um))
+    lo, hi = hm.z_range  # a complete map's: its min and max
+    span = (hi - lo) / min(float(hm.dx_um), float(hm.dy_um))
     return math.isfinite(span + abs(b) + abs(c))
 
 
@@ -380,7 +385,9 @@ class MapSurface(Surface):
     def streamed(self) -> bool:
         return "_whole" not in self.__dict__
 
-    def slope_blocks(self, facets: int | None = None) -> Iterator[tuple[FloatArray, FloatArray]]:
+    def slope_blocks(
+        self, facets: int | None = None, *, reuse: bool = False
+    ) -> Iterator[tuple[FloatArray, FloatArray]]:
         if not self.streamed:
             yield from super().slope_blocks(facets)
             return
@@ -393,9 +400,15 @@ class MapSurface(Surface):
         if report is not None:
             self.__dict__["_passes"] = self.__dict__.get("_passes", 0) + 1
             what = f"facet slopes, pass {self.__dict__['_passes']}"
+        bufs = (np.empty((rows, nx - 1)), np.empty((rows, nx - 1))) if reuse else None
         for r0 in range(0, total, rows):
             r1 = min(r0 + rows, total)
-            pb, qb = _forward_rows(self._hm, b, c, level, r0, r1)
+            if bufs is None:
+                pb, qb = _forward_rows(self._hm, b, c, level, r0, r1)
+            else:
+                pb, qb = _forward_rows(
+                    self._hm, b, c, level, r0, r1, bufs[0][: r1 - r0], bufs[1][: r1 - r0]
+                )
             yield pb.reshape(-1), qb.reshape(-1)
             if report is not None:
                 report(r1, total, what)
@@ -405,11 +418,14 @@ class MapSurface(Surface):
             return super().take(idx)
         b, c, level = self._plane
         hm = self._hm
-        i, j = np.divmod(np.asarray(idx, dtype=np.int64), hm.shape[1] - 1)
-        z = hm.z_um
-        z0 = z[i, j].astype(np.float64)
-        p = (z[i, j + 1].astype(np.float64) - z0) / float(hm.dx_um)
-        q = (z[i + 1, j].astype(np.float64) - z0) / float(hm.dy_um)
+        nx = hm.shape[1]
+        i, j = np.divmod(np.asarray(idx, dtype=np.int64), nx - 1)
+        k = i * nx  # flat index of each facet's corner: 1-D gathers of the map
+        k += j
+        z = hm.z_um.reshape(-1)
+        z0 = z.take(k).astype(np.float64, copy=False)
+        p = (z.take(k + 1).astype(np.float64, copy=False) - z0) / float(hm.dx_um)
+        q = (z.take(k + nx).astype(np.float64, copy=False) - z0) / float(hm.dy_um)
         if level:
             p -= b
             q -= c

@@ -105,14 +105,22 @@ def resolve_steps(
 
 
 def make_heightmap(
-    name: str, z_um: ArrayLike, dx_um: float, dy_um: float, meta: dict[str, str]
+    name: str,
+    z_um: ArrayLike,
+    dx_um: float,
+    dy_um: float,
+    meta: dict[str, str],
+    *,
+    no_inf: bool = False,
 ) -> HeightMap:
     """A :class:`HeightMap` of a reader's heights, taking a fresh array without a copy
-    (float32 heights stay float32: :class:`HeightMap` computes in float64 block by block)."""
+    (float32 heights stay float32: :class:`HeightMap` computes in float64 block by block).
+    ``no_inf``: the reader has already turned every infinite height into NaN (the check
+    for an overflowing scale is then skipped: a pass over the map)."""
     z = np.asarray(z_um)
     if z.dtype != np.float32:
         z = z.astype(np.float64, copy=False)
-    if not math.isfinite(float(np.sum(z, dtype=np.float64))) and np.isinf(z).any():
+    if not no_inf and not math.isfinite(float(np.sum(z, dtype=np.float64))) and np.isinf(z).any():
         raise heightmap_error(
             name, "heights overflow to infinity after scaling: implausible z scale"
         )

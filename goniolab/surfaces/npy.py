@@ -75,19 +75,21 @@ def read_npy(path: Path, opts: ReadOptions) -> HeightMap:
     if z.dtype != np.float32:
         z = z.astype(np.float64, copy=False)
     if not np.isfinite(np.sum(z, dtype=np.float64)):
-        z[np.isinf(z)] = np.nan
+        z[np.isinf(z)] = np.nan  # then no height is infinite, unless scaled below
     meta: dict[str, str] = {"format": "npy"}
     file_steps: tuple[float, float] | None = None
     side = _sidecar(path)
+    scaled = False
     if side.exists():
         file_steps, z_um_per, extra = _read_sidecar(side, name)
         if z_um_per != 1.0:  # scaled in float64, as a float64 file is
             z = z.astype(np.float64, copy=False) * z_um_per
+            scaled = True
         meta.update(extra)
     # name the sidecar only when there is one (issue 27: the message named a missing file)
     what = side.name if side.exists() else f"the file (it has no sidecar {side.name})"
     dx, dy = resolve_steps(name, file_steps, opts.step_um, what=what)
-    hm = make_heightmap(name, z, dx, dy, meta)
+    hm = make_heightmap(name, z, dx, dy, meta, no_inf=not scaled)
     _warn_if_nm(hm)
     return hm
 
@@ -169,32 +171,40 @@ def _warn_if_nm(hm: HeightMap) -> None:
     :data:`_NM_CHECK_ROWS` pairs of adjacent rows spread over the map, in blocks of at most
     1/:data:`_NM_CHECK_BLOCKS` of the map, so the check adds no full-size temporaries to the
     read (it made five, and set the peak memory of a 2048^2 read-to-curve at 3.25 x the
-    map) and few numpy calls (row by row it took 60 ms of a 2048^2 read)."""
+    map) and few numpy calls (row by row it took 60 ms of a 2048^2 read); the slopes are
+    read only when Sq is suspect."""
     z = hm.z_um  # float64, or float32 (the rows read are cast below)
     ny, nx = z.shape
     if ny < 2 or nx < 2:
         return
-    rows = np.unique(np.linspace(0, ny - 2, min(ny - 1, _NM_CHECK_ROWS)).astype(np.intp))
-    n = n_g = 0
-    s1 = s2 = g2 = 0.0
+    rows = np.linspace(0, ny - 2, min(ny - 1, _NM_CHECK_ROWS)).astype(np.intp)
+    rows = rows[np.concatenate(([True], np.diff(rows) > 0))]  # sorted: np.unique's rows
     per_block = max(1, ny // _NM_CHECK_BLOCKS)
-    for k in range(0, rows.size, per_block):  # temporaries of a block of rows only
-        block = rows[k : k + per_block]
-        top = z[block].astype(np.float64, copy=False)
-        below = z[block + 1].astype(np.float64, copy=False)
-        vals = top[np.isfinite(top)]
+    spans = [rows[k : k + per_block] for k in range(0, rows.size, per_block)]
+    n = 0
+    s1 = s2 = 0.0
+    for block in spans:  # temporaries of a block of rows only
+        vals = z[block].astype(np.float64, copy=False)
+        vals = vals[np.isfinite(vals)]
         n += vals.size
         s1 += float(vals.sum())
         s2 += float(np.dot(vals, vals))
-        g = (np.diff(top, axis=1) / hm.dx_um) ** 2 + ((below - top)[:, :-1] / hm.dy_um) ** 2
-        good = g[np.isfinite(g)]
-        n_g += good.size
-        g2 += float(good.sum())
     if n == 0:
         return
     mean = s1 / n
     sq = math.sqrt(max(s2 / n - mean * mean, 0.0))
-    if not sq > NM_SUSPECT_SQ_UM or n_g == 0:
+    if not sq > NM_SUSPECT_SQ_UM:
+        return  # the slopes are read only for a map whose Sq is suspect
+    n_g = 0
+    g2 = 0.0
+    for block in spans:
+        top = z[block].astype(np.float64, copy=False)
+        below = z[block + 1].astype(np.float64, copy=False)
+        g = (np.diff(top, axis=1) / hm.dx_um) ** 2 + ((below - top)[:, :-1] / hm.dy_um) ** 2
+        good = g[np.isfinite(g)]
+        n_g += good.size
+        g2 += float(good.sum())
+    if n_g == 0:
         return
     sdq = math.sqrt(g2 / n_g)
     if sdq > NM_SUSPECT_SDQ:

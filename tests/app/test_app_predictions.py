@@ -7,6 +7,7 @@ from __future__ import annotations
 import asyncio
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -143,3 +144,27 @@ def test_the_cli_and_the_notebook_print_the_same_facet_numbers(
     cli = json.loads(capsys.readouterr().out)
     via_api = gl.predict_brdf("sample:wittmann-3", theta_r_deg="40:50:5", model="facet")
     np.testing.assert_allclose(via_api["luminance_pct"].values, cli["luminance_pct"], rtol=1e-12)
+
+
+@pytest.mark.parametrize("model", ["facet", "auto"])
+def test_long_facet_work_reports_progress_with_either_model(
+    model: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``--model facet`` shows the progress the default shows: every walk over a large
+    map's slopes (here every map counts as large) reports its rows, the last at the end."""
+    from goniolab.optics import surface as surface_mod
+
+    monkeypatch.setattr(surface_mod, "STREAM_MIN_FACETS", 0)
+    rng = np.random.default_rng(3)
+    path = tmp_path / "rough.npy"
+    np.save(path, rng.normal(0.0, 2.0, (96, 96)))
+    (tmp_path / "rough.npy.json").write_text('{"dx_um": 10.0, "dy_um": 10.0}\n')
+    seen: list[tuple[int, int, str]] = []
+    predict_brdf(
+        SurfaceRequest(str(path), model=model),
+        theta_r_deg="30:60:1",
+        progress=lambda done, total, what: seen.append((done, total, what)),
+    )
+    assert seen, "no progress reported"
+    assert all(what.startswith("facet slopes, pass ") for _, _, what in seen)
+    assert seen[-1][0] == seen[-1][1] == 95  # rows of facets of a 96^2 map

@@ -42,8 +42,15 @@ def _sorted(cells: tuple[np.ndarray, np.ndarray, np.ndarray]) -> np.ndarray:
     return np.stack([cp[order], cq[order], c[order]])
 
 
-@pytest.mark.parametrize("spike_um", [0.0, 5.0, 20.0])
-def test_cells_are_the_occupied_slope_pairs(spike_um: float) -> None:
+@pytest.mark.parametrize("one_pass", [True, False])
+@pytest.mark.parametrize("spike_um", [0.0, 5.0, 20.0, 40.0])
+def test_cells_are_the_occupied_slope_pairs(
+    spike_um: float, one_pass: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Both counts (the one-walk int16 count and the general two-walk one) give the
+    distinct pairs; a 40 um spike's slopes (> 32.7) leave int16."""
+    if not one_pass:
+        monkeypatch.setattr(facet_backends, "_ONE_PASS_MAX_FACETS", 0)
     surf = Surface.from_heightmap(_spiked(128, spike_um))
     got = FacetModel(surf, backend="lean")._slope_cells
     np.testing.assert_allclose(_sorted(got), _sorted(_direct_cells(surf)), rtol=0, atol=1e-12)

@@ -19,7 +19,7 @@ from goniolab.model_cache import model_for
 from goniolab.optics import facet as facet_mod
 from goniolab.optics import surface as surface_mod
 from goniolab.optics.facet import FacetModel
-from goniolab.optics.facet_backends import facets_near, slope_cells
+from goniolab.optics.facet_backends import facets_near, slope_cells, slope_cells_indexed
 from goniolab.optics.heightmap import HeightMap, level_plane
 from goniolab.optics.surface import MapSurface, Surface, roughness_stats
 from goniolab.surfaces import resolve_map
@@ -76,6 +76,18 @@ def test_slope_cells_and_near_facets_of_a_map_equal_those_of_its_arrays() -> Non
     assert 0 < got_p.size < held.n_facets
     np.testing.assert_array_equal(got_p, want_p)
     np.testing.assert_array_equal(got_q, want_q)
+    assert streamed.streamed
+    # picked by the facets' cell indices of the one-walk count: the same facets, in order
+    for surface in (streamed, held):
+        _, index = slope_cells_indexed(surface)
+        assert index is not None and index[0].size == held.n_facets
+        for alpha_deg, reach in ((60.0, 0.01), (58.5, 0.004), (64.0, 0.03)):
+            a = np.radians(alpha_deg)
+            got = facets_near(surface, None, wi, a, reach, 0.02, index)
+            want = facets_near(held.p, held.q, wi, a, reach, 0.02)
+            assert 0 < want[0].size < held.n_facets
+            np.testing.assert_array_equal(got[0], want[0])
+            np.testing.assert_array_equal(got[1], want[1])
     assert streamed.streamed
 
 
