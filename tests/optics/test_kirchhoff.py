@@ -438,3 +438,20 @@ def test_folded_screen_gives_every_s_th_cell_of_the_full_transform(stride: int) 
     assert t.nx_t % stride == 0
     with pytest.raises(ValueError, match="stride"):
         model._raw_power(ti, lams, [box] * 2, sub_geo, os=(2, 1), stride=stride)  # type: ignore[arg-type]
+
+
+def test_strided_psd_and_real_space_sq_are_the_full_psds() -> None:
+    # issue 26: the Rayleigh-Rice energy check's every-second cell from the folded tile's
+    # transform, and the rms height from real space (discrete Parseval), equal psd2's
+    from goniolab.optics.psd import psd_strided, windowed_sq_um
+
+    hm = gaussian_acf_map(192, 0.05, 2.0, 0.25, seed=8)
+    t = TiledMap.from_heightmap(hm, tile=96)  # 2 x 2 tiles
+    full = psd2(t)
+    for s in (2, 3):
+        np.testing.assert_allclose(
+            psd_strided(t, s), full.psd_um4[::s, ::s], rtol=1e-4, atol=1e-6 * full.psd_um4.max()
+        )
+    assert windowed_sq_um(t) == pytest.approx(full.sq_um, rel=1e-6)
+    with pytest.raises(ValueError, match="divide"):
+        psd_strided(t, 5)
