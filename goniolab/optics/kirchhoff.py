@@ -90,7 +90,7 @@ from goniolab.optics.physical import (
     PhysicalOpticsModel,
     check_theta_i,
 )
-from goniolab.optics.psd import pruned_fft2
+from goniolab.optics.psd import pruned_fft2, y_axis_first
 
 __all__ = ["DEFAULT_TAYLOR_TOL", "KirchhoffModel", "band_plan", "energy_stride"]
 
@@ -235,8 +235,8 @@ class KirchhoffModel(PhysicalOpticsModel):
         per_box = [(b.iy - y0, b.ix - x0, wy_shape[b.iy - y0], wx_shape[b.ix - x0]) for b in boxes]
         sum_w = float(np.sum(t.wy, dtype=np.float64) * np.sum(t.wx, dtype=np.float64))
         kernel = CK.kirchhoff_band_numba if self.backend == "numba" else CK.kirchhoff_band_numpy
-        y_first = ky.size <= kx.size
         lengths = None if os == (1, 1) else (ly, lx)
+        y_first = y_axis_first(ly // os[1], lx // os[0], ky.size, kx.size, lengths)
         done = 0
         for k in range(t.n_tiles):
             h, w = t.tile(k)

@@ -455,3 +455,13 @@ def test_strided_psd_and_real_space_sq_are_the_full_psds() -> None:
     assert windowed_sq_um(t) == pytest.approx(full.sq_um, rel=1e-6)
     with pytest.raises(ValueError, match="divide"):
         psd_strided(t, 5)
+
+
+def test_the_padded_axis_is_transformed_second() -> None:
+    # issue 26: the ISO 85 deg receptor pads x 3 times; its first (full) pass along the
+    # padded axis cost 1024 transforms of 3072 points, along y 1024 of 1024 points
+    from goniolab.optics.psd import y_axis_first
+
+    assert y_axis_first(1024, 1024, 193, 42, (1024, 3072))
+    assert not y_axis_first(1024, 1024, 42, 193, (3072, 1024))
+    assert y_axis_first(1024, 1024, 40, 41) and not y_axis_first(1024, 1024, 41, 40)
