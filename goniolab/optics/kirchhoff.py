@@ -365,10 +365,11 @@ class KirchhoffModel(PhysicalOpticsModel):
         in each axis (:func:`energy_stride`) times 4, those cells' exact values
         (:meth:`_raw_power`'s folded screen), as Rayleigh-Rice sums its periodogram. That
         is an estimate of the same hemisphere integral from a quarter of the speckle cells
-        (512^2 of them): on 1024^2 maps of Gaussian coats (Sq 20-200 nm, l 1.5-5 um) the
-        factor moved by 0.5-2.4 % of its value (``/tmp`` study in the commit message), of
-        the order of the full sum's own speckle (~1/sqrt(cells carrying the flux)); the
-        check costs a quarter."""
+        (512^2 of them): on 1024^2 maps of Gaussian coats (Sq 20-200 nm, l 1.5-5 um, at
+        70, 85 and 89 deg, n 1.55 and 0.27 + 3.41i) the factor moved by at most 4.3 % of
+        its value (1.7 % on ``bench/bench_physical.py``'s map; G85 by 1e-4 GU), the size of
+        a speckle sum's sampling error (the four interleaved half grids of a 512^2 tile
+        differ by up to 3 % among themselves); the check costs a quarter."""
         t = self._shared.tiled
         s = energy_stride(t.ny_t, t.nx_t)
         nx0, nx1, ny0, ny1 = self._nyquist()
