@@ -241,7 +241,7 @@ class KirchhoffModel(PhysicalOpticsModel):
         for k in range(t.n_tiles):
             h, w = t.tile(k)
             if y_first:  # the first (full) pass runs along the contiguous axis
-                h, w = np.ascontiguousarray(h.T), t.window_transposed
+                h, w = t.tile_transposed(k), t.window_transposed
             fold = h.shape[0] // stride, h.shape[1] // stride
             u = h / np.float32(h_max) if h_max > 0 else h
             coh = [0j for _ in boxes]

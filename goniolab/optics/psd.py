@@ -109,6 +109,10 @@ _TILE_CACHE_BYTES: int = 32 << 20
 _TILES: weakref.WeakKeyDictionary[TiledMap, dict[int, NDArray[np.float32]]] = (
     weakref.WeakKeyDictionary()
 )
+#: Their transposed copies (:meth:`TiledMap.tile_transposed`), kept alike.
+_TILES_T: weakref.WeakKeyDictionary[TiledMap, dict[int, NDArray[np.float32]]] = (
+    weakref.WeakKeyDictionary()
+)
 
 
 @dataclass(frozen=True, eq=False)
@@ -257,6 +261,19 @@ class TiledMap:
         if kept is not None:
             kept[k] = h
         return h, w
+
+    def tile_transposed(self, k: int) -> NDArray[np.float32]:
+        """``tile(k)[0].T`` as a contiguous read-only array (for transforms along y first),
+        kept beside the tile when the tiles are (:meth:`tile`)."""
+        keep = self.n_tiles * self.ny_t * self.nx_t * 4 <= _TILE_CACHE_BYTES
+        kept = _TILES_T.setdefault(self, {}) if keep else None
+        if kept is not None and k in kept:
+            return kept[k]
+        ht = np.ascontiguousarray(self.tile(k)[0].T)
+        ht.setflags(write=False)
+        if kept is not None:
+            kept[k] = ht
+        return ht
 
 
 @dataclass(frozen=True, eq=False)
