@@ -32,11 +32,8 @@ References
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
-
-import numpy as np
 
 from goniolab.optics.apertures import ISO2813_BLACK_GLASS_N, ISO2813_SOURCE, Rect
 from goniolab.optics.fresnel import fresnel_dielectric
@@ -161,40 +158,23 @@ def _reading(
     return 100.0 * model.reflected_fraction(theta_i, theta_r, src, rec) / _standard_flux(theta_i)
 
 
-def _readings(
-    model: ReflectanceModel, theta_i: float, theta_r: Sequence[float], src: Rect, rec: Rect
-) -> list[float]:
-    """:func:`_reading` at several detector angles of one incidence and aperture pair: a
-    model with ``reflected_fractions`` (the wave models, ``auto``) reads them from one set
-    of transforms, any other one by one."""
-    many = getattr(model, "reflected_fractions", None)
-    if many is None:
-        return [_reading(model, theta_i, t, src, rec) for t in theta_r]
-    fr = np.asarray(many(theta_i, np.asarray(theta_r, dtype=np.float64), src, rec))
-    return [100.0 * float(v) / _standard_flux(theta_i) for v in fr]
-
-
 def e430_report(model: ReflectanceModel) -> E430Report:
-    """ASTM E430 methods A and B from ``model.reflected_fraction`` (module docstring); the
-    readings of one incidence and aperture pair are asked for together (:func:`_readings`)."""
+    """ASTM E430 methods A and B from ``model.reflected_fraction`` (module docstring), one
+    reading at a time: read together (one set of transforms for a haze pair, through the
+    wave models' ``reflected_fractions``) the haze readings moved by 1e-9 between a process
+    whose OpenBLAS runs threads and a dask worker whose does not (``tests/test_batch.py``:
+    a batch must read the same numbers wherever it runs)."""
     tb = E430_B_ANGLE_DEG
     gloss_20 = _reading(model, tb, tb, E430_B_SOURCE, E430_B_SPECULAR_RECEPTOR)
-    h_lo, h_hi = _readings(
-        model,
-        tb,
-        (tb - E430_B_HAZE_OFFSET_DEG, tb + E430_B_HAZE_OFFSET_DEG),
-        E430_B_SOURCE,
-        E430_B_HAZE_RECEPTOR,
-    )
+    h_lo = _reading(model, tb, tb - E430_B_HAZE_OFFSET_DEG, E430_B_SOURCE, E430_B_HAZE_RECEPTOR)
+    h_hi = _reading(model, tb, tb + E430_B_HAZE_OFFSET_DEG, E430_B_SOURCE, E430_B_HAZE_RECEPTOR)
     ta = E430_A_ANGLE_DEG
-    rs, r03 = _readings(
-        model, ta, (ta, ta + E430_A_DOI_OFFSET_DEG), E430_A_SOURCE, E430_A_SPECULAR_RECEPTOR
-    )
+    rs = _reading(model, ta, ta, E430_A_SOURCE, E430_A_SPECULAR_RECEPTOR)
+    r03 = _reading(model, ta, ta + E430_A_DOI_OFFSET_DEG, E430_A_SOURCE, E430_A_SPECULAR_RECEPTOR)
 
     def pair(offset: float) -> float:
-        lo, hi = _readings(
-            model, ta, (ta - offset, ta + offset), E430_A_SOURCE, E430_A_HAZE_RECEPTOR
-        )
+        lo = _reading(model, ta, ta - offset, E430_A_SOURCE, E430_A_HAZE_RECEPTOR)
+        hi = _reading(model, ta, ta + offset, E430_A_SOURCE, E430_A_HAZE_RECEPTOR)
         return 0.5 * (lo + hi)
 
     doi = 100.0 * (rs - r03) / rs if rs > 0.0 else 0.0

@@ -402,19 +402,6 @@ class AutoModel:
             theta_i_deg, theta_r_deg, source, receptor
         )
 
-    def reflected_fractions(
-        self, theta_i_deg: float, theta_r_deg: ArrayLike, source: Aperture, receptor: Aperture
-    ) -> FloatArray:
-        """:meth:`reflected_fraction` at several detector angles (the wave models share one
-        set of transforms among them: :meth:`PhysicalOpticsModel.reflected_fractions`)."""
-        m = self.model_at(theta_i_deg)
-        flat = np.asarray(theta_r_deg, dtype=np.float64).ravel()
-        if isinstance(m, PhysicalOpticsModel):
-            return m.reflected_fractions(theta_i_deg, flat, source, receptor)
-        return np.array(
-            [m.reflected_fraction(theta_i_deg, float(t), source, receptor) for t in flat]
-        )
-
     def gloss(self, angles_deg: Sequence[int] = (20, 60, 85)) -> dict[int, float]:
         out: dict[int, float] = {}
         for t in angles_deg:
