@@ -185,3 +185,37 @@ def test_referenced_paths_finds_what_a_reader_sees() -> None:
         "bench/bench_fit.py",
         "configs/profiles/",
     }
+
+
+FIGURES = ROOT / "docs" / "figures.sh"
+
+
+def test_every_figure_is_made_by_docs_figures_sh() -> None:
+    """Every PNG in docs/ is written by docs/figures.sh, every image the docs show is one of
+    them, and the README names the script beside each figure (render-example.png was made by
+    hand, from a command the README did not give in full)."""
+    script = FIGURES.read_text(encoding="utf-8")
+    pngs = {p.relative_to(ROOT).as_posix() for p in (ROOT / "docs").glob("*.png")}
+    assert pngs and {p for p in pngs if p not in script} == set()
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    shown = set()
+    for doc in DOCS:
+        shown |= set(re.findall(r"!\[[^\]]*\]\(([^)]+)\)", doc.read_text(encoding="utf-8")))
+    assert shown == pngs
+    for png in pngs:
+        before = readme[: readme.index(f"]({png})")]
+        assert "docs/figures.sh" in before[-600:], f"README: no 'sh docs/figures.sh' beside {png}"
+
+
+def test_docs_figures_sh_commands_parse() -> None:
+    lines = script_commands(FIGURES.read_text(encoding="utf-8"))
+    assert len(lines) == 4
+    for command in lines:
+        args = _parse(argv_of(command))
+        assert getattr(args, "func", None) is not None, command
+
+
+def script_commands(script: str) -> list[str]:
+    """The ``goniolab`` lines of a shell script (continuations joined, ``"$tmp/x"`` kept)."""
+    joined = script.replace("\\\n", " ")
+    return [" ".join(line.split()) for line in joined.splitlines() if line.startswith("goniolab ")]
