@@ -14,10 +14,13 @@
 
 from __future__ import annotations
 
+import contextlib
 import importlib.util
 import re
+from collections.abc import Iterator
 from pathlib import Path
 from types import ModuleType
+from typing import Any
 
 import pytest
 
@@ -77,19 +80,15 @@ def _console_commands(text: str, heading: str) -> list[tuple[str, str]]:
     return [(code, out) for code, out in found]
 
 
-@pytest.mark.slow
-def test_wire_sim_serial_replies_are_the_simulators(tmp_path: Path) -> None:
-    """docs/WIRE_SIM.md's example replies of the spectro and the glossmeter are what a
-    freshly started simulator answers (the ZGM1120 example showed placeholders, the STIL
-    one the ideal model's 3.37 % where the twin reads 2.70 %)."""
+@contextlib.contextmanager
+def _wire_server(tmp_path: Path) -> Iterator[dict[str, Any]]:
+    """``goniolab sim serve`` on configs/lab-sim-wire.toml (any free Modbus port, its ptys
+    under ``tmp_path``, instant moves); yields its endpoints."""
     import json
     import os
     import subprocess
     import sys
 
-    text = (ROOT / "docs" / "WIRE_SIM.md").read_text()
-    commands = _console_commands(text, "## The serial devices")
-    assert len(commands) == 2
     config = (ROOT / "configs" / "lab-sim-wire.toml").read_text()
     config = re.sub(r"(?m)^port = 5020\b.*$", "port = 0", config)  # any free Modbus port
     config = config.replace("/tmp/goniolab-sim/", f"{tmp_path}/")
@@ -102,7 +101,25 @@ def test_wire_sim_serial_replies_are_the_simulators(tmp_path: Path) -> None:
     )  # fmt: skip
     try:
         assert serve.stdout is not None
-        endpoints = json.loads(serve.stdout.readline())["endpoints"]
+        endpoints: dict[str, Any] = json.loads(serve.stdout.readline())["endpoints"]
+        yield endpoints
+    finally:
+        serve.terminate()
+        serve.wait(timeout=30)
+
+
+@pytest.mark.slow
+def test_wire_sim_serial_replies_are_the_simulators(tmp_path: Path) -> None:
+    """docs/WIRE_SIM.md's example replies of the spectro and the glossmeter are what a
+    freshly started simulator answers (the ZGM1120 example showed placeholders, the STIL
+    one the ideal model's 3.37 % where the twin reads 2.70 %)."""
+    import subprocess
+    import sys
+
+    text = (ROOT / "docs" / "WIRE_SIM.md").read_text()
+    commands = _console_commands(text, "## The serial devices")
+    assert len(commands) == 2
+    with _wire_server(tmp_path) as endpoints:
         assert endpoints["spectro"]["port"] == f"{tmp_path}/spectro"
         for code, expected in commands:
             done = subprocess.run(
@@ -111,9 +128,60 @@ def test_wire_sim_serial_replies_are_the_simulators(tmp_path: Path) -> None:
             )  # fmt: skip
             assert done.returncode == 0, done.stderr
             assert done.stdout == expected, f"docs/WIRE_SIM.md is stale:\n{code}"
-    finally:
-        serve.terminate()
-        serve.wait(timeout=30)
+
+
+def _mbpoll_session(text: str) -> list[tuple[str, list[str]]]:
+    """docs/WIRE_SIM.md's ``$ mbpoll ...`` commands with the result lines shown under each."""
+    section = text.split("## With a standard Modbus master", 1)[1].split("\n## ", 1)[0]
+    found = []
+    for block in re.findall(r"```console\n(.*?)```", section, re.S):
+        for m in re.finditer(r"^\$ (mbpoll .*)\n((?:[^$].*\n)*)", block, re.M):
+            found.append((m[1], [" ".join(line.split()) for line in m[2].splitlines()]))
+    return found
+
+
+@pytest.mark.slow
+def test_wire_sim_mbpoll_session_is_what_mbpoll_reads(tmp_path: Path) -> None:
+    """docs/WIRE_SIM.md's mbpoll session (read the lamp arm's position, start a move through
+    the direct-data registers, read the status and the position) run as written against the
+    simulator (on the port it got): mbpoll prints every result line the doc shows. Before
+    it, the pymodbus example runs and reads the lamp arm's 45000 steps."""
+    import shutil
+    import subprocess
+    import sys
+
+    text = (ROOT / "docs" / "WIRE_SIM.md").read_text()
+    session = _mbpoll_session(text)
+    assert len(session) == 4 and all(lines for _, lines in session)
+    pymodbus = re.search(
+        r"## The same with pymodbus.*?```console\n\$ \.venv/bin/python -c \"\n(.*?)\"\n(.*?)```",
+        text, re.S,
+    )  # fmt: skip
+    assert pymodbus
+    shown = pymodbus[2].splitlines()
+    assert len(shown) == 2
+    with _wire_server(tmp_path) as endpoints:
+        port = endpoints["lamp"]["port"]
+        assert endpoints["detector"]["port"] == port
+        code = pymodbus[1].replace("port=5020", f"port={port}")
+        done = subprocess.run(
+            [sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=False
+        )
+        assert done.returncode == 0, done.stderr
+        printed = done.stdout.splitlines()
+        assert printed[0] == shown[0] == "45000"  # the lamp arm, parked at 45 deg
+        assert printed[1].startswith(shown[1].split("...")[0]), printed[1]  # pymodbus's repr
+        if shutil.which("mbpoll") is None:
+            pytest.skip(
+                "mbpoll is not installed (apt-get install -y mbpoll): the session is not run"
+            )
+        for command, shown in session:
+            argv = command.replace("-p 5020", f"-p {port}").split()
+            done = subprocess.run(argv, capture_output=True, text=True, timeout=30, check=False)
+            assert done.returncode == 0, done.stdout + done.stderr
+            printed = {" ".join(line.split()) for line in done.stdout.splitlines()}
+            missing = [line for line in shown if line not in printed]
+            assert missing == [], f"docs/WIRE_SIM.md: {command!r} prints no {missing}"
 
 
 # --- README.md, "The simulated lab is a digital twin": the twin's residual table ---------
