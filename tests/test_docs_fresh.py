@@ -81,9 +81,11 @@ def _console_commands(text: str, heading: str) -> list[tuple[str, str]]:
 
 
 @contextlib.contextmanager
-def _wire_server(tmp_path: Path) -> Iterator[dict[str, Any]]:
+def _wire_server(tmp_path: Path, *, as_json: bool = True) -> Iterator[dict[str, Any]]:
     """``goniolab sim serve`` on configs/lab-sim-wire.toml (any free Modbus port, its ptys
-    under ``tmp_path``, instant moves); yields its endpoints."""
+    under ``tmp_path``); yields its endpoints (``--json --time-scale 0``: instant moves), or
+    ``{"lines": [...]}``, what it printed before "Ctrl-C to stop." (plain, at the config's
+    clock)."""
     import json
     import os
     import subprocess
@@ -95,14 +97,21 @@ def _wire_server(tmp_path: Path) -> Iterator[dict[str, Any]]:
     (tmp_path / "wire.toml").write_text(config)
     serve = subprocess.Popen(
         [sys.executable, "-c", "import sys; from goniolab.cli import main; sys.exit(main())",
-         "sim", "serve", "--config", str(tmp_path / "wire.toml"), "--json", "--time-scale", "0"],
+         "sim", "serve", "--config", str(tmp_path / "wire.toml"),
+         *(["--json", "--time-scale", "0"] if as_json else [])],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         env={**os.environ, "GONIOLAB_LOG_DIR": str(tmp_path / "log")},
     )  # fmt: skip
     try:
         assert serve.stdout is not None
-        endpoints: dict[str, Any] = json.loads(serve.stdout.readline())["endpoints"]
-        yield endpoints
+        if as_json:
+            endpoints: dict[str, Any] = json.loads(serve.stdout.readline())["endpoints"]
+            yield endpoints
+        else:
+            lines = [serve.stdout.readline()]
+            while lines[-1] and not lines[-1].startswith("Ctrl-C"):
+                lines.append(serve.stdout.readline())
+            yield {"lines": lines}
     finally:
         serve.terminate()
         serve.wait(timeout=30)
@@ -128,6 +137,22 @@ def test_wire_sim_serial_replies_are_the_simulators(tmp_path: Path) -> None:
             )  # fmt: skip
             assert done.returncode == 0, done.stderr
             assert done.stdout == expected, f"docs/WIRE_SIM.md is stale:\n{code}"
+
+
+@pytest.mark.slow
+def test_wire_sim_serve_prints_what_the_doc_shows(tmp_path: Path) -> None:
+    """docs/WIRE_SIM.md's "Start and stop" output is what ``goniolab sim serve`` prints (its
+    Modbus port, pty numbers and file paths as the copied config gives them)."""
+    text = (ROOT / "docs" / "WIRE_SIM.md").read_text()
+    block = re.search(r"## Start and stop\n+```console\n\$ (goniolab .*?)\n(.*?)```", text, re.S)
+    assert block and block[1] == "goniolab sim serve --config configs/lab-sim-wire.toml"
+    with _wire_server(tmp_path, as_json=False) as printed:
+        out = "".join(printed["lines"])
+    out = re.sub(r"127\.0\.0\.1:\d+", "127.0.0.1:5020", out)
+    out = out.replace(f"{tmp_path}/wire.toml", "configs/lab-sim-wire.toml")
+    out = out.replace(f"{tmp_path}/", "/tmp/goniolab-sim/")
+    pts = re.compile(r"/dev/pts/\d+")
+    assert pts.sub("/dev/pts/N", out) == pts.sub("/dev/pts/N", block[2]), out
 
 
 def _mbpoll_session(text: str) -> list[tuple[str, list[str]]]:
