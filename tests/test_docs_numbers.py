@@ -1,0 +1,108 @@
+"""Numbers in the README and docs/ that the models make at fixed inputs, read from the
+doc's own sentence and recomputed with the real code (docs that cannot go stale): each to
+the precision it is printed with.
+
+- README, "Scattering models": G85 of ``sample:gauss-sq177-l5`` by the facet model and by
+  physical optics (``goniolab predict gloss sample:gauss-sq177-l5 [--model facet]``);
+- README, "Rendering": the lightness a metallic panel and a solid red lose from 25 to 95
+  deg aspecular (the 64-pixel render of tests/colour/test_render.py, which bounds them only);
+- README, "Fitting a paint": the KM red's a*, b* (``predict colour sample:solid-red``);
+- docs/COLOUR.md sec. 6: the built-in white's and red's L*, b*, C*, h at 45/0
+  (``goniolab predict colour sample:white``, ``sample:solid-red``; tests/colour/
+  test_paint_physics.py holds them inside the real paints' ranges only).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _text(name: str) -> str:
+    return " ".join((ROOT / name).read_text(encoding="utf-8").split())
+
+
+def _said(doc: str, pattern: str) -> re.Match[str]:
+    m = re.search(pattern, _text(doc))
+    assert m, f"{doc} no longer says {pattern!r}"
+    return m
+
+
+def _near(written: str, value: float, what: str) -> None:
+    """``value`` printed to the digits of ``written`` gives ``written`` (one unit of slack)."""
+    digits = len(written.split(".")[1]) if "." in written else 0
+    assert abs(float(written) - value) <= 10.0**-digits, (
+        f"{what}: the doc says {written}, the code {value:.4f}"
+    )
+
+
+def test_readme_g85_of_the_smooth_coat_facet_and_physical_optics() -> None:
+    from goniolab.model_cache import model_for
+
+    m = _said(
+        "README.md",
+        r"on `sample:gauss-sq177-l5` the facet model reads G85 (?P<facet>\d+) GU, physical "
+        r"optics (?P<auto>\d+)",
+    )
+    spec = "sample:gauss-sq177-l5"
+    _near(m["facet"], model_for(spec, model="facet", masking=True).gloss((85,))[85], "facet G85")
+    _near(m["auto"], model_for(spec, model="auto", masking=True).gloss((85,))[85], "auto G85")
+
+
+def _colour_45(sample: str, capsys: pytest.CaptureFixture[str]) -> dict[str, Any]:
+    from goniolab.cli import main
+
+    assert main(["predict", "colour", sample, "--json"]) == 0
+    found: dict[str, Any] = next(
+        g for g in json.loads(capsys.readouterr().out)["geometries"] if g["aspecular_deg"] == 45
+    )
+    return found
+
+
+@pytest.mark.slow
+def test_colour_md_built_in_white_and_red(capsys: pytest.CaptureFixture[str]) -> None:
+    w = _said("docs/COLOUR.md", r"White: .*?L\\\* (?P<L>[\d.]+), b\\\* \+(?P<b>[\d.]+) at 45/0")
+    r = _said("docs/COLOUR.md", r"Red: L\\\* (?P<L>[\d.]+), C\\\* (?P<C>[\d.]+), h (?P<h>\d+) deg")
+    white, red = _colour_45("sample:white", capsys), _colour_45("sample:solid-red", capsys)
+    _near(w["L"], white["L"], "white L*")
+    _near(w["b"], white["b"], "white b*")
+    _near(r["L"], red["L"], "red L*")
+    _near(r["C"], red["C"], "red C*")
+    _near(r["h"], red["h_deg"], "red h")
+    km = _said("README.md", r"vs the KM red's (?P<a>[\d.]+), (?P<b>[\d.]+)\)")
+    _near(km["a"], red["a"], "KM red a*")
+    _near(km["b"], red["b"], "KM red b*")
+
+
+@pytest.mark.slow
+def test_readme_render_flop_of_a_metallic_and_a_solid(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import numpy as np
+
+    from goniolab.cli import main
+    from tests.colour.test_render import _png_factor_lightness
+
+    m = _said(
+        "README.md",
+        r"a metallic loses ~(?P<metal>\d+) L\\\* \(as a reflectance factor\) from 25 to 95 deg "
+        r"aspecular, a solid red (?P<red>[\d.]+)",
+    )
+    spread = {}
+    for name in ("silver-metallic", "solid-red"):
+        out = tmp_path / f"{name}.png"
+        # what tests/colour/test_render.py draws: 64 px, 20 nm, exposure 1, no sparkle
+        assert main(["render", f"sample:{name}", "--out", str(out), "--size", "64",
+                     "--step-nm", "20", "--exposure", "1", "--no-sparkle"]) == 0  # fmt: skip
+        capsys.readouterr()
+        lightness, aspecular = _png_factor_lightness(out, 64)
+        away = (aspecular >= 25.0) & (aspecular <= 95.0)
+        spread[name] = float(np.ptp(lightness[away]))
+    _near(m["metal"], spread["silver-metallic"], "metallic L* lost 25..95 deg")
+    _near(m["red"], spread["solid-red"], "solid red L* lost 25..95 deg")
