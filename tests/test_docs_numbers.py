@@ -7,6 +7,8 @@ the precision it is printed with.
 - README, "Rendering": the lightness a metallic panel and a solid red lose from 25 to 95
   deg aspecular (the 64-pixel render of tests/colour/test_render.py, which bounds them only);
 - README, "Fitting a paint": the KM red's a*, b* (``predict colour sample:solid-red``);
+- docs/PHYSICS.md: the Rayleigh-factor example (g, exp(-g), G85) and the coherent share of a
+  50 nm coat, from the formula and the models;
 - docs/COLOUR.md sec. 6: the built-in white's and red's L*, b*, C*, h at 45/0
   (``goniolab predict colour sample:white``, ``sample:solid-red``; tests/colour/
   test_paint_physics.py holds them inside the real paints' ranges only).
@@ -15,6 +17,7 @@ the precision it is printed with.
 from __future__ import annotations
 
 import json
+import math
 import re
 from pathlib import Path
 from typing import Any
@@ -106,3 +109,43 @@ def test_readme_render_flop_of_a_metallic_and_a_solid(
         spread[name] = float(np.ptp(lightness[away]))
     _near(m["metal"], spread["silver-metallic"], "metallic L* lost 25..95 deg")
     _near(m["red"], spread["solid-red"], "solid red L* lost 25..95 deg")
+
+
+def _g(sq_um: float, theta_deg: float, wavelength_um: float = 0.55) -> float:
+    """The Rayleigh factor g = (4 pi Sq cos theta / lambda)^2 (docs/PHYSICS.md)."""
+    return (4 * math.pi * sq_um * math.cos(math.radians(theta_deg)) / wavelength_um) ** 2
+
+
+def test_physics_md_rayleigh_factor_example_and_its_g85() -> None:
+    """docs/PHYSICS.md's example map (Sq 177 nm, l 5 um): g at 20/60/85 deg from the map's
+    own Sq, the coherent beam's exp(-g), and G85 by the facet and the wave models (said 88
+    where the code reads 89.3)."""
+    from goniolab.model_cache import model_for
+
+    m = _said(
+        "docs/PHYSICS.md",
+        r"g = (?P<g20>[\d.]+), (?P<g60>[\d.]+) and (?P<g85>[\d.]+) at 20, 60 and 85 deg; the "
+        r"facet model reads G85 (?P<facet>\d+) GU, the wave models (?P<wave>\d+) \(the coherent "
+        r"beam alone is `exp\(-(?P<gx>[\d.]+)\)` = (?P<beam>\d+) %",
+    )
+    spec = "sample:gauss-sq177-l5"
+    auto = model_for(spec, model="auto", masking=True)
+    sq = auto.stats.sq_um
+    for theta in (20, 60, 85):
+        _near(m[f"g{theta}"], _g(sq, theta), f"g at {theta} deg")
+    _near(m["gx"], _g(sq, 85), "g at 85 deg")
+    _near(m["beam"], 100 * math.exp(-_g(sq, 85)), "coherent beam %")
+    _near(m["facet"], model_for(spec, model="facet", masking=True).gloss((85,))[85], "facet G85")
+    _near(m["wave"], auto.gloss((85,))[85], "wave-model G85")
+
+
+def test_physics_md_coherent_fraction_of_a_50_nm_coat() -> None:
+    """The share of the light in the coherent beam, exp(-g), of Sq 50 nm at 60 deg and 550 nm
+    (said 70 %, the formula gives 72 %)."""
+    m = _said(
+        "docs/PHYSICS.md",
+        r"With Sq = (?P<sq>\d+) nm at (?P<t>\d+) deg and (?P<wl>\d+) nm, (?P<pct>\d+) % of the "
+        r"reflected light stays in the coherent beam",
+    )
+    g = _g(float(m["sq"]) / 1000, float(m["t"]), float(m["wl"]) / 1000)
+    _near(m["pct"], 100 * math.exp(-g), "coherent share")
