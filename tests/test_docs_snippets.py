@@ -13,6 +13,7 @@ serve``, are run by tests/test_docs_fresh.py.
 from __future__ import annotations
 
 import ast
+import enum
 import importlib
 import inspect
 import os
@@ -163,3 +164,37 @@ def test_offline_snippet_prints_what_the_doc_shows(doc: str, code: str, out: str
 
 def test_an_offline_snippet_is_run() -> None:
     assert len(OFFLINE) == 1
+
+
+def _call_defaults(sketch: str) -> tuple[str, dict[str, str]]:
+    """``Name(pos, *, key=value, ...)`` -> ("Name", {key: value}) (positional names dropped)."""
+    name, params = sketch.split("(", 1)
+    found = dict(re.findall(r"(\w+)=([^,)]+)", params))
+    return name.strip(), found
+
+
+def test_protocols_md_library_notes_are_the_installed_pymodbus() -> None:
+    """docs/PROTOCOLS.md, "Library notes": the pymodbus minor it names is the one pyproject
+    pins and the one installed, and the client signatures it quotes have those defaults."""
+    import pymodbus
+    import pymodbus.client
+
+    text = " ".join((ROOT / "docs" / "PROTOCOLS.md").read_text(encoding="utf-8").split())
+    notes = text.split("## Library notes", 1)[1]
+    version = re.search(r"pymodbus (\d+\.\d+):", notes)
+    assert version, "docs/PROTOCOLS.md: the library notes name no pymodbus version"
+    assert pymodbus.__version__.startswith(version[1] + ".")
+    pyproject = (ROOT / "pyproject.toml").read_text(encoding="utf-8")
+    assert f'"pymodbus>={version[1]},' in pyproject
+    sketches = re.findall(r"`(Modbus(?:Tcp|Serial)Client\([^`]*\*, [^`]*\))`", notes)
+    assert len(sketches) == 2, sketches
+    for sketch in sketches:
+        name, defaults = _call_defaults(sketch)
+        real = inspect.signature(getattr(pymodbus.client, name)).parameters
+        for key, value in defaults.items():
+            default = real[key].default
+            if isinstance(default, enum.Enum):
+                shown = f"{type(default).__name__}.{default.name}"
+            else:
+                shown = repr(default)
+            assert value.strip() == shown, (name, key, value, default)
