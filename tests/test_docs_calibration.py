@@ -2,6 +2,7 @@
 the doc states for a quality flag, the auto-exposure, the alignment's gates, the calibration
 age and the reconnect window is read from the doc's own sentence and compared with the
 constant or default the code uses. A changed constant fails here until the doc says it.
+And docs/TWIN.md's alignment state file is what the code writes and reads.
 """
 
 from __future__ import annotations
@@ -80,3 +81,32 @@ def test_every_constant_has_its_sentence() -> None:
 def test_doc_number_is_the_codes(name: str) -> None:
     said, code = _number(SAID[name]), _code()[name]
     assert said == pytest.approx(code), f"docs/CALIBRATION.md says {name} {said}, the code {code}"
+
+
+def test_twin_md_alignment_state_example_is_what_the_code_writes_and_reads(tmp_path: Path) -> None:
+    """docs/TWIN.md's alignment state file: ``write_alignment_state`` writes those lines for
+    those values (its header abbreviated in the doc), and the config loader applies them."""
+    from goniolab.config import load_lab_config
+    from goniolab.config.alignment_state import write_alignment_state
+
+    text = (ROOT / "docs" / "TWIN.md").read_text(encoding="utf-8")
+    m = re.search(r"```toml\n(# goniolab alignment state: .*?)```", text, re.S)
+    assert m, "docs/TWIN.md: the alignment state example is gone"
+    shown = m[1].splitlines()
+    table = shown[shown.index("[alignment]") + 1 :]
+    values: dict[str, float | int] = {}
+    for line in table:
+        key, value = (s.strip() for s in line.split("="))
+        values[key] = int(value) if key == "run" else float(value)
+    config = tmp_path / "lab.toml"
+    lab = (ROOT / "configs" / "lab-sim.toml").read_text(encoding="utf-8")
+    config.write_text(lab + '\n[alignment]\nstate_file = "lab.alignment.toml"\n', encoding="utf-8")
+    path = write_alignment_state(load_lab_config(config), values)
+    written = path.read_text(encoding="utf-8").splitlines()
+    assert written[0].startswith(shown[0].removesuffix("...").rstrip())
+    assert written[written.index("[alignment]") + 1 :] == table
+    loaded = load_lab_config(config).alignment
+    assert (loaded.lamp_zero_deg, loaded.detector_zero_deg, loaded.sample_tilt_deg) == (
+        values["lamp_zero_deg"], values["detector_zero_deg"], values["sample_tilt_deg"]
+    )  # fmt: skip
+    assert loaded.loaded_from == str(path)
