@@ -7,6 +7,7 @@ the precision it is printed with.
 - README, "Rendering": the lightness a metallic panel and a solid red lose from 25 to 95
   deg aspecular (the 64-pixel render of tests/colour/test_render.py, which bounds them only);
 - README, "Fitting a paint": the KM red's a*, b* (``predict colour sample:solid-red``);
+- README, "The physics": the grazing split of the source cone (edge, sub-cones, beam share);
 - docs/PHYSICS.md: the Rayleigh-factor example (g, exp(-g), G85) and the coherent share of a
   50 nm coat, from the formula and the models;
 - docs/COLOUR.md sec. 6: the built-in white's and red's L*, b*, C*, h at 45/0
@@ -149,3 +150,26 @@ def test_physics_md_coherent_fraction_of_a_50_nm_coat() -> None:
     )
     g = _g(float(m["sq"]) / 1000, float(m["t"]), float(m["wl"]) / 1000)
     _near(m["pct"], 100 * math.exp(-g), "coherent share")
+
+
+def test_readme_grazing_split_of_the_source_cone() -> None:
+    """README, "The physics": from which lamp angle the 6 deg source cone is split and into
+    how many sub-cones, how many the horizon split has, and the share of the beam a mirror at
+    89 deg receives: each from the code that does it."""
+    from goniolab.optics.apertures import Cone
+    from goniolab.optics.facet_apertures import clipped_source_parts, source_parts
+
+    m = _said(
+        "README.md",
+        r"\(lamp \+ half cone >= (?P<edge>\d+) deg\) the 6 deg source cone is split into "
+        r"(?P<n>\d+) sub-cones: .*? clipped \((?P<horizon>\d+) sub-cones; a mirror at 89 deg "
+        r"reads Fresnel x the (?P<share>\d+) % of the beam",
+    )
+    cone, edge = Cone(6.0), float(m["edge"])
+    assert len(source_parts(edge - 3.0 - 0.01, cone)) == 1
+    assert len(source_parts(edge - 3.0, cone)) == int(m["n"])
+    touching = clipped_source_parts(87.0, cone)  # 87 + 3 = 90: the split, none clipped yet
+    assert len(touching) == int(m["horizon"])
+    _near(
+        m["share"], 100 * sum(share for _, _, share in clipped_source_parts(89.0, cone)), "beam %"
+    )
