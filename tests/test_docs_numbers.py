@@ -7,6 +7,8 @@ the precision it is printed with.
 - README, "Rendering": the lightness a metallic panel and a solid red lose from 25 to 95
   deg aspecular (the 64-pixel render of tests/colour/test_render.py, which bounds them only);
 - README, "Fitting a paint": the KM red's a*, b* (``predict colour sample:solid-red``);
+- README: the log rotation, store timeouts, map size limit and separation floor it states
+  (against the code's constants);
 - README, "The physics": the grazing split of the source cone (edge, sub-cones, beam share);
 - docs/PHYSICS.md: the Rayleigh-factor example (g, exp(-g), G85) and the coherent share of a
   50 nm coat, from the formula and the models;
@@ -173,3 +175,45 @@ def test_readme_grazing_split_of_the_source_cone() -> None:
     _near(
         m["share"], 100 * sum(share for _, _, share in clipped_source_parts(89.0, cone)), "beam %"
     )
+
+
+def _readme_constants() -> dict[str, float]:
+    import inspect
+
+    from drivers.arm_limits import MIN_SEPARATION_FLOOR_DEG
+    from goniolab import logs
+    from goniolab.scan.runner import ScanRunner
+    from goniolab.store import postgres, sqlite
+    from goniolab.surfaces._common import DEFAULT_MAX_MAP_POINTS
+
+    outage = inspect.signature(ScanRunner).parameters["store_outage_s"].default
+    return {
+        "log MB": logs._MAX_BYTES / 1e6,
+        "log files": logs._BACKUPS,
+        "pg connect s": postgres.CONNECT_TIMEOUT_S,
+        "pg statement s": postgres.STATEMENT_TIMEOUT_S,
+        "sqlite lock s": sqlite.BUSY_TIMEOUT_S,
+        "store outage min": outage / 60.0,
+        "map side": DEFAULT_MAX_MAP_POINTS**0.5,
+        "min separation deg": MIN_SEPARATION_FLOOR_DEG,
+    }
+
+
+#: README's sentence around each constant
+README_SAID = {
+    "log MB": r"rotating log file \((?P<x>\d+) MB x \d+\)",
+    "log files": r"rotating log file \(\d+ MB x (?P<x>\d+)\)",
+    "pg connect s": r"PostgreSQL connections have connect \((?P<x>\d+) s\)",
+    "pg statement s": r"statement \((?P<x>\d+) s, server side\)",
+    "sqlite lock s": r"an SQLite file locked by another program for more than (?P<x>\d+) s",
+    "store outage min": r"or fails in one line after (?P<x>\d+) minutes",
+    "map side": r"A map may have at most (?P<x>\d+) x \d+ points",
+    "min separation deg": r"`min_separation_deg` below (?P<x>\d+) deg",
+}
+
+
+@pytest.mark.parametrize("name", sorted(README_SAID))
+def test_readme_constant_is_the_codes(name: str) -> None:
+    assert set(README_SAID) == set(_readme_constants())
+    said = float(_said("README.md", README_SAID[name])["x"])
+    assert said == pytest.approx(_readme_constants()[name]), f"README says {name} {said}"
