@@ -198,3 +198,18 @@ def test_protocols_md_library_notes_are_the_installed_pymodbus() -> None:
             else:
                 shown = repr(default)
             assert value.strip() == shown, (name, key, value, default)
+
+
+def test_hardware_bringup_move_time_is_the_trapezoid() -> None:
+    """docs/HARDWARE_BRINGUP.md's expected move time of the slow jog is what the drivers'
+    trapezoid timing (also the dry run's and the twin's) gives."""
+    from drivers.timing import trapezoid_duration_s
+
+    text = " ".join((ROOT / "docs" / "HARDWARE_BRINGUP.md").read_text(encoding="utf-8").split())
+    m = re.search(
+        r"\((?P<d>[\d.]+) deg at (?P<v>[\d.]+) deg/s, (?P<a>[\d.]+) deg/s\^2: about (?P<t>[\d.]+) s\)",
+        text,
+    )
+    assert m, "docs/HARDWARE_BRINGUP.md no longer states the jog's move time"
+    t = trapezoid_duration_s(float(m["d"]), float(m["v"]), float(m["a"]))
+    assert t == pytest.approx(float(m["t"]), abs=0.05)
