@@ -213,3 +213,14 @@ def test_hardware_bringup_move_time_is_the_trapezoid() -> None:
     assert m, "docs/HARDWARE_BRINGUP.md no longer states the jog's move time"
     t = trapezoid_duration_s(float(m["d"]), float(m["v"]), float(m["a"]))
     assert t == pytest.approx(float(m["t"]), abs=0.05)
+
+
+def test_readme_python_blocks_fit_the_code() -> None:
+    """The README's Python blocks (the notebook API, run by tests/test_api.py; the bluesky
+    plan, which needs the bluesky extra to run) import what exists and call it with
+    parameters the real signatures take."""
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    blocks = re.findall(r"```python\n(.*?)```", text, re.S)
+    assert len(blocks) == 2
+    for block in blocks:
+        assert check_calls(block, "README.md") >= 3
