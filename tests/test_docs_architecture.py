@@ -6,6 +6,7 @@ stale).
   has (and every parameter it requires, unless the line says ``...``); a dataclass's field
   list is its fields; the constants (``GONIO_CONE = Cone(6.0)``, the ISO 2813 apertures and
   black-glass index) equal the code's.
+- "goniolab.colour": every module it names exists and holds the names given under it.
 - "Lab config": the TOML block loads with the real loader.
 """
 
@@ -174,3 +175,47 @@ def test_lab_config_example_loads(tmp_path: Path) -> None:
     path.write_text(_block("Lab config", "toml"), encoding="utf-8")
     config = load_lab_config(path)
     assert config.sample.map == "sample:wittmann-3"
+
+
+def colour_names() -> list[tuple[str, str]]:
+    """docs/ARCHITECTURE.md, "goniolab.colour": (module, name) for every backticked name the
+    text gives under a module label `` `module`: ``."""
+    section = DOC.split("## goniolab.colour", 1)[1].split("\n## ", 1)[0]
+    section = " ".join(section.split())
+    found = []
+    parts = re.split(r"`(\w+)`:", section)  # [before, module, text, module, text, ...]
+    for module, text in zip(parts[1::2], parts[2::2], strict=True):
+        for token in re.findall(r"`([^`]+)`", text):
+            m = re.fullmatch(r"(?:(\w+)\.)?(\w+)(?:\(.*\))?", token)
+            if m is None or token.startswith("goniolab."):
+                continue  # an expression, a path, an option, a key
+            owner, name = m[1], m[2]
+            if owner is not None and owner not in parts[1::2]:
+                continue  # colour.sd_to_XYZ: the library's
+            found.append((owner or module, name))
+    return found
+
+
+COLOUR_NAMES = colour_names()
+
+
+def test_colour_section_is_read() -> None:
+    assert len(COLOUR_NAMES) >= 25
+    assert ("spectra", "check_spectrum") in COLOUR_NAMES
+
+
+@pytest.mark.parametrize(
+    ("module", "name"), COLOUR_NAMES, ids=[f"{m}.{n}" for m, n in COLOUR_NAMES]
+)
+def test_colour_section_names_exist(module: str, name: str) -> None:
+    try:
+        mod = importlib.import_module(f"goniolab.colour.{module}")
+    except ModuleNotFoundError:
+        pytest.fail(f"docs/ARCHITECTURE.md, goniolab.colour: there is no module {module!r}")
+    if hasattr(mod, name):
+        return
+    # a method, written after its class: `Paint(...)`; `subsurface_brdf(...)`
+    classes = [getattr(mod, n) for m, n in COLOUR_NAMES if m == module and hasattr(mod, n)]
+    assert any(inspect.isclass(c) and hasattr(c, name) for c in classes), (
+        f"docs/ARCHITECTURE.md: goniolab.colour.{module} has no {name}"
+    )
