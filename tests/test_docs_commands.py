@@ -219,3 +219,32 @@ def script_commands(script: str) -> list[str]:
     """The ``goniolab`` lines of a shell script (continuations joined, ``"$tmp/x"`` kept)."""
     joined = script.replace("\\\n", " ")
     return [" ".join(line.split()) for line in joined.splitlines() if line.startswith("goniolab ")]
+
+
+def layout_entries() -> list[tuple[str, set[str]]]:
+    """README "Layout": (path of each listed entry, the ``*.py`` names its description gives)."""
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    block = re.search(r"## Layout\n+```\n(.*?)```", readme, re.S)
+    assert block, "README: the Layout block is gone"
+    entries: list[tuple[str, set[str]]] = []
+    top = ""
+    for line in block[1].splitlines():
+        m = re.match(r"^( {0,2})([\w.]+/?)\s", line + " ")
+        if m and (m[2].endswith("/") or m[2].endswith(".py")):
+            path = m[2] if not m[1] else top + m[2]
+            top = m[2] if not m[1] else top
+            entries.append((path, set()))
+            line = line[m.end() :]
+        entries[-1][1].update(re.findall(r"\b(\w+\.py)\b", line))
+    return entries
+
+
+def test_readme_layout_lists_what_is_there() -> None:
+    entries = layout_entries()
+    assert len(entries) >= 15
+    missing = [path for path, _ in entries if not (ROOT / path).exists()]
+    assert missing == [], f"README Layout lists what is not in the repository: {missing}"
+    for path, names in entries:
+        room = ROOT / path.split("/")[0]  # a file named under goniolab/store/ may live in goniolab/
+        absent = sorted(n for n in names if not any(room.rglob(n)))
+        assert absent == [], f"README Layout, {path}: no {absent} under {room.name}/"
