@@ -9,6 +9,7 @@ the precision it is printed with.
 - README, "Fitting a paint": the KM red's a*, b* (``predict colour sample:solid-red``);
 - README: the log rotation, store timeouts, map size limit and separation floor it states
   (against the code's constants);
+- README, "--adaptive": its 7-17x is the range of docs/TWIN.md's 36-point rows;
 - README, "The physics": the grazing split of the source cone (edge, sub-cones, beam share);
 - docs/PHYSICS.md: the Rayleigh-factor example (g, exp(-g), G85) and the coherent share of a
   50 nm coat, from the formula and the models;
@@ -217,3 +218,18 @@ def test_readme_constant_is_the_codes(name: str) -> None:
     assert set(README_SAID) == set(_readme_constants())
     said = float(_said("README.md", README_SAID[name])["x"])
     assert said == pytest.approx(_readme_constants()[name]), f"README says {name} {said}"
+
+
+def test_readme_adaptive_gain_is_docs_twin_md_table() -> None:
+    """README's "7-17x lower rms error" of a 36-point adaptive scan is the range of the
+    36-point rows of docs/TWIN.md's table (made by bench/bench_adaptive.py)."""
+    m = _said(
+        "README.md",
+        r"a 36-point scan reconstructs the curve with (?P<lo>\d+)-(?P<hi>\d+)x lower rms",
+    )
+    twin = (ROOT / "docs" / "TWIN.md").read_text(encoding="utf-8")
+    rows = re.findall(r"^\| [\w-]+ \| 36 \| ([\d.]+) / ([\d.]+) \|", twin, re.M)
+    assert len(rows) >= 3, "docs/TWIN.md: the adaptive table's 36-point rows are gone"
+    gains = [float(u) / float(a) for u, a in rows]
+    _near(m["lo"], min(gains), "smallest gain")
+    _near(m["hi"], max(gains), "largest gain")
