@@ -69,7 +69,7 @@ SAID = {
     "calibration age h": r"`\[spectro\] calibration_max_age_h` \((?P<x>[\d.]+) h\)",
     "reconnect s": r"`\[lab\] reconnect_window_s` \((?P<x>[\d.]+) s of lab clock",
     "twin s_weight": r"`\[sim\.twin\] s_weight = (?P<x>[\d.]+)`",
-    "black glass n": r"\(unpolarised, n = (?P<x>[\d.]+)\)",
+    "black glass n": r"Y_cert = 100 x .*?\((?:unpolarised, )?n = (?P<x>[\d.]+)\)",
 }
 
 
