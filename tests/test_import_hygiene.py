@@ -118,3 +118,5 @@ def test_colour_is_pure_and_imports_colour_science_lazily() -> None:
     )
     assert [m for m in bad if m not in PACKAGE_ROOT] == [], bad
     assert "colour" not in modules  # colour-science is imported inside the functions
+    # the CxF3 parser (optional extra goniolab[cxf]) only when a CxF3 file is read
+    assert not {"colour_cxf", "xsdata"} & {m.split(".")[0] for m in modules}

@@ -21,6 +21,8 @@ HEAVY = (
     "numba",
     "scipy",
     "colour",
+    "colour_cxf",
+    "xsdata",
     "textual",
     "textual_plot",
     "xarray",

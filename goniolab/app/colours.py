@@ -135,19 +135,28 @@ def _spectral(req: SurfaceRequest, opts: ColourOptions, progress: Any) -> tuple[
 
 
 def _compare_file(opts: ColourOptions) -> tuple[Any, int]:
-    """``--compare FILE.csv``: the measured multi-angle spectra (one incidence), repeats
+    """``--compare FILE.csv`` (or a CxF3 file: ``.cxf``/``.cxf3``, or XML in the CxF3
+    namespace): the measured multi-angle spectra (one incidence, one object), repeats
     averaged as spectra, and the rows read."""
     import numpy as np
 
+    from goniolab.colour.cxf_files import is_cxf3, read_spectra_cxf
     from goniolab.colour.exchange import MultiAngleSpectra, read_spectra_csv
     from goniolab.colour.spectra import ColourError
 
     p = Path(str(opts.compare))
     try:
         data = p.read_bytes()
-        text = data.decode("utf-8")
     except OSError as exc:
         raise UserError(f"--compare {p}: cannot read: {exc.strerror}") from None
+    cxf = p.suffix.lower() in (".cxf", ".cxf3") or is_cxf3(data)
+    if cxf and opts.compare_unit != "factor":
+        raise UserError(
+            f"--compare {p}: CxF3 spectra are reflectance factors (100% = 1.0); "
+            "--compare-unit percent does not apply"
+        )
+    try:
+        text = "" if cxf else data.decode("utf-8")
     except UnicodeDecodeError as exc:  # a spreadsheet's "CSV" in its Windows code page
         line = data[: exc.start].count(b"\n") + 1
         raise UserError(
@@ -155,10 +164,17 @@ def _compare_file(opts: ColourOptions) -> tuple[Any, int]:
             "(save the file as 'CSV UTF-8')"
         ) from None
     try:
-        table = read_spectra_csv(text, where=str(p), unit=opts.compare_unit,
-                                 theta_i_deg=opts.theta_i_deg).select("measured")  # fmt: skip
+        if cxf:
+            table = read_spectra_cxf(data, where=str(p))
+        else:
+            table = read_spectra_csv(text, where=str(p), unit=opts.compare_unit,
+                                     theta_i_deg=opts.theta_i_deg).select("measured")  # fmt: skip
     except ColourError as exc:
         raise UserError(str(exc)) from None
+    if cxf and len(set(table.source)) != 1:
+        raise UserError(
+            f"--compare {p}: one object per file, found " + ", ".join(sorted(set(table.source)))
+        )
     incidences = sorted({round(float(t), 6) for t in table.theta_i_deg})
     if len(incidences) != 1:
         raise UserError(
@@ -174,6 +190,7 @@ def _compare_file(opts: ColourOptions) -> tuple[Any, int]:
         avg.factors[order],
         tuple(avg.source[k] for k in order),
         tuple(0 for _ in order),
+        avg.notes,
     )
     return averaged, int(table.factors.shape[0])
 
@@ -209,7 +226,13 @@ def _compare_doc(opts: ColourOptions, measured: Any, rows_read: int, predicted_l
         "measured_lab": [[float(v) for v in row] for row in lab_m],
         "pair": {"reference": f"measured {opts.compare}", "sample": "this prediction"},
         "spectra_notes": [
-            n for n in (range_note(measured.wavelengths_nm), _percent_note(opts, measured)) if n
+            n
+            for n in (
+                range_note(measured.wavelengths_nm),
+                _percent_note(opts, measured),
+                *measured.notes,
+            )
+            if n
         ],
         "tolerance": {
             **tolerance.describe(),

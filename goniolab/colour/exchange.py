@@ -17,9 +17,8 @@ geometry are repeats and are averaged *as spectra* (the colour of the mean spect
 mean of colours). The grid is validated by :func:`goniolab.colour.spectra.check_spectrum`
 (evenly spaced, inside 360-830 nm, covering 400-700 nm).
 
-No CxF/X3 reader: colour-science 0.4.7 reads no CxF3 and no maintained Python package for it
-was found among those this project installs (Nov 2026), so CxF files are exported to CSV by
-the instrument software first.
+CxF3 files (ISO 17972-1) give the same table through
+:func:`goniolab.colour.cxf_files.read_spectra_cxf` (the optional ``colour-cxf`` package).
 """
 
 from __future__ import annotations
@@ -71,7 +70,8 @@ class MultiAngleSpectra:
     """Reflectance factors ``(n, N)`` per geometry on one wavelength grid.
 
     ``source`` per row is ``"measured"``, ``"predicted"`` or the file's own label;
-    ``repeat`` numbers repeats of a geometry (0 when there are none).
+    ``repeat`` numbers repeats of a geometry (0 when there are none); ``notes`` are what the
+    reader says about how it read the file (a CxF3 single-angle geometry read as one angle).
     """
 
     wavelengths_nm: FloatArray
@@ -80,6 +80,7 @@ class MultiAngleSpectra:
     factors: FloatArray
     source: tuple[str, ...]
     repeat: tuple[int, ...]
+    notes: tuple[str, ...] = ()
 
     @property
     def aspecular_deg(self) -> FloatArray:
@@ -99,6 +100,7 @@ class MultiAngleSpectra:
             self.factors[idx],
             tuple(self.source[k] for k in idx),
             tuple(self.repeat[k] for k in idx),
+            self.notes,
         )
 
     def averaged(self) -> MultiAngleSpectra:
@@ -115,6 +117,7 @@ class MultiAngleSpectra:
             np.array([self.factors[idx].mean(axis=0) for _, idx in rows]),
             tuple(k[0] for k, _ in rows),
             tuple(0 for _ in rows),
+            self.notes,
         )
 
 
