@@ -47,15 +47,19 @@ def _angle(asp: float, ti: float = 45.0, azimuth: float | None = None) -> Any:
                           notation=f"{ti:g}as{asp:g}")  # fmt: skip
 
 
-def _doc(specs: list[Any], spectra: list[Any], name: str = "panel 1") -> bytes:
-    obj = cxf3.Object(
-        object_type="Standard", name=name, id="1",
-        creation_date=cxf3.CreationDate("2026-11-26T00:00:00Z"),
-        color_values=cxf3.ColorValues(choice=spectra),
-    )  # fmt: skip
+def _doc(specs: list[Any], spectra: list[Any], names: tuple[str, ...] = ("panel 1",)) -> bytes:
+    """One object per name, each with all ``spectra``."""
+    objs = [
+        cxf3.Object(
+            object_type="Standard", name=name, id=str(k),
+            creation_date=cxf3.CreationDate("2026-11-26T00:00:00Z"),
+            color_values=cxf3.ColorValues(choice=spectra),
+        )
+        for k, name in enumerate(names, start=1)
+    ]  # fmt: skip
     doc = cxf3.CxF(
         resources=cxf3.Resources(
-            object_collection=cxf3.ObjectCollection(object_value=[obj]),
+            object_collection=cxf3.ObjectCollection(object_value=objs),
             color_specification_collection=cxf3.ColorSpecificationCollection(
                 color_specification=specs
             ),
@@ -211,3 +215,32 @@ def test_custom_spectrum_points_and_percent_units_refused() -> None:
     data = _doc([spec], [cxf3.ReflectanceSpectrum(value=ROWS[0][1], color_specification="CS1")])
     with pytest.raises(ColourError, match="LuminanceUnitsType cd/m2 is not normalized"):
         read_spectra_cxf(data, where="x.cxf")
+
+
+def test_percent_units_and_several_objects_are_refused_for_compare(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    f = tmp_path / "lab.cxf"
+    f.write_bytes(_multi_angle())
+    args = ["predict", "colour", "sample:solid-red", "--step-nm", "20", "--compare", str(f)]
+    assert main([*args, "--compare-unit", "percent"]) == 2
+    assert "CxF3 spectra are reflectance factors (100% = 1.0)" in capsys.readouterr().err
+    spectra = [cxf3.ReflectanceSpectrum(value=ROWS[0][1], color_specification="CS1")]
+    data = _doc([_spec("CS1", cxf3.MultiAngleType([_angle(15.0)]))], spectra, ("std", "trial"))
+    assert read_spectra_cxf(data).source == ("std", "trial")
+    err = _refused(data, tmp_path, capsys)
+    assert f"--compare {tmp_path / 'bad.cxf'}: one object per file, found std, trial" in err
+
+
+def test_the_sample_shipped_with_colour_cxf_is_refused_for_its_range() -> None:
+    """colour-cxf's own test file (an X-Rite ColorPort target, 45/0 annular, StartWL 380,
+    Increment 10, 31 values: 380-680 nm) is read down to its grid, which misses 700 nm."""
+    sample = Path(colour_cxf.__file__).parent / "tests" / "resources" / "sample.cxf"
+    if not sample.is_file():
+        pytest.skip("this colour-cxf build ships no sample.cxf")
+    with pytest.raises(ColourError) as err:
+        read_spectra_cxf(sample.read_bytes(), where="sample.cxf")
+    assert str(err.value) == (
+        "sample.cxf: object '1', ReflectanceSpectrum: wavelengths 380-680 nm do not cover "
+        "400-700 nm"
+    )
