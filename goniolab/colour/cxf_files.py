@@ -56,6 +56,7 @@ __all__ = ["CXF3_NAMESPACE", "CXF_INSTALL_HINT", "is_cxf3", "read_spectra_cxf"]
 CXF3_NAMESPACE = "http://colorexchangeformat.com/CxF3-core"
 CXF_INSTALL_HINT = "pip install 'goniolab[cxf]'"
 _ROOT = re.compile(rb"<(?:[A-Za-z_][\w.-]*:)?CxF[\s>/]")
+_DTD = re.compile(rb"<!(?:DOCTYPE|ENTITY)", re.IGNORECASE)
 
 
 def is_cxf3(data: bytes) -> bool:
@@ -171,6 +172,11 @@ def read_spectra_cxf(data: bytes, *, where: str = "cxf") -> MultiAngleSpectra:
     """
     if not is_cxf3(data):
         raise ColourError(f"{where}: not a CxF3 document (no <CxF> in {CXF3_NAMESPACE})")
+    if _DTD.search(data):  # no DTD in CxF3; refused so no entity is ever expanded
+        raise ColourError(
+            f"{where}: has a <!DOCTYPE>/<!ENTITY> declaration, which a CxF3 document does not "
+            "have: refused"
+        )
     cxf = _cxf_module(where)
     try:
         doc = cxf.read_cxf(data)

@@ -151,6 +151,9 @@ def test_corrupt_xml_is_refused_in_one_line(
     assert f"{tmp_path / 'bad.cxf'}: not readable as CxF3: " in err
     err = _refused(b"R_400,R_500\n", tmp_path, capsys)  # a CSV renamed .cxf
     assert "not a CxF3 document" in err
+    entity = b'<?xml version="1.0"?><!DOCTYPE r [<!ENTITY a "aaaa">]>' + data.split(b"?>", 1)[1]
+    err = _refused(entity, tmp_path, capsys)  # no entity expansion ("billion laughs")
+    assert "has a <!DOCTYPE>/<!ENTITY> declaration" in err
 
 
 def test_a_missing_library_names_the_extra(
