@@ -21,8 +21,9 @@ What is read, per ``Object`` of the ``ObjectCollection``:
   ``MultiAngle`` with several ``BRDFAngle`` elements is resolved by the spectrum's ``Name``
   equal to a ``BRDFAngle``'s ``Notation``.
 - values: the schema's ``Spectrum_Reflectance`` is "scaled such that 100% = 1.0"
-  (reflectance factors, CxF3 core schema, ``eSpectrumType``); a ``LuminanceUnitsType``
-  other than ``normalized`` is refused.
+  (reflectance factors, CxF3 core schema, ``eSpectrumType``; the schema bounds them to
+  -0.1 < value < 3.0, so percentages written into a CxF3 file are refused, not rescaled); a
+  ``LuminanceUnitsType`` other than ``normalized`` is refused.
 
 Refused, naming the file, the object and the reason: no geometry (``UnknownGeometry`` or
 none), a sphere (d/8) geometry, an out-of-plane ``Azimuth``, transmittance or emissive
@@ -56,6 +57,8 @@ __all__ = ["CXF3_NAMESPACE", "CXF_INSTALL_HINT", "is_cxf3", "read_spectra_cxf"]
 CXF3_NAMESPACE = "http://colorexchangeformat.com/CxF3-core"
 CXF_INSTALL_HINT = "pip install 'goniolab[cxf]'"
 _ROOT = re.compile(rb"<(?:[A-Za-z_][\w.-]*:)?CxF[\s>/]")
+#: CxF3_Core.xsd: ReflectanceSpectrum values are restricted to -0.1 < value < 3.0
+_SCHEMA_MAX = 3.0
 _DTD = re.compile(rb"<!(?:DOCTYPE|ENTITY)", re.IGNORECASE)
 
 
@@ -233,6 +236,11 @@ def read_spectra_cxf(data: bytes, *, where: str = "cxf") -> MultiAngleSpectra:
                 else [float(v) for v in sp.value]
             )  # fmt: skip
             check_spectrum(wl, vals, what=w)
+            if vals.size and float(vals.max()) >= _SCHEMA_MAX:
+                raise ColourError(
+                    f"{w}: a value of {float(vals.max()):g} is outside the schema's range for "
+                    f"reflectance factors (below {_SCHEMA_MAX:g}; 100% = 1.0): percent?"
+                )
             if wl_ref is None:
                 wl_ref = wl
             elif wl.shape != wl_ref.shape or not np.allclose(wl, wl_ref, rtol=0, atol=1e-9):

@@ -218,6 +218,11 @@ def test_custom_spectrum_points_and_percent_units_refused() -> None:
     data = _doc([spec], [cxf3.ReflectanceSpectrum(value=ROWS[0][1], color_specification="CS1")])
     with pytest.raises(ColourError, match="LuminanceUnitsType cd/m2 is not normalized"):
         read_spectra_cxf(data, where="x.cxf")
+    pct = [100 * v for v in ROWS[0][1]]  # percent written where the schema wants factors
+    data = _doc([_spec("CS1", cxf3.MultiAngleType([_angle(15.0)]))],
+                [cxf3.ReflectanceSpectrum(value=pct, color_specification="CS1")])  # fmt: skip
+    with pytest.raises(ColourError, match=r"a value of 65 is outside the schema's range"):
+        read_spectra_cxf(data, where="x.cxf")
 
 
 def test_percent_units_and_several_objects_are_refused_for_compare(
