@@ -125,9 +125,10 @@ def register_predict_colour(sub: Any) -> None:
     )
     p.add_argument(
         "--compare",
-        metavar="FILE.csv",
-        help="measured multi-angle spectra (R_400.. columns, aspecular_deg or theta_r_deg): "
-        "predicted at the file's geometries and judged against it",
+        metavar="FILE",
+        help="measured multi-angle spectra, a CSV (R_400.. columns, aspecular_deg or "
+        "theta_r_deg) or a CxF3 file (.cxf, needs goniolab[cxf]): predicted at the file's "
+        "geometries and judged against it",
     )
     p.add_argument(
         "--compare-unit",
