@@ -11,6 +11,7 @@ import asyncio
 import contextlib
 import math
 import time
+from typing import Any
 
 from textual import work
 from textual.app import App
@@ -279,15 +280,19 @@ class LiveView(App[int]):
         event loop, then show it in the run line (issue 20)."""
         try:
             note = self.backend.prediction_models(run_id)
+            record = self.backend.prediction_record(run_id)
         except Exception:  # the run line then names no model; the store says it elsewhere
             return
-        self.call_from_thread(self._show_prediction_models, run_id, note)
+        self.call_from_thread(self._show_prediction_models, run_id, note, record)
 
-    def _show_prediction_models(self, run_id: int, note: str) -> None:
+    def _show_prediction_models(self, run_id: int, note: str, record: dict[str, Any]) -> None:
         if run_id == self.run_id:
             self.prediction_note = note
+            # the colour table marks a colour made by a wavelength-free model from it
+            self.comparison.prediction_record = record
             with contextlib.suppress(NoMatches):
                 self.show_run_line()
+            self.schedule_redraw()
 
     @property
     def redraw_pending(self) -> bool:

@@ -24,6 +24,7 @@ FloatArray = np.typing.NDArray[np.float64]
 
 __all__ = [
     "PLOT_MODES",
+    "ColourNote",
     "ColourSwatch",
     "ColourTable",
     "ComparisonPanel",
@@ -66,8 +67,13 @@ class ColourTable(DataTable[str]):
     signed dL*, dC*, dH* and dE00 (predicted - measured) and the verdict of the tolerance
     set at that aspecular angle (:data:`goniolab.colour.tolerance.BUILTIN_SETS`
     ``din6175-2`` by default); a last row gives the overall verdict, with ``prov.`` beside
-    it for a provisional set (``din6175-2``'s limits are goniolab's, not the standard's)."""
+    it for a provisional set (``din6175-2``'s limits are goniolab's, not the standard's).
+    A predicted L* made by a wavelength-free model (the facet model) carries
+    :data:`FREE_MARK`; :class:`ColourNote` under the table says what that means, in the app
+    layer's words (:func:`goniolab.app.colour_notes.predicted_colour_models`, as ``runs colour``)."""
 
+    #: The mark beside a predicted colour whose model has no wavelength in it.
+    FREE_MARK = "†"
     #: The tolerance set judged per angle (a :class:`goniolab.colour.tolerance.ToleranceSet`).
     tolerance_name = "din6175-2"
 
@@ -105,7 +111,8 @@ class ColourTable(DataTable[str]):
                 fmt_num(float(t), 1),
                 fmt_num(float(c.aspecular_deg[k]), 0),
                 *(fmt_num(float(v), 1) for v in m),
-                fmt_num(float(p[0]), 1),
+                fmt_num(float(p[0]), 1)
+                + (f" {self.FREE_MARK}" if c.predicted_colour_note[k] is not None else ""),
                 *(fmt_num(float(d[key][k]), 2) for key in ("dL", "dC", "dH", "dE00")),
                 {True: "pass", False: "FAIL", None: "-"}[passed],
             )
@@ -114,6 +121,19 @@ class ColourTable(DataTable[str]):
             # a set whose limits are not confirmed says so beside its verdict
             prov = "prov." if tol.provisional else ""
             self.add_row("overall", "", "", "", "", "", "", "", prov, tol.name[:6], verdict)
+
+
+class ColourNote(Static):
+    """The colour table's legend: what its :attr:`ColourTable.FREE_MARK` means (the notes of
+    :func:`goniolab.app.colour_notes.predicted_colour_models`); hidden when no row has it."""
+
+    DEFAULT_CSS = "ColourNote { height: auto; max-height: 4; color: $warning; }"
+
+    def show(self, comparison: Comparison) -> None:
+        """Say the notes of ``comparison``'s predicted colours (hide without any)."""
+        notes = comparison.colour_arrays().predicted_colour_notes
+        self.update("\n".join(f"{ColourTable.FREE_MARK} {n}" for n in notes))
+        self.display = bool(notes)
 
 
 def fmt_num(value: float | None, digits: int = 2) -> str:
@@ -198,6 +218,9 @@ class ComparisonPanel(Horizontal):
             yield MetricsTable()
             yield ColourSwatch("colour: -")
             yield ColourTable()
+            note = ColourNote("")
+            note.display = False  # until a predicted colour needs it
+            yield note
 
     @property
     def main_plot(self) -> PlotWidget:
@@ -257,6 +280,7 @@ class ComparisonPanel(Horizontal):
         """Redraw both plots and the metrics table from ``comparison``."""
         self.query_one(ColourSwatch).show_lab(comparison.current_lab())
         self.query_one(ColourTable).show(comparison)
+        self.query_one(ColourNote).show(comparison)
         if self.plot_mode != "luminance":
             self._show_colour_plot(comparison)
         else:
