@@ -10,6 +10,7 @@ from typing import Any
 
 __all__ = [
     "PredictedColourModels",
+    "averaging_notes",
     "predicted_colour_models",
     "predicted_colour_notes",
     "surface_colour_notes",
@@ -98,3 +99,23 @@ def predicted_colour_notes(rec: Any, rows: list[dict[str, Any]]) -> list[str]:
         if note is not None:
             r["predicted_colour_note"] = note
     return got.notes
+
+
+def averaging_notes(rows: Sequence[dict[str, Any]]) -> list[str]:
+    """Say where a stored run's measured colour averaged its repeats as L*a*b* instead of
+    as spectra (``averaged = "lab"``, :func:`goniolab.scan.colour.colour_rows`), and why
+    (the row's ``averaged_reason``), one note per reason naming its angles. L*a*b* is not
+    linear in the spectrum (CIE 15:2004 eq. 8.1's cube root): the mean of the repeats'
+    L*a*b* is not the colour of their mean spectrum. A row of one reading averages
+    nothing: it has no note (its ``averaged_reason`` stays on the row)."""
+    by_reason: dict[str, list[float]] = {}
+    for r in rows:
+        if r.get("averaged") == "lab" and int(r.get("n", 0)) > 1:
+            why = str(r.get("averaged_reason") or "the run does not say why")
+            by_reason.setdefault(why, []).append(float(r["theta_r_deg"]))
+    out = []
+    for why, angles in by_reason.items():
+        lo, hi = min(angles), max(angles)
+        where = f"theta_r {lo:g} deg" if lo == hi else f"theta_r {lo:g}..{hi:g} deg"
+        out.append(f"measured colour ({where}): repeats averaged as L*a*b*, not as spectra: {why}")
+    return out

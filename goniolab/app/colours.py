@@ -493,7 +493,7 @@ def colour_report(
                 f"runs {rec.id} and {other.id} were lit at theta_i {theta_i:g} and "
                 f"{ti_other:g} deg: their colours are not comparable geometry by geometry"
             )
-    from goniolab.app.colour_notes import predicted_colour_notes
+    from goniolab.app.colour_notes import averaging_notes, predicted_colour_notes
 
     colour_notes = predicted_colour_notes(rec, rows)
     other_rows = run_colour(store, other) if other is not None else None
@@ -534,6 +534,7 @@ def colour_report(
         "predicted_flop_index": flop_of_rows(rows, theta_i, "predicted_L"),
         "flop_index_note": flop_index_note(theta_i),
         "predicted_colour_notes": colour_notes,
+        "averaging_notes": averaging_notes(rows),
         "pair": (
             {"reference": f"run {rec.id} measured", "sample": f"run {rec.id} predicted"}
             if other is None

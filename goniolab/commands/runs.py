@@ -139,6 +139,9 @@ def colour_text(rows: list[dict[str, Any]], theta_i_deg: float = 45.0) -> list[s
             )
             + f"  {_f(r.get('dE00_repeat_mean'), '7.3f')}"
         )
+    from goniolab.app.colour_notes import averaging_notes
+
+    out.extend(f"  note: {n}" for n in averaging_notes(rows))
     fi = flop_of_rows(rows, theta_i_deg)
     fi_p = flop_of_rows(rows, theta_i_deg, "predicted_L")
     note = flop_index_note(theta_i_deg)
