@@ -198,12 +198,16 @@ def _cmd_show(args: argparse.Namespace) -> int:
                 print(f"  {label}: {result[key]:+.3f} deg")
     else:
         predicted = rec.model.get("predicted_gu") or {}
+        by = rec.model.get("computed_by") or {}  # the model of each predicted gloss
         for angle, st in summary["statistics"].items():
             pred = predicted.get(angle)
+            model = f" ({safe_text(str(by[angle]))})" if angle in by else ""
             print(
                 f"  G{angle}: {st['mean_gu']:.1f} +- {st['std_gu']:.1f} GU (n = {st['n']})"
-                + ("" if pred is None else f", predicted {float(pred):.1f} GU")
+                + ("" if pred is None else f", predicted {float(pred):.1f} GU{model}")
             )
+        for w in rec.model.get("warnings") or []:
+            print(f"  prediction warning: {safe_text(str(w))}")
     if view.resume is not None:
         print(f"  continue it with: {view.resume}")
     return 0
