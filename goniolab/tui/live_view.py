@@ -213,6 +213,9 @@ class LiveView(App[int]):
             if ev.predicted_models:  # which model computed each predicted gloss (issue 20)
                 by = ", ".join(f"G{a} {m}" for a, m in sorted(ev.predicted_models.items()))
                 log.border_title = f"glossmeter log (predicted by {by})"
+            if ev.predicted_gu and ev.run_id and ev.run_id not in log.checked_runs:
+                log.checked_runs.add(ev.run_id)
+                self._load_gloss_warnings(ev.run_id)
             self.schedule_redraw()
         elif isinstance(ev, InstrumentError):
             now_s = time.monotonic()
@@ -293,6 +296,28 @@ class LiveView(App[int]):
             with contextlib.suppress(NoMatches):
                 self.show_run_line()
             self.schedule_redraw()
+
+    @work(thread=True, group="provenance")
+    def _load_gloss_warnings(self, run_id: int) -> None:
+        """Read the warnings stored with gloss run ``run_id``'s predicted gloss (its record)
+        off the event loop, then show them (a toast each, their count under the log)."""
+        try:
+            record = self.backend.prediction_record(run_id)
+        except Exception as exc:  # said, not dropped: the store has them
+            self.call_from_thread(
+                self.notify, f"run {run_id}: its prediction warnings could not be read: {exc}",
+                title="Gloss prediction", severity="warning",
+            )  # fmt: skip
+            return
+        warnings = record.get("warnings")
+        said = [str(w) for w in warnings] if isinstance(warnings, list) else []
+        self.call_from_thread(self._show_gloss_warnings, run_id, said)
+
+    def _show_gloss_warnings(self, run_id: int, warnings: list[str]) -> None:
+        with contextlib.suppress(NoMatches):
+            self.query_one("#gloss-log", GlossLog).show_prediction_warnings(run_id, warnings)
+        for w in warnings:
+            self.notify(w, title="Gloss prediction", severity="warning")
 
     @property
     def redraw_pending(self) -> bool:

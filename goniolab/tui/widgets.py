@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import re
 from datetime import UTC, datetime
+from typing import Any
 
 import numpy as np
 from textual import events
@@ -516,7 +517,24 @@ def _status_line(widget: Widget) -> StatusLine | None:
 
 
 class GlossLog(DataTable[str]):
-    """Glossmeter readings as they come: time, measured and predicted G20/G60/G85."""
+    """Glossmeter readings as they come: time, measured and predicted G20/G60/G85; the
+    border's subtitle counts the warnings stored with the predicted gloss of the run."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        #: the gloss runs whose stored prediction warnings were asked for
+        self.checked_runs: set[int] = set()
+
+    def show_prediction_warnings(self, run_id: int, warnings: list[str]) -> None:
+        """Say under the log how many warnings run ``run_id``'s predicted gloss carries
+        (the stored run's, :func:`goniolab.optics.provenance.gloss_provenance_of`'s notes)
+        and where to read them."""
+        n = len(warnings)
+        self.border_subtitle = (
+            f"{n} prediction warning{'s' if n != 1 else ''} (goniolab runs show {run_id})"
+            if warnings
+            else ""
+        )
 
     def on_mount(self) -> None:
         self.cursor_type = "row"
