@@ -11,6 +11,7 @@ from typing import Any
 __all__ = [
     "PredictedColourModels",
     "averaging_notes",
+    "calibration_note",
     "predicted_colour_models",
     "predicted_colour_notes",
     "surface_colour_notes",
@@ -118,4 +119,30 @@ def averaging_notes(rows: Sequence[dict[str, Any]]) -> list[str]:
         lo, hi = min(angles), max(angles)
         where = f"theta_r {lo:g} deg" if lo == hi else f"theta_r {lo:g}..{hi:g} deg"
         out.append(f"measured colour ({where}): repeats averaged as L*a*b*, not as spectra: {why}")
+    return out
+
+
+def calibration_note(run_model: Any) -> str:
+    """The calibration a stored BRDF run's readings rest on, as its record cites it
+    (``calibration``: the latest ``goniolab calibrate`` run when it started, its age then
+    and its check standard's verdict, :func:`goniolab.scan.calibration.calibration_notices`)."""
+    model = run_model if isinstance(run_model, dict) else {}
+    cite = model.get("calibration")
+    if not isinstance(cite, dict):
+        return "calibration: not recorded with the run"
+    if cite.get("run") is None:
+        return "calibration: none (no goniolab calibrate record when the run started)"
+    out = f"calibration: run {cite['run']}"
+    if cite.get("time_iso"):
+        out += f" of {cite['time_iso']}"
+    age_h = cite.get("age_h")
+    if isinstance(age_h, int | float):
+        out += f", {float(age_h):.1f} h old when the run started"
+    ok, residual = cite.get("check_ok"), cite.get("check_residual_pct")
+    if ok is None:
+        out += "; check standard not measured"
+    else:
+        out += "; check standard " + ("within" if ok else "MISSED") + " its certificate"
+        if isinstance(residual, int | float):
+            out += f" ({float(residual):+.3f} %)"
     return out

@@ -493,7 +493,11 @@ def colour_report(
                 f"runs {rec.id} and {other.id} were lit at theta_i {theta_i:g} and "
                 f"{ti_other:g} deg: their colours are not comparable geometry by geometry"
             )
-    from goniolab.app.colour_notes import averaging_notes, predicted_colour_notes
+    from goniolab.app.colour_notes import (
+        averaging_notes,
+        calibration_note,
+        predicted_colour_notes,
+    )
 
     colour_notes = predicted_colour_notes(rec, rows)
     other_rows = run_colour(store, other) if other is not None else None
@@ -529,6 +533,9 @@ def colour_report(
         "run": rec.id,
         "theta_i_deg": theta_i,
         "colour_settings": settings,
+        # what the measured colours rest on: the calibration the run cites
+        "calibration": rec.model.get("calibration") if isinstance(rec.model, dict) else None,
+        "calibration_note": calibration_note(rec.model),
         "geometries": rows,
         "flop_index": flop_of_rows(rows, theta_i),
         "predicted_flop_index": flop_of_rows(rows, theta_i, "predicted_L"),

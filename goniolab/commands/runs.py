@@ -179,9 +179,11 @@ def _cmd_show(args: argparse.Namespace) -> int:
     print(f"  goniolab {rec.version}; model {json.dumps(rec.model, sort_keys=True)}")
     print(f"  plan: {plan_text(rec.plan)}")
     if rec.kind == "brdf":
+        from goniolab.app.colour_notes import calibration_note
         from goniolab.commands.scan import format_summary
 
         print(format_summary(summary))
+        print(f"  {calibration_note(rec.model)}")
         if any("L" in r for r in colour):
             print("  colour (reflectance factor, per geometry):")
             theta_i = float(rec.plan.get("theta_i_deg", 45.0))
