@@ -101,6 +101,9 @@ class ColourArrays:
     predicted_colour_note: tuple[str | None, ...] = ()
     #: One note per wavelength-free model, naming its angles (the table's legend).
     predicted_colour_notes: tuple[str, ...] = ()
+    #: Where repeats were averaged as L*a*b* instead of as spectra, and why
+    #: (:func:`goniolab.app.colour_notes.averaging_notes`, as ``runs colour`` says it).
+    averaging_notes: tuple[str, ...] = ()
 
     @property
     def aspecular_deg(self) -> FloatArray:
@@ -235,6 +238,19 @@ class Comparison:
         lab_mean: FloatArray = np.mean(np.array(self.lab[index]), axis=0)
         return lab_mean
 
+    def lab_average_reason(self, index: int) -> str | None:
+        """Why :meth:`mean_lab` averages point ``index``'s repeats as L*a*b* (``None``:
+        it averages them as spectra, or there is nothing to average)."""
+        pairs = self.xyz.get(index) or []
+        if len(self.lab.get(index) or []) < 2:
+            return None
+        missing = sum(p is None for p in pairs)
+        if missing:
+            return f"{missing} of its readings came without XYZ (their white unknown)"
+        if len({p[1] for p in pairs if p is not None}) > 1:
+            return "its readings' L*a*b* are relative to different whites"
+        return None
+
     def colour_arrays(self) -> ColourArrays:
         """Measured and predicted L*a*b* per point, sorted by theta_r."""
         idx = sorted(self.theta_r_deg, key=lambda i: (self.theta_r_deg[i], i))
@@ -254,9 +270,18 @@ class Comparison:
         note: list[str | None] = [None] * len(idx)
         for k, m, n in zip(has, got.model, got.note, strict=True):
             model[k], note[k] = m, n
+        from goniolab.app.colour_notes import averaging_notes
+
+        rows = [
+            {"theta_r_deg": float(theta[k]), "averaged": "lab", "n": len(self.lab[i]),
+             "averaged_reason": why}
+            for k, i in enumerate(idx)
+            if (why := self.lab_average_reason(i)) is not None
+        ]  # fmt: skip
         return ColourArrays(
-            theta, meas, pred, self.theta_i_deg, tuple(model), tuple(note), tuple(got.notes)
-        )
+            theta, meas, pred, self.theta_i_deg, tuple(model), tuple(note), tuple(got.notes),
+            tuple(averaging_notes(rows)),
+        )  # fmt: skip
 
     def add_predicted(self, ev: PointPredicted) -> None:
         """Record the model's prediction for plan point ``ev.index``."""

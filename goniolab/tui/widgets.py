@@ -126,15 +126,18 @@ class ColourTable(DataTable[str]):
 
 class ColourNote(Static):
     """The colour table's legend: what its :attr:`ColourTable.FREE_MARK` means (the notes of
-    :func:`goniolab.app.colour_notes.predicted_colour_models`); hidden when no row has it."""
+    :func:`goniolab.app.colour_notes.predicted_colour_models`) and where repeats were
+    averaged as L*a*b* instead of as spectra; hidden when there is nothing to say."""
 
     DEFAULT_CSS = "ColourNote { height: auto; max-height: 4; color: $warning; }"
 
     def show(self, comparison: Comparison) -> None:
         """Say the notes of ``comparison``'s predicted colours (hide without any)."""
-        notes = comparison.colour_arrays().predicted_colour_notes
-        self.update("\n".join(f"{ColourTable.FREE_MARK} {n}" for n in notes))
-        self.display = bool(notes)
+        c = comparison.colour_arrays()
+        lines = [f"{ColourTable.FREE_MARK} {n}" for n in c.predicted_colour_notes]
+        lines += [f"note: {n}" for n in c.averaging_notes]
+        self.update("\n".join(lines))
+        self.display = bool(lines)
 
 
 def fmt_num(value: float | None, digits: int = 2) -> str:

@@ -85,3 +85,27 @@ async def test_the_live_colour_table_marks_the_analytic_models_colours(
     # the runs browser's stored run carries the same record (screens.RunsScreen._show_run)
     stored = app.backend.load_run(run_id)
     assert stored.prediction["computed_by"] == {"analytic-beckmann": [30.0, 40.0, 50.0]}
+
+
+def test_the_comparison_says_where_it_averaged_as_lab() -> None:
+    # as tests/tui/test_comparison.py: with XYZ the repeats are averaged as spectra; a
+    # point whose readings came without XYZ falls back to the mean L*a*b*, and says so
+    from goniolab.scan.events import PointMeasured
+
+    white = (94.811, 100.0, 107.304)
+    c = Comparison()
+    c.clear(run_id=1)
+    for index, tr, xyz in ((0, 30.0, (20.0, 21.0, 22.0)), (1, 40.0, None)):
+        for rep in range(2):
+            c.add_measured(PointMeasured(
+                run_id=1, index=index, repeat=rep, theta_i_deg=45.0, theta_r_deg=tr,
+                luminance_pct=1.0, measured_theta_i_deg=45.0, measured_theta_r_deg=tr,
+                lab=(50.0 + rep, 1.0, 2.0), xyz=xyz, white_xyz=None if xyz is None else white,
+            ))  # fmt: skip
+    assert c.lab_average_reason(0) is None
+    (note,) = c.colour_arrays().averaging_notes
+    assert note == (
+        "measured colour (theta_r 40 deg): repeats averaged as L*a*b*, not as spectra: "
+        "2 of its readings came without XYZ (their white unknown)"
+    )
+    assert c.colour_arrays().measured_lab[1][0] == 50.5  # the mean L* it says it took
