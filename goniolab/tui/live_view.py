@@ -284,7 +284,12 @@ class LiveView(App[int]):
         try:
             note = self.backend.prediction_models(run_id)
             record = self.backend.prediction_record(run_id)
-        except Exception:  # the run line then names no model; the store says it elsewhere
+        except Exception as exc:  # the run line and colour table then name no model: said
+            self.call_from_thread(
+                self.notify,
+                f"run {run_id}: which model made its prediction could not be read: {exc}",
+                title="Prediction", severity="warning",
+            )  # fmt: skip
             return
         self.call_from_thread(self._show_prediction_models, run_id, note, record)
 

@@ -109,3 +109,21 @@ def test_the_comparison_says_where_it_averaged_as_lab() -> None:
         "2 of its readings came without XYZ (their white unknown)"
     )
     assert c.colour_arrays().measured_lab[1][0] == 50.5  # the mean L* it says it took
+
+
+async def test_a_record_that_cannot_be_read_is_said() -> None:
+    # the colour table's marks come from the stored record: when it cannot be read the
+    # table shows no mark, and the user is told why there is none
+    from goniolab.tui.app import GonioApp
+    from tests.tui.tui_scripted import ScriptedBackend
+
+    class Broken(ScriptedBackend):
+        def prediction_record(self, run_id: int) -> dict:
+            raise OSError("database is locked")
+
+    app = GonioApp(Broken(gated=False), poll_hz=0, autostart=True)
+    async with app.run_test(size=SIZE) as pilot:
+        await wait_until(pilot, lambda: app.run_state is RunState.DONE)
+        await wait_until(pilot, lambda: any(n.title == "Prediction" for n in app._notifications))
+        (msg,) = [n.message for n in app._notifications if n.title == "Prediction"]
+    assert msg == "run 1: which model made its prediction could not be read: database is locked"
