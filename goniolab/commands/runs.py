@@ -210,6 +210,8 @@ def _cmd_show(args: argparse.Namespace) -> int:
             )
         for w in rec.model.get("warnings") or []:
             print(f"  prediction warning: {safe_text(str(w))}")
+        # the readings rest on the meter's own calibration, which goniolab does not read
+        print("  glossmeter calibration: not recorded (its standard and date are the meter's)")
     if view.resume is not None:
         print(f"  continue it with: {view.resume}")
     return 0
