@@ -40,11 +40,19 @@ check: $(DEV_STAMP)
 	$(BIN)/ruff format --check goniolab drivers sim labtoml tests bench
 	$(BIN)/mypy
 
-# Two workers; worksteal lets an idle worker take half of the other's queue, and
+# Three workers on the two cores: the long end-to-end tests mostly wait (a lab clock at
+# real time, a server starting, a driver's timeout), and a third worker runs other tests
+# meanwhile; with two, a quarter to a half of the cores' time went idle (bench/README.md,
+# "The test suite"). worksteal lets an idle worker take half of another's queue, and
 # tests/conftest.py starts the tests marked slow first on each worker (the long end-to-end
 # runs must not be the last ones left). --durations lists the slowest, to see one creep in.
+# PYTHONDONTWRITEBYTECODE is dropped for the run: the suite starts hundreds of Python
+# processes (xdist workers, `goniolab` subprocesses), and without bytecode each compiled the
+# repository's modules again (about 5 s of CPU per worker's collection); Python writes them to
+# the __pycache__ directories .gitignore already names, as any plain run does.
+PYTEST_WORKERS ?= 3
 test: check
-	$(BIN)/python -m pytest -n 2 --dist worksteal --durations=15 -q
+	env -u PYTHONDONTWRITEBYTECODE $(BIN)/python -m pytest -n $(PYTEST_WORKERS) --dist worksteal --durations=15 -q
 
 format: $(DEV_STAMP)
 	$(BIN)/ruff check --fix goniolab drivers sim labtoml tests bench

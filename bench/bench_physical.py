@@ -1,6 +1,11 @@
 """Benchmark of the physical-optics models (Kirchhoff, Rayleigh-Rice): numba vs numpy sums.
 
 Run:  .venv/bin/python bench/bench_physical.py [--size 1024] [--repeats 7] [--json]
+      [--backend numba|numpy|both] [--checkout DIR]
+
+``--checkout DIR`` imports goniolab from another checkout (e.g. ``git archive BASE goniolab
+| tar -x -C DIR``) instead of this one: run it beside a run without, at the same load, for
+a paired A/B of a change (issue 26: the 16-wavelength gloss).
 
 A ``size x size`` smooth Gaussian map (Gaussian ACF, Sq 50 nm, correlation length 2 um,
 0.5 um steps: a high-gloss coat) is tiled once; each workload then runs with the model's
@@ -36,7 +41,15 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+# --checkout, read before the imports below (they come from that checkout)
+sys.path.insert(
+    0,
+    next(
+        (str(Path(sys.argv[i + 1]).resolve()) for i, a in enumerate(sys.argv[:-1])
+         if a == "--checkout"),
+        str(Path(__file__).resolve().parents[1]),
+    ),
+)  # fmt: skip
 
 from goniolab.optics.heightmap import HeightMap
 from goniolab.optics.kirchhoff import KirchhoffModel
@@ -85,12 +98,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--size", type=int, default=1024, help="map size in pixels (default 1024)")
     ap.add_argument("--repeats", type=int, default=7, help="timed runs per workload (>= 3)")
     ap.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    ap.add_argument("--backend", choices=("numba", "numpy", "both"), default="both",
+                    help="the per-cell sums to time (default both)")  # fmt: skip
+    ap.add_argument("--checkout", help="import goniolab from this checkout (module docstring)")
     args = ap.parse_args(argv)
     if args.repeats < 3:
         ap.error("--repeats must be >= 3")
     hm = smooth_map(args.size)
     theta_r = np.arange(0.0, 71.0, 1.0)
+    import goniolab
+
     results: dict[str, object] = {
+        "goniolab": str(Path(goniolab.__file__).parent),
         "map": f"{args.size}x{args.size} at 0.5 um, Sq 50 nm, l 2 um",
         "cpus": os.cpu_count(),
         "load_average_1min": os.getloadavg()[0],
@@ -99,7 +118,7 @@ def main(argv: list[str] | None = None) -> int:
     }
     table: dict[str, dict[str, object]] = {}
     for cls in (KirchhoffModel, RayleighRiceModel):
-        for backend in ("numba", "numpy"):
+        for backend in ("numba", "numpy") if args.backend == "both" else (args.backend,):
             m = cls(hm, n=1.55, wavelength_nm=550.0, backend=backend)  # type: ignore[arg-type]
             key = f"{cls.kind}/{backend}"
             table[key] = {
@@ -132,7 +151,8 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     print(
         f"physical-optics benchmark: {results['map']}, {os.cpu_count()} CPUs, median of "
-        f"{args.repeats}, load average {os.getloadavg()[0]:.1f} (timings scale with other load)"
+        f"{args.repeats}, load average {os.getloadavg()[0]:.1f} (timings scale with other load); "
+        f"goniolab from {results['goniolab']}"
     )
     print(
         f"{'model/backend':<24}{'workload':<18}{'target':>9}{'median':>10}{'min':>9}{'cpu':>9}{'warm-up':>10}"

@@ -26,7 +26,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from goniolab.app.colours import write_png
+from goniolab.app.panel_render import write_png
 from goniolab.colour.paint_render import render, tabulate_brdf
 from goniolab.colour.spectra import colour_module, standard_grid_nm, xyz_weights
 from goniolab.model_cache import paint_for

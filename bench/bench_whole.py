@@ -15,8 +15,9 @@ that levelling has work to do) made in a temporary directory:
   curve and readings written in plain numpy), target ratio <= 0.5;
 - ``--model facet`` runs the facet model's numba-free "lean" backend (one command, one
   process: numba's import and set-up cost ~1 s); the defaults (``--model auto``, masking)
-  use the compiled kernels of the physical-optics models and the facet model: their first
-  run with an empty ``NUMBA_CACHE_DIR`` (compiles the kernels) beside the cached runs;
+  run the wave models' numpy sums and the facet model's lean cells (no numba since issue
+  26): their first run with an empty ``NUMBA_CACHE_DIR`` is timed beside the later runs
+  (the two agree when nothing is JIT-compiled);
 - the memory-bandwidth limit: the bytes the pipeline must touch (read the file into memory,
   two plane sums, the slopes written once, one read of the slopes per facet pass) over the
   measured ``numpy.copyto`` bandwidth (bytes read + written per second);
@@ -198,8 +199,8 @@ def main(argv: list[str] | None = None) -> int:
         gloss = [GONIOLAB, "predict", "gloss", str(mp), *facet]
         base = [PY, str(ROOT / "bench" / "baseline_numpy.py"), str(mp)]
 
-        # the defaults (auto, masking) compile the kernels on their first run with an empty
-        # numba cache (JIT); later runs load them from the cache
+        # the defaults (auto, masking): their first run with an empty numba cache (a JIT
+        # compilation would show here; since issue 26 they load no numba)
         auto_brdf = [GONIOLAB, "predict", "brdf", str(mp), "--theta-i", "45", "--theta-r",
                      "0:70:1"]  # fmt: skip
         auto_gloss = [GONIOLAB, "predict", "gloss", str(mp)]
@@ -288,9 +289,9 @@ def print_table(out: dict[str, object]) -> None:
             f"limit {out[f'limit_{what}_s'] * 1e3:.0f} ms at {out['copy_bandwidth_gbs']:.1f} GB/s"
         )
     print(
-        f"numba kernels (the defaults, auto + masking): first run with an empty cache "
+        f"the defaults (auto, masking), first run with an empty numba cache: "
         f"{out['jit_first_run_brdf_s']:.2f} s (brdf), {out['jit_first_run_gloss_s']:.2f} s "
-        "(gloss); cached: the table above"
+        "(gloss); later runs: the table above"
     )
     for key, label in (("in_process", "lean backend"), ("in_process_numba", "numba, cached")):
         ip = out[key]

@@ -34,7 +34,8 @@ def pytest_configure(config: pytest.Config) -> None:
 
 
 #: End-to-end tests measured at 10 s or more (``--durations`` per directory, one directory at
-#: a time, 2-core machine; bench/README.md has the command and the table). They are marked
+#: a time, 2-core machine; bench/README.md has the command and the table), and the longest
+#: in-process ones of a full run (bench/README.md, "The whole suite"). They are marked
 #: ``slow`` here, beside the ones marked in their files, so that ``-m "not slow"`` leaves
 #: them out and :func:`pytest_collection_modifyitems` starts them first. A test renamed or
 #: removed just drops out of this list's effect.
@@ -78,6 +79,13 @@ MEASURED_SLOW = frozenset(
         "tests/test_store_pg.py::test_two_scans_write_at_once",
         "tests/test_store_pg.py::test_kill_9_mid_scan_then_resume",
         "tests/test_provenance_faces.py::test_gloss_and_scan_runs_name_their_models",
+        # in-process computations measured at 6-30 s in a full `pytest -n 2` run (load 4):
+        # left unmarked, one could be the last test left on a worker's queue
+        "tests/optics/test_kirchhoff.py::test_a_flat_map_at_89_deg_reads_the_beam_above_the_horizon",
+        "tests/optics/test_kirchhoff.py::test_numba_and_numpy_aperture_sums_agree",
+        "tests/optics/test_facet.py::test_masked_cones_up_to_89_deg_match_brute_force",
+        "tests/sim/test_twin_flakes.py::test_outside_the_lobe_stays_below_coverage_times_flake_reflectance",
+        "tests/test_export.py::test_export_to_a_full_disk_keeps_the_old_file",
     }
 )
 

@@ -9,7 +9,7 @@ ROOT = Path(__file__).resolve().parents[1]
 PHYSICS = ROOT / "docs" / "PHYSICS.md"
 
 #: ``PHYSICS.md, "Section"``, ``PHYSICS.md "Section"``, ``PHYSICS.md ("Section")``, across a line break
-CITATION = re.compile(r'PHYSICS\.md,?\s*\(?"([^"]+)"')
+CITATION = re.compile(r'PHYSICS\.md(?:,\s*\(?|\s+\(?|\()"([^"]+)"')  # not "docs/PHYSICS.md"
 
 
 def _headings() -> set[str]:

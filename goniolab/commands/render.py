@@ -18,7 +18,7 @@ __all__ = ["register"]
 
 
 def _cmd_render(args: argparse.Namespace) -> int:
-    from goniolab.app.colours import RenderOptions, render_paint
+    from goniolab.app.panel_render import RenderOptions, render_paint
 
     opts = RenderOptions(
         size=args.size,

@@ -16,6 +16,7 @@ References
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 
@@ -28,6 +29,16 @@ from goniolab.optics.fresnel import fresnel
 __all__ = ["coherent_reflectance", "coherent_sums"]
 
 FloatArray = NDArray[np.float64]
+
+
+@functools.cache
+def _gauss_legendre(n: int) -> tuple[FloatArray, FloatArray]:
+    """``numpy.polynomial.legendre.leggauss(n)``, formed once per n (an eigenvalue
+    problem each call: a 16-wavelength gloss asked for it a hundred times)."""
+    x, w = np.polynomial.legendre.leggauss(n)
+    x.setflags(write=False)
+    w.setflags(write=False)
+    return x, w
 
 
 def coherent_reflectance(
@@ -74,8 +85,8 @@ def coherent_sums(
     if isinstance(source, Rect) and isinstance(receptor, Rect):
         a_s, b_s = math.radians(source.in_plane_deg), math.radians(source.perp_deg)
         a_r, b_r = math.radians(receptor.in_plane_deg), math.radians(receptor.perp_deg)
-        xb, wb = np.polynomial.legendre.leggauss(8)
-        xa, wa = np.polynomial.legendre.leggauss(12)
+        xb, wb = _gauss_legendre(8)
+        xa, wa = _gauss_legendre(12)
         # out of plane: the mirror image of beta is -beta, inside when |beta| <= b_r / 2
         if b_s == 0.0:
             bb, wbb, norm_b = np.zeros(1), np.ones(1), 1.0
@@ -112,8 +123,8 @@ def coherent_sums(
     if a_s == 0.0:
         r0 = float(coherent_reflectance(np.array([m0[2]]), theta_i_deg, c_nominal, n)[0])
         return np.where(gam < a_d, r0, np.where(gam == a_d, 0.5 * r0, 0.0))
-    xu, wu = np.polynomial.legendre.leggauss(12)
-    xv, wv = np.polynomial.legendre.leggauss(16)
+    xu, wu = _gauss_legendre(12)
+    xv, wv = _gauss_legendre(16)
     omega_s = 2.0 * math.pi * (1.0 - math.cos(a_s))
     # the horizon cuts circles of polar radius u > pi/2 - ti about the mirror centre:
     # z = cos u cos ti - sin u sin ti cos v > 0 leaves |v| > acos(cos u cos ti / (sin u sin ti))

@@ -24,6 +24,8 @@ __all__ = ["ENERGY_CHECK_FROM_DEG", "EnergyBudget"]
 #: Beckmann's obliquity factor grows without bound towards grazing incidence, and the
 #: first-order Rayleigh-Rice Q factor may exceed the Fresnel reflectance there.
 ENERGY_CHECK_FROM_DEG: float = 70.0
+#: The interpolation nodes of the energy scale over ISO 2813's band (um).
+ISO_BAND_UM: tuple[float, float, float] = (0.4, 0.55, 0.7)
 
 
 class EnergyBudget:
@@ -40,11 +42,17 @@ class EnergyBudget:
         within energy conservation, per wavelength (1 below :data:`ENERGY_CHECK_FROM_DEG`;
         the subclasses' :meth:`_energy_scales_at` state their bound). For more than three
         wavelengths the factor is computed at the shortest, median and longest and
-        interpolated linearly in ``1/lambda^2`` (it is smooth in lambda: g ~ 1/lambda^2)."""
+        interpolated linearly in ``1/lambda^2`` (it is smooth in lambda: g ~ 1/lambda^2);
+        a set within ISO 2813's 400-700 nm uses that band's ends and middle (400, 550,
+        700 nm: those of the gloss's 16 wavelengths), so the gloss and the validity checks'
+        subset (:meth:`_lams_for_checks`) share one computation."""
         if theta_i_deg < ENERGY_CHECK_FROM_DEG:
             return [1.0 for _ in lams_um]
         if len(lams_um) > 3:
-            nodes = sorted({min(lams_um), float(np.median(lams_um)), max(lams_um)})
+            if ISO_BAND_UM[0] - 1e-9 <= min(lams_um) and max(lams_um) <= ISO_BAND_UM[-1] + 1e-9:
+                nodes = list(ISO_BAND_UM)
+            else:
+                nodes = sorted({min(lams_um), float(np.median(lams_um)), max(lams_um)})
             at = self._energy_scales(theta_i_deg, nodes)
             x = [1.0 / v**2 for v in nodes][::-1]
             return [float(np.interp(1.0 / v**2, x, at[::-1])) for v in lams_um]

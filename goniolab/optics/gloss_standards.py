@@ -159,7 +159,13 @@ def _reading(
 
 
 def e430_report(model: ReflectanceModel) -> E430Report:
-    """ASTM E430 methods A and B from ``model.reflected_fraction`` (module docstring)."""
+    """ASTM E430 methods A and B from ``model.reflected_fraction`` (module docstring), one
+    reading at a time: read together (one set of transforms for a haze pair, through the
+    wave models' ``reflected_fractions``) the haze readings moved by 1e-9 between a process
+    whose OpenBLAS runs threads and a dask worker whose does not (``tests/test_batch.py``:
+    a batch must read the same numbers wherever it runs): the pair's zero-padded DFT-matrix
+    product (:func:`goniolab.optics.psd.pruned_fft2`) is large enough for OpenBLAS to
+    thread it."""
     tb = E430_B_ANGLE_DEG
     gloss_20 = _reading(model, tb, tb, E430_B_SOURCE, E430_B_SPECULAR_RECEPTOR)
     h_lo = _reading(model, tb, tb - E430_B_HAZE_OFFSET_DEG, E430_B_SOURCE, E430_B_HAZE_RECEPTOR)

@@ -539,13 +539,20 @@ class PhysicalOpticsModel(EnergyBudget, CellApertures):
     ) -> float:
         """Fraction of the flux from ``source`` (centred on theta_i) reaching ``receptor``
         (:meth:`provenance` names the model that computes it)."""
+        return float(self.reflected_fractions(theta_i_deg, theta_r_deg, source, receptor))
+
+    def reflected_fractions(
+        self, theta_i_deg: float, theta_r_deg: ArrayLike, source: Aperture, receptor: Aperture
+    ) -> FloatArray:
+        """:meth:`reflected_fraction` at the signed detector angles (any shape): one
+        cell-power map serves every angle (a curve, the E430 haze pairs and DOI)."""
         ti = check_theta_i(theta_i_deg)
-        tr = float(theta_r_deg)
-        if not (math.isfinite(tr) and -90.0 < tr < 90.0):
+        tr = np.asarray(theta_r_deg, dtype=np.float64)
+        if np.any(~np.isfinite(tr)) or np.any(np.abs(tr) >= 90.0):
             raise ValueError(f"theta_r_deg must be in (-90, 90) deg, got {theta_r_deg!r}")
-        self._check_apertures(ti, source, receptor)
-        vals, _ = self._evaluate(ti, np.array([tr]), source, receptor, [self.wavelength_nm])
-        return float(vals[0, 0])
+        self._check_apertures(ti, source, receptor)  # (no angle: an empty result)
+        vals, _ = self._evaluate(ti, tr.ravel(), source, receptor, [self.wavelength_nm])
+        return vals[0].reshape(tr.shape)
 
     def luminance_pct(
         self,
@@ -555,21 +562,12 @@ class PhysicalOpticsModel(EnergyBudget, CellApertures):
         source: Aperture = GONIO_CONE,
         detector: Aperture = GONIO_CONE,
     ) -> FloatArray:
-        """Goniometer reading in % of a mirror at the signed detector angles.
-
-        One cell-power map serves every angle; :meth:`provenance` names the model of each.
-        """
-        ti = check_theta_i(theta_i_deg)
-        tr = np.asarray(theta_r_deg, dtype=np.float64)
-        if np.any(~np.isfinite(tr)) or np.any(np.abs(tr) >= 90.0):
-            raise ValueError("theta_r_deg must be in (-90, 90) deg")
-        self._check_apertures(ti, source, detector)
-        flat = tr.ravel()
-        if flat.size == 0:
-            return np.empty(tr.shape)
-        vals, _ = self._evaluate(ti, flat, source, detector, [self.wavelength_nm])
-        result: FloatArray = 100.0 * vals[0].reshape(tr.shape)
-        return result
+        """Goniometer reading in % of a mirror at the signed detector angles (one
+        cell-power map for all; :meth:`provenance` names the model of each)."""
+        out: FloatArray = 100.0 * self.reflected_fractions(
+            theta_i_deg, theta_r_deg, source, detector
+        )
+        return out
 
     def brdf_inplane(self, theta_i_deg: float, theta_r_deg: ArrayLike) -> FloatArray:
         """In-plane BRDF (sr^-1), averaged over a :data:`POINT_BRDF_BOX_DEG` square receptor.

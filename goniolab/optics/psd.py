@@ -54,8 +54,11 @@ __all__ = [
     "pruned_fft2",
     "psd2",
     "psd_region",
+    "psd_strided",
     "schwartz_taper",
     "tile_starts",
+    "windowed_sq_um",
+    "y_axis_first",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -104,6 +107,10 @@ def tile_starts(n: int, tile: int) -> tuple[list[int], int]:
 _TILE_CACHE_BYTES: int = 32 << 20
 #: The kept tiles of each tiled map (dropped with the map).
 _TILES: weakref.WeakKeyDictionary[TiledMap, dict[int, NDArray[np.float32]]] = (
+    weakref.WeakKeyDictionary()
+)
+#: Their transposed copies (:meth:`TiledMap.tile_transposed`), kept alike.
+_TILES_T: weakref.WeakKeyDictionary[TiledMap, dict[int, NDArray[np.float32]]] = (
     weakref.WeakKeyDictionary()
 )
 
@@ -255,6 +262,19 @@ class TiledMap:
             kept[k] = h
         return h, w
 
+    def tile_transposed(self, k: int) -> NDArray[np.float32]:
+        """``tile(k)[0].T`` as a contiguous read-only array (for transforms along y first),
+        kept beside the tile when the tiles are (:meth:`tile`)."""
+        keep = self.n_tiles * self.ny_t * self.nx_t * 4 <= _TILE_CACHE_BYTES
+        kept = _TILES_T.setdefault(self, {}) if keep else None
+        if kept is not None and k in kept:
+            return kept[k]
+        ht = np.ascontiguousarray(self.tile(k)[0].T)
+        ht.setflags(write=False)
+        if kept is not None:
+            kept[k] = ht
+        return ht
+
 
 @dataclass(frozen=True, eq=False)
 class PSD2:
@@ -293,6 +313,39 @@ def psd2(tiled: TiledMap) -> PSD2:
     return PSD2(fx=fx, fy=fy, psd_um4=psd, sq_um=sq)
 
 
+def windowed_sq_um(tiled: TiledMap) -> float:
+    """The rms height :func:`psd2` integrates to, ``sqrt(mean_tiles sum (W h)^2 / sum W^2)``,
+    summed in real space (discrete Parseval: the same value without a transform)."""
+    acc = 0.0
+    for k in range(tiled.n_tiles):
+        h, w = tiled.tile(k)
+        wh = (w * h).astype(np.float64)
+        # numpy's pairwise sum (einsum's SIMD sum moved with the arrays' alignment: the
+        # same map read 1e-9 apart in two processes)
+        acc += float(np.sum(np.square(wh)))
+    return math.sqrt(acc / (tiled.sum_w2 * tiled.n_tiles))
+
+
+def psd_strided(tiled: TiledMap, stride: int) -> FloatArray:
+    """:func:`psd2`'s PSD (um^4) at every ``stride``-th cell in each axis, ``out[i, j] =
+    PSD(stride fy_i', stride fx_j')`` on the ``(ny / stride, nx / stride)`` grid (numpy
+    ``fftfreq`` order): the transform of length ``N / stride`` of ``W h`` folded ``stride``
+    times along each axis gives those cells exactly (``e^(-2 pi i s m' n / N)`` has period
+    ``N / s`` in n), at ``1 / stride^2`` of the work. The tile's sides must divide."""
+    ny, nx = tiled.ny_t, tiled.nx_t
+    if ny % stride or nx % stride:
+        raise ValueError(f"stride {stride} does not divide the tile ({ny} x {nx})")
+    fy, fx = ny // stride, nx // stride
+    acc = np.zeros((fy, fx), dtype=np.float64)
+    for k in range(tiled.n_tiles):
+        h, w = tiled.tile(k)
+        folded = (w * h).reshape(stride, fy, stride, fx).sum(axis=(0, 2))
+        spec = _fft.fft(_fft.fft(folded.astype(np.complex64), axis=1), axis=0)
+        acc += np.abs(spec).astype(np.float64) ** 2
+    out: FloatArray = acc * tiled.dx_um * tiled.dy_um / (tiled.sum_w2 * tiled.n_tiles)
+    return out
+
+
 #: Largest zero-padded complex64 copy of a tile the padded FFT may make (bytes).
 _MAX_PADDED_BYTES: int = 64 << 20
 
@@ -318,6 +371,36 @@ def _dft_last(a: NDArray[np.complex64], idx: NDArray[np.int64], length: int) -> 
     e = np.exp((-2j * math.pi / length) * np.outer(np.arange(n), idx)).astype(np.complex64)
     result: NDArray[Any] = a @ e
     return result
+
+
+def _pass_cost(lines: int, n: int, length: int, kept: int) -> float:
+    """Work of :func:`_dft_last` on ``lines`` lines of ``n`` points (length ``length``,
+    ``kept`` outputs): an FFT ``L log2 L`` per line, or ``n K`` for the DFT-matrix product
+    it picks for few outputs (the same rule)."""
+    fft_line = length * max(1.0, math.log2(length))
+    if length == n:
+        return lines * fft_line
+    few = kept < (length // n) * max(1.0, math.log2(length))
+    if few or lines * length * 8 > _MAX_PADDED_BYTES:
+        return float(lines * n * kept)
+    return lines * fft_line
+
+
+def y_axis_first(
+    ny: int, nx: int, ky_size: int, kx_size: int, lengths: tuple[int, int] | None = None
+) -> bool:
+    """Whether :func:`pruned_fft2` should run its first (full) pass along y: the order of
+    the two passes with less work. The full pass transforms every line of the tile, the
+    second only the lines kept; with zero padding a full pass along the padded axis costs
+    the padding factor more, so the padded axis goes second (the ISO 85 deg receptor: a
+    3 x padded x axis first took twice the work). Unpadded: y first when ``ky`` is the
+    smaller."""
+    ly, lx = (ny, nx) if lengths is None else lengths
+    x_first = _pass_cost(ny, nx, lx, kx_size) + _pass_cost(kx_size, ny, ly, ky_size)
+    y_first = _pass_cost(nx, ny, ly, ky_size) + _pass_cost(ky_size, nx, lx, kx_size)
+    if (ly, lx) == (ny, nx) and ny == nx:
+        return ky_size <= kx_size
+    return y_first <= x_first
 
 
 def pruned_fft2(
@@ -371,7 +454,7 @@ def psd_region(
     acc = np.zeros((ky.size, kx.size))
     spec = np.empty((ky.size, kx.size), dtype=np.complex64)
     lengths = (os[1] * tiled.ny_t, os[0] * tiled.nx_t)
-    y_first = ky.size <= kx.size
+    y_first = y_axis_first(tiled.ny_t, tiled.nx_t, ky.size, kx.size, lengths)
     for k in range(tiled.n_tiles):
         h, w = tiled.tile(k)
         term = (w * h).astype(np.complex64)

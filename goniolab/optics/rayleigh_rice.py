@@ -59,7 +59,7 @@ from goniolab.optics.physical import (
     PhysicalOpticsModel,
     check_theta_i,
 )
-from goniolab.optics.psd import PSD2, psd2, psd_region
+from goniolab.optics.psd import PSD2, psd2, psd_region, psd_strided, windowed_sq_um
 
 __all__ = ["RayleighRiceModel", "rr_q_factor"]
 
@@ -103,10 +103,16 @@ class RayleighRiceModel(PhysicalOpticsModel):
         out: PSD2 = self._shared.cached(("psd",), lambda: psd2(self._shared.tiled))
         return out
 
+    @property
+    def psd_sq_um(self) -> float:
+        """The rms height the PSD integrates to (:func:`~goniolab.optics.psd.windowed_sq_um`:
+        summed in real space, no transform; shared by every sibling model)."""
+        out: float = self._shared.cached(("psd-sq",), lambda: windowed_sq_um(self._shared.tiled))
+        return out
+
     def rayleigh_g(self, theta_i_deg: float) -> float:
         """Rayleigh factor ``g = (4 pi Sq cos ti / lambda)^2`` of the specular beam."""
-        lam = self.wavelength_nm * 1e-3
-        return (4.0 * math.pi * self.psd.sq_um * math.cos(math.radians(theta_i_deg)) / lam) ** 2
+        return self._g_at(theta_i_deg, self.wavelength_nm * 1e-3)
 
     def specular_reflectance(self, theta_i_deg: float) -> float:
         """``R(ti) exp(-g)``: the coherent specular beam (Debye-Waller)."""
@@ -115,7 +121,7 @@ class RayleighRiceModel(PhysicalOpticsModel):
         return r * math.exp(-self._g_at(ti, self.wavelength_nm * 1e-3))
 
     def _g_at(self, theta_i_deg: float, lam_um: float) -> float:
-        return (4.0 * math.pi * self.psd.sq_um * math.cos(math.radians(theta_i_deg)) / lam_um) ** 2
+        return (4.0 * math.pi * self.psd_sq_um * math.cos(math.radians(theta_i_deg)) / lam_um) ** 2
 
     def _cell_powers(
         self,
@@ -167,14 +173,22 @@ class RayleighRiceModel(PhysicalOpticsModel):
         factor is ``min(1, R (1 - exp(-g)) / (exp(-g) D))``. (Below that angle
         ``exp(-g) D <= R (1 - exp(-g))`` holds by itself: ``g exp(-g) <= 1 - exp(-g)`` and Q
         stays near R.) D is summed over every second cell of the tile's grid in each axis
-        when the tile is larger than 256 points (the periodogram is smooth at that scale)."""
+        when the tile is larger than 256 points (the periodogram is smooth at that scale);
+        where those cells are the even ones, their PSD is the folded tile's transform
+        (:func:`~goniolab.optics.psd.psd_strided`: a quarter of the work), else the
+        full PSD's."""
         t = self._shared.tiled
         ci = math.cos(math.radians(theta_i_deg))
         stride = 2 if max(t.nx_t, t.ny_t) > 256 else 1
         nx0, nx1, ny0, ny1 = self._nyquist()
         box = CellBox(nx0, nx1, ny0, ny1)
         ix, iy = box.ix[::stride], box.iy[::stride]
-        pv = self.psd.psd_um4[np.ix_(iy % t.ny_t, ix % t.nx_t)] * stride * stride
+        if stride > 1 and not (t.nx_t % stride or t.ny_t % stride or nx0 % stride or ny0 % stride):
+            folded = self._shared.cached(("psd-strided", stride), lambda: psd_strided(t, stride))
+            fy, fx = folded.shape
+            pv = folded[np.ix_((iy // stride) % fy, (ix // stride) % fx)] * stride * stride
+        else:
+            pv = self.psd.psd_um4[np.ix_(iy % t.ny_t, ix % t.nx_t)] * stride * stride
         df2 = 1.0 / (t.nx_t * t.dx_um * t.ny_t * t.dy_um)
         r_spec = float(fresnel(ci, self.n))
         out = []
