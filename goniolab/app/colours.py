@@ -311,7 +311,9 @@ def predict_colour(
                 "reflectance_factor": [float(v) for v in f],
             }
         )
-    colour_notes = _surface_colour_notes(model, theta_i, rows, opts)
+    from goniolab.app.colour_notes import surface_colour_notes
+
+    colour_notes = surface_colour_notes(model, theta_i, rows, opts.source_deg, opts.detector_deg)
     notes.extend(colour_notes)
     try:
         sparkle = (
@@ -476,59 +478,6 @@ def _pairs_by_index(
     return out
 
 
-def _surface_colour_notes(
-    model: Any, theta_i: float, rows: list[dict[str, Any]], opts: ColourOptions
-) -> list[str]:
-    """Name the model that computes each row's coat-surface part (``surface_model``,
-    :func:`goniolab.optics.provenance.provenance_of`) and warn where it has no wavelength in
-    it (:func:`goniolab.colour.spectral.surface_colour_note`)."""
-    from goniolab.colour.spectral import surface_colour_note, wavelength_free
-    from goniolab.optics.apertures import Cone
-    from goniolab.optics.provenance import provenance_of
-
-    src, det = Cone(opts.source_deg), Cone(opts.detector_deg)
-    free: dict[str, list[float]] = {}
-    for r in rows:
-        t = float(r["theta_r_deg"])
-        name = provenance_of(model, theta_i, t, src, det).model
-        r["surface_model"] = name
-        if wavelength_free(name):
-            free.setdefault(name, []).append(t)
-    return [surface_colour_note(name, angles) for name, angles in free.items()]
-
-
-def _predicted_colour_notes(rec: Any, rows: list[dict[str, Any]]) -> list[str]:
-    """Name the model of each row's predicted colour (``predicted_model``, from the run's
-    stored ``computed_by``, :meth:`goniolab.scan.prediction.Predictor.provenance`) and,
-    where that model has no wavelength in it (the facet model), say on the row
-    (``predicted_colour_note``) and in the returned notes that its colour from surface
-    scattering is not predicted (:func:`goniolab.colour.spectral.surface_colour_note`)."""
-    from goniolab.colour.spectral import surface_colour_note, wavelength_free
-
-    model = rec.model if isinstance(rec.model, dict) else {}
-    computed_by = model.get("computed_by")
-    by_angle: dict[float, str] = {}
-    if isinstance(computed_by, dict):
-        for name, angles in computed_by.items():
-            for t in angles if isinstance(angles, list) else []:
-                by_angle[round(float(t), 6)] = str(name)
-    elif isinstance(model.get("model_name"), str):  # a run that predates computed_by
-        by_angle = {round(float(r["theta_r_deg"]), 6): model["model_name"] for r in rows}
-    free: dict[str, list[float]] = {}
-    for r in rows:
-        if r.get("predicted_L") is None:
-            continue
-        t = float(r["theta_r_deg"])
-        name = by_angle.get(round(t, 6))
-        if name is None:
-            continue
-        r["predicted_model"] = name
-        if wavelength_free(name):
-            r["predicted_colour_note"] = surface_colour_note(name)
-            free.setdefault(name, []).append(t)
-    return [surface_colour_note(name, angles) for name, angles in free.items()]
-
-
 def colour_report(
     store: Any,
     rec: Any,
@@ -563,7 +512,13 @@ def colour_report(
                 f"runs {rec.id} and {other.id} were lit at theta_i {theta_i:g} and "
                 f"{ti_other:g} deg: their colours are not comparable geometry by geometry"
             )
-    colour_notes = _predicted_colour_notes(rec, rows)
+    from goniolab.app.colour_notes import (
+        averaging_notes,
+        calibration_note,
+        predicted_colour_notes,
+    )
+
+    colour_notes = predicted_colour_notes(rec, rows)
     other_rows = run_colour(store, other) if other is not None else None
     pairs = _pairs_by_index(rows, other_rows)
     if other is not None and not pairs:
@@ -597,11 +552,15 @@ def colour_report(
         "run": rec.id,
         "theta_i_deg": theta_i,
         "colour_settings": settings,
+        # what the measured colours rest on: the calibration the run cites
+        "calibration": rec.model.get("calibration") if isinstance(rec.model, dict) else None,
+        "calibration_note": calibration_note(rec.model),
         "geometries": rows,
         "flop_index": flop_of_rows(rows, theta_i),
         "predicted_flop_index": flop_of_rows(rows, theta_i, "predicted_L"),
         "flop_index_note": flop_index_note(theta_i),
         "predicted_colour_notes": colour_notes,
+        "averaging_notes": averaging_notes(rows),
         "pair": (
             {"reference": f"run {rec.id} measured", "sample": f"run {rec.id} predicted"}
             if other is None

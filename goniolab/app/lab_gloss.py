@@ -26,7 +26,7 @@ if TYPE_CHECKING:
     from goniolab.scan.plans import GlossPlan
     from goniolab.store import RunMeta, RunStore
 
-__all__ = ["MeterPort", "gloss_log", "gloss_plan", "meter_pushes"]
+__all__ = ["MeterPort", "gloss_log", "gloss_plan", "meter_pushes", "stored_gloss_prediction"]
 
 
 @dataclass(frozen=True)
@@ -119,6 +119,10 @@ async def gloss_log(
                 mode = "push" if port is not None and meter_pushes(port.protocol) else "measure"
             logger = await session.start(plan, mode=mode, interval_s=interval_s, meta=meta)
             notify(f"run {logger.run_id} in store {store.location}")
+            # what the stored run says about its predicted gloss (a model out of its
+            # validity, a clamp), before the first reading is printed beside it
+            for w in stored_gloss_prediction(store, logger.run_id)["warnings"]:
+                notify(f"warning: model: {w}")
             logging.getLogger("goniolab").info("run %d in store %s", logger.run_id, store.location)
             watcher: asyncio.Task[None] | None = None
             if watch is not None:
@@ -131,3 +135,18 @@ async def gloss_log(
                 session.bus.close()
                 if watcher is not None:
                     await watcher
+
+
+def stored_gloss_prediction(store: RunStore, run_id: int) -> dict[str, Any]:
+    """The predicted gloss of gloss run ``run_id`` as its record holds it: ``computed_by``
+    (geometry -> the model that computed it, :func:`goniolab.optics.provenance.
+    gloss_provenance_of`) and the ``warnings`` of those numbers (empty without a
+    prediction)."""
+    model = store.get_run(run_id).model
+    model = model if isinstance(model, dict) else {}
+    computed_by = model.get("computed_by")
+    warnings = model.get("warnings")
+    return {
+        "computed_by": dict(computed_by) if isinstance(computed_by, dict) else {},
+        "warnings": [str(w) for w in warnings] if isinstance(warnings, list) else [],
+    }

@@ -198,6 +198,8 @@ def colour_report_text(doc: dict[str, Any], *, with_geometries: bool = True) -> 
 
     out = colour_text(doc["geometries"], doc["theta_i_deg"]) if with_geometries else []
     out.extend(f"note: {n}" for n in doc.get("predicted_colour_notes", []))
+    if doc.get("calibration_note"):
+        out.append(doc["calibration_note"])
     tol = doc["tolerance"]
     pair = doc["pair"]
     out.append(

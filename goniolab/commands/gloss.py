@@ -90,7 +90,7 @@ def _cmd_log(args: argparse.Namespace) -> int:
             "gloss log: give --config FILE, or --port PORT --protocol "
             + "|".join(GLOSSMETERS.names())
         )
-    from goniolab.app.lab_gloss import MeterPort, gloss_log, gloss_plan
+    from goniolab.app.lab_gloss import MeterPort, gloss_log, gloss_plan, stored_gloss_prediction
     from goniolab.app.lab_setup import check_sample, load_config, open_store, stderr_notify
     from goniolab.scan.events import RunState
 
@@ -160,6 +160,9 @@ def _cmd_log(args: argparse.Namespace) -> int:
                         "readings": result.readings,
                         "reconnects": result.reconnects,
                         "statistics": result.stats.as_dict(),
+                        # the stored run's predicted gloss: its model per geometry and
+                        # the warnings of those numbers
+                        "prediction": stored_gloss_prediction(store, result.run_id),
                     }
                 )
             )

@@ -139,6 +139,9 @@ def colour_text(rows: list[dict[str, Any]], theta_i_deg: float = 45.0) -> list[s
             )
             + f"  {_f(r.get('dE00_repeat_mean'), '7.3f')}"
         )
+    from goniolab.app.colour_notes import averaging_notes
+
+    out.extend(f"  note: {n}" for n in averaging_notes(rows))
     fi = flop_of_rows(rows, theta_i_deg)
     fi_p = flop_of_rows(rows, theta_i_deg, "predicted_L")
     note = flop_index_note(theta_i_deg)
@@ -176,9 +179,11 @@ def _cmd_show(args: argparse.Namespace) -> int:
     print(f"  goniolab {rec.version}; model {json.dumps(rec.model, sort_keys=True)}")
     print(f"  plan: {plan_text(rec.plan)}")
     if rec.kind == "brdf":
+        from goniolab.app.colour_notes import calibration_note
         from goniolab.commands.scan import format_summary
 
         print(format_summary(summary))
+        print(f"  {calibration_note(rec.model)}")
         if any("L" in r for r in colour):
             print("  colour (reflectance factor, per geometry):")
             theta_i = float(rec.plan.get("theta_i_deg", 45.0))
@@ -195,12 +200,18 @@ def _cmd_show(args: argparse.Namespace) -> int:
                 print(f"  {label}: {result[key]:+.3f} deg")
     else:
         predicted = rec.model.get("predicted_gu") or {}
+        by = rec.model.get("computed_by") or {}  # the model of each predicted gloss
         for angle, st in summary["statistics"].items():
             pred = predicted.get(angle)
+            model = f" ({safe_text(str(by[angle]))})" if angle in by else ""
             print(
                 f"  G{angle}: {st['mean_gu']:.1f} +- {st['std_gu']:.1f} GU (n = {st['n']})"
-                + ("" if pred is None else f", predicted {float(pred):.1f} GU")
+                + ("" if pred is None else f", predicted {float(pred):.1f} GU{model}")
             )
+        for w in rec.model.get("warnings") or []:
+            print(f"  prediction warning: {safe_text(str(w))}")
+        # the readings rest on the meter's own calibration, which goniolab does not read
+        print("  glossmeter calibration: not recorded (its standard and date are the meter's)")
     if view.resume is not None:
         print(f"  continue it with: {view.resume}")
     return 0

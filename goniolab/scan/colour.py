@@ -123,20 +123,23 @@ def _spectrum_of(p: PointRow) -> tuple[tuple[float, ...], tuple[float, ...]] | N
 
 def _mean_spectrum_colour(
     pts: Sequence[PointRow], point_colour: PointColour, theta_r_deg: float
-) -> tuple[float, float, float] | None:
+) -> tuple[tuple[float, float, float] | None, str]:
     """L*a*b* of the repeats' mean spectrum (the spectra averaged, then converted), or
-    None when a repeat has no spectrum or the grids differ."""
+    ``None`` and why not: a repeat has no stored spectrum, the grids differ, or the mean
+    spectrum cannot be converted."""
     spectra = [_spectrum_of(p) for p in pts]
-    if not spectra or any(s is None for s in spectra):
-        return None
+    missing = [p.repeat for p, s in zip(pts, spectra, strict=True) if s is None]
+    if missing:
+        which = ", ".join(str(r) for r in missing)
+        return None, f"repeat {which} has no stored spectrum"
     grids = {s[0] for s in spectra if s is not None}
     if len(grids) != 1:
-        return None
+        return None, f"the repeats' spectra are on {len(grids)} different wavelength grids"
     mean = np.mean([s[1] for s in spectra if s is not None], axis=0)
     try:
-        return point_colour.measured(next(iter(grids)), list(mean), theta_r_deg).lab
-    except ValueError:
-        return None
+        return point_colour.measured(next(iter(grids)), list(mean), theta_r_deg).lab, ""
+    except ValueError as exc:
+        return None, f"their mean spectrum cannot be converted ({exc})"
 
 
 def colour_rows(
@@ -150,8 +153,8 @@ def colour_rows(
 
     With ``point_colour`` (the run's colour settings) the repeats are averaged as spectra
     (the mean spectrum converted once: ``averaged = "spectra"``); otherwise, or when a
-    repeat has no spectrum, as L*a*b* (``averaged = "lab"``). Readings flagged saturated
-    or under the noise floor are left out. With two or more repeats: ``sd_L``, ``sd_a``,
+    repeat has no spectrum, as L*a*b* (``averaged = "lab"``; ``averaged_reason`` says why).
+    Readings flagged saturated or under the noise floor are left out. With two or more repeats: ``sd_L``, ``sd_a``,
     ``sd_b`` (sample standard deviations between repeats) and ``dE00_repeat_mean`` /
     ``dE00_repeat_max`` (CIEDE2000 of each repeat from the row's colour), the
     repeatability a lab compares with its instrument's (0.05 dE for a good one).
@@ -178,13 +181,15 @@ def colour_rows(
         }
         if cols:
             each = np.array([[c["L"], c["a"], c["b"]] for c in cols])
-            from_spectra = (
-                None
+            from_spectra, why = (
+                (None, "the run's stored config gives no colour settings to convert a spectrum")
                 if point_colour is None
                 else _mean_spectrum_colour(good, point_colour, pts[0].theta_r_deg)
             )
             lab = each.mean(axis=0) if from_spectra is None else np.asarray(from_spectra)
             row["averaged"] = "lab" if from_spectra is None else "spectra"
+            if from_spectra is None:
+                row["averaged_reason"] = why  # the fallback says why (no silent substitution)
             row.update(L=float(lab[0]), a=float(lab[1]), b=float(lab[2]))
             if len(cols) > 1:
                 sd = each.std(axis=0, ddof=1)

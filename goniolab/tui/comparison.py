@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -92,6 +93,17 @@ class ColourArrays:
     predicted_lab: FloatArray
     #: Incidence of the run (the aspecular angles are ``theta_i - theta_r``, ASTM E2194).
     theta_i_deg: float = 45.0
+    #: Per point: the model that computed its predicted colour (``None``: no prediction, or
+    #: the run does not say) and the note of a wavelength-free model (``None``: no note),
+    #: as the app layer says them (:func:`goniolab.app.colour_notes.predicted_colour_models`,
+    #: the same as ``goniolab runs colour``).
+    predicted_model: tuple[str | None, ...] = ()
+    predicted_colour_note: tuple[str | None, ...] = ()
+    #: One note per wavelength-free model, naming its angles (the table's legend).
+    predicted_colour_notes: tuple[str, ...] = ()
+    #: Where repeats were averaged as L*a*b* instead of as spectra, and why
+    #: (:func:`goniolab.app.colour_notes.averaging_notes`, as ``runs colour`` says it).
+    averaging_notes: tuple[str, ...] = ()
 
     @property
     def aspecular_deg(self) -> FloatArray:
@@ -154,6 +166,9 @@ class Comparison:
     theta_i_deg: float = 45.0
     #: readings flagged saturated / under the noise floor (kept off the curve), by flag
     flagged: dict[str, int] = field(default_factory=dict)
+    #: The run's stored prediction record (its ``computed_by``: which model computed each
+    #: angle, :meth:`goniolab.scan.prediction.Predictor.provenance`); empty until read.
+    prediction_record: dict[str, Any] = field(default_factory=dict)
 
     def clear(self, *, run_id: int = 0, sample: str = "", theta_i_deg: float = 45.0) -> None:
         """Forget the curve and start collecting for ``run_id``.
@@ -171,6 +186,7 @@ class Comparison:
         self.predicted_lab.clear()
         self.last_colour_index = None
         self.flagged.clear()
+        self.prediction_record = {}
 
     def add_measured(self, ev: PointMeasured) -> None:
         """Record one reading (one repeat of plan point ``ev.index``).
@@ -222,6 +238,19 @@ class Comparison:
         lab_mean: FloatArray = np.mean(np.array(self.lab[index]), axis=0)
         return lab_mean
 
+    def lab_average_reason(self, index: int) -> str | None:
+        """Why :meth:`mean_lab` averages point ``index``'s repeats as L*a*b* (``None``:
+        it averages them as spectra, or there is nothing to average)."""
+        pairs = self.xyz.get(index) or []
+        if len(self.lab.get(index) or []) < 2:
+            return None
+        missing = sum(p is None for p in pairs)
+        if missing:
+            return f"{missing} of its readings came without XYZ (their white unknown)"
+        if len({p[1] for p in pairs if p is not None}) > 1:
+            return "its readings' L*a*b* are relative to different whites"
+        return None
+
     def colour_arrays(self) -> ColourArrays:
         """Measured and predicted L*a*b* per point, sorted by theta_r."""
         idx = sorted(self.theta_r_deg, key=lambda i: (self.theta_r_deg[i], i))
@@ -233,7 +262,26 @@ class Comparison:
                 meas[k] = self.mean_lab(i)
             if i in self.predicted_lab:
                 pred[k] = self.predicted_lab[i]
-        return ColourArrays(theta, meas, pred, self.theta_i_deg)
+        from goniolab.app.colour_notes import predicted_colour_models
+
+        has = [k for k, i in enumerate(idx) if i in self.predicted_lab]
+        got = predicted_colour_models(self.prediction_record, [float(theta[k]) for k in has])
+        model: list[str | None] = [None] * len(idx)
+        note: list[str | None] = [None] * len(idx)
+        for k, m, n in zip(has, got.model, got.note, strict=True):
+            model[k], note[k] = m, n
+        from goniolab.app.colour_notes import averaging_notes
+
+        rows = [
+            {"theta_r_deg": float(theta[k]), "averaged": "lab", "n": len(self.lab[i]),
+             "averaged_reason": why}
+            for k, i in enumerate(idx)
+            if (why := self.lab_average_reason(i)) is not None
+        ]  # fmt: skip
+        return ColourArrays(
+            theta, meas, pred, self.theta_i_deg, tuple(model), tuple(note), tuple(got.notes),
+            tuple(averaging_notes(rows)),
+        )  # fmt: skip
 
     def add_predicted(self, ev: PointPredicted) -> None:
         """Record the model's prediction for plan point ``ev.index``."""

@@ -11,6 +11,7 @@ import asyncio
 import contextlib
 import math
 import time
+from typing import Any
 
 from textual import work
 from textual.app import App
@@ -212,6 +213,9 @@ class LiveView(App[int]):
             if ev.predicted_models:  # which model computed each predicted gloss (issue 20)
                 by = ", ".join(f"G{a} {m}" for a, m in sorted(ev.predicted_models.items()))
                 log.border_title = f"glossmeter log (predicted by {by})"
+            if ev.predicted_gu and ev.run_id and ev.run_id not in log.checked_runs:
+                log.checked_runs.add(ev.run_id)
+                self._load_gloss_warnings(ev.run_id)
             self.schedule_redraw()
         elif isinstance(ev, InstrumentError):
             now_s = time.monotonic()
@@ -279,15 +283,46 @@ class LiveView(App[int]):
         event loop, then show it in the run line (issue 20)."""
         try:
             note = self.backend.prediction_models(run_id)
-        except Exception:  # the run line then names no model; the store says it elsewhere
+            record = self.backend.prediction_record(run_id)
+        except Exception as exc:  # the run line and colour table then name no model: said
+            self.call_from_thread(
+                self.notify,
+                f"run {run_id}: which model made its prediction could not be read: {exc}",
+                title="Prediction", severity="warning",
+            )  # fmt: skip
             return
-        self.call_from_thread(self._show_prediction_models, run_id, note)
+        self.call_from_thread(self._show_prediction_models, run_id, note, record)
 
-    def _show_prediction_models(self, run_id: int, note: str) -> None:
+    def _show_prediction_models(self, run_id: int, note: str, record: dict[str, Any]) -> None:
         if run_id == self.run_id:
             self.prediction_note = note
+            # the colour table marks a colour made by a wavelength-free model from it
+            self.comparison.prediction_record = record
             with contextlib.suppress(NoMatches):
                 self.show_run_line()
+            self.schedule_redraw()
+
+    @work(thread=True, group="provenance")
+    def _load_gloss_warnings(self, run_id: int) -> None:
+        """Read the warnings stored with gloss run ``run_id``'s predicted gloss (its record)
+        off the event loop, then show them (a toast each, their count under the log)."""
+        try:
+            record = self.backend.prediction_record(run_id)
+        except Exception as exc:  # said, not dropped: the store has them
+            self.call_from_thread(
+                self.notify, f"run {run_id}: its prediction warnings could not be read: {exc}",
+                title="Gloss prediction", severity="warning",
+            )  # fmt: skip
+            return
+        warnings = record.get("warnings")
+        said = [str(w) for w in warnings] if isinstance(warnings, list) else []
+        self.call_from_thread(self._show_gloss_warnings, run_id, said)
+
+    def _show_gloss_warnings(self, run_id: int, warnings: list[str]) -> None:
+        with contextlib.suppress(NoMatches):
+            self.query_one("#gloss-log", GlossLog).show_prediction_warnings(run_id, warnings)
+        for w in warnings:
+            self.notify(w, title="Gloss prediction", severity="warning")
 
     @property
     def redraw_pending(self) -> bool:

@@ -172,6 +172,7 @@ class RunsScreen(Screen[None]):
         s = stored.summary
         comparison = Comparison()
         comparison.clear(run_id=s.run_id, sample=s.sample)
+        comparison.prediction_record = stored.prediction
         for m in stored.measured:
             comparison.add_measured(m)
         for p in stored.predicted:

@@ -473,6 +473,12 @@ class SessionBackend:
         )
 
     # ------------------------------------------------------------------ store
+    def prediction_record(self, run_id: int) -> dict[str, Any]:
+        """Run ``run_id``'s stored prediction record (``computed_by`` among it)."""
+        with open_store(self.store_path, readonly=True) as store:
+            model = store.get_run(run_id).model
+        return model if isinstance(model, dict) else {}
+
     def prediction_models(self, run_id: int) -> str:
         """Which model computes the run's predicted curve, from its stored record
         (``computed_by``, :meth:`goniolab.scan.prediction.Predictor.provenance`)."""
@@ -565,7 +571,8 @@ class SessionBackend:
                 rec.status,
                 len(measured) if rec.kind == "brdf" else len(gloss),
             )
-            return StoredRun(summary, measured, predicted, gloss, colours)
+            model = rec.model if isinstance(rec.model, dict) else {}
+            return StoredRun(summary, measured, predicted, gloss, colours, model)
 
 
 def _stored_white_xyz(config: dict[str, Any]) -> tuple[float, float, float] | None:

@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from collections.abc import Awaitable
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Any, Protocol
 
 from goniolab.errors import UserError
 from goniolab.scan.events import (
@@ -166,6 +166,9 @@ class StoredRun:
     gloss: list[GlossRead] = field(default_factory=list)
     #: Predicted colours per plan point (issue 11; empty for older runs).
     colours: list[ColourPredicted] = field(default_factory=list)
+    #: The run's stored prediction record (``computed_by``: which model computed each angle;
+    #: :attr:`goniolab.tui.comparison.Comparison.prediction_record`).
+    prediction: dict[str, Any] = field(default_factory=dict)
 
 
 class Backend(Protocol):
@@ -263,6 +266,12 @@ class Backend(Protocol):
 
     def load_run(self, run_id: int) -> StoredRun:
         """One stored run's readings, predictions and gloss (blocking: thread worker)."""
+        ...
+
+    def prediction_record(self, run_id: int) -> dict[str, Any]:
+        """Run ``run_id``'s stored prediction record (its ``computed_by``: which model
+        computed each angle's prediction and colour), {} when it has none (blocking:
+        thread worker)."""
         ...
 
     def prediction_models(self, run_id: int) -> str:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import re
 from datetime import UTC, datetime
+from typing import Any
 
 import numpy as np
 from textual import events
@@ -24,6 +25,7 @@ FloatArray = np.typing.NDArray[np.float64]
 
 __all__ = [
     "PLOT_MODES",
+    "ColourNote",
     "ColourSwatch",
     "ColourTable",
     "ComparisonPanel",
@@ -66,8 +68,13 @@ class ColourTable(DataTable[str]):
     signed dL*, dC*, dH* and dE00 (predicted - measured) and the verdict of the tolerance
     set at that aspecular angle (:data:`goniolab.colour.tolerance.BUILTIN_SETS`
     ``din6175-2`` by default); a last row gives the overall verdict, with ``prov.`` beside
-    it for a provisional set (``din6175-2``'s limits are goniolab's, not the standard's)."""
+    it for a provisional set (``din6175-2``'s limits are goniolab's, not the standard's).
+    A predicted L* made by a wavelength-free model (the facet model) carries
+    :data:`FREE_MARK`; :class:`ColourNote` under the table says what that means, in the app
+    layer's words (:func:`goniolab.app.colour_notes.predicted_colour_models`, as ``runs colour``)."""
 
+    #: The mark beside a predicted colour whose model has no wavelength in it.
+    FREE_MARK = "†"
     #: The tolerance set judged per angle (a :class:`goniolab.colour.tolerance.ToleranceSet`).
     tolerance_name = "din6175-2"
 
@@ -105,7 +112,8 @@ class ColourTable(DataTable[str]):
                 fmt_num(float(t), 1),
                 fmt_num(float(c.aspecular_deg[k]), 0),
                 *(fmt_num(float(v), 1) for v in m),
-                fmt_num(float(p[0]), 1),
+                fmt_num(float(p[0]), 1)
+                + (f" {self.FREE_MARK}" if c.predicted_colour_note[k] is not None else ""),
                 *(fmt_num(float(d[key][k]), 2) for key in ("dL", "dC", "dH", "dE00")),
                 {True: "pass", False: "FAIL", None: "-"}[passed],
             )
@@ -114,6 +122,22 @@ class ColourTable(DataTable[str]):
             # a set whose limits are not confirmed says so beside its verdict
             prov = "prov." if tol.provisional else ""
             self.add_row("overall", "", "", "", "", "", "", "", prov, tol.name[:6], verdict)
+
+
+class ColourNote(Static):
+    """The colour table's legend: what its :attr:`ColourTable.FREE_MARK` means (the notes of
+    :func:`goniolab.app.colour_notes.predicted_colour_models`) and where repeats were
+    averaged as L*a*b* instead of as spectra; hidden when there is nothing to say."""
+
+    DEFAULT_CSS = "ColourNote { height: auto; max-height: 4; color: $warning; }"
+
+    def show(self, comparison: Comparison) -> None:
+        """Say the notes of ``comparison``'s predicted colours (hide without any)."""
+        c = comparison.colour_arrays()
+        lines = [f"{ColourTable.FREE_MARK} {n}" for n in c.predicted_colour_notes]
+        lines += [f"note: {n}" for n in c.averaging_notes]
+        self.update("\n".join(lines))
+        self.display = bool(lines)
 
 
 def fmt_num(value: float | None, digits: int = 2) -> str:
@@ -198,6 +222,9 @@ class ComparisonPanel(Horizontal):
             yield MetricsTable()
             yield ColourSwatch("colour: -")
             yield ColourTable()
+            note = ColourNote("")
+            note.display = False  # until a predicted colour needs it
+            yield note
 
     @property
     def main_plot(self) -> PlotWidget:
@@ -257,6 +284,7 @@ class ComparisonPanel(Horizontal):
         """Redraw both plots and the metrics table from ``comparison``."""
         self.query_one(ColourSwatch).show_lab(comparison.current_lab())
         self.query_one(ColourTable).show(comparison)
+        self.query_one(ColourNote).show(comparison)
         if self.plot_mode != "luminance":
             self._show_colour_plot(comparison)
         else:
@@ -492,7 +520,24 @@ def _status_line(widget: Widget) -> StatusLine | None:
 
 
 class GlossLog(DataTable[str]):
-    """Glossmeter readings as they come: time, measured and predicted G20/G60/G85."""
+    """Glossmeter readings as they come: time, measured and predicted G20/G60/G85; the
+    border's subtitle counts the warnings stored with the predicted gloss of the run."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        #: the gloss runs whose stored prediction warnings were asked for
+        self.checked_runs: set[int] = set()
+
+    def show_prediction_warnings(self, run_id: int, warnings: list[str]) -> None:
+        """Say under the log how many warnings run ``run_id``'s predicted gloss carries
+        (the stored run's, :func:`goniolab.optics.provenance.gloss_provenance_of`'s notes)
+        and where to read them."""
+        n = len(warnings)
+        self.border_subtitle = (
+            f"{n} prediction warning{'s' if n != 1 else ''} (goniolab runs show {run_id})"
+            if warnings
+            else ""
+        )
 
     def on_mount(self) -> None:
         self.cursor_type = "row"

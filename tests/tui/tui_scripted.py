@@ -12,7 +12,7 @@ from __future__ import annotations
 import asyncio
 import math
 from collections.abc import Callable
-from typing import ClassVar
+from typing import Any, ClassVar
 
 from textual.pilot import Pilot
 
@@ -110,6 +110,9 @@ class ScriptedBackend:
 
     def prediction_models(self, run_id: int) -> str:
         return "scripted-gaussian"
+
+    def prediction_record(self, run_id: int) -> dict[str, Any]:
+        return {"computed_by": {"scripted-gaussian": []}}
 
     def default_setup(self) -> ScanSetup:
         return ScanSetup("sample:wittmann-3", 20.0, 10.0, 30.0, 2.0, 3)
