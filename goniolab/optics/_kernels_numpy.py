@@ -252,7 +252,7 @@ def deposit_numpy(
         out: FloatArray | None = None
         for di, wa in ((0, 1.0 - fx), (1, fx)):
             for dj, wb in ((0, 1.0 - fy), (1, fy)):
-                part = np.bincount(
+                part: FloatArray = np.bincount(  # type: ignore[assignment]
                     (i + di) * n1 + (j + dj), weights=val * wa * wb, minlength=n0 * n1
                 )
                 if out is None:  # 0 + part is part: no zeroed grid to add it to

@@ -288,10 +288,10 @@ def _dense_cells_one_pass(
         hi = min(lo + _ONE_PASS_COUNT, ip.size)
         for a in range(lo, hi, _ONE_PASS_CHUNK):  # ... formed a few rows at a time, in cache
             b = min(a + _ONE_PASS_CHUNK, hi)
-            k = key[a - lo : b - lo]
-            np.multiply(ip[a:b], n_q, out=k, dtype=np.int64)
-            k += iq[a:b]
-            k -= offset
+            kk = key[a - lo : b - lo]
+            np.multiply(ip[a:b], n_q, out=kk, dtype=np.int64)
+            kk += iq[a:b]
+            kk -= offset
         counts += np.bincount(key[: hi - lo], minlength=n_cells)
     cells = np.flatnonzero(counts)
     weights = counts[cells]
