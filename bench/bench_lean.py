@@ -94,7 +94,8 @@ def make_maps(tdir: Path, n: int) -> dict[str, Path]:
 
 
 def goniolab_cmd(what: str, mp: Path) -> list[str]:
-    code = "import sys; from goniolab.cli import main; sys.exit(main(sys.argv[1:]))"
+    # the console script's own call: main() reads sys.argv (what `goniolab` runs)
+    code = "import sys; from goniolab.cli import main; sys.exit(main())"
     extra = ["--theta-i", "45", "--theta-r", "0:70:1"] if what == "brdf" else []
     return [PY, "-c", code, "predict", what, str(mp), *extra]
 

@@ -58,3 +58,32 @@ def test_redact_blanks_url_and_keyword_passwords_never_env_text(
         redact(text)
         == "postgresql://lab:***@db.example:5432/runs password=*** configs/lab-sim.toml"
     )
+
+
+def test_the_log_file_rotates_as_the_standard_rotating_handler(tmp_path: Path) -> None:
+    """The same files as logging.handlers.RotatingFileHandler(maxBytes=300, backupCount=2)
+    given the same records: goniolab.log, .1 and .2, none beyond, each under the limit."""
+    import logging.handlers
+
+    from goniolab.logs import _RotatingFile
+
+    ours, ref = tmp_path / "ours", tmp_path / "ref"
+    ours.mkdir()
+    ref.mkdir()
+    handlers = [
+        _RotatingFile(ours / "goniolab.log", 300, 2),
+        logging.handlers.RotatingFileHandler(ref / "goniolab.log", maxBytes=300, backupCount=2),
+    ]
+    for i in range(40):
+        record = logging.LogRecord(
+            "goniolab", logging.INFO, __file__, 1, "line %03d of the log", (i,), None
+        )
+        for h in handlers:
+            h.handle(record)
+    for h in handlers:
+        h.close()
+    names = sorted(p.name for p in ours.iterdir())
+    assert names == ["goniolab.log", "goniolab.log.1", "goniolab.log.2"]
+    for name in names:
+        assert (ours / name).read_text() == (ref / name).read_text()
+        assert len((ours / name).read_bytes()) < 300

@@ -249,12 +249,17 @@ def deposit_numpy(
         i = xs.astype(np.int64)
         j = ys.astype(np.int64)
         fx, fy = xs - i, ys - j
-        out = np.zeros(n0 * n1)
+        out: FloatArray | None = None
         for di, wa in ((0, 1.0 - fx), (1, fx)):
             for dj, wb in ((0, 1.0 - fy), (1, fy)):
-                out += np.bincount(
+                part: FloatArray = np.bincount(  # type: ignore[assignment]
                     (i + di) * n1 + (j + dj), weights=val * wa * wb, minlength=n0 * n1
                 )
+                if out is None:  # 0 + part is part: no zeroed grid to add it to
+                    out = part
+                else:
+                    out += part
+        assert out is not None
         return out.reshape(n0, n1)
 
     nac, nbc = coarse_size(na), coarse_size(nb)

@@ -283,11 +283,16 @@ def _dense_cells_one_pass(
         return None
     counts = np.zeros(n_cells, dtype=np.int64)
     offset = p0 * n_q + q0
-    for lo in range(0, ip.size, _ONE_PASS_COUNT):  # int64 keys of a chunk at a time
-        key = np.multiply(ip[lo : lo + _ONE_PASS_COUNT], n_q, dtype=np.int64)
-        key += iq[lo : lo + _ONE_PASS_COUNT]
-        key -= offset
-        counts += np.bincount(key, minlength=n_cells)
+    key = np.empty(min(ip.size, _ONE_PASS_COUNT), dtype=np.int64)
+    for lo in range(0, ip.size, _ONE_PASS_COUNT):  # int64 keys of a chunk at a time ...
+        hi = min(lo + _ONE_PASS_COUNT, ip.size)
+        for a in range(lo, hi, _ONE_PASS_CHUNK):  # ... formed a few rows at a time, in cache
+            b = min(a + _ONE_PASS_CHUNK, hi)
+            kk = key[a - lo : b - lo]
+            np.multiply(ip[a:b], n_q, out=kk, dtype=np.int64)
+            kk += iq[a:b]
+            kk -= offset
+        counts += np.bincount(key[: hi - lo], minlength=n_cells)
     cells = np.flatnonzero(counts)
     weights = counts[cells]
     cp = ((cells // n_q + p0) * LEAN_SLOPE_BIN).astype(np.float64)
