@@ -399,26 +399,10 @@ def _one_blas_thread() -> None:
         os.environ.setdefault(var, "1")
 
 
-def _skip_final_collection() -> None:
-    """The process exits next: move every object to the collector's permanent generation.
-
-    The interpreter's exit then skips the cyclic collection of what the command held (a
-    model cached with its map and slope cells): the operating system takes the memory back
-    at once. About 20 ms of a ``predict brdf``'s 0.28 s of CPU on a 2048^2 map
-    (bench/bench_lean.py). Only when :func:`main` reads the process's own command line
-    (the console script, ``python -m goniolab``): a caller that runs commands in process
-    (tests, a notebook) keeps its collector as it was.
-    """
-    import gc
-
-    gc.freeze()
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``goniolab`` console script; returns the process exit code.
 
-    ``argv`` None: the process's own command line (``sys.argv``), and the process exits
-    after it (:func:`_skip_final_collection`)."""
+    ``argv`` None: the process's own command line (``sys.argv``)."""
     _stack_dump_on_sigusr1()
     _one_blas_thread()
     try:
@@ -433,8 +417,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         _warn_implausible(args)
         code: int = args.func(args)
         sys.stdout.flush()  # a closed pipe shows here, not in the interpreter's exit
-        if argv is None:
-            _skip_final_collection()
     except BrokenPipeError:
         _silence_stdout()
         return EXIT_BROKEN_PIPE
