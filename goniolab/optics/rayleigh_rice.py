@@ -59,7 +59,7 @@ from goniolab.optics.physical import (
     PhysicalOpticsModel,
     check_theta_i,
 )
-from goniolab.optics.psd import PSD2, psd2, psd_region, psd_strided, windowed_sq_um
+from goniolab.optics.psd import PSD2, psd2, psd_region, windowed_sq_um
 
 __all__ = ["RayleighRiceModel", "rr_q_factor"]
 
@@ -172,23 +172,16 @@ class RayleighRiceModel(PhysicalOpticsModel):
         the coherent beam leaves of the Fresnel reflectance, ``R(ti) (1 - exp(-g))``: the
         factor is ``min(1, R (1 - exp(-g)) / (exp(-g) D))``. (Below that angle
         ``exp(-g) D <= R (1 - exp(-g))`` holds by itself: ``g exp(-g) <= 1 - exp(-g)`` and Q
-        stays near R.) D is summed over every second cell of the tile's grid in each axis
-        when the tile is larger than 256 points (the periodogram is smooth at that scale);
-        where those cells are the even ones, their PSD is the folded tile's transform
-        (:func:`~goniolab.optics.psd.psd_strided`: a quarter of the work), else the
-        full PSD's."""
+        stays near R.) D is summed over every cell of the window: a sum over every second
+        cell times 4 ran low where the periodogram is not smooth at that scale, a wavy map's
+        power lying in the few cells around specular (the Kirchhoff check's finding,
+        :meth:`goniolab.optics.kirchhoff.KirchhoffModel._energy_scales_at`)."""
         t = self._shared.tiled
         ci = math.cos(math.radians(theta_i_deg))
-        stride = 2 if max(t.nx_t, t.ny_t) > 256 else 1
         nx0, nx1, ny0, ny1 = self._nyquist()
         box = CellBox(nx0, nx1, ny0, ny1)
-        ix, iy = box.ix[::stride], box.iy[::stride]
-        if stride > 1 and not (t.nx_t % stride or t.ny_t % stride or nx0 % stride or ny0 % stride):
-            folded = self._shared.cached(("psd-strided", stride), lambda: psd_strided(t, stride))
-            fy, fx = folded.shape
-            pv = folded[np.ix_((iy // stride) % fy, (ix // stride) % fx)] * stride * stride
-        else:
-            pv = self.psd.psd_um4[np.ix_(iy % t.ny_t, ix % t.nx_t)] * stride * stride
+        ix, iy = box.ix, box.iy
+        pv = self.psd.psd_um4[np.ix_(iy % t.ny_t, ix % t.nx_t)]
         df2 = 1.0 / (t.nx_t * t.dx_um * t.ny_t * t.dy_um)
         r_spec = float(fresnel(ci, self.n))
         out = []

@@ -129,14 +129,21 @@ class ColourNote(Static):
     :func:`goniolab.app.colour_notes.predicted_colour_models`) and where repeats were
     averaged as L*a*b* instead of as spectra; hidden when there is nothing to say."""
 
-    DEFAULT_CSS = "ColourNote { height: auto; max-height: 4; color: $warning; }"
+    #: at most three lines under the table (which keeps room for its rows, ``min-height``
+    #: in :class:`ComparisonPanel`): the rows' own notes, whose first words say what the
+    #: mark means; the whole notes, with the angles each covers, in the tooltip
+    DEFAULT_CSS = "ColourNote { height: auto; max-height: 3; color: $warning; }"
 
     def show(self, comparison: Comparison) -> None:
         """Say the notes of ``comparison``'s predicted colours (hide without any)."""
         c = comparison.colour_arrays()
-        lines = [f"{ColourTable.FREE_MARK} {n}" for n in c.predicted_colour_notes]
+        row_notes = dict.fromkeys(n for n in c.predicted_colour_note if n is not None)
+        lines = [f"{ColourTable.FREE_MARK} {n}" for n in row_notes]
         lines += [f"note: {n}" for n in c.averaging_notes]
         self.update("\n".join(lines))
+        whole = [f"{ColourTable.FREE_MARK} {n}" for n in c.predicted_colour_notes]
+        whole += [f"note: {n}" for n in c.averaging_notes]
+        self.tooltip = "\n".join(whole) or None
         self.display = bool(lines)
 
 
@@ -203,7 +210,7 @@ class ComparisonPanel(Horizontal):
     ComparisonPanel > Vertical { width: 2fr; min-width: 36; }
     ComparisonPanel .side-plot { height: 2fr; min-height: 8; border: round $secondary; }
     ComparisonPanel MetricsTable { height: 9; }
-    ComparisonPanel ColourTable { height: 1fr; }
+    ComparisonPanel ColourTable { height: 1fr; min-height: 4; }
     """
 
     def __init__(self, *, id: str | None = None) -> None:

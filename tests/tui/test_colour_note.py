@@ -73,6 +73,7 @@ async def test_the_live_colour_table_marks_the_analytic_models_colours(
         legend = app.query_one(ColourNote)
         assert legend.display
         shown = str(legend.render())
+        tooltip = legend.tooltip
         run_id = app.run_id
     # the same words as goniolab runs colour on the stored run
     store = tmp_path / "runs.sqlite"
@@ -80,7 +81,11 @@ async def test_the_live_colour_table_marks_the_analytic_models_colours(
     doc = json.loads(capsys.readouterr().out)
     (note,) = doc["predicted_colour_notes"]
     assert "the analytic-beckmann " + NOTE in note and "theta_r 30..50 deg" in note
-    assert shown == f"† {note}"
+    # the legend: the rows' own note (its first words say what the mark means), the whole
+    # note with its angles in the tooltip
+    (row_note,) = {r["predicted_colour_note"] for r in doc["geometries"]}
+    assert shown == f"† {row_note}" and row_note.startswith("predicted colour: the analytic")
+    assert tooltip == f"† {note}"
     assert all(r["predicted_model"] == "analytic-beckmann" for r in doc["geometries"])
     # the runs browser's stored run carries the same record (screens.RunsScreen._show_run)
     stored = app.backend.load_run(run_id)
