@@ -160,3 +160,27 @@ def test_oversized_sweeps_are_refused_before_they_are_expanded() -> None:
         BrdfPlan(45.0, angles, repeats=11)
     assert BrdfPlan(45.0, angles, repeats=10).n_geometries == MAX_ANGLES
     assert MAX_READINGS == 100_000
+
+
+@pytest.mark.parametrize(
+    ("theta_i", "theta_r", "arm"), [(90.0, 30.0, "lamp"), (45.0, -95.0, "detector")]
+)
+def test_a_geometry_at_or_below_the_sample_plane_is_refused_whatever_the_limits(
+    theta_i: float, theta_r: float, arm: str
+) -> None:
+    """At 90 deg from the normal the lamp lights no sample and the detector sees none
+    (review of 2026-11-26: a config giving the lamp (-5, 95) deg of travel let the TUI form
+    and goniolab scan accept theta_i 90 and 95). The check is geometric, so it holds with a
+    goniometer that would reach anything."""
+    from goniolab.scan.dryrun import PlanRefused, check_reach
+    from goniolab.scan.plans import PlanPoint
+
+    def reaches_all(theta_i_deg: float, theta_r_deg: float) -> None:
+        return None
+
+    ok = [PlanPoint(0, 89.9, 30.0, 0), PlanPoint(1, 45.0, -89.9, 0)]
+    check_reach(ok, reaches_all, park_deg=None)
+    with pytest.raises(
+        PlanRefused, match=rf"point 7 \(theta_i={theta_i:g} deg.*{arm}.*sample plane"
+    ):
+        check_reach([*ok, PlanPoint(7, theta_i, theta_r, 0)], reaches_all, park_deg=None)
