@@ -139,7 +139,8 @@ _MIRROR_ORDERS = OrderTable(
 def table_code_key() -> str:
     """What, besides the truth's content and settings, decides a cached table's numbers: the
     source of the modules that build the true tile and its tables (this one,
-    :mod:`sim.true_surface`, :mod:`sim.kirchhoff_orders`) and the numpy and scipy versions.
+    :mod:`sim.true_surface`, :mod:`sim.kirchhoff_orders`, the twin's spectra and flakes, the
+    optics' heightmap levelling, Fresnel and apertures) and the numpy and scipy versions.
 
     Part of the disk cache's key. Without it, tables written by another version of the twin
     (another branch, an older checkout: the cache directory is per user, not per checkout)
@@ -147,14 +148,26 @@ def table_code_key() -> str:
     Poisson noise, whose sampler draws a variable number of uniforms, turns such a change
     into a different noise stream for every later reading: at an instant clock, RMSE 0.250
     or 0.247 % for the same seed (the closing note's "known defect")."""
+    import importlib
+
     import scipy
 
-    import sim.kirchhoff_orders
-    import sim.true_surface
-
+    # with the optics and twin modules these import (the review of 2026-11-26 found the
+    # levelling, Fresnel, apertures, body spectra and flakes missing from the key); by
+    # import_module: goniolab.optics exports a function named fresnel
+    names = (
+        "sim.true_surface",
+        "sim.kirchhoff_orders",
+        "sim.twin_spectra",
+        "sim.twin_flakes",
+        "goniolab.optics.heightmap",
+        "goniolab.optics.fresnel",
+        "goniolab.optics.apertures",
+    )
+    modules = [__file__, *(str(importlib.import_module(n).__file__) for n in names)]
     h = hashlib.sha1(f"numpy {np.__version__} scipy {scipy.__version__}".encode())
-    for mod in (__file__, sim.true_surface.__file__, sim.kirchhoff_orders.__file__):
-        h.update(Path(mod).read_bytes())
+    for mod in modules:
+        h.update(Path(str(mod)).read_bytes())
     return h.hexdigest()[:16]
 
 

@@ -63,15 +63,24 @@ def test_the_code_key_follows_the_table_code() -> None:
     key = truth_mod.table_code_key()
     assert len(key) == 16 and int(key, 16) >= 0
     import hashlib
+    import importlib
 
     import scipy
 
-    import sim.kirchhoff_orders
-    import sim.true_surface
-
+    # every module whose code decides a table's numbers (the review of 2026-11-26 added the
+    # twin's spectra and flakes and the optics' levelling, Fresnel and apertures)
+    names = (
+        "sim.true_surface",
+        "sim.kirchhoff_orders",
+        "sim.twin_spectra",
+        "sim.twin_flakes",
+        "goniolab.optics.heightmap",
+        "goniolab.optics.fresnel",
+        "goniolab.optics.apertures",
+    )
     h = hashlib.sha1(f"numpy {np.__version__} scipy {scipy.__version__}".encode())
-    for mod in (truth_mod.__file__, sim.true_surface.__file__, sim.kirchhoff_orders.__file__):
-        h.update(Path(mod).read_bytes())
+    for mod in (truth_mod.__file__, *(importlib.import_module(n).__file__ for n in names)):
+        h.update(Path(str(mod)).read_bytes())
     assert key == h.hexdigest()[:16]
 
 
