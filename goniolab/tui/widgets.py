@@ -129,10 +129,10 @@ class ColourNote(Static):
     :func:`goniolab.app.colour_notes.predicted_colour_models`) and where repeats were
     averaged as L*a*b* instead of as spectra; hidden when there is nothing to say."""
 
-    #: at most three lines under the table (which keeps room for its rows, ``min-height``
-    #: in :class:`ComparisonPanel`): the rows' own notes, whose first words say what the
-    #: mark means; the whole notes, with the angles each covers, in the tooltip
-    DEFAULT_CSS = "ColourNote { height: auto; max-height: 3; color: $warning; }"
+    #: at most two lines under the table (of fixed height, :class:`ComparisonPanel`): the
+    #: rows' own notes, whose first words say what the mark means; the whole notes, with
+    #: the angles each covers, in the tooltip
+    DEFAULT_CSS = "ColourNote { height: auto; max-height: 2; color: $warning; }"
 
     def show(self, comparison: Comparison) -> None:
         """Say the notes of ``comparison``'s predicted colours (hide without any)."""
@@ -208,9 +208,9 @@ class ComparisonPanel(Horizontal):
     ComparisonPanel { height: 1fr; }
     ComparisonPanel > .main-plot { width: 3fr; border: round $primary; }
     ComparisonPanel > Vertical { width: 2fr; min-width: 36; }
-    ComparisonPanel .side-plot { height: 2fr; min-height: 8; border: round $secondary; }
+    ComparisonPanel .side-plot { height: 1fr; min-height: 5; border: round $secondary; }
     ComparisonPanel MetricsTable { height: 9; }
-    ComparisonPanel ColourTable { height: 1fr; min-height: 4; }
+    ComparisonPanel ColourTable { height: 7; }
     """
 
     def __init__(self, *, id: str | None = None) -> None:
