@@ -178,6 +178,28 @@ async def test_the_twin_returns_to_the_certified_value_after_calibration() -> No
     assert (await gm.measure()).values_gu[20] == pytest.approx(100.0, abs=5 * 0.1 + 0.05)
 
 
+async def test_the_wire_twin_calibrates_the_geometry_the_frame_names() -> None:
+    """sim/wire/zgm.py: ``72| SN|xy|2|0|0`` (AngleBinary 2 = 60 deg) resets 60 deg only."""
+    from sim.wire.zgm import ZgmProtocol
+
+    clock = SimClock(0.0)
+    drift = GlossDrift(noise_gu=0.0)
+
+    class Standard:
+        def gloss(self, angles: tuple[int, ...]) -> dict[int, float]:
+            return {a: 100.0 for a in angles}
+
+    gm = SimGlossmeter(Standard(), clock, drift=drift)  # type: ignore[arg-type]
+    await gm.connect()
+    wire = ZgmProtocol(gm, SERIAL)
+    await clock.sleep(3600.0)
+    ppm = round((drift.gain(3600.0, 0.0) - 1.0) * 1e6)
+    assert await wire.handle(f"72| {SERIAL}|xy|2|0|0") == f"72| {SERIAL}|xy|{ppm}"
+    # 85 deg was not calibrated: its deviation is the same hour's; 60 deg's is 0 now
+    assert await wire.handle(f"72| {SERIAL}|xz|4|0|0") == f"72| {SERIAL}|xz|{ppm}"
+    assert await wire.handle(f"72| {SERIAL}|ya|2|0|0") == f"72| {SERIAL}|ya|0"
+
+
 def _gloss_log(cfg: Path, store: str, *extra: str) -> None:
     argv = ["gloss", "log", "--config", str(cfg), "--count", "1", "--time-scale", "0",
             "--store", store, "--angles", "60", "--json", *extra]  # fmt: skip
@@ -226,3 +248,22 @@ def test_gloss_log_and_runs_show_name_the_calibration_and_warn_when_old(
     # a longer rule: no warning
     _gloss_log(cfg, store, "--calibration-max-age-h", "48")
     assert "warning: glossmeter calibration" not in capsys.readouterr().err
+
+
+def test_docs_calibration_states_the_codes_limits() -> None:
+    """docs/CALIBRATION.md's 10 % and 24 h are the code's (docs that cannot go stale)."""
+    from goniolab.app.lab_gloss import DEFAULT_MAX_AGE_H, MAX_DEVIATION_PCT
+    from goniolab.commands.gloss import register
+
+    doc = " ".join((Path(__file__).resolve().parents[1] / "docs" / "CALIBRATION.md")
+                   .read_text(encoding="utf-8").split())  # fmt: skip
+    m = re.search(r"a deviation above (?P<x>[0-9.]+) % \(the manual, p\. 22\)", doc)
+    assert m and float(m["x"]) == MAX_DEVIATION_PCT
+    m = re.search(r"`--calibration-max-age-h` \((?P<x>[0-9.]+) h: the lab's rule", doc)
+    assert m and float(m["x"]) == DEFAULT_MAX_AGE_H
+    import argparse
+
+    parser = argparse.ArgumentParser()
+    register(parser.add_subparsers())
+    args = parser.parse_args(["gloss", "log", "--port", "x"])
+    assert args.calibration_max_age_h == DEFAULT_MAX_AGE_H

@@ -47,9 +47,6 @@ MAX_DEVIATION_PCT = 10.0
 #: How old the calibration a gloss run rests on may be before the run warns: the lab's
 #: rule (ISO 2813:2014 asks for a calibration before use; the hours are ours).
 DEFAULT_MAX_AGE_H = 24.0
-#: ISO 2813:2014 sec. 6: the primary standard, polished black glass of n = 1.567, is
-#: 100 GU at every geometry.
-PRIMARY_N = 1.567
 
 
 @dataclass(frozen=True)
@@ -230,6 +227,7 @@ def gloss_standard_gu(
         raise UserError("gloss calibrate: --standard needs --config (its standards.toml)")
     import math
 
+    from goniolab.optics.apertures import ISO2813_BLACK_GLASS_N  # 100 GU, ISO 2813 sec. 6
     from goniolab.optics.fresnel import fresnel
     from goniolab.scan.standards import load_standards, standards_path
 
@@ -243,7 +241,7 @@ def gloss_standard_gu(
     for a in angles_deg:
         cos_i = math.cos(math.radians(a))
         gu[str(a)] = round(
-            100.0 * float(fresnel(cos_i, std.n)) / float(fresnel(cos_i, PRIMARY_N)), 1
+            100.0 * float(fresnel(cos_i, std.n)) / float(fresnel(cos_i, ISO2813_BLACK_GLASS_N)), 1
         )
     return {**std.cite(), "name": std.name, "description": std.description, "gu": gu}
 
