@@ -34,6 +34,7 @@ __all__ = [
     "gloss_log",
     "gloss_plan",
     "meter_pushes",
+    "record_gloss_calibration",
     "stored_gloss_prediction",
 ]
 
@@ -141,14 +142,9 @@ async def gloss_log(
                 mode = "push" if port is not None and meter_pushes(port.protocol) else "measure"
             logger = await session.start(plan, mode=mode, interval_s=interval_s, meta=meta)
             notify(f"run {logger.run_id} in store {store.location}")
-            cite = gloss_calibration_cite(
-                store,
-                meter_identity(session.meter),
-                at=store.get_run(logger.run_id).created_at,
-                angles_deg=plan.angles_deg,
-                max_age_h=max_age_h,
+            cite = record_gloss_calibration(
+                store, logger.run_id, session.meter, plan.angles_deg, max_age_h=max_age_h
             )
-            store.update_model(logger.run_id, {"glossmeter_calibration": cite})
             notify(f"glossmeter calibration: {describe_gloss_calibration(cite)}")
             for w in cite["warnings"]:
                 notify(f"warning: glossmeter calibration: {w}")
@@ -429,6 +425,28 @@ def gloss_calibration_cite(
             )
         )
     cite["warnings"] = warnings
+    return cite
+
+
+def record_gloss_calibration(
+    store: RunStore,
+    run_id: int,
+    meter: object,
+    angles_deg: Sequence[int],
+    *,
+    max_age_h: float = DEFAULT_MAX_AGE_H,
+) -> dict[str, Any]:
+    """Store in gloss run ``run_id`` the calibration of ``meter`` it rests on
+    (:func:`gloss_calibration_cite` at the run's creation) as its model's
+    ``glossmeter_calibration``; return it (its ``warnings`` for the face to show)."""
+    cite = gloss_calibration_cite(
+        store,
+        meter_identity(meter),
+        at=store.get_run(run_id).created_at,
+        angles_deg=angles_deg,
+        max_age_h=max_age_h,
+    )
+    store.update_model(run_id, {"glossmeter_calibration": cite})
     return cite
 
 
