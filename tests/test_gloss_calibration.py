@@ -216,6 +216,13 @@ def test_gloss_log_and_runs_show_name_the_calibration_and_warn_when_old(
     cal = json.loads(capsys.readouterr().out)
     assert cal["run_id"] == 1 and list(cal["angles"]) == ["60"]
     identity = cal["instrument"]["identity"]
+    from goniolab.datasets import run_dataset  # runs export (netCDF, Parquet) of the record
+
+    with RunStore(store, readonly=True) as s:
+        ds = run_dataset(s, 1)
+    assert ds.attrs["kind"] == "glosscal" and ds.attrs["stored_readings"] == 0
+    stored = json.loads(ds.attrs["model_json"])["gloss_calibration"]
+    assert stored["angles"]["60"]["deviation_ppm"] == cal["angles"]["60"]["deviation_ppm"]
 
     _gloss_log(cfg, store)
     captured = capsys.readouterr()
