@@ -125,6 +125,13 @@ async def test_a_meter_off_its_standard_is_not_calibrated(pty: PtyPair, tmp_path
         assert store.list_runs()[0].status == "failed"
 
 
+async def test_a_meter_without_remote_calibration_is_refused(pty: PtyPair, tmp_path: Path) -> None:
+    with RunStore(tmp_path / "s.sqlite") as store:
+        with pytest.raises(UserError, match="has no remote calibration command"):
+            await gloss_calibrate(store, port=MeterPort(pty.path, protocol="line"))
+        assert store.list_runs() == []  # nothing stored: nothing was calibrated
+
+
 def test_a_standard_of_standards_toml_is_worth_its_fresnel_gloss(tmp_path: Path) -> None:
     cfg = load_lab_config(lab_config(tmp_path, sim=NOISELESS))
     # ISO 2813:2014: black glass n = 1.567 is 100 GU at every geometry
