@@ -490,7 +490,7 @@ def run_dataset(store: RunStore, run_id: int) -> xr.Dataset:
     rec = store.get_run(run_id)
     if rec.kind == "gloss":
         return _gloss_run_dataset(store, rec)
-    if rec.kind in ("align", "calibration"):
+    if rec.kind in ("align", "calibration", "glosscal"):  # glosscal: no readings, its record
         return _align_run_dataset(store, rec)
     return _brdf_run_dataset(store, rec)
 

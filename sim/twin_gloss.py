@@ -109,7 +109,8 @@ class SimGlossmeter(SimLink):
         self.name = name
         self.drift = drift
         self._powered_at_s = clock.now()
-        self._calibrated_at_s = self._powered_at_s
+        # per geometry: the ZGM1120 calibrates ONE angle per Calibrate (opcode 72)
+        self._calibrated_at_s = {a: self._powered_at_s for a in GLOSS_ANGLES_DEG}
         self._gloss_cache: dict[int, float] = {}
         self.model = model
         self.clock = clock
@@ -154,12 +155,8 @@ class SimGlossmeter(SimLink):
         clean = await self.predicted_gu(angles_deg)
         values: dict[int, float | None] = {a: None for a in GLOSS_ANGLES_DEG}
         overflow: list[int] = []
-        gain = 1.0
-        if self.drift is not None:
-            now = self.clock.now() - self._powered_at_s
-            gain = self.drift.gain(now, self._calibrated_at_s - self._powered_at_s)
         for a in angles_deg:
-            v = clean[a] * gain
+            v = clean[a] * self._gain(a)
             if self.drift is not None:
                 v += self.drift.noise_gu * float(self._rng.standard_normal())
             elif self.noise_pct:
@@ -189,18 +186,44 @@ class SimGlossmeter(SimLink):
             return self.temperature_c
         return round(self.drift.temperature_c(self.clock.now() - self._powered_at_s), 1)
 
-    def calibrate_ppm(self) -> int:
-        """Calibrate on the black standard: the drift starts again from here. Returns the
-        deviation found (gain - 1, in ppm), as the ZGM1120's Calibrate (opcode 72) does."""
+    def _gain(self, angle_deg: int) -> float:
+        """Reading / truth now at ``angle_deg`` (1 for the ideal twin)."""
+        if self.drift is None:
+            return 1.0
+        return self.drift.gain(
+            self.clock.now() - self._powered_at_s,
+            self._calibrated_at_s[angle_deg] - self._powered_at_s,
+        )
+
+    def calibrate_ppm(self, angle_deg: int | None = None) -> int:
+        """Calibrate on the standard: the drift of ``angle_deg`` (``None``: every geometry)
+        starts again from here. Returns the deviation found (gain - 1, in ppm), as the
+        ZGM1120's Calibrate (opcode 72) does; with ``None`` that of the first geometry."""
+        angles = GLOSS_ANGLES_DEG if angle_deg is None else (angle_deg,)
+        for a in angles:
+            if a not in GLOSS_ANGLES_DEG:
+                raise ValueError(f"{self.name}: geometry {a} deg not one of {GLOSS_ANGLES_DEG}")
         now = self.clock.now()
-        ppm = 0
-        if self.drift is not None:
-            gain = self.drift.gain(
-                now - self._powered_at_s, self._calibrated_at_s - self._powered_at_s
-            )
-            ppm = round((gain - 1.0) * 1e6)
-        self._calibrated_at_s = now
+        ppm = round((self._gain(angles[0]) - 1.0) * 1e6)
+        for a in angles:
+            self._calibrated_at_s[a] = now
         return ppm
+
+    async def calibrate(
+        self,
+        angle_deg: int,
+        *,
+        second_standard_dgu: int | None = None,
+        timeout_s: float = 10.0,
+    ) -> int:
+        """Calibrate ONE geometry, as :meth:`drivers.glossmeter.Zgm1120.calibrate` does;
+        the deviation from the last calibration in ppm. The twin resets its drift on any
+        standard: ``second_standard_dgu`` is checked as the meter checks it, not used."""
+        self._op("calibrate")
+        if second_standard_dgu is not None and not 0 < second_standard_dgu <= 99999:
+            raise ValueError(f"second_standard_dgu {second_standard_dgu} out of 1..99999")
+        await self.clock.sleep(self.measure_time_s)
+        return self.calibrate_ppm(angle_deg)
 
     def readings(self) -> AsyncIterator[GlossReading]:
         """Readings pushed every ``autosend_interval_s`` clock seconds (auto-send)."""

@@ -45,8 +45,12 @@ def test_gloss_log_and_runs_show_say_the_stored_models_and_warnings(
         assert f", predicted {pred:.1f} GU ({name})\n" in out
     for w in model["warnings"]:
         assert f"  prediction warning: {w}\n" in out
-    # nothing in the stored run says which standard the meter was calibrated on, or when
-    assert "  glossmeter calibration: not recorded (its standard and date are the meter's)\n" in out
+    # no gloss calibrate in this store: the run says so (tests/test_gloss_calibration.py
+    # covers a calibrated meter)
+    assert (
+        "  glossmeter calibration: none recorded in this store (for SimGlossmeter glossmeter)\n"
+        in out
+    )
 
 
 def test_a_gloss_run_without_a_prediction_shows_no_model(

@@ -136,6 +136,8 @@ def run_summary(store: RunStore, rec: RunRecord) -> dict[str, Any]:
             return summarize_brdf(plan, store.points(rec.id), store.predictions(rec.id))
         except StoreError as exc:
             raise UserError(str(exc)) from exc
+    if rec.kind == "glosscal":  # a glossmeter calibration: its record (gloss calibrate)
+        return {"readings": 0, "gloss_calibration": rec.model.get("gloss_calibration")}
     if rec.kind in ("align", "calibration"):
         # the result is the run's record (what the alignment found, the calibration's check)
         key = "alignment" if rec.kind == "align" else "calibration"

@@ -47,6 +47,11 @@ EXAMPLES: dict[str, list[str]] = {
         f"goniolab gloss log --config {_SIM} --count 10",
         "goniolab gloss log --port /dev/ttyUSB0 --protocol zgm1120 --count 5",
     ],
+    "gloss calibrate": [
+        f"goniolab gloss calibrate --config {_SIM}          # 20/60/85 on the working standard",
+        f"goniolab gloss calibrate --config {_SIM} --standard black_glass --json",
+        "goniolab gloss calibrate --port /dev/ttyUSB0 --protocol zgm1120 --angles 60",
+    ],
     "gloss log": [
         f"goniolab gloss log --config {_SIM} --count 10            # 10 readings, stored",
         f"goniolab gloss log --config {_SIM} --interval 5 --sample sample:wittmann-3",

@@ -102,6 +102,10 @@ def _cmd_log(args: argparse.Namespace) -> int:
         raise UserError(f"gloss log: --interval must be >= 0 s, got {args.interval}")
     if not args.timeout > 0:
         raise UserError(f"gloss log: --timeout must be > 0 s, got {args.timeout}")
+    if not args.calibration_max_age_h > 0:
+        raise UserError(
+            f"gloss log: --calibration-max-age-h must be > 0, got {args.calibration_max_age_h}"
+        )
     sample = args.sample or ""
     if args.sample:  # checked, as the user typed it (the stored run names it so)
         check_sample(args.sample)
@@ -141,7 +145,7 @@ def _cmd_log(args: argparse.Namespace) -> int:
                 store, plan, config=cfg, port=port, time_scale=args.time_scale,
                 mode=args.mode, interval_s=args.interval, meta=run_meta_args(args),
                 watch=lambda q: _print_events(q, args.json), on_start=on_start,
-                notify=stderr_notify,
+                notify=stderr_notify, max_age_h=args.calibration_max_age_h,
             )  # fmt: skip
         finally:
             if "remove" in stops:
@@ -163,6 +167,10 @@ def _cmd_log(args: argparse.Namespace) -> int:
                         # the stored run's predicted gloss: its model per geometry and
                         # the warnings of those numbers
                         "prediction": stored_gloss_prediction(store, result.run_id),
+                        # the calibration the readings rest on (gloss calibrate)
+                        "calibration": store.get_run(result.run_id).model.get(
+                            "glossmeter_calibration"
+                        ),
                     }
                 )
             )
@@ -181,27 +189,71 @@ def _cmd_log(args: argparse.Namespace) -> int:
     return 0 if result.state in (RunState.DONE, RunState.ABORTED) else 1
 
 
-def register(subparsers: Any) -> None:
-    """Add ``gloss log``."""
+def _cmd_calibrate(args: argparse.Namespace) -> int:
+    from goniolab.app.lab_gloss import MeterPort, gloss_calibrate
+    from goniolab.app.lab_setup import load_config, open_store, stderr_notify
+
+    if bool(args.config) == bool(args.port):
+        raise UserError("gloss calibrate: give --config FILE or --port PORT (one of them)")
+    if args.port and "://" not in args.port and not os.path.exists(args.port):
+        raise UserError(f"gloss calibrate: --port {args.port}: no such device")
+    cfg = load_config(args.config) if args.config else None
+    port = None
+    if args.port:
+        port = MeterPort(
+            args.port, protocol=args.protocol, profile=args.profile,
+            serial_number=args.serial_number, baudrate=args.baudrate, timeout_s=args.timeout,
+        )  # fmt: skip
+    with open_store(args.store, config=cfg) as store:
+        calibration = gloss_calibrate(
+            store, config=cfg, port=port, angles_deg=args.angles, standard=args.standard,
+            time_scale=args.time_scale, notify=stderr_notify,
+        )  # fmt: skip
+        run_id, record = run_lab(calibration)
+        if args.json:
+            print(json.dumps({"run_id": run_id, "store": str(store.location), **record}))
+        else:
+            std = record["standard"]
+            gu = ", ".join(f"G{a} {v:.1f} GU" for a, v in std["gu"].items())
+            print(
+                f"glossmeter {record['instrument']['identity']} calibrated "
+                f"{record['time_iso']} on {std['name']}" + (f" ({gu})" if gu else "")
+            )
+            for a, r in record["angles"].items():
+                print(
+                    f"  G{a}: deviation from the factory calibration {r['deviation_ppm']} ppm "
+                    f"({r['deviation_pct']:+.4f} %)"
+                )
+            print(f"stored as run {run_id} in {store.location}")
+    return 0
+
+
+def _meter_args(p: Any) -> None:
     from drivers.protocols import GLOSSMETERS  # the standard library only: cheap at --help
 
-    p = subparsers.add_parser("gloss", help="glossmeter sessions (gloss log)")
-    sub = p.add_subparsers(dest="gloss_command", metavar="ACTION", required=True)
-    pl = sub.add_parser("log", help="log glossmeter readings into the store")
-    pl.add_argument("--config", help="lab config TOML (uses its [glossmeter])")
-    pl.add_argument("--port", help="serial port of the meter (without --config)")
-    pl.add_argument(
+    p.add_argument("--config", help="lab config TOML (uses its [glossmeter])")
+    p.add_argument("--port", help="serial port of the meter (without --config)")
+    p.add_argument(
         "--protocol",
         choices=GLOSSMETERS.names(),
         default="zgm1120",
         help=f"meter protocol (without --config): {GLOSSMETERS.help_text()}",
     )
-    pl.add_argument("--profile", default=None, help="protocol profile (default: the protocol's)")
-    pl.add_argument("--serial-number", default="401120999", help="ZGM1120 serial number")
-    pl.add_argument(
+    p.add_argument("--profile", default=None, help="protocol profile (default: the protocol's)")
+    p.add_argument("--serial-number", default="401120999", help="ZGM1120 serial number")
+    p.add_argument(
         "--baudrate", type=int, default=None, help="serial baud rate (default: the profile's)"
     )
-    pl.add_argument("--timeout", type=float, default=2.0, help="reply timeout, s")
+    p.add_argument("--timeout", type=float, default=2.0, help="reply timeout, s")
+
+
+def register(subparsers: Any) -> None:
+    """Add ``gloss log`` and ``gloss calibrate``."""
+
+    p = subparsers.add_parser("gloss", help="glossmeter sessions (gloss log, gloss calibrate)")
+    sub = p.add_subparsers(dest="gloss_command", metavar="ACTION", required=True)
+    pl = sub.add_parser("log", help="log glossmeter readings into the store")
+    _meter_args(pl)
     pl.add_argument("--sample", help="sample:NAME or height map: print the predicted gloss beside")
     pl.add_argument(
         "--n", type=float, default=1.55, help="refractive index for --sample (no config)"
@@ -219,5 +271,25 @@ def register(subparsers: Any) -> None:
         help="run store: SQLite file or postgresql:// URL (default: the config's [lab] store, "
         "else goniolab.sqlite in the user data dir: goniolab --version)",
     )
+    pl.add_argument(
+        "--calibration-max-age-h", type=float, default=24.0,
+        help="warn when the meter's newest stored calibration is older (h; the lab's rule)",
+    )  # fmt: skip
     pl.add_argument("--json", action="store_true", help="one JSON object per reading on stdout")
     pl.set_defaults(func=_cmd_log)
+
+    pc = sub.add_parser(
+        "calibrate", help="calibrate the glossmeter on its standard and store the record"
+    )
+    _meter_args(pc)
+    pc.add_argument("--angles", type=int, nargs="+", default=[20, 60, 85], help="geometries, deg")
+    pc.add_argument(
+        "--standard", default=None,
+        help="a fresnel standard of the config's standards.toml (its GU from n; ISO 2813 "
+        "black glass n = 1.567 is 100 GU); default: the meter's own working standard",
+    )  # fmt: skip
+    pc.add_argument("--time-scale", type=float, default=None,
+                    help="sim clock scale, 0 = instant (default: the config's [lab] time_scale)")  # fmt: skip
+    pc.add_argument("--store", help="run store: SQLite file or postgresql:// URL (as gloss log)")
+    pc.add_argument("--json", action="store_true", help="the stored record as one JSON object")
+    pc.set_defaults(func=_cmd_calibrate)

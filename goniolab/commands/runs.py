@@ -188,6 +188,11 @@ def _cmd_show(args: argparse.Namespace) -> int:
             print("  colour (reflectance factor, per geometry):")
             theta_i = float(rec.plan.get("theta_i_deg", 45.0))
             print("\n".join(colour_text(colour, theta_i)))
+    elif rec.kind == "glosscal":
+        from goniolab.app.lab_gloss import describe_calibration_record
+
+        for line in describe_calibration_record(summary.get("gloss_calibration") or {}):
+            print(f"  {safe_text(line)}")
     elif rec.kind in ("align", "calibration"):
         print(f"  readings: {summary['readings']} (the result: the model's {rec.kind} record)")
         result = summary.get("alignment") or {}
@@ -210,8 +215,17 @@ def _cmd_show(args: argparse.Namespace) -> int:
             )
         for w in rec.model.get("warnings") or []:
             print(f"  prediction warning: {safe_text(str(w))}")
-        # the readings rest on the meter's own calibration, which goniolab does not read
-        print("  glossmeter calibration: not recorded (its standard and date are the meter's)")
+        # the calibration the readings rest on (gloss calibrate; gloss log records it)
+        from goniolab.app.lab_gloss import describe_gloss_calibration
+
+        cal = rec.model.get("glossmeter_calibration")
+        if isinstance(cal, dict):
+            print(f"  glossmeter calibration: {safe_text(describe_gloss_calibration(cal))}")
+            for w in cal.get("warnings") or []:
+                print(f"  calibration warning: {safe_text(str(w))}")
+        else:
+            print("  glossmeter calibration: not recorded with this run (logged before "
+                  "gloss runs recorded it)")  # fmt: skip
     if view.resume is not None:
         print(f"  continue it with: {view.resume}")
     return 0

@@ -316,13 +316,19 @@ class LiveView(App[int]):
             return
         warnings = record.get("warnings")
         said = [str(w) for w in warnings] if isinstance(warnings, list) else []
-        self.call_from_thread(self._show_gloss_warnings, run_id, said)
+        cal = record.get("glossmeter_calibration")
+        cal_said = [str(w) for w in cal.get("warnings") or []] if isinstance(cal, dict) else []
+        self.call_from_thread(self._show_gloss_warnings, run_id, said, cal_said)
 
-    def _show_gloss_warnings(self, run_id: int, warnings: list[str]) -> None:
+    def _show_gloss_warnings(
+        self, run_id: int, warnings: list[str], calibration: list[str] | None = None
+    ) -> None:
         with contextlib.suppress(NoMatches):
             self.query_one("#gloss-log", GlossLog).show_prediction_warnings(run_id, warnings)
         for w in warnings:
             self.notify(w, title="Gloss prediction", severity="warning")
+        for w in calibration or []:  # the glossmeter calibration the run rests on
+            self.notify(w, title="Glossmeter calibration", severity="warning")
 
     @property
     def redraw_pending(self) -> bool:

@@ -459,6 +459,11 @@ class SessionBackend:
             # held while the app is open: another 'goniolab runs list' reads it as running,
             # not interrupted (a run stored as running that nobody claims)
             self._stack.enter_context(self.gloss.store.claim_run(run_id))
+            # the calibration the readings rest on (gloss calibrate), in the run's record:
+            # the gloss log toasts its warnings (none recorded, old) with the prediction's
+            from goniolab.app.lab_gloss import record_gloss_calibration
+
+            record_gloss_calibration(self.gloss.store, run_id, self.gloss.meter, plan.angles_deg)
         # the session's gloss run goes on until the app closes: "running", not "done"
         await self.gloss.logger(plan, run_id, prediction, keep_running=True).run()
 

@@ -60,8 +60,9 @@ class GlossSource(Protocol):
         """The instrument's temperature in deg C."""
         ...
 
-    def calibrate_ppm(self) -> int:
-        """Calibrate on the standard; the deviation from the factory calibration in ppm."""
+    def calibrate_ppm(self, angle_deg: int | None = None) -> int:
+        """Calibrate ``angle_deg`` on the standard; the deviation from the factory
+        calibration in ppm."""
         ...
 
 
@@ -210,7 +211,9 @@ class ZgmProtocol:
                 return self.error(tid, opcode, "bad Angle, Cal2Standard or Cal2StandValue")
             if second == 1 and value == 0:
                 return self.error(tid, opcode, "second standard without its value")
-            return self._string(opcode, tid, self.gloss.calibrate_ppm())
+            return self._string(
+                opcode, tid, self.gloss.calibrate_ppm(_ANGLES[angle.bit_length() - 1])
+            )
         return self.error(tid, opcode, "unknown command or arguments")
 
     async def pushed(self) -> str | None:

@@ -63,7 +63,7 @@ class Scripted:
     def current_temperature_c(self) -> float:
         return self.temperature_c
 
-    def calibrate_ppm(self) -> int:
+    def calibrate_ppm(self, angle_deg: int | None = None) -> int:
         return self.ppm
 
 
