@@ -158,8 +158,9 @@ def check_reach(
         if target in checked:
             continue
         try:
-            # above the sample plane, whatever the arms' limits allow (a config may give
-            # the lamp 95 deg of travel): at 90 deg the lamp lights no sample and the
+            check_geometry(*target)
+            # then above the sample plane, whatever the arms' limits allow (a config may
+            # give the lamp 95 deg of travel): at 90 deg the lamp lights no sample and the
             # detector sees none
             for arm, angle in (("lamp", target[0]), ("detector", target[1])):
                 if not -90.0 < angle < 90.0:
@@ -167,7 +168,6 @@ def check_reach(
                         f"{angle:g} deg is not above the sample plane (|angle| < 90 deg)",
                         device=arm,
                     )
-            check_geometry(*target)
         except (LimitError, InterlockError) as exc:
             what = "mirror reference" if p.index == MIRROR_INDEX else f"point {p.index}"
             text = reach() if isinstance(exc, LimitError) else ""
