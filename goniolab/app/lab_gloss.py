@@ -20,6 +20,7 @@ from goniolab.errors import UserError
 
 if TYPE_CHECKING:
     import asyncio
+    from contextlib import AsyncExitStack
 
     from goniolab.config import LabConfig
     from goniolab.scan.gloss_logger import GlossLogger, GlossResult
@@ -61,6 +62,20 @@ class MeterPort:
     baudrate: int | None = None
     timeout_s: float = 2.0
     n: float = 1.55  # refractive index of the sample the prediction is made for
+
+
+async def _meter_on_port(stack: AsyncExitStack, port: MeterPort) -> Any:
+    """Open and connect the glossmeter on ``port`` (closed when ``stack`` closes)."""
+    from drivers.glossmeter import open_glossmeter
+
+    meter = open_glossmeter(
+        port.port, protocol=port.protocol, profile=port.profile,
+        serial_number=port.serial_number, baudrate=port.baudrate,
+        timeout_s=port.timeout_s,
+    )  # fmt: skip
+    await meter.connect()
+    stack.push_async_callback(meter.close)
+    return meter
 
 
 def meter_pushes(protocol: str) -> bool:
@@ -122,16 +137,9 @@ async def gloss_log(
                 )
             else:
                 assert port is not None
-                from drivers.glossmeter import open_glossmeter
                 from drivers.timing import RealClock
 
-                meter = open_glossmeter(
-                    port.port, protocol=port.protocol, profile=port.profile,
-                    serial_number=port.serial_number, baudrate=port.baudrate,
-                    timeout_s=port.timeout_s,
-                )  # fmt: skip
-                await meter.connect()
-                stack.push_async_callback(meter.close)
+                meter = await _meter_on_port(stack, port)
                 session = GlossSession(
                     meter, RealClock(), store,
                     config={"port": port.port, "protocol": port.protocol,
@@ -287,15 +295,7 @@ async def gloss_calibrate(
                 protocol = config.glossmeter.protocol if config.lab.mode != "sim" else "sim"
             else:
                 assert port is not None
-                from drivers.glossmeter import open_glossmeter
-
-                meter = open_glossmeter(
-                    port.port, protocol=port.protocol, profile=port.profile,
-                    serial_number=port.serial_number, baudrate=port.baudrate,
-                    timeout_s=port.timeout_s,
-                )  # fmt: skip
-                await meter.connect()
-                stack.push_async_callback(meter.close)
+                meter = await _meter_on_port(stack, port)
                 protocol = port.protocol
             calibrate = getattr(meter, "calibrate", None)
             if calibrate is None:
