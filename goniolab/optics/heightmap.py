@@ -148,11 +148,20 @@ class HeightMap:
         ny, nx = self.z_um.shape
         return int(ny), int(nx)
 
+    def derived(self) -> dict[str, Any]:
+        """What is derived from the heights (column sums, completeness, plane fit, range),
+        kept while they are read-only. numpy lets the owner of a handed-over array make it
+        writeable again: then nothing is kept (each value is computed from the heights as
+        they are; review of 2026-11-26, a changed map kept its old plane fit)."""
+        if self.z_um.flags.writeable:
+            self._derived.clear()
+        return self._derived
+
     @property
     def n_valid(self) -> int:
         """Number of valid (non-NaN) points (counted in blocks of rows: no map-sized mask)."""
         z = self.z_um
-        if self._derived.get("complete"):
+        if self.derived().get("complete"):
             return int(z.size)
         rows = max(1, _BLOCK_POINTS // max(1, z.shape[1]))
         nan = sum(int(np.count_nonzero(np.isnan(z[r : r + rows]))) for r in range(0, len(z), rows))
@@ -162,11 +171,11 @@ class HeightMap:
     def z_range(self) -> tuple[float, float]:
         """``(min, max)`` of the valid heights (NaN skipped; NaN, NaN when none), found
         once (``np.fmin`` / ``np.fmax`` reductions: no copy of the map)."""
-        got = self._derived.get("z_range")
+        got = self.derived().get("z_range")
         if got is None:
             z = self.z_um
             got = (float(np.fmin.reduce(z, axis=None)), float(np.fmax.reduce(z, axis=None)))
-            self._derived["z_range"] = got
+            self.derived()["z_range"] = got
         out: tuple[float, float] = got
         return out
 
@@ -213,10 +222,10 @@ def plane_fit(hm: HeightMap) -> tuple[float, float, float]:
 def plane_fit_and_completeness(hm: HeightMap) -> tuple[float, float, float, bool]:
     """:func:`plane_fit` and whether the map has no missing point (computed once per map:
     the wave models' tiles and the facet slopes both level it)."""
-    got = hm._derived.get("plane")
+    got = hm.derived().get("plane")
     if got is None:
         got = _plane_fit_and_completeness(hm)
-        hm._derived["plane"] = got
+        hm.derived()["plane"] = got
     out: tuple[float, float, float, bool] = got
     return out
 
@@ -226,7 +235,7 @@ def _plane_fit_and_completeness(hm: HeightMap) -> tuple[float, float, float, boo
     ny, nx = z.shape
     x = (np.arange(nx, dtype=np.float64) - (nx - 1) / 2.0) * hm.dx_um
     y = (np.arange(ny, dtype=np.float64) - (ny - 1) / 2.0) * hm.dy_um
-    col = hm._derived.get("col_sum")
+    col = hm.derived().get("col_sum")
     if col is None:
         col = z.sum(axis=0, dtype=np.float64)  # a float32 map accumulates in float64
     if np.isfinite(col).all():
