@@ -189,3 +189,22 @@ def test_a_postgresql_session_runs_without_jit(store: RunStore) -> None:
     if not store.db.is_postgres:
         pytest.skip("PostgreSQL only")
     assert store.db.execute("SHOW jit").fetchone()[0] == "off"
+
+
+def test_the_kind_column_is_as_wide_as_its_longest_kind(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``runs list``'s columns stay aligned when a kind is longer than 5 characters (a
+    calibration or a gloss calibration): every row's STATUS starts under the header's."""
+    from goniolab.cli import main
+
+    location = tmp_path / "runs.sqlite"
+    with RunStore(location) as s:
+        for kind in ("brdf", "calibration", "glosscal"):
+            s.create_run(kind=kind, plan={"kind": kind}, config={}, sample="sample:x",
+                         model={}, version="t")  # fmt: skip
+    assert main(["runs", "list", "--store", str(location)]) == 0
+    header, *rows = capsys.readouterr().out.splitlines()
+    col = header.index("STATUS")
+    assert [r[col:].split()[0] for r in rows] == ["idle"] * 3
+    assert [r.split()[1] for r in rows] == ["glosscal", "calibration", "brdf"]

@@ -49,7 +49,11 @@ def _cmd_list(args: argparse.Namespace) -> int:
             f"no runs{' match' if listing.filtered else ''} in {listing.location}", file=sys.stderr
         )
         return 0
-    print(f"{'RUN':>5}  {'KIND':5}  {'STATUS':11}  {'READINGS':>8}  {'CREATED (UTC)':19}  SAMPLE")
+    # the kind column as wide as its longest ("calibration", "glosscal"), at least 5
+    kw = max([5, *(len(safe_text(b.record.kind)) for b in listing.runs)])
+    print(
+        f"{'RUN':>5}  {'KIND':{kw}}  {'STATUS':11}  {'READINGS':>8}  {'CREATED (UTC)':19}  SAMPLE"
+    )
     for b in listing.runs:
         r, n = b.record, b.readings
         status = "damaged" if r.damage else "interrupted" if b.interrupted else r.status
@@ -64,7 +68,7 @@ def _cmd_list(args: argparse.Namespace) -> int:
             if v
         )
         print(
-            f"{r.id:>5}  {safe_text(r.kind):5}  {status:11}  {readings:>8}  "
+            f"{r.id:>5}  {safe_text(r.kind):{kw}}  {status:11}  {readings:>8}  "
             f"{_when(r.created_at):19}  {safe_text(r.sample)}{extra}"
         )
         if r.damage:
