@@ -13,27 +13,11 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from goniolab.optics._kernels import interval_overlap, njit_cached
+from goniolab.optics._kernels import interval_overlap, njit_cached, table_value
 
 __all__ = ["cone_cells_numba", "kirchhoff_band_numba", "rect_cells_numba"]
 
 FloatArray = NDArray[np.float64]
-
-
-@njit_cached(nogil=True, fastmath=False)
-def _table(
-    g: float, table: FloatArray, g0: float, g1: float, o_in: float
-) -> float:  # pragma: no cover - numba
-    if g <= g0:
-        return o_in
-    if g >= g1:
-        return 0.0
-    t = (g - g0) / (g1 - g0) * (table.size - 1)
-    i = int(t)
-    if i >= table.size - 1:
-        return table[table.size - 1]
-    f = t - i
-    return table[i] * (1.0 - f) + table[i + 1] * f
 
 
 @njit_cached(nogil=True, fastmath=False)
@@ -95,7 +79,7 @@ def cone_cells_numba(
                 g = 2.0 * math.asin(min(ch, 1.0))
                 if g >= g1:
                     continue
-                acc += v * _table(g, table, g0, g1, o_in)
+                acc += v * table_value(g, table, g0, g1, o_in)
         out[k] = acc
     return out
 

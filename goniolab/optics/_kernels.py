@@ -81,6 +81,7 @@ __all__ = [
     "rect_response_numpy",
     "reflect_numpy",
     "table_numpy",
+    "table_value",
     "weight_grad_numpy",
 ]
 
@@ -282,7 +283,7 @@ def interval_overlap(x: float, s: float, r: float) -> float:  # pragma: no cover
 
 
 @njit_cached(nogil=True, fastmath=False)
-def _table(
+def table_value(
     g: float, table: FloatArray, g0: float, g1: float, o_in: float
 ) -> float:  # pragma: no cover
     """Cap-overlap fraction O(gamma) from its table on [g0, g1] (linear interpolation)."""
@@ -501,7 +502,7 @@ def cone_response_numba(
         if half_chord >= 1.0:
             continue
         g = 2.0 * math.asin(half_chord)
-        acc += w * _table(g, table, g0, g1, o_in)
+        acc += w * table_value(g, table, g0, g1, o_in)
         # tangent at wo towards d: d - (d.wo) wo, of length sin(gamma)
         tx = dx - cos_g * ox
         ty = dy - cos_g * oy
@@ -509,7 +510,7 @@ def cone_response_numba(
         tn = math.sqrt(tx * tx + ty * ty + tz * tz)
         if tn > 1e-300:
             grad = (pp * (tx * mxk + ty * myk + tz * mzk) + qq * tz) / tn
-            acc += grad * _table(g, m1, 0.0, g1, 0.0)
+            acc += grad * table_value(g, m1, 0.0, g1, 0.0)
     return acc
 
 
