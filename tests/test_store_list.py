@@ -100,6 +100,15 @@ def store(
             yield s
 
 
+def test_runs_of_one_kind_are_those_the_whole_list_holds(store: RunStore) -> None:
+    everything = store.list_runs()
+    for kind in ("brdf", "gloss", "glosscal"):
+        want = [r.id for r in everything if r.kind == kind]
+        assert [r.id for r in store.list_runs(kind=kind)] == want
+        assert [r.id for r in store.list_runs(1, kind=kind)] == want[:1]
+    assert {r.kind for r in everything} >= {"brdf", "gloss"}
+
+
 def test_counts_status_and_times_equal_the_counted_truth(store: RunStore) -> None:
     truth = _truth(store)
     assert [n for _, n in truth] == [r[1] for r in reversed(RUNS)]  # the truth is what we wrote

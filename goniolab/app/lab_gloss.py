@@ -380,8 +380,8 @@ def gloss_calibration_cite(
     import math
 
     found = None
-    for rec in store.list_runs():  # newest first
-        if rec.kind != GLOSS_CALIBRATION_KIND or rec.status != "done":
+    for rec in store.list_runs(kind=GLOSS_CALIBRATION_KIND):  # newest first
+        if rec.status != "done":
             continue
         record = rec.model.get("gloss_calibration") or {}
         inst = record.get("instrument") or {}

@@ -298,13 +298,18 @@ class RunStore(ReadingTables):
         row = self.db.execute("SELECT id FROM runs WHERE uuid = ?", (run_uuid,)).fetchone()
         return None if row is None else int(row[0])
 
-    def list_runs(self, limit: int | None = None) -> list[RunRecord]:
-        """Return runs, newest first (a damaged row is listed with its ``damage``)."""
-        sql = f"{self._run_select} ORDER BY id DESC"
-        params: tuple[int, ...] = ()
+    def list_runs(self, limit: int | None = None, *, kind: str | None = None) -> list[RunRecord]:
+        """Return runs, newest first (a damaged row is listed with its ``damage``); only
+        those of ``kind`` when given (selected in the query: no other run is decoded)."""
+        sql = self._run_select
+        params: tuple[int | str, ...] = ()
+        if kind is not None:
+            sql += " WHERE kind = ?"
+            params = (kind,)
+        sql += " ORDER BY id DESC"
         if limit is not None:
             sql += " LIMIT ?"
-            params = (limit,)
+            params = (*params, limit)
         return [RunRecord.from_row(r, self.location) for r in self.db.execute(sql, params)]
 
     def list_briefs(
