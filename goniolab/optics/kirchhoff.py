@@ -156,7 +156,6 @@ class KirchhoffModel(PhysicalOpticsModel):
         boxes: Sequence[CellBox],
         geo: Sequence[tuple[FloatArray, NDArray[np.bool_]]],
         os: tuple[int, int] = (1, 1),
-        stride: int = 1,
     ) -> tuple[list[FloatArray], list[float]]:
         """Diffuse ``sum_tiles |U_d|^2 / (n_tiles N sum W^2 os_x os_y)`` per cell (0 for
         evanescent cells) and the coherent factor ``mean_tiles |sum W e^(-i v_z h)|^2 /
@@ -174,12 +173,6 @@ class KirchhoffModel(PhysicalOpticsModel):
         times the tile when the receptor needs a finer grid); a band's terms are then
         summed per cell by Horner's scheme in one pass per wavelength
         (:func:`goniolab.optics._cell_kernels.kirchhoff_band_numba`).
-
-        ``stride = s > 1`` (unpadded grid only; s divides the tile's sides): the boxes and
-        ``geo`` are in units of every s-th cell, ``m = s m'``. Those cells' exact values are
-        the transform of length ``N / s`` of the screen folded s times along each axis,
-        ``sum_j screen(n' + j N / s)`` (``e^(-2 pi i s m' n / N)`` has period ``N / s`` in
-        n), at ``1 / s^2`` of the transforms' and kernels' work.
         """
         sh = self._shared
         t = sh.tiled
@@ -209,20 +202,18 @@ class KirchhoffModel(PhysicalOpticsModel):
             if any(np.any(ok & owns(b, vz)) for vz, (_, ok) in zip(vzs, geo, strict=True))
             or any(bool(owns(b, v)) for v in v_spec)
         ]
-        if stride > 1 and (os != (1, 1) or t.ny_t % stride or t.nx_t % stride):
-            raise ValueError(f"stride {stride} needs the unpadded grid and divisible tile sides")
-        # the region of the (padded, or folded) grid the boxes read (signed indices)
-        ly, lx = os[1] * t.ny_t // stride, os[0] * t.nx_t // stride
+        # the region of the (padded) grid the boxes read (signed indices)
+        ly, lx = os[1] * t.ny_t, os[0] * t.nx_t
         y0, y1 = min(b.iy0 for b in boxes), max(b.iy1 for b in boxes)
         x0, x1 = min(b.ix0 for b in boxes), max(b.ix1 for b in boxes)
         ky = np.arange(y0, y1 + 1, dtype=np.int64) % ly
         kx = np.arange(x0, x1 + 1, dtype=np.int64) % lx
         # the window's own transform (separable), normalised at DC: the coherent field's
         # shape per cell
-        wy_hat = np.fft.fft(t.wy.astype(np.float64), n=ly * stride)
-        wx_hat = np.fft.fft(t.wx.astype(np.float64), n=lx * stride)
-        wy_shape = wy_hat[ky * stride] / wy_hat[0]
-        wx_shape = wx_hat[kx * stride] / wx_hat[0]
+        wy_hat = np.fft.fft(t.wy.astype(np.float64), n=ly)
+        wx_hat = np.fft.fft(t.wx.astype(np.float64), n=lx)
+        wy_shape = wy_hat[ky] / wy_hat[0]
+        wx_shape = wx_hat[kx] / wx_hat[0]
         per_box = [(b.iy - y0, b.ix - x0, wy_shape[b.iy - y0], wx_shape[b.ix - x0]) for b in boxes]
         sum_w = float(np.sum(t.wy, dtype=np.float64) * np.sum(t.wx, dtype=np.float64))
         kernel = CK.kirchhoff_band_numba if self.backend == "numba" else CK.kirchhoff_band_numpy
@@ -233,7 +224,6 @@ class KirchhoffModel(PhysicalOpticsModel):
             h, w = t.tile(k)
             if y_first:  # the first (full) pass runs along the contiguous axis
                 h, w = t.tile_transposed(k), t.window_transposed
-            fold = h.shape[0] // stride, h.shape[1] // stride
             u = h / np.float32(h_max) if h_max > 0 else h
             coh = [0j for _ in boxes]
             for b, (lo, hi, vc, order) in enumerate(plan):
@@ -254,10 +244,7 @@ class KirchhoffModel(PhysicalOpticsModel):
                 spec = np.empty((order + 1, ky.size, kx.size), dtype=np.complex64)
                 dc = np.empty(order + 1, dtype=np.complex128)
                 for n_term in range(order + 1):
-                    src = term
-                    if stride > 1:  # the screen folded s x s times (docstring)
-                        src = term.reshape(stride, fold[0], stride, fold[1]).sum(axis=(0, 2))
-                    dc[n_term] = pruned_fft2(src, ky, kx, y_first, spec[n_term], lengths)
+                    dc[n_term] = pruned_fft2(term, ky, kx, y_first, spec[n_term], lengths)
                     if n_term < order:
                         term *= u
                     done += 1
@@ -357,7 +344,6 @@ class KirchhoffModel(PhysicalOpticsModel):
         wavy maps nearly all of the diffuse power lies in the few cells around it, so the
         strided sum ran 15-56 % low at 86-89 deg and let that much more diffuse light
         through; ``tests/optics/test_kirchhoff.py``'s wavy-map test holds the factor.)"""
-        s = 1  # every cell (docstring)
         nx0, nx1, ny0, ny1 = self._nyquist()
         box = CellBox(nx0, nx1, ny0, ny1)
         tr = math.radians(theta_i_deg)
@@ -365,17 +351,15 @@ class KirchhoffModel(PhysicalOpticsModel):
         for lam in lams_um:
             cx, cy = self._cell_size(lam)
             x = np.broadcast_to(
-                (box.ix * s).astype(np.float64)[None, :] * cx - math.sin(tr),
+                box.ix.astype(np.float64)[None, :] * cx - math.sin(tr),
                 (box.iy.size, box.ix.size),
             )
-            y = np.broadcast_to(
-                (box.iy * s).astype(np.float64)[:, None] * cy, (box.iy.size, box.ix.size)
-            )
+            y = np.broadcast_to(box.iy.astype(np.float64)[:, None] * cy, (box.iy.size, box.ix.size))
             z2 = 1.0 - x * x - y * y
             ok = z2 > 1e-12
             geo.append((x, y, np.sqrt(np.where(ok, z2, 0.0)), ok))
         raw, coh = self._raw_power(
-            theta_i_deg, lams_um, [box] * len(lams_um), [(g[2], g[3]) for g in geo], stride=s
+            theta_i_deg, lams_um, [box] * len(lams_um), [(g[2], g[3]) for g in geo]
         )
         wi = np.array([math.sin(tr), 0.0, math.cos(tr)])
         out = []
@@ -388,7 +372,7 @@ class KirchhoffModel(PhysicalOpticsModel):
                 wo = np.stack([x[big], y[big], z[big]], axis=-1)
                 w = self._diffuse_g2(np.broadcast_to(wi, wo.shape), wo, lam)
                 contrib[big] *= w
-            d1 = float(np.sum(contrib)) * s * s
+            d1 = float(np.sum(contrib))
             out.append(min(1.0, max(0.0, 1.0 - c) / d1) if d1 > 0.0 else 1.0)
         return out
 

@@ -54,7 +54,6 @@ __all__ = [
     "pruned_fft2",
     "psd2",
     "psd_region",
-    "psd_strided",
     "schwartz_taper",
     "tile_starts",
     "windowed_sq_um",
@@ -324,26 +323,6 @@ def windowed_sq_um(tiled: TiledMap) -> float:
         # same map read 1e-9 apart in two processes)
         acc += float(np.sum(np.square(wh)))
     return math.sqrt(acc / (tiled.sum_w2 * tiled.n_tiles))
-
-
-def psd_strided(tiled: TiledMap, stride: int) -> FloatArray:
-    """:func:`psd2`'s PSD (um^4) at every ``stride``-th cell in each axis, ``out[i, j] =
-    PSD(stride fy_i', stride fx_j')`` on the ``(ny / stride, nx / stride)`` grid (numpy
-    ``fftfreq`` order): the transform of length ``N / stride`` of ``W h`` folded ``stride``
-    times along each axis gives those cells exactly (``e^(-2 pi i s m' n / N)`` has period
-    ``N / s`` in n), at ``1 / stride^2`` of the work. The tile's sides must divide."""
-    ny, nx = tiled.ny_t, tiled.nx_t
-    if ny % stride or nx % stride:
-        raise ValueError(f"stride {stride} does not divide the tile ({ny} x {nx})")
-    fy, fx = ny // stride, nx // stride
-    acc = np.zeros((fy, fx), dtype=np.float64)
-    for k in range(tiled.n_tiles):
-        h, w = tiled.tile(k)
-        folded = (w * h).reshape(stride, fy, stride, fx).sum(axis=(0, 2))
-        spec = _fft.fft(_fft.fft(folded.astype(np.complex64), axis=1), axis=0)
-        acc += np.abs(spec).astype(np.float64) ** 2
-    out: FloatArray = acc * tiled.dx_um * tiled.dy_um / (tiled.sum_w2 * tiled.n_tiles)
-    return out
 
 
 #: Largest zero-padded complex64 copy of a tile the padded FFT may make (bytes).

@@ -415,46 +415,15 @@ def test_grazing_readings_are_continuous_where_the_source_is_split_and_clipped(
         assert after == pytest.approx(before, rel=0.01)
 
 
-@pytest.mark.parametrize("stride", [2, 4])
-def test_folded_screen_gives_every_s_th_cell_of_the_full_transform(stride: int) -> None:
-    # the energy check's strided cells (issue 26): the transform of length N/s of the screen
-    # folded s x s times equals the full transform at the cells s m' (the DFT identity
-    # exp(-2 pi i s m' n / N) has period N/s in n), the coherent part removed alike
-    hm = gaussian_acf_map(64, 0.2, 1.0, 0.25, seed=4)
-    model = KirchhoffModel(hm, n=1.5, tile=32)  # 2 x 2 tiles of 32 x 32
-    t = model._shared.tiled
-    ti, lams = 40.0, [0.45, 0.65]
-    nx0, nx1, ny0, ny1 = model._nyquist()
-    full_box = CellBox(nx0, nx1, ny0, ny1)
-    geo = [model._geometry(ti, lam, full_box) for lam in lams]
-    full, coh = model._raw_power(ti, lams, [full_box] * 2, [(g[2], g[3]) for g in geo])
-    box = CellBox(-((-nx0) // stride), nx1 // stride, -((-ny0) // stride), ny1 // stride)
-    sub_geo = [tuple(a[::stride, ::stride] for a in (g[2], g[3])) for g in geo]
-    assert sub_geo[0][0].shape == (box.iy.size, box.ix.size)
-    got, got_coh = model._raw_power(ti, lams, [box] * 2, sub_geo, stride=stride)  # type: ignore[arg-type]
-    for f, g in zip(full, got, strict=True):
-        np.testing.assert_allclose(g, f[::stride, ::stride], rtol=2e-4, atol=2e-6 * f.max())
-    np.testing.assert_allclose(got_coh, coh, rtol=1e-6)
-    assert t.nx_t % stride == 0
-    with pytest.raises(ValueError, match="stride"):
-        model._raw_power(ti, lams, [box] * 2, sub_geo, os=(2, 1), stride=stride)  # type: ignore[arg-type]
-
-
-def test_strided_psd_and_real_space_sq_are_the_full_psds() -> None:
-    # issue 26: the Rayleigh-Rice energy check's every-second cell from the folded tile's
-    # transform, and the rms height from real space (discrete Parseval), equal psd2's
-    from goniolab.optics.psd import psd_strided, windowed_sq_um
+def test_the_real_space_sq_is_the_full_psds() -> None:
+    # issue 26: the Rayleigh-Rice rms height from real space (discrete Parseval) equals
+    # psd2's
+    from goniolab.optics.psd import windowed_sq_um
 
     hm = gaussian_acf_map(192, 0.05, 2.0, 0.25, seed=8)
     t = TiledMap.from_heightmap(hm, tile=96)  # 2 x 2 tiles
     full = psd2(t)
-    for s in (2, 3):
-        np.testing.assert_allclose(
-            psd_strided(t, s), full.psd_um4[::s, ::s], rtol=1e-4, atol=1e-6 * full.psd_um4.max()
-        )
     assert windowed_sq_um(t) == pytest.approx(full.sq_um, rel=1e-6)
-    with pytest.raises(ValueError, match="divide"):
-        psd_strided(t, 5)
 
 
 def test_the_padded_axis_is_transformed_second() -> None:
