@@ -14,9 +14,13 @@ facets (:class:`goniolab.optics.facet.FacetModel`, backend ``"lean"``).
 
 from __future__ import annotations
 
+import functools
+import itertools
+
 import numpy as np
 from numpy.typing import NDArray
 
+from goniolab.optics.facet_threads import run_tasks
 from goniolab.optics.fresnel import fresnel
 
 FloatArray = NDArray[np.float64]
@@ -220,7 +224,81 @@ def deposit_numpy(
     The mirror directions come first: the weights (Fresnel and its derivative) are then
     formed only for the facets that face the lamp, reflect above the horizon and land on
     the grid (on a rough map about half of them), each by the same operations as
-    :func:`weight_grad_numpy`, so the grid is the same."""
+    :func:`weight_grad_numpy`, so the grid is the same.
+
+    Shared out over threads (:func:`~goniolab.optics.facet_threads.run_tasks`) in fixed
+    tasks: the facets' terms in :data:`_DEPOSIT_PARTS` consecutive parts, joined in order,
+    then each corner of each grid's cloud-in-cell weights counted over all of them and
+    the corners added in order, so the grids are the same bits on any number of threads."""
+    n = mx.size
+    parts = max(1, min(_DEPOSIT_PARTS, n // _DEPOSIT_PART_MIN))
+    cuts = [n * k // parts for k in range(parts + 1)]
+    geometry = (a0, ha, na, b0, hb, nb, grad)
+    pieces = run_tasks(
+        [
+            functools.partial(
+                _deposit_terms,
+                mx[a:b],
+                my[a:b],
+                mz[a:b] if mz.size else mz,
+                wi,
+                n_re,
+                n_im,
+                seed,
+                geometry,
+                None if counts is None else counts[a:b],
+            )
+            for a, b in itertools.pairwise(cuts)
+        ]
+    )
+    x, y, w, ga, gb = (
+        pieces[0][k] if parts == 1 else np.concatenate([piece[k] for piece in pieces])
+        for k in range(5)
+    )
+    nac, nbc = coarse_size(na), coarse_size(nb)
+    clouds = [(x, y, w, na, nb)]
+    if grad:
+        xc, yc = x / GRAD_COARSEN, y / GRAD_COARSEN
+        clouds += [(xc, yc, ga, nac, nbc), (xc, yc, gb, nac, nbc)]
+    corners = run_tasks(
+        [functools.partial(_cic_corner, *cloud, di, dj) for cloud in clouds for di, dj in _CORNERS]
+    )
+    grids = []
+    for k, (_, _, _, n0, n1) in enumerate(clouds):
+        out = corners[4 * k]  # 0 + part is part: no zeroed grid to add it to
+        for part in corners[4 * k + 1 : 4 * k + 4]:
+            out += part
+        grids.append(out.reshape(n0, n1))
+    ggrid = np.zeros((nac, nbc, 2))
+    if grad:
+        ggrid[..., 0] = grids[1]
+        ggrid[..., 1] = grids[2]
+    return grids[0], ggrid, float(w.sum())
+
+
+#: The facets of a deposit are formed in this many parts (of at least _DEPOSIT_PART_MIN)
+#: whatever the number of threads.
+_DEPOSIT_PARTS = 4
+_DEPOSIT_PART_MIN = 1 << 15
+#: The cloud-in-cell corners (di, dj), in the order their grids are added.
+_CORNERS = ((0, 0), (0, 1), (1, 0), (1, 1))
+
+
+def _deposit_terms(
+    mx: FloatArray,
+    my: FloatArray,
+    mz: FloatArray,
+    wi: FloatArray,
+    n_re: float,
+    n_im: float,
+    seed: bool,
+    geometry: tuple[float, float, int, float, float, int, bool],
+    counts: FloatArray | None,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+    """:func:`deposit_numpy`'s terms of the facets (or cells) given that land on the
+    grid: grid coordinates ``(x, y)``, weight and its gradient components along the two
+    grid axes (empty without ``grad``)."""
+    a0, ha, na, b0, hb, nb, grad = geometry
     mx, my, mz = normals_numpy(mx, my, mz)
     c = wi[0] * mx + wi[1] * my + wi[2] * mz
     ox = 2.0 * c * mx - wi[0]
@@ -244,35 +322,32 @@ def deposit_numpy(
     if not keep.all():
         mx, my, mz, ox, oy, oz = mx[keep], my[keep], mz[keep], ox[keep], oy[keep], oz[keep]
         w, pp, qq, x, y = w[keep], pp[keep], qq[keep], x[keep], y[keep]
+    if not grad:
+        return x, y, w, _EMPTY, _EMPTY
+    rho = np.sqrt(ox * ox + oz * oz)
+    ga = (pp * (ox * mz - oz * mx) + qq * ox) / rho
+    gb = (pp * (rho * rho * my - oy * (ox * mx + oz * mz)) - qq * oz * oy) / rho
+    return x, y, w, ga, gb
 
-    def cic(xs: FloatArray, ys: FloatArray, val: FloatArray, n0: int, n1: int) -> FloatArray:
-        i = xs.astype(np.int64)
-        j = ys.astype(np.int64)
-        fx, fy = xs - i, ys - j
-        out: FloatArray | None = None
-        for di, wa in ((0, 1.0 - fx), (1, fx)):
-            for dj, wb in ((0, 1.0 - fy), (1, fy)):
-                part: FloatArray = np.bincount(  # type: ignore[assignment]
-                    (i + di) * n1 + (j + dj), weights=val * wa * wb, minlength=n0 * n1
-                )
-                if out is None:  # 0 + part is part: no zeroed grid to add it to
-                    out = part
-                else:
-                    out += part
-        assert out is not None
-        return out.reshape(n0, n1)
 
-    nac, nbc = coarse_size(na), coarse_size(nb)
-    ggrid = np.zeros((nac, nbc, 2))
-    if grad:
-        mxs, mys, mzs = mx, my, mz
-        rho = np.sqrt(ox * ox + oz * oz)
-        ga = (pp * (ox * mzs - oz * mxs) + qq * ox) / rho
-        gb = (pp * (rho * rho * mys - oy * (ox * mxs + oz * mzs)) - qq * oz * oy) / rho
-        xc, yc = x / GRAD_COARSEN, y / GRAD_COARSEN
-        ggrid[..., 0] = cic(xc, yc, ga, nac, nbc)
-        ggrid[..., 1] = cic(xc, yc, gb, nac, nbc)
-    return cic(x, y, w, na, nb), ggrid, float(w.sum())
+_EMPTY: FloatArray = np.empty(0)
+
+
+def _cic_corner(
+    xs: FloatArray, ys: FloatArray, val: FloatArray, n0: int, n1: int, di: int, dj: int
+) -> FloatArray:
+    """One corner ``(di, dj)`` of the cloud-in-cell deposit of ``val`` at grid coordinates
+    ``(xs, ys)`` on an ``n0 x n1`` grid (flat): the nodes ``(i + di, j + dj)`` with the
+    weights ``val (1 - fx or fx) (1 - fy or fy)``."""
+    i = xs.astype(np.int64)
+    j = ys.astype(np.int64)
+    fx, fy = xs - i, ys - j
+    wa = fx if di else 1.0 - fx
+    wb = fy if dj else 1.0 - fy
+    part: FloatArray = np.bincount(  # type: ignore[assignment]
+        (i + di) * n1 + (j + dj), weights=val * wa * wb, minlength=n0 * n1
+    )
+    return part
 
 
 def table_numpy(g: FloatArray, table: FloatArray, g0: float, g1: float, o_in: float) -> FloatArray:

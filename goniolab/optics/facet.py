@@ -73,10 +73,11 @@ References
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Any, Literal
@@ -119,6 +120,7 @@ from goniolab.optics.facet_backends import (
     slope_cells_indexed,
     thread_limit,
 )
+from goniolab.optics.facet_threads import run_tasks
 from goniolab.optics.fresnel import fresnel, fresnel_dielectric
 from goniolab.optics.slope_statistics import SlopeStatistics
 from goniolab.optics.surface import STREAM_MIN_FACETS, Surface
@@ -725,7 +727,8 @@ class FacetModel:
         i_hi = math.ceil(flat.max() / h) + u + 1
         na, nb = i_hi - i_lo + 1, 2 * v + 1
         a0 = i_lo * h
-        parts = self._run(
+        deposit = functools.partial(
+            self._run,
             "deposit",
             wi,
             math.radians(a0),
@@ -736,15 +739,31 @@ class FacetModel:
             nb,
             kind == "cone" and grad,
         )
+        cf = KN.GRAD_COARSEN
+        beta_nodes = np.arcsin(np.clip(hv * np.arange(-v, v + 1), -1.0, 1.0))
+        beta_coarse = np.arcsin(np.clip(hv * (cf * np.arange(KN.coarse_size(nb)) - v), -1.0, 1.0))
+        alpha_nodes = a0 + h * np.arange(na)
+        alpha_coarse = a0 + cf * h * np.arange(KN.coarse_size(na))
+        if self.masking:
+            # the nodes' Lambda (and the Lambda table it reads) while the facets deposit:
+            # independent walks, on two threads when there are two
+            grids = [(alpha_nodes, beta_nodes)]
+            if kind == "cone" and grad:
+                grids.append((alpha_coarse, beta_coarse))
+
+            def lambdas() -> list[Any]:
+                return [self.slopes.node_lambda(a, b) for a, b in grids]
+
+            tasks: list[Callable[[], Any]] = [deposit, lambdas]
+            parts: list[Any] = run_tasks(tasks)[0]
+        else:
+            parts = deposit()
         grid = np.sum([p[0] for p in parts], axis=0)
         ggrid = np.sum([p[1] for p in parts], axis=0)
-        beta_nodes = np.arcsin(np.clip(hv * np.arange(-v, v + 1), -1.0, 1.0))
-        cf = KN.GRAD_COARSEN
-        beta_coarse = np.arcsin(np.clip(hv * (cf * np.arange(ggrid.shape[1]) - v), -1.0, 1.0))
         if self.masking:
-            grid = grid * self.slopes.g2_nodes(wi, a0 + h * np.arange(na), beta_nodes)
+            grid = grid * self.slopes.g2_nodes(wi, alpha_nodes, beta_nodes)
             if kind == "cone" and grad:
-                g2c = self.slopes.g2_nodes(wi, a0 + cf * h * np.arange(ggrid.shape[0]), beta_coarse)
+                g2c = self.slopes.g2_nodes(wi, alpha_coarse, beta_coarse)
                 ggrid = ggrid * g2c[:, :, None]
         out = np.empty(flat.size)
         kernels: dict[float, FloatArray] = {}

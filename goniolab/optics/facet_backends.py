@@ -12,16 +12,16 @@ occupied cells of the slope histogram of bin :data:`LEAN_SLOPE_BIN`
 
 from __future__ import annotations
 
+import functools
 import math
 import os
-import threading
 from collections.abc import Iterator
-from contextlib import contextmanager
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from goniolab.optics.facet_threads import limit_threads, run_tasks, thread_limit
 from goniolab.optics.surface import Surface
 
 if TYPE_CHECKING:  # the pool is made (and concurrent.futures imported) for numba's threads
@@ -74,6 +74,8 @@ _ONE_PASS_MAX_FACETS = 1 << 24
 _ONE_PASS_CHUNK = 1 << 16
 #: ... and count the kept indices this many at a time.
 _ONE_PASS_COUNT = 1 << 21
+#: Spans of rows the one walk is cut into (the same on any number of threads).
+_WALK_PARTS = 8
 _I16_MIN, _I16_MAX = float(np.iinfo(np.int16).min), float(np.iinfo(np.int16).max)
 #: Empty third facet array: the kernels read ``(p, q)`` slopes instead of unit normals.
 SLOPES: FloatArray = np.empty(0)
@@ -99,7 +101,6 @@ def check_slope_range(
 
 
 _executor: ThreadPoolExecutor | None = None
-_limits = threading.local()
 
 
 def numba_kernels() -> Any:
@@ -108,24 +109,6 @@ def numba_kernels() -> Any:
     from goniolab.optics import _kernels
 
     return _kernels
-
-
-@contextmanager
-def limit_threads(n: int) -> Iterator[None]:
-    """Within the block, this thread runs the facet kernels on at most ``n`` threads.
-
-    A batch that spreads maps over worker processes (:mod:`goniolab.batch`) runs each map on
-    one thread: the cores are busy with other maps, and a map's sums then do not depend on
-    how the facets were split.
-    """
-    if n < 1:
-        raise ValueError(f"limit_threads needs n >= 1, got {n}")
-    old = getattr(_limits, "n", None)
-    _limits.n = n
-    try:
-        yield
-    finally:
-        _limits.n = old
 
 
 def kernel_pool() -> ThreadPoolExecutor:
@@ -137,12 +120,6 @@ def kernel_pool() -> ThreadPoolExecutor:
             max_workers=max(1, os.cpu_count() or 1), thread_name_prefix="facet"
         )
     return _executor
-
-
-def thread_limit() -> int | None:
-    """The :func:`limit_threads` bound of this thread (None: all cores)."""
-    n: int | None = getattr(_limits, "n", None)
-    return n
 
 
 def slope_cells(
@@ -248,17 +225,61 @@ def _dense_cells_one_pass(
     two-walk path (:attr:`~goniolab.optics.surface.Surface.slope_range` first) formed every
     slope twice. None, and nothing kept, when an index leaves int16 (``|slope| >= 32.7``),
     is not finite, or the range needs the sparse count: :func:`slope_cells` then takes its
-    general path, which also names a map beyond the index."""
-    inv = 1.0 / LEAN_SLOPE_BIN
+    general path, which also names a map beyond the index.
+
+    The walk is cut into :data:`_WALK_PARTS` spans of rows and the count into chunks of
+    :data:`_ONE_PASS_COUNT` facets, shared out over threads
+    (:func:`~goniolab.optics.facet_threads.run_tasks`): each span writes its own facets'
+    indices, the ranges are combined by min and max, the chunks' counts are integers
+    summed in order. The same cells and counts on any number of threads."""
     n = surface.n_facets
     ip = np.empty(n, dtype=np.int16)
     iq = np.empty(n, dtype=np.int16)
+    spans = surface.spans(_WALK_PARTS)
+    ranges = run_tasks([functools.partial(_index_span, surface, span, ip, iq) for span in spans])
+    if any(r is None for r in ranges):
+        return None
+    lo_p = min(r[0] for r in ranges if r is not None)
+    hi_p = max(r[1] for r in ranges if r is not None)
+    lo_q = min(r[2] for r in ranges if r is not None)
+    hi_q = max(r[3] for r in ranges if r is not None)
+    p0, q0 = int(lo_p), int(lo_q)
+    n_p, n_q = int(hi_p) - p0 + 1, int(hi_q) - q0 + 1
+    n_cells = n_p * n_q
+    if n_cells > max(_DENSE_CELLS_PER_FACET * surface.n_facets, _DENSE_MIN_CELLS):
+        return None
+    offset = p0 * n_q + q0
+    chunks = [(lo, min(lo + _ONE_PASS_COUNT, n)) for lo in range(0, n, _ONE_PASS_COUNT)]
+    parts = run_tasks(
+        [functools.partial(_count_chunk, ip, iq, lo, hi, n_q, offset, n_cells) for lo, hi in chunks]
+    )
+    counts = parts[0]
+    for part in parts[1:]:
+        counts += part
+    cells = np.flatnonzero(counts)
+    weights = counts[cells]
+    cp = ((cells // n_q + p0) * LEAN_SLOPE_BIN).astype(np.float64)
+    cq = ((cells % n_q + q0) * LEAN_SLOPE_BIN).astype(np.float64)
+    ip.setflags(write=False)
+    iq.setflags(write=False)
+    return (cp, cq, weights.astype(np.float64)), (ip, iq)
+
+
+def _index_span(
+    surface: Surface,
+    span: tuple[int, int],
+    ip: NDArray[np.int16],
+    iq: NDArray[np.int16],
+) -> tuple[float, float, float, float] | None:
+    """The int16 cell indices of the facets of ``span`` into ``ip``, ``iq`` and their
+    range ``(lo_p, hi_p, lo_q, hi_q)``; None when one leaves int16 or is not finite."""
+    inv = 1.0 / LEAN_SLOPE_BIN
     buf = np.empty(0)
     lo_p = lo_q = math.inf
     hi_p = hi_q = -math.inf
-    at = 0
+    at = span[0]
     # blocks of a few rows, formed in reused arrays: the work stays in cache
-    for pb, qb in surface.slope_blocks(_ONE_PASS_CHUNK, reuse=True):
+    for pb, qb in surface.slope_blocks(_ONE_PASS_CHUNK, reuse=True, span=span):
         m = pb.size
         if m > buf.size:  # a block is one row at least
             buf = np.empty(m)
@@ -276,30 +297,29 @@ def _dense_cells_one_pass(
             else:
                 lo_q, hi_q = min(lo_q, lo), max(hi_q, hi)
         at += m
-    p0, q0 = int(lo_p), int(lo_q)
-    n_p, n_q = int(hi_p) - p0 + 1, int(hi_q) - q0 + 1
-    n_cells = n_p * n_q
-    if n_cells > max(_DENSE_CELLS_PER_FACET * surface.n_facets, _DENSE_MIN_CELLS):
-        return None
-    counts = np.zeros(n_cells, dtype=np.int64)
-    offset = p0 * n_q + q0
-    key = np.empty(min(ip.size, _ONE_PASS_COUNT), dtype=np.int64)
-    for lo in range(0, ip.size, _ONE_PASS_COUNT):  # int64 keys of a chunk at a time ...
-        hi = min(lo + _ONE_PASS_COUNT, ip.size)
-        for a in range(lo, hi, _ONE_PASS_CHUNK):  # ... formed a few rows at a time, in cache
-            b = min(a + _ONE_PASS_CHUNK, hi)
-            kk = key[a - lo : b - lo]
-            np.multiply(ip[a:b], n_q, out=kk, dtype=np.int64)
-            kk += iq[a:b]
-            kk -= offset
-        counts += np.bincount(key[: hi - lo], minlength=n_cells)
-    cells = np.flatnonzero(counts)
-    weights = counts[cells]
-    cp = ((cells // n_q + p0) * LEAN_SLOPE_BIN).astype(np.float64)
-    cq = ((cells % n_q + q0) * LEAN_SLOPE_BIN).astype(np.float64)
-    ip.setflags(write=False)
-    iq.setflags(write=False)
-    return (cp, cq, weights.astype(np.float64)), (ip, iq)
+    return lo_p, hi_p, lo_q, hi_q
+
+
+def _count_chunk(
+    ip: NDArray[np.int16],
+    iq: NDArray[np.int16],
+    lo: int,
+    hi: int,
+    n_q: int,
+    offset: int,
+    n_cells: int,
+) -> NDArray[np.int64]:
+    """The facet counts of the cells of the facets ``lo .. hi - 1``: their int64 keys
+    ``ip n_q + iq - offset`` formed a few rows at a time (in cache), then counted."""
+    key = np.empty(hi - lo, dtype=np.int64)
+    for a in range(lo, hi, _ONE_PASS_CHUNK):
+        b = min(a + _ONE_PASS_CHUNK, hi)
+        kk = key[a - lo : b - lo]
+        np.multiply(ip[a:b], n_q, out=kk, dtype=np.int64)
+        kk += iq[a:b]
+        kk -= offset
+    counts: NDArray[np.int64] = np.bincount(key, minlength=n_cells)
+    return counts
 
 
 def cell_index_of(v: float) -> int:

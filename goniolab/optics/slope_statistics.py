@@ -17,13 +17,17 @@ References
 
 from __future__ import annotations
 
+import functools
+import itertools
 import math
+import threading
 from functools import cached_property
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from goniolab.optics.facet_backends import check_slope_range
+from goniolab.optics.facet_threads import run_tasks
 from goniolab.optics.surface import Surface
 
 __all__ = ["SlopeStatistics", "bilinear", "cell_bilinear"]
@@ -40,6 +44,11 @@ _LAMBDA_THETA_STEP_DEG = 0.5
 _LAMBDA_PHI_STEP_DEG = 5.0
 #: Bins of the projected slope per azimuth when the Lambda table is summed.
 _LAMBDA_BINS = 1 << 12
+#: Groups of azimuths the Lambda table is summed in (the same on any number of threads).
+_LAMBDA_GROUPS = 4
+#: Groups of in-plane angles the nodes' Lambda is computed in, of at least this many nodes.
+_NODE_GROUPS = 4
+_NODE_GROUP_MIN = 1 << 15
 
 
 def cell_bilinear(
@@ -76,6 +85,99 @@ def bilinear(
     return out
 
 
+def _lambda_columns(
+    p: FloatArray,
+    q: FloatArray,
+    th: FloatArray,
+    ph: FloatArray,
+    azimuths: range,
+    table: FloatArray,
+) -> None:
+    """The columns ``j`` and ``j + half`` of :attr:`SlopeStatistics._lambda_table` for
+    each ``j`` of ``azimuths`` (``half`` = the azimuths of a half turn), into ``table``."""
+    ct, st = np.cos(th), np.sin(th)
+    with np.errstate(divide="ignore"):
+        cot = np.where(st > 0, ct / st, np.inf)
+    m = p.size
+    nb = _LAMBDA_BINS
+    half = (ph.size - 1) // 2
+    x = np.empty(m)
+    buf = np.empty(m)
+    k = np.empty(m, dtype=np.int64)
+    for j in azimuths:  # the temporaries reused: x = p cos + q sin, k its bin
+        np.multiply(p, math.cos(ph[j]), out=x)
+        x += np.multiply(q, math.sin(ph[j]), out=buf)
+        lo, hi = float(x.min()), float(x.max())
+        width = max(hi - lo, 1e-300) / nb
+        np.subtract(x, lo, out=buf)
+        buf /= width
+        k[...] = buf  # truncation, as astype(np.int64)
+        np.minimum(k, nb - 1, out=k)
+        cnt = np.bincount(k, minlength=nb).astype(np.float64)
+        tot = np.bincount(k, weights=x, minlength=nb)
+        c_cnt = np.concatenate(([0.0], np.cumsum(cnt)))
+        c_tot = np.concatenate(([0.0], np.cumsum(tot)))
+        for sign, col in ((1.0, j), (-1.0, j + half)):
+            # facets with sign * x < cot: x below cot (sign +) or above -cot (sign -)
+            u = np.clip((sign * cot - lo) / width, 0.0, float(nb))
+            b = np.minimum(u.astype(np.int64), nb - 1)
+            f = np.clip(u - b, 0.0, 1.0)
+            if sign > 0:  # bins below b, and the fraction f of bin b
+                count = c_cnt[b] + f * cnt[b]
+                total = c_tot[b] + f * (cnt[b] * (lo + width * (b + 0.5 * f)))
+            else:  # bins above b, and the fraction 1 - f of bin b
+                g = 1.0 - f
+                count = (c_cnt[nb] - c_cnt[b + 1]) + g * cnt[b]
+                total = (c_tot[nb] - c_tot[b + 1]) + g * (cnt[b] * (lo + width * (b + f + 0.5 * g)))
+            table[:, col] = (count * ct - sign * st * total) / m
+
+
+def _nodes_lambda_rows(table: FloatArray, al: FloatArray, be: FloatArray, out: FloatArray) -> None:
+    """:meth:`SlopeStatistics._nodes_lambda` of the nodes ``al`` x ``be`` into ``out``."""
+    n0, n1 = table.shape
+    cb = np.cos(be)
+    cz = np.multiply.outer(np.cos(al), cb)
+    np.clip(cz, -1.0, 1.0, out=cz)
+    x = np.arccos(cz)
+    np.degrees(x, out=x)
+    x /= _LAMBDA_THETA_STEP_DEG
+    np.clip(x, 0.0, n0 - 1.0, out=x)
+    y = np.arctan2(np.broadcast_to(np.sin(be), cz.shape), np.multiply.outer(-np.sin(al), cb))
+    np.degrees(y, out=y)
+    np.remainder(y, 360.0, out=y)
+    y /= _LAMBDA_PHI_STEP_DEG
+    np.clip(y, 0.0, n1 - 1.0, out=y)
+    i = np.floor(x).astype(np.int64)
+    np.minimum(i, n0 - 2, out=i)
+    j = np.floor(y).astype(np.int64)
+    np.minimum(j, n1 - 2, out=j)
+    x -= i  # the fractions fx, fy
+    y -= j
+    flat = i
+    flat *= n1
+    flat += j
+    del j
+    tf = table.ravel()
+    gx, gy = 1.0 - x, 1.0 - y
+    # cell_bilinear's sum, term by term in its order
+    t = tf.take(flat) * gx
+    t *= gy
+    u = tf.take(flat + n1) * x
+    u *= gy
+    t += u
+    flat += 1
+    u = tf.take(flat) * gx
+    u *= y
+    t += u
+    flat += n1
+    u = tf.take(flat) * x
+    u *= y
+    t += u
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lam = np.where(cz > 0, t / np.where(cz > 0, cz, 1.0) - 1.0, np.inf)
+    np.maximum(lam, 0.0, out=out)
+
+
 class SlopeStatistics:
     """P22 and Smith Lambda of a facet set (see :class:`goniolab.optics.facet.FacetModel`
     for ``slope_bin``: ``None`` is the kernel density, a float the histogram of that bin).
@@ -86,6 +188,7 @@ class SlopeStatistics:
         self.slope_bin = HIST_BIN if slope_bin is None else float(slope_bin)
         self.use_kde = slope_bin is None
         self._node_lambda: dict[tuple[float, float, int, float, float, int], FloatArray] = {}
+        self._lock = threading.Lock()  # of _node_lambda: the deposit's threads may fill it
 
     # ------------------------------------------------------------------ slope density P22
     @cached_property
@@ -215,44 +318,13 @@ class SlopeStatistics:
         th = np.radians(np.arange(0.0, 90.0 + 1e-9, _LAMBDA_THETA_STEP_DEG))
         n_ph = round(360.0 / _LAMBDA_PHI_STEP_DEG)
         ph = np.radians(_LAMBDA_PHI_STEP_DEG * np.arange(n_ph + 1))
-        ct, st = np.cos(th), np.sin(th)
-        with np.errstate(divide="ignore"):
-            cot = np.where(st > 0, ct / st, np.inf)
         table = np.empty((th.size, ph.size))
-        m = p.size
-        nb = _LAMBDA_BINS
         half = n_ph // 2
-        x = np.empty(m)
-        buf = np.empty(m)
-        k = np.empty(m, dtype=np.int64)
-        for j in range(half):  # the temporaries reused: x = p cos + q sin, k its bin
-            np.multiply(p, math.cos(ph[j]), out=x)
-            x += np.multiply(q, math.sin(ph[j]), out=buf)
-            lo, hi = float(x.min()), float(x.max())
-            width = max(hi - lo, 1e-300) / nb
-            np.subtract(x, lo, out=buf)
-            buf /= width
-            k[...] = buf  # truncation, as astype(np.int64)
-            np.minimum(k, nb - 1, out=k)
-            cnt = np.bincount(k, minlength=nb).astype(np.float64)
-            tot = np.bincount(k, weights=x, minlength=nb)
-            c_cnt = np.concatenate(([0.0], np.cumsum(cnt)))
-            c_tot = np.concatenate(([0.0], np.cumsum(tot)))
-            for sign, col in ((1.0, j), (-1.0, j + half)):
-                # facets with sign * x < cot: x below cot (sign +) or above -cot (sign -)
-                u = np.clip((sign * cot - lo) / width, 0.0, float(nb))
-                b = np.minimum(u.astype(np.int64), nb - 1)
-                f = np.clip(u - b, 0.0, 1.0)
-                if sign > 0:  # bins below b, and the fraction f of bin b
-                    count = c_cnt[b] + f * cnt[b]
-                    total = c_tot[b] + f * (cnt[b] * (lo + width * (b + 0.5 * f)))
-                else:  # bins above b, and the fraction 1 - f of bin b
-                    g = 1.0 - f
-                    count = (c_cnt[nb] - c_cnt[b + 1]) + g * cnt[b]
-                    total = (c_tot[nb] - c_tot[b + 1]) + g * (
-                        cnt[b] * (lo + width * (b + f + 0.5 * g))
-                    )
-                table[:, col] = (count * ct - sign * st * total) / m
+        # the azimuths in fixed groups, each on whichever thread is free: a column is
+        # computed by the same operations whichever group or thread computes it
+        groups = [range(half * k // _LAMBDA_GROUPS, half * (k + 1) // _LAMBDA_GROUPS)
+                  for k in range(_LAMBDA_GROUPS)]  # fmt: skip
+        run_tasks([functools.partial(_lambda_columns, p, q, th, ph, g, table) for g in groups])
         table[:, n_ph] = table[:, 0]
         return table
 
@@ -284,50 +356,19 @@ class SlopeStatistics:
         cos be)`` (in-plane angle ``al`` x out-of-plane ``be``, rad), the same operations on
         the same values without the ``(..., 3)`` direction array: its strided components
         and a dozen temporaries of the grid's size cost a 71-point curve's two grids
-        (0.9 M nodes) about 25 ms."""
+        (0.9 M nodes) about 25 ms. In fixed groups of in-plane angles, each on whichever
+        thread is free (:func:`~goniolab.optics.facet_threads.run_tasks`): every node by
+        the same operations."""
         table = self._lambda_table
-        n0, n1 = table.shape
-        cb = np.cos(be)
-        cz = np.multiply.outer(np.cos(al), cb)
-        np.clip(cz, -1.0, 1.0, out=cz)
-        x = np.arccos(cz)
-        np.degrees(x, out=x)
-        x /= _LAMBDA_THETA_STEP_DEG
-        np.clip(x, 0.0, n0 - 1.0, out=x)
-        y = np.arctan2(np.broadcast_to(np.sin(be), cz.shape), np.multiply.outer(-np.sin(al), cb))
-        np.degrees(y, out=y)
-        np.remainder(y, 360.0, out=y)
-        y /= _LAMBDA_PHI_STEP_DEG
-        np.clip(y, 0.0, n1 - 1.0, out=y)
-        i = np.floor(x).astype(np.int64)
-        np.minimum(i, n0 - 2, out=i)
-        j = np.floor(y).astype(np.int64)
-        np.minimum(j, n1 - 2, out=j)
-        x -= i  # the fractions fx, fy
-        y -= j
-        flat = i
-        flat *= n1
-        flat += j
-        del j
-        tf = table.ravel()
-        gx, gy = 1.0 - x, 1.0 - y
-        # cell_bilinear's sum, term by term in its order
-        t = tf.take(flat) * gx
-        t *= gy
-        u = tf.take(flat + n1) * x
-        u *= gy
-        t += u
-        flat += 1
-        u = tf.take(flat) * gx
-        u *= y
-        t += u
-        flat += n1
-        u = tf.take(flat) * x
-        u *= y
-        t += u
-        with np.errstate(divide="ignore", invalid="ignore"):
-            lam = np.where(cz > 0, t / np.where(cz > 0, cz, 1.0) - 1.0, np.inf)
-        out: FloatArray = np.maximum(lam, 0.0, out=lam)
+        out = np.empty((al.size, be.size))
+        parts = max(1, min(_NODE_GROUPS, al.size * be.size // _NODE_GROUP_MIN))
+        cuts = [al.size * k // parts for k in range(parts + 1)]
+        run_tasks(
+            [
+                functools.partial(_nodes_lambda_rows, table, al[a:b], be, out[a:b])
+                for a, b in itertools.pairwise(cuts)
+            ]
+        )
         return out
 
     def masking_g2(self, wi: ArrayLike, wo: ArrayLike) -> FloatArray:
@@ -335,12 +376,10 @@ class SlopeStatistics:
         out: FloatArray = 1.0 / (1.0 + self.smith_lambda(wi) + self.smith_lambda(wo))
         return out
 
-    def g2_nodes(self, wi: FloatArray, alpha_deg: FloatArray, beta_rad: FloatArray) -> FloatArray:
-        """Smith G2 at grid nodes (in-plane angle alpha in degrees x out-of-plane beta).
-
-        ``Lambda`` of the nodes does not depend on wi: it is kept for the last few grids, which
-        the sub-cones of a split source share (169 of them at grazing incidence).
-        """
+    def node_lambda(self, alpha_deg: FloatArray, beta_rad: FloatArray) -> FloatArray:
+        """Smith ``Lambda`` of the grid nodes (in-plane angle alpha in degrees x out-of-plane
+        beta), kept for the last few grids: it does not depend on the incidence, and the
+        sub-cones of a split source share their grids (169 of them at grazing incidence)."""
         key = (
             float(alpha_deg[0]),
             float(alpha_deg[-1]),
@@ -349,11 +388,19 @@ class SlopeStatistics:
             float(beta_rad[-1]),
             beta_rad.size,
         )
-        lam = self._node_lambda.get(key)
+        with self._lock:
+            lam = self._node_lambda.get(key)
         if lam is None:
             lam = self._nodes_lambda(np.radians(alpha_deg), np.asarray(beta_rad, np.float64))
-            if len(self._node_lambda) >= 8:
-                self._node_lambda.pop(next(iter(self._node_lambda)))
-            self._node_lambda[key] = lam
+            with self._lock:
+                if len(self._node_lambda) >= 8:
+                    self._node_lambda.pop(next(iter(self._node_lambda)))
+                self._node_lambda[key] = lam
+        return lam
+
+    def g2_nodes(self, wi: FloatArray, alpha_deg: FloatArray, beta_rad: FloatArray) -> FloatArray:
+        """Smith G2 at grid nodes (in-plane angle alpha in degrees x out-of-plane beta), the
+        nodes' Lambda from :meth:`node_lambda`."""
+        lam = self.node_lambda(alpha_deg, beta_rad)
         out: FloatArray = 1.0 / (1.0 + self.smith_lambda(wi) + lam)
         return out

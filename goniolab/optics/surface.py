@@ -274,17 +274,32 @@ class Surface:
         return int(self.p.size)
 
     def slope_blocks(
-        self, facets: int | None = None, *, reuse: bool = False
+        self,
+        facets: int | None = None,
+        *,
+        reuse: bool = False,
+        span: tuple[int, int] | None = None,
     ) -> Iterator[tuple[FloatArray, FloatArray]]:
         """The slopes ``(p, q)`` in consecutive blocks of about ``facets`` facets
         (default :data:`SLOPE_BLOCK_FACETS`), in facet order (a map's surface forms each block from the map when asked, so a walk
         over its facets holds one block, not the map's facets: :class:`MapSurface`).
         ``reuse``: a map's surface may form each block in the previous block's arrays (the
         caller keeps none of them): small blocks then stay in cache, and no new memory is
-        touched per block."""
+        touched per block. ``span``: only the facets ``lo .. hi - 1``, one of
+        :meth:`spans` (a map's surface walks whole rows)."""
         step = max(1, int(SLOPE_BLOCK_FACETS if facets is None else facets))
-        for lo in range(0, self.n_facets, step):
-            yield self.p[lo : lo + step], self.q[lo : lo + step]
+        lo, hi = (0, self.n_facets) if span is None else span
+        for at in range(lo, hi, step):
+            end = min(at + step, hi)
+            yield self.p[at:end], self.q[at:end]
+
+    def spans(self, parts: int) -> list[tuple[int, int]]:
+        """The facets cut into at most ``parts`` consecutive spans ``(lo, hi)`` of about
+        equal size, for walks that :func:`~goniolab.optics.facet_threads.run_tasks` shares
+        out (:meth:`slope_blocks` ``span=``); a map's surface cuts between rows."""
+        n = self.n_facets
+        parts = max(1, min(parts, n))
+        return [(n * k // parts, n * (k + 1) // parts) for k in range(parts)]
 
     def take(self, idx: NDArray[np.int64]) -> tuple[FloatArray, FloatArray]:
         """The slopes of the facets ``idx`` (indices in facet order)."""
@@ -388,23 +403,33 @@ class MapSurface(Surface):
         return "_whole" not in self.__dict__
 
     def slope_blocks(
-        self, facets: int | None = None, *, reuse: bool = False
+        self,
+        facets: int | None = None,
+        *,
+        reuse: bool = False,
+        span: tuple[int, int] | None = None,
     ) -> Iterator[tuple[FloatArray, FloatArray]]:
         if not self.streamed:
-            yield from super().slope_blocks(facets)
+            yield from super().slope_blocks(facets, span=span)
             return
         b, c, level = self._plane
         ny, nx = self._hm.shape
         rows = max(1, int(SLOPE_BLOCK_FACETS if facets is None else facets) // (nx - 1))
         total = ny - 1
-        report = self.progress if self.n_facets > STREAM_MIN_FACETS else None
+        first, last = 0, total
+        if span is not None:
+            first, last = span[0] // (nx - 1), span[1] // (nx - 1)
+            if (first * (nx - 1), last * (nx - 1)) != span:
+                raise ValueError(f"{self!r}: span {span} does not fall between rows")
+        report = self.progress if self.n_facets > STREAM_MIN_FACETS and span is None else None
         what = ""
         if report is not None:
             self.__dict__["_passes"] = self.__dict__.get("_passes", 0) + 1
             what = f"facet slopes, pass {self.__dict__['_passes']}"
+        rows = min(rows, max(1, last - first))
         bufs = (np.empty((rows, nx - 1)), np.empty((rows, nx - 1))) if reuse else None
-        for r0 in range(0, total, rows):
-            r1 = min(r0 + rows, total)
+        for r0 in range(first, last, rows):
+            r1 = min(r0 + rows, last)
             if bufs is None:
                 pb, qb = _forward_rows(self._hm, b, c, level, r0, r1)
             else:
@@ -414,6 +439,16 @@ class MapSurface(Surface):
             yield pb.reshape(-1), qb.reshape(-1)
             if report is not None:
                 report(r1, total, what)
+
+    def spans(self, parts: int) -> list[tuple[int, int]]:
+        if not self.streamed:
+            return super().spans(parts)
+        ny, nx = self._hm.shape
+        rows = ny - 1
+        parts = max(1, min(parts, rows))
+        return [
+            (rows * k // parts * (nx - 1), rows * (k + 1) // parts * (nx - 1)) for k in range(parts)
+        ]
 
     def take(self, idx: NDArray[np.int64]) -> tuple[FloatArray, FloatArray]:
         if not self.streamed:

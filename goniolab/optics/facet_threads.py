@@ -1,0 +1,217 @@
+"""The cores the facet model's walks may use, and the one way they share them.
+
+numpy releases the GIL inside its array loops, so the lean facet model's walks over a map
+(the slope cells, the Smith Lambda table, the nodes' Lambda, the deposit) run on several
+threads of one process when they are cut into independent tasks. :func:`run_tasks` runs a
+fixed list of tasks on up to :func:`walk_threads` threads, the caller's among them, and
+returns their results in the order of the list. The callers cut the work into the same
+tasks whatever the number of threads and combine the results in the list's order (or as
+exact integer counts), so a map's numbers are the same bits on one thread or on many: the
+threads change when a task runs, never what it computes.
+
+How many threads: ``GONIOLAB_THREADS`` (a positive integer) when set, else
+``OMP_NUM_THREADS`` when set (the usual cap of a batch or cluster job), else the CPUs this
+process may run on (:func:`os.sched_getaffinity`); :func:`limit_threads` caps the calling
+thread further (``goniolab.batch`` runs each of its worker processes on one thread).
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+from collections import deque
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from typing import Any, TypeVar
+
+__all__ = ["THREADS_ENV", "limit_threads", "run_tasks", "thread_limit", "walk_threads"]
+
+T = TypeVar("T")
+
+#: Environment variable capping the threads of the facet model's walks.
+THREADS_ENV = "GONIOLAB_THREADS"
+
+_limits = threading.local()
+
+
+@contextmanager
+def limit_threads(n: int) -> Iterator[None]:
+    """Within the block, this thread runs the facet kernels and walks on at most ``n``
+    threads.
+
+    A batch that spreads maps over worker processes (:mod:`goniolab.batch`) runs each map on
+    one thread: the cores are busy with other maps.
+    """
+    if n < 1:
+        raise ValueError(f"limit_threads needs n >= 1, got {n}")
+    old = getattr(_limits, "n", None)
+    _limits.n = n
+    try:
+        yield
+    finally:
+        _limits.n = old
+
+
+def thread_limit() -> int | None:
+    """The :func:`limit_threads` bound of this thread (None: no bound)."""
+    n: int | None = getattr(_limits, "n", None)
+    return n
+
+
+def _env_threads(name: str) -> int | None:
+    raw = os.environ.get(name, "").strip()
+    if not raw:
+        return None
+    try:
+        value = int(raw)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise ValueError(f"{name}={raw!r}: the number of threads must be a positive integer")
+    return value
+
+
+def walk_threads() -> int:
+    """Threads the facet model's walks may use in the calling thread: ``GONIOLAB_THREADS``,
+    else ``OMP_NUM_THREADS``, else the CPUs of this process's affinity mask, and at most
+    the :func:`limit_threads` bound.
+
+    Raises
+    ------
+    ValueError
+        ``GONIOLAB_THREADS`` or ``OMP_NUM_THREADS`` is set but not a positive integer.
+    """
+    n = _env_threads(THREADS_ENV) or _env_threads("OMP_NUM_THREADS")
+    if n is None:
+        try:
+            n = len(os.sched_getaffinity(0))
+        except (AttributeError, OSError):  # not Linux
+            n = os.cpu_count() or 1
+    cap = thread_limit()
+    return max(1, min(n, cap) if cap is not None else n)
+
+
+class _Batch:
+    """One :func:`run_tasks` call: its tasks, handed out in order, and their results."""
+
+    __slots__ = ("error", "left", "limit", "results", "taken", "tasks")
+
+    def __init__(self, tasks: Sequence[Callable[[], Any]], limit: int) -> None:
+        self.tasks = tasks
+        #: the caller's thread bound, which its tasks keep on whichever thread they run
+        self.limit = limit
+        self.results: list[Any] = [None] * len(tasks)
+        self.error: tuple[int, BaseException] | None = None
+        self.taken = 0
+        self.left = len(tasks)
+
+
+_lock = threading.Lock()
+_work = threading.Condition(_lock)
+_open: deque[_Batch] = deque()  # batches with tasks not yet handed out
+_helpers: list[threading.Thread] = []
+
+
+def _reset_after_fork() -> None:
+    """A forked child has none of the parent's helper threads (and maybe a held lock)."""
+    global _lock, _work
+    _lock = threading.Lock()
+    _work = threading.Condition(_lock)
+    _open.clear()
+    _helpers.clear()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_reset_after_fork)
+
+
+def _take(batch: _Batch) -> int | None:
+    """The next task of ``batch`` to run (call with the lock held); None: none left."""
+    if batch.taken >= len(batch.tasks):
+        return None
+    i = batch.taken
+    batch.taken += 1
+    if batch.taken == len(batch.tasks):
+        _open.remove(batch)
+    return i
+
+
+def _run(batch: _Batch, i: int) -> None:
+    old = getattr(_limits, "n", None)
+    _limits.n = batch.limit
+    try:
+        result = batch.tasks[i]()
+        failed: BaseException | None = None
+    except BaseException as exc:  # re-raised in the caller, after the started tasks end
+        failed = exc
+    finally:
+        _limits.n = old
+    with _work:
+        if failed is None:
+            batch.results[i] = result
+        else:
+            if batch.error is None or i < batch.error[0]:
+                batch.error = (i, failed)
+            untaken = len(batch.tasks) - batch.taken  # not started: they never will be
+            if untaken:
+                batch.taken = len(batch.tasks)
+                batch.left -= untaken
+                _open.remove(batch)
+        batch.left -= 1
+        if batch.left == 0:
+            _work.notify_all()  # its caller waits (perhaps among others)
+
+
+def _helper() -> None:
+    while True:
+        with _work:
+            while not _open:
+                _work.wait()
+            batch = _open[0]
+            i = _take(batch)
+        if i is not None:
+            _run(batch, i)
+
+
+def run_tasks(tasks: Sequence[Callable[[], T]]) -> list[T]:
+    """The results of ``tasks`` (callables without arguments), in their order, computed on
+    up to :func:`walk_threads` threads (the calling thread takes tasks too; a task may call
+    :func:`run_tasks` again). The first failing task's exception (in the list's order) is
+    raised once the tasks already started have ended; the tasks not yet started are not.
+
+    A task must not wait for anything its caller holds (a lock, a ``cached_property``
+    being computed by the caller): it may run on another thread while the caller waits.
+    """
+    n = min(walk_threads(), len(tasks))
+    if n <= 1:
+        return [task() for task in tasks]
+    batch = _Batch(tasks, walk_threads())
+    with _work:
+        while len(_helpers) < n - 1:
+            helper = threading.Thread(target=_helper, name="goniolab-walk", daemon=True)
+            helper.start()
+            _helpers.append(helper)
+        _open.append(batch)
+        _work.notify_all()
+    while True:
+        with _work:
+            i = _take(batch)
+        if i is None:
+            break
+        _run(batch, i)
+    # the last tasks run elsewhere: meanwhile, this thread takes other calls' tasks (a
+    # nested call's, or another thread's), so that no core idles while there is work
+    while True:
+        with _work:
+            while batch.left and not _open:
+                _work.wait()
+            if not batch.left:
+                break
+            other = _open[0]
+            i = _take(other)
+        if i is not None:
+            _run(other, i)
+    if batch.error is not None:
+        raise batch.error[1]
+    results: list[T] = batch.results
+    return results
