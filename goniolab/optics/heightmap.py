@@ -16,6 +16,7 @@ References
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -24,6 +25,8 @@ from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
+
+from goniolab.optics.facet_threads import run_tasks
 
 __all__ = [
     "HeightMap",
@@ -174,7 +177,14 @@ class HeightMap:
         got = self.derived().get("z_range")
         if got is None:
             z = self.z_um
-            got = (float(np.fmin.reduce(z, axis=None)), float(np.fmax.reduce(z, axis=None)))
+            # the two reductions at once when two threads may run (run_tasks)
+            lo, hi = run_tasks(
+                [
+                    functools.partial(np.fmin.reduce, z, axis=None),
+                    functools.partial(np.fmax.reduce, z, axis=None),
+                ]
+            )
+            got = (float(lo), float(hi))
             self.derived()["z_range"] = got
         out: tuple[float, float] = got
         return out

@@ -9,6 +9,7 @@ model of a subsample of its slopes, the fallback facet models and the sibling wa
 
 from __future__ import annotations
 
+import functools
 import math
 import threading
 from collections import OrderedDict
@@ -21,6 +22,7 @@ from numpy.typing import NDArray
 
 from goniolab.optics import _fft
 from goniolab.optics.facet import FacetModel
+from goniolab.optics.facet_threads import run_tasks
 from goniolab.optics.heightmap import HeightMap
 from goniolab.optics.psd import TiledMap
 from goniolab.optics.surface import MapSurface, Surface
@@ -221,16 +223,26 @@ class SharedMap:
         # one pass (the sum of squares about zero, then about the mean: the levelled mean
         # is ~0, so no precision is lost)
         blocks = [(r0, min(r0 + _STATS_ROWS, ny)) for r0 in range(0, ny, _STATS_ROWS)]
-        s1 = s2 = sp = sq2 = 0.0
-        for r0, r1 in blocks:  # one more row for the y differences
+
+        def sums(r0: int, r1: int) -> tuple[float, float, float, float]:
             z = t.levelled(slice(r0, min(r1 + 1, ny)), slice(None)).astype(np.float64)
-            zb = z[: r1 - r0]
-            s1 += float(np.sum(zb))
-            s2 += float(np.einsum("ij,ij->", zb, zb))
+            zb = z[: r1 - r0]  # one more row for the y differences
             d = np.diff(zb, axis=1)
-            sp += float(np.einsum("ij,ij->", d, d)) / (t.dx_um * t.dx_um)
-            d = np.diff(z, axis=0)
-            sq2 += float(np.einsum("ij,ij->", d, d)) / (t.dy_um * t.dy_um)
+            e = np.diff(z, axis=0)
+            return (
+                float(np.sum(zb)),
+                float(np.einsum("ij,ij->", zb, zb)),
+                float(np.einsum("ij,ij->", d, d)),
+                float(np.einsum("ij,ij->", e, e)),
+            )
+
+        s1 = s2 = sp = sq2 = 0.0
+        # each block's sums on whichever thread is free, added in the blocks' order
+        for b1, b2, bp, bq in run_tasks([functools.partial(sums, r0, r1) for r0, r1 in blocks]):
+            s1 += b1
+            s2 += b2
+            sp += bp / (t.dx_um * t.dx_um)
+            sq2 += bq / (t.dy_um * t.dy_um)
         n_pts = ny * nx
         mean = s1 / n_pts
         sq = math.sqrt(max(s2 / n_pts - mean * mean, 0.0))
