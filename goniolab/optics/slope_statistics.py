@@ -45,9 +45,13 @@ _LAMBDA_PHI_STEP_DEG = 5.0
 #: Bins of the projected slope per azimuth when the Lambda table is summed.
 _LAMBDA_BINS = 1 << 12
 #: Groups of azimuths the Lambda table is summed in (the same on any number of threads).
-_LAMBDA_GROUPS = 4
-#: Groups of in-plane angles the nodes' Lambda is computed in, of at least this many nodes.
-_NODE_GROUPS = 4
+#: One: its small arrays' numpy calls hold the GIL most of the time, so two threads
+#: summing groups at once were no faster (issue 26, bench/README.md, roughwall); the
+#: table runs beside the slope cells instead (FacetModel._grid_fraction).
+_LAMBDA_GROUPS = 1
+#: Groups of in-plane angles the nodes' Lambda is computed in, of at least this many nodes
+#: (one, for the same reason).
+_NODE_GROUPS = 1
 _NODE_GROUP_MIN = 1 << 15
 
 

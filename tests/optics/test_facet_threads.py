@@ -137,6 +137,11 @@ def test_slope_cells_are_the_facets_unique_cells_on_one_and_two_threads(
 def test_lambda_table_on_two_threads_is_its_definition_and_the_same_bits(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
+    import goniolab.optics.slope_statistics as S
+
+    monkeypatch.setattr(S, "_LAMBDA_GROUPS", 4)
+    monkeypatch.setattr(S, "_NODE_GROUPS", 4)
+    monkeypatch.setattr(S, "_NODE_GROUP_MIN", 1 << 10)
     s = Surface.from_heightmap(_rough_map(300))
     tables = {
         n: _on_threads(n, lambda: SlopeStatistics(s)._lambda_table, monkeypatch) for n in (1, 2)
@@ -159,6 +164,7 @@ def test_deposit_is_the_same_bits_on_one_and_two_threads(
     import goniolab.optics._kernels_numpy as KN
 
     monkeypatch.setattr(KN, "_DEPOSIT_PART_MIN", 1 << 10)  # four parts
+    monkeypatch.setattr(KN, "_DEPOSIT_PARTS", 4)
     s = Surface.from_heightmap(_rough_map(300))
     wi = np.array([math.sin(math.radians(45.0)), 0.0, math.cos(math.radians(45.0))])
     h = math.radians(0.05)
@@ -176,6 +182,14 @@ def test_deposit_is_the_same_bits_on_one_and_two_threads(
 def test_masked_curve_is_the_same_bits_on_one_and_two_threads(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
+    import goniolab.optics._kernels_numpy as KN
+    import goniolab.optics.facet_backends as FB
+    import goniolab.optics.slope_statistics as S
+
+    for mod, name, value in ((S, "_LAMBDA_GROUPS", 4), (S, "_NODE_GROUPS", 4),
+                             (S, "_NODE_GROUP_MIN", 1 << 10), (KN, "_DEPOSIT_PARTS", 4),
+                             (KN, "_DEPOSIT_PART_MIN", 1 << 10), (FB, "_ONE_PASS_COUNT", 1 << 15)):  # fmt: skip
+        monkeypatch.setattr(mod, name, value)  # every walk cut into several tasks
     hm = _rough_map(400)
     curves = {}
     for n in (1, 2):
