@@ -11,8 +11,9 @@ threads change when a task runs, never what it computes.
 
 How many threads: ``GONIOLAB_THREADS`` (a positive integer) when set, else
 ``OMP_NUM_THREADS`` when set (the usual cap of a batch or cluster job), else the CPUs this
-process may run on (:func:`os.sched_getaffinity`); :func:`limit_threads` caps the calling
-thread further (``goniolab.batch`` runs each of its worker processes on one thread).
+process may run on (:func:`os.sched_getaffinity`), or one when the load average says the
+others are busy (:func:`_spare`); :func:`limit_threads` caps the calling thread further
+(``goniolab.batch`` runs each of its worker processes on one thread).
 """
 
 from __future__ import annotations
@@ -73,8 +74,9 @@ def _env_threads(name: str) -> int | None:
 
 def walk_threads() -> int:
     """Threads the facet model's walks may use in the calling thread: ``GONIOLAB_THREADS``,
-    else ``OMP_NUM_THREADS``, else the CPUs of this process's affinity mask, and at most
-    the :func:`limit_threads` bound.
+    else ``OMP_NUM_THREADS``, else the CPUs of this process's affinity mask (one when the
+    load average leaves less than half a CPU free), and at most the :func:`limit_threads`
+    bound.
 
     Raises
     ------
@@ -87,8 +89,24 @@ def walk_threads() -> int:
             n = len(os.sched_getaffinity(0))
         except (AttributeError, OSError):  # not Linux
             n = os.cpu_count() or 1
+        n = _spare(n)
     cap = thread_limit()
     return max(1, min(n, cap) if cap is not None else n)
+
+
+def _spare(n: int) -> int:
+    """``n``, or one thread when the machine's 1-minute load average leaves less than
+    half a CPU of the ``n`` free: a second thread then waits for a core more than it
+    works (on the 2-core machine, a rough 2048^2 ``predict brdf`` took 0.40 s on two
+    threads against 0.32 s on one at load 2; bench/README.md, issue 26, roughwall). The
+    numbers are the same either way; ``GONIOLAB_THREADS`` is taken as given."""
+    if n <= 1:
+        return 1
+    try:
+        load = os.getloadavg()[0]
+    except (AttributeError, OSError):  # no load average here
+        return n
+    return n if load < n - 0.5 else 1
 
 
 class _Batch:

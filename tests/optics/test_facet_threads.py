@@ -10,6 +10,7 @@ table's definition summed facet by facet.
 from __future__ import annotations
 
 import math
+import os
 import threading
 from collections.abc import Callable
 
@@ -83,7 +84,15 @@ def test_thread_count_from_the_environment(monkeypatch: pytest.MonkeyPatch) -> N
     monkeypatch.delenv(FT.THREADS_ENV)
     assert walk_threads() == 5
     monkeypatch.delenv("OMP_NUM_THREADS")
-    assert walk_threads() == len(__import__("os").sched_getaffinity(0))
+    cpus = len(os.sched_getaffinity(0))
+    monkeypatch.setattr(os, "getloadavg", lambda: (0.0, 0.0, 0.0))
+    assert walk_threads() == cpus
+    if cpus > 1:  # a busy machine: one thread, unless the environment asks for more
+        monkeypatch.setattr(os, "getloadavg", lambda: (cpus - 0.5, 0.0, 0.0))
+        assert walk_threads() == 1
+        monkeypatch.setenv(FT.THREADS_ENV, str(cpus))
+        assert walk_threads() == cpus
+        monkeypatch.delenv(FT.THREADS_ENV)
     for bad in ("0", "-2", "two"):
         monkeypatch.setenv(FT.THREADS_ENV, bad)
         with pytest.raises(ValueError, match=f"GONIOLAB_THREADS={bad!r}"):
