@@ -77,7 +77,7 @@ import functools
 import itertools
 import math
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Any, Literal
@@ -120,7 +120,6 @@ from goniolab.optics.facet_backends import (
     slope_cells_indexed,
     thread_limit,
 )
-from goniolab.optics.facet_threads import run_tasks
 from goniolab.optics.fresnel import fresnel, fresnel_dielectric
 from goniolab.optics.slope_statistics import SlopeStatistics
 from goniolab.optics.surface import STREAM_MIN_FACETS, Surface
@@ -727,35 +726,17 @@ class FacetModel:
         i_hi = math.ceil(flat.max() / h) + u + 1
         na, nb = i_hi - i_lo + 1, 2 * v + 1
         a0 = i_lo * h
-        deposit = functools.partial(
-            self._run,
-            "deposit",
-            wi,
-            math.radians(a0),
-            math.radians(h),
-            na,
-            -v * hv,
-            hv,
-            nb,
-            kind == "cone" and grad,
-        )
+        grad_on = kind == "cone" and grad
+        args = (math.radians(a0), math.radians(h), na, -v * hv, hv, nb, grad_on)
+        deposit = functools.partial(self._run, "deposit", wi, *args)
         cf = KN.GRAD_COARSEN
         beta_nodes = np.arcsin(np.clip(hv * np.arange(-v, v + 1), -1.0, 1.0))
         beta_coarse = np.arcsin(np.clip(hv * (cf * np.arange(KN.coarse_size(nb)) - v), -1.0, 1.0))
         alpha_nodes = a0 + h * np.arange(na)
         alpha_coarse = a0 + cf * h * np.arange(KN.coarse_size(na))
-        if self.masking:
-            # the nodes' Lambda (and the Lambda table it reads) while the facets deposit:
-            # independent walks, on two threads when there are two
-            grids = [(alpha_nodes, beta_nodes)]
-            if kind == "cone" and grad:
-                grids.append((alpha_coarse, beta_coarse))
-
-            def lambdas() -> list[Any]:
-                return [self.slopes.node_lambda(a, b) for a, b in grids]
-
-            tasks: list[Callable[[], Any]] = [deposit, lambdas]
-            parts: list[Any] = run_tasks(tasks)[0]
+        if self.masking:  # the nodes' Lambda (and its table) beside the deposit
+            grids = [(alpha_nodes, beta_nodes)] + ([(alpha_coarse, beta_coarse)] if grad_on else [])
+            parts: list[Any] = self.slopes.beside(deposit, grids)
         else:
             parts = deposit()
         grid = np.sum([p[0] for p in parts], axis=0)

@@ -97,8 +97,8 @@ def walk_threads() -> int:
 def _spare(n: int) -> int:
     """``n``, or one thread when the machine's 1-minute load average leaves less than
     half a CPU of the ``n`` free: a second thread then waits for a core more than it
-    works (on the 2-core machine, a rough 2048^2 ``predict brdf`` took 0.40 s on two
-    threads against 0.32 s on one at load 2; bench/README.md, issue 26, roughwall). The
+    works (on the 2-core machine at load 2, a rough 2048^2 ``predict brdf`` took 0.40 s
+    on two threads, its one-thread base 0.32 s; bench/README.md, issue 26, roughwall). The
     numbers are the same either way; ``GONIOLAB_THREADS`` is taken as given."""
     if n <= 1:
         return 1

@@ -21,7 +21,9 @@ import functools
 import itertools
 import math
 import threading
+from collections.abc import Callable
 from functools import cached_property
+from typing import Any, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -33,6 +35,7 @@ from goniolab.optics.surface import Surface
 __all__ = ["SlopeStatistics", "bilinear", "cell_bilinear"]
 
 FloatArray = NDArray[np.float64]
+T = TypeVar("T")
 
 #: Histogram bin of P22 for maps without slope spread (Wittmann et al. 2021, sec. 3.1).
 HIST_BIN = 1e-3
@@ -401,6 +404,19 @@ class SlopeStatistics:
                     self._node_lambda.pop(next(iter(self._node_lambda)))
                 self._node_lambda[key] = lam
         return lam
+
+    def beside(self, work: Callable[[], T], grids: list[tuple[FloatArray, FloatArray]]) -> T:
+        """``work()``, while the :meth:`node_lambda` of each ``(alpha_deg, beta_rad)`` of
+        ``grids`` (and the Lambda table they read) is computed beside it: independent
+        walks, on two threads when there are two (:func:`run_tasks`)."""
+
+        def lambdas() -> None:
+            for alpha_deg, beta_rad in grids:
+                self.node_lambda(alpha_deg, beta_rad)
+
+        tasks: list[Callable[[], Any]] = [work, lambdas]
+        out: T = run_tasks(tasks)[0]
+        return out
 
     def g2_nodes(self, wi: FloatArray, alpha_deg: FloatArray, beta_rad: FloatArray) -> FloatArray:
         """Smith G2 at grid nodes (in-plane angle alpha in degrees x out-of-plane beta), the
