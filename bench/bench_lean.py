@@ -22,6 +22,10 @@ medians. ``--before DIR`` adds the same goniolab commands run from another check
 change. ``--in-process`` adds the issue's in-process figures on a 1024^2 smooth map
 (bench/bench_physical.py's): the Kirchhoff 71-point curve and the 16-wavelength gloss with
 the default (numpy) sums, medians of ``--repeats`` with the FFT cache cleared each time.
+``--floor`` measures only the floor of any wave computation on the smooth map, step by step
+(:func:`floor_steps`: interpreter, numpy, reading the map, levelling, one 2048^2 or four
+1024^2 transforms with numpy.fft / scipy.fft / pocketfft alone, goniolab's Taylor terms),
+paired with the facet script.
 
 Bytecode caching is on (``PYTHONDONTWRITEBYTECODE`` dropped; one untimed run of each
 command writes the caches), as for an installed package; ``NUMBA_CACHE_DIR`` is a fresh
@@ -162,6 +166,131 @@ def in_process(repeats: int) -> dict[str, dict[str, float]]:
     return out
 
 
+# ------------------------------------------------------------------ the floor (--floor)
+_LOAD = "import numpy as np\nz = np.load(MAP)\n"
+_LEVEL = (
+    _LOAD
+    + """ny, nx = z.shape
+x = np.arange(nx) - (nx - 1) / 2.0
+y = np.arange(ny) - (ny - 1) / 2.0
+b = float(z.sum(axis=0) @ x) / (ny * float(x @ x))
+c = float(z.sum(axis=1) @ y) / (nx * float(y @ y))
+h = (z - z.mean() - b * x[None, :] - c * y[:, None]).astype(np.float32)
+w1 = np.hanning(ny // 2).astype(np.float32)
+W = w1[:, None] * w1[None, :]
+t2 = ny // 2
+tiles = [h[i:i + t2, j:j + t2] for i in (0, t2) for j in (0, t2)]
+"""
+)
+# scipy's compiled pocketfft alone, as goniolab.optics._fft loads it (no scipy import)
+_POCKET = """import importlib.machinery, importlib.util, os
+folder = os.path.join(importlib.util.find_spec("scipy").submodule_search_locations[0],
+                      "fft", "_pocketfft")
+path = [os.path.join(folder, f) for f in os.listdir(folder) if f.startswith("pypocketfft.")][0]
+ld = importlib.machinery.ExtensionFileLoader("pypocketfft", path)
+mod = importlib.util.module_from_spec(importlib.util.spec_from_file_location("pypocketfft", path,
+                                                                          loader=ld))
+ld.exec_module(mod)
+def fft(a, axis):
+    return mod.c2c(a, (axis,), True, 0, None, 1)
+def fft2(a):
+    return mod.c2c(a, (0, 1), True, 0, None, 1)
+"""
+
+
+def _taylor(n_terms: int, ky: int, kx: int) -> str:
+    """Kirchhoff's transforms as goniolab forms them, and nothing else: per tile the
+    float32 phase screen ``W exp(-i v_c h)``, then ``n_terms`` Taylor terms (the screen
+    times ``h / h_max`` again each time), each transformed along x over the whole tile,
+    ``kx`` columns kept and transformed along y, ``ky`` rows kept, ``|U|^2`` summed."""
+    return (
+        _LEVEL
+        + _POCKET
+        + f"""acc = np.zeros(({ky}, {kx}))
+for t in tiles:
+    u = t / np.float32(np.abs(t).max())
+    ph = np.float32(20.0) * t
+    term = np.empty(t.shape, np.complex64)
+    term.real = W * np.cos(ph)
+    term.imag = -W * np.sin(ph)
+    for k in range({n_terms}):
+        a = fft(term, 1)[:, :{kx}]
+        s = fft(np.ascontiguousarray(a.T), 1)[:, :{ky}]
+        acc += (s.real * s.real + s.imag * s.imag).T
+        if k < {n_terms} - 1:
+            term *= u
+"""
+    )
+
+
+def floor_steps() -> dict[str, str]:
+    """The floor of any wave computation on a 2048^2 map, step by step (each a whole
+    ``python -c`` process; ``MAP`` is the map's path)."""
+    tile4 = "[{f}((W * t).astype(np.complex64)) for t in tiles]"
+    return {
+        "python -c pass": "pass",
+        "import numpy": "import numpy",
+        "+ np.load (32 MB)": _LOAD,
+        "+ level, float32, 4 tiles": _LEVEL,
+        "+ fft2 2048^2 numpy.fft": _LEVEL + "np.fft.fft2(h.astype(np.complex64))",
+        "+ fft2 2048^2 scipy.fft": _LEVEL
+        + "import scipy.fft\nscipy.fft.fft2(h.astype(np.complex64))",
+        "+ fft2 2048^2 pocketfft": _LEVEL + _POCKET + "fft2(h.astype(np.complex64))",
+        "+ 4 fft2 1024^2 numpy.fft": _LEVEL + tile4.format(f="np.fft.fft2"),
+        "+ 4 fft2 1024^2 scipy.fft": _LEVEL
+        + "import scipy.fft\n"
+        + tile4.format(f="scipy.fft.fft2"),
+        "+ 4 fft2 1024^2 pocketfft": _LEVEL + _POCKET + tile4.format(f="fft2"),
+        # the smooth map's 71-point curve at 45 deg: 8 terms, 199 x 759 cells kept; the
+        # mixed map's: 13 terms, 393 x 999 (goniolab's band plan and boxes for them)
+        "+ 1 Taylor term x 4 tiles": _taylor(1, 199, 759),
+        "+ 8 Taylor terms x 4 tiles (smooth)": _taylor(8, 199, 759),
+        "+ 13 Taylor terms x 4 tiles (mixed)": _taylor(13, 393, 999),
+    }
+
+
+def floor(mp: Path, repeats: int) -> dict[str, dict[str, float]]:
+    """Medians of ``repeats`` whole processes of each :func:`floor_steps` step on ``mp``,
+    and ``bench/baseline_numpy.py MAP brdf`` (the facet script) in the same rounds."""
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    cmds = {name: [PY, "-c", f"MAP = {str(mp)!r}\n" + code]
+            for name, code in floor_steps().items()}  # fmt: skip
+    cmds["facet script (baseline_numpy.py brdf)"] = [
+        PY, str(ROOT / "bench" / "baseline_numpy.py"), str(mp), "brdf"
+    ]  # fmt: skip
+    for cmd in cmds.values():
+        run(cmd, env)
+    rows: dict[str, list[tuple[float, float]]] = {k: [] for k in cmds}
+    for r in range(repeats):
+        for name in list(cmds) if r % 2 == 0 else list(cmds)[::-1]:
+            rows[name].append(run(cmds[name], env))
+    return {
+        name: {"wall_s": statistics.median(w for w, _ in v),
+               "cpu_s": statistics.median(c for _, c in v)}
+        for name, v in rows.items()
+    }  # fmt: skip
+
+
+def print_floor(size: int, repeats: int, as_json: bool) -> int:
+    load0 = os.getloadavg()[0]
+    with tempfile.TemporaryDirectory(prefix="goniolab-floor-") as tmp:
+        mp = Path(tmp) / "smooth.npy"
+        gaussian_map(mp, size, 0.05, 2.0, 0.5, seed=1)
+        rows = floor(mp, repeats)
+    out = {"load_before": load0, "load_after": os.getloadavg()[0], "floor": rows}
+    if as_json:
+        print(json.dumps(out, indent=2))
+        return 0
+    ref = rows["facet script (baseline_numpy.py brdf)"]
+    print(f"the floor, whole processes, {size}^2 smooth map, median of {repeats}, load "
+          f"{load0:.1f} before / {out['load_after']:.1f} after")  # fmt: skip
+    print(f"{'step':40}{'wall':>9}{'cpu':>9}{'wall x':>8}{'cpu x':>7}  (x: over the facet script)")
+    for name, r in rows.items():
+        print(f"{name:40}{r['wall_s']:8.3f}s{r['cpu_s']:8.3f}s"
+              f"{r['wall_s'] / ref['wall_s']:8.2f}{r['cpu_s'] / ref['cpu_s']:7.2f}")  # fmt: skip
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--size", type=int, default=2048)
@@ -170,7 +299,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--in-process", action="store_true")
     ap.add_argument("--only", help="comma-separated maps (rough, mixed, smooth)")
     ap.add_argument("--json", action="store_true")
+    ap.add_argument(
+        "--floor",
+        action="store_true",
+        help="only the floor of a wave computation on the smooth map (steps)",
+    )
     args = ap.parse_args(argv)
+    if args.floor:
+        return print_floor(args.size, args.repeats, args.json)
     out: dict[str, object] = {"cpus": os.cpu_count(), "load_before": os.getloadavg()[0],
                               "size": args.size, "repeats": args.repeats}  # fmt: skip
     with tempfile.TemporaryDirectory(prefix="goniolab-lean-") as tmp:
