@@ -22,6 +22,12 @@ medians. ``--before DIR`` adds the same goniolab commands run from another check
 change. ``--in-process`` adds the issue's in-process figures on a 1024^2 smooth map
 (bench/bench_physical.py's): the Kirchhoff 71-point curve and the 16-wavelength gloss with
 the default (numpy) sums, medians of ``--repeats`` with the FFT cache cleared each time.
+The smooth and mixed maps (where ``auto`` picks the wave models) also pair
+``bench/baseline_wave_numpy.py MAP brdf|gloss`` (the same wave physics in plain numpy, one
+transform per reading and wavelength: 10-20 s a run; ``--no-wave`` leaves it out): the
+``wave x`` columns. ``--check`` only compares that script with goniolab's ``--json`` on
+those maps, reading by reading where goniolab's provenance names the script's model
+(bounds ``CHECK_*``; exit 1 when one is exceeded).
 ``--floor`` measures only the floor of any wave computation on the smooth map, step by step
 (:func:`floor_steps`: interpreter, numpy, reading the map, levelling, one 2048^2 or four
 1024^2 transforms with numpy.fft / scipy.fft / pocketfft alone, goniolab's Taylor terms),
@@ -104,7 +110,13 @@ def goniolab_cmd(what: str, mp: Path) -> list[str]:
     return [PY, "-c", code, "predict", what, str(mp), *extra]
 
 
-def whole(maps: dict[str, Path], repeats: int, before: str | None, tdir: Path) -> dict[str, object]:
+#: The maps where ``auto`` picks wave models: the wave script is paired there too.
+WAVE_MAPS = ("smooth", "mixed")
+
+
+def whole(
+    maps: dict[str, Path], repeats: int, before: str | None, tdir: Path, wave: bool = True
+) -> dict[str, object]:
     env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
     env["NUMBA_CACHE_DIR"] = str(tdir / "numba-cache")
     envs = {"after": {**env, "PYTHONPATH": str(ROOT)}}
@@ -116,6 +128,9 @@ def whole(maps: dict[str, Path], repeats: int, before: str | None, tdir: Path) -
         for what in ("brdf", "gloss"):
             cmds = {label: (goniolab_cmd(what, mp), e) for label, e in envs.items()}
             cmds["numpy"] = ([PY, str(ROOT / "bench" / "baseline_numpy.py"), str(mp), what], env)
+            if wave and name in WAVE_MAPS:
+                cmds["wave"] = ([PY, str(ROOT / "bench" / "baseline_wave_numpy.py"), str(mp), what],
+                                env)  # fmt: skip
             for cmd, e in cmds.values():
                 run(cmd, e)  # untimed: caches written, page cache warm
             rows: dict[str, list[tuple[float, float]]] = {k: [] for k in cmds}
@@ -134,6 +149,9 @@ def whole(maps: dict[str, Path], repeats: int, before: str | None, tdir: Path) -
             for label in envs:
                 med[label]["ratio_wall"] = med[label]["wall_s"] / med["numpy"]["wall_s"]
                 med[label]["ratio_cpu"] = med[label]["cpu_s"] / med["numpy"]["cpu_s"]
+                if "wave" in med:
+                    med[label]["wave_wall"] = med[label]["wall_s"] / med["wave"]["wall_s"]
+                    med[label]["wave_cpu"] = med[label]["cpu_s"] / med["wave"]["cpu_s"]
             out[f"{name} {what}"] = med
     return out
 
@@ -271,6 +289,84 @@ def floor(mp: Path, repeats: int) -> dict[str, dict[str, float]]:
     }  # fmt: skip
 
 
+# ------------------------------------------------------------------ the wave script (--check)
+#: Agreement of bench/baseline_wave_numpy.py with goniolab, checked by ``--check``: gloss
+#: and E430 readings to this fraction of their value ...
+CHECK_GLOSS_REL = 1e-3
+#: ... the curve to this fraction of its peak at every angle ...
+CHECK_CURVE_PEAK = 0.03
+#: ... and to this fraction of the value where the curve is above 1e-3 of its peak.
+CHECK_CURVE_REL = 0.07
+
+
+def _json_of(cmd: list[str], env: dict[str, str]) -> dict[str, object]:
+    out = subprocess.run(cmd, env=env, cwd=tempfile.gettempdir(), capture_output=True,
+                         text=True, check=True)  # fmt: skip
+    doc: dict[str, object] = json.loads(out.stdout)
+    return doc
+
+
+def check_wave(maps: dict[str, Path]) -> dict[str, dict[str, object]]:
+    """The wave script against ``goniolab predict ... --json`` (defaults) on each wave map:
+    every reading goniolab computes with the model the script uses (its provenance says
+    which), the largest deviations and whether they are within the ``CHECK_*`` bounds."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    out: dict[str, dict[str, object]] = {}
+    for name, mp in maps.items():
+        if name not in WAVE_MAPS:
+            continue
+        wave = [PY, str(ROOT / "bench" / "baseline_wave_numpy.py"), str(mp)]
+        g = _json_of([*goniolab_cmd("brdf", mp), "--json"], env)
+        w = _json_of([*wave, "brdf"], env)
+        ours = np.asarray(g["luminance_pct"], dtype=np.float64)
+        theirs = np.asarray(w["luminance_pct"], dtype=np.float64)
+        same = np.array([m == w["model"] for m in g["models"]])  # type: ignore[union-attr]
+        peak = float(ours.max())
+        d = np.abs(theirs - ours)[same]
+        big = (ours >= 1e-3 * peak)[same]
+        rel = float(np.max(d[big] / ours[same][big])) if np.any(big) else 0.0
+        out[f"{name} brdf"] = {
+            "angles_compared": int(same.sum()), "model": w["model"],
+            "max_dev_of_peak": float(d.max()) / peak, "max_rel_dev": rel,
+            "ok": float(d.max()) / peak <= CHECK_CURVE_PEAK and rel <= CHECK_CURVE_REL,
+        }  # fmt: skip
+        g = _json_of([*goniolab_cmd("gloss", mp), "--json"], env)
+        w = _json_of([*wave, "gloss"], env)
+        wm: dict[str, str] = w["models"]  # type: ignore[assignment]
+        gm: dict[str, str] = {**g["model"], **{f"e430.{k}": v for k, v in g["e430_model"].items()}}  # type: ignore[dict-item]
+        devs: dict[str, float] = {}
+        for key, model in wm.items():
+            if gm.get(key) != model:
+                continue
+            if key.startswith("e430."):
+                k = key.removeprefix("e430.")
+                mine, theirs_v = w["e430"][k], g["e430"][k]  # type: ignore[index]
+            else:
+                mine, theirs_v = w[key], g[key]
+            devs[key] = float(mine) / float(theirs_v) - 1.0  # type: ignore[arg-type]
+        worst = max(abs(v) for v in devs.values())
+        out[f"{name} gloss"] = {"compared": sorted(devs), "max_rel_dev": worst,
+                                "ok": worst <= CHECK_GLOSS_REL}  # fmt: skip
+    return out
+
+
+def print_check(maps: dict[str, Path], as_json: bool) -> int:
+    res = check_wave(maps)
+    if as_json:
+        print(json.dumps(res, indent=2))
+    else:
+        for key, r in res.items():
+            print(f"{key:14} {'ok ' if r['ok'] else 'OUT'} " + ", ".join(
+                f"{k} {v:.3g}" if isinstance(v, float) else f"{k} {v}"
+                for k, v in r.items() if k != "ok"))  # fmt: skip
+        print(
+            f"(bounds: gloss readings {CHECK_GLOSS_REL:g} of the value; the curve "
+            f"{CHECK_CURVE_PEAK:g} of its peak, {CHECK_CURVE_REL:g} of the value above 1e-3 "
+            "of the peak; compared where goniolab's provenance names the script's model)"
+        )
+    return 0 if all(r["ok"] for r in res.values()) else 1
+
+
 def print_floor(size: int, repeats: int, as_json: bool) -> int:
     load0 = os.getloadavg()[0]
     with tempfile.TemporaryDirectory(prefix="goniolab-floor-") as tmp:
@@ -298,6 +394,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--before", help="another checkout to run the goniolab commands from")
     ap.add_argument("--in-process", action="store_true")
     ap.add_argument("--only", help="comma-separated maps (rough, mixed, smooth)")
+    ap.add_argument(
+        "--no-wave", action="store_true", help="leave out the wave script's column (10-20 s a run)"
+    )
+    ap.add_argument(
+        "--check",
+        action="store_true",
+        help="only compare the wave script with goniolab on the smooth and mixed maps",
+    )
     ap.add_argument("--json", action="store_true")
     ap.add_argument(
         "--floor",
@@ -314,7 +418,9 @@ def main(argv: list[str] | None = None) -> int:
         maps = make_maps(tdir, args.size)
         if args.only:
             maps = {k: v for k, v in maps.items() if k in args.only.split(",")}
-        out["whole"] = whole(maps, args.repeats, args.before, tdir)
+        if args.check:
+            return print_check(maps, args.json)
+        out["whole"] = whole(maps, args.repeats, args.before, tdir, not args.no_wave)
     if args.in_process:
         out["in_process"] = in_process(args.repeats)
     out["load_after"] = os.getloadavg()[0]
@@ -326,13 +432,16 @@ def main(argv: list[str] | None = None) -> int:
         f"{args.size}^2 maps, load average {out['load_before']:.1f} before / "
         f"{out['load_after']:.1f} after"
     )
-    print(f"{'map command':15}{'run':>8}{'wall':>9}{'cpu':>9}{'wall x':>8}{'cpu x':>7}")
+    print(f"{'map command':15}{'run':>8}{'wall':>9}{'cpu':>9}{'wall x':>8}{'cpu x':>7}"
+          f"{'wave wall x':>12}{'wave cpu x':>11}")  # fmt: skip
     whole_rows = out["whole"]
     assert isinstance(whole_rows, dict)
     for key, med in whole_rows.items():
         for label, r in med.items():
             ratio = (f"{r['ratio_wall']:8.2f}{r['ratio_cpu']:7.2f}" if "ratio_wall" in r
                      else f"{'':8}{'':7}")  # fmt: skip
+            if "wave_wall" in r:
+                ratio += f"{r['wave_wall']:12.3f}{r['wave_cpu']:11.3f}"
             print(f"{key:15}{label:>8}{r['wall_s']:8.3f}s{r['cpu_s']:8.3f}s{ratio}")
     if "in_process" in out:
         ip = out["in_process"]
@@ -340,7 +449,8 @@ def main(argv: list[str] | None = None) -> int:
         for name, r in ip.items():
             print(f"in process: {name}: {r['wall_s'] * 1e3:.0f} ms wall (min "
                   f"{r['min_wall_s'] * 1e3:.0f}), {r['cpu_s'] * 1e3:.0f} ms CPU")  # fmt: skip
-    print("(x: the median over the numpy baseline's median; target <= 0.5)")
+    print("(x: the median over the facet script's median (bench/baseline_numpy.py); wave x: over "
+          "the wave script's (bench/baseline_wave_numpy.py); target <= 0.5)")  # fmt: skip
     return 0
 
 
