@@ -28,7 +28,9 @@ transform per reading and wavelength: 10-20 s a run; ``--no-wave`` leaves it out
 ``wave x`` columns. ``--check`` only compares that script with goniolab's ``--json`` on
 those maps, reading by reading where goniolab's provenance names the script's model
 (bounds ``CHECK_*``; exit 1 when one is exceeded).
-``--floor`` measures only the floor of any wave computation on the smooth map, step by step
+``--same-as DIR`` only checks that ``predict brdf|gloss MAP --json`` prints the same bytes
+(stdout and stderr) from this checkout and from DIR on every map (a speed change that must
+not change a reading). ``--floor`` measures only the floor of any wave computation on the smooth map, step by step
 (:func:`floor_steps`: interpreter, numpy, reading the map, levelling, one 2048^2 or four
 1024^2 transforms with numpy.fft / scipy.fft / pocketfft alone, goniolab's Taylor terms),
 paired with the facet script.
@@ -367,6 +369,23 @@ def print_check(maps: dict[str, Path], as_json: bool) -> int:
     return 0 if all(r["ok"] for r in res.values()) else 1
 
 
+def same_as(maps: dict[str, Path], before: str) -> dict[str, bool]:
+    """Whether ``goniolab predict brdf|gloss MAP --json`` (defaults) prints the same bytes
+    (stdout and stderr) from this checkout and from ``before``, per map and command."""
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    out: dict[str, bool] = {}
+    for name, mp in maps.items():
+        for what in ("brdf", "gloss"):
+            docs = []
+            for root in (str(ROOT), str(Path(before).resolve())):
+                r = subprocess.run([*goniolab_cmd(what, mp), "--json"],
+                                   env={**env, "PYTHONPATH": root}, cwd=tempfile.gettempdir(),
+                                   capture_output=True, check=True)  # fmt: skip
+                docs.append((r.stdout, r.stderr))
+            out[f"{name} {what}"] = docs[0] == docs[1]
+    return out
+
+
 def print_floor(size: int, repeats: int, as_json: bool) -> int:
     load0 = os.getloadavg()[0]
     with tempfile.TemporaryDirectory(prefix="goniolab-floor-") as tmp:
@@ -398,6 +417,11 @@ def main(argv: list[str] | None = None) -> int:
         "--no-wave", action="store_true", help="leave out the wave script's column (10-20 s a run)"
     )
     ap.add_argument(
+        "--same-as",
+        metavar="DIR",
+        help="only check that --json of brdf and gloss is byte-identical to DIR's",
+    )
+    ap.add_argument(
         "--check",
         action="store_true",
         help="only compare the wave script with goniolab on the smooth and mixed maps",
@@ -420,6 +444,11 @@ def main(argv: list[str] | None = None) -> int:
             maps = {k: v for k, v in maps.items() if k in args.only.split(",")}
         if args.check:
             return print_check(maps, args.json)
+        if args.same_as:
+            same = same_as(maps, args.same_as)
+            for key, ok in same.items():
+                print(f"{key:14} {'identical' if ok else 'DIFFERENT'} (--json stdout and stderr)")
+            return 0 if all(same.values()) else 1
         out["whole"] = whole(maps, args.repeats, args.before, tdir, not args.no_wave)
     if args.in_process:
         out["in_process"] = in_process(args.repeats)

@@ -185,18 +185,26 @@ class RayleighRiceModel(PhysicalOpticsModel):
         df2 = 1.0 / (t.nx_t * t.dx_um * t.ny_t * t.dy_um)
         r_spec = float(fresnel(ci, self.n))
         out = []
+        shape = (iy.size, ix.size)
         for lam in lams_um:
             cx, cy = self._cell_size(lam)
             x = ix.astype(np.float64)[None, :] * cx - math.sin(math.radians(theta_i_deg))
             y = iy.astype(np.float64)[:, None] * cy
             z2 = 1.0 - x * x - y * y
             ok = z2 > 1e-12
-            z = np.sqrt(np.where(ok, z2, 0.0))
-            st = np.sqrt(x * x + y * y)
+            # the terms of the real (not evanescent) cells only, put back in place: the
+            # same values summed in the same order as over the whole window (towards
+            # grazing incidence half of it or more is evanescent, and Q's complex
+            # arithmetic was most of a gloss report's Rayleigh-Rice work)
+            xo, yo = np.broadcast_to(x, shape)[ok], np.broadcast_to(y, shape)[ok]
+            z = np.sqrt(z2[ok])
+            st = np.sqrt(xo * xo + yo * yo)
             ts_deg = np.degrees(np.arctan2(st, z))
-            phi_deg = np.where(st > 0, np.degrees(np.arctan2(-y, -x)), 0.0)
+            phi_deg = np.where(st > 0, np.degrees(np.arctan2(-yo, -xo)), 0.0)
             q = rr_q_factor(theta_i_deg, ts_deg, phi_deg, self.n)
-            d = float(np.sum(np.where(ok, 16.0 * math.pi**2 * ci * z * q * pv, 0.0)))
+            terms = np.zeros(shape)
+            terms[ok] = 16.0 * math.pi**2 * ci * z * q * pv[ok]
+            d = float(np.sum(terms))
             d *= df2 / lam**2
             dw = math.exp(-self._g_at(theta_i_deg, lam))
             room = r_spec * (1.0 - dw)

@@ -1,0 +1,60 @@
+"""The wave models' shortcuts that must not change a reading (issue 26, whole process).
+
+Each shortcut is held to the plain formula it replaces, evaluated here over every cell:
+equal to the last bit, since ``goniolab predict ... --json`` must print the same bytes
+(``bench/bench_lean.py --same-as BASE`` checks the whole commands).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from goniolab.optics.cell_apertures import CellBox
+from goniolab.optics.fresnel import fresnel
+from goniolab.optics.rayleigh_rice import RayleighRiceModel, rr_q_factor
+from tests.optics.conftest import make_gaussian_map
+
+
+def _rr_factor_whole_window(m: RayleighRiceModel, theta_i_deg: float, lam: float) -> float:
+    """``min(1, R (1 - exp(-g)) / (exp(-g) D))`` with D summed over every cell of the
+    Nyquist window (the evanescent ones as 0), as the docstring of
+    :meth:`RayleighRiceModel._energy_scales_at` states it."""
+    t = m._shared.tiled
+    ci = math.cos(math.radians(theta_i_deg))
+    nx0, nx1, ny0, ny1 = m._nyquist()
+    box = CellBox(nx0, nx1, ny0, ny1)
+    pv = m.psd.psd_um4[np.ix_(box.iy % t.ny_t, box.ix % t.nx_t)]
+    cx, cy = m._cell_size(lam)
+    x = box.ix.astype(np.float64)[None, :] * cx - math.sin(math.radians(theta_i_deg))
+    y = box.iy.astype(np.float64)[:, None] * cy
+    z2 = 1.0 - x * x - y * y
+    ok = z2 > 1e-12
+    z = np.sqrt(np.where(ok, z2, 0.0))
+    st = np.sqrt(x * x + y * y)
+    ts_deg = np.degrees(np.arctan2(st, z))
+    phi_deg = np.where(st > 0, np.degrees(np.arctan2(-y, -x)), 0.0)
+    q = rr_q_factor(theta_i_deg, ts_deg, phi_deg, m.n)
+    d = float(np.sum(np.where(ok, 16.0 * math.pi**2 * ci * z * q * pv, 0.0)))
+    d *= 1.0 / (t.nx_t * t.dx_um * t.ny_t * t.dy_um) / lam**2
+    dw = math.exp(-m._g_at(theta_i_deg, lam))
+    room = float(fresnel(ci, m.n)) * (1.0 - dw)
+    return min(1.0, room / (dw * d)) if d > 0.0 else 1.0
+
+
+@pytest.mark.parametrize("theta_i_deg", [70.0, 85.0, 89.0])
+@pytest.mark.parametrize(("slope", "step_um"), [(0.02, 0.5), (0.3, 1.0)])
+def test_rr_energy_factor_from_the_real_cells_is_the_whole_window_sum(
+    theta_i_deg: float, slope: float, step_um: float
+) -> None:
+    # a smooth map (the factor 1) and a steep one (the factor binds at grazing incidence)
+    hm = make_gaussian_map(128, slope, corr_px=2.0, seed=3, step_um=step_um)
+    m = RayleighRiceModel(hm, n=1.55)
+    lams = [0.4, 0.55, 0.7]
+    got = m._energy_scales_at(theta_i_deg, lams)
+    want = [_rr_factor_whole_window(m, theta_i_deg, lam) for lam in lams]
+    assert got == want  # bit for bit
+    if slope > 0.1 and theta_i_deg >= 89.0:
+        assert min(got) < 1.0  # the case where the sum decides a reading
