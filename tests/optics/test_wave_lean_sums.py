@@ -58,3 +58,41 @@ def test_rr_energy_factor_from_the_real_cells_is_the_whole_window_sum(
     assert got == want  # bit for bit
     if slope > 0.1 and theta_i_deg >= 89.0:
         assert min(got) < 1.0  # the case where the sum decides a reading
+
+
+@pytest.mark.parametrize("corr_px", [0.4, 0.8, 1.2, 2.0, 4.0])
+@pytest.mark.parametrize("length_um", [0.3, 0.55, 1.0, 2.5])
+def test_the_correlation_bound_never_contradicts_the_length(
+    corr_px: float, length_um: float
+) -> None:
+    """The regime rule's ``corr_length_um < lambda`` read through the real-space bound
+    (:meth:`MapStats.corr_length_below`) is the comparison with the transforms' length:
+    the bound decides only when the length is surely not below."""
+    from goniolab.optics.shared_map import SharedMap
+
+    hm = make_gaussian_map(256, 0.02, corr_px=corr_px, seed=5, step_um=0.5)
+    shared = SharedMap(hm, 1024, 0.25)
+    quick = shared.stats.corr_length_below(length_um)
+    decided = shared._corr_at_least(length_um)
+    exact = shared._corr_length_um()  # the transforms' value, computed apart
+    assert quick == (exact < length_um)
+    if decided:
+        assert exact >= length_um
+
+
+def test_the_rule_reads_a_smooth_maps_length_only_when_the_bound_cannot_decide() -> None:
+    from goniolab.optics.model_choice import choose_model
+    from goniolab.optics.shared_map import SharedMap
+
+    # correlation length 2.0 um > 0.55 um, g 0.15-1: decided by the bound, never computed
+    hm = make_gaussian_map(256, 0.03, corr_px=2.0, seed=5, step_um=0.5)
+    shared = SharedMap(hm, 1024, 0.25)
+    ch = choose_model(shared.stats, 45.0, 550.0)
+    assert 0.15 < ch.g <= 1.0 and ch.model == "kirchhoff"
+    assert callable(shared.stats._corr)
+    # 0.44 um < 0.55 um: the bound cannot decide; the rule computes it, picks Rayleigh-Rice
+    fine = make_gaussian_map(256, 0.05, corr_px=0.4, seed=5, step_um=0.5)
+    fshared = SharedMap(fine, 1024, 0.25)
+    ch = choose_model(fshared.stats, 45.0, 550.0)
+    assert ch.model == "rayleigh-rice" and "correlation length 0.44 um" in ch.reason
+    assert not callable(fshared.stats._corr)
