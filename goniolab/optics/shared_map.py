@@ -129,6 +129,8 @@ class SharedMap:
         self._factories: dict[tuple[complex, bool], Callable[[], FacetModel]] = {}
         #: the other wave models of the same map, by (kind, n, wavelength, weighting, masking)
         self.siblings: dict[tuple[Any, ...], Any] = {}
+        #: :meth:`_corr_at_least` by length
+        self._corr_bounds: dict[float, bool] = {}
         #: where the facet models of this map report long walks (:meth:`report_to`)
         self.progress: Callable[[int, int, str], None] | None = None
 
@@ -267,7 +269,14 @@ class SharedMap:
         :data:`_ACF_MARGIN` (far beyond the rounding by which they differ from the
         transforms' values). Both lengths are then at least that many steps: the ACF first
         falls below ``1/e`` after them. False (undecided) otherwise: the length is then
-        computed. Cost: a few dot products instead of two transforms of the tile."""
+        computed. Cost: a few dot products instead of two transforms of the tile, once per
+        length (the rule asks at every geometry)."""
+        found = self._corr_bounds.get(length_um)
+        if found is None:
+            found = self._corr_bounds[length_um] = self._acf_above_level(length_um)
+        return found
+
+    def _acf_above_level(self, length_um: float) -> bool:
         t = self.tiled
         h, w = t.tile(0)
         ny, nx = h.shape

@@ -96,3 +96,23 @@ def test_the_rule_reads_a_smooth_maps_length_only_when_the_bound_cannot_decide()
     ch = choose_model(fshared.stats, 45.0, 550.0)
     assert ch.model == "rayleigh-rice" and "correlation length 0.44 um" in ch.reason
     assert not callable(fshared.stats._corr)
+
+
+def test_a_curve_asks_the_correlation_bound_once() -> None:
+    """The rule asks at every angle of a curve; the bound (a tile's dot products) is
+    formed once per length."""
+    from goniolab.optics.shared_map import SharedMap
+
+    hm = make_gaussian_map(256, 0.03, corr_px=2.0, seed=5, step_um=0.5)
+    shared = SharedMap(hm, 1024, 0.25)
+    calls: list[float] = []
+    plain = shared._acf_above_level
+
+    def counted(length_um: float) -> bool:
+        calls.append(length_um)
+        return plain(length_um)
+
+    shared._acf_above_level = counted  # type: ignore[method-assign]
+    for _ in range(71):
+        assert not shared.stats.corr_length_below(0.55)
+    assert calls == [0.55]
