@@ -148,10 +148,12 @@ class RayleighRiceModel(PhysicalOpticsModel):
         whole = self._psd_cells(union, os) if os != (1, 1) and len(boxes) > 1 else None
         for lam, box, scale in zip(lams_um, boxes, scales, strict=True):
             x, y, z, ok = self._geometry(theta_i_deg, lam, box, os)
-            st = np.sqrt(x * x + y * y)
-            ts_deg = np.degrees(np.arctan2(st, np.where(ok, z, 0.0)))
+            # the real cells only (the evanescent ones carry 0), put back in place below
+            xo, yo, zo = x[ok], y[ok], z[ok]
+            st = np.sqrt(xo * xo + yo * yo)
+            ts_deg = np.degrees(np.arctan2(st, zo))
             # azimuth from the forward direction: phi_ours - 180 deg
-            phi_deg = np.where(st > 0, np.degrees(np.arctan2(-y, -x)), 0.0)
+            phi_deg = np.where(st > 0, np.degrees(np.arctan2(-yo, -xo)), 0.0)
             q = rr_q_factor(theta_i_deg, ts_deg, phi_deg, self.n)
             if whole is None:
                 pv = self._psd_cells(box, os)
@@ -161,8 +163,10 @@ class RayleighRiceModel(PhysicalOpticsModel):
                     box.ix0 - union.ix0 : box.ix1 - union.ix0 + 1,
                 ]
             dw = math.exp(-self._g_at(theta_i_deg, lam))
-            p = 16.0 * math.pi**2 * ci * np.where(ok, z, 0.0) * q * pv * df2 / lam**2
-            out.append(np.where(ok, scale * dw * p, 0.0))
+            p = 16.0 * math.pi**2 * ci * zo * q * pv[ok] * df2 / lam**2
+            cells = np.zeros(ok.shape)
+            cells[ok] = scale * dw * p
+            out.append(cells)
             coh.append(dw)
         return out, coh
 

@@ -116,3 +116,38 @@ def test_a_curve_asks_the_correlation_bound_once() -> None:
     for _ in range(71):
         assert not shared.stats.corr_length_below(0.55)
     assert calls == [0.55]
+
+
+@pytest.mark.parametrize(("theta_i_deg", "receptor"), [(85.0, (4.0, 6.0)), (60.0, (4.4, 11.7))])
+def test_rr_cells_from_the_real_cells_are_the_formula_over_the_box(
+    theta_i_deg: float, receptor: tuple[float, float]
+) -> None:
+    """Rayleigh-Rice's cell powers (formed on the real cells only) equal the module
+    docstring's ``exp(-g) 16 pi^2 cos ti cos ts Q PSD df^2 / lambda^2`` over every cell of
+    the box (0 where evanescent), bit for bit."""
+    from goniolab.optics.apertures import ISO2813_SOURCE, Rect
+
+    hm = make_gaussian_map(128, 0.02, corr_px=2.0, seed=3, step_um=0.5)
+    m = RayleighRiceModel(hm, n=1.55)
+    lam = 0.55
+    rec = Rect(*receptor)
+    ra, rb = m._reach(ISO2813_SOURCE, rec)
+    tr = math.radians(theta_i_deg)
+    os, _ = m._oversampling(lam, rec, np.array([theta_i_deg]))
+    box, _ = m._box_for(theta_i_deg, lam, tr - ra, tr + ra, rb, os)
+    (got,), _ = m._cell_powers(theta_i_deg, [lam], [box], os)
+    x, y, z, ok = m._geometry(theta_i_deg, lam, box, os)
+    if theta_i_deg > 80.0:
+        assert not ok.all()  # some cells are evanescent (the case the shortcut skips)
+    st = np.sqrt(x * x + y * y)
+    ts_deg = np.degrees(np.arctan2(st, np.where(ok, z, 0.0)))
+    phi_deg = np.where(st > 0, np.degrees(np.arctan2(-y, -x)), 0.0)
+    q = rr_q_factor(theta_i_deg, ts_deg, phi_deg, m.n)
+    pv = m._psd_cells(box, os)
+    t = m._shared.tiled
+    df2 = 1.0 / (os[0] * t.nx_t * t.dx_um * os[1] * t.ny_t * t.dy_um)
+    ci = math.cos(tr)
+    p = 16.0 * math.pi**2 * ci * np.where(ok, z, 0.0) * q * pv * df2 / lam**2
+    scale = m._energy_scales(theta_i_deg, [lam])[0]
+    want = np.where(ok, scale * math.exp(-m._g_at(theta_i_deg, lam)) * p, 0.0)
+    assert np.array_equal(got, want)
