@@ -17,10 +17,14 @@ way a numpy user writes it from those formulas, without goniolab:
   receptor's centre and per tile the transform ``U = fft2(W exp(-i v_z h))`` with
   ``numpy.fft`` (float64 / complex128, as a float64 map gives), zero-padded when the
   receptor is narrower than 6 cells (PHYSICS.md, "No silent fallback"; goniolab's rule);
-  a cell's flux fraction is ``R(wi.h) |G|^2 mean_tiles |U|^2 / (N sum W^2)`` (Beckmann's
-  obliquity ``|G|^2 = |wi + wo|^4 / (4 cos ti cos to (cos ti + cos to)^2)``, Fresnel at
-  the half vector), its direction from the grating equation ``(wi + wo)_xy = lambda m /
-  field``. The coherent beam stays in ``|U|^2`` (it lands in the cells at specular);
+  a cell's diffuse flux fraction is ``R(wi.h) |G|^2 mean_tiles |U_d|^2 / (N sum W^2)``
+  (Beckmann's obliquity ``|G|^2 = |wi + wo|^4 / (4 cos ti cos to (cos ti + cos to)^2)``,
+  Fresnel at the half vector), its direction from the grating equation ``(wi + wo)_xy =
+  lambda m / field``, with ``U_d = U - <W exp(-i v_z h)> fft2(W)``: the coherent field
+  taken out, as kirchhoff.py states (the lit spot is far larger than the map, so the
+  window's diffraction of it is not light the instrument sees). The coherent beam
+  ``R(ti) mean_tiles |<W exp(-i v_spec h)>|^2`` reaches the receptor through the overlap
+  of the source image centred at specular;
 - **Rayleigh-Rice** (where the regime rule of PHYSICS.md picks it: ``g <= 0.15`` and
   ``Sdq <= 0.15``): the PSD of the windowed tiles (one transform per tile, padded alike),
   a cell's flux ``exp(-g) 16 pi^2 cos ti cos ts Q PSD df_x df_y / lambda^2`` with Stover's
