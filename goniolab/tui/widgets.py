@@ -397,7 +397,8 @@ class StatusPanel(Vertical):
         table = self.query_one("#arms", DataTable)
         table.cell_padding = 0  # fits a 40-column panel: each width leaves its own gap
         for key, label, width in (
-            ("angle", "angle°", 6),  # "0.00" .. "89.99" (the sample plane) leave a gap
+            # "0.00" .. "89.99" (the sample plane) leave a gap; "angle°" would fill it
+            ("angle", "θ °", 6),
             ("motion", "motion", 7),
             ("homed", "homed", 6),
             ("link", "link", 5),
