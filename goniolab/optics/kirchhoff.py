@@ -374,11 +374,12 @@ class KirchhoffModel(PhysicalOpticsModel):
           Horner step is 4 float64 operations per cell, run over all wavelengths together
           in blocks of rows that stay in cache (:meth:`_energy_horner`);
         - ``dc_n`` is the term's sum in complex128 (not the float32 transform's row sums);
-        - Smith's ``Lambda(wi)`` is one value, not one per cell.
+        - the obliquity and Smith's G2 in blocks of rows too (large temporaries cost more
+          than the arithmetic), ``Lambda(wi)`` one value, not one per cell.
 
         The result equals the box form's every-cell sum to float32 rounding (the
-        transforms run x first instead of y first): ``D_1`` to a few 1e-7 and ``C`` to a
-        few 1e-9 (``tests/optics/test_kirchhoff.py``, at 70/85/89 deg on smooth, wavy and
+        transforms run x first instead of y first): ``D_1`` to a few 1e-7 and ``C`` to
+        about 1e-8 (``tests/optics/test_kirchhoff.py``, at 70/85/89 deg on smooth, wavy and
         rough coats, with the box form kept there as the reference, and against the
         Kirchhoff sum formed directly over the map). ``1 - C`` is small towards grazing
         (1e-4 on a smooth coat at 89 deg), so the factor moves by up to ~1e-4 relative there
