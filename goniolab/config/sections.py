@@ -233,6 +233,9 @@ class GlossmeterConfig(StrictSection):
     serial_number: str = "401120999"
     baudrate: Annotated[int, Field(strict=True, ge=300, le=4_000_000)] = 9600
     timeout_s: TimeoutS = 2.0
+    #: a gloss run (``goniolab gloss log``, the TUI's log) warns when the meter's newest
+    #: ``goniolab gloss calibrate`` record is older than this (the lab's rule)
+    calibration_max_age_h: Annotated[float, Field(strict=False, gt=0.0, allow_inf_nan=False)] = 24.0
 
     @model_validator(mode="before")
     @classmethod

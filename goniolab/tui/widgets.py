@@ -397,15 +397,18 @@ class StatusPanel(Vertical):
         table = self.query_one("#arms", DataTable)
         table.cell_padding = 0  # fits a 40-column panel: each width leaves its own gap
         for key, label, width in (
-            ("angle", "angle°", 7),
+            # "0.00" .. "89.99" (the sample plane) leave a gap; "angle°" would fill it
+            ("angle", "θ °", 6),
             ("motion", "motion", 7),
             ("homed", "homed", 6),
             ("link", "link", 5),
             ("alarm", "alarm", 5),
         ):
             table.add_column(label, key=key, width=width)
-        table.add_row("-", "-", "-", "…", "-", key="lamp", label="lamp")
-        table.add_row("-", "-", "-", "…", "-", key="detector", label="detector")
+        # the labels' trailing space is the gap before the angle ("detector58.00" was
+        # read as one word: the label column is as wide as its longest label)
+        table.add_row("-", "-", "-", "…", "-", key="lamp", label="lamp ")
+        table.add_row("-", "-", "-", "…", "-", key="detector", label="detector ")
 
     def _set(self, row: str, col: str, text: str) -> None:
         """Update one cell, skipping unchanged values (polling must not repaint idly)."""

@@ -537,3 +537,28 @@ async def test_the_end_of_a_run_says_how_many_warnings_it_stored_and_how_many_we
             "Scan: run 1 done; 1 warning stored with the run (goniolab runs show 1); 3 of its "
             "messages were not shown as they came"
         )
+
+
+@pytest.mark.parametrize(("rows", "shown"), [(35, False), (39, False), (40, True), (42, True)])
+async def test_the_side_plot_gives_way_when_it_would_get_three_rows(rows: int, shown: bool) -> None:
+    """Under 40 rows the metrics, the colour table and its note (18 rows of the right
+    column) leave the side plot 3 rows or fewer: it is hidden, and ``l`` says why instead of
+    switching an invisible plot silently. From 40 rows it shows, with more than 3 rows."""
+    app = GonioApp(ScriptedBackend(gated=False), poll_hz=0)
+    async with app.run_test(size=(140, rows)) as pilot:
+        await wait_until(pilot, app.ready.is_set)
+        side = app.query_one("#live", ComparisonPanel).side_plot
+        await pilot.pause()
+        assert side.display is shown
+        if shown:
+            assert side.region.height > 5  # the border's 2 rows and more than 3 of plot
+        await pilot.press("l")
+        await pilot.pause()
+        said = [n for n in notes(app) if n.startswith("Side plot: ")]
+        if shown:
+            assert said == []
+        else:
+            assert said == [
+                "Side plot: the side plot (log10 of both curves) is hidden in a window under "
+                "40 rows: enlarge the window to see it"
+            ]
