@@ -63,6 +63,10 @@ from goniolab.optics.psd import PSD2, psd2, psd_region, windowed_sq_um
 
 __all__ = ["RayleighRiceModel", "rr_q_factor"]
 
+#: Rows of the Nyquist window per block of the energy check's sums (16 rows of a
+#: 1024-wide window: 16 k cells, whose float64 and complex temporaries stay in cache).
+_ENERGY_ROWS: int = 16
+
 
 def rr_q_factor(
     theta_i_deg: float, theta_s_deg: ArrayLike, phi_s_deg: ArrayLike, n: complex | float
@@ -190,24 +194,32 @@ class RayleighRiceModel(PhysicalOpticsModel):
         r_spec = float(fresnel(ci, self.n))
         out = []
         shape = (iy.size, ix.size)
+        c16 = 16.0 * math.pi**2 * ci
         for lam in lams_um:
             cx, cy = self._cell_size(lam)
             x = ix.astype(np.float64)[None, :] * cx - math.sin(math.radians(theta_i_deg))
             y = iy.astype(np.float64)[:, None] * cy
-            z2 = 1.0 - x * x - y * y
-            ok = z2 > 1e-12
-            # the terms of the real (not evanescent) cells only, put back in place: the
-            # same values summed in the same order as over the whole window (towards
-            # grazing incidence half of it or more is evanescent, and Q's complex
-            # arithmetic was most of a gloss report's Rayleigh-Rice work)
-            xo, yo = np.broadcast_to(x, shape)[ok], np.broadcast_to(y, shape)[ok]
-            z = np.sqrt(z2[ok])
-            st = np.sqrt(xo * xo + yo * yo)
-            ts_deg = np.degrees(np.arctan2(st, z))
-            phi_deg = np.where(st > 0, np.degrees(np.arctan2(-yo, -xo)), 0.0)
-            q = rr_q_factor(theta_i_deg, ts_deg, phi_deg, self.n)
+            # the terms of the real (not evanescent) cells only, put back in place and summed
+            # over the whole window: the same values in the same order (towards grazing
+            # incidence half of the window or more is evanescent, and Q's complex arithmetic
+            # was most of a gloss report's Rayleigh-Rice work), formed in blocks of rows
+            # whose temporaries stay in cache (:data:`_ENERGY_ROWS`)
             terms = np.zeros(shape)
-            terms[ok] = 16.0 * math.pi**2 * ci * z * q * pv[ok]
+            for r0 in range(0, shape[0], _ENERGY_ROWS):
+                rows = slice(r0, min(r0 + _ENERGY_ROWS, shape[0]))
+                yb = y[rows]
+                z2 = 1.0 - x * x - yb * yb
+                ok = z2 > 1e-12
+                if not ok.any():
+                    continue
+                part = (yb.shape[0], shape[1])
+                xo, yo = np.broadcast_to(x, part)[ok], np.broadcast_to(yb, part)[ok]
+                z = np.sqrt(z2[ok])
+                st = np.sqrt(xo * xo + yo * yo)
+                ts_deg = np.degrees(np.arctan2(st, z))
+                phi_deg = np.where(st > 0, np.degrees(np.arctan2(-yo, -xo)), 0.0)
+                q = rr_q_factor(theta_i_deg, ts_deg, phi_deg, self.n)
+                terms[rows][ok] = c16 * z * q * pv[rows][ok]
             d = float(np.sum(terms))
             d *= df2 / lam**2
             dw = math.exp(-self._g_at(theta_i_deg, lam))
