@@ -1,7 +1,8 @@
 """The default path, whole process, in every regime (issue 26): paired A/B runs.
 
 Run:  .venv/bin/python bench/bench_lean.py [--size 2048] [--repeats 5] [--before DIR]
-      [--in-process] [--json]
+      [--in-process] [--only MAPS] [--no-wave] [--json]
+      .venv/bin/python bench/bench_lean.py --check | --same-as DIR | --floor
 
 On three ``size x size`` float64 ``.npy`` maps made in a temporary directory (periodic
 Gaussian surfaces, Gaussian ACF):
