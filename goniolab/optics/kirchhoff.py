@@ -98,6 +98,15 @@ __all__ = ["DEFAULT_TAYLOR_TOL", "KirchhoffModel", "band_plan"]
 #: Bound on the truncated Taylor remainder of the phase factor, per pixel.
 DEFAULT_TAYLOR_TOL: float = 1e-4
 _BAND_X: tuple[float, ...] = (0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0)
+#: The coherent factor from binned heights (:meth:`KirchhoffModel._coherent_direct`): the
+#: bin width is this phase over the largest ``v`` asked for (rounded up to a power of 2),
+#: so a point's phase offset from its bin centre is at most half of it, and the
+#: expansion of that offset's phase factor keeps terms to :data:`_COH_ORDER`
+#: (remainder ``0.01^5 / 5! < 1e-12`` per point).
+_COH_BIN_PHASE: float = 0.02
+_COH_ORDER: int = 4
+#: Points per block of that binning (its float64 temporaries stay small).
+_COH_BLOCK: int = 1 << 18
 #: Cells per block of the energy check's Horner sums (all wavelengths together): the
 #: block's few float64 arrays stay in a core's cache.
 _HORNER_BLOCK: int = 32768
@@ -361,8 +370,9 @@ class KirchhoffModel(PhysicalOpticsModel):
         Nyquist window (:meth:`_energy_scales_at`), per wavelength.
 
         The sum as :meth:`_raw_power` forms a box's cells (the same Taylor bands of the
-        phase screen, :func:`band_plan`; the coherent field taken out; the same
-        ``C``), arranged for a window that is the whole transform grid:
+        phase screen, :func:`band_plan`; the coherent field taken out), arranged for a
+        window that is the whole transform grid; ``C`` is summed over the map's points
+        (:meth:`_coherent_direct`), not from the bands:
 
         - the transform outputs stay in the FFT's own order (the cells' directions are
           formed in that order instead: no reordering or transposed copy of a 1024^2
@@ -377,13 +387,14 @@ class KirchhoffModel(PhysicalOpticsModel):
         - the obliquity and Smith's G2 in blocks of rows too (large temporaries cost more
           than the arithmetic), ``Lambda(wi)`` one value, not one per cell.
 
-        The result equals the box form's every-cell sum to float32 rounding (the
-        transforms run x first instead of y first): ``D_1`` to a few 1e-7 and ``C`` to
-        about 1e-8 (``tests/optics/test_kirchhoff.py``, at 70/85/89 deg on smooth, wavy and
-        rough coats, with the box form kept there as the reference, and against the
-        Kirchhoff sum formed directly over the map). ``1 - C`` is small towards grazing
-        (1e-4 on a smooth coat at 89 deg), so the factor moves by up to ~1e-4 relative there
-        as ``C``'s rounding is amplified; elsewhere by ~1e-7."""
+        ``D_1`` equals the box form's every-cell sum to float32 rounding (the transforms
+        run x first instead of y first), a few 1e-7 (``tests/optics/test_kirchhoff.py``,
+        at 70/85/89 deg on smooth, wavy and rough coats, with the box form kept there as
+        the reference, and against the Kirchhoff sum formed directly over the map); ``C``
+        equals the direct complex128 mean within 1e-13. ``1 - C`` is small towards
+        grazing (5e-5 to 1e-4 at 89 deg on smooth and wavy coats) and amplifies any error
+        of ``C``: the band sum's ``C`` (a Taylor remainder of up to ``taylor_tol`` per
+        point, and float32) was 1e-8 to 2e-7 off, the factor up to 0.4 %."""
         sh = self._shared
         t = sh.tiled
         ny, nx = t.ny_t, t.nx_t
@@ -438,28 +449,24 @@ class KirchhoffModel(PhysicalOpticsModel):
         wx_hat = np.fft.fft(t.wx.astype(np.float64))
         w_shape = np.multiply.outer(wy_hat[rows] / wy_hat[0], wx_hat[cols] / wx_hat[0])
         w_shape = w_shape.astype(np.complex64)
-        sum_w = float(np.sum(t.wy, dtype=np.float64) * np.sum(t.wx, dtype=np.float64))
         acc = np.zeros((n_l, n_r, n_c))
-        coh_acc = [0.0 for _ in lams_um]
         first = np.empty((ny, nx), dtype=np.complex64)
         full_rows = None if n_r == ny else np.empty((ny, n_c), dtype=np.complex64)
-        # per band: the cells it owns, the rows and columns holding them, and which
-        # specular directions it owns (a band owning neither costs no transform)
+        # per band: the cells it owns and the rows and columns holding them (a band owning
+        # none costs no transform)
         owners = []
         for b, (lo, hi, _, _) in enumerate(plan):
             own = ok & (vz >= lo) & ((vz <= hi) if b == last else (vz < hi))
             rr = np.flatnonzero(own.any(axis=(0, 2)))
             cc = np.flatnonzero(own.any(axis=(0, 1)))
-            spec_own = [lo <= v <= hi if b == last else lo <= v < hi for v in v_spec]
-            owners.append((own, rr, cc, spec_own))
+            owners.append((own, rr, cc))
         total = t.n_tiles * sum(order + 1 for *_, order in plan)
         done = 0
         for k in range(t.n_tiles):
             h, w = t.tile(k)
             u = h / np.float32(h_max) if h_max > 0 else h
-            coh = [0j for _ in lams_um]
-            for (_, _, vc, order), (own, rr, cc, spec_own) in zip(plan, owners, strict=True):
-                if rr.size == 0 and not any(spec_own):
+            for (_, _, vc, order), (own, rr, cc) in zip(plan, owners, strict=True):
+                if rr.size == 0:
                     done += order + 1  # reported too: the display must reach 100 %
                     if self.progress is not None:
                         self.progress(done, total, "kirchhoff energy check")
@@ -499,30 +506,17 @@ class KirchhoffModel(PhysicalOpticsModel):
                     if self.progress is not None:
                         self.progress(done, total, "kirchhoff energy check")
                 del term
-                for li in range(n_l):
-                    if spec_own[li]:
-                        step = -1j * (v_spec[li] - vc) * h_max
-                        e, c = 0j, 1.0 + 0j
-                        for n in range(order + 1):
-                            if n:
-                                c *= step / n
-                            e += complex(dc[n]) * c
-                        coh[li] += e
-                if rr.size == 0:
-                    continue
                 r0, r1, c0, c1 = int(rr[0]), int(rr[-1]) + 1, int(cc[0]), int(cc[-1]) + 1
                 self._energy_horner(
                     spec[:, :, c0:c1], vz[:, :, c0:c1], vc, h_max, r0, r1,
                     own[:, :, c0:c1] if len(plan) > 1 else None, acc[:, :, c0:c1],
                 )  # fmt: skip
-            for li in range(n_l):
-                coh_acc[li] += abs(coh[li]) ** 2 / sum_w**2
         norm = t.n_tiles * ny * nx * t.sum_w2
         wi = np.array([[s_i, 0.0, c_i]])  # Lambda(wi): one value for all cells
         # the per-cell weights in blocks of rows (large temporaries cost more than the
         # arithmetic: the obliquity and G2 of 1.4 M cells took 3-5 times longer unblocked)
         step = max(1, _HORNER_BLOCK // max(1, n_c))
-        coh_out, d1_out = [], []
+        d1_out = []
         for li, lam in enumerate(lams_um):
             cx, cy = self._cell_size(lam)
             wox, woy = fx[cols] * cx - s_i, fy[rows] * cy
@@ -550,9 +544,64 @@ class KirchhoffModel(PhysicalOpticsModel):
                 wo[1] = np.broadcast_to(woy[r0:r1, None], big.shape)[big]
                 wo[2] = z[li, r0:r1][big]
                 blk[big] *= self._diffuse_g2(wi, wo.T, lam)
-            coh_out.append(coh_acc[li] / t.n_tiles)
             d1_out.append(float(np.sum(contrib)))
-        return coh_out, d1_out
+        return self._coherent_direct(v_spec), d1_out
+
+    def _coherent_direct(self, vs: Sequence[float]) -> list[float]:
+        """The coherent factor ``C = mean_tiles |sum W e^(-i v h)|^2 / (sum W)^2`` at each
+        ``v`` (1/um), summed over the map's points in float64, not from the Taylor bands.
+
+        The energy check divides by ``1 - C``, which is 1e-4 on a smooth coat at 89 deg:
+        ``C`` from the truncated Taylor sum (a remainder of up to ``taylor_tol`` per
+        point) moved the factor by 3e-5 to 1.4e-4 on a smooth 1024^2 coat and by 0.24 % on
+        a wavy one (``tests/optics/test_kirchhoff.py``). Here each tile's heights are put
+        in bins of width ``delta = 0.02 / v_max``; with ``c_b`` a bin's centre and ``d``
+        a point's offset from it (``|v d| <= 0.01``),
+
+        .. math:: \\sum W e^{-i v h} = \\sum_b e^{-i v c_b}
+                  \\sum_{n \\le 4} \\frac{(-i v)^n}{n!} \\sum_{h \\in b} W d^n
+
+        to ``0.01^5 / 5! < 1e-12`` of ``sum W`` (the binned moments are formed once per
+        tile and bin width, cached, in blocks of points: one pass over the tile whatever
+        the number of ``v``; a direct ``exp`` per point and ``v`` costs about as much per
+        ``v`` as the binning does once)."""
+        if not vs:
+            return []
+        sh = self._shared
+        t = sh.tiled
+        v_max = max(abs(float(v)) for v in vs)
+        # the bin width from v_max rounded up to a power of 2: nearby calls share the bins
+        delta = _COH_BIN_PHASE / (2.0 ** math.ceil(math.log2(v_max))) if v_max > 0 else 1.0
+        fact = np.array([1.0 / math.factorial(n) for n in range(_COH_ORDER + 1)])
+        acc = [0.0 for _ in vs]
+        for k in range(t.n_tiles):
+
+            def moments(k: int = k) -> tuple[FloatArray, FloatArray, float]:
+                h, w = t.tile(k)
+                hf, wf = h.reshape(-1), w.reshape(-1)
+                lo = float(hf.min())
+                n_bins = int((float(hf.max()) - lo) / delta) + 1
+                mom = np.zeros((_COH_ORDER + 1, n_bins))
+                for a in range(0, hf.size, _COH_BLOCK):
+                    hb = hf[a : a + _COH_BLOCK].astype(np.float64)
+                    hb -= lo
+                    idx = (hb * (1.0 / delta)).astype(np.intp)
+                    np.minimum(idx, n_bins - 1, out=idx)  # the top height's own bin edge
+                    d = hb - (idx + 0.5) * delta  # the offset from the bin's centre
+                    wd = wf[a : a + _COH_BLOCK].astype(np.float64)
+                    for n in range(_COH_ORDER + 1):
+                        mom[n] += np.bincount(idx, weights=wd, minlength=n_bins)
+                        if n < _COH_ORDER:
+                            wd *= d
+                centres: FloatArray = lo + (np.arange(n_bins, dtype=np.float64) + 0.5) * delta
+                return centres, mom, float(np.sum(w, dtype=np.float64))
+
+            centres, mom, sum_w = sh.cached(("kirchhoff coherent moments", k, delta), moments)
+            for i, v in enumerate(vs):
+                powers = (-1j * float(v)) ** np.arange(_COH_ORDER + 1) * fact
+                field = np.exp(-1j * float(v) * centres) @ (powers @ mom)
+                acc[i] += abs(complex(field)) ** 2 / sum_w**2
+        return [a / t.n_tiles for a in acc]
 
     @staticmethod
     def _energy_horner(
