@@ -522,13 +522,26 @@ class KirchhoffModel(PhysicalOpticsModel):
         for li, lam in enumerate(lams_um):
             cx, cy = self._cell_size(lam)
             wox, woy = fx[cols] * cx - s_i, fy[rows] * cy
-            contrib = np.empty((n_r, n_c))
+            # the obliquity |G|^2 (:meth:`_obliquity`) with |wo| = 1 used:
+            # |wi + wo|^2 = 2 (1 + wi.wo), so |G|^2 = (1 + wi.wo)^2 / (ci co (ci + co)^2),
+            # wi.wo = s_i wo_x + c_i co (one column term and one cell term; 8 operations
+            # per cell instead of 15, the same values to ~1e-16)
+            one_wx = 1.0 + s_i * wox
+            contrib = np.zeros((n_r, n_c))
+            num = np.empty((min(step, n_r), n_c))
+            den = np.empty_like(num)
             for r0 in range(0, n_r, step):
                 r1 = min(n_r, r0 + step)
-                x = np.broadcast_to(wox[None, :], (r1 - r0, n_c))
-                y = np.broadcast_to(woy[r0:r1, None], (r1 - r0, n_c))
-                blk = self._obliquity(theta_i_deg, x, y, z[li, r0:r1], ok[li, r0:r1])
-                np.multiply(blk, acc[li, r0:r1], out=contrib[r0:r1])
+                zb, nb, db = z[li, r0:r1], num[: r1 - r0], den[: r1 - r0]
+                np.multiply(zb, c_i, out=nb)
+                nb += one_wx[None, :]
+                nb *= nb
+                np.add(zb, c_i, out=db)
+                db *= db
+                db *= zb
+                db *= c_i
+                np.divide(nb, db, out=contrib[r0:r1], where=ok[li, r0:r1])
+                contrib[r0:r1] *= acc[li, r0:r1]
             contrib /= norm
             # the shadowing of the cells that carry the flux (>= 1e-6 of the largest);
             # the others count unshadowed (an upper bound on D_1)
