@@ -625,27 +625,35 @@ def _coherent_factor_direct(model: KirchhoffModel, theta_i_deg: float, lam_um: f
 
 
 @pytest.mark.parametrize(
-    ("sq_um", "l_um", "step_um"),
-    [(0.05, 2.0, 0.5), (0.03, 40.0, 0.5), (0.6, 3.0, 0.25)],
-    ids=["smooth", "wavy", "rough"],
+    ("sq_um", "l_um", "step_um", "tile"),
+    [(0.05, 2.0, 0.5, 128), (0.03, 40.0, 0.5, 128), (0.6, 3.0, 0.25, 128), (3.0, 3.0, 0.25, 16)],
+    ids=["smooth", "wavy", "rough", "tall-relief"],
 )
 def test_the_coherent_factor_is_the_direct_mean_over_the_map(
-    sq_um: float, l_um: float, step_um: float
+    sq_um: float, l_um: float, step_um: float, tile: int
 ) -> None:
     """The energy check's ``C`` (heights binned, the offsets' phase factors to 4th order)
     against the direct complex128 mean over every point of every tile, at 70/85/89 deg and
     400/550/700 nm (4 tiles of 128^2). The Taylor band sum it replaced was up to 3e-8 off
     on the smooth and rough coats and up to 1.9e-7 on the wavy one (measured), where
     ``1 - C`` is 2.4e-4 and 4.8e-5 at 89 deg: the factor was up to 1.2e-4 and 0.4 % off;
-    the binned sum is within 1e-13."""
-    model = KirchhoffModel(gaussian_acf_map(256, sq_um, l_um, step_um, seed=5), tile=128)
-    assert model._shared.tiled.n_tiles == 4
+    the binned sum is within 1e-13. The tall relief (Sq 3 um on tiles of 16^2: a span of
+    ~20 um needs ~10^4 bins of 0.02 / 64 um, more than the tile's 256 points) takes the
+    wider bins with more moments."""
+    model = KirchhoffModel(gaussian_acf_map(256, sq_um, l_um, step_um, seed=5), tile=tile)
+    assert model._shared.tiled.n_tiles == (256 // tile) ** 2
     lams = [0.4, 0.55, 0.7]
     for ti in (70.0, 85.0, 89.0):
         coh, _ = model._energy_sums(ti, lams)
         ref = [_coherent_factor_direct(model, ti, lam) for lam in lams]
         np.testing.assert_allclose(coh, ref, rtol=0, atol=1e-13)
         assert 0.0 < min(ref) < 1.0
+    if tile == 16:  # never more bins than points; the wider bins took more moments
+        moments = [
+            v for k, v in model._shared.cache.items() if k[0] == "kirchhoff coherent moments"
+        ]
+        assert all(m[1].shape[1] <= 256 for m in moments)
+        assert any(m[1].shape[0] > 5 for m in moments)
 
 
 def test_the_energy_check_reports_its_transforms_to_the_total() -> None:
