@@ -98,6 +98,17 @@ __all__ = ["DEFAULT_TAYLOR_TOL", "KirchhoffModel", "band_plan"]
 #: Bound on the truncated Taylor remainder of the phase factor, per pixel.
 DEFAULT_TAYLOR_TOL: float = 1e-4
 _BAND_X: tuple[float, ...] = (0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0)
+#: The coherent factor from binned heights (:meth:`KirchhoffModel._coherent_direct`): the
+#: bin width is this phase over the largest ``v`` asked for (rounded up to a power of 2),
+#: so a point's phase offset from its bin centre is at most half of it, and the
+#: expansion of that offset's phase factor keeps terms to :data:`_COH_ORDER`
+#: (remainder ``0.01^5 / 5! < 1e-12`` per point).
+_COH_BIN_PHASE: float = 0.02
+_COH_ORDER: int = 4
+#: The bound on that remainder, per point, kept when a tall relief needs wider bins.
+_COH_REMAINDER: float = 1e-12
+#: Points per block of that binning (its float64 temporaries stay small).
+_COH_BLOCK: int = 1 << 18
 #: Cells per block of the energy check's Horner sums (all wavelengths together): the
 #: block's few float64 arrays stay in a core's cache.
 _HORNER_BLOCK: int = 32768
@@ -361,8 +372,9 @@ class KirchhoffModel(PhysicalOpticsModel):
         Nyquist window (:meth:`_energy_scales_at`), per wavelength.
 
         The sum as :meth:`_raw_power` forms a box's cells (the same Taylor bands of the
-        phase screen, :func:`band_plan`; the coherent field taken out; the same
-        ``C``), arranged for a window that is the whole transform grid:
+        phase screen, :func:`band_plan`; the coherent field taken out), arranged for a
+        window that is the whole transform grid; ``C`` is summed over the map's points
+        (:meth:`_coherent_direct`), not from the bands:
 
         - the transform outputs stay in the FFT's own order (the cells' directions are
           formed in that order instead: no reordering or transposed copy of a 1024^2
@@ -371,19 +383,20 @@ class KirchhoffModel(PhysicalOpticsModel):
           window from 70 deg on) are not transformed along y, and rows likewise;
         - the coherent field ``dc_n w`` is taken out of each term's transform (and
           ``1/n!`` put in) once, not per wavelength after the Horner sums, so one real
-          Horner step is 4 float64 operations per cell, run over all wavelengths together
+          Horner step is 4 float32 operations per cell, run over all wavelengths together
           in blocks of rows that stay in cache (:meth:`_energy_horner`);
         - ``dc_n`` is the term's sum in complex128 (not the float32 transform's row sums);
         - the obliquity and Smith's G2 in blocks of rows too (large temporaries cost more
           than the arithmetic), ``Lambda(wi)`` one value, not one per cell.
 
-        The result equals the box form's every-cell sum to float32 rounding (the
-        transforms run x first instead of y first): ``D_1`` to a few 1e-7 and ``C`` to
-        about 1e-8 (``tests/optics/test_kirchhoff.py``, at 70/85/89 deg on smooth, wavy and
-        rough coats, with the box form kept there as the reference, and against the
-        Kirchhoff sum formed directly over the map). ``1 - C`` is small towards grazing
-        (1e-4 on a smooth coat at 89 deg), so the factor moves by up to ~1e-4 relative there
-        as ``C``'s rounding is amplified; elsewhere by ~1e-7."""
+        ``D_1`` equals the box form's every-cell sum to float32 rounding (the transforms
+        run x first instead of y first), a few 1e-7 (``tests/optics/test_kirchhoff.py``,
+        at 70/85/89 deg on smooth, wavy and rough coats, with the box form kept there as
+        the reference, and against the Kirchhoff sum formed directly over the map); ``C``
+        equals the direct complex128 mean within 1e-13. ``1 - C`` is small towards
+        grazing (5e-5 to 1e-4 at 89 deg on smooth and wavy coats) and amplifies any error
+        of ``C``: the band sum's ``C`` (a Taylor remainder of up to ``taylor_tol`` per
+        point, and float32) was 1e-8 to 2e-7 off, the factor up to 0.4 %."""
         sh = self._shared
         t = sh.tiled
         ny, nx = t.ny_t, t.nx_t
@@ -438,28 +451,25 @@ class KirchhoffModel(PhysicalOpticsModel):
         wx_hat = np.fft.fft(t.wx.astype(np.float64))
         w_shape = np.multiply.outer(wy_hat[rows] / wy_hat[0], wx_hat[cols] / wx_hat[0])
         w_shape = w_shape.astype(np.complex64)
-        sum_w = float(np.sum(t.wy, dtype=np.float64) * np.sum(t.wx, dtype=np.float64))
         acc = np.zeros((n_l, n_r, n_c))
-        coh_acc = [0.0 for _ in lams_um]
         first = np.empty((ny, nx), dtype=np.complex64)
+        coherent = np.empty((n_r, n_c), dtype=np.complex64)  # dc_n w_shape, per term
         full_rows = None if n_r == ny else np.empty((ny, n_c), dtype=np.complex64)
-        # per band: the cells it owns, the rows and columns holding them, and which
-        # specular directions it owns (a band owning neither costs no transform)
+        # per band: the cells it owns and the rows and columns holding them (a band owning
+        # none costs no transform)
         owners = []
         for b, (lo, hi, _, _) in enumerate(plan):
             own = ok & (vz >= lo) & ((vz <= hi) if b == last else (vz < hi))
             rr = np.flatnonzero(own.any(axis=(0, 2)))
             cc = np.flatnonzero(own.any(axis=(0, 1)))
-            spec_own = [lo <= v <= hi if b == last else lo <= v < hi for v in v_spec]
-            owners.append((own, rr, cc, spec_own))
+            owners.append((own, rr, cc))
         total = t.n_tiles * sum(order + 1 for *_, order in plan)
         done = 0
         for k in range(t.n_tiles):
             h, w = t.tile(k)
             u = h / np.float32(h_max) if h_max > 0 else h
-            coh = [0j for _ in lams_um]
-            for (_, _, vc, order), (own, rr, cc, spec_own) in zip(plan, owners, strict=True):
-                if rr.size == 0 and not any(spec_own):
+            for (_, _, vc, order), (own, rr, cc) in zip(plan, owners, strict=True):
+                if rr.size == 0:
                     done += order + 1  # reported too: the display must reach 100 %
                     if self.progress is not None:
                         self.progress(done, total, "kirchhoff energy check")
@@ -489,7 +499,8 @@ class KirchhoffModel(PhysicalOpticsModel):
                         o += a1 - a0
                     if full_rows is not None:
                         np.take(full_rows, rows, axis=0, out=spec[n])
-                    spec[n] -= w_shape * np.complex64(dc[n])
+                    np.multiply(w_shape, np.complex64(dc[n]), out=coherent)
+                    spec[n] -= coherent
                     if n:
                         fact *= n
                         spec[n] *= np.float32(1.0 / fact)
@@ -499,40 +510,40 @@ class KirchhoffModel(PhysicalOpticsModel):
                     if self.progress is not None:
                         self.progress(done, total, "kirchhoff energy check")
                 del term
-                for li in range(n_l):
-                    if spec_own[li]:
-                        step = -1j * (v_spec[li] - vc) * h_max
-                        e, c = 0j, 1.0 + 0j
-                        for n in range(order + 1):
-                            if n:
-                                c *= step / n
-                            e += complex(dc[n]) * c
-                        coh[li] += e
-                if rr.size == 0:
-                    continue
                 r0, r1, c0, c1 = int(rr[0]), int(rr[-1]) + 1, int(cc[0]), int(cc[-1]) + 1
                 self._energy_horner(
                     spec[:, :, c0:c1], vz[:, :, c0:c1], vc, h_max, r0, r1,
                     own[:, :, c0:c1] if len(plan) > 1 else None, acc[:, :, c0:c1],
                 )  # fmt: skip
-            for li in range(n_l):
-                coh_acc[li] += abs(coh[li]) ** 2 / sum_w**2
         norm = t.n_tiles * ny * nx * t.sum_w2
         wi = np.array([[s_i, 0.0, c_i]])  # Lambda(wi): one value for all cells
         # the per-cell weights in blocks of rows (large temporaries cost more than the
         # arithmetic: the obliquity and G2 of 1.4 M cells took 3-5 times longer unblocked)
         step = max(1, _HORNER_BLOCK // max(1, n_c))
-        coh_out, d1_out = [], []
+        d1_out = []
         for li, lam in enumerate(lams_um):
             cx, cy = self._cell_size(lam)
             wox, woy = fx[cols] * cx - s_i, fy[rows] * cy
-            contrib = np.empty((n_r, n_c))
+            # the obliquity |G|^2 (:meth:`_obliquity`) with |wo| = 1 used:
+            # |wi + wo|^2 = 2 (1 + wi.wo), so |G|^2 = (1 + wi.wo)^2 / (ci co (ci + co)^2),
+            # wi.wo = s_i wo_x + c_i co (one column term and one cell term; 8 operations
+            # per cell instead of 15, the same values to ~1e-16)
+            one_wx = 1.0 + s_i * wox
+            contrib = np.zeros((n_r, n_c))
+            num = np.empty((min(step, n_r), n_c))
+            den = np.empty_like(num)
             for r0 in range(0, n_r, step):
                 r1 = min(n_r, r0 + step)
-                x = np.broadcast_to(wox[None, :], (r1 - r0, n_c))
-                y = np.broadcast_to(woy[r0:r1, None], (r1 - r0, n_c))
-                blk = self._obliquity(theta_i_deg, x, y, z[li, r0:r1], ok[li, r0:r1])
-                np.multiply(blk, acc[li, r0:r1], out=contrib[r0:r1])
+                zb, nb, db = z[li, r0:r1], num[: r1 - r0], den[: r1 - r0]
+                np.multiply(zb, c_i, out=nb)
+                nb += one_wx[None, :]
+                nb *= nb
+                np.add(zb, c_i, out=db)
+                db *= db
+                db *= zb
+                db *= c_i
+                np.divide(nb, db, out=contrib[r0:r1], where=ok[li, r0:r1])
+                contrib[r0:r1] *= acc[li, r0:r1]
             contrib /= norm
             # the shadowing of the cells that carry the flux (>= 1e-6 of the largest);
             # the others count unshadowed (an upper bound on D_1)
@@ -550,9 +561,77 @@ class KirchhoffModel(PhysicalOpticsModel):
                 wo[1] = np.broadcast_to(woy[r0:r1, None], big.shape)[big]
                 wo[2] = z[li, r0:r1][big]
                 blk[big] *= self._diffuse_g2(wi, wo.T, lam)
-            coh_out.append(coh_acc[li] / t.n_tiles)
             d1_out.append(float(np.sum(contrib)))
-        return coh_out, d1_out
+        return self._coherent_direct(v_spec), d1_out
+
+    def _coherent_direct(self, vs: Sequence[float]) -> list[float]:
+        """The coherent factor ``C = mean_tiles |sum W e^(-i v h)|^2 / (sum W)^2`` at each
+        ``v`` (1/um), summed over the map's points in float64, not from the Taylor bands.
+
+        The energy check divides by ``1 - C``, which is 1e-4 on a smooth coat at 89 deg:
+        ``C`` from the truncated Taylor sum (a remainder of up to ``taylor_tol`` per
+        point) moved the factor by 3e-5 to 1.4e-4 on a smooth 1024^2 coat and by 0.24 % on
+        a wavy one (``tests/optics/test_kirchhoff.py``). Here each tile's heights are put
+        in bins of width ``delta = 0.02 / v_max``; with ``c_b`` a bin's centre and ``d``
+        a point's offset from it (``|v d| <= 0.01``),
+
+        .. math:: \\sum W e^{-i v h} = \\sum_b e^{-i v c_b}
+                  \\sum_{n \\le 4} \\frac{(-i v)^n}{n!} \\sum_{h \\in b} W d^n
+
+        to ``0.01^5 / 5! < 1e-12`` of ``sum W`` (the binned moments are formed once per
+        tile and bin width, cached, in blocks of points: one pass over the tile whatever
+        the number of ``v``, ~10 ms on 1024^2; a direct ``exp`` per point costs 30-40 ms
+        per ``v``). A relief taller than one bin per point (``span / delta`` above the
+        tile's points) gets bins ``span / points`` wide and as many more moments as keep
+        the remainder below 1e-12 per point, so the moments never outgrow the tile."""
+        if not vs:
+            return []
+        sh = self._shared
+        t = sh.tiled
+        v_max = max(abs(float(v)) for v in vs)
+        # the bin width from v_max rounded up to a power of 2: nearby calls share the bins
+        v_bins = 2.0 ** math.ceil(math.log2(v_max)) if v_max > 0 else 1.0
+        delta = _COH_BIN_PHASE / v_bins
+        acc = [0.0 for _ in vs]
+        for k in range(t.n_tiles):
+
+            def moments(k: int = k) -> tuple[FloatArray, FloatArray, float]:
+                h, w = t.tile(k)
+                hf, wf = h.reshape(-1), w.reshape(-1)
+                lo = float(hf.min())
+                span = float(hf.max()) - lo
+                # at most one bin per point (a tall relief would otherwise ask for more
+                # bins than the tile has points): wider bins, and more moments so the
+                # offsets' remainder stays within that of the narrow bins
+                width = max(delta, span / max(1, hf.size - 1))
+                order = _COH_ORDER
+                half = 0.5 * width * v_bins
+                while half ** (order + 1) / math.factorial(order + 1) > _COH_REMAINDER:
+                    order += 1
+                n_bins = int(span / width) + 1
+                mom = np.zeros((order + 1, n_bins))
+                for a in range(0, hf.size, _COH_BLOCK):
+                    hb = hf[a : a + _COH_BLOCK].astype(np.float64)
+                    hb -= lo
+                    idx = (hb * (1.0 / width)).astype(np.intp)
+                    np.minimum(idx, n_bins - 1, out=idx)  # the top height's own bin edge
+                    d = hb - (idx + 0.5) * width  # the offset from the bin's centre
+                    wd = wf[a : a + _COH_BLOCK].astype(np.float64)
+                    for n in range(order + 1):
+                        mom[n] += np.bincount(idx, weights=wd, minlength=n_bins)
+                        if n < order:
+                            wd *= d
+                centres: FloatArray = lo + (np.arange(n_bins, dtype=np.float64) + 0.5) * width
+                return centres, mom, float(np.sum(w, dtype=np.float64))
+
+            centres, mom, sum_w = sh.cached(("kirchhoff coherent moments", k, delta), moments)
+            n_mom = np.arange(mom.shape[0])
+            fact = np.array([1.0 / math.factorial(int(n)) for n in n_mom])
+            for i, v in enumerate(vs):
+                powers = (-1j * float(v)) ** n_mom * fact
+                field = np.exp(-1j * float(v) * centres) @ (powers @ mom)
+                acc[i] += abs(complex(field)) ** 2 / sum_w**2
+        return [a / t.n_tiles for a in acc]
 
     @staticmethod
     def _energy_horner(
@@ -567,22 +646,30 @@ class KirchhoffModel(PhysicalOpticsModel):
     ) -> None:
         """``acc += |sum_n G_n (-i x)^n|^2`` (``x = (v_z - v_c) h_max``, per wavelength and
         cell; ``G_n`` = ``spec[n]``, shared by the wavelengths) over rows ``r0:r1``, by
-        Horner's scheme in float64, in blocks of rows small enough to stay in cache; only
-        where ``own`` (the band's cells) when given."""
+        Horner's scheme in float32 (``x`` formed in float64, then rounded; the ``G_n`` are
+        float32 transforms already), in blocks of rows small enough to stay in cache; only
+        where ``own`` (the band's cells) when given; ``acc`` is float64.
+
+        float32 instead of float64 (energy16b, issue 26): 16 instead of 22-26 ms per check
+        on the 1024^2 bench map; ``D_1`` moved by at most 1.4e-9 relative on smooth and
+        rough coats and 9e-8 on a wavy one (70/85/89 deg, 400/550/700 nm), below the
+        float32 transforms' own rounding of ``D_1`` (a few 1e-7;
+        ``tests/optics/test_kirchhoff.py`` holds both)."""
         n_terms, _, n_c = spec.shape
         n_l = vz.shape[0]
         step = max(1, _HORNER_BLOCK // max(1, n_l * n_c))
         for a in range(r0, r1, step):
             b = min(r1, a + step)
             sub = spec[:, a:b]
-            x = vz[:, a:b] - vc
-            x *= h_max
-            fr = np.empty(x.shape)
-            fi = np.empty(x.shape)
+            x64 = vz[:, a:b] - vc
+            x64 *= h_max
+            x = x64.astype(np.float32)
+            fr = np.empty(x.shape, dtype=np.float32)
+            fi = np.empty(x.shape, dtype=np.float32)
             fr[...] = sub[n_terms - 1].real
             fi[...] = sub[n_terms - 1].imag
-            t1 = np.empty(x.shape)
-            t2 = np.empty(x.shape)
+            t1 = np.empty(x.shape, dtype=np.float32)
+            t2 = np.empty(x.shape, dtype=np.float32)
             for n in range(n_terms - 2, -1, -1):
                 # f <- G_n + (-i x) f
                 np.multiply(x, fi, out=t1)
