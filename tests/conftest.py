@@ -7,7 +7,9 @@ from __future__ import annotations
 
 import itertools
 import os
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 from hypothesis import settings
@@ -33,6 +35,21 @@ def _log_dir(_log_root: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     path.mkdir()
     monkeypatch.setenv("GONIOLAB_LOG_DIR", str(path))
     return path
+
+
+@pytest.fixture(scope="session")
+def pg_shared() -> Iterator[Any]:
+    """A throw-away PostgreSQL server (tests/pg_server.py) for the whole test process, for
+    the modules that only create databases of their own in it (test_store_pg,
+    test_store_list, test_notebook): an initdb and a start cost ~0.9 s of CPU each.
+    test_store_faults freezes and restarts servers: it starts its own."""
+    from tests.pg_server import find_pg_bin, pg_server
+
+    bindir, why = find_pg_bin()
+    if bindir is None:
+        pytest.skip(why)
+    with pg_server(bindir) as srv:
+        yield srv
 
 
 def pytest_configure(config: pytest.Config) -> None:

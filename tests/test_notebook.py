@@ -120,20 +120,17 @@ def test_run_scan_in_a_kernel_with_sqlite(tmp_path: Path, notebook: Any) -> None
 
 
 def test_run_scan_in_a_kernel_with_postgresql(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, notebook: Any
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, notebook: Any, request: pytest.FixtureRequest
 ) -> None:
-    from tests.pg_server import PLANTED_PASSWORD, find_pg_bin, pg_server
+    from tests.pg_server import PLANTED_PASSWORD
 
-    bindir, why = find_pg_bin()
-    if bindir is None:
-        pytest.skip(why)
-    with pg_server(bindir) as srv:
-        url = srv.create_db("notebook")
-        monkeypatch.setenv("PGPASSWORD", PLANTED_PASSWORD)  # the kernel has it (_kernel_env)
-        _check_scan_cells(_execute(_scan_cells(url), notebook))
-        with RunStore(url, readonly=True) as s:
-            assert [s.get_run(r).status for r in (1, 2)] == ["done", "done"]
-            assert s.count_points(2) == 6
+    srv = request.getfixturevalue("pg_shared")  # skips without PostgreSQL
+    url = srv.create_db(f"notebook{os.getpid()}")
+    monkeypatch.setenv("PGPASSWORD", PLANTED_PASSWORD)  # the kernel has it (_kernel_env)
+    _check_scan_cells(_execute(_scan_cells(url), notebook))
+    with RunStore(url, readonly=True) as s:
+        assert [s.get_run(r).status for r in (1, 2)] == ["done", "done"]
+        assert s.count_points(2) == 6
 
 
 @pytest.fixture(scope="module")

@@ -15,7 +15,6 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -24,7 +23,7 @@ import pytest
 from goniolab.store import RunBusy, RunStore, StoreError
 from tests._cli import run_cli
 from tests._runs import lum, make_store
-from tests.pg_server import PLANTED_PASSWORD, PgServer, find_pg_bin, pg_server
+from tests.pg_server import PLANTED_PASSWORD, PgServer, find_pg_bin
 
 ROOT = Path(__file__).resolve().parents[1]
 GONIOLAB = str(Path(sys.executable).with_name("goniolab"))
@@ -34,10 +33,9 @@ _names = itertools.count()
 
 
 @pytest.fixture(scope="module")
-def server() -> Iterator[PgServer]:
-    assert BIN is not None
-    with pg_server(BIN) as srv:
-        yield srv
+def server(pg_shared: PgServer) -> PgServer:
+    """The test process's server (tests/conftest.py); each test makes its own database."""
+    return pg_shared
 
 
 @pytest.fixture
