@@ -9,8 +9,9 @@ directory the subprocess would get, and returns a :class:`subprocess.CompletedPr
 with its exit status, stdout and stderr kept apart. The boundary itself (the console
 script, signals, exit statuses seen by a shell, a killed process) stays tested by the real
 subprocess tests: ``tests/test_cli_stop_signals.py``, ``tests/test_cli_pipes.py``,
-``tests/test_cli_signals.py``, ``tests/test_store_pg.py`` (two scans at once, kill -9),
-``tests/scan/test_integration.py``, ``tests/test_readme_examples.py``.
+``tests/test_cli_signals.py``, ``tests/test_store_pg.py`` (two scans at once through the
+installed console script, kill -9), ``tests/scan/test_integration.py``, ``sim serve`` in
+``tests/sim/test_wire.py`` and ``tests/wire/test_server_restart.py``.
 """
 
 from __future__ import annotations
