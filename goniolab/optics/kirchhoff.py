@@ -593,38 +593,43 @@ class KirchhoffModel(PhysicalOpticsModel):
         v_bins = 2.0 ** math.ceil(math.log2(v_max)) if v_max > 0 else 1.0
         delta = _COH_BIN_PHASE / v_bins
         acc = [0.0 for _ in vs]
-        for k in range(t.n_tiles):
 
-            def moments(k: int = k) -> tuple[FloatArray, FloatArray, float]:
-                h, w = t.tile(k)
-                hf, wf = h.reshape(-1), w.reshape(-1)
-                lo = float(hf.min())
-                span = float(hf.max()) - lo
-                # at most one bin per point (a tall relief would otherwise ask for more
-                # bins than the tile has points): wider bins, and more moments so the
-                # offsets' remainder stays within that of the narrow bins
-                width = max(delta, span / max(1, hf.size - 1))
-                order = _COH_ORDER
-                half = 0.5 * width * v_bins
-                while half ** (order + 1) / math.factorial(order + 1) > _COH_REMAINDER:
-                    order += 1
-                n_bins = int(span / width) + 1
-                mom = np.zeros((order + 1, n_bins))
-                for a in range(0, hf.size, _COH_BLOCK):
-                    hb = hf[a : a + _COH_BLOCK].astype(np.float64)
-                    hb -= lo
-                    idx = (hb * (1.0 / width)).astype(np.intp)
-                    np.minimum(idx, n_bins - 1, out=idx)  # the top height's own bin edge
-                    d = hb - (idx + 0.5) * width  # the offset from the bin's centre
-                    wd = wf[a : a + _COH_BLOCK].astype(np.float64)
-                    for n in range(order + 1):
-                        mom[n] += np.bincount(idx, weights=wd, minlength=n_bins)
-                        if n < order:
-                            wd *= d
-                centres: FloatArray = lo + (np.arange(n_bins, dtype=np.float64) + 0.5) * width
-                return centres, mom, float(np.sum(w, dtype=np.float64))
+        def moments(k: int) -> tuple[FloatArray, FloatArray, float]:
+            h, w = t.tile(k)
+            hf, wf = h.reshape(-1), w.reshape(-1)
+            lo = float(hf.min())
+            span = float(hf.max()) - lo
+            # at most one bin per point (a tall relief would otherwise ask for more
+            # bins than the tile has points): wider bins, and more moments so the
+            # offsets' remainder stays within that of the narrow bins
+            width = max(delta, span / max(1, hf.size - 1))
+            order = _COH_ORDER
+            half = 0.5 * width * v_bins
+            while half ** (order + 1) / math.factorial(order + 1) > _COH_REMAINDER:
+                order += 1
+            n_bins = int(span / width) + 1
+            mom = np.zeros((order + 1, n_bins))
+            for a in range(0, hf.size, _COH_BLOCK):
+                hb = hf[a : a + _COH_BLOCK].astype(np.float64)
+                hb -= lo
+                idx = (hb * (1.0 / width)).astype(np.intp)
+                np.minimum(idx, n_bins - 1, out=idx)  # the top height's own bin edge
+                d = hb - (idx + 0.5) * width  # the offset from the bin's centre
+                wd = wf[a : a + _COH_BLOCK].astype(np.float64)
+                for n in range(order + 1):
+                    mom[n] += np.bincount(idx, weights=wd, minlength=n_bins)
+                    if n < order:
+                        wd *= d
+            centres: FloatArray = lo + (np.arange(n_bins, dtype=np.float64) + 0.5) * width
+            return centres, mom, float(np.sum(w, dtype=np.float64))
 
-            centres, mom, sum_w = sh.cached(("kirchhoff coherent moments", k, delta), moments)
+        # one cache entry for all the tiles (one per tile flooded the shared LRU cache of
+        # 24 entries on maps of many tiles, evicting the readings' transforms)
+        tiles = sh.cached(
+            ("kirchhoff coherent moments", delta),
+            lambda: [moments(k) for k in range(t.n_tiles)],
+        )
+        for centres, mom, sum_w in tiles:
             n_mom = np.arange(mom.shape[0])
             fact = np.array([1.0 / math.factorial(int(n)) for n in n_mom])
             for i, v in enumerate(vs):
@@ -663,6 +668,11 @@ class KirchhoffModel(PhysicalOpticsModel):
             sub = spec[:, a:b]
             x64 = vz[:, a:b] - vc
             x64 *= h_max
+            if own is not None:
+                # cells of the block outside the band (evanescent or another band's) are
+                # multiplied by 0 below: their x, up to (v_hi - v_lo) h_max, must not
+                # overflow float32 in x^order (inf * 0 = NaN in acc)
+                x64 *= own[:, a:b]
             x = x64.astype(np.float32)
             fr = np.empty(x.shape, dtype=np.float32)
             fi = np.empty(x.shape, dtype=np.float32)

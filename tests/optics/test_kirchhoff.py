@@ -650,7 +650,10 @@ def test_the_coherent_factor_is_the_direct_mean_over_the_map(
         assert 0.0 < min(ref) < 1.0
     if tile == 16:  # never more bins than points; the wider bins took more moments
         moments = [
-            v for k, v in model._shared.cache.items() if k[0] == "kirchhoff coherent moments"
+            m
+            for k, v in model._shared.cache.items()
+            if k[0] == "kirchhoff coherent moments"
+            for m in v
         ]
         assert all(m[1].shape[1] <= 256 for m in moments)
         assert any(m[1].shape[0] > 5 for m in moments)
@@ -666,3 +669,29 @@ def test_the_energy_check_reports_its_transforms_to_the_total() -> None:
     totals = {tot for _, tot, w in calls if w == "kirchhoff energy check"}
     assert len(totals) == 1 and done == sorted(done) and done[-1] == totals.pop()
     assert done[-1] % model._shared.tiled.n_tiles == 0 and model._shared.tiled.n_tiles == 4
+
+
+def test_the_energy_check_of_a_map_with_a_spike_stays_finite() -> None:
+    """One 30 um spike on a smooth 256^2 coat: h_max is the spike's, the rough Taylor plan
+    has several bands, and the Horner sums ran over cells of other bands too, where
+    ``x = (v_z - v_c) h_max`` reaches hundreds: x^order overflowed float32, inf * 0 = NaN,
+    ``D_1`` was NaN and the factor silently 1 (review 2026-11-26: albedo 1.11 at 89 deg).
+    The box form (main b8ea67c) gave 0.0073758 / 0.0040731 / 0.0039236."""
+    z = gaussian_acf_map(256, 0.05, 2.0, 0.5, seed=5).z_um.copy()
+    z[100, 100] += 30.0
+    model = KirchhoffModel(HeightMap(z_um=z, dx_um=0.5, dy_um=0.5), n=1.55)
+    _, d1 = model._energy_sums(89.0, [0.4, 0.55, 0.7])
+    assert all(math.isfinite(d) for d in d1), d1
+    _, d1_ref = _energy_sums_box_form(model, 89.0, [0.4, 0.55, 0.7])
+    np.testing.assert_allclose(d1, d1_ref, rtol=1e-5)
+
+
+def test_the_coherent_moments_do_not_flood_the_shared_cache() -> None:
+    """64 tiles: the direct C's moments are one cache entry, not one per tile (the shared
+    LRU cache holds 24: per-tile entries evicted the readings' transforms)."""
+    model = KirchhoffModel(gaussian_acf_map(512, 0.05, 2.0, 0.5, seed=5), n=1.55, tile=64)
+    assert model._shared.tiled.n_tiles == 64
+    model.albedo_tis(70.0)
+    before = list(model._shared.cache)
+    model._energy_sums(85.0, [0.4, 0.55, 0.7])
+    assert all(k in model._shared.cache for k in before)
