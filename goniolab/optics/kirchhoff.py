@@ -112,6 +112,9 @@ _COH_BLOCK: int = 1 << 18
 #: Cells per block of the energy check's Horner sums (all wavelengths together): the
 #: block's few float64 arrays stay in a core's cache.
 _HORNER_BLOCK: int = 32768
+#: ``D_1`` at or below this is the float32 transforms' rounding, not diffuse light (a flat
+#: map's ``D_1`` is 1e-14 to 1e-13; the smoothest coats' are above 1e-6).
+_D1_FLOOR: float = 1e-10
 
 
 def band_plan(
@@ -360,8 +363,14 @@ class KirchhoffModel(PhysicalOpticsModel):
         strided sum ran 15-56 % low at 86-89 deg and let that much more diffuse light
         through; ``tests/optics/test_kirchhoff.py``'s wavy-map test holds the factor.)"""
         coh, d1 = self._energy_sums(theta_i_deg, lams_um)
+        if not all(math.isfinite(v) for v in (*coh, *d1)):  # never a silent factor of 1
+            raise FloatingPointError(
+                f"kirchhoff energy check at {theta_i_deg:g} deg: C = {coh}, D_1 = {d1}"
+            )
+        # D_1 at or below the float32 transforms' rounding (a flat map: 1e-14 to 1e-13)
+        # is no diffuse light: nothing to scale (the ratio of two roundings is no factor)
         return [
-            min(1.0, max(0.0, 1.0 - c) / d) if d > 0.0 else 1.0
+            min(1.0, max(0.0, 1.0 - c) / d) if d > _D1_FLOOR else 1.0
             for c, d in zip(coh, d1, strict=True)
         ]
 

@@ -695,3 +695,13 @@ def test_the_coherent_moments_do_not_flood_the_shared_cache() -> None:
     before = list(model._shared.cache)
     model._energy_sums(85.0, [0.4, 0.55, 0.7])
     assert all(k in model._shared.cache for k in before)
+
+
+@pytest.mark.parametrize("shape", [(256, 256), (100, 77)])
+def test_a_flat_map_has_no_diffuse_light_to_scale(shape: tuple[int, int]) -> None:
+    """A perfect mirror: ``1 - C`` and ``D_1`` are both rounding (1e-15 to 1e-13), their
+    ratio no factor (it read 0 on 256^2 and 0.04-0.09 on 100 x 77, each with a note
+    "diffuse light scaled by ..."): nothing is scaled and nothing is noted."""
+    model = KirchhoffModel(HeightMap(z_um=np.zeros(shape), dx_um=0.5, dy_um=0.5), n=1.55)
+    assert model._energy_scales_at(89.0, [0.4, 0.55, 0.7]) == [1.0, 1.0, 1.0]
+    assert not [n for n in model.albedo_tis(89.0)[2].notes if "scaled" in n]
