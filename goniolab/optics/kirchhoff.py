@@ -107,13 +107,18 @@ _COH_BIN_PHASE: float = 0.02
 _COH_ORDER: int = 4
 #: The bound on that remainder, per point, kept when a tall relief needs wider bins.
 _COH_REMAINDER: float = 1e-12
+#: Half a bin's phase span (rad) above which a tile's ``C`` is summed point by point (the
+#: moments of offsets that wide lose digits to their alternating terms: 3.7e-9 instead
+#: of 1e-13 for a 1 mm spike on 16^2 tiles, and an overflow for a 5 mm one; review of
+#: 2026-11-26). Only a relief far taller than one bin per point gets there.
+_COH_DIRECT_HALF: float = 1.0
 #: Points per block of that binning (its float64 temporaries stay small).
 _COH_BLOCK: int = 1 << 18
 #: Cells per block of the energy check's Horner sums (all wavelengths together): the
 #: block's few float64 arrays stay in a core's cache.
 _HORNER_BLOCK: int = 32768
 #: ``D_1`` at or below this is the float32 transforms' rounding, not diffuse light (a flat
-#: map's ``D_1`` is 1e-14 to 1e-13; the smoothest coats' are above 1e-6).
+#: map's ``D_1`` is 1e-14 to 1e-13; a coat of Sq 0.1 nm has about 3e-9: review of 2026-11-26).
 _D1_FLOOR: float = 1e-10
 
 
@@ -603,7 +608,7 @@ class KirchhoffModel(PhysicalOpticsModel):
         delta = _COH_BIN_PHASE / v_bins
         acc = [0.0 for _ in vs]
 
-        def moments(k: int) -> tuple[FloatArray, FloatArray, float]:
+        def moments(k: int) -> tuple[FloatArray | None, FloatArray | None, float]:
             h, w = t.tile(k)
             hf, wf = h.reshape(-1), w.reshape(-1)
             lo = float(hf.min())
@@ -614,6 +619,11 @@ class KirchhoffModel(PhysicalOpticsModel):
             width = max(delta, span / max(1, hf.size - 1))
             order = _COH_ORDER
             half = 0.5 * width * v_bins
+            if half > _COH_DIRECT_HALF:
+                # bins so wide that the offsets' phase reaches a radian: the moments'
+                # alternating terms lose digits (and half ** order overflows on a relief
+                # of mm on a small tile); such a tile is summed point by point instead
+                return None, None, float(np.sum(w, dtype=np.float64))
             while half ** (order + 1) / math.factorial(order + 1) > _COH_REMAINDER:
                 order += 1
             n_bins = int(span / width) + 1
@@ -638,7 +648,15 @@ class KirchhoffModel(PhysicalOpticsModel):
             ("kirchhoff coherent moments", delta),
             lambda: [moments(k) for k in range(t.n_tiles)],
         )
-        for centres, mom, sum_w in tiles:
+        for k, (centres, mom, sum_w) in enumerate(tiles):
+            if centres is None or mom is None:  # a tall relief on a small tile: directly
+                h, w = t.tile(k)
+                hf = h.reshape(-1).astype(np.float64)
+                wf = w.reshape(-1).astype(np.float64)
+                for i, v in enumerate(vs):
+                    field = wf @ np.exp(-1j * float(v) * hf)
+                    acc[i] += abs(complex(field)) ** 2 / sum_w**2
+                continue
             n_mom = np.arange(mom.shape[0])
             fact = np.array([1.0 / math.factorial(int(n)) for n in n_mom])
             for i, v in enumerate(vs):
