@@ -278,12 +278,24 @@ def test_gloss_log_and_runs_show_name_the_calibration_and_warn_when_old(
     )
     _gloss_log(cfg12, store)
     assert "older than 12 h (the lab's rule)" in capsys.readouterr().err
-    # a rule that is no age: the file, the key and the reason
-    bad = tmp_path / "bad.toml"
-    bad.write_text(text.replace("[glossmeter]\n", "[glossmeter]\ncalibration_max_age_h = 0\n", 1))
-    assert main(["gloss", "log", "--config", str(bad), "--count", "1", "--store", store]) != 0
-    err = capsys.readouterr().err
-    assert str(bad) in err and "glossmeter.calibration_max_age_h" in err, err
+    # inf is the lab's "never", in the config as on the command line
+    cfg_inf = tmp_path / "lab_inf.toml"
+    cfg_inf.write_text(
+        text.replace("[glossmeter]\n", "[glossmeter]\ncalibration_max_age_h = inf\n", 1)
+    )
+    _gloss_log(cfg_inf, store)
+    assert "warning: glossmeter calibration" not in capsys.readouterr().err
+    _gloss_log(cfg, store, "--calibration-max-age-h", "inf")
+    assert "warning: glossmeter calibration" not in capsys.readouterr().err
+    # a rule that is no age (0, a string, a boolean): the file, the key and the reason
+    for value in ("0", '"48"', "true"):
+        bad = tmp_path / "bad.toml"
+        bad.write_text(
+            text.replace("[glossmeter]\n", f"[glossmeter]\ncalibration_max_age_h = {value}\n", 1)
+        )
+        assert main(["gloss", "log", "--config", str(bad), "--count", "1", "--store", store]) != 0
+        err = capsys.readouterr().err
+        assert str(bad) in err and "glossmeter.calibration_max_age_h" in err, (value, err)
 
 
 def test_docs_calibration_states_the_codes_limits() -> None:

@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import datetime as dt
 import json
-import math
 import os
 import sys
 from typing import TYPE_CHECKING, Any
@@ -103,11 +102,9 @@ def _cmd_log(args: argparse.Namespace) -> int:
         raise UserError(f"gloss log: --interval must be >= 0 s, got {args.interval}")
     if not args.timeout > 0:
         raise UserError(f"gloss log: --timeout must be > 0 s, got {args.timeout}")
-    if args.calibration_max_age_h is not None and not (
-        math.isfinite(args.calibration_max_age_h) and args.calibration_max_age_h > 0
-    ):
-        raise UserError(
-            f"gloss log: --calibration-max-age-h must be a number > 0, "
+    if args.calibration_max_age_h is not None and not args.calibration_max_age_h > 0:
+        raise UserError(  # inf is the lab's "never", as in the config
+            f"gloss log: --calibration-max-age-h must be > 0 (inf: never warn), "
             f"got {args.calibration_max_age_h}"
         )
     sample = args.sample or ""
