@@ -125,14 +125,14 @@ class GonioApp(LabActions):
     #banner.shown { display: block; }
     #too-small { display: none; }
     /* 120 to 159 columns: a narrower form beside the plots */
-    App.-medium #left { width: 40; }
+    App.-medium #left { width: 41; }  /* the arm table's 39 columns inside its border */
     /* under 120 columns: the plots take the width; f swaps the form in */
     App.-narrow #left { display: none; }
     App.-narrow.-form #left { display: block; width: 1fr; }
     App.-narrow.-form #live { display: none; }
     /* under 34 rows: a shorter gloss log; under 40 the residual plot gives way: the
-       metrics, the colour table and its note take 18 rows of the right column, and
-       under 40 rows the plot would get 3 rows or fewer (nothing readable) */
+       metrics, the colour table and its note take 18 rows of the right column, and the
+       plot would get 4-8 rows (3 at 120 x 32); from 40 rows it gets 9 or more */
     App.-short #gloss-log { height: 5; }
     App.-cramped ComparisonPanel .side-plot { display: none; }
     /* below the minimum: only a message saying so */

@@ -37,7 +37,8 @@ class LabActions(LiveView):
 
     #: The fewest terminal rows that show the side plot (residuals / log10) beside the
     #: metrics and colour tables (18 rows of the right column); under it the plot would
-    #: get 3 rows or fewer: it is hidden (``GonioApp.layout_for``) and ``l`` says why.
+    #: get 4-8 rows of which 2 are its border (3 at 120 x 32, one tick label): it is
+    #: hidden (``GonioApp.layout_for``) and ``l`` says why; from 40 rows it gets 9 or more.
     SIDE_PLOT_MIN_ROWS: ClassVar[int] = 40
 
     # the state, set by GonioApp.__init__

@@ -395,10 +395,11 @@ class StatusPanel(Vertical):
     def on_mount(self) -> None:
         self.border_title = "instrument"
         table = self.query_one("#arms", DataTable)
-        table.cell_padding = 0  # fits a 40-column panel: each width leaves its own gap
+        table.cell_padding = 0  # fits a 41-column panel: each width leaves its own gap
         for key, label, width in (
-            # "0.00" .. "89.99" (the sample plane) leave a gap; "angle°" would fill it
-            ("angle", "θ °", 6),
+            # "-89.99" .. "89.99" (the sample plane) leave a gap: with the labels' 9
+            # columns the table is 39 wide (the -medium layout's panel gives 39 inside)
+            ("angle", "angle°", 7),
             ("motion", "motion", 7),
             ("homed", "homed", 6),
             ("link", "link", 5),
