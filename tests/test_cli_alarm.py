@@ -22,16 +22,16 @@ import pytest
 from goniolab.scan.alarm import ArmAlarm, alarm_hint, reset_alarms
 from goniolab.scan.plans import DEFAULT_REPEATS
 from goniolab.store import RunStore
+from tests._cli import run_cli
 from tests.scan.test_integration import lab_config
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def _cli(*args: str, env: dict[str, str]) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "goniolab.cli", *args],
-        capture_output=True, text=True, env=env, timeout=300, cwd=ROOT, check=False,
-    )  # fmt: skip
+    """``goniolab ARGS`` in this process (tests/_cli.py); the simulated controllers that
+    keep the alarm between the commands are the ``goniolab sim serve`` process."""
+    return run_cli(*args, cwd=ROOT)
 
 
 @pytest.mark.wire

@@ -19,6 +19,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -97,20 +98,15 @@ def test_a_signal_aborts_the_scan_and_parks(
         assert 0 < s.count_points(1) < 8  # what was measured stays, the rest is resumable
 
 
-@pytest.mark.wire
-@pytest.mark.parametrize(
-    "signals",
-    [[signal.SIGTERM], [signal.SIGHUP], [signal.SIGINT, signal.SIGINT]],
-    ids=["TERM", "HUP", "INT-twice"],
-)
-def test_a_signal_parks_the_arms_of_the_wire_lab(
-    tmp_path: Path, signals: list[signal.Signals]
-) -> None:
-    from goniolab.config import load_lab_config
-    from goniolab.lab_wiring import Lab
-
-    served = lab_config(tmp_path, base="lab-sim-wire.toml", sim=NOISELESS, name="served.toml")
-    client = tmp_path / "client.toml"
+@pytest.fixture(scope="module")
+def wire_lab(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
+    """The simulated controllers in a ``goniolab sim serve`` process of their own, one for
+    the module's wire tests (its start and its first reading, which builds the facet model's
+    tables, cost more CPU than a test's scan; each test's scan moves the arms off the park
+    position before its signal): yields the client's config."""
+    tmp = tmp_path_factory.mktemp("wire")
+    served = lab_config(tmp, base="lab-sim-wire.toml", sim=NOISELESS, name="served.toml")
+    client = tmp / "client.toml"
     client.write_text(
         served.read_text().replace("start_sim_servers = true", "start_sim_servers = false")
     )
@@ -119,38 +115,54 @@ def test_a_signal_parks_the_arms_of_the_wire_lab(
          "--time-scale", "1"],
         cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
     )  # fmt: skip
-    store, err_path = tmp_path / "s.sqlite", tmp_path / "err.txt"
     try:
         assert server.stdout is not None
         json.loads(server.stdout.readline())  # serving
-        proc = _start(_scan_args(client, store), err_path, tmp_path)
-        try:
-            _wait_for(proc, err_path, r"\] [1-9]\d*/\d+ ETA")
-            for sig in signals:
-                proc.send_signal(sig)
-                time.sleep(0.05)
-            code = _stopped(proc, err_path)
-        finally:
-            proc.kill()
-        assert code == 130, err_path.read_text()
-        # the controllers outlive the scan: where did it leave the arms?
-        cfg = load_lab_config(client)
-
-        async def positions() -> tuple[float, float]:
-            async with Lab.from_config(cfg) as lab:
-                return await lab.goniometer.positions_deg()
-
-        import asyncio
-
-        ti, tr = asyncio.run(positions())
-        park = cfg.goniometer.park
-        assert (ti, tr) == (
-            pytest.approx(park.theta_i_deg, abs=0.01),
-            pytest.approx(park.theta_r_deg, abs=0.01),
-        )
+        yield client
     finally:
         server.send_signal(signal.SIGINT)
         server.wait(timeout=30)
+
+
+@pytest.mark.wire
+@pytest.mark.parametrize(
+    "signals",
+    [[signal.SIGTERM], [signal.SIGHUP], [signal.SIGINT, signal.SIGINT]],
+    ids=["TERM", "HUP", "INT-twice"],
+)
+def test_a_signal_parks_the_arms_of_the_wire_lab(
+    tmp_path: Path, signals: list[signal.Signals], wire_lab: Path
+) -> None:
+    from goniolab.config import load_lab_config
+    from goniolab.lab_wiring import Lab
+
+    client = wire_lab
+    store, err_path = tmp_path / "s.sqlite", tmp_path / "err.txt"
+    proc = _start(_scan_args(client, store), err_path, tmp_path)
+    try:
+        _wait_for(proc, err_path, r"\] [1-9]\d*/\d+ ETA")
+        for sig in signals:
+            proc.send_signal(sig)
+            time.sleep(0.05)
+        code = _stopped(proc, err_path)
+    finally:
+        proc.kill()
+    assert code == 130, err_path.read_text()
+    # the controllers outlive the scan: where did it leave the arms?
+    cfg = load_lab_config(client)
+
+    async def positions() -> tuple[float, float]:
+        async with Lab.from_config(cfg) as lab:
+            return await lab.goniometer.positions_deg()
+
+    import asyncio
+
+    ti, tr = asyncio.run(positions())
+    park = cfg.goniometer.park
+    assert (ti, tr) == (
+        pytest.approx(park.theta_i_deg, abs=0.01),
+        pytest.approx(park.theta_r_deg, abs=0.01),
+    )
     with RunStore(store, readonly=True) as s:
         run = s.get_run(1)
         assert run.status == "aborted" and signals[0].name in run.reason, run.reason

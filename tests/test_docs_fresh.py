@@ -251,20 +251,18 @@ def _readme_twin_table() -> tuple[dict[float, tuple[str, str, str]], list[str]]:
 
 
 def run_readme_twin_scan(workdir: Path) -> tuple[dict[float, tuple[float, float]], list[str]]:
-    """Run the README's command (in a store of its own) as a process: theta_r -> (twin,
-    predicted) luminance in % from the stored run (the CSV export's columns), and the lines
-    the scan printed."""
-    import os
+    """Run the README's command (in a store of its own; in this process, tests/_cli.py:
+    the numbers do not depend on the process, and a ``goniolab scan`` process's imports
+    cost more CPU than the scan): theta_r -> (twin, predicted) luminance in % from the
+    stored run (the CSV export's columns), and the lines the scan printed."""
     import shlex
-    import subprocess
-    import sys
 
-    env = {**os.environ, "GONIOLAB_LOG_DIR": str(workdir / "log"), "NO_COLOR": "1"}
-    goniolab = [sys.executable, "-c", "import sys; from goniolab.cli import main; sys.exit(main())"]
+    from tests._cli import run_cli
+
     store = ["--store", str(workdir / "runs.sqlite")]
-    scan = subprocess.run(
-        [*goniolab, *shlex.split(_TWIN_COMMAND)[1:], *store],
-        cwd=ROOT, env=env, capture_output=True, text=True, timeout=300, check=False,
+    scan = run_cli(
+        *shlex.split(_TWIN_COMMAND)[1:], *store, cwd=ROOT,
+        env={"GONIOLAB_LOG_DIR": str(workdir / "log"), "NO_COLOR": "1"},
     )  # fmt: skip
     assert scan.returncode == 0, scan.stderr[-2000:]
     import goniolab.api as gl

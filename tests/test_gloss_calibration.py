@@ -262,6 +262,40 @@ def test_gloss_log_and_runs_show_name_the_calibration_and_warn_when_old(
     # a longer rule: no warning
     _gloss_log(cfg, store, "--calibration-max-age-h", "48")
     assert "warning: glossmeter calibration" not in capsys.readouterr().err
+    # the lab's rule in its config ([glossmeter] calibration_max_age_h); the option wins
+    text = cfg.read_text()
+    cfg48 = tmp_path / "lab48.toml"
+    cfg48.write_text(
+        text.replace("[glossmeter]\n", "[glossmeter]\ncalibration_max_age_h = 48\n", 1)
+    )
+    _gloss_log(cfg48, store)
+    assert "warning: glossmeter calibration" not in capsys.readouterr().err
+    _gloss_log(cfg48, store, "--calibration-max-age-h", "24")
+    assert "older than 24 h (the lab's rule)" in capsys.readouterr().err
+    cfg12 = tmp_path / "lab12.toml"
+    cfg12.write_text(
+        text.replace("[glossmeter]\n", "[glossmeter]\ncalibration_max_age_h = 12\n", 1)
+    )
+    _gloss_log(cfg12, store)
+    assert "older than 12 h (the lab's rule)" in capsys.readouterr().err
+    # inf is the lab's "never", in the config as on the command line
+    cfg_inf = tmp_path / "lab_inf.toml"
+    cfg_inf.write_text(
+        text.replace("[glossmeter]\n", "[glossmeter]\ncalibration_max_age_h = inf\n", 1)
+    )
+    _gloss_log(cfg_inf, store)
+    assert "warning: glossmeter calibration" not in capsys.readouterr().err
+    _gloss_log(cfg, store, "--calibration-max-age-h", "inf")
+    assert "warning: glossmeter calibration" not in capsys.readouterr().err
+    # a rule that is no age (0, a string, a boolean): the file, the key and the reason
+    for value in ("0", '"48"', "true"):
+        bad = tmp_path / "bad.toml"
+        bad.write_text(
+            text.replace("[glossmeter]\n", f"[glossmeter]\ncalibration_max_age_h = {value}\n", 1)
+        )
+        assert main(["gloss", "log", "--config", str(bad), "--count", "1", "--store", store]) != 0
+        err = capsys.readouterr().err
+        assert str(bad) in err and "glossmeter.calibration_max_age_h" in err, (value, err)
 
 
 def test_docs_calibration_states_the_codes_limits() -> None:
@@ -280,4 +314,9 @@ def test_docs_calibration_states_the_codes_limits() -> None:
     parser = argparse.ArgumentParser()
     register(parser.add_subparsers())
     args = parser.parse_args(["gloss", "log", "--port", "x"])
-    assert args.calibration_max_age_h == DEFAULT_MAX_AGE_H
+    assert args.calibration_max_age_h is None  # the config's rule, else DEFAULT_MAX_AGE_H
+    from goniolab.config.sections import GlossmeterConfig
+
+    assert GlossmeterConfig.model_fields["calibration_max_age_h"].default == DEFAULT_MAX_AGE_H
+    m = re.search(r"`\[glossmeter\] calibration_max_age_h` \((?P<x>[0-9.]+) h\)", doc)
+    assert m and float(m["x"]) == DEFAULT_MAX_AGE_H

@@ -23,10 +23,13 @@ import re
 import subprocess
 import sys
 import tempfile
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+
+from tests._zygote import client_env, zygote
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
@@ -62,8 +65,14 @@ def examples(text: str) -> list[Example]:
     return found
 
 
-def run_examples(workdir: Path, found: list[Example]) -> list[str]:
-    """Run every block in ``workdir``; return their stdouts (fails on a non-zero exit)."""
+def run_examples(
+    workdir: Path, found: list[Example], server: dict[str, str] | None = None
+) -> list[str]:
+    """Run every block in ``workdir``; return their stdouts (fails on a non-zero exit).
+    ``server``: a running :func:`tests._zygote.zygote` (else one is started for the call)."""
+    if server is None:
+        with zygote(workdir) as started:
+            return run_examples(workdir, found, started)
     (workdir / "configs").symlink_to(ROOT / "configs")
     env = {
         **os.environ,
@@ -74,6 +83,10 @@ def run_examples(workdir: Path, found: list[Example]) -> list[str]:
         "NO_COLOR": "1",
     }
     outputs = []
+    # each `goniolab` of a block is a process forked from a server that imported numpy,
+    # colour-science, scipy and matplotlib once (tests/_zygote.py): its own argv, working
+    # directory, environment, streams and exit status, without a second of imports each
+    env = client_env(env, server)
     for ex in found:
         done = subprocess.run(
             ["bash", "-c", "set -euo pipefail\n" + ex.script],
@@ -86,6 +99,13 @@ def run_examples(workdir: Path, found: list[Example]) -> list[str]:
             )
         outputs.append(done.stdout)
     return outputs
+
+
+@pytest.fixture(scope="module")
+def goniolab_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, str]]:
+    """One fork server for both docs' examples."""
+    with zygote(tmp_path_factory.mktemp("zygote")) as server:
+        yield server
 
 
 #: How far a printed decimal may move: the twin's readings at an instant lab clock move by
@@ -133,9 +153,11 @@ def test_doc_has_examples(doc: Path) -> None:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("doc", DOCS, ids=lambda p: p.name)
-def test_doc_examples_run_and_print_what_the_doc_says(tmp_path: Path, doc: Path) -> None:
+def test_doc_examples_run_and_print_what_the_doc_says(
+    tmp_path: Path, doc: Path, goniolab_server: dict[str, str]
+) -> None:
     found = examples(doc.read_text())
-    outputs = run_examples(tmp_path, found)
+    outputs = run_examples(tmp_path, found, goniolab_server)
     for ex, out in zip(found, outputs, strict=True):
         if ex.expected is not None:
             assert same_output(out, ex.expected), (

@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 from goniolab.store import RunMeta, RunRecord, RunStore
-from tests.pg_server import PLANTED_PASSWORD, PgServer, find_pg_bin, pg_server
+from tests.pg_server import PLANTED_PASSWORD, PgServer, find_pg_bin
 
 BIN, WHY = find_pg_bin()
 _names = itertools.count()
@@ -72,12 +72,12 @@ def _mentions(rec: RunRecord, text: str) -> bool:
 
 
 @pytest.fixture(scope="module")
-def server() -> Iterator[PgServer | None]:
+def server(request: pytest.FixtureRequest) -> PgServer | None:
+    """The test process's server (tests/conftest.py), or None without PostgreSQL."""
     if BIN is None:
-        yield None
-        return
-    with pg_server(BIN) as srv:
-        yield srv
+        return None
+    srv: PgServer = request.getfixturevalue("pg_shared")
+    return srv
 
 
 @pytest.fixture(scope="module", params=["sqlite", "postgres"])

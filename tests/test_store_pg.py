@@ -15,15 +15,15 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import pytest
 
 from goniolab.store import RunBusy, RunStore, StoreError
+from tests._cli import run_cli
 from tests._runs import lum, make_store
-from tests.pg_server import PLANTED_PASSWORD, PgServer, find_pg_bin, pg_server
+from tests.pg_server import PLANTED_PASSWORD, PgServer, find_pg_bin
 
 ROOT = Path(__file__).resolve().parents[1]
 GONIOLAB = str(Path(sys.executable).with_name("goniolab"))
@@ -33,10 +33,9 @@ _names = itertools.count()
 
 
 @pytest.fixture(scope="module")
-def server() -> Iterator[PgServer]:
-    assert BIN is not None
-    with pg_server(BIN) as srv:
-        yield srv
+def server(pg_shared: PgServer) -> PgServer:
+    """The test process's server (tests/conftest.py); each test makes its own database."""
+    return pg_shared
 
 
 @pytest.fixture
@@ -51,9 +50,11 @@ def _env(log_dir: Path) -> dict[str, str]:
 
 
 def _cli(*args: str, env: dict[str, str], check: bool = True) -> subprocess.CompletedProcess[str]:
-    out = subprocess.run(
-        [GONIOLAB, *args], capture_output=True, text=True, env=env, timeout=300, cwd=ROOT
-    )
+    """``goniolab ARGS`` in this process (tests/_cli.py: the scans of
+    :func:`test_two_scans_write_at_once` and :func:`test_kill_9_mid_scan_then_resume` are the
+    real ``goniolab`` processes here)."""
+    out = run_cli(*args, env={"PGPASSWORD": env["PGPASSWORD"],
+                              "GONIOLAB_LOG_DIR": env["GONIOLAB_LOG_DIR"]}, cwd=ROOT)  # fmt: skip
     if check:
         assert out.returncode == 0, out.stderr
     return out

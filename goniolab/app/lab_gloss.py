@@ -108,14 +108,16 @@ async def gloss_log(
     watch: Callable[[asyncio.Queue[Any]], Coroutine[Any, Any, None]] | None = None,
     on_start: Callable[[GlossLogger], None] | None = None,
     notify: Notify = quiet,
-    max_age_h: float = DEFAULT_MAX_AGE_H,
+    max_age_h: float | None = None,
 ) -> GlossResult:
     """Log glossmeter readings of ``plan`` into a new ``gloss`` run of ``store``: from the
     glossmeter of ``config`` or the meter on ``port`` (one of them). ``mode``: ``measure``
     (ask for each reading) or ``push`` (take what the meter sends; the default for a
     pushing protocol on a port). ``watch`` consumes the run's events; ``on_start`` gets the
     logger once the run is stored (stop it there). The run records the calibration it
-    rests on (:func:`gloss_calibration_cite`; older than ``max_age_h``: a warning).
+    rests on (:func:`gloss_calibration_cite`; older than ``max_age_h``: a warning;
+    default: the config's ``[glossmeter] calibration_max_age_h``, else
+    :data:`DEFAULT_MAX_AGE_H`).
 
     Raises
     ------
@@ -129,6 +131,10 @@ async def gloss_log(
 
     if (config is None) == (port is None):
         raise UserError("gloss log: give a lab config or a port (one of them)")
+    if max_age_h is None:
+        max_age_h = (
+            config.glossmeter.calibration_max_age_h if config is not None else DEFAULT_MAX_AGE_H
+        )
     with lab_errors("gloss log"):
         async with AsyncExitStack() as stack:
             if config is not None:

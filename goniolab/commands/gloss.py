@@ -102,9 +102,10 @@ def _cmd_log(args: argparse.Namespace) -> int:
         raise UserError(f"gloss log: --interval must be >= 0 s, got {args.interval}")
     if not args.timeout > 0:
         raise UserError(f"gloss log: --timeout must be > 0 s, got {args.timeout}")
-    if not args.calibration_max_age_h > 0:
-        raise UserError(
-            f"gloss log: --calibration-max-age-h must be > 0, got {args.calibration_max_age_h}"
+    if args.calibration_max_age_h is not None and not args.calibration_max_age_h > 0:
+        raise UserError(  # inf is the lab's "never", as in the config
+            f"gloss log: --calibration-max-age-h must be > 0 (inf: never warn), "
+            f"got {args.calibration_max_age_h}"
         )
     sample = args.sample or ""
     if args.sample:  # checked, as the user typed it (the stored run names it so)
@@ -272,8 +273,9 @@ def register(subparsers: Any) -> None:
         "else goniolab.sqlite in the user data dir: goniolab --version)",
     )
     pl.add_argument(
-        "--calibration-max-age-h", type=float, default=24.0,
-        help="warn when the meter's newest stored calibration is older (h; the lab's rule)",
+        "--calibration-max-age-h", type=float, default=None,
+        help="warn when the meter's newest stored calibration is older (h; the lab's rule; "
+        "default: the config's [glossmeter] calibration_max_age_h, else 24)",
     )  # fmt: skip
     pl.add_argument("--json", action="store_true", help="one JSON object per reading on stdout")
     pl.set_defaults(func=_cmd_log)

@@ -213,8 +213,9 @@ class SpectroConfig(StrictSection):
     #: the certified standards (goniolab/scan/standards.py), relative to this file's
     #: directory, else the shipped configs/standards.toml
     standards: str = "standards.toml"
-    #: a run warns when the newest `goniolab calibrate` record is older than this
-    calibration_max_age_h: Annotated[float, Field(strict=False, gt=0.0)] = 24.0
+    #: a run warns when the newest `goniolab calibrate` record is older than this (h; a
+    #: number, ``inf`` = never)
+    calibration_max_age_h: Annotated[float, Field(strict=True, gt=0.0)] = 24.0
 
     @model_validator(mode="before")
     @classmethod
@@ -233,6 +234,10 @@ class GlossmeterConfig(StrictSection):
     serial_number: str = "401120999"
     baudrate: Annotated[int, Field(strict=True, ge=300, le=4_000_000)] = 9600
     timeout_s: TimeoutS = 2.0
+    #: a gloss run (``goniolab gloss log``, the TUI's log) warns when the meter's newest
+    #: ``goniolab gloss calibrate`` record is older than this (h, the lab's rule; ``inf`` =
+    #: never, as for ``[spectro]``)
+    calibration_max_age_h: Annotated[float, Field(strict=True, gt=0.0)] = 24.0
 
     @model_validator(mode="before")
     @classmethod

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["BACKEND", "fft"]
+__all__ = ["BACKEND", "fft", "fft_into"]
 
 _C2C: Callable[..., Any] | None = None
 #: The FFT in use: ``"pocketfft"`` (scipy's compiled module alone) or ``"scipy.fft"``.
@@ -85,3 +85,15 @@ def fft(a: NDArray[Any], axis: int = -1) -> NDArray[Any]:
 
     result: NDArray[Any] = scipy.fft.fft(a, axis=axis, workers=-1)
     return result
+
+
+def fft_into(a: NDArray[Any], axis: int, out: NDArray[Any]) -> None:
+    """:func:`fft` of ``a`` along ``axis`` written into ``out`` (same shape and dtype; either
+    may be a strided view, as a few columns of a larger array): no new array per call."""
+    c2c = _backend()
+    if c2c is not None:
+        c2c(a, (axis % a.ndim,), True, 0, out, 1)
+        return
+    import scipy.fft
+
+    out[...] = scipy.fft.fft(a, axis=axis, workers=-1)

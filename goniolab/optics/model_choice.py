@@ -129,7 +129,7 @@ def choose_model(stats: MapStats, theta_deg: float, wavelength_nm: float) -> Cho
     lam_um = wavelength_nm * 1e-3
     if g <= RR_MAX_G and stats.sdq <= RR_MAX_SDQ:
         return Choice("rayleigh-rice", g, f"g = {g:.3g} <= {RR_MAX_G:g}, Sdq {stats.sdq:.3g}")
-    if g <= 1.0 and stats.corr_length_um < lam_um:  # g first: the length costs FFTs
+    if g <= 1.0 and stats.corr_length_below(lam_um):  # g first: the length costs FFTs
         return Choice(
             "rayleigh-rice",
             g,

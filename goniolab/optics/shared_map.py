@@ -36,6 +36,9 @@ _MASKING_FACETS: int = 1 << 17
 #: Rows of the levelled map per block when the roughness statistics are summed.
 _STATS_ROWS: int = 64  # a block of a 2048-wide map in cache: a third faster than 256
 _STATS_GROUPS: int = 2  # groups of blocks the statistics are summed in (run_tasks)
+#: How far above 1/e the real-space autocorrelation must be at every lag for
+#: :meth:`SharedMap._corr_at_least` to decide without the transforms.
+_ACF_MARGIN: float = 1e-3
 #: Cached cell-power maps per shared map.
 _CACHE_SIZE: int = 24
 
@@ -53,7 +56,7 @@ class MapStats:
     by value, as a frozen dataclass of the five numbers.
     """
 
-    __slots__ = ("_corr", "field_um", "sdq", "sq_um", "step_um")
+    __slots__ = ("_corr", "_corr_at_least", "field_um", "sdq", "sq_um", "step_um")
     _FIELDS = ("sq_um", "sdq", "corr_length_um", "step_um", "field_um")
 
     sq_um: float
@@ -61,6 +64,7 @@ class MapStats:
     step_um: float
     field_um: float
     _corr: float | Callable[[], float]
+    _corr_at_least: Callable[[float], bool] | None
 
     def __init__(
         self,
@@ -69,10 +73,22 @@ class MapStats:
         corr_length_um: float | Callable[[], float],
         step_um: float,
         field_um: float,
+        corr_at_least: Callable[[float], bool] | None = None,
     ) -> None:
         for name, value in (("sq_um", sq_um), ("sdq", sdq), ("step_um", step_um),
-                            ("field_um", field_um), ("_corr", corr_length_um)):  # fmt: skip
+                            ("field_um", field_um), ("_corr", corr_length_um),
+                            ("_corr_at_least", corr_at_least)):  # fmt: skip
             object.__setattr__(self, name, value)
+
+    def corr_length_below(self, length_um: float) -> bool:
+        """``corr_length_um < length_um``, without computing the length when a cheap bound
+        (``corr_at_least``, :meth:`SharedMap._corr_at_least`) shows it is not below: the
+        regime rule asks this of every smooth map, whose correlation length is then
+        hardly ever read."""
+        corr = self._corr
+        if callable(corr) and self._corr_at_least is not None and self._corr_at_least(length_um):
+            return False
+        return self.corr_length_um < length_um
 
     @property
     def corr_length_um(self) -> float:
@@ -116,6 +132,8 @@ class SharedMap:
         self._factories: dict[tuple[complex, bool], Callable[[], FacetModel]] = {}
         #: the other wave models of the same map, by (kind, n, wavelength, weighting, masking)
         self.siblings: dict[tuple[Any, ...], Any] = {}
+        #: :meth:`_corr_at_least` by length
+        self._corr_bounds: dict[float, bool] = {}
         #: where the facet models of this map report long walks (:meth:`report_to`)
         self.progress: Callable[[int, int, str], None] | None = None
 
@@ -260,7 +278,52 @@ class SharedMap:
             corr_length_um=self._corr_length_um,
             step_um=max(t.dx_um, t.dy_um),
             field_um=min(t.nx_t * t.dx_um, t.ny_t * t.dy_um),
+            corr_at_least=self._corr_at_least,
         )
+
+    def _corr_at_least(self, length_um: float) -> bool:
+        """True when :meth:`_corr_length_um` is surely at least ``length_um``: the same
+        autocorrelations (of the first windowed tile, circular, summed over the other axis)
+        summed in real space at the lags up to ``length_um``, each above ``1/e`` by
+        :data:`_ACF_MARGIN` (far beyond the rounding by which they differ from the
+        transforms' values). Both lengths are then at least that many steps: the ACF first
+        falls below ``1/e`` after them. False (undecided) otherwise: the length is then
+        computed. Cost: a few dot products instead of two transforms of the tile, once per
+        length (the rule asks at every geometry)."""
+        found = self._corr_bounds.get(length_um)
+        if found is None:
+            found = self._corr_bounds[length_um] = self._acf_above_level(length_um)
+        return found
+
+    def _acf_above_level(self, length_um: float) -> bool:
+        t = self.tiled
+        h, w = t.tile(0)
+        ny, nx = h.shape
+        jx = math.ceil(length_um / t.dx_um)
+        jy = math.ceil(length_um / t.dy_um)
+        if not (0 < jx < nx // 2 and 0 < jy < ny // 2):
+            return False
+        # the product _corr_length_um transforms (float32), in float64
+        a = np.asarray(h * w, dtype=np.float64)
+        flat = a.ravel()
+        zero = float(np.dot(flat, flat))
+        if not zero > 0.0:
+            return False
+        level = math.exp(-1.0) + _ACF_MARGIN
+        for j in range(1, jx + 1):
+            # along x, circular per row: the flat product pairs the last j points of a row
+            # with the next row's first j; those pairs are swapped for the row's own first j
+            lin = float(np.dot(flat[:-j], flat[j:]))
+            cross = float(np.sum(a[:-1, nx - j :] * a[1:, :j]))
+            wrap = float(np.sum(a[:, nx - j :] * a[:, :j]))
+            if (lin - cross + wrap) / zero < level:
+                return False
+        for j in range(1, jy + 1):
+            lin = float(np.dot(flat[: -j * nx], flat[j * nx :]))
+            wrap = float(np.sum(a[ny - j :] * a[:j]))
+            if (lin + wrap) / zero < level:
+                return False
+        return True
 
     def _corr_length_um(self) -> float:
         """Where the isotropic ACF falls to 1/e: the mean of the lengths along x and y."""

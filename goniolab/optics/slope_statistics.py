@@ -66,12 +66,15 @@ def cell_bilinear(
     fy: FloatArray,
 ) -> FloatArray:
     """Bilinear interpolation in the cell ``[i, i + 1] x [j, j + 1]`` of ``grid`` at the
-    fractions ``(fx, fy)`` of its sides."""
+    fractions ``(fx, fy)`` of its sides (the corners gathered by flat index: the same
+    values as ``grid[i, j]``, without numpy's slower 2-D fancy indexing)."""
+    flat = i * grid.shape[1] + j
+    g = grid.ravel()
     out: FloatArray = (
-        grid[i, j] * (1 - fx) * (1 - fy)
-        + grid[i + 1, j] * fx * (1 - fy)
-        + grid[i, j + 1] * (1 - fx) * fy
-        + grid[i + 1, j + 1] * fx * fy
+        g.take(flat) * (1 - fx) * (1 - fy)
+        + g.take(flat + grid.shape[1]) * fx * (1 - fy)
+        + g.take(flat + 1) * (1 - fx) * fy
+        + g.take(flat + grid.shape[1] + 1) * fx * fy
     )
     return out
 
@@ -346,7 +349,8 @@ class SlopeStatistics:
         wa = np.asarray(w, dtype=np.float64)
         cz = np.clip(wa[..., 2], -1.0, 1.0)
         th_deg = np.degrees(np.arccos(cz))
-        ph_deg = np.degrees(np.arctan2(wa[..., 1], wa[..., 0])) % 360.0
+        ph_deg = np.degrees(np.arctan2(wa[..., 1], wa[..., 0]))
+        ph_deg += 360.0 * (ph_deg < 0.0)  # % 360.0 of atan2's range, without np.remainder
         table = self._lambda_table
         x = np.clip(th_deg / _LAMBDA_THETA_STEP_DEG, 0.0, table.shape[0] - 1.0)
         y = np.clip(ph_deg / _LAMBDA_PHI_STEP_DEG, 0.0, table.shape[1] - 1.0)

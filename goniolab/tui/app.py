@@ -125,12 +125,14 @@ class GonioApp(LabActions):
     #banner.shown { display: block; }
     #too-small { display: none; }
     /* 120 to 159 columns: a narrower form beside the plots */
-    App.-medium #left { width: 40; }
+    App.-medium #left { width: 41; }  /* the arm table's 39 columns inside its border */
     /* under 120 columns: the plots take the width; f swaps the form in */
     App.-narrow #left { display: none; }
     App.-narrow.-form #left { display: block; width: 1fr; }
     App.-narrow.-form #live { display: none; }
-    /* under 34 rows: a shorter gloss log; under 30 the residual plot gives way */
+    /* under 34 rows: a shorter gloss log; under 40 the residual plot gives way: the
+       metrics, the colour table and its note take 18 rows of the right column, and the
+       plot would get 4-8 rows (3 at 120 x 32); from 40 rows it gets 9 or more */
     App.-short #gloss-log { height: 5; }
     App.-cramped ComparisonPanel .side-plot { display: none; }
     /* below the minimum: only a message saying so */
@@ -217,13 +219,14 @@ class GonioApp(LabActions):
 
     def layout_for(self, width: int, height: int) -> None:
         """Set the size classes: ``-narrow`` under 120 columns, ``-medium`` under 160,
-        ``-short`` under 34 rows, ``-cramped`` under 30, ``-tiny`` below :attr:`MIN_SIZE`."""
+        ``-short`` under 34 rows, ``-cramped`` under :attr:`SIDE_PLOT_MIN_ROWS`, ``-tiny``
+        below :attr:`MIN_SIZE`."""
         min_w, min_h = self.MIN_SIZE
         tiny = width < min_w or height < min_h
         self.set_class(width < 120, "-narrow")
         self.set_class(120 <= width < 160, "-medium")
         self.set_class(height < 34, "-short")
-        self.set_class(height < 30, "-cramped")
+        self.set_class(height < self.SIDE_PLOT_MIN_ROWS, "-cramped")
         self.set_class(tiny, "-tiny")
         with contextlib.suppress(NoMatches):
             self.query_one("#too-small", Static).update(

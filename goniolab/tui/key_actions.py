@@ -12,6 +12,7 @@ from __future__ import annotations
 import asyncio
 import math
 import time
+from typing import ClassVar
 
 from textual import work
 from textual.css.query import NoMatches
@@ -33,6 +34,12 @@ ALIGN_CONFIRM_S = 5.0
 
 class LabActions(LiveView):
     """The key actions and the workers that talk to the lab."""
+
+    #: The fewest terminal rows that show the side plot (residuals / log10) beside the
+    #: metrics and colour tables (18 rows of the right column); under it the plot would
+    #: get 4-8 rows of which 2 are its border (3 at 120 x 32, one tick label): it is
+    #: hidden (``GonioApp.layout_for``) and ``l`` says why; from 40 rows it gets 9 or more.
+    SIDE_PLOT_MIN_ROWS: ClassVar[int] = 40
 
     # the state, set by GonioApp.__init__
     autostart: bool
@@ -265,6 +272,13 @@ class LabActions(LiveView):
         panel = self.query_one("#live", ComparisonPanel)
         panel.toggle_log()
         panel.show(self.comparison)
+        if self.has_class("-cramped"):  # the plot it switches is hidden: say so, and why
+            rows = self.SIDE_PLOT_MIN_ROWS
+            self.notify(
+                f"the side plot ({'log10 of both curves' if panel.log_view else 'residuals'}) "
+                f"is hidden in a window under {rows} rows: enlarge the window to see it",
+                title="Side plot", timeout=4,
+            )  # fmt: skip
 
     def action_cycle_plot(self) -> None:
         """Main plot: luminance, L* or a*/b* against angle (key ``c``)."""

@@ -463,7 +463,10 @@ class SessionBackend:
             # the gloss log toasts its warnings (none recorded, old) with the prediction's
             from goniolab.app.lab_gloss import record_gloss_calibration
 
-            record_gloss_calibration(self.gloss.store, run_id, self.gloss.meter, plan.angles_deg)
+            record_gloss_calibration(
+                self.gloss.store, run_id, self.gloss.meter, plan.angles_deg,
+                max_age_h=self.config.glossmeter.calibration_max_age_h,
+            )  # fmt: skip
         # the session's gloss run goes on until the app closes: "running", not "done"
         await self.gloss.logger(plan, run_id, prediction, keep_running=True).run()
 

@@ -395,8 +395,10 @@ class StatusPanel(Vertical):
     def on_mount(self) -> None:
         self.border_title = "instrument"
         table = self.query_one("#arms", DataTable)
-        table.cell_padding = 0  # fits a 40-column panel: each width leaves its own gap
+        table.cell_padding = 0  # fits a 41-column panel: each width leaves its own gap
         for key, label, width in (
+            # "-89.99" .. "89.99" (the sample plane) leave a gap: with the labels' 9
+            # columns the table is 39 wide (the -medium layout's panel gives 39 inside)
             ("angle", "angle°", 7),
             ("motion", "motion", 7),
             ("homed", "homed", 6),
@@ -404,8 +406,10 @@ class StatusPanel(Vertical):
             ("alarm", "alarm", 5),
         ):
             table.add_column(label, key=key, width=width)
-        table.add_row("-", "-", "-", "…", "-", key="lamp", label="lamp")
-        table.add_row("-", "-", "-", "…", "-", key="detector", label="detector")
+        # the labels' trailing space is the gap before the angle ("detector58.00" was
+        # read as one word: the label column is as wide as its longest label)
+        table.add_row("-", "-", "-", "…", "-", key="lamp", label="lamp ")
+        table.add_row("-", "-", "-", "…", "-", key="detector", label="detector ")
 
     def _set(self, row: str, col: str, text: str) -> None:
         """Update one cell, skipping unchanged values (polling must not repaint idly)."""

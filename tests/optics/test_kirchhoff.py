@@ -19,6 +19,7 @@ import math
 import numpy as np
 import pytest
 
+from goniolab.optics import kirchhoff as kirchhoff_module
 from goniolab.optics.apertures import Cone, Rect, integrate_brdf
 from goniolab.optics.cell_apertures import CellBox
 from goniolab.optics.facet import FacetModel
@@ -437,7 +438,7 @@ def test_the_padded_axis_is_transformed_second() -> None:
 
 
 @pytest.mark.parametrize(
-    ("sq_um", "l_um", "factor"), [(0.03, 40.0, 0.14563), (0.10, 80.0, 0.23464)]
+    ("sq_um", "l_um", "factor"), [(0.03, 40.0, 0.145972), (0.10, 80.0, 0.234593)]
 )
 def test_the_energy_check_of_a_wavy_map_sums_the_halo_around_specular(
     sq_um: float, l_um: float, factor: float
@@ -447,7 +448,281 @@ def test_the_energy_check_of_a_wavy_map_sums_the_halo_around_specular(
     sum over every second cell times 4 (tried for speed) always sampled that empty cell and
     skipped most of the halo: at 89 deg the factor came out 0.306 instead of 0.235 (review
     of 2026-11-26: the reviewer's every-cell sum, stride forced to 1, gave 0.2346 for the
-    80 um map; the 40 um map's value is the every-cell sum's)."""
+    80 um map; the 40 um map's value is the every-cell sum's).
+
+    The pins were 0.14563 and 0.23464 until 2026-11-26 (energy16b): they carried the Taylor
+    remainder of the coherent factor ``C`` (formed from the truncated band sum, a remainder
+    of up to ``taylor_tol`` per point), which ``1 - C`` (1.5e-4 on the 40 um map at 89 deg)
+    amplifies: 0.24 % on the 40 um map, 0.02 % on the 80 um one. ``C`` is now summed over
+    the map's points (``test_the_coherent_factor_is_the_direct_mean_over_the_map``), and
+    the factors are those of the direct ``C`` with the same every-cell ``D_1``; the bound
+    (1e-5) is ``D_1``'s float32 rounding (a few 1e-7) with margin, and fails the old values."""
     hm = gaussian_acf_map(1024, sq_um, l_um, 0.5, seed=3)  # 512 um field, one 1024^2 tile
     got = KirchhoffModel(hm, n=1.55)._energy_scales_at(89.0, [0.55])[0]
-    assert got == pytest.approx(factor, rel=1e-3)
+    assert got == pytest.approx(factor, rel=1e-5)
+
+
+def _energy_sums_box_form(
+    model: KirchhoffModel, theta_i_deg: float, lams_um: list[float]
+) -> tuple[list[float], list[float]]:
+    """``(C, D_1)`` per wavelength as the energy check formed them before 2026-11-26 (main
+    b8ea67c): the whole Nyquist window as one box of :meth:`KirchhoffModel._raw_power` (its
+    cells reordered from the transform's, transforms y first, coherent field removed after
+    the Horner sums), the independent slow reference of :meth:`_energy_sums`."""
+    nx0, nx1, ny0, ny1 = model._nyquist()
+    box = CellBox(nx0, nx1, ny0, ny1)
+    tr = math.radians(theta_i_deg)
+    geo = []
+    for lam in lams_um:
+        cx, cy = model._cell_size(lam)
+        x = np.broadcast_to(box.ix[None, :] * cx - math.sin(tr), (box.iy.size, box.ix.size))
+        y = np.broadcast_to(box.iy[:, None] * cy, (box.iy.size, box.ix.size))
+        z2 = 1.0 - x * x - y * y
+        ok = z2 > 1e-12
+        geo.append((x, y, np.sqrt(np.where(ok, z2, 0.0)), ok))
+    boxes = [box] * len(lams_um)
+    raw, coh = model._raw_power(theta_i_deg, lams_um, boxes, [(g[2], g[3]) for g in geo])
+    wi = np.array([math.sin(tr), 0.0, math.cos(tr)])
+    d1 = []
+    for r, (x, y, z, ok), lam in zip(raw, geo, lams_um, strict=True):
+        contrib = r * model._obliquity(theta_i_deg, x, y, z, ok)
+        big = contrib > 1e-6 * float(contrib.max(initial=0.0))
+        if model.masking and np.any(big):
+            wo = np.stack([x[big], y[big], z[big]], axis=-1)
+            contrib[big] *= model._diffuse_g2(np.broadcast_to(wi, wo.shape), wo, lam)
+        d1.append(float(np.sum(contrib)))
+    return list(coh), d1
+
+
+def _energy_sums_direct(
+    model: KirchhoffModel, theta_i_deg: float, lams_um: list[float]
+) -> tuple[list[float], list[float]]:
+    """``(C, D_1)`` with each cell's field the Kirchhoff sum formed directly over the map,
+    ``U = sum W exp(-i (v_x x + v_y y + v_z h))`` in complex128 at the cell's own ``v_z``
+    (no Taylor bands, no FFT), the coherent part ``sum W exp(-i v_z h)`` times the window's
+    shape removed, tile by tile; ``C`` the direct ``|sum W exp(-i v_spec h)|^2 / (sum W)^2``."""
+    t = model._shared.tiled
+    tr = math.radians(theta_i_deg)
+    ci = math.cos(tr)
+    nx0, nx1, ny0, ny1 = model._nyquist()
+    mx = np.arange(nx0, nx1 + 1)
+    my = np.arange(ny0, ny1 + 1)
+    yy = (np.arange(t.ny_t) * t.dy_um)[:, None]
+    xx = (np.arange(t.nx_t) * t.dx_um)[None, :]
+    wy = t.wy.astype(np.float64)
+    wx = t.wx.astype(np.float64)
+    wy_hat = np.exp(-2j * math.pi * np.outer(my, np.arange(t.ny_t)) / t.ny_t) @ wy
+    wx_hat = np.exp(-2j * math.pi * np.outer(mx, np.arange(t.nx_t)) / t.nx_t) @ wx
+    shape = np.outer(wy_hat, wx_hat) / (wy.sum() * wx.sum())
+    norm = t.n_tiles * t.ny_t * t.nx_t * t.sum_w2
+    wi = np.array([math.sin(tr), 0.0, ci])
+    coh, d1 = [], []
+    for lam in lams_um:
+        cx, cy = model._cell_size(lam)
+        x = np.broadcast_to(mx[None, :] * cx - math.sin(tr), (my.size, mx.size))
+        y = np.broadcast_to(my[:, None] * cy, (my.size, mx.size))
+        z2 = 1.0 - x * x - y * y
+        ok = z2 > 1e-12
+        z = np.sqrt(np.where(ok, z2, 0.0))
+        vz = (2 * math.pi / lam) * (ci + z)
+        # exp(-i (v_x x + v_y y)) of every cell and point, (cells, points)
+        ex = np.exp(-2j * math.pi * np.outer(mx, xx[0]) / (t.nx_t * t.dx_um))
+        ey = np.exp(-2j * math.pi * np.outer(my, yy[:, 0]) / (t.ny_t * t.dy_um))
+        power = np.zeros(x.shape)
+        c_sum = 0.0
+        for k in range(t.n_tiles):
+            h, w = (a.astype(np.float64) for a in t.tile(k))
+            # (rows, cols, points y, points x) would be large: one row of cells at a time
+            for i in range(my.size):
+                s = w[None] * np.exp(-1j * vz[i][:, None, None] * h[None])  # (cols, y, x)
+                u = np.einsum("cyx,y,cx->c", s, ey[i], ex)
+                mean = s.sum(axis=(1, 2))
+                power[i] += np.abs(u - mean * shape[i]) ** 2
+            v_spec = (2 * math.pi / lam) * 2 * ci
+            c_sum += abs(np.sum(w * np.exp(-1j * v_spec * h))) ** 2 / np.sum(w) ** 2
+        contrib = np.where(ok, power / norm, 0.0) * model._obliquity(theta_i_deg, x, y, z, ok)
+        big = contrib > 1e-6 * float(contrib.max(initial=0.0))
+        if model.masking and np.any(big):
+            wo = np.stack([x[big], y[big], z[big]], axis=-1)
+            contrib[big] *= model._diffuse_g2(np.broadcast_to(wi, wo.shape), wo, lam)
+        coh.append(c_sum / t.n_tiles)
+        d1.append(float(np.sum(contrib)))
+    return coh, d1
+
+
+@pytest.mark.parametrize("theta_i_deg", [70.0, 85.0, 89.0])
+@pytest.mark.parametrize(
+    ("sq_um", "l_um", "step_um"),
+    [(0.05, 2.0, 0.5), (0.03, 40.0, 0.5), (0.15, 1.0, 0.25)],
+    ids=["smooth", "wavy", "rough"],
+)
+def test_the_energy_sums_equal_the_every_cell_sum_of_the_box_form(
+    sq_um: float, l_um: float, step_um: float, theta_i_deg: float
+) -> None:
+    """The energy check's sums (transform outputs in the FFT's order, evanescent columns
+    not transformed along y, the coherent field taken out of each term's transform, the
+    Horner sums in blocks) against the every-cell sum of the whole window as one box of
+    ``_raw_power`` (the form the check had before): both sum every cell with the same
+    Taylor bands, and differ by float32 rounding only (the transforms run x first here,
+    y first there): ``D_1`` measured within 3.2e-7. ``C`` is the direct mean over the
+    map's points, not the box form's Taylor sum (which differed from it by up to 1.9e-7
+    here, on the wavy coat): the factor is the box form's ``D_1`` with the direct ``C``."""
+    model = KirchhoffModel(gaussian_acf_map(256, sq_um, l_um, step_um, seed=5), n=1.55)
+    lams = [0.4, 0.55, 0.7]
+    coh, d1 = model._energy_sums(theta_i_deg, lams)
+    _, d1_ref = _energy_sums_box_form(model, theta_i_deg, lams)
+    coh_ref = [_coherent_factor_direct(model, theta_i_deg, lam) for lam in lams]
+    np.testing.assert_allclose(coh, coh_ref, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(d1, d1_ref, rtol=1e-6)
+    factor_ref = [min(1.0, (1.0 - c) / d) for c, d in zip(coh_ref, d1_ref, strict=True)]
+    np.testing.assert_allclose(model._energy_scales_at(theta_i_deg, lams), factor_ref, rtol=1e-6)
+
+
+@pytest.mark.parametrize("sq_um", [0.02, 0.3], ids=["smooth", "rough"])
+def test_the_energy_sums_match_the_kirchhoff_sum_formed_directly(
+    sq_um: float, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Every cell's field summed directly over the map in complex128 (no Taylor bands, no
+    FFT) is the truth: with the Taylor remainder made negligible (tol 1e-12) the FFT sums
+    differ by float32 rounding only (measured: ``D_1`` 2e-7); ``C`` is summed over the
+    points in float64 (it was the float32 band sum: 2e-9 off on the smooth coat, 3.5e-8 on
+    the rough one, whose float32 phase screen ``v_c h`` reaches tens of radians). The map: 6 tiles
+    of 32 x 24 at 0.15 um, so that rows and columns of the window are evanescent at every
+    wavelength (lambda / (2 step) > 1: those rows are dropped, those columns not
+    transformed), and the rough coat needs several Taylor bands."""
+    z = gaussian_acf_map(96, sq_um, 1.0, 0.15, seed=9).z_um[:64, :72]
+    model = KirchhoffModel(HeightMap(z_um=z, dx_um=0.15, dy_um=0.15), n=1.5, tile=32)
+    model.taylor_tol = 1e-12
+    t = model._shared.tiled
+    assert (t.n_tiles, t.ny_t, t.nx_t) == (6, 32, 24)
+    assert (t.ny_t // 2 - 1) * model._cell_size(0.4)[1] > 1.0  # rows beyond the horizon
+    plans: list[int] = []
+
+    def spy(*args: float) -> list[tuple[float, float, float, int]]:
+        plans.append(len(band_plan(*args)))
+        return band_plan(*args)
+
+    monkeypatch.setattr(kirchhoff_module, "band_plan", spy)
+    lams = [0.4, 0.55, 0.7]
+    for ti in (70.0, 85.0, 89.0):
+        coh, d1 = model._energy_sums(ti, lams)
+        coh_ref, d1_ref = _energy_sums_direct(model, ti, lams)
+        np.testing.assert_allclose(coh, coh_ref, rtol=0, atol=1e-13)
+        np.testing.assert_allclose(d1, d1_ref, rtol=1e-6)
+    assert max(plans) > 1 if sq_um > 0.1 else max(plans) == 1
+
+
+def _coherent_factor_direct(model: KirchhoffModel, theta_i_deg: float, lam_um: float) -> float:
+    """``mean_tiles |sum W exp(-i v h)|^2 / (sum W)^2`` at the specular ``v = 2 k cos ti``,
+    one complex128 exponential per point (the definition, PHYSICS.md "Energy")."""
+    t = model._shared.tiled
+    v = 2.0 * (2.0 * math.pi / lam_um) * math.cos(math.radians(theta_i_deg))
+    acc = 0.0
+    for k in range(t.n_tiles):
+        h, w = (a.astype(np.float64) for a in t.tile(k))
+        acc += abs(np.sum(w * np.exp(-1j * v * h))) ** 2 / np.sum(w) ** 2
+    return acc / t.n_tiles
+
+
+@pytest.mark.parametrize(
+    ("sq_um", "l_um", "step_um", "tile"),
+    [(0.05, 2.0, 0.5, 128), (0.03, 40.0, 0.5, 128), (0.6, 3.0, 0.25, 128), (3.0, 3.0, 0.25, 16)],
+    ids=["smooth", "wavy", "rough", "tall-relief"],
+)
+def test_the_coherent_factor_is_the_direct_mean_over_the_map(
+    sq_um: float, l_um: float, step_um: float, tile: int
+) -> None:
+    """The energy check's ``C`` (heights binned, the offsets' phase factors to 4th order)
+    against the direct complex128 mean over every point of every tile, at 70/85/89 deg and
+    400/550/700 nm (4 tiles of 128^2). The Taylor band sum it replaced was up to 3e-8 off
+    on the smooth and rough coats and up to 1.9e-7 on the wavy one (measured), where
+    ``1 - C`` is 2.4e-4 and 4.8e-5 at 89 deg: the factor was up to 1.2e-4 and 0.4 % off;
+    the binned sum is within 1e-13. The tall relief (Sq 3 um on tiles of 16^2: a span of
+    ~20 um needs ~10^4 bins of 0.02 / 64 um, more than the tile's 256 points) takes the
+    wider bins with more moments."""
+    model = KirchhoffModel(gaussian_acf_map(256, sq_um, l_um, step_um, seed=5), tile=tile)
+    assert model._shared.tiled.n_tiles == (256 // tile) ** 2
+    lams = [0.4, 0.55, 0.7]
+    for ti in (70.0, 85.0, 89.0):
+        coh, _ = model._energy_sums(ti, lams)
+        ref = [_coherent_factor_direct(model, ti, lam) for lam in lams]
+        np.testing.assert_allclose(coh, ref, rtol=0, atol=1e-13)
+        assert 0.0 < min(ref) < 1.0
+    if tile == 16:  # never more bins than points; the wider bins took more moments
+        moments = [
+            m
+            for k, v in model._shared.cache.items()
+            if k[0] == "kirchhoff coherent moments"
+            for m in v
+        ]
+        assert all(m[1].shape[1] <= 256 for m in moments)
+        assert any(m[1].shape[0] > 5 for m in moments)
+
+
+@pytest.mark.parametrize("spike_um", [50.0, 1000.0, 5000.0])
+def test_the_coherent_factor_of_a_spike_on_small_tiles_is_the_direct_mean(
+    spike_um: float,
+) -> None:
+    """One spike of up to 5 mm on a smooth 64^2 coat in tiles of 16^2: the bins, one per
+    point at most, get so wide that their offsets' phase passes a radian; their moments'
+    alternating terms lost digits (3.7e-9 off for 1 mm) and ``half ** order`` overflowed
+    (5 mm: OverflowError; review of 2026-11-26). Such a tile is summed point by point: C
+    within 1e-13 of the definition at 70/85/89 deg."""
+    hm0 = gaussian_acf_map(64, 0.05, 2.0, 0.25, seed=5)
+    z = np.array(hm0.z_um, dtype=np.float64)
+    z[10, 10] += spike_um
+    model = KirchhoffModel(HeightMap(z_um=z, dx_um=0.25, dy_um=0.25), n=1.55, tile=16)
+    lam = 0.4
+    tis = (70.0, 85.0, 89.0)
+    vs = [2.0 * (2.0 * math.pi / lam) * math.cos(math.radians(ti)) for ti in tis]
+    got = model._coherent_direct(vs)
+    ref = [_coherent_factor_direct(model, ti, lam) for ti in tis]
+    np.testing.assert_allclose(got, ref, rtol=0, atol=1e-13)
+
+
+def test_the_energy_check_reports_its_transforms_to_the_total() -> None:
+    # the terminal display ends its line only when done == total; several tiles and bands
+    calls: list[tuple[int, int, str]] = []
+    hm = gaussian_acf_map(256, 0.3, 2.0, 0.25, seed=12)
+    model = KirchhoffModel(hm, tile=128, progress=lambda d, t, w: calls.append((d, t, w)))
+    model._energy_scales_at(85.0, [0.4, 0.55, 0.7])
+    done = [d for d, _, w in calls if w == "kirchhoff energy check"]
+    totals = {tot for _, tot, w in calls if w == "kirchhoff energy check"}
+    assert len(totals) == 1 and done == sorted(done) and done[-1] == totals.pop()
+    assert done[-1] % model._shared.tiled.n_tiles == 0 and model._shared.tiled.n_tiles == 4
+
+
+def test_the_energy_check_of_a_map_with_a_spike_stays_finite() -> None:
+    """One 30 um spike on a smooth 256^2 coat: h_max is the spike's, the rough Taylor plan
+    has several bands, and the Horner sums ran over cells of other bands too, where
+    ``x = (v_z - v_c) h_max`` reaches hundreds: x^order overflowed float32, inf * 0 = NaN,
+    ``D_1`` was NaN and the factor silently 1 (review 2026-11-26: albedo 1.11 at 89 deg).
+    The box form (main b8ea67c) gave 0.0073758 / 0.0040731 / 0.0039236."""
+    z = gaussian_acf_map(256, 0.05, 2.0, 0.5, seed=5).z_um.copy()
+    z[100, 100] += 30.0
+    model = KirchhoffModel(HeightMap(z_um=z, dx_um=0.5, dy_um=0.5), n=1.55)
+    _, d1 = model._energy_sums(89.0, [0.4, 0.55, 0.7])
+    assert all(math.isfinite(d) for d in d1), d1
+    _, d1_ref = _energy_sums_box_form(model, 89.0, [0.4, 0.55, 0.7])
+    np.testing.assert_allclose(d1, d1_ref, rtol=1e-5)
+
+
+def test_the_coherent_moments_do_not_flood_the_shared_cache() -> None:
+    """64 tiles: the direct C's moments are one cache entry, not one per tile (the shared
+    LRU cache holds 24: per-tile entries evicted the readings' transforms)."""
+    model = KirchhoffModel(gaussian_acf_map(512, 0.05, 2.0, 0.5, seed=5), n=1.55, tile=64)
+    assert model._shared.tiled.n_tiles == 64
+    model.albedo_tis(70.0)
+    before = list(model._shared.cache)
+    model._energy_sums(85.0, [0.4, 0.55, 0.7])
+    assert all(k in model._shared.cache for k in before)
+
+
+@pytest.mark.parametrize("shape", [(256, 256), (100, 77)])
+def test_a_flat_map_has_no_diffuse_light_to_scale(shape: tuple[int, int]) -> None:
+    """A perfect mirror: ``1 - C`` and ``D_1`` are both rounding (1e-15 to 1e-13), their
+    ratio no factor (it read 0 on 256^2 and 0.04-0.09 on 100 x 77, each with a note
+    "diffuse light scaled by ..."): nothing is scaled and nothing is noted."""
+    model = KirchhoffModel(HeightMap(z_um=np.zeros(shape), dx_um=0.5, dy_um=0.5), n=1.55)
+    assert model._energy_scales_at(89.0, [0.4, 0.55, 0.7]) == [1.0, 1.0, 1.0]
+    assert not [n for n in model.albedo_tis(89.0)[2].notes if "scaled" in n]

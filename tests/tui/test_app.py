@@ -537,3 +537,49 @@ async def test_the_end_of_a_run_says_how_many_warnings_it_stored_and_how_many_we
             "Scan: run 1 done; 1 warning stored with the run (goniolab runs show 1); 3 of its "
             "messages were not shown as they came"
         )
+
+
+@pytest.mark.parametrize(("rows", "shown"), [(35, False), (39, False), (40, True), (42, True)])
+async def test_the_side_plot_gives_way_when_it_would_get_three_rows(rows: int, shown: bool) -> None:
+    """Under 40 rows the metrics, the colour table and its note (18 rows of the right
+    column) leave the side plot 4-8 rows, 2 of them its border (3 at 120 x 32: one tick
+    label): it is hidden, and ``l`` says why instead of switching an invisible plot
+    silently. From 40 rows it shows, 9 rows or more."""
+    app = GonioApp(ScriptedBackend(gated=False), poll_hz=0)
+    async with app.run_test(size=(140, rows)) as pilot:
+        await wait_until(pilot, app.ready.is_set)
+        side = app.query_one("#live", ComparisonPanel).side_plot
+        await pilot.pause()
+        assert side.display is shown
+        if shown:
+            assert side.region.height >= 9  # the border's 2 rows and 7 or more of plot
+        await pilot.press("l")
+        await pilot.pause()
+        said = [n for n in notes(app) if n.startswith("Side plot: ")]
+        if shown:
+            assert said == []
+        else:
+            assert said == [
+                "Side plot: the side plot (log10 of both curves) is hidden in a window under "
+                "40 rows: enlarge the window to see it"
+            ]
+
+
+@pytest.mark.parametrize("width", [120, 140, 170])
+async def test_the_arm_table_fits_its_panel_with_signed_angles(width: int) -> None:
+    """A detector at -75.50 deg (configs/lab-sim-multiangle.toml's range is -80..80): each
+    column keeps a gap after its widest value and the table fits its panel without a
+    horizontal scroll at the -medium (120-159 columns) and wide layouts."""
+    app = GonioApp(ScriptedBackend(gated=False), poll_hz=0)
+    async with app.run_test(size=(width, 42)) as pilot:
+        await wait_until(pilot, app.ready.is_set)
+        panel = app.query_one(StatusPanel)
+        panel.show_angles(-45.0, -75.5, True)
+        await pilot.pause()
+        arms = panel.query_one("#arms", DataTable)
+        widest = {"angle": "-89.99", "motion": "moving", "homed": "homed", "link": "lost"}
+        for key, text in widest.items():
+            assert arms.columns[key].width > len(text), key  # type: ignore[index]
+        assert max(len(str(r.label)) for r in arms.rows.values()) > len("detector")
+        assert cell(arms, "detector", "angle") == "-75.50"
+        assert arms.virtual_size.width <= arms.scrollable_content_region.width

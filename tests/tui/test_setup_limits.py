@@ -7,9 +7,6 @@ the driver's own check (drivers.arm_limits.geometry_problem)."""
 from __future__ import annotations
 
 import asyncio
-import os
-import subprocess
-import sys
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
@@ -29,6 +26,7 @@ from goniolab.tui.app import GonioApp
 from goniolab.tui.session_backend import SessionBackend
 from goniolab.tui.view_model import ScanSetup
 from goniolab.tui.widgets import ScanForm
+from tests._cli import run_cli
 from tests.tui.test_lab import sim_config
 from tests.tui.tui_scripted import wait_until
 
@@ -57,13 +55,10 @@ CASES = {
 
 
 def cli_error(cfg: Path, theta_i: str, theta_r: str) -> str:
-    """What ``goniolab scan`` prints on stderr for the plan (its exit status checked)."""
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
-    out = subprocess.run(
-        [sys.executable, "-m", "goniolab", "scan", "--config", str(cfg), "--theta-i", theta_i,
-         "--theta-r", theta_r, "--time-scale", "0"],
-        capture_output=True, text=True, timeout=60, env=env, cwd=REPO,
-    )  # fmt: skip
+    """What ``goniolab scan`` prints on stderr for the plan (its exit status checked; run in
+    this process, tests/_cli.py: the message is the point, not the process)."""
+    out = run_cli("scan", "--config", cfg, "--theta-i", theta_i, "--theta-r", theta_r,
+                  "--time-scale", "0", cwd=REPO)  # fmt: skip
     assert out.returncode == 2, out.stderr
     lines = [ln for ln in out.stderr.splitlines() if ln.startswith(CLI_PREFIX)]
     assert len(lines) == 1, out.stderr
