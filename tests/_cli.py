@@ -20,6 +20,7 @@ import contextlib
 import io
 import os
 import subprocess
+import sys
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 
@@ -68,7 +69,15 @@ def run_cli(
             try:
                 code = main(argv)
             except SystemExit as exc:
-                code = exc.code if isinstance(exc.code, int) else 1
+                # as the interpreter ends a process: None is 0, an int itself, anything
+                # else printed to stderr and 1 (a sys.exit("message") must show its text)
+                if exc.code is None:
+                    code = 0
+                elif isinstance(exc.code, int):
+                    code = exc.code
+                else:
+                    print(exc.code, file=sys.stderr)
+                    code = 1
         finally:
             os.chdir(here)
             out.flush()
