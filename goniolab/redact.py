@@ -96,14 +96,21 @@ def _redact_uris(text: str) -> str:
         end = n if m is None else m.start()
         at = text.rfind("@", start, end)
         colon = text.find(":", start, at if at >= 0 else end)
-        if at < 0 and colon >= 0:
+        # "user:@pass word@host": an '@' and a raw space in the password; the '@' found
+        # is the password's own when a space cut the URI and no path follows it (a host
+        # with a path, "host:5432/runs", is a URI's end): follow to the next '@' too
+        own_at = (
+            at >= 0 and 0 <= colon < at and m is not None and text[m.start()] == " "
+            and "/" not in text[at + 1 : end]
+        )  # fmt: skip
+        if (at < 0 and colon >= 0) or own_at:
             # "user:pass word@host": a raw space in the password; follow to the next '@'
             # on the line, unless what follows the colon is a port with a path after it
             # ("host:5432/db"; a bare "host:5432" is followed too: safe rather than sorry)
             rest = text[colon + 1 : end]
             after = rest.split("/", 1)[0]
             port = after.isdigit() and "/" in rest
-            if after and not port and text[start] != "[":
+            if own_at or (after and not port and text[start] != "["):
                 if next_at != -1 and next_at < end:
                     next_at = text.find("@", end)
                 if next_nl != -1 and next_nl < end:
