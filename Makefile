@@ -50,7 +50,9 @@ check: $(DEV_STAMP)
 # processes (xdist workers, `goniolab` subprocesses), and without bytecode each compiled the
 # repository's modules again (about 5 s of CPU per worker's collection); Python writes them to
 # the __pycache__ directories .gitignore already names, as any plain run does.
-PYTEST_WORKERS ?= 3
+# 4 workers on 2 idle cores since the suite's CPU cut (issue 26): 170 s against 187 s for
+# 3 in back-to-back pytest runs on a fresh clone (bench/README.md, "The suite's CPU")
+PYTEST_WORKERS ?= 4
 test: check
 	env -u PYTHONDONTWRITEBYTECODE $(BIN)/python -m pytest -n $(PYTEST_WORKERS) --dist worksteal --durations=15 -q
 
