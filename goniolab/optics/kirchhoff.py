@@ -122,6 +122,21 @@ _HORNER_BLOCK: int = 32768
 _D1_FLOOR: float = 1e-10
 
 
+def _weighted_phase(
+    h: NDArray[np.float32], w: NDArray[np.float32], vc: float
+) -> NDArray[np.complex64]:
+    """``W exp(-i v_c h)`` in complex64 from float32 cos/sin: the screen each Taylor band
+    transforms (the readings' :meth:`KirchhoffModel._raw_power` and the energy check)."""
+    phase = np.float32(vc) * h
+    cos = np.cos(phase)
+    np.sin(phase, out=phase)
+    term = np.empty(h.shape, dtype=np.complex64)
+    np.multiply(w, cos, out=term.real)
+    np.multiply(w, phase, out=term.imag)
+    np.negative(term.imag, out=term.imag)
+    return term
+
+
 def band_plan(
     v_lo: float, v_hi: float, h_max_um: float, tol: float = DEFAULT_TAYLOR_TOL
 ) -> list[tuple[float, float, float, int]]:
@@ -255,15 +270,7 @@ class KirchhoffModel(PhysicalOpticsModel):
                     if self.progress is not None:
                         self.progress(done, total, "kirchhoff FFT")
                     continue
-                # W exp(-i v_c h) in complex64 from float32 cos/sin
-                phase = np.float32(vc) * h
-                cos = np.cos(phase)
-                np.sin(phase, out=phase)
-                term = np.empty(h.shape, dtype=np.complex64)
-                np.multiply(w, cos, out=term.real)
-                np.multiply(w, phase, out=term.imag)
-                np.negative(term.imag, out=term.imag)
-                del phase, cos
+                term = _weighted_phase(h, w, vc)
                 spec = np.empty((order + 1, ky.size, kx.size), dtype=np.complex64)
                 dc = np.empty(order + 1, dtype=np.complex128)
                 for n_term in range(order + 1):
@@ -488,15 +495,7 @@ class KirchhoffModel(PhysicalOpticsModel):
                     if self.progress is not None:
                         self.progress(done, total, "kirchhoff energy check")
                     continue
-                # W exp(-i v_c h) in complex64 from float32 cos/sin (as _raw_power)
-                phase = np.float32(vc) * h
-                cos = np.cos(phase)
-                np.sin(phase, out=phase)
-                term = np.empty(h.shape, dtype=np.complex64)
-                np.multiply(w, cos, out=term.real)
-                np.multiply(w, phase, out=term.imag)
-                np.negative(term.imag, out=term.imag)
-                del phase, cos
+                term = _weighted_phase(h, w, vc)  # as _raw_power
                 # G_n = (F_n - dc_n w_shape) / n! at the kept outputs, F_n the transform of
                 # the term W exp(-i v_c h) u^n: the x pass over the whole tile, the y pass
                 # on the kept columns only
