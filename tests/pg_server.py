@@ -77,6 +77,37 @@ def _as_server_user(cmd: list[str]) -> list[str]:
     return ["runuser", "-u", "postgres", "--", *cmd] if os.geteuid() == 0 else cmd
 
 
+#: Attempts at a port: another process (an xdist worker starting its own server) may take
+#: the port :func:`_free_port` found free between its check and the server's bind.
+PORT_ATTEMPTS = 5
+
+
+def _start(bindir: Path, data: Path, root: Path, env: dict[str, str]) -> int:
+    """Start the server of ``data`` on a free port; return the port. A port taken between
+    :func:`_free_port` and the server's bind (the log says "could not bind") is retried on
+    another, up to :data:`PORT_ATTEMPTS` times; any other failure raises at once, with the
+    server's log."""
+    log = root / "server.log"
+    for attempt in range(1, PORT_ATTEMPTS + 1):
+        port = _free_port()
+        opts = f"-p {port} -k {root} -c listen_addresses=127.0.0.1 -c fsync=off"
+        log.unlink(missing_ok=True)
+        proc = subprocess.run(
+            _as_server_user([str(bindir / "pg_ctl"), "-D", str(data), "-o", opts,
+                             "-l", str(log), "-w", "-t", "60", "start"]),
+            capture_output=True, env=env, timeout=120, check=False,
+        )  # fmt: skip
+        if proc.returncode == 0:
+            return port
+        text = log.read_text(errors="replace") if log.exists() else ""
+        if "could not bind" not in text or attempt == PORT_ATTEMPTS:
+            raise RuntimeError(
+                f"pg_ctl start on port {port} failed ({proc.returncode}): "
+                f"{proc.stderr.decode(errors='replace')[-400:]} {text[-800:]}"
+            )
+    raise AssertionError("unreachable")
+
+
 @contextlib.contextmanager
 def pg_server(bindir: Path) -> Iterator[PgServer]:
     """Start a server in a temp dir; stop it and remove everything on exit."""
@@ -87,7 +118,6 @@ def pg_server(bindir: Path) -> Iterator[PgServer]:
     if os.geteuid() == 0:
         shutil.chown(root, "postgres")
         shutil.chown(pwfile, "postgres")
-    port = _free_port()
     env = {**os.environ, "LC_ALL": "C"}
     env.pop("PGPASSWORD", None)
     run = {"check": True, "capture_output": True, "env": env, "timeout": 120}
@@ -96,12 +126,7 @@ def pg_server(bindir: Path) -> Iterator[PgServer]:
                          "scram-sha-256", f"--pwfile={pwfile}", "-E", "UTF8"]),
         **run,
     )  # fmt: skip
-    opts = f"-p {port} -k {root} -c listen_addresses=127.0.0.1 -c fsync=off"
-    subprocess.run(
-        _as_server_user([str(bindir / "pg_ctl"), "-D", str(data), "-o", opts,
-                         "-l", str(root / "server.log"), "-w", "-t", "60", "start"]),
-        **run,
-    )  # fmt: skip
+    port = _start(bindir, data, root, env)
     try:
         yield PgServer(port=port, root=root)
     finally:

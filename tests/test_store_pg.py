@@ -257,3 +257,27 @@ def test_migrate_from_sqlite(url: str, tmp_path: Path) -> None:
     _cli("runs", "export", "1", "--store", url, "-o", str(tmp_path / "b.nc"), env=env)
     with xr.open_dataset(tmp_path / "a.nc") as da, xr.open_dataset(tmp_path / "b.nc") as db:
         xr.testing.assert_equal(da, db)
+
+
+def test_test_server_retries_a_port_taken_before_its_bind(monkeypatch: pytest.MonkeyPatch) -> None:
+    """tests/pg_server.py: a port found free and then taken by another process (an xdist
+    worker's server) before PostgreSQL binds it makes the start fail with "could not bind";
+    the helper starts on another port instead of failing the module's tests."""
+    import socket
+
+    import tests.pg_server as pgs
+
+    assert BIN is not None
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        busy = int(taken.getsockname()[1])
+        ports = iter([busy])
+        real = pgs._free_port
+        monkeypatch.setattr(pgs, "_free_port", lambda: next(ports, None) or real())
+        with pgs.pg_server(BIN) as srv:
+            assert srv.port != busy
+            import psycopg
+
+            with psycopg.connect(srv.url(), password=PLANTED_PASSWORD) as conn:
+                assert conn.execute("SELECT 1").fetchone() == (1,)
