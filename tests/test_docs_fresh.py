@@ -10,6 +10,8 @@
   answers.
 - README.md's twin residual table and its summary lines are what their command measures
   (``.venv/bin/python -m tests.test_docs_fresh --update`` rewrites them).
+- README.md's speed summary is generated from bench/README.md's issue-26 table
+  (``.venv/bin/python bench/speed_summary.py --write``).
 """
 
 from __future__ import annotations
@@ -333,3 +335,17 @@ if __name__ == "__main__":
     if sys.argv[1:] != ["--update"]:
         sys.exit("usage: python -m tests.test_docs_fresh --update  (README.md's twin table)")
     update_readme_twin_table()
+
+
+def test_readme_speed_table_is_bench_readmes() -> None:
+    """README.md's speed summary is bench/README.md's issue-26 table, column for column
+    (``bench/speed_summary.py``): a figure updated in one and not the other fails here."""
+    summary = _bench("speed_summary")
+    bench = (ROOT / "bench" / "README.md").read_text(encoding="utf-8")
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    rows = summary.table_rows(bench)
+    assert len(rows) >= 10 and all(r["target"] for r in rows)
+    assert summary.written(readme) == summary.block(bench), (
+        "README.md's speed summary differs from bench/README.md's table: run "
+        "'.venv/bin/python bench/speed_summary.py --write'"
+    )
