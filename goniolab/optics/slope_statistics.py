@@ -125,8 +125,12 @@ def _lambda_columns(
         buf /= width
         k[...] = buf  # truncation, as astype(np.int64)
         np.minimum(k, nb - 1, out=k)
-        cnt = np.bincount(k, minlength=nb).astype(np.float64)
-        tot = np.bincount(k, weights=x, minlength=nb)
+        # the counts and sums per bin by np.add.at: the facets added in their order, as
+        # np.bincount adds them (the same sums), without bincount's min/max pass over k
+        cnt = np.zeros(nb)
+        np.add.at(cnt, k, 1.0)
+        tot = np.zeros(nb)
+        np.add.at(tot, k, x)
         c_cnt = np.concatenate(([0.0], np.cumsum(cnt)))
         c_tot = np.concatenate(([0.0], np.cumsum(tot)))
         for sign, col in ((1.0, j), (-1.0, j + half)):
