@@ -696,9 +696,11 @@ class FacetModel:
         in-plane angle of ``flat`` (deg), by the deposited grid (see :meth:`luminance_pct`);
         ``grad=False`` leaves out the first-order term of the weight across the source."""
         kind = self._aperture_pair(source, detector)
+        caps = None  # the cone half angles, rad
         if kind == "cone":
             assert isinstance(source, Cone) and isinstance(detector, Cone)
             reach_a = reach_b = source.half_angle_deg + detector.half_angle_deg
+            caps = (math.radians(source.half_angle_deg), math.radians(detector.half_angle_deg))
         else:
             assert isinstance(source, Rect) and isinstance(detector, Rect)
             reach_a = 0.5 * (source.in_plane_deg + detector.in_plane_deg)
@@ -721,7 +723,9 @@ class FacetModel:
         alpha_coarse = a0 + cf * h * np.arange(KN.coarse_size(na))
         if self.masking:  # the nodes' Lambda (and its table) beside the deposit
             grids = [(alpha_nodes, beta_nodes)] + ([(alpha_coarse, beta_coarse)] if grad_on else [])
-            parts: list[Any] = self.slopes.beside(deposit, grids)
+            # and the cone kernels' overlap table (cached), which the readings need next
+            table = None if caps is None else functools.partial(cone_table, *caps)
+            parts: list[Any] = self.slopes.beside(deposit, grids, table)
         else:
             parts = deposit()
         grid = np.sum([p[0] for p in parts], axis=0)

@@ -415,14 +415,22 @@ class SlopeStatistics:
                 self._node_lambda[key] = lam
         return lam
 
-    def beside(self, work: Callable[[], T], grids: list[tuple[FloatArray, FloatArray]]) -> T:
+    def beside(
+        self,
+        work: Callable[[], T],
+        grids: list[tuple[FloatArray, FloatArray]],
+        then: Callable[[], object] | None = None,
+    ) -> T:
         """``work()``, while the :meth:`node_lambda` of each ``(alpha_deg, beta_rad)`` of
-        ``grids`` (and the Lambda table they read) is computed beside it: independent
+        ``grids`` (and the Lambda table they read), and then ``then()`` (work the caller
+        needs next, e.g. a cached aperture table), are computed beside it: independent
         walks, on two threads when there are two (:func:`run_tasks`)."""
 
         def lambdas() -> None:
             for alpha_deg, beta_rad in grids:
                 self.node_lambda(alpha_deg, beta_rad)
+            if then is not None:
+                then()
 
         tasks: list[Callable[[], Any]] = [work, lambdas]
         out: T = run_tasks(tasks)[0]
