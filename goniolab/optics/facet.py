@@ -333,7 +333,7 @@ class FacetModel:
 
     def _cells(self, keep_index: bool) -> tuple[FloatArray, FloatArray, FloatArray]:
         """:attr:`_slope_cells`; ``keep_index=False`` (a cone grid's deposit) lets the int16
-        indices go once counted: their 8 MB (2048^2 facets) are reused by the deposit's
+        indices go once counted: their 16 MB (2048^2 facets) are reused by the deposit's
         temporaries instead of fresh pages (a later slit counts again, :meth:`_facets_near`)."""
         got: tuple[FloatArray, FloatArray, FloatArray] | None = self.__dict__.get("_cells_")
         if got is None:
