@@ -58,7 +58,9 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -346,16 +348,59 @@ def facet_floor(mp: Path, repeats: int) -> dict[str, dict[str, float]]:
     }  # fmt: skip
 
 
+def facet_stages(mp: Path, repeats: int) -> dict[str, float]:
+    """The rough map's 71-point curve (defaults) in this process, stage by stage on one
+    thread: medians of ``repeats`` of each stage's wall time (a fresh model each time,
+    the cone table's cache cleared; this process's heap is warm, so a fresh process
+    faults in more pages than these figures include)."""
+    import gc
+
+    os.environ["GONIOLAB_THREADS"] = "1"
+    from goniolab.model_cache import _check_numeric_range, build_model, resolve_map
+    from goniolab.optics.apertures import Cone
+    from goniolab.optics.facet_apertures import cone_table
+
+    times: dict[str, list[float]] = {}
+
+    def stage(name: str, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
+        t0 = time.perf_counter()
+        out = fn(*args, **kwargs)
+        times.setdefault(name, []).append(time.perf_counter() - t0)
+        return out
+
+    tr = np.arange(0.0, 71.0)
+    cone = Cone(6.0)
+    for _ in range(repeats + 1):  # the first round warms the imports and the heap
+        cone_table.cache_clear()
+        hm = stage("read the map (resolve_map)", resolve_map, str(mp))
+        stage("its height range (the overflow check)", _check_numeric_range, "map", hm)
+        auto = stage("level it (auto model, plane fit)", build_model, hm)
+        stage("Sq and the rule's choice at 45 deg", auto.choice, 45.0)
+        facet = auto.facet
+        stage("slope cells (walk, count)", facet._cells, keep_index=False)
+        stage("Smith Lambda table", getattr, facet.slopes, "_lambda_table")
+        stage("deposit, nodes' Lambda, cone table, 71 readings", auto.luminance_pct, 45.0, tr,
+              source=cone, detector=cone)  # fmt: skip
+        del hm, auto, facet  # the next round reads and models the map afresh (the readers
+        gc.collect()  # share a map still held; the model's closures are cycles)
+    return {name: statistics.median(v[1:]) for name, v in times.items()}
+
+
 def print_facet_floor(size: int, repeats: int, as_json: bool) -> int:
     load0 = os.getloadavg()[0]
     with tempfile.TemporaryDirectory(prefix="goniolab-facet-floor-") as tmp:
         mp = Path(tmp) / "rough.npy"
         gaussian_map(mp, size, 2.5, 30.0, 1.0, seed=2)
         rows = facet_floor(mp, repeats)
-    out = {"load_before": load0, "load_after": os.getloadavg()[0], "floor": rows}
+        stages = facet_stages(mp, repeats)
+    out = {"load_before": load0, "load_after": os.getloadavg()[0], "floor": rows,
+           "stages_s": stages}  # fmt: skip
     if as_json:
         print(json.dumps(out, indent=2))
         return 0
+    print(f"the curve in process, one thread, median of {repeats} (warm heap):")
+    for name, t in stages.items():
+        print(f"  {name:50}{1e3 * t:7.1f} ms")
     ref = rows["facet script (baseline_numpy.py brdf)"]
     print(f"the facet floor, whole processes, {size}^2 rough map, median of {repeats}, load "
           f"{load0:.1f} before / {out['load_after']:.1f} after")  # fmt: skip
