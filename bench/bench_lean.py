@@ -2,7 +2,7 @@
 
 Run:  .venv/bin/python bench/bench_lean.py [--size 2048] [--repeats 5] [--before DIR]
       [--in-process] [--only MAPS] [--no-wave] [--json]
-      .venv/bin/python bench/bench_lean.py --check | --same-as DIR | --floor
+      .venv/bin/python bench/bench_lean.py --check | --same-as DIR | --floor | --facet-floor
 
 On three ``size x size`` float64 ``.npy`` maps made in a temporary directory (periodic
 Gaussian surfaces, Gaussian ACF):
@@ -29,6 +29,9 @@ transform per reading and wavelength: 10-20 s a run; ``--no-wave`` leaves it out
 ``wave x`` columns. ``--check`` only compares that script with goniolab's ``--json`` on
 those maps, reading by reading where goniolab's provenance names the script's model
 (bounds ``CHECK_*``; exit 1 when one is exceeded).
+``--facet-floor`` measures only the floor of ``predict brdf`` on the rough map: the
+interpreter, numpy, reading the map, every module the command imports (imported, nothing
+run), the command on one thread and with the defaults, paired with the facet script.
 ``--same-as DIR`` only checks that ``predict brdf|gloss MAP --json`` prints the same bytes
 (stdout and stderr) from this checkout and from DIR on every map (a speed change that must
 not change a reading). ``--floor`` measures only the floor of any wave computation on the smooth map, step by step
@@ -55,7 +58,9 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -292,6 +297,120 @@ def floor(mp: Path, repeats: int) -> dict[str, dict[str, float]]:
     }  # fmt: skip
 
 
+# ------------------------------------------------------------------ the facet floor (--facet-floor)
+def _command_modules(mp: Path, env: dict[str, str]) -> list[str]:
+    """The modules a ``predict brdf MAP`` process holds when it ends (run in process)."""
+    code = (
+        "import sys, io, contextlib\nfrom goniolab.cli import main\n"
+        "with contextlib.redirect_stdout(io.StringIO()):\n"
+        f"    main(['predict', 'brdf', {str(mp)!r}, '--theta-i', '45', '--theta-r', '0:70:1'])\n"
+        "print('\\n'.join(sys.modules))"
+    )
+    out = subprocess.run([PY, "-c", code], env=env, cwd=tempfile.gettempdir(),
+                         capture_output=True, text=True, check=True)  # fmt: skip
+    return [m for m in out.stdout.split() if not m.startswith("__")]
+
+
+def facet_floor(mp: Path, repeats: int) -> dict[str, dict[str, float]]:
+    """The floor of ``predict brdf`` on the rough map, whole processes, paired in the same
+    rounds: the interpreter, numpy's import, reading the map, every module the command
+    imports (imported, nothing run) with and without reading the map, the command on one
+    thread and with the defaults, and the facet script. OpenBLAS capped at one thread in
+    all (as the CLI does before numpy loads)."""
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    env = {**env, "PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1"}
+    mods = _command_modules(mp, env)
+    imports = f"import importlib\nfor m in {mods!r}:\n    try:\n        importlib.import_module(m)\n    except Exception:\n        pass\n"  # fmt: skip
+    load = f"import numpy as np\nnp.load({str(mp)!r})\n"
+    steps = {
+        "python -c pass": "pass",
+        "import numpy": "import numpy",
+        "+ np.load of the map": load,
+        f"the command's {len(mods)} modules imported": imports,
+        "+ np.load, after those imports": imports + load,
+    }
+    cmds = {name: ([PY, "-c", code], env) for name, code in steps.items()}
+    cmds["predict brdf, one thread"] = (goniolab_cmd("brdf", mp), {**env, "GONIOLAB_THREADS": "1"})
+    cmds["predict brdf (defaults)"] = (goniolab_cmd("brdf", mp), env)
+    cmds["facet script (baseline_numpy.py brdf)"] = (
+        [PY, str(ROOT / "bench" / "baseline_numpy.py"), str(mp), "brdf"], env
+    )  # fmt: skip
+    for cmd, e in cmds.values():
+        run(cmd, e)
+    rows: dict[str, list[tuple[float, float]]] = {k: [] for k in cmds}
+    for r in range(repeats):
+        for name in list(cmds) if r % 2 == 0 else list(cmds)[::-1]:
+            rows[name].append(run(*cmds[name]))
+    return {
+        name: {"wall_s": statistics.median(w for w, _ in v),
+               "cpu_s": statistics.median(c for _, c in v)}
+        for name, v in rows.items()
+    }  # fmt: skip
+
+
+def facet_stages(mp: Path, repeats: int) -> dict[str, float]:
+    """The rough map's 71-point curve (defaults) in this process, stage by stage on one
+    thread: medians of ``repeats`` of each stage's wall time (a fresh model each time,
+    the cone table's cache cleared; this process's heap is warm, so a fresh process
+    faults in more pages than these figures include)."""
+    import gc
+
+    os.environ["GONIOLAB_THREADS"] = "1"
+    from goniolab.model_cache import _check_numeric_range, build_model, resolve_map
+    from goniolab.optics.apertures import Cone
+    from goniolab.optics.facet_apertures import cone_table
+
+    times: dict[str, list[float]] = {}
+
+    def stage(name: str, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
+        t0 = time.perf_counter()
+        out = fn(*args, **kwargs)
+        times.setdefault(name, []).append(time.perf_counter() - t0)
+        return out
+
+    tr = np.arange(0.0, 71.0)
+    cone = Cone(6.0)
+    for _ in range(repeats + 1):  # the first round warms the imports and the heap
+        cone_table.cache_clear()
+        hm = stage("read the map (resolve_map)", resolve_map, str(mp))
+        stage("its height range (the overflow check)", _check_numeric_range, "map", hm)
+        auto = stage("level it (auto model, plane fit)", build_model, hm)
+        stage("Sq and the rule's choice at 45 deg", auto.choice, 45.0)
+        facet = auto.facet
+        stage("slope cells (walk, count)", facet._cells, keep_index=False)
+        stage("Smith Lambda table", getattr, facet.slopes, "_lambda_table")
+        stage("deposit, nodes' Lambda, cone table, 71 readings", auto.luminance_pct, 45.0, tr,
+              source=cone, detector=cone)  # fmt: skip
+        del hm, auto, facet  # the next round reads and models the map afresh (the readers
+        gc.collect()  # share a map still held; the model's closures are cycles)
+    return {name: statistics.median(v[1:]) for name, v in times.items()}
+
+
+def print_facet_floor(size: int, repeats: int, as_json: bool) -> int:
+    load0 = os.getloadavg()[0]
+    with tempfile.TemporaryDirectory(prefix="goniolab-facet-floor-") as tmp:
+        mp = Path(tmp) / "rough.npy"
+        gaussian_map(mp, size, 2.5, 30.0, 1.0, seed=2)
+        rows = facet_floor(mp, repeats)
+        stages = facet_stages(mp, repeats)
+    out = {"load_before": load0, "load_after": os.getloadavg()[0], "floor": rows,
+           "stages_s": stages}  # fmt: skip
+    if as_json:
+        print(json.dumps(out, indent=2))
+        return 0
+    print(f"the curve in process, one thread, median of {repeats} (warm heap):")
+    for name, t in stages.items():
+        print(f"  {name:50}{1e3 * t:7.1f} ms")
+    ref = rows["facet script (baseline_numpy.py brdf)"]
+    print(f"the facet floor, whole processes, {size}^2 rough map, median of {repeats}, load "
+          f"{load0:.1f} before / {out['load_after']:.1f} after")  # fmt: skip
+    print(f"{'step':40}{'wall':>9}{'cpu':>9}{'wall x':>8}{'cpu x':>7}  (x: over the facet script)")
+    for name, r in rows.items():
+        print(f"{name:40}{r['wall_s']:8.3f}s{r['cpu_s']:8.3f}s"
+              f"{r['wall_s'] / ref['wall_s']:8.2f}{r['cpu_s'] / ref['cpu_s']:7.2f}")  # fmt: skip
+    return 0
+
+
 # ------------------------------------------------------------------ the wave script (--check)
 #: Agreement of bench/baseline_wave_numpy.py with goniolab, checked by ``--check``: gloss
 #: and E430 readings to this fraction of their value ...
@@ -433,7 +552,14 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="only the floor of a wave computation on the smooth map (steps)",
     )
+    ap.add_argument(
+        "--facet-floor",
+        action="store_true",
+        help="only the floor of predict brdf on the rough map (imports, reading, the command)",
+    )
     args = ap.parse_args(argv)
+    if args.facet_floor:
+        return print_facet_floor(args.size, args.repeats, args.json)
     if args.floor:
         return print_floor(args.size, args.repeats, args.json)
     out: dict[str, object] = {"cpus": os.cpu_count(), "load_before": os.getloadavg()[0],

@@ -268,8 +268,8 @@ def surface_model(
 
 def parse_angle_list(spec: str | Sequence[float] | NDArray[np.float64], name: str) -> NDArray[Any]:
     """Angles from ``start:stop:step`` (stop included), ``a,b,c`` or a sequence, degrees
-    (:func:`goniolab.scan.plans.parse_angles`); ``name`` names the input in the error."""
-    from goniolab.scan.plans import PlanError, parse_angles
+    (:func:`goniolab.scan.angle_lists.parse_angles`); ``name`` names the input in the error."""
+    from goniolab.scan.angle_lists import PlanError, parse_angles
 
     given = spec if isinstance(spec, str) else [float(v) for v in spec]
     try:

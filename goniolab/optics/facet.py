@@ -79,7 +79,6 @@ import math
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass
-from functools import cached_property
 from typing import Any, Literal
 
 import numpy as np
@@ -117,6 +116,7 @@ from goniolab.optics.facet_backends import (
     kernel_pool,
     limit_threads,
     numba_kernels,
+    run_blocks,
     slope_cells_indexed,
     thread_limit,
 )
@@ -292,6 +292,7 @@ class FacetModel:
         wi: FloatArray,
         *args: Any,
         near: tuple[float, float, float] | None = None,
+        keep_index: bool = True,
     ) -> list[Any]:
         """Run a kernel (``"deposit"``, ``"cone_response"``, ...) over the facets, one
         result per chunk: its numba version in threaded chunks, or its numpy twin.
@@ -307,13 +308,13 @@ class FacetModel:
             if near is not None:
                 p, q = self._facets_near(wi, *near)
                 return [numpy_fn(p, q, SLOPES, *common)]
-            cp, cq, counts = self._slope_cells  # in blocks: a block's temporaries only
+            cp, cq, counts = self._cells(keep_index)  # in blocks: a block's temporaries only
             return [
                 numpy_fn(cp[a:b], cq[a:b], SLOPES, *common, counts=counts[a:b])
                 for a, b in itertools.pairwise([*range(0, cp.size, _CELLS_PER_CALL), cp.size])
             ]
         if self.surface.streamed and self.surface.n_facets > STREAM_MIN_FACETS:
-            return self._run_blocks(numpy_fn if self.backend == "numpy" else kernel, common)
+            return run_blocks(self.surface, numpy_fn if self.backend == "numpy" else kernel, common)
         chunks = self._chunks()
         if self.backend == "numpy":
             return [numpy_fn(*c, *common) for c in chunks]
@@ -323,42 +324,25 @@ class FacetModel:
         futures = [kernel_pool().submit(numba_fn, *c, *common) for c in chunks]
         return [f.result() for f in futures]
 
-    def _run_blocks(self, kernel: Any, common: tuple[Any, ...]) -> list[Any]:
-        """:meth:`_run`'s per-facet kernels over a large map's surface, block by block as
-        it forms them (:meth:`~goniolab.optics.surface.Surface.slope_blocks`): numba's on
-        up to as many blocks at once as threads, the numpy twin (``kernel`` a function) one
-        by one. The map's facets are never all held, nor the blocks' results: they are
-        summed as they come (every kernel's result is a sum over facets)."""
-
-        def add(a: Any, b: Any) -> Any:
-            return b if a is None else tuple(map(add, a, b)) if isinstance(a, tuple) else a + b
-
-        total: Any = None
-        if callable(kernel):
-            for p, q in self.surface.slope_blocks():
-                total = add(total, kernel(p, q, SLOPES, *common))
-            return [total]
-        numba_fn = getattr(numba_kernels(), kernel + "_numba")
-        width = max(1, thread_limit() or os.cpu_count() or 1)
-        wave: list[Any] = []
-        for p, q in self.surface.slope_blocks():
-            wave.append(kernel_pool().submit(numba_fn, p, q, SLOPES, *common))
-            if len(wave) >= width:
-                for f in wave:
-                    total = add(total, f.result())
-                wave = []
-        for f in wave:
-            total = add(total, f.result())
-        return [total]
-
-    @cached_property
+    @property
     def _slope_cells(self) -> tuple[FloatArray, FloatArray, FloatArray]:
         """The lean backend's slope cells ``(p, q, count)``
-        (:func:`goniolab.optics.facet_backends.slope_cells`)."""
-        cells, index = slope_cells_indexed(self.surface)
-        keep = self.surface.n_facets <= _KEEP_INDEX_MAX_FACETS  # 4 bytes a facet, held
-        self.__dict__["_cell_index"] = index if keep else None
-        return cells
+        (:func:`goniolab.optics.facet_backends.slope_cells`), counted once, with the facets'
+        cell indices kept beside them (``_cell_index``) for the narrow slits."""
+        return self._cells(keep_index=True)
+
+    def _cells(self, keep_index: bool) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """:attr:`_slope_cells`; ``keep_index=False`` (a cone grid's deposit) lets the int16
+        indices go once counted: their 16 MB (2048^2 facets) are reused by the deposit's
+        temporaries instead of fresh pages (a later slit counts again, :meth:`_facets_near`)."""
+        got: tuple[FloatArray, FloatArray, FloatArray] | None = self.__dict__.get("_cells_")
+        if got is None:
+            got, index = slope_cells_indexed(self.surface)
+            if keep_index:  # 4 bytes a facet, held
+                keep = self.surface.n_facets <= _KEEP_INDEX_MAX_FACETS
+                self.__dict__["_cell_index"] = index if keep else None
+            self.__dict__["_cells_"] = got
+        return got
 
     def _facets_near(
         self, wi: FloatArray, alpha_rad: float, reach_a: float, reach_b: float
@@ -366,8 +350,9 @@ class FacetModel:
         """The facets a narrow slit can reach (:func:`goniolab.optics.facet_backends.facets_near`);
         from the second slit on, picked by the facets' cell indices (:attr:`_slope_cells`)."""
         walks = self.__dict__["_near_walks"] = self.__dict__.get("_near_walks", 0) + 1
-        if walks > 1 and self.backend == "lean":
-            self._slope_cells  # noqa: B018  (one walk for all slits; it keeps the index)
+        if walks > 1 and self.backend == "lean" and "_cell_index" not in self.__dict__:
+            self.__dict__.pop("_cells_", None)  # one walk for all slits, keeping the index
+            self._slope_cells  # noqa: B018
         index = self.__dict__.get("_cell_index")
         return facets_near(self.surface, None, wi, alpha_rad, reach_a, reach_b, index)
 
@@ -711,9 +696,11 @@ class FacetModel:
         in-plane angle of ``flat`` (deg), by the deposited grid (see :meth:`luminance_pct`);
         ``grad=False`` leaves out the first-order term of the weight across the source."""
         kind = self._aperture_pair(source, detector)
+        caps = None  # the cone half angles, rad
         if kind == "cone":
             assert isinstance(source, Cone) and isinstance(detector, Cone)
             reach_a = reach_b = source.half_angle_deg + detector.half_angle_deg
+            caps = (math.radians(source.half_angle_deg), math.radians(detector.half_angle_deg))
         else:
             assert isinstance(source, Rect) and isinstance(detector, Rect)
             reach_a = 0.5 * (source.in_plane_deg + detector.in_plane_deg)
@@ -728,7 +715,7 @@ class FacetModel:
         a0 = i_lo * h
         grad_on = kind == "cone" and grad
         args = (math.radians(a0), math.radians(h), na, -v * hv, hv, nb, grad_on)
-        deposit = functools.partial(self._run, "deposit", wi, *args)
+        deposit = functools.partial(self._run, "deposit", wi, *args, keep_index=False)
         cf = KN.GRAD_COARSEN
         beta_nodes = np.arcsin(np.clip(hv * np.arange(-v, v + 1), -1.0, 1.0))
         beta_coarse = np.arcsin(np.clip(hv * (cf * np.arange(KN.coarse_size(nb)) - v), -1.0, 1.0))
@@ -736,7 +723,9 @@ class FacetModel:
         alpha_coarse = a0 + cf * h * np.arange(KN.coarse_size(na))
         if self.masking:  # the nodes' Lambda (and its table) beside the deposit
             grids = [(alpha_nodes, beta_nodes)] + ([(alpha_coarse, beta_coarse)] if grad_on else [])
-            parts: list[Any] = self.slopes.beside(deposit, grids)
+            # and the cone kernels' overlap table (cached), which the readings need next
+            table = None if caps is None else functools.partial(cone_table, *caps)
+            parts: list[Any] = self.slopes.beside(deposit, grids, table)
         else:
             parts = deposit()
         grid = np.sum([p[0] for p in parts], axis=0)

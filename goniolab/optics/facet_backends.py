@@ -38,6 +38,7 @@ __all__ = [
     "kernel_pool",
     "limit_threads",
     "numba_kernels",
+    "run_blocks",
     "slope_cells",
     "slope_cells_indexed",
     "thread_limit",
@@ -72,8 +73,10 @@ _MAX_SLOPE_CELLS = 1 << 30
 _ONE_PASS_MAX_FACETS = 1 << 24
 #: ... forming the slopes this many at a time (a few rows of a map: in cache) ...
 _ONE_PASS_CHUNK = 1 << 16
-#: ... and count the kept indices this many at a time.
-_ONE_PASS_COUNT = 1 << 21
+#: ... and count the kept indices in tasks of this many facets (each task a grid of counts
+#: of its own; one task for a 2048^2 map: a second grid of counts, and its fresh pages,
+#: cost more than a second thread gains).
+_ONE_PASS_COUNT = 1 << 24
 #: Spans of rows the one walk is cut into (the same on any number of threads).
 _WALK_PARTS = 8
 _I16_MIN, _I16_MAX = float(np.iinfo(np.int16).min), float(np.iinfo(np.int16).max)
@@ -120,6 +123,35 @@ def kernel_pool() -> ThreadPoolExecutor:
             max_workers=max(1, os.cpu_count() or 1), thread_name_prefix="facet"
         )
     return _executor
+
+
+def run_blocks(surface: Surface, kernel: Any, common: tuple[Any, ...]) -> list[Any]:
+    """:meth:`goniolab.optics.facet.FacetModel._run`'s per-facet kernels over a large
+    map's ``surface``, block by block as it forms them
+    (:meth:`~goniolab.optics.surface.Surface.slope_blocks`): numba's on up to as many
+    blocks at once as threads, the numpy twin (``kernel`` a function) one by one. The map's facets are never all held, nor the blocks' results: they are
+    summed as they come (every kernel's result is a sum over facets)."""
+
+    def add(a: Any, b: Any) -> Any:
+        return b if a is None else tuple(map(add, a, b)) if isinstance(a, tuple) else a + b
+
+    total: Any = None
+    if callable(kernel):
+        for p, q in surface.slope_blocks():
+            total = add(total, kernel(p, q, SLOPES, *common))
+        return [total]
+    numba_fn = getattr(numba_kernels(), kernel + "_numba")
+    width = max(1, thread_limit() or os.cpu_count() or 1)
+    wave: list[Any] = []
+    for p, q in surface.slope_blocks():
+        wave.append(kernel_pool().submit(numba_fn, p, q, SLOPES, *common))
+        if len(wave) >= width:
+            for f in wave:
+                total = add(total, f.result())
+            wave = []
+    for f in wave:
+        total = add(total, f.result())
+    return [total]
 
 
 def slope_cells(
@@ -310,15 +342,19 @@ def _count_chunk(
     n_cells: int,
 ) -> NDArray[np.int64]:
     """The facet counts of the cells of the facets ``lo .. hi - 1``: their int64 keys
-    ``ip n_q + iq - offset`` formed a few rows at a time (in cache), then counted."""
-    key = np.empty(hi - lo, dtype=np.int64)
+    ``ip n_q + iq - offset`` formed a few rows at a time in one reused buffer (in cache)
+    and added to the counts as they come (``np.add.at``, as fast as ``np.bincount`` since
+    numpy 1.25): no key array of the facets (16 MB per 2**21 facets, freshly mapped pages
+    that cost a 2048^2 curve more than the count itself)."""
+    counts: NDArray[np.int64] = np.zeros(n_cells, dtype=np.int64)
+    key = np.empty(min(_ONE_PASS_CHUNK, hi - lo), dtype=np.int64)
     for a in range(lo, hi, _ONE_PASS_CHUNK):
         b = min(a + _ONE_PASS_CHUNK, hi)
-        kk = key[a - lo : b - lo]
+        kk = key[: b - a]
         np.multiply(ip[a:b], n_q, out=kk, dtype=np.int64)
         kk += iq[a:b]
         kk -= offset
-    counts: NDArray[np.int64] = np.bincount(key, minlength=n_cells)
+        np.add.at(counts, kk, 1)
     return counts
 
 

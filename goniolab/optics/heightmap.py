@@ -177,11 +177,14 @@ class HeightMap:
         got = self.derived().get("z_range")
         if got is None:
             z = self.z_um
-            # the two reductions at once when two threads may run (run_tasks)
+            # the two reductions at once when two threads may run (run_tasks); a map with
+            # no NaN (its sums finite, "complete") takes min and max, a third faster than
+            # fmin and fmax and the same values there
+            complete = bool(self.derived().get("complete"))
             lo, hi = run_tasks(
                 [
-                    functools.partial(np.fmin.reduce, z, axis=None),
-                    functools.partial(np.fmax.reduce, z, axis=None),
+                    functools.partial((np.minimum if complete else np.fmin).reduce, z, axis=None),
+                    functools.partial((np.maximum if complete else np.fmax).reduce, z, axis=None),
                 ]
             )
             got = (float(lo), float(hi))

@@ -50,35 +50,47 @@ class MapStats:
     ``corr_length_um``: where the isotropic autocorrelation falls to 1/e;
     ``step_um``: the larger lateral step; ``field_um``: the smaller tile side.
 
-    ``corr_length_um`` may be given as a function: it is then computed when first read
-    (the transforms of a tile, about 15 ms on a 2048^2 map, which the regime rule reads
-    only for a smooth map: a rough map's rule decides on Sq alone). Immutable, compared
-    by value, as a frozen dataclass of the five numbers.
+    ``sdq`` and ``corr_length_um`` may be given as functions: each is then computed when
+    first read (Sdq: a pass over the map's differences, about 8 ms on a 2048^2 map; the
+    length: the transforms of a tile, about 15 ms), which the regime rule reads only for
+    a smooth map: a rough map's rule decides on Sq alone (g >= 20 comes before any
+    test of Sdq or the length). Immutable, compared by value, as a frozen dataclass of
+    the five numbers.
     """
 
-    __slots__ = ("_corr", "_corr_at_least", "field_um", "sdq", "sq_um", "step_um")
+    __slots__ = ("_corr", "_corr_at_least", "_sdq", "field_um", "sq_um", "step_um")
     _FIELDS = ("sq_um", "sdq", "corr_length_um", "step_um", "field_um")
 
     sq_um: float
-    sdq: float
     step_um: float
     field_um: float
+    _sdq: float | Callable[[], float]
     _corr: float | Callable[[], float]
     _corr_at_least: Callable[[float], bool] | None
 
     def __init__(
         self,
         sq_um: float,
-        sdq: float,
+        sdq: float | Callable[[], float],
         corr_length_um: float | Callable[[], float],
         step_um: float,
         field_um: float,
         corr_at_least: Callable[[float], bool] | None = None,
     ) -> None:
-        for name, value in (("sq_um", sq_um), ("sdq", sdq), ("step_um", step_um),
+        for name, value in (("sq_um", sq_um), ("_sdq", sdq), ("step_um", step_um),
                             ("field_um", field_um), ("_corr", corr_length_um),
                             ("_corr_at_least", corr_at_least)):  # fmt: skip
             object.__setattr__(self, name, value)
+
+    @property
+    def sdq(self) -> float:
+        """The rms gradient ``sqrt(<p^2 + q^2>)`` (computed when first read, if given as a
+        function)."""
+        sdq = self._sdq
+        if callable(sdq):
+            sdq = float(sdq())
+            object.__setattr__(self, "_sdq", sdq)
+        return float(sdq)
 
     def corr_length_below(self, length_um: float) -> bool:
         """``corr_length_um < length_um``, without computing the length when a cheap bound
@@ -234,22 +246,30 @@ class SharedMap:
     def _facets_surface(self) -> Surface:
         return Surface.from_heightmap(self.hm)
 
-    @cached_property
-    def stats(self) -> MapStats:
+    def _block_sums(self, diffs: bool) -> list[tuple[float, ...]]:
+        """Per block of :data:`_STATS_ROWS` rows of the levelled map (float32 heights as
+        the tiles hold them, summed in float64), in the blocks' order: ``(sum z, sum z^2)``
+        and, with ``diffs``, the sums of the squared x and y differences (the x
+        differences within the block's rows, the y differences to the next row)."""
         t = self.tiled
-        ny, nx = t.shape
-        # sums over blocks of rows of the levelled map (float64): no copy of the whole map;
-        # one pass (the sum of squares about zero, then about the mean: the levelled mean
-        # is ~0, so no precision is lost)
+        ny, _ = t.shape
+        # sums over blocks of rows (no copy of the whole map), one pass (the sum of squares
+        # about zero, then about the mean: the levelled mean is ~0, so no precision is lost)
         blocks = [(r0, min(r0 + _STATS_ROWS, ny)) for r0 in range(0, ny, _STATS_ROWS)]
 
-        def sums(part: list[tuple[int, int]]) -> list[tuple[float, float, float, float]]:
-            out = []
-            for r0, r1 in part:  # one more row for the y differences
-                z = t.levelled(slice(r0, min(r1 + 1, ny)), slice(None)).astype(np.float64)
+        def sums(part: list[tuple[int, int]]) -> list[tuple[float, ...]]:
+            out: list[tuple[float, ...]] = []
+            for r0, r1 in part:
+                # one more row for the y differences (each height is levelled on its own:
+                # the block's own rows are the same values either way)
+                r_end = min(r1 + 1, ny) if diffs else r1
+                z = t.levelled(slice(r0, r_end), slice(None)).astype(np.float64)
                 zb = z[: r1 - r0]
                 s1 = float(np.sum(zb))
                 s2 = float(np.einsum("ij,ij->", zb, zb))
+                if not diffs:
+                    out.append((s1, s2))
+                    continue
                 d = np.diff(zb, axis=1)
                 sp = float(np.einsum("ij,ij->", d, d))
                 d = np.diff(z, axis=0)
@@ -258,23 +278,39 @@ class SharedMap:
 
         # the blocks in a few fixed groups on whichever thread is free (a group walks its
         # blocks in a loop, whose temporaries the allocator reuses), each block's sums
-        # added in the blocks' order: the same bits on any number of threads
+        # added in the blocks' order by the caller: the same bits on any number of threads
         k = _STATS_GROUPS
         groups = [blocks[len(blocks) * i // k : len(blocks) * (i + 1) // k] for i in range(k)]
-        s1 = s2 = sp = sq2 = 0.0
-        for part in run_tasks([functools.partial(sums, g) for g in groups if g]):
-            for b1, b2, bp, bq in part:
-                s1 += b1
-                s2 += b2
-                sp += bp / (t.dx_um * t.dx_um)
-                sq2 += bq / (t.dy_um * t.dy_um)
+        return [row for part in run_tasks([functools.partial(sums, g) for g in groups if g])
+                for row in part]  # fmt: skip
+
+    def _rms_gradient(self) -> float:
+        """The rms gradient of the levelled map (forward differences along x and y)."""
+        t = self.tiled
+        ny, nx = t.shape
+        sp = sq2 = 0.0
+        for _, _, bp, bq in self._block_sums(diffs=True):
+            sp += bp / (t.dx_um * t.dx_um)
+            sq2 += bq / (t.dy_um * t.dy_um)
+        return math.sqrt(sp / (ny * (nx - 1)) + sq2 / ((ny - 1) * nx))
+
+    @cached_property
+    def stats(self) -> MapStats:
+        """The map's :class:`MapStats`: Sq now (a pass over the levelled heights), Sdq and
+        the correlation length when first read (the regime rule reads them for a smooth
+        map only)."""
+        t = self.tiled
+        ny, nx = t.shape
+        s1 = s2 = 0.0
+        for b1, b2 in self._block_sums(diffs=False):
+            s1 += b1
+            s2 += b2
         n_pts = ny * nx
         mean = s1 / n_pts
         sq = math.sqrt(max(s2 / n_pts - mean * mean, 0.0))
-        sdq = math.sqrt(sp / (ny * (nx - 1)) + sq2 / ((ny - 1) * nx))
         return MapStats(
             sq_um=sq,
-            sdq=sdq,
+            sdq=self._rms_gradient,
             corr_length_um=self._corr_length_um,
             step_um=max(t.dx_um, t.dy_um),
             field_um=min(t.nx_t * t.dx_um, t.ny_t * t.dy_um),

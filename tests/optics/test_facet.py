@@ -853,3 +853,20 @@ def test_point_brdf_kernel_density_matches_beckmann_on_a_rough_gaussian_map(
         # brdf_point (the --point path) uses the same density: wo_oop[4] is (ti, 186 deg)
         assert m.brdf_point(ti, ti, 186.0) == pytest.approx(float(fa[len(tr) + 4]), rel=0.05)
     assert worst_hist > 0.15  # the old 1e-3 histogram fails the same bound
+
+
+def test_gauss_legendre_rules_are_numpys_to_the_last_bit() -> None:
+    """The cone table's 16-point rule is kept as literals (no numpy.polynomial import):
+    the same doubles as numpy's leggauss, and other orders are numpy's own."""
+    from numpy.polynomial.legendre import leggauss
+
+    from goniolab.optics.facet_apertures import gauss_legendre
+
+    for n in (16, 48, 5):
+        x, w = gauss_legendre(n)
+        want_x, want_w = leggauss(n)
+        assert np.array_equal(x, want_x) and np.array_equal(w, want_w), n
+    x, w = gauss_legendre(16)
+    # an independent truth: the rule integrates x^30 exactly (2 / 31), and sums to 2
+    assert float(np.sum(w * x**30)) == pytest.approx(2.0 / 31.0, rel=1e-13)
+    assert float(np.sum(w)) == pytest.approx(2.0, rel=1e-15)

@@ -156,3 +156,24 @@ def test_lean_cone_responses_work_for_a_point_source(gauss_surface_256: Surface)
         45.0, 45.0, Cone(0.0), Cone(6.0)
     )
     assert got == pytest.approx(ref, rel=2e-3)
+
+
+def test_cone_grid_counts_cells_without_the_index_and_the_slits_count_it_again(
+    gaussian_factory: Callable[..., HeightMap],
+) -> None:
+    """A masked cone curve counts the slope cells and lets the facets' int16 cell indices
+    go (their memory is the deposit's); a gloss report on the same model afterwards reads
+    its narrow slits through indices counted again: every reading the bits of a fresh
+    model's report, and the cells the same cells."""
+    surf = Surface.from_heightmap(gaussian_factory(256, 0.02, seed=4))
+    fresh = FacetModel(surf, masking=True, backend="lean")
+    want = gloss_report(fresh).as_dict()
+    used = FacetModel(surf, masking=True, backend="lean")
+    curve = used.luminance_pct(45.0, np.arange(30.0, 61.0), source=Cone(6.0))
+    assert float(curve.max()) > 0
+    assert "_cell_index" not in used.__dict__  # counted by the grid: no index kept
+    assert gloss_report(used).as_dict() == want
+    index = used.__dict__["_cell_index"]
+    assert index is not None and index[0].size == surf.n_facets  # the slits counted it
+    for a, b in zip(used._slope_cells, fresh._slope_cells, strict=True):
+        assert np.array_equal(a, b)

@@ -55,3 +55,24 @@ def test_auto_luminance_uses_the_chosen_model() -> None:
     np.testing.assert_array_equal(auto.luminance_pct(45, tr), m.luminance_pct(45, tr))
     ex = auto.explain(45, tr)
     assert ex["model"] == auto.choice(45).model
+
+
+def test_a_rough_map_is_sent_to_facets_on_sq_alone_and_sdq_is_summed_when_read() -> None:
+    """g >= 20 decides before any test of Sdq: the rule's choice on a rough map leaves the
+    rms gradient unsummed (a pass over the map's differences); read, it is the formula
+    sqrt(<p^2> + <q^2>) of the levelled float32 heights."""
+    from goniolab.optics.heightmap import HeightMap, level_plane
+
+    rng = np.random.default_rng(5)
+    z = np.cumsum(rng.normal(size=(300, 260)), axis=1) * 0.5  # Sq of several um
+    hm = HeightMap(z_um=z, dx_um=0.5, dy_um=0.4, source="rough")
+    auto = model_for(hm, model="auto")
+    assert isinstance(auto, AutoModel)
+    assert auto.choice(60).model == "facet"
+    st = auto.stats
+    assert callable(st._sdq)  # not summed by the choice
+    lev = np.asarray(level_plane(hm).z_um, dtype=np.float32).astype(np.float64)
+    p, q = np.diff(lev, axis=1) / 0.5, np.diff(lev, axis=0) / 0.4
+    assert st.sdq == pytest.approx(float(np.sqrt(np.mean(p * p) + np.mean(q * q))), rel=1e-12)
+    assert not callable(st._sdq)  # summed once, kept
+    assert st.sq_um == pytest.approx(float(np.std(lev)), rel=1e-12)
