@@ -429,41 +429,6 @@ def _keep_freed_memory() -> None:
             mallopt(param, value)
 
 
-def _one_shot_exit_ok() -> bool:
-    """Whether a one-shot ``predict`` process may end at once (:func:`_end_now`): no
-    thread it must wait for (the facet walks' helpers are daemons) and no worker pool
-    (``predict gloss`` over many maps) whose shutdown the interpreter's exit runs."""
-    import threading
-
-    if "multiprocessing" in sys.modules or "concurrent.futures" in sys.modules:
-        return False
-    main_thread = threading.main_thread()
-    return all(t.daemon or t is main_thread for t in threading.enumerate())
-
-
-def _end_now(code: int) -> NoReturn:
-    """End a one-shot ``predict`` process: what the interpreter's exit does that anyone
-    can see, then ``os._exit``, without its teardown of every module.
-
-    The ``atexit`` functions run (``logging.shutdown`` closes the log file, after which
-    nothing is logged; ``weakref.finalize`` callbacks), the cyclic garbage is collected
-    (its finalizers run, an unclosed file's buffer among them) and stdout and stderr are
-    flushed. What is skipped is clearing the ~280 modules' globals one by one and the
-    collections between, about 10 ms of a 2048^2 ``predict brdf`` (bench/README.md,
-    issue 26, facetidle): the objects still alive then get no ``__del__``, which Python
-    does not guarantee at exit anyway (reference manual, ``object.__del__``).
-    """
-    import atexit
-    import gc
-
-    atexit._run_exitfuncs()
-    gc.collect()
-    for stream in (sys.stdout, sys.stderr):
-        with contextlib.suppress(OSError, ValueError, AttributeError):
-            stream.flush()
-    os._exit(code)
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``goniolab`` console script; returns the process exit code.
 
@@ -485,8 +450,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         _warn_implausible(args)
         code: int = args.func(args)
         sys.stdout.flush()  # a closed pipe shows here, not in the interpreter's exit
-        if command == "predict" and argv is None and _one_shot_exit_ok():
-            _end_now(code)  # a process of its own: no module teardown
     except BrokenPipeError:
         _silence_stdout()
         return EXIT_BROKEN_PIPE

@@ -303,37 +303,3 @@ def test_batch_rows_name_the_model_of_every_number(capsys: pytest.CaptureFixture
     rough = rows["sample:wittmann-1"]
     assert rough["model"]["G20"] == "kirchhoff" and rough["e430_model"]["doi"] == "kirchhoff"
     assert any(w.startswith("G20: rayleigh-rice is outside") for w in rough["warnings"])
-
-
-def test_a_predict_process_ends_with_its_output_log_atexit_and_status(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
-    """A ``predict`` process of its own ends without the interpreter's module teardown
-    (``cli._end_now``): its JSON is whole on a pipe and equal to the in-process result,
-    the functions registered with ``atexit`` run (one that prints, here, and logging's
-    shutdown, which writes the log file's last line), the log file holds the command, and
-    the exit status is the command's."""
-    import os
-    import subprocess
-    import sys
-
-    want = _run_json(capsys, "predict", "brdf", "sample:gaussian-s0.05", "--theta-r", "40:50:5")
-    code = (
-        "import atexit, logging, sys\n"
-        "atexit.register(lambda: print('atexit ran', file=sys.stderr))\n"
-        "atexit.register(lambda: logging.getLogger('goniolab').info('last line'))\n"
-        "from goniolab.cli import main\n"
-        "sys.exit(main())\n"
-    )
-    argv = ["predict", "brdf", "sample:gaussian-s0.05", "--theta-r", "40:50:5", "--json"]
-    env = {**os.environ, "GONIOLAB_LOG_DIR": str(tmp_path / "log")}
-    proc = subprocess.run([sys.executable, "-c", code, *argv], capture_output=True, text=True,
-                          env=env, timeout=120, check=False)  # fmt: skip
-    assert proc.returncode == 0, proc.stderr
-    assert json.loads(proc.stdout) == want
-    assert "atexit ran" in proc.stderr
-    log = (tmp_path / "log" / "goniolab.log").read_text()
-    assert "predict brdf sample:gaussian-s0.05" in log and "last line" in log
-    bad = subprocess.run([sys.executable, "-c", code, "predict", "brdf", str(tmp_path / "no.npy")],
-                         capture_output=True, text=True, env=env, timeout=120, check=False)  # fmt: skip
-    assert bad.returncode == 2 and "atexit ran" in bad.stderr
