@@ -72,6 +72,7 @@ References
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from typing import Any
@@ -84,12 +85,14 @@ from goniolab.optics import _fft
 from goniolab.optics.cell_apertures import CellBox
 from goniolab.optics.fresnel import fresnel
 from goniolab.optics.physical import (
+    ENERGY_CHECK_FROM_DEG,
     FACET_MIN_HANDOVER_G,
     MAX_PHASE_STEP_RAD,
     RR_VALID_SDQ,
     FloatArray,
     PhysicalOpticsModel,
     check_theta_i,
+    run_reporting,
 )
 from goniolab.optics.psd import pruned_fft2, y_axis_first
 
@@ -135,6 +138,17 @@ def _weighted_phase(
     np.multiply(w, phase, out=term.imag)
     np.negative(term.imag, out=term.imag)
     return term
+
+
+def _row_halves(r0: int, r1: int, step: int) -> list[tuple[int, int]]:
+    """Rows ``r0:r1`` in two parts (one if a single block of ``step`` rows holds them),
+    cut at a multiple of ``step`` from ``r0``: the tasks of a sum over blocks of rows,
+    whose blocks stay those of one pass."""
+    n_blocks = -(-(r1 - r0) // step)
+    if n_blocks < 2:
+        return [(r0, r1)]
+    mid = r0 + (n_blocks // 2) * step
+    return [(r0, mid), (mid, r1)]
 
 
 def band_plan(
@@ -332,11 +346,27 @@ class KirchhoffModel(PhysicalOpticsModel):
             self._geometry(theta_i_deg, lam, box, os)
             for lam, box in zip(lams_um, boxes, strict=True)
         ]
-        raw, coh = self._shared.cached(
-            key,
-            lambda: self._raw_power(theta_i_deg, lams_um, boxes, [(g[2], g[3]) for g in geo], os),
-        )
-        scales = self._energy_scales(theta_i_deg, lams_um)
+
+        def readings() -> tuple[list[FloatArray], list[float]]:
+            out: tuple[list[FloatArray], list[float]] = self._shared.cached(
+                key,
+                lambda: self._raw_power(
+                    theta_i_deg, lams_um, boxes, [(g[2], g[3]) for g in geo], os
+                ),
+            )
+            return out
+
+        def scales_of() -> list[float]:
+            return self._energy_scales(theta_i_deg, lams_um)
+
+        if theta_i_deg >= ENERGY_CHECK_FROM_DEG:
+            # the readings and the energy check are independent until the scale is
+            # applied: two tasks (two threads when the load leaves a core free), the
+            # energy check first (the longer)
+            got: list[Any] = run_reporting([scales_of, readings], self.progress)
+            scales, (raw, coh) = got
+        else:
+            (raw, coh), scales = readings(), scales_of()
         out = []
         for r, (x, y, z, ok), s in zip(raw, geo, scales, strict=True):
             geom = self._obliquity(theta_i_deg, x, y, z, ok)
@@ -418,6 +448,20 @@ class KirchhoffModel(PhysicalOpticsModel):
         grazing (5e-5 to 1e-4 at 89 deg on smooth and wavy coats) and amplifies any error
         of ``C``: the band sum's ``C`` (a Taylor remainder of up to ``taylor_tol`` per
         point, and float32) was 1e-8 to 2e-7 off, the factor up to 0.4 %."""
+        c_i = math.cos(math.radians(theta_i_deg))
+        v_spec = [(2.0 * math.pi / lam) * 2.0 * c_i for lam in lams_um]
+        # C and D_1 are independent: two tasks (:func:`run_reporting`)
+        d1, coh = run_reporting(
+            [lambda: self._energy_d1(theta_i_deg, lams_um), lambda: self._coherent_direct(v_spec)]
+        )
+        return coh, d1
+
+    def _energy_d1(self, theta_i_deg: float, lams_um: Sequence[float]) -> list[float]:
+        """``D_1`` per wavelength (:meth:`_energy_sums`). The Horner sums and the per-cell
+        weights run as tasks on blocks of rows in two halves (:func:`_row_halves`; two
+        threads when the load leaves a core free): every cell is formed by the same
+        operations on either thread and the sums over cells are taken in this thread, so
+        ``D_1`` is the same bits on one thread or two (``tests/optics/test_kirchhoff.py``)."""
         sh = self._shared
         t = sh.tiled
         ny, nx = t.ny_t, t.nx_t
@@ -486,6 +530,7 @@ class KirchhoffModel(PhysicalOpticsModel):
             owners.append((own, rr, cc))
         total = t.n_tiles * sum(order + 1 for *_, order in plan)
         done = 0
+        spec = np.empty((0, 0, 0), dtype=np.complex64)
         for k in range(t.n_tiles):
             h, w = t.tile(k)
             u = h / np.float32(h_max) if h_max > 0 else h
@@ -524,29 +569,41 @@ class KirchhoffModel(PhysicalOpticsModel):
                         self.progress(done, total, "kirchhoff energy check")
                 del term
                 r0, r1, c0, c1 = int(rr[0]), int(rr[-1]) + 1, int(cc[0]), int(cc[-1]) + 1
-                self._energy_horner(
-                    spec[:, :, c0:c1], vz[:, :, c0:c1], vc, h_max, r0, r1,
-                    own[:, :, c0:c1] if len(plan) > 1 else None, acc[:, :, c0:c1],
+                h_step = max(1, _HORNER_BLOCK // max(1, n_l * (c1 - c0)))
+                run_reporting(
+                    [
+                        functools.partial(
+                            self._energy_horner, spec[:, :, c0:c1], vz[:, :, c0:c1], vc,
+                            h_max, a, b, own[:, :, c0:c1] if len(plan) > 1 else None,
+                            acc[:, :, c0:c1],
+                        )
+                        for a, b in _row_halves(r0, r1, h_step)
+                    ]
                 )  # fmt: skip
+        del spec, first, full_rows, coherent
         norm = t.n_tiles * ny * nx * t.sum_w2
         wi = np.array([[s_i, 0.0, c_i]])  # Lambda(wi): one value for all cells
         # the per-cell weights in blocks of rows (large temporaries cost more than the
         # arithmetic: the obliquity and G2 of 1.4 M cells took 3-5 times longer unblocked)
         step = max(1, _HORNER_BLOCK // max(1, n_c))
-        d1_out = []
-        for li, lam in enumerate(lams_um):
+        halves = _row_halves(0, n_r, step)
+        wo_xy = []
+        for lam in lams_um:
             cx, cy = self._cell_size(lam)
-            wox, woy = fx[cols] * cx - s_i, fy[rows] * cy
+            wo_xy.append((fx[cols] * cx - s_i, fy[rows] * cy))
+        contrib = np.zeros((n_l, n_r, n_c))
+
+        def weights(li: int, a: int, b: int) -> None:
+            wox = wo_xy[li][0]
             # the obliquity |G|^2 (:meth:`_obliquity`) with |wo| = 1 used:
             # |wi + wo|^2 = 2 (1 + wi.wo), so |G|^2 = (1 + wi.wo)^2 / (ci co (ci + co)^2),
             # wi.wo = s_i wo_x + c_i co (one column term and one cell term; 8 operations
             # per cell instead of 15, the same values to ~1e-16)
             one_wx = 1.0 + s_i * wox
-            contrib = np.zeros((n_r, n_c))
-            num = np.empty((min(step, n_r), n_c))
+            num = np.empty((min(step, b - a), n_c))
             den = np.empty_like(num)
-            for r0 in range(0, n_r, step):
-                r1 = min(n_r, r0 + step)
+            for r0 in range(a, b, step):
+                r1 = min(b, r0 + step)
                 zb, nb, db = z[li, r0:r1], num[: r1 - r0], den[: r1 - r0]
                 np.multiply(zb, c_i, out=nb)
                 nb += one_wx[None, :]
@@ -555,15 +612,15 @@ class KirchhoffModel(PhysicalOpticsModel):
                 db *= db
                 db *= zb
                 db *= c_i
-                np.divide(nb, db, out=contrib[r0:r1], where=ok[li, r0:r1])
-                contrib[r0:r1] *= acc[li, r0:r1]
-            contrib /= norm
-            # the shadowing of the cells that carry the flux (>= 1e-6 of the largest);
-            # the others count unshadowed (an upper bound on D_1)
-            floor = 1e-6 * float(contrib.max(initial=0.0))
-            for r0 in range(0, n_r, step) if self.masking else ():
-                r1 = min(n_r, r0 + step)
-                blk = contrib[r0:r1]
+                np.divide(nb, db, out=contrib[li, r0:r1], where=ok[li, r0:r1])
+                contrib[li, r0:r1] *= acc[li, r0:r1]
+                contrib[li, r0:r1] /= norm
+
+        def shadowing(li: int, a: int, b: int, floor: float) -> None:
+            wox, woy = wo_xy[li]
+            for r0 in range(a, b, step):
+                r1 = min(b, r0 + step)
+                blk = contrib[li, r0:r1]
                 big = blk > floor
                 n_big = int(np.count_nonzero(big))
                 if n_big == 0:
@@ -573,9 +630,16 @@ class KirchhoffModel(PhysicalOpticsModel):
                 wo[0] = np.broadcast_to(wox[None, :], big.shape)[big]
                 wo[1] = np.broadcast_to(woy[r0:r1, None], big.shape)[big]
                 wo[2] = z[li, r0:r1][big]
-                blk[big] *= self._diffuse_g2(wi, wo.T, lam)
-            d1_out.append(float(np.sum(contrib)))
-        return self._coherent_direct(v_spec), d1_out
+                blk[big] *= self._diffuse_g2(wi, wo.T, lams_um[li])
+
+        cells = [(li, a, b) for li in range(n_l) for a, b in halves]
+        run_reporting([functools.partial(weights, *c) for c in cells])
+        if self.masking:
+            # the shadowing of the cells that carry the flux (>= 1e-6 of the largest);
+            # the others count unshadowed (an upper bound on D_1)
+            floors = [1e-6 * float(contrib[li].max(initial=0.0)) for li in range(n_l)]
+            run_reporting([functools.partial(shadowing, *c, floors[c[0]]) for c in cells])
+        return [float(np.sum(contrib[li])) for li in range(n_l)]
 
     def _coherent_direct(self, vs: Sequence[float]) -> list[float]:
         """The coherent factor ``C = mean_tiles |sum W e^(-i v h)|^2 / (sum W)^2`` at each

@@ -58,6 +58,7 @@ from goniolab.optics.physical import (
     FloatArray,
     PhysicalOpticsModel,
     check_theta_i,
+    run_reporting,
 )
 from goniolab.optics.psd import PSD2, psd2, psd_region, windowed_sq_um
 
@@ -195,19 +196,26 @@ class RayleighRiceModel(PhysicalOpticsModel):
         out = []
         shape = (iy.size, ix.size)
         c16 = 16.0 * math.pi**2 * ci
+        s_i = math.sin(math.radians(theta_i_deg))
+        # the terms of the real (not evanescent) cells only, put back in place and summed
+        # over the whole window: the same values in the same order (towards grazing
+        # incidence half of the window or more is evanescent, and Q's complex arithmetic
+        # was most of a gloss report's Rayleigh-Rice work), formed in blocks of rows whose
+        # temporaries stay in cache (:data:`_ENERGY_ROWS`); the blocks of each wavelength
+        # in two halves, tasks on up to two threads (:func:`run_reporting`: each cell by
+        # the same operations on either thread, the sum in this one: the same bits)
+        terms = np.zeros((len(lams_um), *shape))
+        xs, ys = [], []
         for lam in lams_um:
             cx, cy = self._cell_size(lam)
-            x = ix.astype(np.float64)[None, :] * cx - math.sin(math.radians(theta_i_deg))
-            y = iy.astype(np.float64)[:, None] * cy
-            # the terms of the real (not evanescent) cells only, put back in place and summed
-            # over the whole window: the same values in the same order (towards grazing
-            # incidence half of the window or more is evanescent, and Q's complex arithmetic
-            # was most of a gloss report's Rayleigh-Rice work), formed in blocks of rows
-            # whose temporaries stay in cache (:data:`_ENERGY_ROWS`)
-            terms = np.zeros(shape)
-            for r0 in range(0, shape[0], _ENERGY_ROWS):
-                rows = slice(r0, min(r0 + _ENERGY_ROWS, shape[0]))
-                yb = y[rows]
+            xs.append(ix.astype(np.float64)[None, :] * cx - s_i)
+            ys.append(iy.astype(np.float64)[:, None] * cy)
+
+        def block_terms(li: int, a: int, b: int) -> None:
+            x = xs[li]
+            for r0 in range(a, b, _ENERGY_ROWS):
+                rows = slice(r0, min(r0 + _ENERGY_ROWS, b))
+                yb = ys[li][rows]
                 z2 = 1.0 - x * x - yb * yb
                 ok = z2 > 1e-12
                 if not ok.any():
@@ -219,8 +227,20 @@ class RayleighRiceModel(PhysicalOpticsModel):
                 ts_deg = np.degrees(np.arctan2(st, z))
                 phi_deg = np.where(st > 0, np.degrees(np.arctan2(-yo, -xo)), 0.0)
                 q = rr_q_factor(theta_i_deg, ts_deg, phi_deg, self.n)
-                terms[rows][ok] = c16 * z * q * pv[rows][ok]
-            d = float(np.sum(terms))
+                terms[li][rows][ok] = c16 * z * q * pv[rows][ok]
+
+        n_blocks = -(-shape[0] // _ENERGY_ROWS)
+        mid = min(shape[0], (n_blocks // 2) * _ENERGY_ROWS)
+        halves = [(a, b) for a, b in ((0, mid), (mid, shape[0])) if b > a]
+        run_reporting(
+            [
+                functools.partial(block_terms, li, a, b)
+                for li in range(len(lams_um))
+                for a, b in halves
+            ]
+        )
+        for li, lam in enumerate(lams_um):
+            d = float(np.sum(terms[li]))
             d *= df2 / lam**2
             dw = math.exp(-self._g_at(theta_i_deg, lam))
             room = r_spec * (1.0 - dw)
