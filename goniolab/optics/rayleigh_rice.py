@@ -83,6 +83,20 @@ def rr_q_factor(
     si, ci = math.sin(ti), math.cos(ti)
     ss, cs = np.sin(ts), np.cos(ts)
     cp, sp = np.cos(ps), np.sin(ps)
+    if eps.imag == 0.0 and eps.real >= 1.0:
+        # a real index n >= 1 (a dielectric coat): every square root below is of a
+        # positive number and every factor real, so the same formulas in real
+        # arithmetic (issue 26: a third of the complex work; the same Q to ~1e-15)
+        er = eps.real
+        ar_i = math.sqrt(er - si * si)
+        ar_s = np.sqrt(er - ss * ss)
+        e1r = er - 1.0
+        r_ss = e1r * cp / ((ci + ar_i) * (cs + ar_s))
+        r_pp = e1r * (er * si * ss - ar_s * ar_i * cp) / ((er * ci + ar_i) * (er * cs + ar_s))
+        r_ps = -e1r * ar_i * sp / ((er * ci + ar_i) * (cs + ar_s))
+        r_sp = -e1r * ar_s * sp / ((ci + ar_i) * (er * cs + ar_s))
+        real: FloatArray = 0.5 * (r_ss * r_ss + r_pp * r_pp + r_ps * r_ps + r_sp * r_sp)
+        return real
     a_i = np.sqrt(eps - si * si + 0j)
     a_s = np.sqrt(eps - ss * ss + 0j)
     e1 = eps - 1.0
