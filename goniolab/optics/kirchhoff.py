@@ -92,6 +92,7 @@ from goniolab.optics.physical import (
     FloatArray,
     PhysicalOpticsModel,
     check_theta_i,
+    row_parts,
     run_reporting,
 )
 from goniolab.optics.psd import pruned_fft2, y_axis_first
@@ -120,6 +121,9 @@ _COH_BLOCK: int = 1 << 18
 #: Cells per block of the energy check's Horner sums (all wavelengths together): the
 #: block's few float64 arrays stay in a core's cache.
 _HORNER_BLOCK: int = 32768
+#: Parts of rows per wavelength the energy check's per-cell weights are formed in (tasks:
+#: fine enough that a thread joining late finds some left).
+_PARTS: int = 4
 #: ``D_1`` at or below this is the float32 transforms' rounding, not diffuse light (a flat
 #: map's ``D_1`` is 1e-14 to 1e-13; a coat of Sq 0.1 nm has about 3e-9: review of 2026-11-26).
 _D1_FLOOR: float = 1e-10
@@ -138,17 +142,6 @@ def _weighted_phase(
     np.multiply(w, phase, out=term.imag)
     np.negative(term.imag, out=term.imag)
     return term
-
-
-def _row_halves(r0: int, r1: int, step: int) -> list[tuple[int, int]]:
-    """Rows ``r0:r1`` in two parts (one if a single block of ``step`` rows holds them),
-    cut at a multiple of ``step`` from ``r0``: the tasks of a sum over blocks of rows,
-    whose blocks stay those of one pass."""
-    n_blocks = -(-(r1 - r0) // step)
-    if n_blocks < 2:
-        return [(r0, r1)]
-    mid = r0 + (n_blocks // 2) * step
-    return [(r0, mid), (mid, r1)]
 
 
 def band_plan(
@@ -458,7 +451,7 @@ class KirchhoffModel(PhysicalOpticsModel):
 
     def _energy_d1(self, theta_i_deg: float, lams_um: Sequence[float]) -> list[float]:
         """``D_1`` per wavelength (:meth:`_energy_sums`). The Horner sums and the per-cell
-        weights run as tasks on blocks of rows in two halves (:func:`_row_halves`; two
+        weights run as tasks on blocks of rows in parts (:func:`row_parts`; two
         threads when the load leaves a core free): every cell is formed by the same
         operations on either thread and the sums over cells are taken in this thread, so
         ``D_1`` is the same bits on one thread or two (``tests/optics/test_kirchhoff.py``)."""
@@ -495,11 +488,13 @@ class KirchhoffModel(PhysicalOpticsModel):
         runs = [(int(r[0]), int(r[-1]) + 1) for r in np.split(cols, cuts)]
         n_l, n_r, n_c = len(lams_um), rows.size, cols.size
         ok = np.empty((n_l, n_r, n_c), dtype=bool)
-        z = np.empty((n_l, n_r, n_c))
+        z = np.zeros((n_l, n_r, n_c))  # 0 on the evanescent cells
+        z2 = np.empty((n_r, n_c))
         for li in range(n_l):
-            z2 = one_x2[li][cols][None, :] - y2[li][rows][:, None]
+            np.subtract(one_x2[li][cols][None, :], y2[li][rows][:, None], out=z2)
             np.greater(z2, 1e-12, out=ok[li])
-            np.sqrt(np.where(ok[li], z2, 0.0), out=z[li])
+            np.sqrt(z2, out=z[li], where=ok[li])
+        del z2
         # v_z = k (z + cos ti) per cell, formed where it is read (the Horner sums) rather
         # than stored: its extremes over the real cells are those of z, as rounding is
         # monotonic (fl(fl(z + c) k) never decreases with z), the same values as a pass
@@ -579,9 +574,8 @@ class KirchhoffModel(PhysicalOpticsModel):
                     if full_rows is not None:
                         np.take(full_rows, rows, axis=0, out=spec)
                     np.multiply(w_shape, np.complex64(dc[n]), out=coherent)
-                    spec -= coherent
-                    np.copyto(spec_r[n], spec.real)
-                    np.copyto(spec_i[n], spec.imag)
+                    np.subtract(spec.real, coherent.real, out=spec_r[n])
+                    np.subtract(spec.imag, coherent.imag, out=spec_i[n])
                     if n:
                         fact *= n
                         spec_r[n] *= np.float32(1.0 / fact)
@@ -601,7 +595,7 @@ class KirchhoffModel(PhysicalOpticsModel):
                             z[:, :, c0:c1], kz, c_i, vc, h_max, a, b,
                             None if own is None else own[:, :, c0:c1], acc[:, :, c0:c1],
                         )
-                        for a, b in _row_halves(r0, r1, h_step)
+                        for a, b in row_parts(r0, r1, h_step)
                     ]
                 )  # fmt: skip
         del spec, spec_r, spec_i, first, full_rows, coherent
@@ -610,7 +604,7 @@ class KirchhoffModel(PhysicalOpticsModel):
         # the per-cell weights in blocks of rows (large temporaries cost more than the
         # arithmetic: the obliquity and G2 of 1.4 M cells took 3-5 times longer unblocked)
         step = max(1, _HORNER_BLOCK // max(1, n_c))
-        halves = _row_halves(0, n_r, step)
+        parts = row_parts(0, n_r, step, _PARTS)
         wo_xy = []
         for lam in lams_um:
             cx, cy = self._cell_size(lam)
@@ -659,7 +653,7 @@ class KirchhoffModel(PhysicalOpticsModel):
                 wo[2] = z[li, r0:r1][big]
                 blk[big] *= self._diffuse_g2(wi, wo.T, lams_um[li])
 
-        cells = [(li, a, b) for li in range(n_l) for a, b in halves]
+        cells = [(li, a, b) for li in range(n_l) for a, b in parts]
         run_reporting([functools.partial(weights, *c) for c in cells])
         if self.masking:
             # the shadowing of the cells that carry the flux (>= 1e-6 of the largest);

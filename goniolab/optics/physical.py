@@ -65,6 +65,7 @@ References
 from __future__ import annotations
 
 import functools
+import itertools
 import math
 import threading
 from collections.abc import Callable, Sequence
@@ -185,6 +186,16 @@ class _JointProgress:
             total = sum(self.base) + sum(t for _, t, _ in self.now)
             if total:
                 self.fn(total, total, self.what)
+
+
+def row_parts(r0: int, r1: int, step: int, parts: int = 2) -> list[tuple[int, int]]:
+    """Rows ``r0:r1`` in at most ``parts`` consecutive parts of whole blocks of ``step``
+    rows (counted from ``r0``; the last block may be short): the tasks of a pass over
+    blocks of rows, whose blocks stay those of one pass whatever the parts."""
+    n_blocks = -(-(r1 - r0) // step)
+    k = max(1, min(parts, n_blocks))
+    cuts = [r0 + (n_blocks * j // k) * step for j in range(k)] + [r1]
+    return [(a, b) for a, b in itertools.pairwise(cuts) if b > a]
 
 
 def _carried(fn: Progress, task: Callable[[], T]) -> T:

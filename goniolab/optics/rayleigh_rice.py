@@ -58,6 +58,7 @@ from goniolab.optics.physical import (
     FloatArray,
     PhysicalOpticsModel,
     check_theta_i,
+    row_parts,
     run_reporting,
 )
 from goniolab.optics.psd import PSD2, psd2, psd_region, windowed_sq_um
@@ -67,6 +68,9 @@ __all__ = ["RayleighRiceModel", "rr_q_factor"]
 #: Rows of the Nyquist window per block of the energy check's sums (16 rows of a
 #: 1024-wide window: 16 k cells, whose float64 and complex temporaries stay in cache).
 _ENERGY_ROWS: int = 16
+#: Parts of rows per wavelength the energy check's terms are formed in (tasks: fine enough
+#: that a thread joining late finds some left).
+_ENERGY_PARTS: int = 4
 
 
 def rr_q_factor(
@@ -216,7 +220,7 @@ class RayleighRiceModel(PhysicalOpticsModel):
         # incidence half of the window or more is evanescent, and Q's complex arithmetic
         # was most of a gloss report's Rayleigh-Rice work), formed in blocks of rows whose
         # temporaries stay in cache (:data:`_ENERGY_ROWS`); the blocks of each wavelength
-        # in two halves, tasks on up to two threads (:func:`run_reporting`: each cell by
+        # in parts, tasks on up to two threads (:func:`run_reporting`: each cell by
         # the same operations on either thread, the sum in this one: the same bits)
         terms = np.zeros((len(lams_um), *shape))
         xs, ys = [], []
@@ -243,14 +247,11 @@ class RayleighRiceModel(PhysicalOpticsModel):
                 q = rr_q_factor(theta_i_deg, ts_deg, phi_deg, self.n)
                 terms[li][rows][ok] = c16 * z * q * pv[rows][ok]
 
-        n_blocks = -(-shape[0] // _ENERGY_ROWS)
-        mid = min(shape[0], (n_blocks // 2) * _ENERGY_ROWS)
-        halves = [(a, b) for a, b in ((0, mid), (mid, shape[0])) if b > a]
         run_reporting(
             [
                 functools.partial(block_terms, li, a, b)
                 for li in range(len(lams_um))
-                for a, b in halves
+                for a, b in row_parts(0, shape[0], _ENERGY_ROWS, _ENERGY_PARTS)
             ]
         )
         for li, lam in enumerate(lams_um):

@@ -151,3 +151,20 @@ def test_a_gloss_on_two_threads_reports_one_rising_bar(monkeypatch: pytest.Monke
     assert all(d < t for d, t, _ in calls[:-1])
     assert calls[-1][0] == calls[-1][1] == totals[-1]
     assert {w for *_, w in calls} == {"kirchhoff FFT", "kirchhoff energy check"}
+
+
+@pytest.mark.parametrize(
+    ("r0", "r1", "step", "parts"),
+    [(0, 1024, 21, 4), (0, 1024, 16, 2), (5, 30, 16, 4), (0, 10, 16, 4)],
+)
+def test_row_parts_cover_the_rows_in_whole_blocks(r0: int, r1: int, step: int, parts: int) -> None:
+    """The parts of a pass over blocks of ``step`` rows: consecutive, covering ``r0:r1``,
+    each cut on a block boundary (so each block is the one pass's), at most ``parts``."""
+    from goniolab.optics.physical import row_parts
+
+    got = row_parts(r0, r1, step, parts)
+    assert got[0][0] == r0 and got[-1][1] == r1
+    assert all(a < b for a, b in got) and all(p[1] == q[0] for p, q in zip(got, got[1:]))
+    assert all((a - r0) % step == 0 for a, _ in got)
+    n_blocks = -(-(r1 - r0) // step)
+    assert len(got) == min(parts, n_blocks)
