@@ -11,6 +11,7 @@ and the progress sums worked by hand.
 
 from __future__ import annotations
 
+import itertools
 import math
 import threading
 from collections.abc import Callable
@@ -164,7 +165,7 @@ def test_row_parts_cover_the_rows_in_whole_blocks(r0: int, r1: int, step: int, p
 
     got = row_parts(r0, r1, step, parts)
     assert got[0][0] == r0 and got[-1][1] == r1
-    assert all(a < b for a, b in got) and all(p[1] == q[0] for p, q in zip(got, got[1:]))
+    assert all(a < b for a, b in got) and all(p[1] == q[0] for p, q in itertools.pairwise(got))
     assert all((a - r0) % step == 0 for a, _ in got)
     n_blocks = -(-(r1 - r0) // step)
     assert len(got) == min(parts, n_blocks)
