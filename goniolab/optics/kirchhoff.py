@@ -340,14 +340,25 @@ class KirchhoffModel(PhysicalOpticsModel):
             for lam, box in zip(lams_um, boxes, strict=True)
         ]
 
-        def readings() -> tuple[list[FloatArray], list[float]]:
-            out: tuple[list[FloatArray], list[float]] = self._shared.cached(
+        def readings() -> tuple[list[FloatArray], list[float], list[tuple[Any, Any]]]:
+            raw: list[FloatArray]
+            coh: list[float]
+            raw, coh = self._shared.cached(
                 key,
                 lambda: self._raw_power(
                     theta_i_deg, lams_um, boxes, [(g[2], g[3]) for g in geo], os
                 ),
             )
-            return out
+            # each cell's obliquity and Fresnel factors here, beside the energy check,
+            # so that only their product with the scale is left when it ends
+            factors = [
+                (
+                    self._obliquity(theta_i_deg, x, y, z, ok),
+                    self._fresnel_geom(theta_i_deg, x, y, z, ok),
+                )
+                for x, y, z, ok in geo
+            ]
+            return raw, coh, factors
 
         def scales_of() -> list[float]:
             return self._energy_scales(theta_i_deg, lams_um)
@@ -357,13 +368,10 @@ class KirchhoffModel(PhysicalOpticsModel):
             # applied: two tasks (two threads when the load leaves a core free), the
             # energy check first (the longer)
             got: list[Any] = run_reporting([scales_of, readings], self.progress)
-            scales, (raw, coh) = got
+            scales, (raw, coh, factors) = got
         else:
-            (raw, coh), scales = readings(), scales_of()
-        out = []
-        for r, (x, y, z, ok), s in zip(raw, geo, scales, strict=True):
-            geom = self._obliquity(theta_i_deg, x, y, z, ok)
-            out.append(s * r * geom * self._fresnel_geom(theta_i_deg, x, y, z, ok))
+            (raw, coh, factors), scales = readings(), scales_of()
+        out = [s * r * geom * fg for r, (geom, fg), s in zip(raw, factors, scales, strict=True)]
         return out, list(coh)
 
     @staticmethod

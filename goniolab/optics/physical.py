@@ -564,10 +564,15 @@ class PhysicalOpticsModel(EnergyBudget, CellApertures):
         lams_um = [lam * 1e-3 for lam in lams_nm]
         powers, coh = self._cell_powers(theta_i_deg, lams_um, boxes, os)
         out = np.empty((len(lams_nm), theta_r_deg.size))
-        for k, (lam, box, p, c) in enumerate(zip(lams_um, boxes, powers, coh, strict=True)):
-            out[k] = self._sum_apertures(
-                theta_i_deg, lam, box, p, theta_r_deg, source, receptor, os
-            ) + coherent_sums(theta_i_deg, c, theta_r_deg, source, receptor, self.n)
+
+        def sums(a: int, b: int) -> None:
+            for k in range(a, b):
+                out[k] = self._sum_apertures(
+                    theta_i_deg, lams_um[k], boxes[k], powers[k], theta_r_deg, source, receptor, os
+                ) + coherent_sums(theta_i_deg, coh[k], theta_r_deg, source, receptor, self.n)
+
+        # the wavelengths in two parts (tasks: each wavelength's sums on one thread)
+        run_reporting([functools.partial(sums, a, b) for a, b in row_parts(0, len(lams_um), 1, 2)])
         return out
 
     def _evaluate(
