@@ -58,10 +58,9 @@ from goniolab.optics.physical import (
     FloatArray,
     PhysicalOpticsModel,
     check_theta_i,
-    row_parts,
-    run_reporting,
 )
 from goniolab.optics.psd import PSD2, psd2, psd_region, windowed_sq_um
+from goniolab.optics.wave_tasks import row_parts, run_reporting
 
 __all__ = ["RayleighRiceModel", "rr_q_factor"]
 

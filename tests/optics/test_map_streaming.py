@@ -163,7 +163,7 @@ def test_rayleigh_rice_reports_its_psd_tiles_and_reads_the_same() -> None:
     assert heard == quiet
     assert seen and {w for _, _, w in seen} == {"rayleigh-rice PSD tiles"}
     # the gloss's three geometries (4 tiles each) run as tasks, possibly at once, and
-    # report as one bar (physical.run_reporting, issue 26): the totals add up as the
+    # report as one bar (wave_tasks.run_reporting, issue 26): the totals add up as the
     # geometries start, done never falls, and the bar closes once, at 12 of 12
     assert {t for _, t, _ in seen} == {4, 8, 12}
     assert seen[-1] == (12, 12, "rayleigh-rice PSD tiles")

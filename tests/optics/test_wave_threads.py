@@ -23,8 +23,8 @@ import pytest
 from goniolab.optics import facet_threads as FT
 from goniolab.optics.heightmap import HeightMap
 from goniolab.optics.kirchhoff import KirchhoffModel
-from goniolab.optics.physical import run_reporting
 from goniolab.optics.rayleigh_rice import RayleighRiceModel
+from goniolab.optics.wave_tasks import run_reporting
 
 
 def _coat(n: int, sq_um: float, l_um: float, step_um: float, seed: int) -> HeightMap:
@@ -161,7 +161,7 @@ def test_a_gloss_on_two_threads_reports_one_rising_bar(monkeypatch: pytest.Monke
 def test_row_parts_cover_the_rows_in_whole_blocks(r0: int, r1: int, step: int, parts: int) -> None:
     """The parts of a pass over blocks of ``step`` rows: consecutive, covering ``r0:r1``,
     each cut on a block boundary (so each block is the one pass's), at most ``parts``."""
-    from goniolab.optics.physical import row_parts
+    from goniolab.optics.wave_tasks import row_parts
 
     got = row_parts(r0, r1, step, parts)
     assert got[0][0] == r0 and got[-1][1] == r1
