@@ -138,7 +138,6 @@ class GlossTasks:
     :class:`goniolab.optics.physical.PhysicalOpticsModel`, which defines what is declared
     here)."""
 
-    masking: bool
     _shared: SharedMap
 
     @property
@@ -147,6 +146,10 @@ class GlossTasks:
 
     @property
     def facet_model(self) -> FacetModel:
+        raise NotImplementedError
+
+    @property
+    def _g2_per_source(self) -> bool:
         raise NotImplementedError
 
     def _lams_for_gloss(self) -> tuple[FloatArray, FloatArray]:
@@ -225,10 +228,11 @@ class GlossTasks:
 
     def _warm(self) -> None:
         """Form the map's values every reading reads (its statistics, height bound and, with
-        masking, the slope model of Smith's G2) before tasks read them on two threads."""
+        Kirchhoff's shadowing, the slope model of Smith's G2) before tasks read them on two
+        threads."""
         sh = self._shared
         _ = sh.stats, sh.h_max_um
-        if self.masking:
+        if self._g2_per_source:  # (Rayleigh-Rice has no shadowing: no slope model)
             _ = sh.masking_model
 
     def _gloss_at(self, key: int) -> float:
