@@ -21,6 +21,13 @@ runs; medians against the issue-15 targets:
   receptors zero-padded to 6 cells across) and the Kirchhoff albedo at 85 deg over the
   whole Nyquist window of the 1024^2 map.
 
+Threads: a gloss's geometries, Kirchhoff's readings beside its energy check and the energy
+checks' per-cell work run as tasks on up to two threads
+(:func:`goniolab.optics.facet_threads.run_tasks`: one thread when the load average leaves
+less than half a CPU free, or as ``GONIOLAB_THREADS`` says; the same numbers either way).
+The header gives the threads the load rule allowed at the start; ``GONIOLAB_THREADS=1``
+gives the one-thread figure.
+
 The "numpy" column runs the per-cell sums (aperture sums, and Kirchhoff's Horner sums of the
 Taylor terms) with the plain-numpy twins (FFTs are scipy's in both); the physical-optics FFT
 work is the same in both columns.
@@ -51,6 +58,7 @@ sys.path.insert(
     ),
 )  # fmt: skip
 
+from goniolab.optics.facet_threads import walk_threads
 from goniolab.optics.heightmap import HeightMap
 from goniolab.optics.kirchhoff import KirchhoffModel
 from goniolab.optics.physical import PhysicalOpticsModel
@@ -113,6 +121,7 @@ def main(argv: list[str] | None = None) -> int:
         "map": f"{args.size}x{args.size} at 0.5 um, Sq 50 nm, l 2 um",
         "cpus": os.cpu_count(),
         "load_average_1min": os.getloadavg()[0],
+        "threads": walk_threads(),
         "repeats": args.repeats,
         "targets_ms": TARGETS_MS,
     }
@@ -151,7 +160,8 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     print(
         f"physical-optics benchmark: {results['map']}, {os.cpu_count()} CPUs, median of "
-        f"{args.repeats}, load average {os.getloadavg()[0]:.1f} (timings scale with other load); "
+        f"{args.repeats}, load average {os.getloadavg()[0]:.1f} (timings scale with other load), "
+        f"{results['threads']} thread(s) at the start; "
         f"goniolab from {results['goniolab']}"
     )
     print(

@@ -72,6 +72,7 @@ References
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from typing import Any
@@ -83,7 +84,9 @@ from goniolab.optics import _cell_kernels as CK
 from goniolab.optics import _fft
 from goniolab.optics.cell_apertures import CellBox
 from goniolab.optics.fresnel import fresnel
+from goniolab.optics.kirchhoff_coherent import coherent_direct
 from goniolab.optics.physical import (
+    ENERGY_CHECK_FROM_DEG,
     FACET_MIN_HANDOVER_G,
     MAX_PHASE_STEP_RAD,
     RR_VALID_SDQ,
@@ -92,31 +95,19 @@ from goniolab.optics.physical import (
     check_theta_i,
 )
 from goniolab.optics.psd import pruned_fft2, y_axis_first
+from goniolab.optics.wave_tasks import row_parts, run_reporting
 
 __all__ = ["DEFAULT_TAYLOR_TOL", "KirchhoffModel", "band_plan"]
 
 #: Bound on the truncated Taylor remainder of the phase factor, per pixel.
 DEFAULT_TAYLOR_TOL: float = 1e-4
 _BAND_X: tuple[float, ...] = (0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0)
-#: The coherent factor from binned heights (:meth:`KirchhoffModel._coherent_direct`): the
-#: bin width is this phase over the largest ``v`` asked for (rounded up to a power of 2),
-#: so a point's phase offset from its bin centre is at most half of it, and the
-#: expansion of that offset's phase factor keeps terms to :data:`_COH_ORDER`
-#: (remainder ``0.01^5 / 5! < 1e-12`` per point).
-_COH_BIN_PHASE: float = 0.02
-_COH_ORDER: int = 4
-#: The bound on that remainder, per point, kept when a tall relief needs wider bins.
-_COH_REMAINDER: float = 1e-12
-#: Half a bin's phase span (rad) above which a tile's ``C`` is summed point by point (the
-#: moments of offsets that wide lose digits to their alternating terms: 3.7e-9 instead
-#: of 1e-13 for a 1 mm spike on 16^2 tiles, and an overflow for a 5 mm one; review of
-#: 2026-11-26). Only a relief far taller than one bin per point gets there.
-_COH_DIRECT_HALF: float = 1.0
-#: Points per block of that binning (its float64 temporaries stay small).
-_COH_BLOCK: int = 1 << 18
 #: Cells per block of the energy check's Horner sums (all wavelengths together): the
 #: block's few float64 arrays stay in a core's cache.
 _HORNER_BLOCK: int = 32768
+#: Parts of rows per wavelength the energy check's per-cell weights are formed in (tasks:
+#: fine enough that a thread joining late finds some left).
+_PARTS: int = 4
 #: ``D_1`` at or below this is the float32 transforms' rounding, not diffuse light (a flat
 #: map's ``D_1`` is 1e-14 to 1e-13; a coat of Sq 0.1 nm has about 3e-9: review of 2026-11-26).
 _D1_FLOOR: float = 1e-10
@@ -332,15 +323,39 @@ class KirchhoffModel(PhysicalOpticsModel):
             self._geometry(theta_i_deg, lam, box, os)
             for lam, box in zip(lams_um, boxes, strict=True)
         ]
-        raw, coh = self._shared.cached(
-            key,
-            lambda: self._raw_power(theta_i_deg, lams_um, boxes, [(g[2], g[3]) for g in geo], os),
-        )
-        scales = self._energy_scales(theta_i_deg, lams_um)
-        out = []
-        for r, (x, y, z, ok), s in zip(raw, geo, scales, strict=True):
-            geom = self._obliquity(theta_i_deg, x, y, z, ok)
-            out.append(s * r * geom * self._fresnel_geom(theta_i_deg, x, y, z, ok))
+
+        def readings() -> tuple[list[FloatArray], list[float], list[tuple[Any, Any]]]:
+            raw: list[FloatArray]
+            coh: list[float]
+            raw, coh = self._shared.cached(
+                key,
+                lambda: self._raw_power(
+                    theta_i_deg, lams_um, boxes, [(g[2], g[3]) for g in geo], os
+                ),
+            )
+            # each cell's obliquity and Fresnel factors here, beside the energy check,
+            # so that only their product with the scale is left when it ends
+            factors = [
+                (
+                    self._obliquity(theta_i_deg, x, y, z, ok),
+                    self._fresnel_geom(theta_i_deg, x, y, z, ok),
+                )
+                for x, y, z, ok in geo
+            ]
+            return raw, coh, factors
+
+        def scales_of() -> list[float]:
+            return self._energy_scales(theta_i_deg, lams_um)
+
+        if theta_i_deg >= ENERGY_CHECK_FROM_DEG:
+            # the readings and the energy check are independent until the scale is
+            # applied: two tasks (two threads when the load leaves a core free), the
+            # energy check first (the longer)
+            got: list[Any] = run_reporting([scales_of, readings], self.progress)
+            scales, (raw, coh, factors) = got
+        else:
+            (raw, coh, factors), scales = readings(), scales_of()
+        out = [s * r * geom * fg for r, (geom, fg), s in zip(raw, factors, scales, strict=True)]
         return out, list(coh)
 
     @staticmethod
@@ -418,6 +433,20 @@ class KirchhoffModel(PhysicalOpticsModel):
         grazing (5e-5 to 1e-4 at 89 deg on smooth and wavy coats) and amplifies any error
         of ``C``: the band sum's ``C`` (a Taylor remainder of up to ``taylor_tol`` per
         point, and float32) was 1e-8 to 2e-7 off, the factor up to 0.4 %."""
+        c_i = math.cos(math.radians(theta_i_deg))
+        v_spec = [(2.0 * math.pi / lam) * 2.0 * c_i for lam in lams_um]
+        # C and D_1 are independent: two tasks (:func:`run_reporting`)
+        d1, coh = run_reporting(
+            [lambda: self._energy_d1(theta_i_deg, lams_um), lambda: self._coherent_direct(v_spec)]
+        )
+        return coh, d1
+
+    def _energy_d1(self, theta_i_deg: float, lams_um: Sequence[float]) -> list[float]:
+        """``D_1`` per wavelength (:meth:`_energy_sums`). The Horner sums and the per-cell
+        weights run as tasks on blocks of rows in parts (:func:`row_parts`; two
+        threads when the load leaves a core free): every cell is formed by the same
+        operations on either thread and the sums over cells are taken in this thread, so
+        ``D_1`` is the same bits on one thread or two (``tests/optics/test_kirchhoff.py``)."""
         sh = self._shared
         t = sh.tiled
         ny, nx = t.ny_t, t.nx_t
@@ -451,18 +480,27 @@ class KirchhoffModel(PhysicalOpticsModel):
         runs = [(int(r[0]), int(r[-1]) + 1) for r in np.split(cols, cuts)]
         n_l, n_r, n_c = len(lams_um), rows.size, cols.size
         ok = np.empty((n_l, n_r, n_c), dtype=bool)
-        z = np.empty((n_l, n_r, n_c))
+        z = np.zeros((n_l, n_r, n_c))  # 0 on the evanescent cells
+        z2 = np.empty((n_r, n_c))
         for li in range(n_l):
-            z2 = one_x2[li][cols][None, :] - y2[li][rows][:, None]
+            np.subtract(one_x2[li][cols][None, :], y2[li][rows][:, None], out=z2)
             np.greater(z2, 1e-12, out=ok[li])
-            np.sqrt(np.where(ok[li], z2, 0.0), out=z[li])
-        vz = z + c_i
-        vz *= np.array([2.0 * math.pi / lam for lam in lams_um])[:, None, None]
+            np.sqrt(z2, out=z[li], where=ok[li])
+        del z2
+        # v_z = k (z + cos ti) per cell, formed where it is read (the Horner sums) rather
+        # than stored: its extremes over the real cells are those of z, as rounding is
+        # monotonic (fl(fl(z + c) k) never decreases with z), the same values as a pass
+        # over a stored v_z
+        kz = np.array([2.0 * math.pi / lam for lam in lams_um])[:, None, None]
         v_spec = [(2.0 * math.pi / lam) * 2.0 * c_i for lam in lams_um]
         v_lo, v_hi = min(v_spec), max(v_spec)
-        if np.any(ok):
-            v_lo = min(v_lo, float(vz[ok].min()))
-            v_hi = max(v_hi, float(vz[ok].max()))
+        for li in range(n_l):
+            if np.any(ok[li]):  # z is 0 on the others (max) and excluded from the min
+                z_lo = float(np.min(z[li], where=ok[li], initial=np.inf))
+                z_hi = float(np.max(z[li]))
+                k_li = float(kz[li, 0, 0])
+                v_lo = min(v_lo, (z_lo + c_i) * k_li)
+                v_hi = max(v_hi, (z_hi + c_i) * k_li)
         h_max = sh.h_max_um
         plan = band_plan(v_lo, v_hi, h_max, self.taylor_tol)
         last = len(plan) - 1
@@ -477,15 +515,26 @@ class KirchhoffModel(PhysicalOpticsModel):
         coherent = np.empty((n_r, n_c), dtype=np.complex64)  # dc_n w_shape, per term
         full_rows = None if n_r == ny else np.empty((ny, n_c), dtype=np.complex64)
         # per band: the cells it owns and the rows and columns holding them (a band owning
-        # none costs no transform)
-        owners = []
-        for b, (lo, hi, _, _) in enumerate(plan):
-            own = ok & (vz >= lo) & ((vz <= hi) if b == last else (vz < hi))
-            rr = np.flatnonzero(own.any(axis=(0, 2)))
-            cc = np.flatnonzero(own.any(axis=(0, 1)))
-            owners.append((own, rr, cc))
+        # none costs no transform); one band owns every real cell (its edges are the
+        # extremes of v_z over them)
+        owners: list[tuple[NDArray[np.bool_] | None, NDArray[np.intp], NDArray[np.intp]]] = []
+        if len(plan) == 1:
+            owners.append(
+                (None, np.flatnonzero(ok.any(axis=(0, 2))), np.flatnonzero(ok.any(axis=(0, 1))))
+            )
+        else:
+            vz = z + c_i
+            vz *= kz
+            for b, (lo, hi, _, _) in enumerate(plan):
+                mask = ok & (vz >= lo) & ((vz <= hi) if b == last else (vz < hi))
+                rr = np.flatnonzero(mask.any(axis=(0, 2)))
+                cc = np.flatnonzero(mask.any(axis=(0, 1)))
+                owners.append((mask, rr, cc))
+            del vz
         total = t.n_tiles * sum(order + 1 for *_, order in plan)
         done = 0
+        spec = np.empty((n_r, n_c), dtype=np.complex64)  # one term's transform
+        spec_r = spec_i = np.empty((0, 0, 0), dtype=np.float32)
         for k in range(t.n_tiles):
             h, w = t.tile(k)
             u = h / np.float32(h_max) if h_max > 0 else h
@@ -499,24 +548,30 @@ class KirchhoffModel(PhysicalOpticsModel):
                 # G_n = (F_n - dc_n w_shape) / n! at the kept outputs, F_n the transform of
                 # the term W exp(-i v_c h) u^n: the x pass over the whole tile, the y pass
                 # on the kept columns only
-                spec = np.empty((order + 1, n_r, n_c), dtype=np.complex64)
+                # (kept as real and imaginary planes: the Horner sums read them contiguous,
+                # half the time of the complex array's strided parts; a complex times a
+                # real 1/n! is the product of each part, the same values)
+                spec_r = np.empty((order + 1, n_r, n_c), dtype=np.float32)
+                spec_i = np.empty((order + 1, n_r, n_c), dtype=np.float32)
                 dc = np.empty(order + 1, dtype=np.complex128)
                 fact = 1.0
                 for n in range(order + 1):
                     _fft.fft_into(term, 1, first)
                     dc[n] = complex(np.sum(term, dtype=np.complex128))
-                    dest = spec[n] if full_rows is None else full_rows
+                    dest = spec if full_rows is None else full_rows
                     o = 0
                     for a0, a1 in runs:
                         _fft.fft_into(first[:, a0:a1], 0, dest[:, o : o + a1 - a0])
                         o += a1 - a0
                     if full_rows is not None:
-                        np.take(full_rows, rows, axis=0, out=spec[n])
+                        np.take(full_rows, rows, axis=0, out=spec)
                     np.multiply(w_shape, np.complex64(dc[n]), out=coherent)
-                    spec[n] -= coherent
+                    np.subtract(spec.real, coherent.real, out=spec_r[n])
+                    np.subtract(spec.imag, coherent.imag, out=spec_i[n])
                     if n:
                         fact *= n
-                        spec[n] *= np.float32(1.0 / fact)
+                        spec_r[n] *= np.float32(1.0 / fact)
+                        spec_i[n] *= np.float32(1.0 / fact)
                     if n < order:
                         term *= u
                     done += 1
@@ -524,29 +579,42 @@ class KirchhoffModel(PhysicalOpticsModel):
                         self.progress(done, total, "kirchhoff energy check")
                 del term
                 r0, r1, c0, c1 = int(rr[0]), int(rr[-1]) + 1, int(cc[0]), int(cc[-1]) + 1
-                self._energy_horner(
-                    spec[:, :, c0:c1], vz[:, :, c0:c1], vc, h_max, r0, r1,
-                    own[:, :, c0:c1] if len(plan) > 1 else None, acc[:, :, c0:c1],
+                h_step = max(1, _HORNER_BLOCK // max(1, n_l * (c1 - c0)))
+                run_reporting(
+                    [
+                        functools.partial(
+                            self._energy_horner, spec_r[:, :, c0:c1], spec_i[:, :, c0:c1],
+                            z[:, :, c0:c1], kz, c_i, vc, h_max, a, b,
+                            None if own is None else own[:, :, c0:c1], acc[:, :, c0:c1],
+                        )
+                        for a, b in row_parts(r0, r1, h_step)
+                    ]
                 )  # fmt: skip
+        del spec, spec_r, spec_i, first, full_rows, coherent
         norm = t.n_tiles * ny * nx * t.sum_w2
         wi = np.array([[s_i, 0.0, c_i]])  # Lambda(wi): one value for all cells
         # the per-cell weights in blocks of rows (large temporaries cost more than the
         # arithmetic: the obliquity and G2 of 1.4 M cells took 3-5 times longer unblocked)
         step = max(1, _HORNER_BLOCK // max(1, n_c))
-        d1_out = []
-        for li, lam in enumerate(lams_um):
+        parts = row_parts(0, n_r, step, _PARTS)
+        wo_xy = []
+        for lam in lams_um:
             cx, cy = self._cell_size(lam)
-            wox, woy = fx[cols] * cx - s_i, fy[rows] * cy
+            wo_xy.append((fx[cols] * cx - s_i, fy[rows] * cy))
+        # each cell's share of D_1, |G|^2 |U_d|^2 / norm, written over its |U_d|^2 in acc
+        contrib = acc
+
+        def weights(li: int, a: int, b: int) -> None:
+            wox = wo_xy[li][0]
             # the obliquity |G|^2 (:meth:`_obliquity`) with |wo| = 1 used:
             # |wi + wo|^2 = 2 (1 + wi.wo), so |G|^2 = (1 + wi.wo)^2 / (ci co (ci + co)^2),
             # wi.wo = s_i wo_x + c_i co (one column term and one cell term; 8 operations
             # per cell instead of 15, the same values to ~1e-16)
             one_wx = 1.0 + s_i * wox
-            contrib = np.zeros((n_r, n_c))
-            num = np.empty((min(step, n_r), n_c))
+            num = np.empty((min(step, b - a), n_c))
             den = np.empty_like(num)
-            for r0 in range(0, n_r, step):
-                r1 = min(n_r, r0 + step)
+            for r0 in range(a, b, step):
+                r1 = min(b, r0 + step)
                 zb, nb, db = z[li, r0:r1], num[: r1 - r0], den[: r1 - r0]
                 np.multiply(zb, c_i, out=nb)
                 nb += one_wx[None, :]
@@ -555,15 +623,17 @@ class KirchhoffModel(PhysicalOpticsModel):
                 db *= db
                 db *= zb
                 db *= c_i
-                np.divide(nb, db, out=contrib[r0:r1], where=ok[li, r0:r1])
-                contrib[r0:r1] *= acc[li, r0:r1]
-            contrib /= norm
-            # the shadowing of the cells that carry the flux (>= 1e-6 of the largest);
-            # the others count unshadowed (an upper bound on D_1)
-            floor = 1e-6 * float(contrib.max(initial=0.0))
-            for r0 in range(0, n_r, step) if self.masking else ():
-                r1 = min(n_r, r0 + step)
-                blk = contrib[r0:r1]
+                okb, cb = ok[li, r0:r1], contrib[li, r0:r1]
+                np.divide(nb, db, out=nb, where=okb)
+                cb *= nb
+                cb /= norm
+                np.copyto(cb, 0.0, where=~okb)  # the evanescent cells carry nothing
+
+        def shadowing(li: int, a: int, b: int, floor: float) -> None:
+            wox, woy = wo_xy[li]
+            for r0 in range(a, b, step):
+                r1 = min(b, r0 + step)
+                blk = contrib[li, r0:r1]
                 big = blk > floor
                 n_big = int(np.count_nonzero(big))
                 if n_big == 0:
@@ -573,101 +643,30 @@ class KirchhoffModel(PhysicalOpticsModel):
                 wo[0] = np.broadcast_to(wox[None, :], big.shape)[big]
                 wo[1] = np.broadcast_to(woy[r0:r1, None], big.shape)[big]
                 wo[2] = z[li, r0:r1][big]
-                blk[big] *= self._diffuse_g2(wi, wo.T, lam)
-            d1_out.append(float(np.sum(contrib)))
-        return self._coherent_direct(v_spec), d1_out
+                blk[big] *= self._diffuse_g2(wi, wo.T, lams_um[li])
+
+        cells = [(li, a, b) for li in range(n_l) for a, b in parts]
+        run_reporting([functools.partial(weights, *c) for c in cells])
+        if self.masking:
+            # the shadowing of the cells that carry the flux (>= 1e-6 of the largest);
+            # the others count unshadowed (an upper bound on D_1)
+            floors = [1e-6 * float(contrib[li].max(initial=0.0)) for li in range(n_l)]
+            run_reporting([functools.partial(shadowing, *c, floors[c[0]]) for c in cells])
+        return [float(np.sum(contrib[li])) for li in range(n_l)]
 
     def _coherent_direct(self, vs: Sequence[float]) -> list[float]:
-        """The coherent factor ``C = mean_tiles |sum W e^(-i v h)|^2 / (sum W)^2`` at each
-        ``v`` (1/um), summed over the map's points in float64, not from the Taylor bands.
-
-        The energy check divides by ``1 - C``, which is 1e-4 on a smooth coat at 89 deg:
-        ``C`` from the truncated Taylor sum (a remainder of up to ``taylor_tol`` per
-        point) moved the factor by 3e-5 to 1.4e-4 on a smooth 1024^2 coat and by 0.24 % on
-        a wavy one (``tests/optics/test_kirchhoff.py``). Here each tile's heights are put
-        in bins of width ``delta = 0.02 / v_max``; with ``c_b`` a bin's centre and ``d``
-        a point's offset from it (``|v d| <= 0.01``),
-
-        .. math:: \\sum W e^{-i v h} = \\sum_b e^{-i v c_b}
-                  \\sum_{n \\le 4} \\frac{(-i v)^n}{n!} \\sum_{h \\in b} W d^n
-
-        to ``0.01^5 / 5! < 1e-12`` of ``sum W`` (the binned moments are formed once per
-        tile and bin width, cached, in blocks of points: one pass over the tile whatever
-        the number of ``v``, ~10 ms on 1024^2; a direct ``exp`` per point costs 30-40 ms
-        per ``v``). A relief taller than one bin per point (``span / delta`` above the
-        tile's points) gets bins ``span / points`` wide and as many more moments as keep
-        the remainder below 1e-12 per point, so the moments never outgrow the tile."""
-        if not vs:
-            return []
-        sh = self._shared
-        t = sh.tiled
-        v_max = max(abs(float(v)) for v in vs)
-        # the bin width from v_max rounded up to a power of 2: nearby calls share the bins
-        v_bins = 2.0 ** math.ceil(math.log2(v_max)) if v_max > 0 else 1.0
-        delta = _COH_BIN_PHASE / v_bins
-        acc = [0.0 for _ in vs]
-
-        def moments(k: int) -> tuple[FloatArray | None, FloatArray | None, float]:
-            h, w = t.tile(k)
-            hf, wf = h.reshape(-1), w.reshape(-1)
-            lo = float(hf.min())
-            span = float(hf.max()) - lo
-            # at most one bin per point (a tall relief would otherwise ask for more
-            # bins than the tile has points): wider bins, and more moments so the
-            # offsets' remainder stays within that of the narrow bins
-            width = max(delta, span / max(1, hf.size - 1))
-            order = _COH_ORDER
-            half = 0.5 * width * v_bins
-            if half > _COH_DIRECT_HALF:
-                # bins so wide that the offsets' phase reaches a radian: the moments'
-                # alternating terms lose digits (and half ** order overflows on a relief
-                # of mm on a small tile); such a tile is summed point by point instead
-                return None, None, float(np.sum(w, dtype=np.float64))
-            while half ** (order + 1) / math.factorial(order + 1) > _COH_REMAINDER:
-                order += 1
-            n_bins = int(span / width) + 1
-            mom = np.zeros((order + 1, n_bins))
-            for a in range(0, hf.size, _COH_BLOCK):
-                hb = hf[a : a + _COH_BLOCK].astype(np.float64)
-                hb -= lo
-                idx = (hb * (1.0 / width)).astype(np.intp)
-                np.minimum(idx, n_bins - 1, out=idx)  # the top height's own bin edge
-                d = hb - (idx + 0.5) * width  # the offset from the bin's centre
-                wd = wf[a : a + _COH_BLOCK].astype(np.float64)
-                for n in range(order + 1):
-                    mom[n] += np.bincount(idx, weights=wd, minlength=n_bins)
-                    if n < order:
-                        wd *= d
-            centres: FloatArray = lo + (np.arange(n_bins, dtype=np.float64) + 0.5) * width
-            return centres, mom, float(np.sum(w, dtype=np.float64))
-
-        # one cache entry for all the tiles (one per tile flooded the shared LRU cache of
-        # 24 entries on maps of many tiles, evicting the readings' transforms)
-        tiles = sh.cached(
-            ("kirchhoff coherent moments", delta),
-            lambda: [moments(k) for k in range(t.n_tiles)],
-        )
-        for k, (centres, mom, sum_w) in enumerate(tiles):
-            if centres is None or mom is None:  # a tall relief on a small tile: directly
-                h, w = t.tile(k)
-                hf = h.reshape(-1).astype(np.float64)
-                wf = w.reshape(-1).astype(np.float64)
-                for i, v in enumerate(vs):
-                    field = wf @ np.exp(-1j * float(v) * hf)
-                    acc[i] += abs(complex(field)) ** 2 / sum_w**2
-                continue
-            n_mom = np.arange(mom.shape[0])
-            fact = np.array([1.0 / math.factorial(int(n)) for n in n_mom])
-            for i, v in enumerate(vs):
-                powers = (-1j * float(v)) ** n_mom * fact
-                field = np.exp(-1j * float(v) * centres) @ (powers @ mom)
-                acc[i] += abs(complex(field)) ** 2 / sum_w**2
-        return [a / t.n_tiles for a in acc]
+        """The coherent factor ``C`` at each ``v`` (1/um), summed over the map's points in
+        float64, not from the Taylor bands
+        (:func:`goniolab.optics.kirchhoff_coherent.coherent_direct`)."""
+        return coherent_direct(self._shared, vs)
 
     @staticmethod
     def _energy_horner(
-        spec: NDArray[np.complex64],
-        vz: FloatArray,
+        spec_r: NDArray[np.float32],
+        spec_i: NDArray[np.float32],
+        z: FloatArray,
+        kz: FloatArray,
+        c_i: float,
         vc: float,
         h_max: float,
         r0: int,
@@ -675,8 +674,9 @@ class KirchhoffModel(PhysicalOpticsModel):
         own: NDArray[np.bool_] | None,
         acc: FloatArray,
     ) -> None:
-        """``acc += |sum_n G_n (-i x)^n|^2`` (``x = (v_z - v_c) h_max``, per wavelength and
-        cell; ``G_n`` = ``spec[n]``, shared by the wavelengths) over rows ``r0:r1``, by
+        """``acc += |sum_n G_n (-i x)^n|^2`` (``x = (v_z - v_c) h_max``, ``v_z = k (z +
+        cos ti)`` with ``k`` = ``kz`` per wavelength, per wavelength and cell; ``G_n`` =
+        ``spec_r[n] + i spec_i[n]``, shared by the wavelengths) over rows ``r0:r1``, by
         Horner's scheme in float32 (``x`` formed in float64, then rounded; the ``G_n`` are
         float32 transforms already), in blocks of rows small enough to stay in cache; only
         where ``own`` (the band's cells) when given; ``acc`` is float64.
@@ -685,14 +685,16 @@ class KirchhoffModel(PhysicalOpticsModel):
         on the 1024^2 bench map; ``D_1`` moved by at most 1.4e-9 relative on smooth and
         rough coats and 9e-8 on a wavy one (70/85/89 deg, 400/550/700 nm), below the
         float32 transforms' own rounding of ``D_1`` (a few 1e-7;
-        ``tests/optics/test_kirchhoff.py`` holds both)."""
-        n_terms, _, n_c = spec.shape
-        n_l = vz.shape[0]
+        ``tests/optics/test_kirchhoff.py`` holds both). The ``G_n`` as contiguous real
+        and imaginary planes (issue 26, g16): 8 instead of 16 ms, the same values."""
+        n_terms, _, n_c = spec_r.shape
+        n_l = z.shape[0]
         step = max(1, _HORNER_BLOCK // max(1, n_l * n_c))
         for a in range(r0, r1, step):
             b = min(r1, a + step)
-            sub = spec[:, a:b]
-            x64 = vz[:, a:b] - vc
+            x64 = z[:, a:b] + c_i
+            x64 *= kz
+            x64 -= vc
             x64 *= h_max
             if own is not None:
                 # cells of the block outside the band (evanescent or another band's) are
@@ -702,16 +704,16 @@ class KirchhoffModel(PhysicalOpticsModel):
             x = x64.astype(np.float32)
             fr = np.empty(x.shape, dtype=np.float32)
             fi = np.empty(x.shape, dtype=np.float32)
-            fr[...] = sub[n_terms - 1].real
-            fi[...] = sub[n_terms - 1].imag
+            fr[...] = spec_r[n_terms - 1, a:b]
+            fi[...] = spec_i[n_terms - 1, a:b]
             t1 = np.empty(x.shape, dtype=np.float32)
             t2 = np.empty(x.shape, dtype=np.float32)
             for n in range(n_terms - 2, -1, -1):
                 # f <- G_n + (-i x) f
                 np.multiply(x, fi, out=t1)
-                t1 += sub[n].real
+                t1 += spec_r[n, a:b]
                 np.multiply(x, fr, out=t2)
-                np.subtract(sub[n].imag, t2, out=t2)
+                np.subtract(spec_i[n, a:b], t2, out=t2)
                 fr, t1 = t1, fr
                 fi, t2 = t2, fi
             fr *= fr

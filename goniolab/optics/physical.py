@@ -64,8 +64,9 @@ References
 
 from __future__ import annotations
 
+import functools
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import ClassVar, Literal
 
 import numpy as np
@@ -74,7 +75,6 @@ from numpy.typing import ArrayLike, NDArray
 from goniolab.optics import _cell_kernels as CK
 from goniolab.optics.apertures import (
     GONIO_CONE,
-    ISO2813_BLACK_GLASS_N,
     ISO2813_RECEPTOR,
     ISO2813_SOURCE,
     Aperture,
@@ -96,6 +96,7 @@ from goniolab.optics.heightmap import HeightMap
 from goniolab.optics.provenance import Provenance
 from goniolab.optics.psd import DEFAULT_TAPER, DEFAULT_TILE
 from goniolab.optics.shared_map import MapStats, SharedMap
+from goniolab.optics.wave_tasks import GlossTasks, Progress, row_parts, run_reporting, task_progress
 
 __all__ = [
     "ENERGY_CHECK_FROM_DEG",
@@ -116,8 +117,6 @@ __all__ = [
 FloatArray = NDArray[np.float64]
 GlossWeighting = Literal["iso2813", "single"]
 Backend = Literal["numba", "numpy"]
-#: ``progress(done, total, what)``: called while long work runs.
-Progress = Callable[[int, int, str], None]
 
 #: Below this Rayleigh factor g no geometry is handed to the facet model: its coherent beam
 #: ``exp(-g)`` is more than a third of the reflected light, which the facet model lacks.
@@ -144,7 +143,7 @@ def check_theta_i(theta_i_deg: float) -> float:
     return v
 
 
-class PhysicalOpticsModel(EnergyBudget, CellApertures):
+class PhysicalOpticsModel(EnergyBudget, CellApertures, GlossTasks):
     """Base of the wave-optics models (implements ``ReflectanceModel``; module docstring).
 
     Parameters
@@ -219,8 +218,12 @@ class PhysicalOpticsModel(EnergyBudget, CellApertures):
     def progress(self) -> Progress | None:
         """``progress(done, total, what)`` or None; setting it also makes the facet work
         on the same map report there (:meth:`SharedMap.report_to`: a large map's slopes,
-        walked block by block)."""
-        return self._progress
+        walked block by block). Within a task of :func:`run_reporting`, that task's slot
+        of the joint report."""
+        if self._progress is None:
+            return None
+        fn = task_progress()
+        return self._progress if fn is None else fn
 
     @progress.setter
     def progress(self, fn: Progress | None) -> None:
@@ -469,10 +472,15 @@ class PhysicalOpticsModel(EnergyBudget, CellApertures):
         lams_um = [lam * 1e-3 for lam in lams_nm]
         powers, coh = self._cell_powers(theta_i_deg, lams_um, boxes, os)
         out = np.empty((len(lams_nm), theta_r_deg.size))
-        for k, (lam, box, p, c) in enumerate(zip(lams_um, boxes, powers, coh, strict=True)):
-            out[k] = self._sum_apertures(
-                theta_i_deg, lam, box, p, theta_r_deg, source, receptor, os
-            ) + coherent_sums(theta_i_deg, c, theta_r_deg, source, receptor, self.n)
+
+        def sums(a: int, b: int) -> None:
+            for k in range(a, b):
+                out[k] = self._sum_apertures(
+                    theta_i_deg, lams_um[k], boxes[k], powers[k], theta_r_deg, source, receptor, os
+                ) + coherent_sums(theta_i_deg, coh[k], theta_r_deg, source, receptor, self.n)
+
+        # the wavelengths in two parts (tasks: each wavelength's sums on one thread)
+        run_reporting([functools.partial(sums, a, b) for a, b in row_parts(0, len(lams_um), 1, 2)])
         return out
 
     def _evaluate(
@@ -697,39 +705,6 @@ class PhysicalOpticsModel(EnergyBudget, CellApertures):
         ``Rect(POINT_BRDF_BOX_DEG, POINT_BRDF_BOX_DEG)`` for :meth:`brdf_inplane`)."""
         flat = np.asarray(theta_r_deg, dtype=np.float64).ravel()
         return [self.provenance(theta_i_deg, float(t), source, receptor) for t in flat]
-
-    def gloss(self, angles_deg: Sequence[int] = (20, 60, 85)) -> dict[int, float]:
-        """ISO 2813 gloss in GU, weighted over wavelength by C x V(lambda) (or one wavelength).
-
-        ``G = 100 sum_l w_l Phi_l / Phi_std`` with ``Phi_l`` the flux fraction from the ISO
-        source into the ISO receptor at wavelength l and ``Phi_std`` that of the polished
-        black glass (n = 1.567) through the same apertures, as the instrument is calibrated:
-        every source direction with its own Fresnel reflectance (within 3e-5 of the nominal
-        ``F(1.567, t)``), so that the standard reads 100 exactly. :meth:`gloss_provenance`
-        names the model of each geometry.
-        """
-        lams, w = self._lams_for_gloss()
-        out: dict[int, float] = {}
-        for t in angles_deg:
-            key = int(t)
-            if key not in ISO2813_RECEPTOR:
-                raise ValueError(
-                    f"no ISO 2813 geometry at {t} deg; known: {sorted(ISO2813_RECEPTOR)}"
-                )
-            rec = ISO2813_RECEPTOR[key]
-            who, _ = self._route(key, key, ISO2813_SOURCE, rec, self._lams_for_checks())
-            if who == "facet":
-                out[key] = self.facet_model.gloss((key,))[key]
-                continue
-            if who != "self":
-                out[key] = self._sibling(who).gloss((key,))[key]
-                continue
-            frac = self._fractions(key, np.array([float(key)]), ISO2813_SOURCE, rec, list(lams))
-            ref = coherent_sums(
-                key, 1.0, np.array([float(key)]), ISO2813_SOURCE, rec, ISO2813_BLACK_GLASS_N
-            )[0]
-            out[key] = 100.0 * float(np.sum(w * frac[:, 0]) / np.sum(w)) / ref
-        return out
 
     def gloss_provenance(self, angles_deg: Sequence[int] = (20, 60, 85)) -> dict[int, Provenance]:
         """Per ISO 2813 geometry: the model that computes it and the notes (validity

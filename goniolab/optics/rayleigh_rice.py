@@ -60,12 +60,16 @@ from goniolab.optics.physical import (
     check_theta_i,
 )
 from goniolab.optics.psd import PSD2, psd2, psd_region, windowed_sq_um
+from goniolab.optics.wave_tasks import row_parts, run_reporting
 
 __all__ = ["RayleighRiceModel", "rr_q_factor"]
 
 #: Rows of the Nyquist window per block of the energy check's sums (16 rows of a
 #: 1024-wide window: 16 k cells, whose float64 and complex temporaries stay in cache).
 _ENERGY_ROWS: int = 16
+#: Parts of rows per wavelength the energy check's terms are formed in (tasks: fine enough
+#: that a thread joining late finds some left).
+_ENERGY_PARTS: int = 4
 
 
 def rr_q_factor(
@@ -82,6 +86,20 @@ def rr_q_factor(
     si, ci = math.sin(ti), math.cos(ti)
     ss, cs = np.sin(ts), np.cos(ts)
     cp, sp = np.cos(ps), np.sin(ps)
+    if eps.imag == 0.0 and eps.real >= 1.0:
+        # a real index n >= 1 (a dielectric coat): every square root below is of a
+        # positive number and every factor real, so the same formulas in real
+        # arithmetic (issue 26: a third of the complex work; the same Q to ~1e-15)
+        er = eps.real
+        ar_i = math.sqrt(er - si * si)
+        ar_s = np.sqrt(er - ss * ss)
+        e1r = er - 1.0
+        r_ss = e1r * cp / ((ci + ar_i) * (cs + ar_s))
+        r_pp = e1r * (er * si * ss - ar_s * ar_i * cp) / ((er * ci + ar_i) * (er * cs + ar_s))
+        r_ps = -e1r * ar_i * sp / ((er * ci + ar_i) * (cs + ar_s))
+        r_sp = -e1r * ar_s * sp / ((ci + ar_i) * (er * cs + ar_s))
+        real: FloatArray = 0.5 * (r_ss * r_ss + r_pp * r_pp + r_ps * r_ps + r_sp * r_sp)
+        return real
     a_i = np.sqrt(eps - si * si + 0j)
     a_s = np.sqrt(eps - ss * ss + 0j)
     e1 = eps - 1.0
@@ -195,19 +213,26 @@ class RayleighRiceModel(PhysicalOpticsModel):
         out = []
         shape = (iy.size, ix.size)
         c16 = 16.0 * math.pi**2 * ci
+        s_i = math.sin(math.radians(theta_i_deg))
+        # the terms of the real (not evanescent) cells only, put back in place and summed
+        # over the whole window: the same values in the same order (towards grazing
+        # incidence half of the window or more is evanescent, and Q's complex arithmetic
+        # was most of a gloss report's Rayleigh-Rice work), formed in blocks of rows whose
+        # temporaries stay in cache (:data:`_ENERGY_ROWS`); the blocks of each wavelength
+        # in parts, tasks on up to two threads (:func:`run_reporting`: each cell by
+        # the same operations on either thread, the sum in this one: the same bits)
+        terms = np.zeros((len(lams_um), *shape))
+        xs, ys = [], []
         for lam in lams_um:
             cx, cy = self._cell_size(lam)
-            x = ix.astype(np.float64)[None, :] * cx - math.sin(math.radians(theta_i_deg))
-            y = iy.astype(np.float64)[:, None] * cy
-            # the terms of the real (not evanescent) cells only, put back in place and summed
-            # over the whole window: the same values in the same order (towards grazing
-            # incidence half of the window or more is evanescent, and Q's complex arithmetic
-            # was most of a gloss report's Rayleigh-Rice work), formed in blocks of rows
-            # whose temporaries stay in cache (:data:`_ENERGY_ROWS`)
-            terms = np.zeros(shape)
-            for r0 in range(0, shape[0], _ENERGY_ROWS):
-                rows = slice(r0, min(r0 + _ENERGY_ROWS, shape[0]))
-                yb = y[rows]
+            xs.append(ix.astype(np.float64)[None, :] * cx - s_i)
+            ys.append(iy.astype(np.float64)[:, None] * cy)
+
+        def block_terms(li: int, a: int, b: int) -> None:
+            x = xs[li]
+            for r0 in range(a, b, _ENERGY_ROWS):
+                rows = slice(r0, min(r0 + _ENERGY_ROWS, b))
+                yb = ys[li][rows]
                 z2 = 1.0 - x * x - yb * yb
                 ok = z2 > 1e-12
                 if not ok.any():
@@ -219,8 +244,17 @@ class RayleighRiceModel(PhysicalOpticsModel):
                 ts_deg = np.degrees(np.arctan2(st, z))
                 phi_deg = np.where(st > 0, np.degrees(np.arctan2(-yo, -xo)), 0.0)
                 q = rr_q_factor(theta_i_deg, ts_deg, phi_deg, self.n)
-                terms[rows][ok] = c16 * z * q * pv[rows][ok]
-            d = float(np.sum(terms))
+                terms[li][rows][ok] = c16 * z * q * pv[rows][ok]
+
+        run_reporting(
+            [
+                functools.partial(block_terms, li, a, b)
+                for li in range(len(lams_um))
+                for a, b in row_parts(0, shape[0], _ENERGY_ROWS, _ENERGY_PARTS)
+            ]
+        )
+        for li, lam in enumerate(lams_um):
+            d = float(np.sum(terms[li]))
             d *= df2 / lam**2
             dw = math.exp(-self._g_at(theta_i_deg, lam))
             room = r_spec * (1.0 - dw)

@@ -171,6 +171,19 @@ def test_q_factor_is_fresnel_in_the_specular_direction(n: complex) -> None:
         assert float(q) == pytest.approx(float(fresnel(math.cos(math.radians(t)), n)), rel=1e-12)
 
 
+@pytest.mark.parametrize("n", [1.0, 1.55, 2.5])
+def test_q_factor_of_a_real_index_in_real_arithmetic_is_the_complex_formula(n: float) -> None:
+    """A real index n >= 1 takes the real-arithmetic path (issue 26); an index with an
+    imaginary part of 1e-300 (no physical difference) takes the complex one: the same Q over
+    the hemisphere to 1e-14, azimuths of both signs, grazing incidence and scattering."""
+    ts, ps = np.meshgrid(np.linspace(0.0, 89.9, 60), np.linspace(-180.0, 180.0, 73))
+    for ti in (0.0, 45.0, 85.0, 89.0):
+        real = rr_q_factor(ti, ts, ps, n)
+        cplx = rr_q_factor(ti, ts, ps, complex(n, 1e-300))
+        np.testing.assert_allclose(real, cplx, rtol=1e-14, atol=1e-300)
+        assert (real > 0.0).all() if n > 1.0 else (real == 0.0).all()
+
+
 def test_energy_at_most_one_over_incidence() -> None:
     coat = gaussian_acf_map(128, 0.1, 2.0, 0.25, seed=2)
     smooth = gaussian_acf_map(128, 0.01, 2.0, 0.25, seed=2)

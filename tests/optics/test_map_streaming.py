@@ -162,4 +162,10 @@ def test_rayleigh_rice_reports_its_psd_tiles_and_reads_the_same() -> None:
     heard = RayleighRiceModel(hm, tile=64, progress=lambda d, t, w: seen.append((d, t, w))).gloss()
     assert heard == quiet
     assert seen and {w for _, _, w in seen} == {"rayleigh-rice PSD tiles"}
-    assert {t for _, t, _ in seen} == {4} and (4, 4, "rayleigh-rice PSD tiles") in seen
+    # the gloss's three geometries (4 tiles each) run as tasks, possibly at once, and
+    # report as one bar (wave_tasks.run_reporting, issue 26): the totals add up as the
+    # geometries start, done never falls, and the bar closes once, at 12 of 12
+    assert {t for _, t, _ in seen} == {4, 8, 12}
+    assert seen[-1] == (12, 12, "rayleigh-rice PSD tiles")
+    assert [d for d, _, _ in seen] == sorted(d for d, _, _ in seen)
+    assert all(d < t for d, t, _ in seen[:-1])
