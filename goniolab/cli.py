@@ -429,6 +429,20 @@ def _keep_freed_memory() -> None:
             mallopt(param, value)
 
 
+def _check_thread_env() -> None:
+    """A ``GONIOLAB_THREADS`` or ``OMP_NUM_THREADS`` that is not a positive integer is the
+    user's error, said before any work (the models read it deep inside a computation,
+    where it surfaced as a traceback)."""
+    if not (os.environ.get("GONIOLAB_THREADS") or os.environ.get("OMP_NUM_THREADS")):
+        return
+    from goniolab.optics.facet_threads import walk_threads
+
+    try:
+        walk_threads()
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``goniolab`` console script; returns the process exit code.
 
@@ -448,6 +462,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         _one_line_warnings(args.debug)
         _start_log(args, argv)
         _warn_implausible(args)
+        _check_thread_env()
         code: int = args.func(args)
         sys.stdout.flush()  # a closed pipe shows here, not in the interpreter's exit
     except BrokenPipeError:

@@ -60,11 +60,15 @@ def thread_limit() -> int | None:
 
 
 def _env_threads(name: str) -> int | None:
+    """The positive integer of environment variable ``name`` (None when unset or empty).
+    ``OMP_NUM_THREADS`` may be OpenMP's list of nested levels (``4,2``, OpenMP 5.2 sec.
+    21.1.2): its first entry, the outermost level, counts."""
     raw = os.environ.get(name, "").strip()
     if not raw:
         return None
+    first = raw.split(",", 1)[0].strip() if name == "OMP_NUM_THREADS" else raw
     try:
-        value = int(raw)
+        value = int(first)
     except ValueError:
         value = 0
     if value < 1:

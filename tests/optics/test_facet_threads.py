@@ -93,10 +93,17 @@ def test_thread_count_from_the_environment(monkeypatch: pytest.MonkeyPatch) -> N
         monkeypatch.setenv(FT.THREADS_ENV, str(cpus))
         assert walk_threads() == cpus
         monkeypatch.delenv(FT.THREADS_ENV)
-    for bad in ("0", "-2", "two"):
+    for bad in ("0", "-2", "two", "4,2"):
         monkeypatch.setenv(FT.THREADS_ENV, bad)
         with pytest.raises(ValueError, match=f"GONIOLAB_THREADS={bad!r}"):
             walk_threads()
+    monkeypatch.delenv(FT.THREADS_ENV)
+    # OpenMP's list of nested levels (OpenMP 5.2 sec. 21.1.2): the outermost level counts
+    monkeypatch.setenv("OMP_NUM_THREADS", "3,2")
+    assert walk_threads() == 3
+    monkeypatch.setenv("OMP_NUM_THREADS", "0,2")
+    with pytest.raises(ValueError, match="OMP_NUM_THREADS='0,2'"):
+        walk_threads()
 
 
 def _on_threads(n: int, fn: Callable[[], object], monkeypatch: pytest.MonkeyPatch) -> object:
