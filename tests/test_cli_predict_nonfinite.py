@@ -52,3 +52,29 @@ def test_a_plain_map_still_gives_valid_json(
     assert main(["predict", "stats", str(p), "--json"]) == 0
     doc = json.loads(capsys.readouterr().out, parse_constant=lambda c: pytest.fail(c))
     assert np.isfinite(doc["Sq_nm"]) and doc["Sq_nm"] > 0
+
+
+@pytest.mark.parametrize(
+    "command",
+    [["gloss"], ["brdf", "--theta-i", "80", "--theta-r", "75:85:5"], ["albedo"]],
+    ids=["gloss", "brdf", "albedo"],
+)
+def test_a_models_non_finite_guard_is_one_clear_error(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], command: list[str]
+) -> None:
+    """The Kirchhoff energy check raises FloatingPointError rather than scale by a
+    non-finite factor (never a silent 1); every ``predict`` command turns it into the
+    overflow error, exit 2, no traceback and no half-written JSON."""
+    from goniolab.optics.kirchhoff import KirchhoffModel
+
+    def broken(self: object, theta_i_deg: float, lams_um: object) -> list[float]:
+        raise FloatingPointError(f"kirchhoff energy check at {theta_i_deg:g} deg: D_1 = [nan]")
+
+    monkeypatch.setattr(KirchhoffModel, "_energy_scales_at", broken)
+    surface = "sample:gauss-sq177-l5"
+    code = main(["predict", command[0], surface, "--model", "kirchhoff", *command[1:], "--json"])
+    out, err = capsys.readouterr()
+    assert code == 2, err
+    assert out == ""
+    assert "kirchhoff energy check at" in err and "D_1 = [nan]" in err
+    assert "overflowed double precision" in err and "Traceback" not in err

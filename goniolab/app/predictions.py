@@ -19,16 +19,20 @@ module name is used once in the tree, ``goniolab/commands/predict.py`` is the CL
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, ParamSpec, TypeVar
 
 import numpy as np
 
 from goniolab.errors import UserError
 from goniolab.model_registry import DEFAULT_MODEL, model_names
+
+P = ParamSpec("P")
+R = TypeVar("R")
 
 if TYPE_CHECKING:  # the optics load when a prediction runs
     from numpy.typing import NDArray
@@ -278,6 +282,23 @@ def parse_angle_list(spec: str | Sequence[float] | NDArray[np.float64], name: st
         raise UserError(str(exc)) from None
 
 
+def _non_finite_is_user_error(fn: Callable[P, R]) -> Callable[P, R]:
+    """A model's guard against non-finite sums (the Kirchhoff energy check raises
+    ``FloatingPointError``, never a silent factor of 1) is the overflow error naming the
+    surface (as :func:`require_finite`'s), not a traceback."""
+
+    @functools.wraps(fn)
+    def wrapper(*args: P.args, **kwargs: P.kwargs) -> R:
+        try:
+            return fn(*args, **kwargs)
+        except FloatingPointError as exc:
+            req = args[0] if args else kwargs.get("req")
+            label = getattr(req, "label", "the surface")
+            raise UserError(f"{label}: {exc}: {MODEL_OVERFLOW}") from None
+
+    return wrapper
+
+
 def require_finite(spec: str, doc: dict[str, Any], cause: str) -> None:
     """A non-finite number in a result is an error naming the key and the cause, not
     ``Infinity`` or ``NaN`` in the output (not valid JSON) with exit 0."""
@@ -442,6 +463,7 @@ def _gloss_models(model: Any, rep: Any) -> tuple[dict[str, Any], dict[str, Any],
     return names, fb, list(rep.warnings)
 
 
+@_non_finite_is_user_error
 def predict_gloss(
     req: SurfaceRequest,
     *,
@@ -624,6 +646,7 @@ def _peak(tr: NDArray[np.float64], curve: NDArray[np.float64], of: str) -> dict[
     return out
 
 
+@_non_finite_is_user_error
 def predict_brdf(
     req: SurfaceRequest,
     *,
@@ -733,6 +756,7 @@ class AlbedoPrediction:
         return out
 
 
+@_non_finite_is_user_error
 def predict_albedo(
     req: SurfaceRequest,
     theta_i_deg: str | Sequence[float] = "0,30,60,85",
