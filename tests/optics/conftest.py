@@ -10,6 +10,7 @@ model must reproduce.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import numpy as np
@@ -38,6 +39,16 @@ def make_gaussian_map(
     p = (z[:, 2:] - z[:, :-2]) / (2.0 * step_um)
     z *= slope_rms / float(np.sqrt(np.mean(p * p)))
     return HeightMap(z_um=z, dx_um=step_um, dy_um=step_um, source=f"gaussian(s={slope_rms})")
+
+
+def gaussian_acf_map(n: int, sq_um: float, l_um: float, step_um: float, seed: int) -> HeightMap:
+    """Periodic Gaussian surface with ACF Sq^2 exp(-r^2/l^2) (heights scaled to Sq exactly)."""
+    rng = np.random.default_rng(seed)
+    f = np.fft.fftfreq(n, step_um)
+    filt = np.exp(-0.5 * (math.pi * l_um) ** 2 * (f[:, None] ** 2 + f[None, :] ** 2))
+    z = np.real(np.fft.ifft2(np.fft.fft2(rng.normal(size=(n, n))) * filt))
+    z *= sq_um / z.std()
+    return HeightMap(z_um=z, dx_um=step_um, dy_um=step_um, source=f"gauss(Sq={sq_um})")
 
 
 @pytest.fixture(scope="session")

@@ -29,18 +29,9 @@ from goniolab.optics.kirchhoff import KirchhoffModel, band_plan
 from goniolab.optics.psd import TiledMap, psd2, schwartz_taper
 from goniolab.optics.rayleigh_rice import RayleighRiceModel, rr_q_factor
 from goniolab.optics.surface import Surface
+from tests.optics.conftest import gaussian_acf_map
 
 LAM_UM = 0.55
-
-
-def gaussian_acf_map(n: int, sq_um: float, l_um: float, step_um: float, seed: int) -> HeightMap:
-    """Periodic Gaussian surface with ACF Sq^2 exp(-r^2/l^2) (heights scaled to Sq exactly)."""
-    rng = np.random.default_rng(seed)
-    f = np.fft.fftfreq(n, step_um)
-    filt = np.exp(-0.5 * (math.pi * l_um) ** 2 * (f[:, None] ** 2 + f[None, :] ** 2))
-    z = np.real(np.fft.ifft2(np.fft.fft2(rng.normal(size=(n, n))) * filt))
-    z *= sq_um / z.std()
-    return HeightMap(z_um=z, dx_um=step_um, dy_um=step_um, source=f"gauss(Sq={sq_um})")
 
 
 @pytest.fixture(scope="module")

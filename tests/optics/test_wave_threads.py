@@ -12,29 +12,17 @@ and the progress sums worked by hand.
 from __future__ import annotations
 
 import itertools
-import math
 import threading
 from collections.abc import Callable
 from typing import Any
 
-import numpy as np
 import pytest
 
 from goniolab.optics import facet_threads as FT
-from goniolab.optics.heightmap import HeightMap
 from goniolab.optics.kirchhoff import KirchhoffModel
 from goniolab.optics.rayleigh_rice import RayleighRiceModel
 from goniolab.optics.wave_tasks import run_reporting
-
-
-def _coat(n: int, sq_um: float, l_um: float, step_um: float, seed: int) -> HeightMap:
-    """Periodic Gaussian surface, ACF Sq^2 exp(-r^2/l^2) (tests/optics/test_kirchhoff.py)."""
-    rng = np.random.default_rng(seed)
-    f = np.fft.fftfreq(n, step_um)
-    filt = np.exp(-0.5 * (math.pi * l_um) ** 2 * (f[:, None] ** 2 + f[None, :] ** 2))
-    z = np.real(np.fft.ifft2(np.fft.fft2(rng.normal(size=(n, n))) * filt))
-    z *= sq_um / z.std()
-    return HeightMap(z_um=z, dx_um=step_um, dy_um=step_um, source=f"gauss(Sq={sq_um})")
+from tests.optics.conftest import gaussian_acf_map
 
 
 def _meet_once(cls: type, name: str, barrier: threading.Barrier, mp: pytest.MonkeyPatch) -> None:
@@ -70,7 +58,7 @@ def test_kirchhoff_gloss_is_the_same_bits_on_one_thread_and_two(
     """A smooth coat on 4 tiles; the rough one (seed 5: Sq 0.12 um) plans several Taylor
     bands in the energy check (its per-band cell masks)."""
     sq = 0.05 if seed == 3 else 0.12
-    hm = _coat(256, sq, 2.0, 0.5, seed)
+    hm = gaussian_acf_map(256, sq, 2.0, 0.5, seed)
 
     def make() -> KirchhoffModel:
         return KirchhoffModel(hm, tile=128, n=1.55)
@@ -92,7 +80,7 @@ def test_rayleigh_rice_gloss_is_the_same_bits_on_one_thread_and_two(
 ) -> None:
     """Rayleigh-Rice answers 85 deg (its energy check's terms in blocks of rows on two
     threads) and hands 20 and 60 deg to its Kirchhoff sibling (g > RR_VALID_G there)."""
-    hm = _coat(256, 0.05, 2.0, 0.5, 3)
+    hm = gaussian_acf_map(256, 0.05, 2.0, 0.5, 3)
 
     def make() -> RayleighRiceModel:
         return RayleighRiceModel(hm, tile=128, n=1.55)
@@ -119,7 +107,9 @@ def test_progress_of_tasks_at_once_adds_up_and_closes_once(
     then one (5, 5)."""
     monkeypatch.setenv(FT.THREADS_ENV, "1")
     calls: list[tuple[int, int, str]] = []
-    model = KirchhoffModel(_coat(64, 0.05, 2.0, 0.5, 1), progress=lambda *c: calls.append(c))
+    model = KirchhoffModel(
+        gaussian_acf_map(64, 0.05, 2.0, 0.5, 1), progress=lambda *c: calls.append(c)
+    )
 
     def task(what: str, steps: list[tuple[int, int]]) -> str:
         for done, total in steps:
@@ -142,7 +132,7 @@ def test_a_gloss_on_two_threads_reports_one_rising_bar(monkeypatch: pytest.Monke
     (the terminal bar closes at done >= total)."""
     monkeypatch.setenv(FT.THREADS_ENV, "2")
     calls: list[tuple[int, int, str]] = []
-    hm = _coat(256, 0.05, 2.0, 0.5, 3)
+    hm = gaussian_acf_map(256, 0.05, 2.0, 0.5, 3)
     model = KirchhoffModel(hm, tile=128, progress=lambda *c: calls.append(c))
     model.gloss((20, 60, 85))
     done = [d for d, _, _ in calls]
