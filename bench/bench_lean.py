@@ -401,13 +401,7 @@ def print_facet_floor(size: int, repeats: int, as_json: bool) -> int:
     print(f"the curve in process, one thread, median of {repeats} (warm heap):")
     for name, t in stages.items():
         print(f"  {name:50}{1e3 * t:7.1f} ms")
-    ref = rows["facet script (baseline_numpy.py brdf)"]
-    print(f"the facet floor, whole processes, {size}^2 rough map, median of {repeats}, load "
-          f"{load0:.1f} before / {out['load_after']:.1f} after")  # fmt: skip
-    print(f"{'step':40}{'wall':>9}{'cpu':>9}{'wall x':>8}{'cpu x':>7}  (x: over the facet script)")
-    for name, r in rows.items():
-        print(f"{name:40}{r['wall_s']:8.3f}s{r['cpu_s']:8.3f}s"
-              f"{r['wall_s'] / ref['wall_s']:8.2f}{r['cpu_s'] / ref['cpu_s']:7.2f}")  # fmt: skip
+    print_floor_rows(f"the facet floor, whole processes, {size}^2 rough map", rows, repeats, out)
     return 0
 
 
@@ -506,6 +500,20 @@ def same_as(maps: dict[str, Path], before: str) -> dict[str, bool]:
     return out
 
 
+def print_floor_rows(
+    title: str, rows: dict[str, dict[str, float]], repeats: int, out: dict[str, Any]
+) -> None:
+    """A floor table (:func:`floor`, :func:`facet_floor`): each step's medians and their
+    ratio to the facet script's, under ``title`` and the load before / after."""
+    ref = rows["facet script (baseline_numpy.py brdf)"]
+    print(f"{title}, median of {repeats}, load "
+          f"{out['load_before']:.1f} before / {out['load_after']:.1f} after")  # fmt: skip
+    print(f"{'step':40}{'wall':>9}{'cpu':>9}{'wall x':>8}{'cpu x':>7}  (x: over the facet script)")
+    for name, r in rows.items():
+        print(f"{name:40}{r['wall_s']:8.3f}s{r['cpu_s']:8.3f}s"
+              f"{r['wall_s'] / ref['wall_s']:8.2f}{r['cpu_s'] / ref['cpu_s']:7.2f}")  # fmt: skip
+
+
 def print_floor(size: int, repeats: int, as_json: bool) -> int:
     load0 = os.getloadavg()[0]
     with tempfile.TemporaryDirectory(prefix="goniolab-floor-") as tmp:
@@ -516,13 +524,7 @@ def print_floor(size: int, repeats: int, as_json: bool) -> int:
     if as_json:
         print(json.dumps(out, indent=2))
         return 0
-    ref = rows["facet script (baseline_numpy.py brdf)"]
-    print(f"the floor, whole processes, {size}^2 smooth map, median of {repeats}, load "
-          f"{load0:.1f} before / {out['load_after']:.1f} after")  # fmt: skip
-    print(f"{'step':40}{'wall':>9}{'cpu':>9}{'wall x':>8}{'cpu x':>7}  (x: over the facet script)")
-    for name, r in rows.items():
-        print(f"{name:40}{r['wall_s']:8.3f}s{r['cpu_s']:8.3f}s"
-              f"{r['wall_s'] / ref['wall_s']:8.2f}{r['cpu_s'] / ref['cpu_s']:7.2f}")  # fmt: skip
+    print_floor_rows(f"the floor, whole processes, {size}^2 smooth map", rows, repeats, out)
     return 0
 
 

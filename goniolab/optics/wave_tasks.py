@@ -75,12 +75,7 @@ class _JointProgress:
             self.fn(min(all_done, all_total - 1), all_total, what)
 
     def run(self, i: int, task: Callable[[], T]) -> T:
-        old = getattr(_slot, "fn", None)
-        _slot.fn = functools.partial(self.report, i)
-        try:
-            return task()
-        finally:
-            _slot.fn = old
+        return _carried(functools.partial(self.report, i), task)
 
     def close(self) -> None:
         with self.lock:
@@ -100,6 +95,7 @@ def row_parts(r0: int, r1: int, step: int, parts: int = 2) -> list[tuple[int, in
 
 
 def _carried(fn: Progress, task: Callable[[], T]) -> T:
+    """``task()`` with ``fn`` as this thread's progress slot (the old slot back after)."""
     old = getattr(_slot, "fn", None)
     _slot.fn = fn
     try:
