@@ -62,13 +62,14 @@ def test_a_plain_map_still_gives_valid_json(
 def test_a_models_non_finite_guard_is_one_clear_error(
     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], command: list[str]
 ) -> None:
-    """The Kirchhoff energy check raises FloatingPointError rather than scale by a
-    non-finite factor (never a silent 1); every ``predict`` command turns it into the
-    overflow error, exit 2, no traceback and no half-written JSON."""
+    """The Kirchhoff energy check raises NonFiniteEnergySums (a FloatingPointError) rather
+    than scale by a non-finite factor (never a silent 1); every ``predict`` command turns
+    it into the overflow error, exit 2, no traceback and no half-written JSON."""
+    from goniolab.optics.energy_budget import NonFiniteEnergySums
     from goniolab.optics.kirchhoff import KirchhoffModel
 
     def broken(self: object, theta_i_deg: float, lams_um: object) -> list[float]:
-        raise FloatingPointError(f"kirchhoff energy check at {theta_i_deg:g} deg: D_1 = [nan]")
+        raise NonFiniteEnergySums(f"kirchhoff energy check at {theta_i_deg:g} deg: D_1 = [nan]")
 
     monkeypatch.setattr(KirchhoffModel, "_energy_scales_at", broken)
     surface = "sample:gauss-sq177-l5"
@@ -78,3 +79,19 @@ def test_a_models_non_finite_guard_is_one_clear_error(
     assert out == ""
     assert "kirchhoff energy check at" in err and "D_1 = [nan]" in err
     assert "overflowed double precision" in err and "Traceback" not in err
+
+
+def test_another_floating_point_error_is_not_called_an_overflow(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Only the energy check's guard is the overflow error: a FloatingPointError of
+    another cause (``numpy.seterr(all="raise")`` in a notebook) passes unchanged."""
+    from goniolab.app.predictions import SurfaceRequest, predict_gloss
+    from goniolab.optics.kirchhoff import KirchhoffModel
+
+    def other(self: object, theta_i_deg: float, lams_um: object) -> list[float]:
+        raise FloatingPointError("underflow encountered in multiply")
+
+    monkeypatch.setattr(KirchhoffModel, "_energy_scales_at", other)
+    with pytest.raises(FloatingPointError, match=r"^underflow encountered in multiply$"):
+        predict_gloss(SurfaceRequest("sample:gauss-sq177-l5", model="kirchhoff"))

@@ -31,10 +31,9 @@ import numpy as np
 from goniolab.errors import UserError
 from goniolab.model_registry import DEFAULT_MODEL, model_names
 
-P = ParamSpec("P")
-R = TypeVar("R")
-
 if TYPE_CHECKING:  # the optics load when a prediction runs
+    P = ParamSpec("P")
+    R = TypeVar("R")
     from numpy.typing import NDArray
 
     from goniolab.optics.gloss_standards import GlossReport
@@ -283,18 +282,19 @@ def parse_angle_list(spec: str | Sequence[float] | NDArray[np.float64], name: st
 
 
 def _non_finite_is_user_error(fn: Callable[P, R]) -> Callable[P, R]:
-    """A model's guard against non-finite sums (the Kirchhoff energy check raises
-    ``FloatingPointError``, never a silent factor of 1) is the overflow error naming the
-    surface (as :func:`require_finite`'s), not a traceback."""
+    """The energy check's ``NonFiniteEnergySums`` as the overflow error; others pass."""
 
     @functools.wraps(fn)
     def wrapper(*args: P.args, **kwargs: P.kwargs) -> R:
         try:
             return fn(*args, **kwargs)
         except FloatingPointError as exc:
-            req = args[0] if args else kwargs.get("req")
-            label = getattr(req, "label", "the surface")
-            raise UserError(f"{label}: {exc}: {MODEL_OVERFLOW}") from None
+            from goniolab.optics.energy_budget import NonFiniteEnergySums
+
+            if not isinstance(exc, NonFiniteEnergySums):
+                raise
+            label = getattr(args[0] if args else kwargs.get("req"), "label", "the surface")
+            raise UserError(f"{label}: {exc}: {MODEL_OVERFLOW}") from exc
 
     return wrapper
 

@@ -17,6 +17,13 @@ import numpy as np
 
 from goniolab.optics.shared_map import SharedMap
 
+
+class NonFiniteEnergySums(FloatingPointError):
+    """An energy check's sums came out non-finite (NaN or inf): raised rather than scale
+    the diffuse light by a factor made of them (never a silent factor of 1); the
+    application turns it into its overflow error naming the surface."""
+
+
 __all__ = ["ENERGY_CHECK_FROM_DEG", "EnergyBudget"]
 
 #: From this incidence on, the diffuse part of the wave models is held to energy

@@ -83,6 +83,7 @@ from numpy.typing import NDArray
 from goniolab.optics import _cell_kernels as CK
 from goniolab.optics import _fft
 from goniolab.optics.cell_apertures import CellBox
+from goniolab.optics.energy_budget import NonFiniteEnergySums
 from goniolab.optics.fresnel import fresnel
 from goniolab.optics.kirchhoff_coherent import coherent_direct
 from goniolab.optics.physical import (
@@ -391,7 +392,7 @@ class KirchhoffModel(PhysicalOpticsModel):
         through; ``tests/optics/test_kirchhoff.py``'s wavy-map test holds the factor.)"""
         coh, d1 = self._energy_sums(theta_i_deg, lams_um)
         if not all(math.isfinite(v) for v in (*coh, *d1)):  # never a silent factor of 1
-            raise FloatingPointError(
+            raise NonFiniteEnergySums(
                 f"kirchhoff energy check at {theta_i_deg:g} deg: C = {coh}, D_1 = {d1}"
             )
         # D_1 at or below the float32 transforms' rounding (a flat map: 1e-14 to 1e-13)
