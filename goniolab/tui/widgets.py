@@ -63,7 +63,22 @@ class ColourSwatch(Static):
         )
 
 
-class ColourTable(DataTable[str]):
+class SyncedTable(DataTable[str]):
+    """A :class:`DataTable` whose vertical scrollbar shows where it is scrolled when the
+    bar appears.
+
+    Textual moves a scrollbar's thumb only while the bar is shown
+    (``Widget.watch_scroll_y``). A table that scrolls to its new last row in the same
+    refresh that makes it overflow (the gloss log's third reading at 80 x 24) scrolled
+    first and showed its bar after, its thumb at the top beside the bottom rows until
+    the next scroll."""
+
+    def watch_show_vertical_scrollbar(self, shown: bool) -> None:
+        if shown:
+            self.vertical_scrollbar.position = self.scroll_y
+
+
+class ColourTable(SyncedTable):
     """Per point: theta_r, the E2194 aspecular angle, measured L*a*b*, predicted L*, the
     signed dL*, dC*, dH* and dE00 (predicted - measured) and the verdict of the tolerance
     set at that aspecular angle (:data:`goniolab.colour.tolerance.BUILTIN_SETS`
@@ -530,7 +545,7 @@ def _status_line(widget: Widget) -> StatusLine | None:
         return None
 
 
-class GlossLog(DataTable[str]):
+class GlossLog(SyncedTable):
     """Glossmeter readings as they come: time, measured and predicted G20/G60/G85; the
     border's subtitle counts the warnings stored with the predicted gloss of the run."""
 

@@ -583,3 +583,27 @@ async def test_the_arm_table_fits_its_panel_with_signed_angles(width: int) -> No
         assert max(len(str(r.label)) for r in arms.rows.values()) > len("detector")
         assert cell(arms, "detector", "angle") == "-75.50"
         assert arms.virtual_size.width <= arms.scrollable_content_region.width
+
+
+async def test_gloss_log_scrollbar_shows_the_scroll_it_appears_at() -> None:
+    """The race of the 80 x 24 snapshot: the log scrolled to its last row in the refresh
+    that made it overflow, before its scrollbar was shown; textual moves the thumb only
+    while the bar is shown, so the thumb stayed at the top beside the bottom rows."""
+    backend = ScriptedBackend(gated=False)
+    app = GonioApp(backend, poll_hz=0, autostart=True)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await wait_until(pilot, lambda: app.run_state is RunState.DONE)
+        log = app.query_one("#gloss-log", GlossLog)
+        for t_s in (5, 9, 13):
+            backend.publish_gloss(t_s, 60.0)
+        await wait_until(pilot, lambda: log.row_count == 4)
+        await settle(pilot, app)
+        assert log.max_scroll_y > 0  # the log overflows at this size
+        # the order of the race, forced: the thumb at the top, the bar hidden, the table
+        # scrolled to its end, the bar shown
+        log.scroll_y = 0
+        assert log.vertical_scrollbar.position == 0
+        log.show_vertical_scrollbar = False
+        log.scroll_y = log.max_scroll_y
+        log.show_vertical_scrollbar = True
+        assert log.vertical_scrollbar.position == log.max_scroll_y
