@@ -114,9 +114,14 @@ def _spare(n: int) -> int:
 
 
 class _Batch:
-    """One :func:`run_tasks` call: its tasks, handed out in order, and their results."""
+    """One :func:`run_tasks` call: its tasks, handed out in order, and their results.
 
-    __slots__ = ("error", "left", "limit", "results", "taken", "tasks")
+    ``finished[i]`` is set once task ``i`` is accounted for (run, failed, or never to be
+    started), by one store: a task is never counted twice, and :func:`_finish` may be
+    called again for it (by a thread's handler of an exception that came between taking
+    a task and counting it, :func:`_step`) without harm."""
+
+    __slots__ = ("error", "finished", "limit", "results", "taken", "tasks")
 
     def __init__(self, tasks: Sequence[Callable[[], Any]], limit: int) -> None:
         self.tasks = tasks
@@ -125,13 +130,21 @@ class _Batch:
         self.results: list[Any] = [None] * len(tasks)
         self.error: tuple[int, BaseException] | None = None
         self.taken = 0
-        self.left = len(tasks)
+        self.finished = [False] * len(tasks)
+
+    @property
+    def left(self) -> int:
+        """Tasks not yet accounted for (read with the lock held)."""
+        return self.finished.count(False)
 
 
 _lock = threading.Lock()
 _work = threading.Condition(_lock)
 _open: deque[_Batch] = deque()  # batches with tasks not yet handed out
 _helpers: list[threading.Thread] = []
+#: a waiter looks again this often even without a notification, so that a notification
+#: lost to an exception between counting a task and notifying cannot keep it waiting
+_RECHECK_S = 0.25
 
 
 def _reset_after_fork() -> None:
@@ -158,6 +171,27 @@ def _take(batch: _Batch) -> int | None:
     return i
 
 
+def _finish(batch: _Batch, i: int, result: Any, failed: BaseException | None) -> None:
+    """Account for task ``i`` of ``batch`` (once: again is a no-op); a failure also
+    accounts for the tasks not yet started, which never will be."""
+    with _work:
+        if batch.finished[i]:
+            return
+        if failed is None:
+            batch.results[i] = result
+        else:
+            if batch.error is None or i < batch.error[0]:
+                batch.error = (i, failed)
+            if batch.taken < len(batch.tasks):
+                for j in range(batch.taken, len(batch.tasks)):
+                    batch.finished[j] = True
+                batch.taken = len(batch.tasks)
+                _open.remove(batch)
+        batch.finished[i] = True  # the one store that counts it
+        if not batch.left:
+            _work.notify_all()  # its caller waits (perhaps among others)
+
+
 def _run(batch: _Batch, i: int) -> None:
     old = getattr(_limits, "n", None)
     _limits.n = batch.limit
@@ -165,23 +199,31 @@ def _run(batch: _Batch, i: int) -> None:
         result = batch.tasks[i]()
         failed: BaseException | None = None
     except BaseException as exc:  # re-raised in the caller, after the started tasks end
-        failed = exc
+        result, failed = None, exc
     finally:
         _limits.n = old
-    with _work:
-        if failed is None:
-            batch.results[i] = result
-        else:
-            if batch.error is None or i < batch.error[0]:
-                batch.error = (i, failed)
-            untaken = len(batch.tasks) - batch.taken  # not started: they never will be
-            if untaken:
-                batch.taken = len(batch.tasks)
-                batch.left -= untaken
-                _open.remove(batch)
-        batch.left -= 1
-        if batch.left == 0:
-            _work.notify_all()  # its caller waits (perhaps among others)
+    _finish(batch, i, result, failed)
+
+
+def _step(batch: _Batch) -> bool:
+    """Take the next task of ``batch`` and run it; False when none was left.
+
+    An exception outside the task (a KeyboardInterrupt lands on the main thread wherever
+    it is, here between taking the task and counting it) accounts for the task as failed
+    with it before it propagates: otherwise a batch of another thread (whose tasks the
+    main thread takes while it waits) would wait for that task for ever."""
+    i: int | None = None
+    try:
+        with _work:
+            i = _take(batch)
+        if i is None:
+            return False
+        _run(batch, i)
+        return True
+    except BaseException as exc:
+        if i is not None:
+            _finish(batch, i, None, exc)
+        raise
 
 
 def _helper() -> None:
@@ -190,9 +232,7 @@ def _helper() -> None:
             while not _open:
                 _work.wait()
             batch = _open[0]
-            i = _take(batch)
-        if i is not None:
-            _run(batch, i)
+        _step(batch)
 
 
 def run_tasks(tasks: Sequence[Callable[[], T]]) -> list[T]:
@@ -215,24 +255,18 @@ def run_tasks(tasks: Sequence[Callable[[], T]]) -> list[T]:
             _helpers.append(helper)
         _open.append(batch)
         _work.notify_all()
-    while True:
-        with _work:
-            i = _take(batch)
-        if i is None:
-            break
-        _run(batch, i)
+    while _step(batch):
+        pass
     # the last tasks run elsewhere: meanwhile, this thread takes other calls' tasks (a
     # nested call's, or another thread's), so that no core idles while there is work
     while True:
         with _work:
             while batch.left and not _open:
-                _work.wait()
+                _work.wait(_RECHECK_S)
             if not batch.left:
                 break
             other = _open[0]
-            i = _take(other)
-        if i is not None:
-            _run(other, i)
+        _step(other)
     if batch.error is not None:
         raise batch.error[1]
     results: list[T] = batch.results
