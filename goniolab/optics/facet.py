@@ -77,6 +77,7 @@ import functools
 import itertools
 import math
 import os
+import threading
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
@@ -334,14 +335,22 @@ class FacetModel:
     def _cells(self, keep_index: bool) -> tuple[FloatArray, FloatArray, FloatArray]:
         """:attr:`_slope_cells`; ``keep_index=False`` (a cone grid's deposit) lets the int16
         indices go once counted: their 16 MB (2048^2 facets) are reused by the deposit's
-        temporaries instead of fresh pages (a later slit counts again, :meth:`_facets_near`)."""
+        temporaries instead of fresh pages (a later slit counts again, :meth:`_facets_near`).
+
+        Counted once when two threads ask at once (wave gloss geometries handed to the
+        facet model run as tasks): the second waits. Re-entrant: a holder that, waiting
+        for its walk's tasks, runs a task asking for the cells counts again, not waits."""
         got: tuple[FloatArray, FloatArray, FloatArray] | None = self.__dict__.get("_cells_")
-        if got is None:
-            got, index = slope_cells_indexed(self.surface)
-            if keep_index:  # 4 bytes a facet, held
-                keep = self.surface.n_facets <= _KEEP_INDEX_MAX_FACETS
-                self.__dict__["_cell_index"] = index if keep else None
-            self.__dict__["_cells_"] = got
+        if got is not None:
+            return got
+        with self.__dict__.setdefault("_cells_lock", threading.RLock()):  # setdefault: atomic
+            got = self.__dict__.get("_cells_")
+            if got is None:
+                got, index = slope_cells_indexed(self.surface)
+                if keep_index:  # 4 bytes a facet, held
+                    keep = self.surface.n_facets <= _KEEP_INDEX_MAX_FACETS
+                    self.__dict__["_cell_index"] = index if keep else None
+                self.__dict__["_cells_"] = got
         return got
 
     def _facets_near(

@@ -75,6 +75,48 @@ def test_the_first_failing_task_in_order_is_raised(two_threads: None) -> None:
     assert run_tasks([lambda: 3]) == [3]  # the pool still works
 
 
+def test_an_interrupt_after_taking_a_task_fails_that_task_instead_of_losing_it(
+    two_threads: None, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Ctrl-C lands on the main thread wherever it is; while it waits for its own batch it
+    runs other threads' tasks. Raised between taking such a task and counting it, the task
+    was never counted and that batch's caller waited for ever. Now the task counts as
+    failed with the interrupt: its caller gets it once the started tasks end."""
+    batch = FT._Batch([lambda: 1, lambda: 2, lambda: 3], 2)
+    with FT._work:
+        FT._open.append(batch)
+    real_run = FT._run
+
+    def interrupted(b: FT._Batch, i: int) -> None:
+        raise KeyboardInterrupt  # after _take, before the task ran or was counted
+
+    monkeypatch.setattr(FT, "_run", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        FT._step(batch)
+    monkeypatch.setattr(FT, "_run", real_run)
+    # the task and those never to start are counted: nothing is left to wait for, and
+    # the batch's error is the interrupt, which its caller raises
+    with FT._work:
+        assert batch.left == 0
+        assert batch not in FT._open
+    assert batch.error is not None and batch.error[0] == 0
+    assert isinstance(batch.error[1], KeyboardInterrupt)
+    assert FT._step(batch) is False
+    assert run_tasks([lambda: 4, lambda: 5]) == [4, 5]  # the pool still works
+
+
+def test_a_task_is_counted_once_whatever_calls_finish_again(two_threads: None) -> None:
+    batch = FT._Batch([lambda: 1, lambda: 2], 2)
+    with FT._work:
+        FT._open.append(batch)
+    assert FT._step(batch) is True
+    FT._finish(batch, 0, None, KeyboardInterrupt())  # a handler's call after the count
+    with FT._work:
+        assert batch.left == 1 and batch.error is None and batch.results[0] == 1
+    assert FT._step(batch) is True
+    assert batch.left == 0 and batch.results == [1, 2]
+
+
 def test_thread_count_from_the_environment(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv(FT.THREADS_ENV, "3")
     monkeypatch.setenv("OMP_NUM_THREADS", "5")
@@ -148,6 +190,40 @@ def test_slope_cells_are_the_facets_unique_cells_on_one_and_two_threads(
     np.testing.assert_array_equal(np.rint(cq2 / LEAN_SLOPE_BIN), cells[:, 1])
     np.testing.assert_array_equal(c2, counts)
     assert int(c2.sum()) == s.n_facets
+
+
+def test_slope_cells_asked_by_two_threads_at_once_are_counted_once(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Two gloss geometries handed to the facet model run as tasks on two threads; both
+    ask for the slope cells. Without a lock each counted them (double the walk's time,
+    twice its memory); the second now waits for the first's cells, the same object."""
+    import goniolab.optics.facet as F
+
+    model = FacetModel(Surface.from_heightmap(_rough_map(200)), backend="lean")
+    walking, release = threading.Event(), threading.Event()
+    walks: list[int] = []
+    real = F.slope_cells_indexed
+
+    def slow_walk(surface: Surface) -> object:
+        walks.append(threading.get_ident())
+        walking.set()
+        release.wait(10.0)
+        return real(surface)
+
+    monkeypatch.setattr(F, "slope_cells_indexed", slow_walk)
+    got: list[object] = []
+    first = threading.Thread(target=lambda: got.append(model._cells(True)))
+    first.start()
+    assert walking.wait(10.0)
+    second = threading.Thread(target=lambda: got.append(model._cells(True)))
+    second.start()
+    second.join(0.3)  # it waits for the first walk (without the lock it walks too)
+    release.set()
+    first.join(10.0)
+    second.join(10.0)
+    assert len(walks) == 1
+    assert len(got) == 2 and got[0] is got[1]
 
 
 def test_lambda_table_on_two_threads_is_its_definition_and_the_same_bits(
