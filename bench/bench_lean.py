@@ -562,6 +562,11 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if args.facet_floor:
         return print_facet_floor(args.size, args.repeats, args.json)
+    if args.floor and args.size != 2048:
+        # the Taylor steps keep the cells goniolab keeps on the 2048^2 map's 1024^2 tiles
+        ap.error(
+            f"--floor measures the 2048^2 map (its kept cells are that map's); not --size {args.size}"
+        )
     if args.floor:
         return print_floor(args.size, args.repeats, args.json)
     out: dict[str, object] = {"cpus": os.cpu_count(), "load_before": os.getloadavg()[0],
