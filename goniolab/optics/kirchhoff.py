@@ -95,7 +95,8 @@ from goniolab.optics.physical import (
     PhysicalOpticsModel,
     check_theta_i,
 )
-from goniolab.optics.psd import pruned_fft2, y_axis_first
+from goniolab.optics.psd import pruned_terms, y_axis_first
+from goniolab.optics.taylor_fft import first_pass, split_planes
 from goniolab.optics.wave_tasks import row_parts, run_reporting
 
 __all__ = ["DEFAULT_TAYLOR_TOL", "KirchhoffModel", "band_plan"]
@@ -112,21 +113,6 @@ _PARTS: int = 4
 #: ``D_1`` at or below this is the float32 transforms' rounding, not diffuse light (a flat
 #: map's ``D_1`` is 1e-14 to 1e-13; a coat of Sq 0.1 nm has about 3e-9: review of 2026-11-26).
 _D1_FLOOR: float = 1e-10
-
-
-def _weighted_phase(
-    h: NDArray[np.float32], w: NDArray[np.float32], vc: float
-) -> NDArray[np.complex64]:
-    """``W exp(-i v_c h)`` in complex64 from float32 cos/sin: the screen each Taylor band
-    transforms (the readings' :meth:`KirchhoffModel._raw_power` and the energy check)."""
-    phase = np.float32(vc) * h
-    cos = np.cos(phase)
-    np.sin(phase, out=phase)
-    term = np.empty(h.shape, dtype=np.complex64)
-    np.multiply(w, cos, out=term.real)
-    np.multiply(w, phase, out=term.imag)
-    np.negative(term.imag, out=term.imag)
-    return term
 
 
 def band_plan(
@@ -254,25 +240,17 @@ class KirchhoffModel(PhysicalOpticsModel):
             h, w = t.tile(k)
             if y_first:  # the first (full) pass runs along the contiguous axis
                 h, w = t.tile_transposed(k), t.window_transposed
-            u = h / np.float32(h_max) if h_max > 0 else h
             coh = [0j for _ in boxes]
             for b, (lo, hi, vc, order) in enumerate(plan):
+                done += order + 1  # (a band without cells too: the display must reach 100 %)
                 if b not in active:
-                    done += order + 1  # reported too: the display must reach 100 %
                     if self.progress is not None:
                         self.progress(done, total, "kirchhoff FFT")
                     continue
-                term = _weighted_phase(h, w, vc)
                 spec = np.empty((order + 1, ky.size, kx.size), dtype=np.complex64)
-                dc = np.empty(order + 1, dtype=np.complex128)
-                for n_term in range(order + 1):
-                    dc[n_term] = pruned_fft2(term, ky, kx, y_first, spec[n_term], lengths)
-                    if n_term < order:
-                        term *= u
-                    done += 1
-                    if self.progress is not None:
-                        self.progress(done, total, "kirchhoff FFT")
-                del term
+                dc = pruned_terms(h, w, h_max, vc, ky, kx, y_first, spec, lengths)
+                if self.progress is not None:
+                    self.progress(done, total, "kirchhoff FFT")
                 for li, ((rows, cols, w_r, w_c), vz, (_, ok)) in enumerate(
                     zip(per_box, vzs, geo, strict=True)
                 ):
@@ -476,9 +454,6 @@ class KirchhoffModel(PhysicalOpticsModel):
             y2.append(oy)
         cols = np.flatnonzero(col_any)
         rows = np.flatnonzero(row_any)
-        # the kept columns as runs of consecutive outputs (1 or 2: the window wraps)
-        cuts = np.flatnonzero(np.diff(cols) != 1) + 1
-        runs = [(int(r[0]), int(r[-1]) + 1) for r in np.split(cols, cuts)]
         n_l, n_r, n_c = len(lams_um), rows.size, cols.size
         ok = np.empty((n_l, n_r, n_c), dtype=bool)
         z = np.zeros((n_l, n_r, n_c))  # 0 on the evanescent cells
@@ -512,9 +487,6 @@ class KirchhoffModel(PhysicalOpticsModel):
         w_shape = np.multiply.outer(wy_hat[rows] / wy_hat[0], wx_hat[cols] / wx_hat[0])
         w_shape = w_shape.astype(np.complex64)
         acc = np.zeros((n_l, n_r, n_c))
-        first = np.empty((ny, nx), dtype=np.complex64)
-        coherent = np.empty((n_r, n_c), dtype=np.complex64)  # dc_n w_shape, per term
-        full_rows = None if n_r == ny else np.empty((ny, n_c), dtype=np.complex64)
         # per band: the cells it owns and the rows and columns holding them (a band owning
         # none costs no transform); one band owns every real cell (its edges are the
         # extremes of v_z over them)
@@ -534,51 +506,38 @@ class KirchhoffModel(PhysicalOpticsModel):
             del vz
         total = t.n_tiles * sum(order + 1 for *_, order in plan)
         done = 0
-        spec = np.empty((n_r, n_c), dtype=np.complex64)  # one term's transform
+        keep_rows = None if n_r == ny else rows
         spec_r = spec_i = np.empty((0, 0, 0), dtype=np.float32)
         for k in range(t.n_tiles):
             h, w = t.tile(k)
-            u = h / np.float32(h_max) if h_max > 0 else h
             for (_, _, vc, order), (own, rr, cc) in zip(plan, owners, strict=True):
                 if rr.size == 0:
                     done += order + 1  # reported too: the display must reach 100 %
                     if self.progress is not None:
                         self.progress(done, total, "kirchhoff energy check")
                     continue
-                term = _weighted_phase(h, w, vc)  # as _raw_power
                 # G_n = (F_n - dc_n w_shape) / n! at the kept outputs, F_n the transform of
-                # the term W exp(-i v_c h) u^n: the x pass over the whole tile, the y pass
-                # on the kept columns only
-                # (kept as real and imaginary planes: the Horner sums read them contiguous,
-                # half the time of the complex array's strided parts; a complex times a
-                # real 1/n! is the product of each part, the same values)
-                spec_r = np.empty((order + 1, n_r, n_c), dtype=np.float32)
-                spec_i = np.empty((order + 1, n_r, n_c), dtype=np.float32)
+                # the term W exp(-i v_c h) u^n: the x pass of all the terms over blocks of
+                # rows (taylor_fft.first_pass), then the y pass of each on the kept
+                # columns, in place; G_n written over F_n as real and imaginary planes
+                # (the Horner sums read them contiguous, half the time of the complex
+                # array's strided parts; a complex times a real 1/n! is the product of
+                # each part, the same values)
+                spec = np.empty((order + 1, ny, n_c), dtype=np.complex64)
                 dc = np.empty(order + 1, dtype=np.complex128)
+                first_pass(h, w, h_max, vc, cols, spec, dc_points=dc)
+                planes = spec.view(np.float32).reshape(order + 1, ny, 2 * n_c)
                 fact = 1.0
                 for n in range(order + 1):
-                    _fft.fft_into(term, 1, first)
-                    dc[n] = complex(np.sum(term, dtype=np.complex128))
-                    dest = spec if full_rows is None else full_rows
-                    o = 0
-                    for a0, a1 in runs:
-                        _fft.fft_into(first[:, a0:a1], 0, dest[:, o : o + a1 - a0])
-                        o += a1 - a0
-                    if full_rows is not None:
-                        np.take(full_rows, rows, axis=0, out=spec)
-                    np.multiply(w_shape, np.complex64(dc[n]), out=coherent)
-                    np.subtract(spec.real, coherent.real, out=spec_r[n])
-                    np.subtract(spec.imag, coherent.imag, out=spec_i[n])
-                    if n:
-                        fact *= n
-                        spec_r[n] *= np.float32(1.0 / fact)
-                        spec_i[n] *= np.float32(1.0 / fact)
-                    if n < order:
-                        term *= u
+                    _fft.fft_into(spec[n], 0, spec[n])
+                    fact *= max(n, 1)
+                    split_planes(
+                        spec[n], planes[n], keep_rows, w_shape, dc[n], 1.0 / fact if n else None
+                    )
                     done += 1
                     if self.progress is not None:
                         self.progress(done, total, "kirchhoff energy check")
-                del term
+                spec_r, spec_i = planes[:, :n_r, :n_c], planes[:, :n_r, n_c:]
                 r0, r1, c0, c1 = int(rr[0]), int(rr[-1]) + 1, int(cc[0]), int(cc[-1]) + 1
                 h_step = max(1, _HORNER_BLOCK // max(1, n_l * (c1 - c0)))
                 run_reporting(
@@ -591,7 +550,7 @@ class KirchhoffModel(PhysicalOpticsModel):
                         for a, b in row_parts(r0, r1, h_step)
                     ]
                 )  # fmt: skip
-        del spec, spec_r, spec_i, first, full_rows, coherent
+        del spec_r, spec_i
         norm = t.n_tiles * ny * nx * t.sum_w2
         wi = np.array([[s_i, 0.0, c_i]])  # Lambda(wi): one value for all cells
         # the per-cell weights in blocks of rows (large temporaries cost more than the

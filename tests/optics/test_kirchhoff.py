@@ -730,3 +730,95 @@ def test_a_flat_map_has_no_diffuse_light_to_scale(shape: tuple[int, int]) -> Non
     model = KirchhoffModel(HeightMap(z_um=np.zeros(shape), dx_um=0.5, dy_um=0.5), n=1.55)
     assert model._energy_scales_at(89.0, [0.4, 0.55, 0.7]) == [1.0, 1.0, 1.0]
     assert not [n for n in model.albedo_tis(89.0)[2].notes if "scaled" in n]
+
+
+@pytest.mark.parametrize("shape", [(1024, 128), (600, 96)])
+def test_the_blocked_first_pass_is_the_whole_tile_pass_bit_for_bit(
+    shape: tuple[int, int],
+) -> None:
+    """issue 26, g16c: the Taylor terms' first pass in blocks of rows
+    (:func:`goniolab.optics.taylor_fft.first_pass`) gives the whole-tile passes' outputs,
+    the lines' zero-frequency outputs, and numpy's own complex128 sum of each term's points:
+    the same bits where the width divides numpy's 8192-element chunks (128; 1024 on the
+    bench map), within float64 rounding where it does not (96). The truth is the term formed
+    over the whole tile and transformed as the readings did before."""
+    from goniolab.optics import _fft
+    from goniolab.optics.taylor_fft import block_rows, first_pass, weighted_phase
+
+    rng = np.random.default_rng(26)
+    ny, nx = shape
+    assert block_rows(nx) < ny  # several blocks, the last one short for 600 x 96
+    h = (0.05 * rng.standard_normal(shape)).astype(np.float32)
+    w = rng.uniform(0.2, 1.0, shape).astype(np.float32)
+    h_max, vc, n_t = float(np.abs(h).max()), 7.4, 6
+    keep = np.r_[0 : nx // 3, nx - nx // 4 : nx].astype(np.intp)
+    out = np.empty((n_t, ny, keep.size), dtype=np.complex64)
+    rows = np.empty((n_t, ny), dtype=np.complex64)
+    sums = np.empty(n_t, dtype=np.complex128)
+    first_pass(h, w, h_max, vc, keep, out, dc_rows=rows, dc_points=sums)
+    term = weighted_phase(h, w, vc)
+    u = h / np.float32(h_max)
+    for n in range(n_t):
+        full = _fft.fft(term, axis=1)
+        assert np.array_equal(out[n].view(np.uint64), full[:, keep].view(np.uint64))
+        assert np.array_equal(rows[n].view(np.uint64), full[:, 0].view(np.uint64))
+        ref = complex(np.sum(term, dtype=np.complex128))
+        if 8192 % nx == 0:
+            assert complex(sums[n]) == ref
+        else:
+            assert abs(complex(sums[n]) - ref) <= 1e-13 * np.sum(np.abs(term))
+        term *= u
+
+
+@pytest.mark.parametrize(("y_first", "lengths"), [(False, None), (True, None), (True, (96, 288))])
+def test_the_blocked_terms_are_the_pruned_transforms_bit_for_bit(
+    y_first: bool, lengths: tuple[int, int] | None
+) -> None:
+    """:func:`goniolab.optics.psd.pruned_terms` (the readings' terms of a band, first pass
+    in blocks) against :func:`goniolab.optics.psd.pruned_fft2` of each term formed over the
+    whole tile, as the readings formed them before (unpadded, y first, and the ISO 85 deg
+    receptor's x axis padded 3 x): the same bits, outputs and zero-frequency values."""
+    from goniolab.optics.psd import pruned_fft2, pruned_terms
+    from goniolab.optics.taylor_fft import weighted_phase
+
+    rng = np.random.default_rng(5)
+    h = (0.05 * rng.standard_normal((96, 96))).astype(np.float32)
+    w = rng.uniform(0.2, 1.0, (96, 96)).astype(np.float32)
+    h_max, vc, n_t = float(np.abs(h).max()), 12.5, 5
+    ky = np.arange(-7, 12, dtype=np.int64) % (lengths or (96, 96))[0]
+    kx = np.arange(30, 41, dtype=np.int64) % (lengths or (96, 96))[1]
+    out = np.empty((n_t, ky.size, kx.size), dtype=np.complex64)
+    dc = pruned_terms(h, w, h_max, vc, ky, kx, y_first, out, lengths)
+    term = weighted_phase(h, w, vc)
+    u = h / np.float32(h_max)
+    ref = np.empty((ky.size, kx.size), dtype=np.complex64)
+    for n in range(n_t):
+        ref_dc = pruned_fft2(term, ky, kx, y_first, ref, lengths)
+        assert np.array_equal(out[n].view(np.uint64), ref.view(np.uint64))
+        assert complex(dc[n]) == ref_dc
+        term *= u
+
+
+@pytest.mark.parametrize("subset", [False, True])
+def test_the_planes_written_over_the_transform_are_the_whole_array_forms(subset: bool) -> None:
+    """:func:`goniolab.optics.taylor_fft.split_planes` writes ``(x[rows] - dc shape) / n!``
+    as real and imaginary planes over ``x``'s own memory: the same bits as the energy
+    check's whole-array arithmetic before (complex64 ``shape * dc``, float32 differences
+    and scale), with every kept line read before its memory is written."""
+    from goniolab.optics.taylor_fft import split_planes
+
+    rng = np.random.default_rng(7)
+    ny, n_c = 700, 50
+    x = (rng.standard_normal((ny, n_c)) + 1j * rng.standard_normal((ny, n_c))).astype(np.complex64)
+    rows = np.sort(rng.choice(ny, 500, replace=False)) if subset else None
+    n_r = ny if rows is None else rows.size
+    shape = (rng.standard_normal((n_r, n_c)) + 1j).astype(np.complex64)
+    dc, scale = 0.3 - 1.7j, 1.0 / 6.0
+    spec = x if rows is None else x[rows]
+    coherent = shape * np.complex64(dc)
+    ref_r = (spec.real - coherent.real) * np.float32(scale)
+    ref_i = (spec.imag - coherent.imag) * np.float32(scale)
+    planes = x.view(np.float32).reshape(ny, 2 * n_c)
+    split_planes(x, planes, rows, shape, dc, scale)
+    assert np.array_equal(planes[:n_r, :n_c], ref_r)
+    assert np.array_equal(planes[:n_r, n_c:], ref_i)

@@ -1,0 +1,171 @@
+"""The first pass of the Kirchhoff model's Taylor-term transforms, in blocks of rows.
+
+A Taylor band of :mod:`goniolab.optics.kirchhoff` transforms the terms
+``T_n = W exp(-i v_c h) u^n`` (``u = h / h_max``, ``n = 0..N``) of a tile; both its readings
+(:meth:`~goniolab.optics.kirchhoff.KirchhoffModel._raw_power`) and its energy check
+(:meth:`~goniolab.optics.kirchhoff.KirchhoffModel._energy_d1`) transform along the tile's
+last axis first, over every line, and keep some outputs of each line. Term by term that
+wrote a whole tile of complex64 outputs per term and read and rewrote the whole term to
+form the next (about 40 MB of memory traffic per term on 1024^2, which two threads share:
+issue 26, g16c). :func:`first_pass` forms all the band's terms of a block of rows at once
+instead, where they stay in a core's cache: the block's phase screen, its ``N + 1`` FFTs,
+the kept outputs copied out, the term multiplied by ``u`` for the next one.
+
+Every output is formed by the same operations on the same values as the whole-tile passes
+(pocketfft transforms each line by itself, element-wise operations do not depend on the
+array around the element), so the outputs are the same bits
+(``tests/optics/test_kirchhoff.py``). The zero-frequency sums are those of the callers: the
+lines' zero-frequency outputs (summed by the caller), or the sum of the term's points in
+complex128 taken in numpy's own order: numpy sums a contiguous array in chunks of 8192
+elements, each by pairwise summation, added one after the other; the chunk sums here are
+the same chunks' (:data:`_SUM_CHUNK`), added in the same order, when the tile's width
+divides 8192 (every power of two up to it), and within a few float64 roundings otherwise.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from goniolab.optics import _fft
+
+__all__ = ["block_rows", "first_pass", "split_planes", "weighted_phase"]
+
+#: Elements per chunk of numpy's sum of a contiguous array (its buffer size, 8192).
+_SUM_CHUNK: int = 8192
+#: Bytes of one block's complex64 term: with the FFT's output block and the float32
+#: heights, window and ``u`` of the block it stays in a core's 1 MB L2 cache.
+_BLOCK_BYTES: int = 1 << 18
+
+
+def weighted_phase(
+    h: NDArray[np.float32], w: NDArray[np.float32], vc: float
+) -> NDArray[np.complex64]:
+    """``W exp(-i v_c h)`` in complex64 from float32 cos/sin: the screen each Taylor band
+    transforms (:func:`first_pass` forms it so, block by block)."""
+    phase = np.float32(vc) * h
+    cos = np.cos(phase)
+    np.sin(phase, out=phase)
+    term = np.empty(h.shape, dtype=np.complex64)
+    np.multiply(w, cos, out=term.real)
+    np.multiply(w, phase, out=term.imag)
+    np.negative(term.imag, out=term.imag)
+    return term
+
+
+def block_rows(nx: int) -> int:
+    """Rows per block of :func:`first_pass` for lines of ``nx`` points: about
+    :data:`_BLOCK_BYTES` of complex64, a whole number of numpy's sum chunks when ``nx``
+    divides :data:`_SUM_CHUNK`."""
+    rows = max(1, _BLOCK_BYTES // (8 * max(1, nx)))
+    if _SUM_CHUNK % nx == 0:
+        chunk = _SUM_CHUNK // nx
+        rows = max(chunk, rows - rows % chunk)
+    return rows
+
+
+def first_pass(
+    h: NDArray[np.float32],
+    w: NDArray[np.float32],
+    h_max: float,
+    vc: float,
+    keep: NDArray[np.intp],
+    out: NDArray[np.complex64],
+    dc_rows: NDArray[np.complex64] | None = None,
+    dc_points: NDArray[np.complex128] | None = None,
+) -> None:
+    """The FFTs along the last axis of the terms ``T_n = W exp(-i v_c h) (h / h_max)^n``,
+    ``n = 0..N`` (``N + 1 = out.shape[0]``), at the outputs ``keep`` of every line:
+    ``out[n] = fft(T_n, axis=-1)[:, keep]``.
+
+    ``W exp(-i v_c h)`` is formed in complex64 from float32 cos/sin as
+    :func:`goniolab.optics.kirchhoff._weighted_phase` forms it, and ``T_{n+1} = T_n u`` with
+    ``u = h / h_max`` (``h`` itself when ``h_max <= 0``) in float32, as the whole-tile
+    passes did. ``dc_rows[n]`` (if given) receives each line's zero-frequency output,
+    ``dc_points[n]`` the sum of ``T_n``'s points in complex128 (module docstring: numpy's
+    order)."""
+    ny, nx = h.shape
+    n_terms = out.shape[0]
+    step = block_rows(nx)
+    blk_t = np.empty((step, nx), dtype=np.complex64)
+    blk_f = np.empty((step, nx), dtype=np.complex64)
+    phase = np.empty((step, nx), dtype=np.float32)
+    cos = np.empty((step, nx), dtype=np.float32)
+    u = np.empty((step, nx), dtype=np.float32)
+    by_chunk = nx <= _SUM_CHUNK and _SUM_CHUNK % nx == 0
+    chunk_rows = _SUM_CHUNK // nx if by_chunk else step
+    sums: list[list[complex]] = [[] for _ in range(n_terms)]
+    for r0 in range(0, ny, step):
+        r1 = min(ny, r0 + step)
+        m = r1 - r0
+        t, f, ph, c, ub = blk_t[:m], blk_f[:m], phase[:m], cos[:m], u[:m]
+        hb, wb = h[r0:r1], w[r0:r1]
+        # W exp(-i v_c h) (as _weighted_phase)
+        np.multiply(np.float32(vc), hb, out=ph)
+        np.cos(ph, out=c)
+        np.sin(ph, out=ph)
+        np.multiply(wb, c, out=t.real)
+        np.multiply(wb, ph, out=t.imag)
+        np.negative(t.imag, out=t.imag)
+        if h_max > 0:
+            np.divide(hb, np.float32(h_max), out=ub)
+        else:
+            ub[...] = hb
+        for n in range(n_terms):
+            _fft.fft_into(t, 1, f)
+            np.take(f, keep, axis=1, out=out[n, r0:r1])
+            if dc_rows is not None:
+                dc_rows[n, r0:r1] = f[:, 0]
+            if dc_points is not None:
+                if by_chunk and m % chunk_rows == 0:  # the block's chunks at once
+                    part: NDArray[np.complex128] = np.sum(
+                        t.reshape(-1, _SUM_CHUNK), axis=1, dtype=np.complex128
+                    )
+                    sums[n].extend(part.tolist())
+                else:
+                    for a in range(0, m, chunk_rows):
+                        part1 = np.sum(t[a : a + chunk_rows], dtype=np.complex128)
+                        sums[n].append(complex(part1))
+            if n < n_terms - 1:
+                t *= ub
+    if dc_points is not None:
+        for n in range(n_terms):
+            acc = 0j
+            for s in sums[n]:  # one after the other, as numpy adds its chunks
+                acc += s
+            dc_points[n] = acc
+
+
+def split_planes(
+    x: NDArray[np.complex64],
+    planes: NDArray[np.float32],
+    rows: NDArray[np.intp] | None,
+    shape: NDArray[np.complex64],
+    dc: complex,
+    scale: float | None,
+) -> None:
+    """``G = (x[rows] - dc shape) scale`` as real and imaginary planes, written over ``x``
+    itself: ``planes`` is ``x``'s memory seen as float32 ``(lines, 2 n_c)``, row ``i``
+    holding ``G[i]``'s real parts then its imaginary parts (``rows`` None: every line).
+
+    Line ``i`` of ``G`` is formed from line ``rows[i] >= i`` of ``x``, read (a block at a
+    time, in increasing order) before line ``i``'s memory is written. The products and
+    differences are those of whole arrays (complex64 ``shape * dc``, then float32), the
+    same values."""
+    n_r, n_c = shape.shape
+    step = max(1, _BLOCK_BYTES // (8 * max(1, n_c)))
+    src = np.empty((min(step, n_r), n_c), dtype=np.complex64)
+    coh = np.empty_like(src)
+    c64 = np.complex64(dc)
+    for i0 in range(0, n_r, step):
+        i1 = min(n_r, i0 + step)
+        m = i1 - i0
+        if rows is None:
+            src[:m] = x[i0:i1]
+        else:
+            np.take(x, rows[i0:i1], axis=0, out=src[:m])
+        np.multiply(shape[i0:i1], c64, out=coh[:m])
+        np.subtract(src[:m].real, coh[:m].real, out=planes[i0:i1, :n_c])
+        np.subtract(src[:m].imag, coh[:m].imag, out=planes[i0:i1, n_c:])
+        if scale is not None:
+            planes[i0:i1] *= np.float32(scale)
