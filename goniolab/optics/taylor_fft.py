@@ -8,8 +8,9 @@ last axis first, over every line, and keep some outputs of each line. Term by te
 wrote a whole tile of complex64 outputs per term and read and rewrote the whole term to
 form the next (about 40 MB of memory traffic per term on 1024^2, which two threads share:
 issue 26, g16c). :func:`first_pass` forms all the band's terms of a block of rows at once
-instead, where they stay in a core's cache: the block's phase screen, its ``N + 1`` FFTs,
-the kept outputs copied out, the term multiplied by ``u`` for the next one.
+instead, while the block stays in cache: the block's phase screen, its ``N + 1`` FFTs,
+the kept outputs copied out, the term multiplied by ``u`` for the next one
+(:data:`_BLOCK_BYTES` says why the blocks are not smaller).
 
 Every output is formed by the same operations on the same values as the whole-tile passes
 (pocketfft transforms each line by itself, element-wise operations do not depend on the
@@ -33,9 +34,15 @@ __all__ = ["block_rows", "first_pass", "split_planes", "weighted_phase"]
 
 #: Elements per chunk of numpy's sum of a contiguous array (its buffer size, 8192).
 _SUM_CHUNK: int = 8192
-#: Bytes of one block's complex64 term: with the FFT's output block and the float32
-#: heights, window and ``u`` of the block it stays in a core's 1 MB L2 cache.
-_BLOCK_BYTES: int = 1 << 18
+#: Bytes of one block's complex64 term (256 lines of 1024): the block's term and FFT
+#: outputs (4 MB) stay in the shared L3 cache, and a band's pass is a few dozen numpy
+#: calls per block, not per line. Smaller blocks (32 lines, in a core's L2) were as fast
+#: on one thread but slower on two: each call releases and takes back the GIL, and two
+#: threads making many short calls hand it over thousands of times a gloss (a futex wake
+#: each); on the bench map's gloss (two threads, load 0.3-0.9, 20 runs each, medians)
+#: 256 KB blocks 150 ms, 1 MB 143, 2 MB 137, 4 MB 139, whole tiles (8 MB) 156
+#: (issue 26, g16c).
+_BLOCK_BYTES: int = 1 << 21
 
 
 def weighted_phase(
