@@ -96,7 +96,7 @@ from goniolab.optics.physical import (
     check_theta_i,
 )
 from goniolab.optics.psd import pruned_terms, y_axis_first
-from goniolab.optics.taylor_fft import first_pass, split_planes
+from goniolab.optics.taylor_fft import first_pass, g_planes
 from goniolab.optics.wave_tasks import row_parts, run_reporting
 
 __all__ = ["DEFAULT_TAYLOR_TOL", "KirchhoffModel", "band_plan"]
@@ -507,7 +507,6 @@ class KirchhoffModel(PhysicalOpticsModel):
         total = t.n_tiles * sum(order + 1 for *_, order in plan)
         done = 0
         keep_rows = None if n_r == ny else rows
-        spec_r = spec_i = np.empty((0, 0, 0), dtype=np.float32)
         for k in range(t.n_tiles):
             h, w = t.tile(k)
             for (_, _, vc, order), (own, rr, cc) in zip(plan, owners, strict=True):
@@ -516,41 +515,31 @@ class KirchhoffModel(PhysicalOpticsModel):
                     if self.progress is not None:
                         self.progress(done, total, "kirchhoff energy check")
                     continue
-                # G_n = (F_n - dc_n w_shape) / n! at the kept outputs, F_n the transform of
-                # the term W exp(-i v_c h) u^n: the x pass of all the terms over blocks of
-                # rows (taylor_fft.first_pass), then the y pass of each on the kept
-                # columns, in place; G_n written over F_n as real and imaginary planes
-                # (the Horner sums read them contiguous, half the time of the complex
-                # array's strided parts; a complex times a real 1/n! is the product of
-                # each part, the same values)
+                # F_n, the transform of the term W exp(-i v_c h) u^n at the kept outputs:
+                # the x pass of all the terms over blocks of rows (taylor_fft.first_pass),
+                # then the y pass of each on the kept columns, in place; G_n = (F_n -
+                # dc_n w_shape) / n! is formed block by block where the Horner sums read it
                 spec = np.empty((order + 1, ny, n_c), dtype=np.complex64)
                 dc = np.empty(order + 1, dtype=np.complex128)
                 first_pass(h, w, h_max, vc, cols, spec, dc_points=dc)
-                planes = spec.view(np.float32).reshape(order + 1, ny, 2 * n_c)
-                fact = 1.0
                 for n in range(order + 1):
                     _fft.fft_into(spec[n], 0, spec[n])
-                    fact *= max(n, 1)
-                    split_planes(
-                        spec[n], planes[n], keep_rows, w_shape, dc[n], 1.0 / fact if n else None
-                    )
                     done += 1
                     if self.progress is not None:
                         self.progress(done, total, "kirchhoff energy check")
-                spec_r, spec_i = planes[:, :n_r, :n_c], planes[:, :n_r, n_c:]
                 r0, r1, c0, c1 = int(rr[0]), int(rr[-1]) + 1, int(cc[0]), int(cc[-1]) + 1
                 h_step = max(1, _HORNER_BLOCK // max(1, n_l * (c1 - c0)))
                 run_reporting(
                     [
                         functools.partial(
-                            self._energy_horner, spec_r[:, :, c0:c1], spec_i[:, :, c0:c1],
-                            z[:, :, c0:c1], kz, c_i, vc, h_max, a, b,
+                            self._energy_horner, spec[:, :, c0:c1], keep_rows,
+                            w_shape[:, c0:c1], dc, z[:, :, c0:c1], kz, c_i, vc, h_max, a, b,
                             None if own is None else own[:, :, c0:c1], acc[:, :, c0:c1],
                         )
                         for a, b in row_parts(r0, r1, h_step)
                     ]
                 )  # fmt: skip
-        del spec_r, spec_i
+                del spec
         norm = t.n_tiles * ny * nx * t.sum_w2
         wi = np.array([[s_i, 0.0, c_i]])  # Lambda(wi): one value for all cells
         # the per-cell weights in blocks of rows (large temporaries cost more than the
@@ -622,8 +611,10 @@ class KirchhoffModel(PhysicalOpticsModel):
 
     @staticmethod
     def _energy_horner(
-        spec_r: NDArray[np.float32],
-        spec_i: NDArray[np.float32],
+        spec: NDArray[np.complex64],
+        rows: NDArray[np.intp] | None,
+        w_shape: NDArray[np.complex64],
+        dc: NDArray[np.complex128],
         z: FloatArray,
         kz: FloatArray,
         c_i: float,
@@ -647,7 +638,7 @@ class KirchhoffModel(PhysicalOpticsModel):
         float32 transforms' own rounding of ``D_1`` (a few 1e-7;
         ``tests/optics/test_kirchhoff.py`` holds both). The ``G_n`` as contiguous real
         and imaginary planes (issue 26, g16): 8 instead of 16 ms, the same values."""
-        n_terms, _, n_c = spec_r.shape
+        n_terms, _, n_c = spec.shape
         n_l = z.shape[0]
         step = max(1, _HORNER_BLOCK // max(1, n_l * n_c))
         for a in range(r0, r1, step):
@@ -662,18 +653,19 @@ class KirchhoffModel(PhysicalOpticsModel):
                 # overflow float32 in x^order (inf * 0 = NaN in acc)
                 x64 *= own[:, a:b]
             x = x64.astype(np.float32)
+            spec_r, spec_i = g_planes(spec, rows, w_shape, dc, a, b)
             fr = np.empty(x.shape, dtype=np.float32)
             fi = np.empty(x.shape, dtype=np.float32)
-            fr[...] = spec_r[n_terms - 1, a:b]
-            fi[...] = spec_i[n_terms - 1, a:b]
+            fr[...] = spec_r[n_terms - 1]
+            fi[...] = spec_i[n_terms - 1]
             t1 = np.empty(x.shape, dtype=np.float32)
             t2 = np.empty(x.shape, dtype=np.float32)
             for n in range(n_terms - 2, -1, -1):
                 # f <- G_n + (-i x) f
                 np.multiply(x, fi, out=t1)
-                t1 += spec_r[n, a:b]
+                t1 += spec_r[n]
                 np.multiply(x, fr, out=t2)
-                np.subtract(spec_i[n, a:b], t2, out=t2)
+                np.subtract(spec_i[n], t2, out=t2)
                 fr, t1 = t1, fr
                 fi, t2 = t2, fi
             fr *= fr

@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 
 from goniolab.optics import _fft
 
-__all__ = ["block_rows", "first_pass", "split_planes", "weighted_phase"]
+__all__ = ["block_rows", "first_pass", "g_planes", "weighted_phase"]
 
 #: Elements per chunk of numpy's sum of a contiguous array (its buffer size, 8192).
 _SUM_CHUNK: int = 8192
@@ -99,6 +99,12 @@ def first_pass(
     phase = np.empty((step, nx), dtype=np.float32)
     cos = np.empty((step, nx), dtype=np.float32)
     u = np.empty((step, nx), dtype=np.float32)
+    # the kept outputs as runs of consecutive ones (the readings' and the energy check's
+    # are one or two: a window that may wrap), copied as slices (np.take along the last
+    # axis gathers element by element: 2-3 times slower), or gathered when scattered
+    cuts = np.flatnonzero(np.diff(keep) != 1) + 1
+    runs = [(int(r[0]), int(r[-1]) + 1) for r in np.split(keep, cuts)] if keep.size else []
+    by_runs = len(runs) <= 4
     by_chunk = nx <= _SUM_CHUNK and _SUM_CHUNK % nx == 0
     chunk_rows = _SUM_CHUNK // nx if by_chunk else step
     sums: list[list[complex]] = [[] for _ in range(n_terms)]
@@ -120,7 +126,13 @@ def first_pass(
             ub[...] = hb
         for n in range(n_terms):
             _fft.fft_into(t, 1, f)
-            np.take(f, keep, axis=1, out=out[n, r0:r1])
+            if by_runs:
+                o = 0
+                for a0, a1 in runs:
+                    out[n, r0:r1, o : o + a1 - a0] = f[:, a0:a1]
+                    o += a1 - a0
+            else:
+                np.take(f, keep, axis=1, out=out[n, r0:r1])
             if dc_rows is not None:
                 dc_rows[n, r0:r1] = f[:, 0]
             if dc_points is not None:
@@ -143,36 +155,39 @@ def first_pass(
             dc_points[n] = acc
 
 
-def split_planes(
+def g_planes(
     x: NDArray[np.complex64],
-    planes: NDArray[np.float32],
     rows: NDArray[np.intp] | None,
     shape: NDArray[np.complex64],
-    dc: complex,
-    scale: float | None,
-) -> None:
-    """``G = (x[rows] - dc shape) scale`` as real and imaginary planes, written over ``x``
-    itself: ``planes`` is ``x``'s memory seen as float32 ``(lines, 2 n_c)``, row ``i``
-    holding ``G[i]``'s real parts then its imaginary parts (``rows`` None: every line).
-
-    Line ``i`` of ``G`` is formed from line ``rows[i] >= i`` of ``x``, read (a block at a
-    time, in increasing order) before line ``i``'s memory is written. The products and
-    differences are those of whole arrays (complex64 ``shape * dc``, then float32), the
-    same values."""
-    n_r, n_c = shape.shape
-    step = max(1, _BLOCK_BYTES // (8 * max(1, n_c)))
-    src = np.empty((min(step, n_r), n_c), dtype=np.complex64)
-    coh = np.empty_like(src)
-    c64 = np.complex64(dc)
-    for i0 in range(0, n_r, step):
-        i1 = min(n_r, i0 + step)
-        m = i1 - i0
+    dc: NDArray[np.complex128],
+    a: int,
+    b: int,
+) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+    """The real and imaginary planes ``(n_terms, b - a, n_c)`` of
+    ``G_n = (x[n][rows[a:b]] - dc_n shape[a:b]) / n!`` (``rows`` None: lines ``a:b``),
+    each contiguous: the Taylor terms of a block of the energy check's cells, formed where
+    its Horner sums read them (in cache) instead of in a pass of their own over the whole
+    window. The products and differences are those of whole arrays (complex64
+    ``shape * dc_n``, then float32 differences and the float32 ``1/n!``), the same
+    values."""
+    n_t, _, n_c = x.shape
+    m = b - a
+    gr = np.empty((n_t, m, n_c), dtype=np.float32)
+    gi = np.empty((n_t, m, n_c), dtype=np.float32)
+    src = np.empty((m, n_c), dtype=np.complex64)
+    coh = np.empty((m, n_c), dtype=np.complex64)
+    fact = 1.0
+    for n in range(n_t):
         if rows is None:
-            src[:m] = x[i0:i1]
+            s = x[n, a:b]
         else:
-            np.take(x, rows[i0:i1], axis=0, out=src[:m])
-        np.multiply(shape[i0:i1], c64, out=coh[:m])
-        np.subtract(src[:m].real, coh[:m].real, out=planes[i0:i1, :n_c])
-        np.subtract(src[:m].imag, coh[:m].imag, out=planes[i0:i1, n_c:])
-        if scale is not None:
-            planes[i0:i1] *= np.float32(scale)
+            np.take(x[n], rows[a:b], axis=0, out=src)
+            s = src
+        np.multiply(shape[a:b], np.complex64(dc[n]), out=coh)
+        np.subtract(s.real, coh.real, out=gr[n])
+        np.subtract(s.imag, coh.imag, out=gi[n])
+        if n:
+            fact *= n
+            gr[n] *= np.float32(1.0 / fact)
+            gi[n] *= np.float32(1.0 / fact)
+    return gr, gi

@@ -751,16 +751,21 @@ def test_the_blocked_first_pass_is_the_whole_tile_pass_bit_for_bit(
     h = (0.05 * rng.standard_normal(shape)).astype(np.float32)
     w = rng.uniform(0.2, 1.0, shape).astype(np.float32)
     h_max, vc, n_t = float(np.abs(h).max()), 7.4, 6
+    # kept outputs as two runs (copied as slices) and scattered (gathered)
     keep = np.r_[0 : nx // 3, nx - nx // 4 : nx].astype(np.intp)
     out = np.empty((n_t, ny, keep.size), dtype=np.complex64)
     rows = np.empty((n_t, ny), dtype=np.complex64)
     sums = np.empty(n_t, dtype=np.complex128)
     first_pass(h, w, h_max, vc, keep, out, dc_rows=rows, dc_points=sums)
+    every_third = np.arange(1, nx, 3, dtype=np.intp)
+    scattered = np.empty((n_t, ny, every_third.size), dtype=np.complex64)
+    first_pass(h, w, h_max, vc, every_third, scattered)
     term = weighted_phase(h, w, vc)
     u = h / np.float32(h_max)
     for n in range(n_t):
         full = _fft.fft(term, axis=1)
         assert np.array_equal(out[n].view(np.uint64), full[:, keep].view(np.uint64))
+        assert np.array_equal(scattered[n].view(np.uint64), full[:, every_third].view(np.uint64))
         assert np.array_equal(rows[n].view(np.uint64), full[:, 0].view(np.uint64))
         ref = complex(np.sum(term, dtype=np.complex128))
         if 8192 % nx == 0:
@@ -800,25 +805,32 @@ def test_the_blocked_terms_are_the_pruned_transforms_bit_for_bit(
 
 
 @pytest.mark.parametrize("subset", [False, True])
-def test_the_planes_written_over_the_transform_are_the_whole_array_forms(subset: bool) -> None:
-    """:func:`goniolab.optics.taylor_fft.split_planes` writes ``(x[rows] - dc shape) / n!``
-    as real and imaginary planes over ``x``'s own memory: the same bits as the energy
-    check's whole-array arithmetic before (complex64 ``shape * dc``, float32 differences
-    and scale), with every kept line read before its memory is written."""
-    from goniolab.optics.taylor_fft import split_planes
+def test_the_horner_blocks_taylor_planes_are_the_whole_array_forms(subset: bool) -> None:
+    """:func:`goniolab.optics.taylor_fft.g_planes` forms ``(x[n][rows[a:b]] - dc_n shape) /
+    n!`` of a block of cells as contiguous real and imaginary planes: the same bits as the
+    energy check's whole-window arithmetic before (complex64 ``shape * dc_n``, float32
+    differences and the float32 ``1/n!``), on every line or on kept lines only."""
+    from goniolab.optics.taylor_fft import g_planes
 
     rng = np.random.default_rng(7)
-    ny, n_c = 700, 50
-    x = (rng.standard_normal((ny, n_c)) + 1j * rng.standard_normal((ny, n_c))).astype(np.complex64)
+    n_t, ny, n_c = 4, 700, 50
+    x = rng.standard_normal((n_t, ny, n_c)) + 1j * rng.standard_normal((n_t, ny, n_c))
+    x = x.astype(np.complex64)
     rows = np.sort(rng.choice(ny, 500, replace=False)) if subset else None
     n_r = ny if rows is None else rows.size
     shape = (rng.standard_normal((n_r, n_c)) + 1j).astype(np.complex64)
-    dc, scale = 0.3 - 1.7j, 1.0 / 6.0
-    spec = x if rows is None else x[rows]
-    coherent = shape * np.complex64(dc)
-    ref_r = (spec.real - coherent.real) * np.float32(scale)
-    ref_i = (spec.imag - coherent.imag) * np.float32(scale)
-    planes = x.view(np.float32).reshape(ny, 2 * n_c)
-    split_planes(x, planes, rows, shape, dc, scale)
-    assert np.array_equal(planes[:n_r, :n_c], ref_r)
-    assert np.array_equal(planes[:n_r, n_c:], ref_i)
+    dc = np.array([0.3 - 1.7j, 2.0 + 0.1j, -0.5j, 1.25], dtype=np.complex128)
+    a, b = 33, 301
+    gr, gi = g_planes(x, rows, shape, dc, a, b)
+    fact = 1.0
+    for n in range(n_t):
+        spec = x[n] if rows is None else x[n][rows]
+        coherent = shape * np.complex64(dc[n])
+        ref_r = spec.real - coherent.real
+        ref_i = spec.imag - coherent.imag
+        if n:
+            fact *= n
+            ref_r *= np.float32(1.0 / fact)
+            ref_i *= np.float32(1.0 / fact)
+        assert np.array_equal(gr[n], ref_r[a:b])
+        assert np.array_equal(gi[n], ref_i[a:b])
