@@ -110,6 +110,10 @@ _HORNER_BLOCK: int = 32768
 #: Parts of rows per wavelength the energy check's per-cell weights are formed in (tasks:
 #: fine enough that a thread joining late finds some left).
 _PARTS: int = 4
+#: At most this many directions' G2 kept per model (:meth:`KirchhoffModel._diffuse_g2`),
+#: and at most this many sets of them.
+_G2_MEMO_DIRS: int = 4
+_G2_MEMO_SIZE: int = 64
 #: ``D_1`` at or below this is the float32 transforms' rounding, not diffuse light (a flat
 #: map's ``D_1`` is 1e-14 to 1e-13; a coat of Sq 0.1 nm has about 3e-9: review of 2026-11-26).
 _D1_FLOOR: float = 1e-10
@@ -682,13 +686,31 @@ class KirchhoffModel(PhysicalOpticsModel):
         of the direction. Where the roughness is small against the wavelength (g_d -> 0)
         light does not see the slopes as shadowing facets and nothing is removed (as in
         Rayleigh-Rice, which ``auto`` uses there); where it is large (the facet limit,
-        ``g_d`` >> 1) this is the facet model's G2. With ``masking=False``: 1."""
+        ``g_d`` >> 1) this is the facet model's G2. With ``masking=False``: 1.
+
+        ``G2`` itself does not depend on the wavelength: for a few directions (a gloss's
+        detector, asked once per wavelength) it is kept for the map and read again (the
+        same values; 2 of its 96 Smith Lambda calls on one- or two-element arrays per
+        16-wavelength gloss were each a few dozen numpy calls holding the GIL: issue 26,
+        g16c)."""
         if not self.masking:
             return 1.0
         sq = self._shared.stats.sq_um
         k = 2.0 * math.pi / lam_um
         gd = (k * sq * (wi[..., 2] + np.clip(wo[..., 2], 0.0, None))) ** 2
-        g2 = self._shared.masking_model.masking_g2(wi, wo)
+        if np.size(wo) <= 3 * _G2_MEMO_DIRS:
+            wi_a, wo_a = np.asarray(wi, dtype=np.float64), np.asarray(wo, dtype=np.float64)
+            key = (wi_a.shape, wi_a.tobytes(), wo_a.shape, wo_a.tobytes())
+            # one entry of the map's shared cache for them all (dropped with the cache)
+            memo: dict[Any, FloatArray] = self._shared.cached(("kirchhoff few G2",), dict)
+            g2 = memo.get(key)
+            if g2 is None:
+                g2 = self._shared.masking_model.masking_g2(wi, wo)
+                if len(memo) >= _G2_MEMO_SIZE:
+                    memo.clear()
+                memo[key] = g2
+        else:
+            g2 = self._shared.masking_model.masking_g2(wi, wo)
         out: FloatArray = np.power(np.clip(g2, 1e-300, 1.0), -np.expm1(-gd))
         return out
 

@@ -834,3 +834,26 @@ def test_the_horner_blocks_taylor_planes_are_the_whole_array_forms(subset: bool)
             ref_i *= np.float32(1.0 / fact)
         assert np.array_equal(gr[n], ref_r[a:b])
         assert np.array_equal(gi[n], ref_i[a:b])
+
+
+def test_the_kept_g2_of_a_detector_is_the_formula_at_every_wavelength() -> None:
+    """issue 26, g16c: Smith's G2 of a few directions (a gloss detector's, asked once per
+    wavelength) is kept in the map's shared cache and read again; the shadowing returned
+    at each wavelength is still ``G2^(1 - exp(-g_d))`` with that wavelength's ``g_d``,
+    bit for bit, and dropping the cache recomputes the same values."""
+    model = KirchhoffModel(gaussian_acf_map(128, 0.3, 1.5, 0.25, seed=3), n=1.5)
+    wi = np.array([[math.sin(math.radians(60.0)), 0.0, math.cos(math.radians(60.0))]])
+    wo = np.array([[-math.sin(math.radians(58.0)), 0.01, math.cos(math.radians(58.0))]])
+    g2 = model._shared.masking_model.masking_g2(wi, wo)
+    assert 0.0 < float(g2[0]) < 1.0  # the slopes shadow this direction
+    sq = model._shared.stats.sq_um
+    for lam in (0.4, 0.55, 0.7, 0.55):
+        gd = ((2.0 * math.pi / lam) * sq * (wi[..., 2] + wo[..., 2])) ** 2
+        want = np.power(np.clip(g2, 1e-300, 1.0), -np.expm1(-gd))
+        assert np.array_equal(model._diffuse_g2(wi, wo, lam), want)
+    memo = model._shared.cached(("kirchhoff few G2",), dict)
+    assert len(memo) == 1
+    model._shared.cache.clear()
+    gd = ((2.0 * math.pi / 0.7) * sq * (wi[..., 2] + wo[..., 2])) ** 2
+    want = np.power(np.clip(g2, 1e-300, 1.0), -np.expm1(-gd))
+    assert np.array_equal(model._diffuse_g2(wi, wo, 0.7), want)
