@@ -104,9 +104,12 @@ __all__ = ["DEFAULT_TAYLOR_TOL", "KirchhoffModel", "band_plan"]
 #: Bound on the truncated Taylor remainder of the phase factor, per pixel.
 DEFAULT_TAYLOR_TOL: float = 1e-4
 _BAND_X: tuple[float, ...] = (0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0)
-#: Cells per block of the energy check's Horner sums (all wavelengths together): the
-#: block's few float64 arrays stay in a core's cache.
-_HORNER_BLOCK: int = 32768
+#: Cells per block of the energy check's Horner sums (all wavelengths together) and of its
+#: per-cell weights: the block's arrays stay in cache. 65536 rather than 32768 (issue 26,
+#: g16c): as fast on one thread, and half the numpy calls, each of which takes the GIL
+#: back, on two (bench map gloss, 30 runs each at load 0.9-1.05: 124.8 ms median
+#: against 128.8 with 32768).
+_HORNER_BLOCK: int = 65536
 #: Parts of rows per wavelength the energy check's per-cell weights are formed in (tasks:
 #: fine enough that a thread joining late finds some left).
 _PARTS: int = 4
@@ -236,7 +239,6 @@ class KirchhoffModel(PhysicalOpticsModel):
         wx_shape = wx_hat[kx] / wx_hat[0]
         per_box = [(b.iy - y0, b.ix - x0, wy_shape[b.iy - y0], wx_shape[b.ix - x0]) for b in boxes]
         sum_w = float(np.sum(t.wy, dtype=np.float64) * np.sum(t.wx, dtype=np.float64))
-        kernel = CK.kirchhoff_band_numba if self.backend == "numba" else CK.kirchhoff_band_numpy
         lengths = None if os == (1, 1) else (ly, lx)
         y_first = y_axis_first(ly // os[1], lx // os[0], ky.size, kx.size, lengths)
         done = 0
@@ -255,25 +257,19 @@ class KirchhoffModel(PhysicalOpticsModel):
                 dc = pruned_terms(h, w, h_max, vc, ky, kx, y_first, spec, lengths)
                 if self.progress is not None:
                     self.progress(done, total, "kirchhoff FFT")
+                if self.backend != "numba":  # the boxes a few at once (same values)
+                    CK.kirchhoff_bands_numpy(
+                        spec, dc, [(r, c) for r, c, _, _ in per_box], vzs, [g[1] for g in geo],
+                        lo, hi, b == last, vc, h_max, wy_shape, wx_shape, acc,
+                    )  # fmt: skip
                 for li, ((rows, cols, w_r, w_c), vz, (_, ok)) in enumerate(
                     zip(per_box, vzs, geo, strict=True)
                 ):
-                    kernel(
-                        spec,
-                        dc,
-                        rows,
-                        cols,
-                        vz,
-                        ok,
-                        lo,
-                        hi,
-                        b == last,
-                        vc,
-                        h_max,
-                        w_r,
-                        w_c,
-                        acc[li],
-                    )
+                    if self.backend == "numba":
+                        CK.kirchhoff_band_numba(
+                            spec, dc, rows, cols, vz, ok, lo, hi, b == last, vc, h_max, w_r,
+                            w_c, acc[li],
+                        )  # fmt: skip
                     if owns(b, v_spec[li]):
                         step = -1j * (v_spec[li] - vc) * h_max
                         e, c = 0j, 1.0 + 0j

@@ -93,7 +93,7 @@ def first_pass(
     order)."""
     ny, nx = h.shape
     n_terms = out.shape[0]
-    step = block_rows(nx)
+    step = min(block_rows(nx), max(1, ny))
     blk_t = np.empty((step, nx), dtype=np.complex64)
     blk_f = np.empty((step, nx), dtype=np.complex64)
     phase = np.empty((step, nx), dtype=np.float32)

@@ -857,3 +857,47 @@ def test_the_kept_g2_of_a_detector_is_the_formula_at_every_wavelength() -> None:
     gd = ((2.0 * math.pi / 0.7) * sq * (wi[..., 2] + wo[..., 2])) ** 2
     want = np.power(np.clip(g2, 1e-300, 1.0), -np.expm1(-gd))
     assert np.array_equal(model._diffuse_g2(wi, wo, 0.7), want)
+
+
+def test_the_grouped_band_sums_are_each_boxs_own_bit_for_bit() -> None:
+    """issue 26, g16c: :func:`goniolab.optics._cell_kernels.kirchhoff_bands_numpy` sums a
+    band over several boxes (one per wavelength, of different sizes and places in the
+    region, one owning no cell of the band) a few at once; each box's cells get exactly
+    what :func:`kirchhoff_band_numpy` gives that box alone."""
+    from goniolab.optics import _cell_kernels as ck
+
+    rng = np.random.default_rng(11)
+    n_t, ny, nx = 6, 40, 30
+    spec = (rng.standard_normal((n_t, ny, nx)) + 1j * rng.standard_normal((n_t, ny, nx))).astype(
+        np.complex64
+    )
+    dc = rng.standard_normal(n_t) + 1j * rng.standard_normal(n_t)
+    wy = rng.standard_normal(ny) + 1j * rng.standard_normal(ny)
+    wx = rng.standard_normal(nx) + 1j * rng.standard_normal(nx)
+    lo, hi, vc, h_max = 9.0, 11.0, 10.0, 0.2
+    places = [(0, 40, 0, 30), (3, 33, 5, 26), (6, 30, 2, 20), (10, 21, 8, 29), (1, 9, 1, 9)]
+    boxes, vzs, oks, ref, got = [], [], [], [], []
+    for j, (r0, r1, c0, c1) in enumerate(places):
+        rows = np.arange(r0, r1, dtype=np.int64)
+        cols = np.arange(c0, c1, dtype=np.int64)
+        vz = rng.uniform(8.0, 12.0, (rows.size, cols.size))
+        if j == 4:
+            vz += 5.0  # beyond the band: no cell owned
+        boxes.append((rows, cols))
+        vzs.append(vz)
+        oks.append(rng.uniform(size=vz.shape) > 0.1)
+        ref.append(rng.uniform(size=vz.shape))
+        got.append(ref[-1].copy())
+    init = [r.copy() for r in ref]
+    for j, (rows, cols) in enumerate(boxes):
+        ck.kirchhoff_band_numpy(
+            spec, dc, rows, cols, vzs[j], oks[j], lo, hi, False, vc, h_max, wy[rows], wx[cols],
+            ref[j],
+        )  # fmt: skip
+    ck.kirchhoff_bands_numpy(
+        spec, dc, boxes, vzs, oks, lo, hi, False, vc, h_max, wy, wx, got
+    )  # fmt: skip
+    for r, g in zip(ref, got, strict=True):
+        assert np.array_equal(r, g)
+    assert all(not np.array_equal(ref[j], init[j]) for j in range(4))
+    assert np.array_equal(got[4], init[4])  # the box owning no cell: untouched
