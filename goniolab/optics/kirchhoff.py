@@ -396,6 +396,9 @@ class KirchhoffModel(PhysicalOpticsModel):
           complex tile per Taylor term);
         - the columns evanescent at every wavelength (``|wo_x| >= 1``, about half the
           window from 70 deg on) are not transformed along y, and rows likewise;
+        - the terms' x passes run over blocks of rows, all the band's terms of a block
+          at once (:func:`goniolab.optics.taylor_fft.first_pass`), their y passes in
+          place on the kept columns;
         - the coherent field ``dc_n w`` is taken out of each term's transform (and
           ``1/n!`` put in) once, not per wavelength after the Horner sums, so one real
           Horner step is 4 float32 operations per cell, run over all wavelengths together
@@ -626,8 +629,10 @@ class KirchhoffModel(PhysicalOpticsModel):
         acc: FloatArray,
     ) -> None:
         """``acc += |sum_n G_n (-i x)^n|^2`` (``x = (v_z - v_c) h_max``, ``v_z = k (z +
-        cos ti)`` with ``k`` = ``kz`` per wavelength, per wavelength and cell; ``G_n`` =
-        ``spec_r[n] + i spec_i[n]``, shared by the wavelengths) over rows ``r0:r1``, by
+        cos ti)`` with ``k`` = ``kz`` per wavelength, per wavelength and cell; ``G_n =
+        (spec[n] - dc_n w_shape) / n!`` at the kept ``rows`` (None: all), shared by the
+        wavelengths and formed per block, :func:`~goniolab.optics.taylor_fft.g_planes`)
+        over rows ``r0:r1``, by
         Horner's scheme in float32 (``x`` formed in float64, then rounded; the ``G_n`` are
         float32 transforms already), in blocks of rows small enough to stay in cache; only
         where ``own`` (the band's cells) when given; ``acc`` is float64.
@@ -637,7 +642,8 @@ class KirchhoffModel(PhysicalOpticsModel):
         rough coats and 9e-8 on a wavy one (70/85/89 deg, 400/550/700 nm), below the
         float32 transforms' own rounding of ``D_1`` (a few 1e-7;
         ``tests/optics/test_kirchhoff.py`` holds both). The ``G_n`` as contiguous real
-        and imaginary planes (issue 26, g16): 8 instead of 16 ms, the same values."""
+        and imaginary planes (issue 26, g16): 8 instead of 16 ms, the same values; formed
+        per block in cache rather than in a pass of their own over the window (g16c)."""
         n_terms, _, n_c = spec.shape
         n_l = z.shape[0]
         step = max(1, _HORNER_BLOCK // max(1, n_l * n_c))
