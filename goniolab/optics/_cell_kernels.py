@@ -11,7 +11,8 @@ overlaps for rectangles (Mihalik & Durikovic eqs. 15-17).
 
 :func:`kirchhoff_band_numba` sums the Taylor terms of the Kirchhoff model's phase screen
 (:mod:`goniolab.optics.kirchhoff`) per cell by Horner's scheme, the coherent part removed,
-and adds ``|U|^2`` to the cell.
+and adds ``|U|^2`` to the cell; :func:`kirchhoff_bands_numpy` does so for the boxes of
+several wavelengths a few at once (the same values, fewer numpy calls).
 
 Each kernel exists as numpy code here (the default: no JIT start-up) and in numba
 (``cache=True, nogil=True``) in :mod:`._cell_kernels_numba`, imported only when a model
