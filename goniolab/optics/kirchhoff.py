@@ -113,7 +113,7 @@ _HORNER_BLOCK: int = 65536
 #: Parts of rows per wavelength the energy check's per-cell weights are formed in (tasks:
 #: fine enough that a thread joining late finds some left).
 _PARTS: int = 4
-#: At most this many directions' G2 kept per model (:meth:`KirchhoffModel._diffuse_g2`),
+#: At most this many directions' G2 kept for the map (:meth:`KirchhoffModel._diffuse_g2`),
 #: and at most this many sets of them.
 _G2_MEMO_DIRS: int = 4
 _G2_MEMO_SIZE: int = 64
@@ -192,10 +192,12 @@ class KirchhoffModel(PhysicalOpticsModel):
 
         Only the transform outputs the boxes read are formed: each Taylor term is transformed
         along the axis needing fewer outputs first (over the whole tile, contiguous), those
-        outputs kept, then along the other axis (``pruned_fft2``; zero-padded to ``os``
-        times the tile when the receptor needs a finer grid); a band's terms are then
+        outputs kept, then along the other axis (``psd.pruned_terms``: all of a band's terms
+        at once, the first pass in blocks of lines; zero-padded to ``os`` times the tile
+        when the receptor needs a finer grid); a band's terms are then
         summed per cell by Horner's scheme in one pass per wavelength
-        (:func:`goniolab.optics._cell_kernels.kirchhoff_band_numba`).
+        (:func:`goniolab.optics._cell_kernels.kirchhoff_band_numba`; with numpy, four
+        wavelengths' boxes at a time, :func:`~goniolab.optics._cell_kernels.kirchhoff_bands_numpy`).
         """
         sh = self._shared
         t = sh.tiled
