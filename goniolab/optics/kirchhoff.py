@@ -95,7 +95,8 @@ from goniolab.optics.physical import (
     PhysicalOpticsModel,
     check_theta_i,
 )
-from goniolab.optics.psd import pruned_fft2, y_axis_first
+from goniolab.optics.psd import pruned_terms, y_axis_first
+from goniolab.optics.taylor_fft import first_pass, g_planes
 from goniolab.optics.wave_tasks import row_parts, run_reporting
 
 __all__ = ["DEFAULT_TAYLOR_TOL", "KirchhoffModel", "band_plan"]
@@ -103,30 +104,22 @@ __all__ = ["DEFAULT_TAYLOR_TOL", "KirchhoffModel", "band_plan"]
 #: Bound on the truncated Taylor remainder of the phase factor, per pixel.
 DEFAULT_TAYLOR_TOL: float = 1e-4
 _BAND_X: tuple[float, ...] = (0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0)
-#: Cells per block of the energy check's Horner sums (all wavelengths together): the
-#: block's few float64 arrays stay in a core's cache.
-_HORNER_BLOCK: int = 32768
+#: Cells per block of the energy check's Horner sums (all wavelengths together) and of its
+#: per-cell weights: the block's arrays stay in cache. 65536 rather than 32768 (issue 26,
+#: g16c): as fast on one thread, and half the numpy calls, each of which takes the GIL
+#: back, on two (bench map gloss, 30 runs each at load 0.9-1.05: 124.8 ms median
+#: against 128.8 with 32768).
+_HORNER_BLOCK: int = 65536
 #: Parts of rows per wavelength the energy check's per-cell weights are formed in (tasks:
 #: fine enough that a thread joining late finds some left).
 _PARTS: int = 4
+#: At most this many directions' G2 kept for the map (:meth:`KirchhoffModel._diffuse_g2`),
+#: and at most this many sets of them.
+_G2_MEMO_DIRS: int = 4
+_G2_MEMO_SIZE: int = 64
 #: ``D_1`` at or below this is the float32 transforms' rounding, not diffuse light (a flat
 #: map's ``D_1`` is 1e-14 to 1e-13; a coat of Sq 0.1 nm has about 3e-9: review of 2026-11-26).
 _D1_FLOOR: float = 1e-10
-
-
-def _weighted_phase(
-    h: NDArray[np.float32], w: NDArray[np.float32], vc: float
-) -> NDArray[np.complex64]:
-    """``W exp(-i v_c h)`` in complex64 from float32 cos/sin: the screen each Taylor band
-    transforms (the readings' :meth:`KirchhoffModel._raw_power` and the energy check)."""
-    phase = np.float32(vc) * h
-    cos = np.cos(phase)
-    np.sin(phase, out=phase)
-    term = np.empty(h.shape, dtype=np.complex64)
-    np.multiply(w, cos, out=term.real)
-    np.multiply(w, phase, out=term.imag)
-    np.negative(term.imag, out=term.imag)
-    return term
 
 
 def band_plan(
@@ -199,10 +192,12 @@ class KirchhoffModel(PhysicalOpticsModel):
 
         Only the transform outputs the boxes read are formed: each Taylor term is transformed
         along the axis needing fewer outputs first (over the whole tile, contiguous), those
-        outputs kept, then along the other axis (``pruned_fft2``; zero-padded to ``os``
-        times the tile when the receptor needs a finer grid); a band's terms are then
+        outputs kept, then along the other axis (``psd.pruned_terms``: all of a band's terms
+        at once, the first pass in blocks of lines; zero-padded to ``os`` times the tile
+        when the receptor needs a finer grid); a band's terms are then
         summed per cell by Horner's scheme in one pass per wavelength
-        (:func:`goniolab.optics._cell_kernels.kirchhoff_band_numba`).
+        (:func:`goniolab.optics._cell_kernels.kirchhoff_band_numba`; with numpy, four
+        wavelengths' boxes at a time, :func:`~goniolab.optics._cell_kernels.kirchhoff_bands_numpy`).
         """
         sh = self._shared
         t = sh.tiled
@@ -246,7 +241,6 @@ class KirchhoffModel(PhysicalOpticsModel):
         wx_shape = wx_hat[kx] / wx_hat[0]
         per_box = [(b.iy - y0, b.ix - x0, wy_shape[b.iy - y0], wx_shape[b.ix - x0]) for b in boxes]
         sum_w = float(np.sum(t.wy, dtype=np.float64) * np.sum(t.wx, dtype=np.float64))
-        kernel = CK.kirchhoff_band_numba if self.backend == "numba" else CK.kirchhoff_band_numpy
         lengths = None if os == (1, 1) else (ly, lx)
         y_first = y_axis_first(ly // os[1], lx // os[0], ky.size, kx.size, lengths)
         done = 0
@@ -254,44 +248,30 @@ class KirchhoffModel(PhysicalOpticsModel):
             h, w = t.tile(k)
             if y_first:  # the first (full) pass runs along the contiguous axis
                 h, w = t.tile_transposed(k), t.window_transposed
-            u = h / np.float32(h_max) if h_max > 0 else h
             coh = [0j for _ in boxes]
             for b, (lo, hi, vc, order) in enumerate(plan):
+                done += order + 1  # (a band without cells too: the display must reach 100 %)
                 if b not in active:
-                    done += order + 1  # reported too: the display must reach 100 %
                     if self.progress is not None:
                         self.progress(done, total, "kirchhoff FFT")
                     continue
-                term = _weighted_phase(h, w, vc)
                 spec = np.empty((order + 1, ky.size, kx.size), dtype=np.complex64)
-                dc = np.empty(order + 1, dtype=np.complex128)
-                for n_term in range(order + 1):
-                    dc[n_term] = pruned_fft2(term, ky, kx, y_first, spec[n_term], lengths)
-                    if n_term < order:
-                        term *= u
-                    done += 1
-                    if self.progress is not None:
-                        self.progress(done, total, "kirchhoff FFT")
-                del term
+                dc = pruned_terms(h, w, h_max, vc, ky, kx, y_first, spec, lengths)
+                if self.progress is not None:
+                    self.progress(done, total, "kirchhoff FFT")
+                if self.backend != "numba":  # the boxes a few at once (same values)
+                    CK.kirchhoff_bands_numpy(
+                        spec, dc, [(r, c) for r, c, _, _ in per_box], vzs, [g[1] for g in geo],
+                        lo, hi, b == last, vc, h_max, wy_shape, wx_shape, acc,
+                    )  # fmt: skip
                 for li, ((rows, cols, w_r, w_c), vz, (_, ok)) in enumerate(
                     zip(per_box, vzs, geo, strict=True)
                 ):
-                    kernel(
-                        spec,
-                        dc,
-                        rows,
-                        cols,
-                        vz,
-                        ok,
-                        lo,
-                        hi,
-                        b == last,
-                        vc,
-                        h_max,
-                        w_r,
-                        w_c,
-                        acc[li],
-                    )
+                    if self.backend == "numba":
+                        CK.kirchhoff_band_numba(
+                            spec, dc, rows, cols, vz, ok, lo, hi, b == last, vc, h_max, w_r,
+                            w_c, acc[li],
+                        )  # fmt: skip
                     if owns(b, v_spec[li]):
                         step = -1j * (v_spec[li] - vc) * h_max
                         e, c = 0j, 1.0 + 0j
@@ -418,6 +398,9 @@ class KirchhoffModel(PhysicalOpticsModel):
           complex tile per Taylor term);
         - the columns evanescent at every wavelength (``|wo_x| >= 1``, about half the
           window from 70 deg on) are not transformed along y, and rows likewise;
+        - the terms' x passes run over blocks of rows, all the band's terms of a block
+          at once (:func:`goniolab.optics.taylor_fft.first_pass`), their y passes in
+          place on the kept columns;
         - the coherent field ``dc_n w`` is taken out of each term's transform (and
           ``1/n!`` put in) once, not per wavelength after the Horner sums, so one real
           Horner step is 4 float32 operations per cell, run over all wavelengths together
@@ -476,9 +459,6 @@ class KirchhoffModel(PhysicalOpticsModel):
             y2.append(oy)
         cols = np.flatnonzero(col_any)
         rows = np.flatnonzero(row_any)
-        # the kept columns as runs of consecutive outputs (1 or 2: the window wraps)
-        cuts = np.flatnonzero(np.diff(cols) != 1) + 1
-        runs = [(int(r[0]), int(r[-1]) + 1) for r in np.split(cols, cuts)]
         n_l, n_r, n_c = len(lams_um), rows.size, cols.size
         ok = np.empty((n_l, n_r, n_c), dtype=bool)
         z = np.zeros((n_l, n_r, n_c))  # 0 on the evanescent cells
@@ -512,9 +492,6 @@ class KirchhoffModel(PhysicalOpticsModel):
         w_shape = np.multiply.outer(wy_hat[rows] / wy_hat[0], wx_hat[cols] / wx_hat[0])
         w_shape = w_shape.astype(np.complex64)
         acc = np.zeros((n_l, n_r, n_c))
-        first = np.empty((ny, nx), dtype=np.complex64)
-        coherent = np.empty((n_r, n_c), dtype=np.complex64)  # dc_n w_shape, per term
-        full_rows = None if n_r == ny else np.empty((ny, n_c), dtype=np.complex64)
         # per band: the cells it owns and the rows and columns holding them (a band owning
         # none costs no transform); one band owns every real cell (its edges are the
         # extremes of v_z over them)
@@ -534,64 +511,40 @@ class KirchhoffModel(PhysicalOpticsModel):
             del vz
         total = t.n_tiles * sum(order + 1 for *_, order in plan)
         done = 0
-        spec = np.empty((n_r, n_c), dtype=np.complex64)  # one term's transform
-        spec_r = spec_i = np.empty((0, 0, 0), dtype=np.float32)
+        keep_rows = None if n_r == ny else rows
         for k in range(t.n_tiles):
             h, w = t.tile(k)
-            u = h / np.float32(h_max) if h_max > 0 else h
             for (_, _, vc, order), (own, rr, cc) in zip(plan, owners, strict=True):
                 if rr.size == 0:
                     done += order + 1  # reported too: the display must reach 100 %
                     if self.progress is not None:
                         self.progress(done, total, "kirchhoff energy check")
                     continue
-                term = _weighted_phase(h, w, vc)  # as _raw_power
-                # G_n = (F_n - dc_n w_shape) / n! at the kept outputs, F_n the transform of
-                # the term W exp(-i v_c h) u^n: the x pass over the whole tile, the y pass
-                # on the kept columns only
-                # (kept as real and imaginary planes: the Horner sums read them contiguous,
-                # half the time of the complex array's strided parts; a complex times a
-                # real 1/n! is the product of each part, the same values)
-                spec_r = np.empty((order + 1, n_r, n_c), dtype=np.float32)
-                spec_i = np.empty((order + 1, n_r, n_c), dtype=np.float32)
+                # F_n, the transform of the term W exp(-i v_c h) u^n at the kept outputs:
+                # the x pass of all the terms over blocks of rows (taylor_fft.first_pass),
+                # then the y pass of each on the kept columns, in place; G_n = (F_n -
+                # dc_n w_shape) / n! is formed block by block where the Horner sums read it
+                spec = np.empty((order + 1, ny, n_c), dtype=np.complex64)
                 dc = np.empty(order + 1, dtype=np.complex128)
-                fact = 1.0
+                first_pass(h, w, h_max, vc, cols, spec, dc_points=dc)
                 for n in range(order + 1):
-                    _fft.fft_into(term, 1, first)
-                    dc[n] = complex(np.sum(term, dtype=np.complex128))
-                    dest = spec if full_rows is None else full_rows
-                    o = 0
-                    for a0, a1 in runs:
-                        _fft.fft_into(first[:, a0:a1], 0, dest[:, o : o + a1 - a0])
-                        o += a1 - a0
-                    if full_rows is not None:
-                        np.take(full_rows, rows, axis=0, out=spec)
-                    np.multiply(w_shape, np.complex64(dc[n]), out=coherent)
-                    np.subtract(spec.real, coherent.real, out=spec_r[n])
-                    np.subtract(spec.imag, coherent.imag, out=spec_i[n])
-                    if n:
-                        fact *= n
-                        spec_r[n] *= np.float32(1.0 / fact)
-                        spec_i[n] *= np.float32(1.0 / fact)
-                    if n < order:
-                        term *= u
+                    _fft.fft_into(spec[n], 0, spec[n])
                     done += 1
                     if self.progress is not None:
                         self.progress(done, total, "kirchhoff energy check")
-                del term
                 r0, r1, c0, c1 = int(rr[0]), int(rr[-1]) + 1, int(cc[0]), int(cc[-1]) + 1
                 h_step = max(1, _HORNER_BLOCK // max(1, n_l * (c1 - c0)))
                 run_reporting(
                     [
                         functools.partial(
-                            self._energy_horner, spec_r[:, :, c0:c1], spec_i[:, :, c0:c1],
-                            z[:, :, c0:c1], kz, c_i, vc, h_max, a, b,
+                            self._energy_horner, spec[:, :, c0:c1], keep_rows,
+                            w_shape[:, c0:c1], dc, z[:, :, c0:c1], kz, c_i, vc, h_max, a, b,
                             None if own is None else own[:, :, c0:c1], acc[:, :, c0:c1],
                         )
                         for a, b in row_parts(r0, r1, h_step)
                     ]
                 )  # fmt: skip
-        del spec, spec_r, spec_i, first, full_rows, coherent
+                del spec
         norm = t.n_tiles * ny * nx * t.sum_w2
         wi = np.array([[s_i, 0.0, c_i]])  # Lambda(wi): one value for all cells
         # the per-cell weights in blocks of rows (large temporaries cost more than the
@@ -663,8 +616,10 @@ class KirchhoffModel(PhysicalOpticsModel):
 
     @staticmethod
     def _energy_horner(
-        spec_r: NDArray[np.float32],
-        spec_i: NDArray[np.float32],
+        spec: NDArray[np.complex64],
+        rows: NDArray[np.intp] | None,
+        w_shape: NDArray[np.complex64],
+        dc: NDArray[np.complex128],
         z: FloatArray,
         kz: FloatArray,
         c_i: float,
@@ -676,8 +631,10 @@ class KirchhoffModel(PhysicalOpticsModel):
         acc: FloatArray,
     ) -> None:
         """``acc += |sum_n G_n (-i x)^n|^2`` (``x = (v_z - v_c) h_max``, ``v_z = k (z +
-        cos ti)`` with ``k`` = ``kz`` per wavelength, per wavelength and cell; ``G_n`` =
-        ``spec_r[n] + i spec_i[n]``, shared by the wavelengths) over rows ``r0:r1``, by
+        cos ti)`` with ``k`` = ``kz`` per wavelength, per wavelength and cell; ``G_n =
+        (spec[n] - dc_n w_shape) / n!`` at the kept ``rows`` (None: all), shared by the
+        wavelengths and formed per block, :func:`~goniolab.optics.taylor_fft.g_planes`)
+        over rows ``r0:r1``, by
         Horner's scheme in float32 (``x`` formed in float64, then rounded; the ``G_n`` are
         float32 transforms already), in blocks of rows small enough to stay in cache; only
         where ``own`` (the band's cells) when given; ``acc`` is float64.
@@ -687,8 +644,9 @@ class KirchhoffModel(PhysicalOpticsModel):
         rough coats and 9e-8 on a wavy one (70/85/89 deg, 400/550/700 nm), below the
         float32 transforms' own rounding of ``D_1`` (a few 1e-7;
         ``tests/optics/test_kirchhoff.py`` holds both). The ``G_n`` as contiguous real
-        and imaginary planes (issue 26, g16): 8 instead of 16 ms, the same values."""
-        n_terms, _, n_c = spec_r.shape
+        and imaginary planes (issue 26, g16): 8 instead of 16 ms, the same values; formed
+        per block in cache rather than in a pass of their own over the window (g16c)."""
+        n_terms, _, n_c = spec.shape
         n_l = z.shape[0]
         step = max(1, _HORNER_BLOCK // max(1, n_l * n_c))
         for a in range(r0, r1, step):
@@ -703,18 +661,19 @@ class KirchhoffModel(PhysicalOpticsModel):
                 # overflow float32 in x^order (inf * 0 = NaN in acc)
                 x64 *= own[:, a:b]
             x = x64.astype(np.float32)
+            spec_r, spec_i = g_planes(spec, rows, w_shape, dc, a, b)
             fr = np.empty(x.shape, dtype=np.float32)
             fi = np.empty(x.shape, dtype=np.float32)
-            fr[...] = spec_r[n_terms - 1, a:b]
-            fi[...] = spec_i[n_terms - 1, a:b]
+            fr[...] = spec_r[n_terms - 1]
+            fi[...] = spec_i[n_terms - 1]
             t1 = np.empty(x.shape, dtype=np.float32)
             t2 = np.empty(x.shape, dtype=np.float32)
             for n in range(n_terms - 2, -1, -1):
                 # f <- G_n + (-i x) f
                 np.multiply(x, fi, out=t1)
-                t1 += spec_r[n, a:b]
+                t1 += spec_r[n]
                 np.multiply(x, fr, out=t2)
-                np.subtract(spec_i[n, a:b], t2, out=t2)
+                np.subtract(spec_i[n], t2, out=t2)
                 fr, t1 = t1, fr
                 fi, t2 = t2, fi
             fr *= fr
@@ -731,13 +690,31 @@ class KirchhoffModel(PhysicalOpticsModel):
         of the direction. Where the roughness is small against the wavelength (g_d -> 0)
         light does not see the slopes as shadowing facets and nothing is removed (as in
         Rayleigh-Rice, which ``auto`` uses there); where it is large (the facet limit,
-        ``g_d`` >> 1) this is the facet model's G2. With ``masking=False``: 1."""
+        ``g_d`` >> 1) this is the facet model's G2. With ``masking=False``: 1.
+
+        ``G2`` itself does not depend on the wavelength: for a few directions (a gloss's
+        detector, asked once per wavelength) it is kept for the map and read again (the
+        same values; 2 of its 96 Smith Lambda calls on one- or two-element arrays per
+        16-wavelength gloss were each a few dozen numpy calls holding the GIL: issue 26,
+        g16c)."""
         if not self.masking:
             return 1.0
         sq = self._shared.stats.sq_um
         k = 2.0 * math.pi / lam_um
         gd = (k * sq * (wi[..., 2] + np.clip(wo[..., 2], 0.0, None))) ** 2
-        g2 = self._shared.masking_model.masking_g2(wi, wo)
+        if np.size(wo) <= 3 * _G2_MEMO_DIRS:
+            wi_a, wo_a = np.asarray(wi, dtype=np.float64), np.asarray(wo, dtype=np.float64)
+            key = (wi_a.shape, wi_a.tobytes(), wo_a.shape, wo_a.tobytes())
+            # one entry of the map's shared cache for them all (dropped with the cache)
+            memo: dict[Any, FloatArray] = self._shared.cached(("kirchhoff few G2",), dict)
+            g2 = memo.get(key)
+            if g2 is None:
+                g2 = self._shared.masking_model.masking_g2(wi, wo)
+                if len(memo) >= _G2_MEMO_SIZE:
+                    memo.clear()
+                memo[key] = g2
+        else:
+            g2 = self._shared.masking_model.masking_g2(wi, wo)
         out: FloatArray = np.power(np.clip(g2, 1e-300, 1.0), -np.expm1(-gd))
         return out
 

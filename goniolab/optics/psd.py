@@ -45,6 +45,7 @@ from numpy.typing import NDArray
 
 from goniolab.optics import _fft
 from goniolab.optics.heightmap import HeightMap, fill_missing, level_plane, plane_fit
+from goniolab.optics.taylor_fft import first_pass, weighted_phase
 
 __all__ = [
     "DEFAULT_TAPER",
@@ -52,6 +53,7 @@ __all__ = [
     "PSD2",
     "TiledMap",
     "pruned_fft2",
+    "pruned_terms",
     "psd2",
     "psd_region",
     "schwartz_taper",
@@ -415,6 +417,57 @@ def pruned_fft2(
     a = _dft_last(term, first, l1)
     b = _dft_last(np.ascontiguousarray(a.T), second, l2)  # (first, second)
     out[...] = b if y_first else b.T
+    return dc
+
+
+def pruned_terms(
+    h: NDArray[np.float32],
+    w: NDArray[np.float32],
+    h_max: float,
+    vc: float,
+    ky: NDArray[np.int64],
+    kx: NDArray[np.int64],
+    y_first: bool,
+    out: NDArray[np.complex64],
+    lengths: tuple[int, int] | None = None,
+) -> NDArray[np.complex128]:
+    """:func:`pruned_fft2` of each Taylor term ``T_n = W exp(-i v_c h) (h / h_max)^n`` of
+    a band, ``n = 0..N`` (``N + 1 = out.shape[0]``), into ``out[n]``; returns the terms'
+    zero-frequency values. ``h`` and ``w`` are laid out as ``term`` there.
+
+    The first pass, an FFT along the contiguous axis, runs for all the terms of a block of
+    lines at once (:func:`goniolab.optics.taylor_fft.first_pass`: the terms stay in cache;
+    no tile-sized output per term); the second pass transforms the outputs kept, term by
+    term, as :func:`pruned_fft2` does: the same values, bit for bit. A first pass along a
+    zero-padded axis (not chosen by :func:`y_axis_first` unless both axes are padded) is
+    :func:`pruned_fft2` itself, term by term."""
+    n_t = out.shape[0]
+    ny, nx = (h.shape[1], h.shape[0]) if y_first else h.shape
+    ly, lx = (ny, nx) if lengths is None else lengths
+    (first, l1), (second, l2) = ((ky, ly), (kx, lx)) if y_first else ((kx, lx), (ky, ly))
+    dc = np.empty(n_t, dtype=np.complex128)
+    if l1 != h.shape[1]:
+        term = weighted_phase(h, w, vc)
+        u = h / np.float32(h_max) if h_max > 0 else h
+        for n in range(n_t):
+            dc[n] = pruned_fft2(term, ky, kx, y_first, out[n], lengths)
+            if n < n_t - 1:
+                term *= u
+        return dc
+    keep = first.astype(np.intp)
+    a = np.empty((n_t, h.shape[0], keep.size), dtype=np.complex64)
+    if (ly, lx) == (ny, nx):
+        lines = np.empty((n_t, h.shape[0]), dtype=np.complex64)
+        first_pass(h, w, h_max, vc, keep, a, dc_rows=lines)
+        for n in range(n_t):
+            dc[n] = complex(np.sum(lines[n], dtype=np.complex128))
+            b = np.take(_fft.fft(a[n], axis=0), second, axis=0)
+            out[n] = b.T if y_first else b
+        return dc
+    first_pass(h, w, h_max, vc, keep, a, dc_points=dc)
+    for n in range(n_t):
+        b = _dft_last(np.ascontiguousarray(a[n].T), second, l2)
+        out[n] = b if y_first else b.T
     return dc
 
 

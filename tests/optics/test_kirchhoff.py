@@ -730,3 +730,174 @@ def test_a_flat_map_has_no_diffuse_light_to_scale(shape: tuple[int, int]) -> Non
     model = KirchhoffModel(HeightMap(z_um=np.zeros(shape), dx_um=0.5, dy_um=0.5), n=1.55)
     assert model._energy_scales_at(89.0, [0.4, 0.55, 0.7]) == [1.0, 1.0, 1.0]
     assert not [n for n in model.albedo_tis(89.0)[2].notes if "scaled" in n]
+
+
+@pytest.mark.parametrize("shape", [(600, 1024), (600, 1000)])
+def test_the_blocked_first_pass_is_the_whole_tile_pass_bit_for_bit(
+    shape: tuple[int, int],
+) -> None:
+    """issue 26, g16c: the Taylor terms' first pass in blocks of rows
+    (:func:`goniolab.optics.taylor_fft.first_pass`) gives the whole-tile passes' outputs,
+    the lines' zero-frequency outputs, and numpy's own complex128 sum of each term's points:
+    the same bits where the width divides numpy's 8192-element chunks (1024, as on the
+    bench map), within float64 rounding where it does not (1000). The truth is the term formed
+    over the whole tile and transformed as the readings did before."""
+    from goniolab.optics import _fft
+    from goniolab.optics.taylor_fft import block_rows, first_pass, weighted_phase
+
+    rng = np.random.default_rng(26)
+    ny, nx = shape
+    assert block_rows(nx) < ny  # several blocks, the last one short
+    h = (0.05 * rng.standard_normal(shape)).astype(np.float32)
+    w = rng.uniform(0.2, 1.0, shape).astype(np.float32)
+    h_max, vc, n_t = float(np.abs(h).max()), 7.4, 6
+    # kept outputs as two runs (copied as slices) and scattered (gathered)
+    keep = np.r_[0 : nx // 3, nx - nx // 4 : nx].astype(np.intp)
+    out = np.empty((n_t, ny, keep.size), dtype=np.complex64)
+    rows = np.empty((n_t, ny), dtype=np.complex64)
+    sums = np.empty(n_t, dtype=np.complex128)
+    first_pass(h, w, h_max, vc, keep, out, dc_rows=rows, dc_points=sums)
+    every_third = np.arange(1, nx, 3, dtype=np.intp)
+    scattered = np.empty((n_t, ny, every_third.size), dtype=np.complex64)
+    first_pass(h, w, h_max, vc, every_third, scattered)
+    term = weighted_phase(h, w, vc)
+    u = h / np.float32(h_max)
+    for n in range(n_t):
+        full = _fft.fft(term, axis=1)
+        assert np.array_equal(out[n].view(np.uint64), full[:, keep].view(np.uint64))
+        assert np.array_equal(scattered[n].view(np.uint64), full[:, every_third].view(np.uint64))
+        assert np.array_equal(rows[n].view(np.uint64), full[:, 0].view(np.uint64))
+        ref = complex(np.sum(term, dtype=np.complex128))
+        if 8192 % nx == 0:
+            assert complex(sums[n]) == ref
+        else:
+            assert abs(complex(sums[n]) - ref) <= 1e-13 * np.sum(np.abs(term))
+        term *= u
+
+
+@pytest.mark.parametrize(("y_first", "lengths"), [(False, None), (True, None), (True, (96, 288))])
+def test_the_blocked_terms_are_the_pruned_transforms_bit_for_bit(
+    y_first: bool, lengths: tuple[int, int] | None
+) -> None:
+    """:func:`goniolab.optics.psd.pruned_terms` (the readings' terms of a band, first pass
+    in blocks) against :func:`goniolab.optics.psd.pruned_fft2` of each term formed over the
+    whole tile, as the readings formed them before (unpadded, y first, and the ISO 85 deg
+    receptor's x axis padded 3 x): the same bits, outputs and zero-frequency values."""
+    from goniolab.optics.psd import pruned_fft2, pruned_terms
+    from goniolab.optics.taylor_fft import weighted_phase
+
+    rng = np.random.default_rng(5)
+    h = (0.05 * rng.standard_normal((96, 96))).astype(np.float32)
+    w = rng.uniform(0.2, 1.0, (96, 96)).astype(np.float32)
+    h_max, vc, n_t = float(np.abs(h).max()), 12.5, 5
+    ky = np.arange(-7, 12, dtype=np.int64) % (lengths or (96, 96))[0]
+    kx = np.arange(30, 41, dtype=np.int64) % (lengths or (96, 96))[1]
+    out = np.empty((n_t, ky.size, kx.size), dtype=np.complex64)
+    dc = pruned_terms(h, w, h_max, vc, ky, kx, y_first, out, lengths)
+    term = weighted_phase(h, w, vc)
+    u = h / np.float32(h_max)
+    ref = np.empty((ky.size, kx.size), dtype=np.complex64)
+    for n in range(n_t):
+        ref_dc = pruned_fft2(term, ky, kx, y_first, ref, lengths)
+        assert np.array_equal(out[n].view(np.uint64), ref.view(np.uint64))
+        assert complex(dc[n]) == ref_dc
+        term *= u
+
+
+@pytest.mark.parametrize("subset", [False, True])
+def test_the_horner_blocks_taylor_planes_are_the_whole_array_forms(subset: bool) -> None:
+    """:func:`goniolab.optics.taylor_fft.g_planes` forms ``(x[n][rows[a:b]] - dc_n shape) /
+    n!`` of a block of cells as contiguous real and imaginary planes: the same bits as the
+    energy check's whole-window arithmetic before (complex64 ``shape * dc_n``, float32
+    differences and the float32 ``1/n!``), on every line or on kept lines only."""
+    from goniolab.optics.taylor_fft import g_planes
+
+    rng = np.random.default_rng(7)
+    n_t, ny, n_c = 4, 700, 50
+    x = rng.standard_normal((n_t, ny, n_c)) + 1j * rng.standard_normal((n_t, ny, n_c))
+    x = x.astype(np.complex64)
+    rows = np.sort(rng.choice(ny, 500, replace=False)) if subset else None
+    n_r = ny if rows is None else rows.size
+    shape = (rng.standard_normal((n_r, n_c)) + 1j).astype(np.complex64)
+    dc = np.array([0.3 - 1.7j, 2.0 + 0.1j, -0.5j, 1.25], dtype=np.complex128)
+    a, b = 33, 301
+    gr, gi = g_planes(x, rows, shape, dc, a, b)
+    fact = 1.0
+    for n in range(n_t):
+        spec = x[n] if rows is None else x[n][rows]
+        coherent = shape * np.complex64(dc[n])
+        ref_r = spec.real - coherent.real
+        ref_i = spec.imag - coherent.imag
+        if n:
+            fact *= n
+            ref_r *= np.float32(1.0 / fact)
+            ref_i *= np.float32(1.0 / fact)
+        assert np.array_equal(gr[n], ref_r[a:b])
+        assert np.array_equal(gi[n], ref_i[a:b])
+
+
+def test_the_kept_g2_of_a_detector_is_the_formula_at_every_wavelength() -> None:
+    """issue 26, g16c: Smith's G2 of a few directions (a gloss detector's, asked once per
+    wavelength) is kept in the map's shared cache and read again; the shadowing returned
+    at each wavelength is still ``G2^(1 - exp(-g_d))`` with that wavelength's ``g_d``,
+    bit for bit, and dropping the cache recomputes the same values."""
+    model = KirchhoffModel(gaussian_acf_map(128, 0.3, 1.5, 0.25, seed=3), n=1.5)
+    wi = np.array([[math.sin(math.radians(60.0)), 0.0, math.cos(math.radians(60.0))]])
+    wo = np.array([[-math.sin(math.radians(58.0)), 0.01, math.cos(math.radians(58.0))]])
+    g2 = model._shared.masking_model.masking_g2(wi, wo)
+    assert 0.0 < float(g2[0]) < 1.0  # the slopes shadow this direction
+    sq = model._shared.stats.sq_um
+    for lam in (0.4, 0.55, 0.7, 0.55):
+        gd = ((2.0 * math.pi / lam) * sq * (wi[..., 2] + wo[..., 2])) ** 2
+        want = np.power(np.clip(g2, 1e-300, 1.0), -np.expm1(-gd))
+        assert np.array_equal(model._diffuse_g2(wi, wo, lam), want)
+    memo = model._shared.cached(("kirchhoff few G2",), dict)
+    assert len(memo) == 1
+    model._shared.cache.clear()
+    gd = ((2.0 * math.pi / 0.7) * sq * (wi[..., 2] + wo[..., 2])) ** 2
+    want = np.power(np.clip(g2, 1e-300, 1.0), -np.expm1(-gd))
+    assert np.array_equal(model._diffuse_g2(wi, wo, 0.7), want)
+
+
+def test_the_grouped_band_sums_are_each_boxs_own_bit_for_bit() -> None:
+    """issue 26, g16c: :func:`goniolab.optics._cell_kernels.kirchhoff_bands_numpy` sums a
+    band over several boxes (one per wavelength, of different sizes and places in the
+    region, one owning no cell of the band) a few at once; each box's cells get exactly
+    what :func:`kirchhoff_band_numpy` gives that box alone."""
+    from goniolab.optics import _cell_kernels as ck
+
+    rng = np.random.default_rng(11)
+    n_t, ny, nx = 6, 40, 30
+    spec = (rng.standard_normal((n_t, ny, nx)) + 1j * rng.standard_normal((n_t, ny, nx))).astype(
+        np.complex64
+    )
+    dc = rng.standard_normal(n_t) + 1j * rng.standard_normal(n_t)
+    wy = rng.standard_normal(ny) + 1j * rng.standard_normal(ny)
+    wx = rng.standard_normal(nx) + 1j * rng.standard_normal(nx)
+    lo, hi, vc, h_max = 9.0, 11.0, 10.0, 0.2
+    places = [(0, 40, 0, 30), (3, 33, 5, 26), (6, 30, 2, 20), (10, 21, 8, 29), (1, 9, 1, 9)]
+    boxes, vzs, oks, ref, got = [], [], [], [], []
+    for j, (r0, r1, c0, c1) in enumerate(places):
+        rows = np.arange(r0, r1, dtype=np.int64)
+        cols = np.arange(c0, c1, dtype=np.int64)
+        vz = rng.uniform(8.0, 12.0, (rows.size, cols.size))
+        if j == 4:
+            vz += 5.0  # beyond the band: no cell owned
+        boxes.append((rows, cols))
+        vzs.append(vz)
+        oks.append(rng.uniform(size=vz.shape) > 0.1)
+        ref.append(rng.uniform(size=vz.shape))
+        got.append(ref[-1].copy())
+    init = [r.copy() for r in ref]
+    for j, (rows, cols) in enumerate(boxes):
+        ck.kirchhoff_band_numpy(
+            spec, dc, rows, cols, vzs[j], oks[j], lo, hi, False, vc, h_max, wy[rows], wx[cols],
+            ref[j],
+        )  # fmt: skip
+    ck.kirchhoff_bands_numpy(
+        spec, dc, boxes, vzs, oks, lo, hi, False, vc, h_max, wy, wx, got
+    )  # fmt: skip
+    for r, g in zip(ref, got, strict=True):
+        assert np.array_equal(r, g)
+    assert all(not np.array_equal(ref[j], init[j]) for j in range(4))
+    assert np.array_equal(got[4], init[4])  # the box owning no cell: untouched
