@@ -18,8 +18,9 @@ runs; medians against the issue-15 targets:
 - Kirchhoff ISO 2813 gloss triplet weighted over 16 wavelengths, C x V(lambda) (<= 1 s);
 - the same two for Rayleigh-Rice (one PSD, shared by every geometry and wavelength);
 - without a target (issue 20): Kirchhoff gloss of a 50 um field (256 x 256, the ISO
-  receptors zero-padded to 6 cells across) and the Kirchhoff albedo at 85 deg over the
-  whole Nyquist window of the 1024^2 map.
+  receptors zero-padded to 6 cells across), the Kirchhoff albedo at 85 deg over the
+  whole Nyquist window of the 1024^2 map, and a Kirchhoff curve at 80 deg, where the
+  source cone is summed over 169 sub-cones.
 
 Threads: a gloss's geometries, Kirchhoff's readings beside its energy check and the energy
 checks' per-cell work run as tasks on up to two threads
@@ -153,6 +154,10 @@ def main(argv: list[str] | None = None) -> int:
         "kirchhoff gloss_16wl, 50 um field": timed(k_afm, k_afm.gloss, args.repeats),
         "kirchhoff albedo 85 deg, whole window": timed(
             k_big, lambda: k_big.albedo_tis(85.0), args.repeats
+        ),
+        # the 6 deg source split into 169 sub-cones (G2 per source direction, from 78 deg)
+        "kirchhoff curve at 80 deg, 71 pts (169 sub-cones)": timed(
+            k_big, lambda: k_big.luminance_pct(80.0, np.arange(15.0, 86.0, 1.0)), args.repeats
         ),
     }
     if args.json:

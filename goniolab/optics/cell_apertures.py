@@ -19,9 +19,10 @@ References
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -318,7 +319,10 @@ class CellApertures:
         """
         a_d = math.radians(receptor.half_angle_deg)
         d = np.stack([-np.sin(tr), np.zeros_like(tr), np.cos(tr)], axis=-1)
-        fn = CK.cone_cells_numba if self.backend == "numba" else CK.cone_cells_numpy
+        if self.backend == "numba":
+            fn: Any = CK.cone_cells_numba
+        else:  # the window's cells formed once for every sub-cone (the same values)
+            fn = functools.partial(CK.cone_cells_numpy, window=CK.cone_window(wox, woy, p))
         out = np.zeros(tr.size)
         ti = math.radians(theta_i_deg)
         for c, sub, share in clipped_source_parts(theta_i_deg, source):
