@@ -201,6 +201,15 @@ class KirchhoffModel(PhysicalOpticsModel):
         """
         sh = self._shared
         t = sh.tiled
+        if sh.h_max_um == 0.0:
+            # a flat map (levelled to exactly 0): each tile's screen is the window itself and
+            # its field the coherent beam alone, so no cell holds diffuse light and C = 1,
+            # exactly (the transforms gave their float32 rounding, some 1e-14 of the beam,
+            # over every cell, which a split source's 169 sub-cones then summed for seconds)
+            if self.progress is not None:
+                self.progress(1, 1, "kirchhoff FFT")
+            zeros = [np.zeros((b.iy1 - b.iy0 + 1, b.ix1 - b.ix0 + 1)) for b in boxes]
+            return zeros, [1.0 for _ in boxes]
         cz_i = math.cos(math.radians(theta_i_deg))
         vzs = [(2.0 * math.pi / lam) * (cz_i + z) for lam, (z, _) in zip(lams_um, geo, strict=True)]
         v_spec = [(2.0 * math.pi / lam) * 2.0 * cz_i for lam in lams_um]

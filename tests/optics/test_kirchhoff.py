@@ -75,6 +75,22 @@ def test_flat_map_reads_exact_fresnel_gloss(flat512: HeightMap, cls: type) -> No
     assert [round(g[t], 1) for t in (20, 60, 85)] == [95.4, 97.3, 99.8]
 
 
+@pytest.mark.parametrize("cls", [KirchhoffModel, RayleighRiceModel])
+def test_a_flat_map_sends_nothing_off_specular(flat512: HeightMap, cls: type) -> None:
+    """A mirror's light is its coherent beam: 15 deg off specular, where the 6 deg cones
+    do not reach the beam, it reads exactly 0 (Kirchhoff's float32 transforms had left
+    some 1e-14 of the beam over every cell), and at specular Fresnel averaged over the
+    source (PHYSICS.md)."""
+    from goniolab.optics.apertures import sample_aperture
+
+    model = cls(flat512, n=1.55)
+    got = model.luminance_pct(45.0, np.array([30.0, 45.0]))
+    assert got[0] == 0.0
+    src, w = sample_aperture(Cone(6.0), 45.0, 0.0, n=400)
+    want = 100.0 * float(np.sum(w * fresnel_dielectric(src[:, 2], 1.55)) / w.sum())
+    assert got[1] == pytest.approx(want, rel=1e-6)
+
+
 def test_specular_beam_is_fresnel_times_debye_waller() -> None:
     sq = 0.05
     hm = gaussian_acf_map(512, sq, 2.0, 0.25, seed=1)
