@@ -19,8 +19,10 @@ array around the element), so the outputs are the same bits
 lines' zero-frequency outputs (summed by the caller), or the sum of the term's points in
 complex128 taken in numpy's own order: numpy sums a contiguous array in chunks of 8192
 elements, each by pairwise summation, added one after the other; the chunk sums here are
-the same chunks' (:data:`_SUM_CHUNK`), added in the same order, when the tile's width
-divides 8192 (every power of two up to it), and within a few float64 roundings otherwise.
+the same chunks' (:data:`_SUM_CHUNK`) of the whole term, a chunk that straddles two
+blocks completed from the next, added in the same order, whatever the tile's width (a
+padded receptor's 1000- or 600-wide tiles summed block by block had been 6 units in the
+last place off: review of 2026-11-27).
 """
 
 from __future__ import annotations
@@ -86,7 +88,7 @@ def first_pass(
     ``out[n] = fft(T_n, axis=-1)[:, keep]``.
 
     ``W exp(-i v_c h)`` is formed in complex64 from float32 cos/sin as
-    :func:`goniolab.optics.kirchhoff._weighted_phase` forms it, and ``T_{n+1} = T_n u`` with
+    :func:`weighted_phase` forms it, and ``T_{n+1} = T_n u`` with
     ``u = h / h_max`` (``h`` itself when ``h_max <= 0``) in float32, as the whole-tile
     passes did. ``dc_rows[n]`` (if given) receives each line's zero-frequency output,
     ``dc_points[n]`` the sum of ``T_n``'s points in complex128 (module docstring: numpy's
@@ -105,15 +107,15 @@ def first_pass(
     cuts = np.flatnonzero(np.diff(keep) != 1) + 1
     runs = [(int(r[0]), int(r[-1]) + 1) for r in np.split(keep, cuts)] if keep.size else []
     by_runs = len(runs) <= 4
-    by_chunk = nx <= _SUM_CHUNK and _SUM_CHUNK % nx == 0
-    chunk_rows = _SUM_CHUNK // nx if by_chunk else step
     sums: list[list[complex]] = [[] for _ in range(n_terms)]
+    carry = np.empty((n_terms, _SUM_CHUNK), dtype=np.complex64)
+    carry_n = [0] * n_terms
     for r0 in range(0, ny, step):
         r1 = min(ny, r0 + step)
         m = r1 - r0
         t, f, ph, c, ub = blk_t[:m], blk_f[:m], phase[:m], cos[:m], u[:m]
         hb, wb = h[r0:r1], w[r0:r1]
-        # W exp(-i v_c h) (as _weighted_phase)
+        # W exp(-i v_c h) (as weighted_phase)
         np.multiply(np.float32(vc), hb, out=ph)
         np.cos(ph, out=c)
         np.sin(ph, out=ph)
@@ -135,20 +137,36 @@ def first_pass(
                 np.take(f, keep, axis=1, out=out[n, r0:r1])
             if dc_rows is not None:
                 dc_rows[n, r0:r1] = f[:, 0]
-            if dc_points is not None:
-                if by_chunk and m % chunk_rows == 0:  # the block's chunks at once
+            if dc_points is not None:  # numpy's chunks of the whole term, across blocks
+                flat = t.reshape(-1)
+                pos, have = 0, carry_n[n]
+                if have:
+                    need = min(_SUM_CHUNK - have, flat.size)
+                    carry[n, have : have + need] = flat[:need]
+                    have += need
+                    pos = need
+                    if have == _SUM_CHUNK:
+                        sums[n].append(complex(np.sum(carry[n], dtype=np.complex128)))
+                        have = 0
+                full = (flat.size - pos) // _SUM_CHUNK
+                if full:
                     part: NDArray[np.complex128] = np.sum(
-                        t.reshape(-1, _SUM_CHUNK), axis=1, dtype=np.complex128
+                        flat[pos : pos + full * _SUM_CHUNK].reshape(full, _SUM_CHUNK),
+                        axis=1,
+                        dtype=np.complex128,
                     )
                     sums[n].extend(part.tolist())
-                else:
-                    for a in range(0, m, chunk_rows):
-                        part1 = np.sum(t[a : a + chunk_rows], dtype=np.complex128)
-                        sums[n].append(complex(part1))
+                    pos += full * _SUM_CHUNK
+                if pos < flat.size:
+                    carry[n, : flat.size - pos] = flat[pos:]
+                    have = flat.size - pos
+                carry_n[n] = have
             if n < n_terms - 1:
                 t *= ub
     if dc_points is not None:
         for n in range(n_terms):
+            if carry_n[n]:
+                sums[n].append(complex(np.sum(carry[n, : carry_n[n]], dtype=np.complex128)))
             acc = 0j
             for s in sums[n]:  # one after the other, as numpy adds its chunks
                 acc += s
