@@ -165,9 +165,12 @@ def _take(batch: _Batch) -> int | None:
     if batch.taken >= len(batch.tasks):
         return None
     i = batch.taken
-    batch.taken += 1
-    if batch.taken == len(batch.tasks):
+    if i + 1 == len(batch.tasks) and batch in _open:
+        # before counting it taken: CPython runs a pending signal's handler right after a
+        # C call such as remove(); raised here, the task is still untaken, and its owner,
+        # which takes its own tasks without _open, runs it (the other order lost it)
         _open.remove(batch)
+    batch.taken = i + 1  # (no signal check between this store and _step's `i = ...`)
     return i
 
 
@@ -182,17 +185,24 @@ def _finish(batch: _Batch, i: int, result: Any, failed: BaseException | None) ->
         else:
             if batch.error is None or i < batch.error[0]:
                 batch.error = (i, failed)
-            if batch.taken < len(batch.tasks):
-                for j in range(batch.taken, len(batch.tasks)):
-                    batch.finished[j] = True
-                batch.taken = len(batch.tasks)
-                _open.remove(batch)
+            _cancel(batch)
         batch.finished[i] = True  # the one store that counts it
         if not batch.left:
             _work.notify_all()  # its caller waits (perhaps among others)
 
 
-def _run(batch: _Batch, i: int) -> None:
+def _cancel(batch: _Batch) -> None:
+    """Account for the tasks of ``batch`` not yet started, which never will be (call with
+    the lock held; again is a no-op)."""
+    for j in range(batch.taken, len(batch.tasks)):
+        batch.finished[j] = True
+    batch.taken = len(batch.tasks)
+    if batch in _open:
+        _open.remove(batch)
+
+
+def _run(batch: _Batch, i: int) -> BaseException | None:
+    """Run task ``i`` of ``batch`` and account for it; its exception, if it raised one."""
     old = getattr(_limits, "n", None)
     _limits.n = batch.limit
     try:
@@ -203,10 +213,12 @@ def _run(batch: _Batch, i: int) -> None:
     finally:
         _limits.n = old
     _finish(batch, i, result, failed)
+    return failed
 
 
-def _step(batch: _Batch) -> bool:
-    """Take the next task of ``batch`` and run it; False when none was left.
+def _step(batch: _Batch) -> tuple[bool, BaseException | None]:
+    """Take the next task of ``batch`` and run it: whether there was one, and the
+    exception it raised.
 
     An exception outside the task (a KeyboardInterrupt lands on the main thread wherever
     it is, here between taking the task and counting it) accounts for the task as failed
@@ -217,9 +229,8 @@ def _step(batch: _Batch) -> bool:
         with _work:
             i = _take(batch)
         if i is None:
-            return False
-        _run(batch, i)
-        return True
+            return False, None
+        return True, _run(batch, i)
     except BaseException as exc:
         if i is not None:
             _finish(batch, i, None, exc)
@@ -248,25 +259,35 @@ def run_tasks(tasks: Sequence[Callable[[], T]]) -> list[T]:
     if n <= 1:
         return [task() for task in tasks]
     batch = _Batch(tasks, walk_threads())
-    with _work:
-        while len(_helpers) < n - 1:
-            helper = threading.Thread(target=_helper, name="goniolab-walk", daemon=True)
-            helper.start()
-            _helpers.append(helper)
-        _open.append(batch)
-        _work.notify_all()
-    while _step(batch):
-        pass
-    # the last tasks run elsewhere: meanwhile, this thread takes other calls' tasks (a
-    # nested call's, or another thread's), so that no core idles while there is work
-    while True:
+    try:
         with _work:
-            while batch.left and not _open:
-                _work.wait(_RECHECK_S)
-            if not batch.left:
-                break
-            other = _open[0]
-        _step(other)
+            while len(_helpers) < n - 1:
+                helper = threading.Thread(target=_helper, name="goniolab-walk", daemon=True)
+                helper.start()
+                _helpers.append(helper)
+            _open.append(batch)
+            _work.notify_all()
+        while _step(batch)[0]:
+            pass
+        # the last tasks run elsewhere: meanwhile, this thread takes other calls' tasks (a
+        # nested call's, or another thread's), so that no core idles while there is work
+        while True:
+            with _work:
+                while batch.left and not _open:
+                    _work.wait(_RECHECK_S)
+                if not batch.left:
+                    break
+                other = _open[0]
+            _, failed = _step(other)
+            if isinstance(failed, KeyboardInterrupt | SystemExit):
+                # Ctrl-C meant for this (main) thread landed in another call's task: that
+                # call fails with it, and so does this one, now (not after its own tasks;
+                # its own instance: the other call's thread raises the first)
+                raise type(failed)(*failed.args)
+    except BaseException:
+        with _work:  # this call is left (an interrupt): its tasks not yet started never
+            _cancel(batch)  # will be, and no helper is to take them later
+        raise
     if batch.error is not None:
         raise batch.error[1]
     results: list[T] = batch.results

@@ -12,7 +12,9 @@ from __future__ import annotations
 import math
 import os
 import threading
+from collections import deque
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -101,19 +103,127 @@ def test_an_interrupt_after_taking_a_task_fails_that_task_instead_of_losing_it(
         assert batch not in FT._open
     assert batch.error is not None and batch.error[0] == 0
     assert isinstance(batch.error[1], KeyboardInterrupt)
-    assert FT._step(batch) is False
+    assert FT._step(batch) == (False, None)
     assert run_tasks([lambda: 4, lambda: 5]) == [4, 5]  # the pool still works
+
+
+def test_an_interrupt_inside_taking_the_last_task_leaves_it_to_its_owner(
+    two_threads: None, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """CPython raises a pending Ctrl-C right after a C call returns, such as the removal
+    of a batch whose last task is being taken from the open batches: raised there, after
+    the task was counted taken but before the taker knew which, it was never run nor
+    counted. The task is now counted taken after the removal: still untaken, its owner
+    (which takes its own tasks without the open list) runs it."""
+
+    class InterruptAfterRemove(deque[FT._Batch]):
+        def remove(self, value: FT._Batch) -> None:
+            super().remove(value)
+            raise KeyboardInterrupt  # the signal check after the C call
+
+    batch = FT._Batch([lambda: 1, lambda: 2], 2)
+    with FT._work:
+        FT._open.append(batch)
+    assert FT._step(batch) == (True, None)
+    real, patched = FT._open, InterruptAfterRemove(FT._open)
+    monkeypatch.setattr(FT, "_open", patched)
+    with pytest.raises(KeyboardInterrupt):
+        FT._step(batch)
+    monkeypatch.undo()
+    real.clear()
+    real.extend(patched)  # the open batches as the interrupt left them
+    with FT._work:
+        assert batch not in FT._open and batch.left == 1 and batch.error is None
+    assert FT._step(batch) == (True, None)  # the owner's own loop takes it
+    assert batch.left == 0 and batch.results == [1, 2]
+
+
+def test_an_interrupt_just_after_a_call_opened_its_batch_cancels_the_batch(
+    two_threads: None, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Ctrl-C right after a call put its batch among the open ones (``deque.append``, a C
+    call) left the batch there, untaken: the helpers later ran all its tasks, before any
+    newer call's. Now the interrupted call cancels its tasks not yet started."""
+
+    class InterruptAfterAppend(deque[FT._Batch]):
+        def append(self, value: FT._Batch) -> None:
+            super().append(value)
+            raise KeyboardInterrupt
+
+    ran: list[int] = []
+    real, patched = FT._open, InterruptAfterAppend(FT._open)
+    monkeypatch.setattr(FT, "_open", patched)
+    with pytest.raises(KeyboardInterrupt):
+        run_tasks([lambda k=k: ran.append(k) for k in range(4)])
+    monkeypatch.undo()
+    real.clear()
+    real.extend(patched)
+    assert len(FT._open) == 0
+    assert run_tasks([lambda: 7, lambda: 8]) == [7, 8]
+    assert ran == []  # none of the abandoned tasks ran, then or later
+
+
+_SWALLOWED = """
+import os, signal, threading, time
+os.environ["GONIOLAB_THREADS"] = "2"
+from goniolab.optics import facet_threads as FT
+own1_running, w0_taken, release = threading.Event(), threading.Event(), threading.Event()
+other = {}
+def worker():  # another thread's call (a TUI worker, a notebook's thread)
+    def w0():
+        w0_taken.set()
+        release.wait(10.0)
+    def w1():  # run by the main thread while it waits: Ctrl-C lands here
+        threading.Timer(0.1, os.kill, (os.getpid(), signal.SIGINT)).start()
+        time.sleep(3.0)
+    try:
+        other["result"] = FT.run_tasks([w0, w1])
+    except BaseException as exc:
+        other["error"] = type(exc).__name__
+def own0():  # the main thread's first task: the helper holds own1, the worker waits on w0
+    assert own1_running.wait(10.0)
+    threading.Thread(target=worker).start()
+    assert w0_taken.wait(10.0)
+def own1():
+    own1_running.set()
+    time.sleep(3.0)
+t0 = time.monotonic()
+try:
+    FT.run_tasks([own0, own1])
+    print("returned", round(time.monotonic() - t0, 1))
+except KeyboardInterrupt:
+    print("KeyboardInterrupt", round(time.monotonic() - t0, 1))
+release.set()
+"""
+
+
+def test_ctrl_c_in_another_calls_task_reaches_the_main_threads_call() -> None:
+    """Waiting for its own tasks, the main thread runs other threads' tasks; a Ctrl-C (a
+    real SIGINT) during one failed only that other call, and the main thread's call went
+    on and returned as if nothing had happened. Now both raise it, the main thread's at
+    once (not after its own 3 s task on the helper)."""
+    import subprocess
+    import sys
+
+    out = subprocess.run(
+        [sys.executable, "-c", _SWALLOWED], capture_output=True, text=True, timeout=60,
+        cwd=str(Path(__file__).resolve().parents[2]),
+    )  # fmt: skip
+    assert out.returncode == 0, out.stderr
+    word, seconds = out.stdout.split()
+    assert word == "KeyboardInterrupt", out.stdout
+    assert float(seconds) < 2.0
 
 
 def test_a_task_is_counted_once_whatever_calls_finish_again(two_threads: None) -> None:
     batch = FT._Batch([lambda: 1, lambda: 2], 2)
     with FT._work:
         FT._open.append(batch)
-    assert FT._step(batch) is True
+    assert FT._step(batch) == (True, None)
     FT._finish(batch, 0, None, KeyboardInterrupt())  # a handler's call after the count
     with FT._work:
         assert batch.left == 1 and batch.error is None and batch.results[0] == 1
-    assert FT._step(batch) is True
+    assert FT._step(batch) == (True, None)
     assert batch.left == 0 and batch.results == [1, 2]
 
 
