@@ -108,7 +108,9 @@ def first_pass(
     runs = [(int(r[0]), int(r[-1]) + 1) for r in np.split(keep, cuts)] if keep.size else []
     by_runs = len(runs) <= 4
     sums: list[list[complex]] = [[] for _ in range(n_terms)]
-    carry = np.empty((n_terms, _SUM_CHUNK), dtype=np.complex64)
+    # a chunk straddling two blocks (a width that does not divide the chunk), made when
+    # first needed: with 256-line blocks of a power-of-two width none does
+    carry: NDArray[np.complex64] | None = None
     carry_n = [0] * n_terms
     for r0 in range(0, ny, step):
         r1 = min(ny, r0 + step)
@@ -141,6 +143,7 @@ def first_pass(
                 flat = t.reshape(-1)
                 pos, have = 0, carry_n[n]
                 if have:
+                    assert carry is not None
                     need = min(_SUM_CHUNK - have, flat.size)
                     carry[n, have : have + need] = flat[:need]
                     have += need
@@ -158,6 +161,8 @@ def first_pass(
                     sums[n].extend(part.tolist())
                     pos += full * _SUM_CHUNK
                 if pos < flat.size:
+                    if carry is None:
+                        carry = np.empty((n_terms, _SUM_CHUNK), dtype=np.complex64)
                     carry[n, : flat.size - pos] = flat[pos:]
                     have = flat.size - pos
                 carry_n[n] = have
@@ -165,7 +170,7 @@ def first_pass(
                 t *= ub
     if dc_points is not None:
         for n in range(n_terms):
-            if carry_n[n]:
+            if carry_n[n] and carry is not None:
                 sums[n].append(complex(np.sum(carry[n, : carry_n[n]], dtype=np.complex128)))
             acc = 0j
             for s in sums[n]:  # one after the other, as numpy adds its chunks
