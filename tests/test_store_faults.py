@@ -110,7 +110,7 @@ def test_full_disk_mid_scan_pauses_parked_and_resumes(tmp_path: Path) -> None:
 def test_a_store_that_stays_away_fails_the_run_parked(tmp_path: Path) -> None:
     cfg = sim_config(tmp_path)
     with small_tmpfs(tmp_path / "disk", 1024) as disk, RunStore(disk / "s.sqlite") as store:
-        result, _events = asyncio.run(
+        result, events = asyncio.run(
             _scan_with_outage(
                 cfg, store, break_store=lambda: fill(disk), mend_store=None, outage_s=2.0
             )
@@ -124,7 +124,12 @@ def test_a_store_that_stays_away_fails_the_run_parked(tmp_path: Path) -> None:
         # the run, claimed by nobody, lists as interrupted (resumable), not as running
         assert store.get_run(result.run_id).status in ("running", "paused", "failed")
         assert store.is_claimed(result.run_id) is False
-        assert store.count_points(result.run_id) == 3
+        # every reading announced was stored (a point is announced after its write), and
+        # none after: the disk fills while the 4th reading may already be on its way
+        # (stored on a busy machine, it made this read 4 where 3 was assumed)
+        announced = sum(isinstance(e, PointMeasured) for e in events)
+        assert 3 <= announced < len(list(PLAN.points()))
+        assert store.count_points(result.run_id) == announced
 
 
 def test_sqlite_locked_by_another_program_is_one_line(
