@@ -188,7 +188,20 @@ def kirchhoff_band_numpy(
         sub = spec[:, r][:, :, c]
     x = vz[a0:a1, b0:b1] - vc
     x *= h_max
-    n_terms = spec.shape[0]
+    power = _horner_power(sub, dc, x, np.multiply.outer(w_rows[a0:a1], w_cols[b0:b1]))
+    acc[a0:a1, b0:b1] += np.where(own[a0:a1, b0:b1], power, 0.0)
+
+
+def _horner_power(
+    sub: NDArray[np.complex64],
+    dc: NDArray[np.complex128],
+    x: FloatArray,
+    w: NDArray[np.complex128],
+) -> FloatArray:
+    """``|sum_n (F_n - dc_n w) (-i x)^n / n!|^2`` per cell by Horner's scheme in float64:
+    ``sub[n]`` the term transforms at the cells (``x`` may carry a leading axis of boxes),
+    ``w`` the window's shape there (the coherent field ``dc_n w`` taken out)."""
+    n_terms = sub.shape[0]
     top = sub[n_terms - 1]
     fr, fi = top.real.astype(np.float64), top.imag.astype(np.float64)
     er = np.full(x.shape, dc[n_terms - 1].real)
@@ -198,12 +211,11 @@ def kirchhoff_band_numpy(
         term = sub[n]
         fr, fi = term.real + a * fi, term.imag - a * fr
         er, ei = dc[n].real + a * ei, dc[n].imag - a * er
-    w = np.multiply.outer(w_rows[a0:a1], w_cols[b0:b1])
     ur = fr - (er * w.real - ei * w.imag)
     ui = fi - (er * w.imag + ei * w.real)
-    power = ur * ur
+    power: FloatArray = ur * ur
     power += ui * ui
-    acc[a0:a1, b0:b1] += np.where(own[a0:a1, b0:b1], power, 0.0)
+    return power
 
 
 #: Boxes per group of :func:`kirchhoff_bands_numpy` (consecutive wavelengths: their boxes
@@ -246,7 +258,6 @@ def kirchhoff_bands_numpy(
         ci = np.flatnonzero(own.any(axis=0))
         a0, a1, b0, b1 = int(ri[0]), int(ri[-1]) + 1, int(ci[0]), int(ci[-1]) + 1
         items.append((i, a0, a1, b0, b1, own[a0:a1, b0:b1]))
-    n_terms = spec.shape[0]
     for g in range(0, len(items), _BAND_GROUP):
         part = items[g : g + _BAND_GROUP]
         r_lo = min(int(boxes[i][0][a0]) for i, a0, _, _, _, _ in part)
@@ -263,20 +274,7 @@ def kirchhoff_bands_numpy(
             x[place] = xs
             at.append(place)
         sub = spec[:, r_lo:r_hi, c_lo:c_hi]
-        top = sub[n_terms - 1]
-        fr, fi = top.real.astype(np.float64), top.imag.astype(np.float64)
-        er = np.full(x.shape, dc[n_terms - 1].real)
-        ei = np.full(x.shape, dc[n_terms - 1].imag)
-        for n in range(n_terms - 2, -1, -1):
-            a = x / (n + 1)
-            term = sub[n]
-            fr, fi = term.real + a * fi, term.imag - a * fr
-            er, ei = dc[n].real + a * ei, dc[n].imag - a * er
-        w = np.multiply.outer(wy[r_lo:r_hi], wx[c_lo:c_hi])
-        ur = fr - (er * w.real - ei * w.imag)
-        ui = fi - (er * w.imag + ei * w.real)
-        power = ur * ur
-        power += ui * ui
+        power = _horner_power(sub, dc, x, np.multiply.outer(wy[r_lo:r_hi], wx[c_lo:c_hi]))
         for (i, a0, a1, b0, b1, own), place in zip(part, at, strict=True):
             accs[i][a0:a1, b0:b1] += np.where(own, power[place], 0.0)
 
