@@ -249,6 +249,10 @@ def kirchhoff_bands_numpy(
     arrays per gloss, each taking the GIL back from the other thread: issue 26, g16c).
     Every owned cell is formed by the same operations on the same values, the same
     bits."""
+    for rows, cols in boxes:  # a box is placed by its first index: they must be runs
+        for idx in (rows, cols):
+            if idx.size and int(idx[-1]) - int(idx[0]) + 1 != idx.size:
+                raise ValueError("kirchhoff_bands_numpy: a box's rows and columns are runs")
     items: list[tuple[int, int, int, int, int, NDArray[np.bool_]]] = []
     for i, (vz, ok) in enumerate(zip(vzs, oks, strict=True)):
         own = ok & (vz >= lo) & ((vz <= hi) if hi_inclusive else (vz < hi))
