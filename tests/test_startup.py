@@ -79,7 +79,16 @@ def test_help_and_version_import_nothing_heavy() -> None:
     assert heavy_in(mods) == []
 
 
-def test_samples_lists_the_library_without_numpy() -> None:
+@pytest.mark.parametrize("thread_env", [None, "OMP_NUM_THREADS", "GONIOLAB_THREADS"])
+def test_samples_lists_the_library_without_numpy(
+    thread_env: str | None, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # a batch job's OMP_NUM_THREADS (or GONIOLAB_THREADS) made the thread check import
+    # goniolab.optics, and numpy with it, for commands that never compute
+    for name in ("OMP_NUM_THREADS", "GONIOLAB_THREADS"):
+        monkeypatch.delenv(name, raising=False)
+    if thread_env is not None:
+        monkeypatch.setenv(thread_env, "4")
     mods = loaded(
         "import contextlib, io\n"
         "from goniolab.cli import main\n"
