@@ -10,7 +10,9 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import os
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -164,6 +166,21 @@ def test_a_dead_worker_is_an_error_row_not_the_end_of_the_batch() -> None:
     }
 
 
+@contextlib.contextmanager
+def _environ_restored() -> Iterator[None]:
+    """The environment as it was before: dask's nanny sets ``OMP_NUM_THREADS``,
+    ``MKL_NUM_THREADS`` ... to 1 in the process that spawns its workers
+    (``distributed.nanny.pre-spawn-environ``) and leaves them, and the tests after this
+    one (their subprocesses too) ran the models' walks on one thread."""
+    saved = os.environ.copy()
+    try:
+        yield
+    finally:
+        for name in set(os.environ) - set(saved):
+            del os.environ[name]
+        os.environ.update(saved)
+
+
 def test_dask_workers_get_absolute_paths(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """Issue 22.10: a relative map path typed where the client runs is not found by a worker
     running in another directory. The cluster's worker process starts in ``elsewhere``; the
@@ -173,9 +190,12 @@ def test_dask_workers_get_absolute_paths(tmp_path: Path, monkeypatch: pytest.Mon
     (tmp_path / "maps").mkdir()
     names = [Path(m).name for m in _maps(tmp_path / "maps")[:2]]
     monkeypatch.chdir(tmp_path / "elsewhere")
-    with distributed.LocalCluster(
-        n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None
-    ) as cluster:
+    with (
+        _environ_restored(),
+        distributed.LocalCluster(
+            n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None
+        ) as cluster,
+    ):
         monkeypatch.chdir(tmp_path / "maps")
         remote = {
             r["map"]: r for r in run_dask(names, GlossOptions(), address=cluster.scheduler_address)
