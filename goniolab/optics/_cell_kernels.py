@@ -175,12 +175,10 @@ def kirchhoff_band_numpy(
     Horner sums over the rectangle of cells holding those the band owns, in real and
     imaginary parts (the step ``-i d`` is imaginary: ``f (-i a) = a f_im - i a f_re``),
     added to ``acc`` where the band owns the cell."""
-    own = ok & (vz >= lo) & ((vz <= hi) if hi_inclusive else (vz < hi))
-    ri = np.flatnonzero(own.any(axis=1))
-    if ri.size == 0:
+    owned = _owned_rect(vz, ok, lo, hi, hi_inclusive)
+    if owned is None:
         return
-    ci = np.flatnonzero(own.any(axis=0))
-    a0, a1, b0, b1 = int(ri[0]), int(ri[-1]) + 1, int(ci[0]), int(ci[-1]) + 1
+    a0, a1, b0, b1, own = owned
     r, c = rows[a0:a1], cols[b0:b1]
     if r.size > 1 and np.all(np.diff(r) == 1) and c.size > 1 and np.all(np.diff(c) == 1):
         sub = spec[:, int(r[0]) : int(r[-1]) + 1, int(c[0]) : int(c[-1]) + 1]
@@ -189,7 +187,22 @@ def kirchhoff_band_numpy(
     x = vz[a0:a1, b0:b1] - vc
     x *= h_max
     power = _horner_power(sub, dc, x, np.multiply.outer(w_rows[a0:a1], w_cols[b0:b1]))
-    acc[a0:a1, b0:b1] += np.where(own[a0:a1, b0:b1], power, 0.0)
+    acc[a0:a1, b0:b1] += np.where(own, power, 0.0)
+
+
+def _owned_rect(
+    vz: FloatArray, ok: NDArray[np.bool_], lo: float, hi: float, hi_inclusive: bool
+) -> tuple[int, int, int, int, NDArray[np.bool_]] | None:
+    """The rectangle ``(a0, a1, b0, b1)`` of a box's cells holding those a Taylor band
+    owns (real, ``lo <= v_z < hi``, or ``<= hi`` for the last band) and the owned cells in
+    it; None: the band owns none."""
+    own = ok & (vz >= lo) & ((vz <= hi) if hi_inclusive else (vz < hi))
+    ri = np.flatnonzero(own.any(axis=1))
+    if ri.size == 0:
+        return None
+    ci = np.flatnonzero(own.any(axis=0))
+    a0, a1, b0, b1 = int(ri[0]), int(ri[-1]) + 1, int(ci[0]), int(ci[-1]) + 1
+    return a0, a1, b0, b1, own[a0:a1, b0:b1]
 
 
 def _horner_power(
@@ -255,13 +268,9 @@ def kirchhoff_bands_numpy(
                 raise ValueError("kirchhoff_bands_numpy: a box's rows and columns are runs")
     items: list[tuple[int, int, int, int, int, NDArray[np.bool_]]] = []
     for i, (vz, ok) in enumerate(zip(vzs, oks, strict=True)):
-        own = ok & (vz >= lo) & ((vz <= hi) if hi_inclusive else (vz < hi))
-        ri = np.flatnonzero(own.any(axis=1))
-        if ri.size == 0:
-            continue
-        ci = np.flatnonzero(own.any(axis=0))
-        a0, a1, b0, b1 = int(ri[0]), int(ri[-1]) + 1, int(ci[0]), int(ci[-1]) + 1
-        items.append((i, a0, a1, b0, b1, own[a0:a1, b0:b1]))
+        owned = _owned_rect(vz, ok, lo, hi, hi_inclusive)
+        if owned is not None:
+            items.append((i, *owned))
     for g in range(0, len(items), _BAND_GROUP):
         part = items[g : g + _BAND_GROUP]
         r_lo = min(int(boxes[i][0][a0]) for i, a0, _, _, _, _ in part)
