@@ -48,14 +48,24 @@ _BLOCK_BYTES: int = 1 << 21
 
 
 def weighted_phase(
-    h: NDArray[np.float32], w: NDArray[np.float32], vc: float
+    h: NDArray[np.float32],
+    w: NDArray[np.float32],
+    vc: float,
+    out: NDArray[np.complex64] | None = None,
+    scratch: tuple[NDArray[np.float32], NDArray[np.float32]] | None = None,
 ) -> NDArray[np.complex64]:
     """``W exp(-i v_c h)`` in complex64 from float32 cos/sin: the screen each Taylor band
-    transforms (:func:`first_pass` forms it so, block by block)."""
-    phase = np.float32(vc) * h
-    cos = np.cos(phase)
+    transforms (:func:`first_pass` forms it so, block by block, into ``out`` with two
+    float32 arrays of ``h``'s shape as ``scratch``)."""
+    phase, cos = (
+        (np.empty(h.shape, np.float32), np.empty(h.shape, np.float32))
+        if scratch is None
+        else scratch
+    )
+    term = np.empty(h.shape, dtype=np.complex64) if out is None else out
+    np.multiply(np.float32(vc), h, out=phase)
+    np.cos(phase, out=cos)
     np.sin(phase, out=phase)
-    term = np.empty(h.shape, dtype=np.complex64)
     np.multiply(w, cos, out=term.real)
     np.multiply(w, phase, out=term.imag)
     np.negative(term.imag, out=term.imag)
@@ -117,13 +127,7 @@ def first_pass(
         m = r1 - r0
         t, f, ph, c, ub = blk_t[:m], blk_f[:m], phase[:m], cos[:m], u[:m]
         hb, wb = h[r0:r1], w[r0:r1]
-        # W exp(-i v_c h) (as weighted_phase)
-        np.multiply(np.float32(vc), hb, out=ph)
-        np.cos(ph, out=c)
-        np.sin(ph, out=ph)
-        np.multiply(wb, c, out=t.real)
-        np.multiply(wb, ph, out=t.imag)
-        np.negative(t.imag, out=t.imag)
+        weighted_phase(hb, wb, vc, out=t, scratch=(ph, c))
         if h_max > 0:
             np.divide(hb, np.float32(h_max), out=ub)
         else:
