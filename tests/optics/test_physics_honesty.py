@@ -37,20 +37,11 @@ from goniolab.optics.heightmap import HeightMap
 from goniolab.optics.kirchhoff import KirchhoffModel
 from goniolab.optics.physical import box_projected_solid_angle_sr
 from goniolab.optics.rayleigh_rice import RayleighRiceModel, rr_q_factor
+from tests.optics.conftest import gaussian_acf_map
 
 LAM_UM = 0.55
 #: (points, step um) of the three fields: an AFM map, a microscope map, a profilometer map
 FIELDS = {50: (256, 50 / 256), 256: (512, 0.5), 1000: (1000, 1.0)}
-
-
-def gaussian_map(n: int, sq_um: float, l_um: float, step_um: float, seed: int = 3) -> HeightMap:
-    """Periodic Gaussian surface with ACF Sq^2 exp(-r^2/l^2) (heights scaled to Sq)."""
-    rng = np.random.default_rng(seed)
-    f = np.fft.fftfreq(n, step_um)
-    filt = np.exp(-0.5 * (math.pi * l_um) ** 2 * (f[:, None] ** 2 + f[None, :] ** 2))
-    z = np.real(np.fft.ifft2(np.fft.fft2(rng.normal(size=(n, n))) * filt))
-    z *= sq_um / z.std()
-    return HeightMap(z_um=z, dx_um=step_um, dy_um=step_um, source=f"gauss({sq_um}, {l_um})")
 
 
 def beckmann_series(sq: float, l_um: float, n: complex) -> object:
@@ -99,7 +90,7 @@ def scalar_kirchhoff_gloss(sq: float, l_um: float, t: int) -> float:
 @functools.cache
 def coat(field: int, sq: float, l_um: float) -> HeightMap:
     n, step = FIELDS[field]
-    return gaussian_map(n, sq, l_um, step)
+    return gaussian_acf_map(n, sq, l_um, step, seed=3)
 
 
 # ------------------------------------------------------------------------ gloss, any field
@@ -172,7 +163,7 @@ def test_albedo_never_exceeds_the_fresnel_bound(sq: float, l_um: float, n: compl
     is valid) is at most the Fresnel bound + 1 %, from normal to 89 deg. Before: a smooth
     metal read 1.175 F at normal incidence (RR without exp(-g)), Kirchhoff 1.05-3.66 at
     85-89 deg. 96 x 96 maps of step l/4 (the field holds 24 correlation lengths)."""
-    hm = gaussian_map(96, sq, l_um, l_um / 4.0, seed=5)
+    hm = gaussian_acf_map(96, sq, l_um, l_um / 4.0, seed=5)
     auto = build_model(hm, n=n, model="auto", wavelength_nm=550.0)
     sdq = auto.stats.sdq  # type: ignore[attr-defined]
     for ti in (0.0, 30.0, 60.0, 85.0, 89.0):
@@ -187,7 +178,7 @@ def test_wave_models_conserve_energy_at_grazing(n: complex) -> None:
     F(theta_i) at 85 and 89 deg (the coherent beam dominates; unchecked, Beckmann's
     obliquity factor made Kirchhoff read 1.1-1.7 F there)."""
     for sq, l_um, step in ((0.1, 2.0, 0.25), (0.04, 0.4, 0.05)):
-        hm = gaussian_map(128, sq, l_um, step, seed=2)
+        hm = gaussian_acf_map(128, sq, l_um, step, seed=2)
         for cls in (KirchhoffModel, RayleighRiceModel):
             model = cls(hm, n=n)
             for ti in (85.0, 89.0):
@@ -312,7 +303,7 @@ def test_g85_does_not_jump_with_the_map_step() -> None:
     of the coat (Sq 50 nm, l 2 um) within 0.3 GU, with ``auto``'s own model."""
     want = scalar_kirchhoff_gloss(0.05, 2.0, 85)
     for step in (0.44, 0.46):
-        hm = gaussian_map(round(256 / step), 0.05, 2.0, step, seed=7)
+        hm = gaussian_acf_map(round(256 / step), 0.05, 2.0, step, seed=7)
         auto = build_model(hm, n=1.55, model="auto", wavelength_nm=550.0)
         assert auto.gloss((85,))[85] == pytest.approx(want, abs=0.3)
         assert auto.gloss_provenance((85,))[85].model != "facet"  # type: ignore[attr-defined]
@@ -389,7 +380,7 @@ def test_apertures_wholly_beyond_the_nyquist_window_read_zero_and_say_so() -> No
     """g < 1 and every angle of the call beyond lambda / (2 step) of specular (1 um steps,
     ti 45, theta_r 0 and 5 deg): the wave model answers 0 (the map holds no such
     frequencies) with the note, for the goniometer cones and the --point box alike."""
-    hm = gaussian_map(256, 0.05, 2.0, 1.0, seed=4)
+    hm = gaussian_acf_map(256, 0.05, 2.0, 1.0, seed=4)
     for cls in (KirchhoffModel, RayleighRiceModel):
         model = cls(hm, n=1.55)
         assert model.rayleigh_factor(45.0) < 1.0
@@ -406,7 +397,7 @@ def test_readings_are_continuous_across_the_kirchhoff_facet_switch_with_masking(
     from goniolab.optics.facet import FacetModel
     from goniolab.optics.surface import Surface
 
-    hm = gaussian_map(512, 1.0, 20.0, 0.5, seed=5)
+    hm = gaussian_acf_map(512, 1.0, 20.0, 0.5, seed=5)
     k = KirchhoffModel(hm, n=1.55, masking=True, taper=0.05)
     f = FacetModel(Surface.from_heightmap(hm), n=1.55, masking=True)
     for ti in (45.0, 70.0):
