@@ -399,36 +399,6 @@ def _one_blas_thread() -> None:
         os.environ.setdefault(var, "1")
 
 
-#: glibc malloc settings of a ``predict`` process, unless the environment sets them:
-#: (mallopt parameter, its environment variable, bytes).
-_MALLOC_KEEP = ((-1, "MALLOC_TRIM_THRESHOLD_", 256 << 20), (-3, "MALLOC_MMAP_THRESHOLD_", 64 << 20))
-
-
-def _keep_freed_memory() -> None:
-    """Let glibc's malloc keep freed blocks below 64 MB for reuse in a ``predict`` process.
-
-    By default glibc serves blocks above 128 kB with fresh ``mmap`` pages and gives the
-    top of its heap back to the kernel once 128 kB are free there: a walk over a map's
-    blocks that frees its temporaries between blocks (or tasks) then takes a page fault
-    and a zeroed page per 4 kB every time. Kept, they are reused: a rough 2048^2
-    ``predict brdf`` spent about 15 ms less (bench/README.md, issue 26, roughwall).
-    ``MALLOC_TRIM_THRESHOLD_`` / ``MALLOC_MMAP_THRESHOLD_`` in the environment win (glibc
-    reads them itself); other C libraries are left alone. ctypes is imported by numpy
-    anyway.
-    """
-    if not sys.platform.startswith("linux"):
-        return
-    import ctypes
-
-    try:
-        mallopt = ctypes.CDLL(None).mallopt
-    except (OSError, AttributeError):  # no mallopt in this C library
-        return
-    for param, env, value in _MALLOC_KEEP:
-        if env not in os.environ:
-            mallopt(param, value)
-
-
 #: Commands that never run the models' threaded walks: no thread setting to check (the
 #: check imports goniolab.optics, and numpy with it: 45 ms of a 80 ms ``runs list``).
 _NO_THREAD_COMMANDS = frozenset({"samples", "runs", "lab"})
@@ -459,7 +429,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         command = _command_in(sys.argv[1:] if argv is None else argv)
         if command == "predict" and argv is None:  # a one-shot process of its own
-            _keep_freed_memory()
+            from goniolab.process_heap import tune_predict_heap
+
+            tune_predict_heap()
         parser = build_parser(command)
         args = parser.parse_args(argv)
         if not getattr(args, "func", None):
