@@ -134,3 +134,51 @@ def test_only_a_predict_process_of_its_own_tunes_its_heap() -> None:
     # main(argv): called by a host process (a test, a notebook): its heap is left alone
     assert probe(run_cli.format(argv=stats, arg=repr(stats)))["marked"] is False
     assert probe(run_cli.format(argv=["samples"], arg=""))["marked"] is False
+
+
+#: The CLI run as the console script runs it (``main()`` reading ``sys.argv``), with
+#: ``predict stats`` replaced by a command that leaves an object with a finalizer in a
+#: reference cycle: only the cyclic collector at exit can finalize it (the finalizer writes
+#: by ``os`` calls bound beforehand, as module globals are gone by then).
+_LEAKY_COMMAND = """
+import gc, os, sys
+import goniolab.commands.predict as predict
+class Leaky:
+    def __del__(self, _open=os.open, _write=os.write, _close=os.close,
+                _flags=os.O_WRONLY | os.O_CREAT, _path={path!r}):
+        fd = _open(_path, _flags, 0o644)
+        _write(fd, b'finalized at exit')
+        _close(fd)
+def leaky(args):
+    x = Leaky()
+    x.cycle = x
+    return 0
+predict._cmd_stats = leaky
+from goniolab.cli import main
+sys.argv = ['goniolab', 'predict', 'stats', 'sample:wittmann-3']
+code = main({arg})
+print(json.dumps({{'frozen': gc.get_freeze_count()}}))
+{at_exit}
+sys.exit(code)
+"""
+
+
+def test_a_predict_process_freezes_its_imports_and_still_collects_the_commands_cycles(
+    tmp_path: Path,
+) -> None:
+    out = tmp_path / "finalized.txt"
+
+    def run(arg: str, at_exit: str = "") -> dict[str, object]:
+        if out.exists():
+            out.unlink()
+        return probe(_LEAKY_COMMAND.format(path=str(out), arg=arg, at_exit=at_exit))
+
+    assert int(run("")["frozen"]) > 10_000  # type: ignore[call-overload]  # numpy's among them
+    # the command's own cycle was not frozen: collected at exit, its finalizer run
+    assert out.read_text() == "finalized at exit"
+    # (what a freeze of everything at exit would lose: the finalizer never runs)
+    run("", at_exit="gc.freeze()")
+    assert not out.exists()
+    # a host process (main(argv)) keeps its collector as it was
+    assert run(repr(["predict", "stats", "sample:wittmann-3"]))["frozen"] == 0
+    assert out.read_text() == "finalized at exit"
