@@ -182,3 +182,26 @@ def test_a_predict_process_freezes_its_imports_and_still_collects_the_commands_c
     # a host process (main(argv)) keeps its collector as it was
     assert run(repr(["predict", "stats", "sample:wittmann-3"]))["frozen"] == 0
     assert out.read_text() == "finalized at exit"
+
+
+#: Collections counted while nothing is frozen yet, from the CLI's start on.
+_COLLECTIONS = """
+import gc, sys
+from goniolab.cli import main
+early = []
+gc.callbacks.append(lambda phase, info: early.append(1)
+                    if phase == 'start' and not gc.get_freeze_count() else None)
+sys.argv = ['goniolab', 'predict', 'stats', 'sample:wittmann-3', '--json']
+import contextlib, io
+with contextlib.redirect_stdout(io.StringIO()):
+    main({arg})
+print(json.dumps({{'early': len(early), 'enabled': gc.isenabled()}}))
+"""
+
+
+def test_a_predict_process_collects_nothing_while_it_imports() -> None:
+    one_shot = probe(_COLLECTIONS.format(arg=""))
+    assert one_shot == {"early": 0, "enabled": True}
+    host = probe(_COLLECTIONS.format(arg=repr(["predict", "stats", "sample:wittmann-3"])))
+    assert int(host["early"]) > 10  # type: ignore[call-overload]  # numpy's import collects
+    assert host["enabled"] is True
