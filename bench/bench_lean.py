@@ -112,8 +112,9 @@ def make_maps(tdir: Path, n: int) -> dict[str, Path]:
 
 
 def goniolab_cmd(what: str, mp: Path) -> list[str]:
-    # the console script's own call: main() reads sys.argv (what `goniolab` runs)
-    code = "import sys; from goniolab.cli import main; sys.exit(main())"
+    # the console script's own call (what `goniolab` runs): console() runs main() on
+    # sys.argv and ends the process; a checkout from before console() (--before): main()
+    code = "import sys\nfrom goniolab import cli\nsys.exit(getattr(cli, 'console', cli.main)())"
     extra = ["--theta-i", "45", "--theta-r", "0:70:1"] if what == "brdf" else []
     return [PY, "-c", code, "predict", what, str(mp), *extra]
 

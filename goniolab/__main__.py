@@ -1,5 +1,5 @@
 """``python -m goniolab``: the same command line as the ``goniolab`` script."""
 
-from goniolab.cli import main
+from goniolab.cli import console
 
-raise SystemExit(main())
+console()
