@@ -46,8 +46,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 #: The issue's target: peak RSS of the whole process over the map's float32 bytes.
 TARGET_OVER_MAP = 2.5
-#: ``goniolab`` as the console script runs it (the package has no ``__main__``).
-_CLI = "import sys; from goniolab.cli import main; sys.exit(main(sys.argv[1:]))"
+#: ``goniolab`` as the console script runs it (``console()``: a one-shot ``predict``
+#: process, with its heap and collector settings, goniolab.process_heap and goniolab.cli).
+_CLI = "from goniolab.cli import console; console()"
 
 
 def make_map(path: Path, n: int, kind: str, seed: int = 1) -> None:
