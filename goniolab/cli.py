@@ -440,10 +440,13 @@ def _freeze_imports() -> None:
 
     gc.freeze()
     gc.enable()
+    _collector_paused.clear()
 
 
 #: Set by :func:`main` when a one-shot ``predict`` command has run to its end (its status).
 _one_shot_ended: list[int] = []
+#: Set while :func:`main` has the cyclic collector paused (a one-shot ``predict``'s imports).
+_collector_paused: list[bool] = []
 
 
 def _end_one_shot(code: int) -> NoReturn:
@@ -461,19 +464,22 @@ def _end_one_shot(code: int) -> NoReturn:
     for stream in (sys.stdout, sys.stderr):
         with contextlib.suppress(OSError, ValueError):  # a reader gone, a closed stream
             stream.flush()
-    os._exit(code & 0xFF)
+    os._exit(code & 0xFF)  # as the shell sees sys.exit(code): the low 8 bits
 
 
 def console() -> NoReturn:
     """The ``goniolab`` console script and ``python -m goniolab``: :func:`main` on the
-    process's command line, then the process's exit (:func:`_end_one_shot` after a
-    one-shot ``predict`` command, when no other thread that the interpreter would wait
-    for is still running; else the interpreter's own)."""
+    process's command line, then the process's exit: :func:`_end_one_shot` after a
+    one-shot ``predict`` command, else the interpreter's own, which is also taken when
+    another thread the interpreter would wait for still runs, or a profiler or tracer
+    watches the process (``python -m cProfile -o FILE -m goniolab ...`` writes its file
+    after the command returns)."""
     import threading
 
     code = main()
     others = [t for t in threading.enumerate() if t is not threading.main_thread()]
-    if _one_shot_ended and not any(t.is_alive() and not t.daemon for t in others):
+    quick = not any(t.is_alive() and not t.daemon for t in others)
+    if _one_shot_ended and quick and sys.getprofile() is None and sys.gettrace() is None:
         _end_one_shot(code)
     sys.exit(code)
 
@@ -491,6 +497,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             import gc
 
             gc.disable()  # until the imports are frozen (_freeze_imports)
+            _collector_paused.append(True)
             from goniolab.process_heap import tune_predict_heap
 
             tune_predict_heap()
@@ -533,6 +540,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         if "logging" in sys.modules and sys.modules["logging"].getLogger().handlers:
             _log().exception("unexpected error")
         raise
+    finally:
+        if _collector_paused:
+            # a one-shot predict that ended before its imports were frozen (bad options,
+            # --help): the collector runs again for whoever goes on in this process
+            import gc
+
+            _collector_paused.clear()
+            gc.enable()
     return code
 
 

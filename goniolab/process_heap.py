@@ -21,8 +21,9 @@ the 2-core bench machine: 64 MB touched in 4 kB pages took 22-28 ms of system ti
 On the rough 2048^2 ``predict brdf`` of bench/bench_lean.py the page faults fell from
 16,600 to 4,300 and the wall time from 0.196 to 0.182 s (median of 14 paired runs,
 bench/README.md, issue 26). A setting given in the environment (``MALLOC_TRIM_THRESHOLD_``,
-``MALLOC_MMAP_THRESHOLD_``, ``MALLOC_TOP_PAD_``, ``MALLOC_ARENA_MAX``, which glibc reads
-itself) wins over the one here; other C libraries than glibc, other systems, and a kernel
+``MALLOC_MMAP_THRESHOLD_``, ``MALLOC_TOP_PAD_``, ``MALLOC_ARENA_MAX``, or the same
+``glibc.malloc.*`` tunables in ``GLIBC_TUNABLES``, which glibc reads itself) wins over the
+one here (a trim threshold of the user's also leaves the heap's reserve out); other C libraries than glibc, other systems, and a kernel
 without transparent huge pages are left as they are.
 
 Only for a process of its own (the CLI calls it before any work): a long-lived process (the
@@ -59,11 +60,12 @@ _DEFAULT_TOP_PAD = 128 * 1024
 #: which marks those itself).
 HEAP_RESERVE = 128 << 20
 _HUGE_PAGE = 2 << 20
-#: (mallopt parameter, the environment variable that overrides it, value).
+#: (mallopt parameter, the environment variable and the glibc tunable that override it,
+#: value).
 _KEEP_FREED = (
-    (M_TRIM_THRESHOLD, "MALLOC_TRIM_THRESHOLD_", 256 << 20),
-    (M_MMAP_THRESHOLD, "MALLOC_MMAP_THRESHOLD_", 64 << 20),
-    (M_ARENA_MAX, "MALLOC_ARENA_MAX", 1),
+    (M_TRIM_THRESHOLD, "MALLOC_TRIM_THRESHOLD_", "glibc.malloc.trim_threshold", 256 << 20),
+    (M_MMAP_THRESHOLD, "MALLOC_MMAP_THRESHOLD_", "glibc.malloc.mmap_threshold", 64 << 20),
+    (M_ARENA_MAX, "MALLOC_ARENA_MAX", "glibc.malloc.arena_max", 1),
 )
 _THP_ENABLED = "/sys/kernel/mm/transparent_hugepage/enabled"
 
@@ -96,16 +98,28 @@ def tune_predict_heap() -> dict[str, Any]:
     except (OSError, AttributeError):  # no mallopt in this C library
         done["why_not"] = "no mallopt (not glibc)"
         return done
-    for param, env, value in _KEEP_FREED:
-        if env not in os.environ and mallopt(param, value) == 1:
+    for param, env, tunable, value in _KEEP_FREED:
+        if not _user_set(env, tunable) and mallopt(param, value) == 1:
             done["mallopt"].append(env)
-    if "MALLOC_TOP_PAD_" in os.environ:
+    if _user_set("MALLOC_TOP_PAD_", "glibc.malloc.top_pad"):
         done["why_not"] = "MALLOC_TOP_PAD_ set"
+    elif _user_set("MALLOC_TRIM_THRESHOLD_", "glibc.malloc.trim_threshold"):
+        # a threshold of the user's below the reserve would give it back at the next free
+        done["why_not"] = "MALLOC_TRIM_THRESHOLD_ set"
     elif thp_mode() not in ("always", "madvise"):
         done["why_not"] = "no transparent huge pages"
     else:
         done["huge_pages"], done["why_not"] = _reserve_huge_heap(libc, mallopt)
     return done
+
+
+def _user_set(env: str, tunable: str) -> bool:
+    """Whether the user chose this malloc setting: its ``MALLOC_*_`` variable, or its
+    tunable in ``GLIBC_TUNABLES`` (``glibc.malloc.arena_max=4:...``)."""
+    if env in os.environ:
+        return True
+    tunables = os.environ.get("GLIBC_TUNABLES", "")
+    return any(item.split("=", 1)[0] == tunable for item in tunables.split(":"))
 
 
 class _MallInfo2(ctypes.Structure):

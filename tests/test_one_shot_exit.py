@@ -19,7 +19,12 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def _env(tmp_path: Path) -> dict[str, str]:
-    env = {k: v for k, v in os.environ.items() if not k.startswith("MALLOC_")}
+    # stdout buffered, as a plain run has it (PYTHONUNBUFFERED would flush every write)
+    env = {
+        k: v
+        for k, v in os.environ.items()
+        if not k.startswith("MALLOC_") and k not in ("PYTHONUNBUFFERED", "GLIBC_TUNABLES")
+    }
     return {**env, "GONIOLAB_LOG_DIR": str(tmp_path / "log"), "PYTHONPATH": str(ROOT)}
 
 
@@ -78,6 +83,19 @@ def late_thread(args):
     threading.Thread(target=work, daemon=False).start()
     return 0
 
+def status_3(args):
+    import atexit
+    atexit.register(note, {path!r}, b'exit handler run')
+    # printed after main() flushed stdout: only the end's own flush gets it out
+    atexit.register(print, 'printed by an exit handler', end='')
+    return 3
+
+real_exit = os._exit
+def spy(code, _note=note):
+    _note({path!r} + '.quick', b'quick end')
+    real_exit(code)
+os._exit = spy
+
 predict._cmd_stats = {command}
 sys.argv = ['goniolab', 'predict', 'stats', 'sample:wittmann-3']
 from goniolab.cli import console
@@ -85,7 +103,9 @@ console()
 """
 
 
-def _console(tmp_path: Path, command: str) -> tuple[int, str]:
+def _console(tmp_path: Path, command: str) -> tuple[subprocess.CompletedProcess[str], str, bool]:
+    """The process's result, what its command or exit left in the note file, and whether
+    it ended by the quick end (``os._exit``)."""
     out = tmp_path / "left.txt"
     proc = subprocess.run(
         [sys.executable, "-c", _CONSOLE.format(path=str(out), command=command)],
@@ -95,14 +115,44 @@ def _console(tmp_path: Path, command: str) -> tuple[int, str]:
         text=True,
         timeout=120,
     )
-    assert proc.returncode == 0, proc.stderr
-    return proc.returncode, out.read_text() if out.exists() else ""
+    quick = (tmp_path / "left.txt.quick").exists()
+    return proc, out.read_text() if out.exists() else "", quick
 
 
 def test_the_commands_cyclic_garbage_is_finalized_at_the_end(tmp_path: Path) -> None:
-    assert _console(tmp_path, "cycle")[1] == "finalized at exit"
+    proc, left, quick = _console(tmp_path, "cycle")
+    assert (proc.returncode, left, quick) == (0, "finalized at exit", True)
+
+
+def test_the_quick_end_runs_the_exit_handlers_flushes_and_keeps_the_status(
+    tmp_path: Path,
+) -> None:
+    proc, left, quick = _console(tmp_path, "status_3")
+    assert quick
+    assert proc.returncode == 3
+    assert left == "exit handler run"
+    assert proc.stdout == "printed by an exit handler"
 
 
 def test_a_thread_the_command_left_running_is_waited_for(tmp_path: Path) -> None:
     # the quick end would cut it off: the interpreter's exit, which joins it, is taken
-    assert _console(tmp_path, "late_thread")[1] == "written by a thread after the command"
+    proc, left, quick = _console(tmp_path, "late_thread")
+    assert (proc.returncode, left, quick) == (0, "written by a thread after the command", False)
+
+
+def test_a_profiler_wrapping_the_command_still_writes_its_file(tmp_path: Path) -> None:
+    mp = _map(tmp_path)
+    prof = tmp_path / "predict.prof"
+    cmd = [sys.executable, "-m", "cProfile", "-o", str(prof), "-m", "goniolab"]
+    proc = subprocess.run(
+        [*cmd, "predict", "stats", str(mp)],
+        env=_env(tmp_path),
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode == 0, proc.stderr
+    import pstats
+
+    assert pstats.Stats(str(prof)).total_calls > 0  # type: ignore[attr-defined]

@@ -41,7 +41,9 @@ linux_thp = pytest.mark.skipif(
 
 def probe(code: str, env: dict[str, str] | None = None) -> dict[str, object]:
     """Run ``code`` (which prints one JSON line last) in a fresh interpreter."""
-    clean = {k: v for k, v in os.environ.items() if not k.startswith("MALLOC_")}
+    clean = {
+        k: v for k, v in os.environ.items() if not k.startswith("MALLOC_") and k != "GLIBC_TUNABLES"
+    }
     out = subprocess.run(
         [sys.executable, "-c", _HEAP_MAPS + code],
         cwd=ROOT,
@@ -93,6 +95,23 @@ def test_the_environment_wins_over_the_heap_settings() -> None:
     done = got["done"]
     assert done["why_not"] == "MALLOC_TOP_PAD_ set"  # type: ignore[index]
     assert "MALLOC_ARENA_MAX" not in done["mallopt"]  # type: ignore[index]
+
+
+@linux_thp
+def test_a_users_trim_threshold_or_tunables_win_over_the_heap_settings() -> None:
+    code = (
+        "from goniolab.process_heap import tune_predict_heap\n"
+        "done = tune_predict_heap()\n"
+        "print(json.dumps({'after': heap_maps(), 'done': done}))\n"
+    )
+    # a trim threshold under the reserve would hand the reserve back at the next free
+    got = probe(code, env={"MALLOC_TRIM_THRESHOLD_": "131072"})
+    assert not any(hg for _, _, hg in got["after"])  # type: ignore[union-attr]
+    assert got["done"]["why_not"] == "MALLOC_TRIM_THRESHOLD_ set"  # type: ignore[index]
+    got = probe(code, env={"GLIBC_TUNABLES": "glibc.malloc.arena_max=4:glibc.malloc.top_pad=0"})
+    assert "MALLOC_ARENA_MAX" not in got["done"]["mallopt"]  # type: ignore[index]
+    assert "MALLOC_MMAP_THRESHOLD_" in got["done"]["mallopt"]  # type: ignore[index]
+    assert got["done"]["why_not"] == "MALLOC_TOP_PAD_ set"  # type: ignore[index]
 
 
 #: A worker thread's 64 kB block (under glibc's default mmap threshold): in [heap] or not.
@@ -205,3 +224,14 @@ def test_a_predict_process_collects_nothing_while_it_imports() -> None:
     host = probe(_COLLECTIONS.format(arg=repr(["predict", "stats", "sample:wittmann-3"])))
     assert int(host["early"]) > 10  # type: ignore[call-overload]  # numpy's import collects
     assert host["enabled"] is True
+
+
+def test_a_predict_that_ends_before_its_imports_leaves_the_collector_running() -> None:
+    got = probe(
+        "import gc, sys\n"
+        "from goniolab.cli import main\n"
+        "sys.argv = ['goniolab', 'predict', 'brdf', 'sample:wittmann-3', '--no-such-option']\n"
+        "code = main()\n"
+        "print(json.dumps({'code': code, 'enabled': gc.isenabled()}))\n"
+    )
+    assert got == {"code": 2, "enabled": True}
