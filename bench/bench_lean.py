@@ -17,8 +17,8 @@ Each map: ``goniolab predict brdf MAP --theta-i 45 --theta-r 0:70:1`` and ``goni
 predict gloss MAP`` with the defaults (``--model auto``, masking on), paired with
 ``bench/baseline_numpy.py MAP brdf|gloss`` (the plain-numpy facet script): each repetition
 runs the pair back to back (order alternating), so both see the same load; medians of
-``--repeats`` of wall and CPU time (user + system, from ``wait4``) and the ratios of the
-medians. ``--before DIR`` adds the same goniolab commands run from another checkout
+``--repeats`` of wall and CPU time (user + system, from ``wait4``), of the minor page faults
+(``ru_minflt``) and the ratios of the medians. ``--before DIR`` adds the same goniolab commands run from another checkout
 (``PYTHONPATH=DIR``, e.g. ``/work/main``), paired in the same repetitions: the A/B of a
 change. ``--in-process`` adds the issue's in-process figures on a 1024^2 smooth map
 (bench/bench_physical.py's): the Kirchhoff 71-point curve and the 16-wavelength gloss with
@@ -73,6 +73,13 @@ def run(cmd: list[str], env: dict[str, str]) -> tuple[float, float]:
     """(wall s, CPU s of the process and its children), run from the temporary directory:
     ``python -c`` puts the working directory first on ``sys.path``, which would shadow
     ``PYTHONPATH`` (the checkout under test) with a checkout it was started in."""
+    wall, cpu, _ = run_faults(cmd, env)
+    return wall, cpu
+
+
+def run_faults(cmd: list[str], env: dict[str, str]) -> tuple[float, float, int]:
+    """:func:`run`, and the process's minor page faults (``wait4``'s ``ru_minflt``: each
+    first touch of a page; a transparent huge page counts once)."""
     t0 = time.perf_counter()
     proc = subprocess.Popen(
         cmd, env=env, cwd=tempfile.gettempdir(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE
@@ -83,7 +90,7 @@ def run(cmd: list[str], env: dict[str, str]) -> tuple[float, float]:
     err = proc.stderr.read().decode() if proc.stderr else ""
     if code != 0:
         raise RuntimeError(f"{' '.join(cmd)} failed ({code}): {err[-800:]}")
-    return wall, ru.ru_utime + ru.ru_stime
+    return wall, ru.ru_utime + ru.ru_stime, ru.ru_minflt
 
 
 def gaussian_map(
@@ -142,16 +149,17 @@ def whole(
                                 env)  # fmt: skip
             for cmd, e in cmds.values():
                 run(cmd, e)  # untimed: caches written, page cache warm
-            rows: dict[str, list[tuple[float, float]]] = {k: [] for k in cmds}
+            rows: dict[str, list[tuple[float, float, int]]] = {k: [] for k in cmds}
             order = list(cmds)
             for r in range(repeats):
                 for label in order if r % 2 == 0 else order[::-1]:
-                    rows[label].append(run(*cmds[label]))
+                    rows[label].append(run_faults(*cmds[label]))
             med = {
                 label: {
-                    "wall_s": statistics.median(w for w, _ in v),
-                    "cpu_s": statistics.median(c for _, c in v),
-                    "min_wall_s": min(w for w, _ in v),
+                    "wall_s": statistics.median(w for w, _, _ in v),
+                    "cpu_s": statistics.median(c for _, c, _ in v),
+                    "min_wall_s": min(w for w, _, _ in v),
+                    "page_faults": statistics.median(f for _, _, f in v),
                 }
                 for label, v in rows.items()
             }
@@ -596,8 +604,8 @@ def main(argv: list[str] | None = None) -> int:
         f"{args.size}^2 maps, load average {out['load_before']:.1f} before / "
         f"{out['load_after']:.1f} after"
     )
-    print(f"{'map command':15}{'run':>8}{'wall':>9}{'cpu':>9}{'wall x':>8}{'cpu x':>7}"
-          f"{'wave wall x':>12}{'wave cpu x':>11}")  # fmt: skip
+    print(f"{'map command':15}{'run':>8}{'wall':>9}{'cpu':>9}{'faults':>8}{'wall x':>8}"
+          f"{'cpu x':>7}{'wave wall x':>12}{'wave cpu x':>11}")  # fmt: skip
     whole_rows = out["whole"]
     assert isinstance(whole_rows, dict)
     for key, med in whole_rows.items():
@@ -606,15 +614,17 @@ def main(argv: list[str] | None = None) -> int:
                      else f"{'':8}{'':7}")  # fmt: skip
             if "wave_wall" in r:
                 ratio += f"{r['wave_wall']:12.3f}{r['wave_cpu']:11.3f}"
-            print(f"{key:15}{label:>8}{r['wall_s']:8.3f}s{r['cpu_s']:8.3f}s{ratio}")
+            faults = f"{r['page_faults']:8.0f}"
+            print(f"{key:15}{label:>8}{r['wall_s']:8.3f}s{r['cpu_s']:8.3f}s{faults}{ratio}")
     if "in_process" in out:
         ip = out["in_process"]
         assert isinstance(ip, dict)
         for name, r in ip.items():
             print(f"in process: {name}: {r['wall_s'] * 1e3:.0f} ms wall (min "
                   f"{r['min_wall_s'] * 1e3:.0f}), {r['cpu_s'] * 1e3:.0f} ms CPU")  # fmt: skip
-    print("(x: the median over the facet script's median (bench/baseline_numpy.py); wave x: over "
-          "the wave script's (bench/baseline_wave_numpy.py); target <= 0.5)")  # fmt: skip
+    print("(faults: the median of the process's minor page faults; x: the median over the facet "
+          "script's median (bench/baseline_numpy.py); wave x: over the wave script's "
+          "(bench/baseline_wave_numpy.py); target <= 0.5)")  # fmt: skip
     return 0
 
 
