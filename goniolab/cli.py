@@ -425,9 +425,9 @@ def _freeze_imports() -> None:
     (numpy, the models' front end) and freeze the objects made so far out of the cyclic
     garbage collector (:func:`gc.freeze`), so that the interpreter's collections, the final
     ones at exit above all, no longer walk them: the exit of a rough 2048^2 ``predict brdf``
-    took 20 ms, 8 ms frozen (bench/README.md, issue 26). The collector, paused by
-    :func:`main` while the modules were imported (53 collections, 5 ms, of objects that
-    live as long as the process), runs again from here.
+    took 24.2 ms, 7.8 ms frozen (``bench/bench_process.py --before BASE``, bench/README.md,
+    issue 26). The collector, paused by :func:`main` while the modules were imported (53
+    collections, 5 ms, of objects that live as long as the process), runs again from here.
 
     The objects the command makes are not frozen: the collector still finds their cycles,
     at exit too, and runs their finalizers (a file left open in a cycle is flushed). What
@@ -440,13 +440,10 @@ def _freeze_imports() -> None:
 
     gc.freeze()
     gc.enable()
-    _collector_paused.clear()
 
 
 #: Set by :func:`main` when a one-shot ``predict`` command has run to its end (its status).
 _one_shot_ended: list[int] = []
-#: Set while :func:`main` has the cyclic collector paused (a one-shot ``predict``'s imports).
-_collector_paused: list[bool] = []
 
 
 def _end_one_shot(code: int) -> NoReturn:
@@ -454,8 +451,9 @@ def _end_one_shot(code: int) -> NoReturn:
     teardown: the exit handlers (:mod:`atexit`: logging closes its file, temporary
     directories go), a collection (the command's cyclic garbage, with its finalizers), the
     standard streams flushed, then :func:`os._exit`. The teardown left out deallocates
-    every object of numpy and goniolab's modules one by one: 4.6 of a rough 2048^2
-    ``predict brdf``'s 7.9 ms of exit (bench/README.md, issue 26)."""
+    every object of numpy and goniolab's modules one by one: a rough 2048^2 ``predict
+    brdf``'s exit took 3.2 ms this way, 7.8 ms by the interpreter's
+    (``bench/bench_process.py``, bench/README.md, issue 26)."""
     import atexit
     import gc
 
@@ -477,9 +475,9 @@ def console() -> NoReturn:
     import threading
 
     code = main()
-    others = [t for t in threading.enumerate() if t is not threading.main_thread()]
-    quick = not any(t.is_alive() and not t.daemon for t in others)
-    if _one_shot_ended and quick and sys.getprofile() is None and sys.gettrace() is None:
+    waited_for = any(not t.daemon and t is not threading.main_thread() and t.is_alive()
+                     for t in threading.enumerate())  # fmt: skip
+    if _one_shot_ended and not waited_for and sys.getprofile() is None and sys.gettrace() is None:
         _end_one_shot(code)
     sys.exit(code)
 
@@ -490,6 +488,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     ``argv`` None: the process's own command line (``sys.argv``)."""
     _stack_dump_on_sigusr1()
     _one_blas_thread()
+    paused = False  # the cyclic collector, while a one-shot predict imports
     try:
         command = _command_in(sys.argv[1:] if argv is None else argv)
         one_shot = command == "predict" and argv is None  # a process of its own
@@ -497,7 +496,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             import gc
 
             gc.disable()  # until the imports are frozen (_freeze_imports)
-            _collector_paused.append(True)
+            paused = True
             from goniolab.process_heap import tune_predict_heap
 
             tune_predict_heap()
@@ -513,6 +512,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         _check_thread_env(command)
         if one_shot:
             _freeze_imports()
+            paused = False
         code: int = args.func(args)
         sys.stdout.flush()  # a closed pipe shows here, not in the interpreter's exit
         if one_shot:
@@ -541,12 +541,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             _log().exception("unexpected error")
         raise
     finally:
-        if _collector_paused:
+        if paused:
             # a one-shot predict that ended before its imports were frozen (bad options,
             # --help): the collector runs again for whoever goes on in this process
             import gc
 
-            _collector_paused.clear()
             gc.enable()
     return code
 

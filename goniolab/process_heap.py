@@ -4,9 +4,9 @@ A ``goniolab predict`` process reads a map, forms a few dozen temporaries of 0.1
 (a rough 2048^2 map's 394,000 slope cells: 3 MB an array) and ends. With glibc's defaults
 each of them costs fresh pages: blocks above 128 kB come from ``mmap`` and go back on
 ``free``, and the heap's top is given back once 128 kB are free there. Every first touch
-of a 4 kB page is a page fault, and in a virtual machine a costly one (1.4 us and more on
-the 2-core bench machine: 64 MB touched in 4 kB pages took 22-28 ms of system time, in
-2 MB transparent huge pages 3 ms). :func:`tune_predict_heap` therefore
+of a 4 kB page is a page fault, and in a virtual machine a costly one (on the 2-core bench
+machine 64 MB touched in 4 kB pages took 22.4 ms, in 2 MB transparent huge pages 3.1 ms:
+``bench/bench_process.py``). :func:`tune_predict_heap` therefore
 
 - keeps freed blocks below 64 MB for reuse (``M_MMAP_THRESHOLD``, ``M_TRIM_THRESHOLD``):
   a walk that frees its temporaries between blocks reuses their pages;
@@ -18,13 +18,14 @@ the 2-core bench machine: 64 MB touched in 4 kB pages took 22-28 ms of system ti
   would be a separate mapping in 4 kB pages. The threads allocate under Python's lock
   anyway, so one arena costs them no waiting.
 
-On the rough 2048^2 ``predict brdf`` of bench/bench_lean.py the page faults fell from
-16,600 to 4,300 and the wall time from 0.196 to 0.182 s (median of 14 paired runs,
-bench/README.md, issue 26). A setting given in the environment (``MALLOC_TRIM_THRESHOLD_``,
-``MALLOC_MMAP_THRESHOLD_``, ``MALLOC_TOP_PAD_``, ``MALLOC_ARENA_MAX``, or the same
-``glibc.malloc.*`` tunables in ``GLIBC_TUNABLES``, which glibc reads itself) wins over the
-one here (a trim threshold of the user's also leaves the heap's reserve out); other C libraries than glibc, other systems, and a kernel
-without transparent huge pages are left as they are.
+On the rough 2048^2 ``predict brdf`` of ``bench/bench_lean.py`` (its ``faults`` column) the
+whole process's page faults fell from 16,555 to 4,276 with this and the collector settings
+of :mod:`goniolab.cli` (bench/README.md, issue 26, "A one-shot process"). A setting given
+in the environment (``MALLOC_TRIM_THRESHOLD_``, ``MALLOC_MMAP_THRESHOLD_``,
+``MALLOC_TOP_PAD_``, ``MALLOC_ARENA_MAX``, or the same ``glibc.malloc.*`` tunables in
+``GLIBC_TUNABLES``, which glibc reads itself) wins over the one here (a trim threshold of
+the user's also leaves the heap's reserve out); other C libraries than glibc, other
+systems, and a kernel without transparent huge pages are left as they are.
 
 Only for a process of its own (the CLI calls it before any work): a long-lived process (the
 TUI, a notebook) keeps glibc's defaults.
