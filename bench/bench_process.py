@@ -14,6 +14,9 @@ Two measurements (issue 26, bench/README.md "A one-shot process"):
   from another checkout: the time from the command's return (a timestamp written to
   stderr after ``main()``) to the parent's ``wait`` returning, medians of ``--repeats``
   fresh processes.
+- ``collections``: the same command as ``goniolab`` runs it: the cyclic collections the
+  whole process makes and their time (``gc.callbacks``), medians of ``--repeats``; with
+  ``--before DIR`` also from that checkout.
 """
 
 from __future__ import annotations
@@ -70,6 +73,45 @@ cli.main = timed
 """
 
 
+#: The command with every cyclic collection counted and timed (``{run}``: as above).
+_GC_CODE = """import gc, sys, time
+got = [0, 0.0, 0.0]
+def watch(phase, info):
+    if phase == 'start':
+        got[2] = time.perf_counter()
+    else:
+        got[0] += 1
+        got[1] += time.perf_counter() - got[2]
+gc.callbacks.append(watch)
+from goniolab import cli
+sys.argv = ['goniolab', 'predict', 'brdf', {map!r}, '--theta-i', '45', '--theta-r', '0:70:1']
+main = cli.main
+def counted():
+    code = main()
+    sys.stderr.write('COLLECTIONS %d %.6f\\n' % (got[0], got[1]))
+    sys.stderr.flush()
+    return code
+cli.main = counted
+{run}
+"""
+
+
+def collections(code: str, env: dict[str, str]) -> tuple[int, float]:
+    """(collections, their ms) of one process running ``code``."""
+    proc = subprocess.run(
+        [sys.executable, "-c", code],
+        env=env,
+        cwd=tempfile.gettempdir(),
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        check=True,
+    )
+    line = [ln for ln in proc.stderr.splitlines() if ln.startswith("COLLECTIONS ")][-1]
+    n, secs = line.split()[1:]
+    return int(n), 1e3 * float(secs)
+
+
 def exit_ms(code: str, env: dict[str, str]) -> float:
     proc = subprocess.run(
         [sys.executable, "-c", code],
@@ -120,7 +162,17 @@ def main(argv: list[str] | None = None) -> int:
             for k in list(codes) if r % 2 == 0 else list(codes)[::-1]:
                 rows[k].append(exit_ms(*codes[k]))
         exits = {k: statistics.median(v) for k, v in rows.items()}
+        gc_runs = {"console() (goniolab)": str(ROOT)}
+        if args.before:
+            gc_runs["sys.exit(main()), --before"] = args.before
+        gcs: dict[str, tuple[float, float]] = {}
+        for k, path in gc_runs.items():
+            run = "cli.console()" if path == str(ROOT) else "sys.exit(cli.main())"
+            code = _GC_CODE.format(map=str(mp), run=run)
+            got = [collections(code, {**env, "PYTHONPATH": path}) for _ in range(args.repeats)]
+            gcs[k] = (statistics.median(g[0] for g in got), statistics.median(g[1] for g in got))
     out["exit_ms"] = exits
+    out["collections"] = {k: {"count": n, "ms": ms} for k, (n, ms) in gcs.items()}
     out["load_after"] = os.getloadavg()[0]
     if args.json:
         print(json.dumps(out, indent=2))
@@ -131,6 +183,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"64 MB touched, {name:16} {r['ms']:7.1f} ms  {r['faults']:7.0f} faults")
     for name, ms in exits.items():
         print(f"exit of predict brdf (rough 2048^2), {name:28} {ms:6.1f} ms")
+    for name, (n, ms) in gcs.items():
+        print(f"cyclic collections of predict brdf, {name:29} {n:4.0f}, {ms:5.1f} ms")
     return 0
 
 
